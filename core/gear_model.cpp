@@ -1,0 +1,89 @@
+#include "core/gear_model.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace gearpulse {
+namespace {
+
+double finite_number(const nlohmann::json& obj, const char* key, bool required) {
+  const auto it = obj.find(key);
+  if (it == obj.end()) {
+    if (required) throw std::invalid_argument(std::string("model: missing field '") + key + "'");
+    return 0.0;
+  }
+  if (!it->is_number())
+    throw std::invalid_argument(std::string("model: field '") + key + "' is not a number");
+  const double value = it->get<double>();
+  if (!std::isfinite(value))
+    throw std::invalid_argument(std::string("model: field '") + key + "' is not finite");
+  return value;
+}
+
+}  // namespace
+
+nlohmann::json model_to_json(const GearModel& model) {
+  nlohmann::json gears = nlohmann::json::array();
+  for (const Gear& g : model.gears) {
+    gears.push_back({{"theta", g.theta}, {"weight", g.weight}, {"stderr", g.std_error}});
+  }
+  nlohmann::json out = {{"version", GearModel::kVersion},
+                        {"gears", std::move(gears)},
+                        {"sigma_speed", model.sigma_speed},
+                        {"sigma_freq", model.sigma_freq},
+                        {"samples", model.samples},
+                        {"log_likelihood", model.log_likelihood},
+                        {"outlier_weight", model.outlier_weight}};
+  if (!model.method.empty()) out["method"] = model.method;
+  if (!model.reason.empty()) out["reason"] = model.reason;
+  if (!model.extra.empty()) out["extra"] = model.extra;
+  return out;
+}
+
+GearModel model_from_json(const nlohmann::json& json) {
+  if (!json.is_object()) throw std::invalid_argument("model: not a JSON object");
+  if (!json.contains("version") || !json["version"].is_number_integer() ||
+      json["version"].get<int>() != GearModel::kVersion) {
+    throw std::invalid_argument("model: unsupported or missing version (expected 1)");
+  }
+  if (!json.contains("gears") || !json["gears"].is_array())
+    throw std::invalid_argument("model: 'gears' is not a list");
+  GearModel model;
+  double previous = 0.0;
+  for (const auto& g : json["gears"]) {
+    if (!g.is_object()) throw std::invalid_argument("model: a gear is not an object");
+    Gear gear;
+    gear.theta = finite_number(g, "theta", true);
+    gear.weight = finite_number(g, "weight", false);
+    gear.std_error = finite_number(g, "stderr", false);
+    if (gear.theta <= previous)
+      throw std::invalid_argument("model: theta must be positive and ascending (eq. 5)");
+    previous = gear.theta;
+    model.gears.push_back(gear);
+  }
+  model.sigma_speed = finite_number(json, "sigma_speed", false);
+  model.sigma_freq = finite_number(json, "sigma_freq", false);
+  const double samples = finite_number(json, "samples", false);
+  if (samples < 0) throw std::invalid_argument("model: 'samples' is negative");
+  model.samples = static_cast<std::size_t>(samples);
+  model.log_likelihood = finite_number(json, "log_likelihood", false);
+  model.outlier_weight = finite_number(json, "outlier_weight", false);
+  if (auto it = json.find("method"); it != json.end() && it->is_string())
+    model.method = it->get<std::string>();
+  if (auto it = json.find("reason"); it != json.end() && it->is_string())
+    model.reason = it->get<std::string>();
+  if (auto it = json.find("extra"); it != json.end() && it->is_object()) model.extra = *it;
+  return model;
+}
+
+std::string serialize_model(const GearModel& model) {
+  return model_to_json(model).dump(2) + "\n";
+}
+
+GearModel parse_model(std::string_view text) {
+  nlohmann::json json = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (json.is_discarded()) throw std::invalid_argument("model: not valid JSON");
+  return model_from_json(json);
+}
+
+}  // namespace gearpulse

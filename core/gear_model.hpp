@@ -1,0 +1,43 @@
+#pragma once
+// The learned model: one scale factor theta_i = v / s per forward gear (paper eq. (3)), with the noise
+// levels of eqs. (1)-(2). Immutable once built; the daemon swaps whole models atomically.
+#include <cstddef>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace gearpulse {
+
+struct Gear {
+  double theta = 0.0;      // (m/s)/Hz
+  double weight = 0.0;     // alpha_i of eq. (6)
+  double std_error = 0.0;  // standard error of theta from the observed information ("stderr" in JSON)
+};
+
+struct GearModel {
+  static constexpr int kVersion = 1;
+  std::vector<Gear> gears;   // ascending theta, constraint (5)
+  double sigma_speed = 0.0;  // sigma_v, m/s
+  double sigma_freq = 0.0;   // sigma_s, Hz
+  std::size_t samples = 0;   // samples used by the fit
+  double log_likelihood = 0.0;
+  // Fields beyond the contract's minimum; readers ignore what they do not know.
+  double outlier_weight = 0.0;                      // beta of eq. (6)
+  std::string method;                               // "auto" or "paper"
+  std::string reason;                               // why no gear ladder was found (gears empty), else empty
+  nlohmann::json extra = nlohmann::json::object();  // estimator-specific parameters (e.g. clutch-out density)
+
+  [[nodiscard]] bool empty() const noexcept { return gears.empty(); }
+};
+
+// JSON of `gearpulse fit --out` and of state_dir/model.json (INTERFACES.md).
+[[nodiscard]] nlohmann::json model_to_json(const GearModel& model);
+// Throws std::invalid_argument with a readable message if the JSON is not a valid model
+// (wrong version, non-positive or unordered theta, non-finite numbers).
+[[nodiscard]] GearModel model_from_json(const nlohmann::json& json);
+[[nodiscard]] std::string serialize_model(const GearModel& model);
+[[nodiscard]] GearModel parse_model(std::string_view text);
+
+}  // namespace gearpulse

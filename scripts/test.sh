@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The one test command: installs what is missing, builds with warnings as errors, runs every test,
+# then again under AddressSanitizer+UndefinedBehaviorSanitizer, the ring under ThreadSanitizer,
+# and checks formatting. Exit status is non-zero if anything fails.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+jobs=$(nproc 2>/dev/null || echo 2)
+
+bash scripts/setup.sh
+
+echo "== format check"
+git ls-files '*.cpp' '*.hpp' | xargs -r clang-format --dry-run --Werror
+
+echo "== release build + tests"
+cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+cmake --build build -j"$jobs"
+ctest --test-dir build --output-on-failure -j"$jobs"
+
+echo "== ASan+UBSan build + tests"
+cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DGEARPULSE_SANITIZE=address,undefined >/dev/null
+cmake --build build-asan -j"$jobs"
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+  ctest --test-dir build-asan --output-on-failure -j"$jobs"
+
+echo "== TSan: SPSC ring"
+cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DGEARPULSE_SANITIZE=thread >/dev/null
+cmake --build build-tsan -j"$jobs" --target spsc_ring_test
+TSAN_OPTIONS=halt_on_error=1 ctest --test-dir build-tsan --output-on-failure -R "ring"
+echo "== all tests passed"

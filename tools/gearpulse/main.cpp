@@ -1,0 +1,36 @@
+// gearpulse: the offline tool (fit, replay, track, simulate) over logs and recordings.
+#include <cstdio>
+#include <exception>
+
+#include <CLI/CLI.hpp>
+
+#include "tools/gearpulse/commands.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"gearpulse: learn gear scales and synthesize speed pulses, offline"};
+  app.require_subcommand(1);
+  int status = 0;
+  gearpulse::cli::add_fit(app, status);
+  gearpulse::cli::add_replay(app, status);
+  gearpulse::cli::add_track(app, status);
+  gearpulse::cli::add_simulate(app, status);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::Success& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "gearpulse: %s\n", e.what());
+    return 2;
+  } catch (const gearpulse::cli::UsageError& e) {
+    std::fprintf(stderr, "gearpulse: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "gearpulse: error: %s\n", e.what());
+    return 2;
+  }
+  return status;
+}
