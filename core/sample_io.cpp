@@ -1,0 +1,444 @@
+#include "core/sample_io.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <istream>
+#include <optional>
+#include <ostream>
+
+namespace gearpulse {
+namespace {
+
+constexpr double kKmhToMs = 1.0 / 3.6;
+constexpr double kMphToMs = 0.44704;
+constexpr double kSecondsPerMinute = 60.0;  // freq = rpm / 60
+
+std::string_view trim(std::string_view s) noexcept {
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front())))
+    s.remove_prefix(1);
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back())))
+    s.remove_suffix(1);
+  if (s.size() >= 2 && s.front() == '"' && s.back() == '"') s = trim(s.substr(1, s.size() - 2));
+  return s;
+}
+
+// Splits on commas (Carloop uses ", " and a trailing comma: trimming handles the first, the second only
+// adds an empty cell past the last column).
+void split_cells(std::string_view line, std::vector<std::string_view>& cells) {
+  cells.clear();
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = line.find(',', start);
+    if (comma == std::string_view::npos) {
+      cells.push_back(trim(line.substr(start)));
+      break;
+    }
+    cells.push_back(trim(line.substr(start, comma - start)));
+    start = comma + 1;
+  }
+}
+
+std::string quoted(std::string_view cell) {
+  constexpr std::size_t kMaxShown = 24;
+  std::string out = "'";
+  for (char c : cell.substr(0, kMaxShown))
+    out += std::isprint(static_cast<unsigned char>(c)) ? c : '?';
+  if (cell.size() > kMaxShown) out += "...";
+  return out + "'";
+}
+
+enum class CellKind { kMissing, kNumber, kBad };
+
+struct Cell {
+  CellKind kind = CellKind::kMissing;
+  double value = kMissing;
+  std::string problem;  // set when kind == kBad
+};
+
+// `spreadsheet_missing`: tokens that Torque and spreadsheets write for "no value" ("-", "#N/A", "#DIV/0!").
+Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet_missing) {
+  Cell cell;
+  if (text.empty()) return cell;
+  if (spreadsheet_missing && (text == "-" || text.front() == '#' || text == "N/A")) return cell;
+  double value = 0.0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || ptr != text.data() + text.size()) {
+    cell.kind = CellKind::kBad;
+    cell.problem = "not a number in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  if (!std::isfinite(value)) {
+    cell.kind = CellKind::kBad;
+    cell.problem = "non-finite value in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  if (value < 0.0 && column != "t") {
+    cell.kind = CellKind::kBad;
+    cell.problem = "negative value in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  cell.kind = CellKind::kNumber;
+  cell.value = value;
+  return cell;
+}
+
+std::optional<std::size_t> find_column(const std::vector<std::string>& header, std::string_view name) {
+  for (std::size_t i = 0; i < header.size(); ++i) {
+    if (header[i].size() != name.size()) continue;
+    if (std::equal(name.begin(), name.end(), header[i].begin(), [](char a, char b) {
+          return std::tolower(static_cast<unsigned char>(a)) == std::tolower(static_cast<unsigned char>(b));
+        }))
+      return i;
+  }
+  return std::nullopt;
+}
+
+// Clock time of day from Torque's time columns: "06:37.7" (mm:ss.s, as a spreadsheet re-saved it),
+// "19:06:38" inside "Thu Jan 11 19:06:38 EST 2018", "06:34:27.403" inside "23-Feb-2022 06:34:27.403".
+// Returns seconds and the period after which the clock wraps (an hour or a day).
+std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
+  std::string_view token;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    std::size_t end = text.find(' ', start);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string_view word = text.substr(start, end - start);
+    if (word.find(':') != std::string_view::npos) token = word;
+    start = end + 1;
+  }
+  if (token.empty()) return std::nullopt;
+  double parts[3] = {0, 0, 0};
+  int count = 0;
+  std::size_t pos = 0;
+  while (count < 3) {
+    std::size_t colon = token.find(':', pos);
+    const std::string_view part =
+        token.substr(pos, colon == std::string_view::npos ? token.npos : colon - pos);
+    const auto [ptr, ec] = std::from_chars(part.data(), part.data() + part.size(), parts[count]);
+    if (part.empty() || ec != std::errc() || ptr != part.data() + part.size() ||
+        !std::isfinite(parts[count]) || parts[count] < 0)
+      return std::nullopt;
+    ++count;
+    if (colon == std::string_view::npos) break;
+    pos = colon + 1;
+    if (count == 3) return std::nullopt;
+  }
+  if (count == 2) return std::make_pair(parts[0] * 60.0 + parts[1], 3600.0);
+  if (count == 3) return std::make_pair(parts[0] * 3600.0 + parts[1] * 60.0 + parts[2], 86400.0);
+  return std::nullopt;
+}
+
+// Collects samples and skip reports; enforces the rules common to every format.
+class LogBuilder {
+ public:
+  LogBuilder(std::string_view name, const ReadOptions& options) : options_(options) { log_.name = name; }
+
+  void skip(std::size_t line, std::string_view reason) {
+    ++log_.skipped_count;
+    if (log_.skipped.size() < options_.max_messages)
+      log_.skipped.push_back(log_.name + ":" + std::to_string(line) + ": " + std::string(reason));
+  }
+  // Returns false (and reports) when t runs backwards.
+  bool add(std::size_t line, Sample s) {
+    if (!log_.samples.empty() && s.t < log_.samples.back().t) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", s.t, log_.samples.back().t);
+      skip(line, buf);
+      return false;
+    }
+    log_.samples.push_back(s);
+    return true;
+  }
+  SampleLog& log() noexcept { return log_; }
+
+  SampleLog finish() {
+    const bool usable = std::any_of(log_.samples.begin(), log_.samples.end(),
+                                    [](const Sample& s) { return s.has_speed() || s.has_freq(); });
+    if (!usable) {
+      std::string msg = log_.name + ": no usable samples";
+      if (log_.skipped_count > 0) {
+        msg += " (" + std::to_string(log_.skipped_count) + " bad rows; first: " + log_.skipped.front() + ")";
+      } else if (log_.samples.empty() && log_.repeated_rows == 0) {
+        msg += " (no data rows after the header)";
+      } else {
+        msg += " (every row lacks both speed and frequency)";
+      }
+      throw SampleFileError(msg);
+    }
+    return std::move(log_);
+  }
+
+ private:
+  const ReadOptions& options_;
+  SampleLog log_;
+};
+
+struct LineReader {
+  std::istream& in;
+  std::string line;
+  std::size_t number = 0;
+  bool next() {
+    if (!std::getline(in, line)) return false;
+    ++number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (number == 1 && line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+    return true;
+  }
+};
+
+bool blank(std::string_view line) {
+  return trim(line).empty();
+}
+
+std::string cells_problem(std::size_t have, std::size_t need) {
+  return "too few cells (" + std::to_string(have) + ", need " + std::to_string(need) + ")";
+}
+
+void read_generic(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out) {
+  const std::size_t it = *find_column(header, "t");
+  const std::size_t is = *find_column(header, "speed");
+  const std::size_t iff = *find_column(header, "freq");
+  const std::size_t need = std::max({it, is, iff}) + 1;
+  out.log().format = SampleFormat::kGeneric;
+  out.log().speed_column = "speed";
+  std::vector<std::string_view> cells;
+  while (reader.next()) {
+    if (blank(reader.line)) continue;
+    split_cells(reader.line, cells);
+    if (cells.size() < need) {
+      out.skip(reader.number, cells_problem(cells.size(), need));
+      continue;
+    }
+    const Cell t = parse_cell(cells[it], "t", false);
+    const Cell v = parse_cell(cells[is], "speed", false);
+    const Cell f = parse_cell(cells[iff], "freq", false);
+    if (t.kind == CellKind::kMissing) {
+      out.skip(reader.number, "missing t");
+      continue;
+    }
+    const Cell* bad = t.kind == CellKind::kBad ? &t : v.kind == CellKind::kBad ? &v : &f;
+    if (bad->kind == CellKind::kBad) {
+      out.skip(reader.number, bad->problem);
+      continue;
+    }
+    out.add(reader.number, Sample{t.value, v.value, f.value});
+  }
+}
+
+// Carloop and `speed,rpm` logs: OBD values held between refreshes. A row whose rpm and speed both equal
+// the previous row's carries nothing new (the logger polls many PIDs round-robin), so it is dropped.
+void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+              SampleFormat format) {
+  std::optional<std::size_t> it;
+  std::size_t irpm = 0, ispeed = 0;
+  if (format == SampleFormat::kCarloop) {
+    it = find_column(header, "ENGINE_RUN_TINE ()");  // sic: the logger's own spelling
+    if (!it) it = find_column(header, "ENGINE_RUN_TIME ()");
+    irpm = *find_column(header, "ENGINE_RPM ()");
+    ispeed = *find_column(header, "VEHICLE_SPEED ()");
+    out.log().speed_column = "VEHICLE_SPEED ()";
+  } else {
+    irpm = *find_column(header, "rpm");
+    ispeed = *find_column(header, "speed");
+    out.log().speed_column = "speed";
+  }
+  out.log().format = format;
+  const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
+  std::vector<std::string_view> cells;
+  std::size_t row = 0;
+  double last_rpm = kMissing, last_speed = kMissing;
+  bool have_last = false;
+  while (reader.next()) {
+    if (blank(reader.line)) continue;
+    const double counter = static_cast<double>(row++);
+    split_cells(reader.line, cells);
+    if (cells.size() < need) {
+      out.skip(reader.number, cells_problem(cells.size(), need));
+      continue;
+    }
+    const Cell rpm = parse_cell(cells[irpm], "rpm", false);
+    const Cell speed = parse_cell(cells[ispeed], "speed", false);
+    Cell t;
+    t.kind = CellKind::kNumber;
+    t.value = counter;
+    if (it) t = parse_cell(cells[*it], "time", false);
+    if (t.kind == CellKind::kMissing) {
+      out.skip(reader.number, "missing time");
+      continue;
+    }
+    const Cell* bad = t.kind == CellKind::kBad ? &t : rpm.kind == CellKind::kBad ? &rpm : &speed;
+    if (bad->kind == CellKind::kBad) {
+      out.skip(reader.number, bad->problem);
+      continue;
+    }
+    const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
+    if (have_last && same(rpm.value, last_rpm) && same(speed.value, last_speed)) {
+      ++out.log().repeated_rows;
+      continue;
+    }
+    if (out.add(reader.number, Sample{t.value, speed.value * kKmhToMs, rpm.value / kSecondsPerMinute})) {
+      last_rpm = rpm.value;
+      last_speed = speed.value;
+      have_last = true;
+    }
+  }
+}
+
+struct SpeedColumn {
+  const char* header;
+  double to_ms;
+  bool gps;
+};
+constexpr SpeedColumn kTorqueSpeeds[] = {{"GPS Speed (Meters/second)", 1.0, true},
+                                         {"Speed (GPS)(km/h)", kKmhToMs, true},
+                                         {"Speed (OBD)(km/h)", kKmhToMs, false},
+                                         {"Speed (OBD)(mph)", kMphToMs, false}};
+
+void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+                 TorqueSpeed choice) {
+  out.log().format = SampleFormat::kTorque;
+  const std::size_t irpm = *find_column(header, "Engine RPM(rpm)");
+  std::optional<std::size_t> itime = find_column(header, "Device Time");
+  if (!itime) itime = find_column(header, "GPS Time");
+  // First GPS and first OBD speed column present.
+  std::optional<std::size_t> igps, iobd;
+  const SpeedColumn* gps_col = nullptr;
+  const SpeedColumn* obd_col = nullptr;
+  for (const SpeedColumn& c : kTorqueSpeeds) {
+    if (auto i = find_column(header, c.header)) {
+      if (c.gps && !igps) igps = i, gps_col = &c;
+      if (!c.gps && !iobd) iobd = i, obd_col = &c;
+    }
+  }
+  if (choice == TorqueSpeed::kGps && !igps)
+    throw SampleFileError(out.log().name + ":1: no GPS speed column ('GPS Speed (Meters/second)')");
+  if (choice == TorqueSpeed::kObd && !iobd)
+    throw SampleFileError(out.log().name + ":1: no OBD speed column ('Speed (OBD)(km/h)' or '(mph)')");
+
+  struct Row {
+    std::size_t line;
+    double t, gps, obd, freq;
+  };
+  std::vector<Row> rows;
+  std::size_t need = irpm + 1;
+  for (auto i : {itime, igps, iobd})
+    if (i) need = std::max(need, *i + 1);
+  std::vector<std::string_view> cells;
+  std::size_t counter = 0;
+  double offset = 0.0, last_clock = -1.0;
+  std::size_t gps_count = 0;
+  while (reader.next()) {
+    if (blank(reader.line)) continue;
+    const double row_time = static_cast<double>(counter++);
+    split_cells(reader.line, cells);
+    if (cells.size() < need) {
+      out.skip(reader.number, cells_problem(cells.size(), need));
+      continue;
+    }
+    Row row{reader.number, row_time, kMissing, kMissing, kMissing};
+    if (itime) {
+      const auto clock = parse_clock(cells[*itime]);
+      if (!clock) {
+        out.skip(reader.number, "unreadable time " + quoted(cells[*itime]));
+        continue;
+      }
+      // The clock wraps every hour (mm:ss) or day (hh:mm:ss): unwrap it.
+      if (last_clock >= 0.0 && clock->first < last_clock - clock->second / 2) offset += clock->second;
+      last_clock = clock->first;
+      row.t = clock->first + offset;
+    }
+    const Cell rpm = parse_cell(cells[irpm], header[irpm], true);
+    Cell gps, obd;
+    if (igps) gps = parse_cell(cells[*igps], header[*igps], true);
+    if (iobd) obd = parse_cell(cells[*iobd], header[*iobd], true);
+    const Cell* bad = rpm.kind == CellKind::kBad ? &rpm : gps.kind == CellKind::kBad ? &gps : &obd;
+    if (bad->kind == CellKind::kBad) {
+      out.skip(reader.number, bad->problem);
+      continue;
+    }
+    row.freq = rpm.value / kSecondsPerMinute;
+    if (igps) row.gps = gps.value * gps_col->to_ms;
+    if (iobd) row.obd = obd.value * obd_col->to_ms;
+    if (std::isfinite(row.gps)) ++gps_count;
+    rows.push_back(row);
+  }
+  const bool use_gps = choice == TorqueSpeed::kGps || (choice == TorqueSpeed::kAuto && gps_count > 0);
+  if (!use_gps && !iobd)
+    throw SampleFileError(out.log().name +
+                          ":1: no speed values (no OBD speed column and no GPS speed value)");
+  out.log().speed_column = use_gps ? gps_col->header : obd_col->header;
+  const double t0 = rows.empty() ? 0.0 : rows.front().t;
+  for (const Row& r : rows)
+    out.add(r.line, Sample{r.t - t0, use_gps ? r.gps : r.obd, r.freq});
+}
+
+}  // namespace
+
+std::string_view format_name(SampleFormat format) noexcept {
+  switch (format) {
+    case SampleFormat::kGeneric:
+      return "csv";
+    case SampleFormat::kTorque:
+      return "torque";
+    case SampleFormat::kCarloop:
+      return "carloop";
+    case SampleFormat::kSpeedRpm:
+      return "speed-rpm";
+  }
+  return "unknown";
+}
+
+SampleLog read_samples(std::istream& in, std::string_view name, const ReadOptions& options) {
+  LineReader reader{in, {}, 0};
+  LogBuilder out(name, options);
+  bool got_header = false;
+  while (reader.next()) {
+    if (!blank(reader.line)) {
+      got_header = true;
+      break;
+    }
+  }
+  if (!got_header) {
+    if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
+    throw SampleFileError(std::string(name) + ": empty file");
+  }
+  std::vector<std::string_view> views;
+  split_cells(reader.line, views);
+  std::vector<std::string> header(views.begin(), views.end());
+  const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
+
+  if (has("Engine RPM(rpm)")) {
+    read_torque(reader, header, out, options.torque_speed);
+  } else if (has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()")) {
+    read_obd(reader, header, out, SampleFormat::kCarloop);
+  } else if (has("t") && has("speed") && has("freq")) {
+    read_generic(reader, header, out);
+  } else if (header.size() >= 2 && has("speed") && has("rpm")) {
+    read_obd(reader, header, out, SampleFormat::kSpeedRpm);
+  } else {
+    throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) + ": unrecognised header " +
+                          quoted(reader.line) +
+                          " (expected t,speed,freq or a Torque Pro, Carloop or speed,rpm log)");
+  }
+  if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
+  return out.finish();
+}
+
+void write_samples(std::ostream& out, std::span<const Sample> samples) {
+  out << "t,speed,freq\n";
+  char buf[96];
+  for (const Sample& s : samples) {
+    int n = std::snprintf(buf, sizeof buf, "%.17g,", s.t);
+    if (s.has_speed())
+      n += std::snprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), "%.17g", s.speed);
+    buf[n++] = ',';
+    if (s.has_freq()) n += std::snprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), "%.17g", s.freq);
+    buf[n++] = '\n';
+    out.write(buf, n);
+  }
+}
+
+}  // namespace gearpulse

@@ -1,0 +1,57 @@
+#pragma once
+// Readers (and a writer) for sample logs: the generic CSV of INTERFACES.md (`t,speed,freq`), Torque Pro
+// exports, Carloop OBD-II logs and `speed,rpm[,...]` logs. The format is detected from the header.
+// Parsing works on a stream plus a display name (used in messages): core never opens files.
+//
+// Units on output are always those of `Sample`: t in s, speed in m/s, freq in Hz (rpm / 60 for OBD logs).
+// Rows that cannot be used (garbage, NaN, negative values, time going backwards, too few cells) are
+// skipped and reported as "name:line: reason"; a log with no usable sample is an error.
+#include <cstddef>
+#include <iosfwd>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/sample.hpp"
+
+namespace gearpulse {
+
+enum class SampleFormat { kGeneric, kTorque, kCarloop, kSpeedRpm };
+
+[[nodiscard]] std::string_view format_name(SampleFormat format) noexcept;
+
+// Which speed a Torque Pro export gives. kAuto takes the GPS Doppler speed when the file has any (it is
+// what the daemon sees live from gpsd, so a model fitted on it matches the live input), else the OBD
+// speed (the car's own wheel-speed reading: smoother but quantised and often a few % high).
+enum class TorqueSpeed { kAuto, kGps, kObd };
+
+struct ReadOptions {
+  TorqueSpeed torque_speed = TorqueSpeed::kAuto;
+  std::size_t max_messages = 1000;  // skip messages kept (all are counted)
+};
+
+struct SampleLog {
+  std::string name;
+  SampleFormat format = SampleFormat::kGeneric;
+  std::string speed_column;  // header of the column the speed came from
+  std::vector<Sample> samples;
+  std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages
+  std::size_t skipped_count = 0;     // every skipped bad row
+  std::size_t repeated_rows = 0;     // OBD rows dropped because nothing was refreshed (not errors)
+};
+
+// Thrown when nothing usable can be read (empty stream, unknown header, no valid row). what() is one
+// line that starts with the display name.
+struct SampleFileError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+[[nodiscard]] SampleLog read_samples(std::istream& in, std::string_view name,
+                                     const ReadOptions& options = {});
+
+// Writes the generic CSV (`t,speed,freq`, empty cell = missing) with enough digits to round-trip.
+void write_samples(std::ostream& out, std::span<const Sample> samples);
+
+}  // namespace gearpulse

@@ -1,0 +1,183 @@
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "core/sample_io.hpp"
+
+using gearpulse::read_samples;
+using gearpulse::Sample;
+using gearpulse::SampleFileError;
+using gearpulse::SampleFormat;
+using gearpulse::SampleLog;
+
+namespace {
+
+SampleLog read_text(const std::string& text, const gearpulse::ReadOptions& options = {}) {
+  std::istringstream in(text);
+  return read_samples(in, "log.csv", options);
+}
+
+std::string error_of(const std::string& text) {
+  try {
+    (void)read_text(text);
+  } catch (const SampleFileError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+const std::filesystem::path kReal = "/work/shared/data/real";
+
+}  // namespace
+
+TEST_CASE("io: generic CSV with empty cells and extra columns") {
+  const SampleLog log = read_text("t,speed,freq,snr_db\n0,1.5,50,12\n1,,51,\n2,2.5,,3\n");
+  CHECK(log.format == SampleFormat::kGeneric);
+  REQUIRE(log.samples.size() == 3);
+  CHECK(log.samples[0].speed == Approx(1.5));
+  CHECK(log.samples[0].freq == Approx(50));
+  CHECK_FALSE(log.samples[1].has_speed());
+  CHECK(log.samples[1].freq == Approx(51));
+  CHECK_FALSE(log.samples[2].has_freq());
+  CHECK(log.skipped_count == 0);
+}
+
+TEST_CASE("io: bad rows are skipped and reported with file and line") {
+  const SampleLog log = read_text(
+      "t,speed,freq\r\n"
+      "2,1,50\r\n"
+      "1,nan,50\r\n"
+      "2,-3,50\r\n"
+      "3,abc,50\r\n"
+      "4,1\r\n"
+      "1.5,1,50\r\n"
+      "\r\n"
+      "5,1,inf\r\n"
+      "6,2,60\r\n");
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.samples[1].t == Approx(6));
+  CHECK(log.skipped_count == 6);
+  REQUIRE(log.skipped.size() == 6);
+  CHECK(log.skipped[0].rfind("log.csv:3: non-finite", 0) == 0);
+  CHECK(log.skipped[1].rfind("log.csv:4: negative", 0) == 0);
+  CHECK(log.skipped[2].rfind("log.csv:5: not a number", 0) == 0);
+  CHECK(log.skipped[3].rfind("log.csv:6: too few cells", 0) == 0);
+  CHECK(log.skipped[4].rfind("log.csv:7: time goes backwards", 0) == 0);
+  CHECK(log.skipped[5].rfind("log.csv:9: non-finite", 0) == 0);
+}
+
+TEST_CASE("io: empty, headerless and useless files are one-line errors") {
+  CHECK(error_of("") == "log.csv: empty file");
+  CHECK(error_of("\n\n") == "log.csv: empty file");
+  CHECK(error_of("1,2,3\n4,5,6\n").rfind("log.csv:1: unrecognised header", 0) == 0);
+  CHECK(error_of("t,speed,freq\n").find("no data rows") != std::string::npos);
+  CHECK(error_of("t,speed,freq\n0,x,1\n").find("log.csv:2: not a number") != std::string::npos);
+  CHECK(error_of("t,speed,freq\n0,,\n1,,\n").find("no usable samples") != std::string::npos);
+  for (const std::string& e : {error_of(""), error_of("t,speed,freq\n0,x,1\n")})
+    CHECK(e.find('\n') == std::string::npos);
+}
+
+TEST_CASE("io: the skip list is capped but every skip is counted") {
+  std::string text = "t,speed,freq\n";
+  for (int i = 0; i < 50; ++i)
+    text += "x,1,2\n";
+  text += "1,1,1\n";
+  gearpulse::ReadOptions options;
+  options.max_messages = 5;
+  const SampleLog log = read_text(text, options);
+  CHECK(log.skipped_count == 50);
+  CHECK(log.skipped.size() == 5);
+  CHECK(log.samples.size() == 1);
+}
+
+TEST_CASE("io: Carloop rows that refresh nothing are dropped and rpm becomes Hz") {
+  const std::string header = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),THROTTLE (),\r\n";
+  const SampleLog log = read_text(header +
+                                  "24.000000, 873.250000, 3.000000, 17.6,\r\n"
+                                  "25.000000, 873.250000, 3.000000, 17.6,\r\n"
+                                  "25.000000, 873.250000, 3.000000, 17.9,\r\n"
+                                  "27.000000, 1200.000000, 18.000000, 17.6,\r\n"
+                                  "27.000000, 1200.000000, 18.000000, 17.6,\r\n");
+  CHECK(log.format == SampleFormat::kCarloop);
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.repeated_rows == 3);
+  CHECK(log.samples[0].t == Approx(24));
+  CHECK(log.samples[0].freq == Approx(873.25 / 60));
+  CHECK(log.samples[1].speed == Approx(18 / 3.6));
+}
+
+TEST_CASE("io: speed and rpm logs use the row counter as time") {
+  const SampleLog log = read_text("speed,rpm,load\n7,898,44\n7,898,44\n1,917,32\n");
+  CHECK(log.format == SampleFormat::kSpeedRpm);
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.samples[0].t == Approx(0));
+  CHECK(log.samples[1].t == Approx(2));
+  CHECK(log.samples[1].speed == Approx(1 / 3.6));
+  CHECK(log.samples[1].freq == Approx(917.0 / 60));
+}
+
+TEST_CASE("io: Torque exports pick GPS or OBD speed and unwrap the clock") {
+  const std::string text =
+      "GPS Time, Device Time,GPS Speed (Meters/second),Engine RPM(rpm),Speed (OBD)(mph),Ratio\n"
+      "Thu Jan 11 19:59:58 EST 2018,59:58.5,10,2000,22,#DIV/0!\n"
+      "-,59:59.5,-,2100,23,#N/A\n"
+      "Thu Jan 11 20:00:00 EST 2018,00:00.5,11,-,24,\n";
+  const SampleLog gps = read_text(text);
+  CHECK(gps.format == SampleFormat::kTorque);
+  CHECK(gps.speed_column == "GPS Speed (Meters/second)");
+  REQUIRE(gps.samples.size() == 3);
+  CHECK(gps.samples[0].t == Approx(0));
+  CHECK(gps.samples[2].t == Approx(2));
+  CHECK(gps.samples[0].speed == Approx(10));
+  CHECK_FALSE(gps.samples[1].has_speed());
+  CHECK(gps.samples[1].freq == Approx(35));
+  CHECK_FALSE(gps.samples[2].has_freq());
+
+  gearpulse::ReadOptions obd;
+  obd.torque_speed = gearpulse::TorqueSpeed::kObd;
+  const SampleLog log = read_text(text, obd);
+  CHECK(log.speed_column == "Speed (OBD)(mph)");
+  CHECK(log.samples[1].speed == Approx(23 * 0.44704));
+}
+
+TEST_CASE("io: written CSV reads back") {
+  const std::vector<Sample> in = {
+      {0.0, 1.25, 40.5}, {0.5, gearpulse::kMissing, 41.0}, {1.0, 3.0, gearpulse::kMissing}};
+  std::stringstream buf;
+  gearpulse::write_samples(buf, in);
+  const SampleLog log = read_samples(buf, "mem");
+  REQUIRE(log.samples.size() == 3);
+  CHECK(log.samples[0].speed == 1.25);
+  CHECK_FALSE(log.samples[1].has_speed());
+  CHECK_FALSE(log.samples[2].has_freq());
+}
+
+TEST_CASE("io: every real log reads with sensible values") {
+  if (!std::filesystem::exists(kReal)) {
+    WARN("no real logs at " << kReal);
+    return;
+  }
+  std::size_t files = 0;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(kReal)) {
+    if (entry.path().extension() != ".csv") continue;
+    ++files;
+    std::ifstream in(entry.path(), std::ios::binary);
+    const SampleLog log = read_samples(in, entry.path().string());
+    INFO(entry.path().string());
+    CHECK(log.samples.size() > 100);
+    CHECK(log.skipped_count * 50 <= log.samples.size() + log.skipped_count);
+    std::size_t moving = 0;
+    for (const Sample& s : log.samples) {
+      if (s.has_speed()) CHECK(s.speed < 70.0);
+      if (s.has_freq()) CHECK(s.freq < 150.0);
+      if (s.has_speed() && s.has_freq() && s.speed > 2.0) ++moving;
+    }
+    CHECK(moving > 50);
+    CHECK(std::is_sorted(log.samples.begin(), log.samples.end(),
+                         [](const Sample& a, const Sample& b) { return a.t < b.t; }));
+  }
+  CHECK(files >= 28);
+}
