@@ -19,5 +19,6 @@ void add_fit(CLI::App& app, int& status);
 void add_replay(CLI::App& app, int& status);
 void add_track(CLI::App& app, int& status);
 void add_simulate(CLI::App& app, int& status);
+void add_feed(CLI::App& app, int& status);
 
 }  // namespace gearpulse::cli

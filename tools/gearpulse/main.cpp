@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
   gearpulse::cli::add_replay(app, status);
   gearpulse::cli::add_track(app, status);
   gearpulse::cli::add_simulate(app, status);
+  gearpulse::cli::add_feed(app, status);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -1,0 +1,139 @@
+// `gearpulse feed`: plays a raw PCM file into a FIFO at real-time pace, one ALSA period per write.
+//
+// The ALSA `file` plugin, used as a capture PCM with a FIFO as its `infile`, reads one period per
+// transfer; a write of any other size leaves holes in the captured stream. So every write here is
+// exactly one period, and the writes are paced from one fixed start with clock_nanosleep(TIMER_ABSTIME)
+// so the stream never drifts from the wall clock however long it runs.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <csignal>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "tools/gearpulse/commands.hpp"
+
+namespace gearpulse::cli {
+namespace {
+
+struct FeedOptions {
+  std::string input;
+  std::string fifo;
+  int period = 1024;  // frames per write
+  int rate = 48000;   // frames per second
+  int channels = 1;
+  std::string format = "s16";
+  bool quiet = false;
+};
+
+int bytes_per_sample(const std::string& format) {
+  if (format == "s16") return 2;
+  if (format == "s32" || format == "float") return 4;
+  throw UsageError("--format must be s16, s32 or float, not '" + format + "'");
+}
+
+std::vector<std::uint8_t> read_whole_file(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) throw UsageError(path + ": " + std::strerror(errno));
+  std::vector<std::uint8_t> data;
+  std::uint8_t buf[1 << 16];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0)
+    data.insert(data.end(), buf, buf + n);
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (failed) throw UsageError(path + ": read error");
+  return data;
+}
+
+void add_ns(timespec& ts, std::int64_t ns) {
+  const std::int64_t total = ts.tv_nsec + ns;
+  ts.tv_sec += static_cast<time_t>(total / 1'000'000'000);
+  ts.tv_nsec = static_cast<long>(total % 1'000'000'000);
+}
+
+// Writes all of buf, resuming after signals; false when the reader went away.
+bool write_all(int fd, const std::uint8_t* buf, std::size_t len) {
+  while (len > 0) {
+    const ssize_t n = ::write(fd, buf, len);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return false;
+    }
+    buf += n;
+    len -= static_cast<std::size_t>(n);
+  }
+  return true;
+}
+
+int run_feed(const FeedOptions& o) {
+  if (o.period <= 0 || o.rate <= 0 || o.channels <= 0) {
+    throw UsageError("--period, --rate and --channels must be positive");
+  }
+  const std::size_t frame_bytes = static_cast<std::size_t>(o.channels * bytes_per_sample(o.format));
+  const std::size_t period_bytes = frame_bytes * static_cast<std::size_t>(o.period);
+  std::vector<std::uint8_t> data = read_whole_file(o.input);
+  if (data.size() % frame_bytes != 0) {
+    throw UsageError(o.input + ": size " + std::to_string(data.size()) + " is not a whole number of " +
+                     std::to_string(frame_bytes) + "-byte frames");
+  }
+  // The plugin only ever reads whole periods: pad the tail with silence rather than leave it unread.
+  const std::size_t periods = (data.size() + period_bytes - 1) / period_bytes;
+  data.resize(periods * period_bytes, 0);
+
+  std::signal(SIGPIPE, SIG_IGN);
+  const int fd = ::open(o.fifo.c_str(), O_WRONLY);  // blocks until the capture side opens it
+  if (fd < 0) throw UsageError(o.fifo + ": " + std::strerror(errno));
+
+  timespec start{};
+  clock_gettime(CLOCK_MONOTONIC, &start);
+  const double period_ns = 1e9 * o.period / o.rate;
+  std::size_t written = 0;
+  for (; written < periods; ++written) {
+    if (!write_all(fd, data.data() + written * period_bytes, period_bytes)) break;
+    // Deadline of the next write, from the fixed start: rounding never accumulates.
+    timespec next = start;
+    add_ns(next, static_cast<std::int64_t>(period_ns * static_cast<double>(written + 1)));
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr) == EINTR) {
+    }
+  }
+  ::close(fd);
+  if (written < periods) {
+    std::fprintf(stderr, "gearpulse feed: %s: reader closed after %zu of %zu periods\n", o.fifo.c_str(),
+                 written, periods);
+    return 1;
+  }
+  if (!o.quiet) {
+    std::fprintf(stderr, "gearpulse feed: %zu periods (%.1f s) written to %s\n", periods,
+                 static_cast<double>(periods) * o.period / o.rate, o.fifo.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_feed(CLI::App& app, int& status) {
+  auto opts = std::make_shared<FeedOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "feed", "Play a raw PCM file into a FIFO at real-time pace, one period per write (ALSA file plugin)");
+  cmd->add_option("--period", opts->period, "Frames per write; must equal the capture's period size")
+      ->capture_default_str();
+  cmd->add_option("--rate", opts->rate, "Frames per second")->capture_default_str();
+  cmd->add_option("--channels", opts->channels, "Interleaved channels in the file")->capture_default_str();
+  cmd->add_option("--format", opts->format, "Sample format: s16, s32 or float (little endian)")
+      ->capture_default_str();
+  cmd->add_flag("--quiet", opts->quiet, "No summary line");
+  cmd->add_option("FILE", opts->input, "Raw interleaved PCM file")->required();
+  cmd->add_option("FIFO", opts->fifo, "FIFO named as the ALSA file plugin's infile")->required();
+  cmd->callback([opts, &status] { status = run_feed(*opts); });
+}
+
+}  // namespace gearpulse::cli
