@@ -1,0 +1,77 @@
+// Entry point: validates options, keeps the usable samples, and dispatches to the paper or auto mode.
+#include "core/estimator.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "core/estimator_internal.hpp"
+
+namespace gearpulse {
+namespace detail {
+
+GearModel finish_model(const MixtureData& data, const MixtureParams& p, const std::string& method,
+                       const GradientLayout& layout) {
+  GearModel model;
+  model.method = method;
+  model.samples = data.size();
+  model.sigma_speed = p.sigma_v;
+  model.sigma_freq = p.sigma_s;
+  model.outlier_weight = p.beta_clutch;
+  model.log_likelihood = log_likelihood(data, p);
+  const Eigen::MatrixXd info = observed_information(data, p, layout);
+  Eigen::VectorXd variance = Eigen::VectorXd::Constant(layout.size(), NAN);
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(info);
+  if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
+    const Eigen::MatrixXd cov = ldlt.solve(Eigen::MatrixXd::Identity(layout.size(), layout.size()));
+    variance = cov.diagonal();
+  }
+  for (int i = 0; i < p.gears(); ++i) {
+    Gear g;
+    g.theta = p.theta[static_cast<std::size_t>(i)];
+    g.weight = p.alpha[static_cast<std::size_t>(i)];
+    // A non-positive variance means the information matrix is singular there: report 0 (unknown)
+    // rather than a fabricated figure.
+    g.std_error = std::isfinite(variance[i]) && variance[i] > 0.0 ? std::sqrt(variance[i]) : 0.0;
+    model.gears.push_back(g);
+  }
+  nlohmann::json clutch = {
+      {"weight", p.beta_clutch}, {"lo", p.g_lo}, {"hi", p.g_hi}, {"density", p.g_density}};
+  model.extra["clutch_out"] = clutch;
+  if (p.beta_stand > 0.0) model.extra["standstill"] = {{"weight", p.beta_stand}, {"sigma", p.stand_sigma}};
+  return model;
+}
+
+}  // namespace detail
+
+FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& options) {
+  if (!options.ratios.empty()) {
+    if (options.ratios.size() > 11) throw std::invalid_argument("fit: at most 11 ratios (12 gears)");
+    for (double c : options.ratios) {
+      if (!std::isfinite(c) || c <= 1.0)
+        throw std::invalid_argument("fit: every ratio must be finite and > 1");
+    }
+    if (options.gears != 0 && options.gears != static_cast<int>(options.ratios.size()) + 1)
+      throw std::invalid_argument("fit: --gears must equal the number of ratios + 1");
+  }
+  if (options.gears != 0 && (options.gears < 2 || options.gears > 12))
+    throw std::invalid_argument("fit: gears must be 2..12 (or 0 = from the data)");
+  detail::MixtureData data;
+  data.v.reserve(samples.size());
+  data.s.reserve(samples.size());
+  for (const Sample& s : samples) {
+    if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0) continue;
+    data.v.push_back(s.speed);
+    data.s.push_back(s.freq);
+  }
+  FitResult result;
+  if (!options.ratios.empty()) {
+    result.model = detail::fit_paper(data, options.ratios);
+  } else {
+    result.model = detail::fit_auto(data, options.gears);
+  }
+  if (result.model.method.empty()) result.model.method = options.ratios.empty() ? "auto" : "paper";
+  if (result.model.samples == 0) result.model.samples = data.size();
+  return result;
+}
+
+}  // namespace gearpulse

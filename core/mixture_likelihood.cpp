@@ -1,0 +1,389 @@
+#include "core/mixture_likelihood.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <thread>
+
+namespace gearpulse::detail {
+namespace {
+
+constexpr double kLogTwoPi = 1.8378770664093453;
+constexpr double kTiny = 1e-300;
+// Below this many samples a second thread costs more than it saves.
+constexpr std::size_t kParallelThreshold = 40000;
+
+// Runs fn(begin, end, slot) over [0, n) in one or two slices and returns the two slot results.
+template <typename Result, typename Fn>
+std::pair<Result, Result> split_two(std::size_t n, Fn&& fn) {
+  Result a{};
+  Result b{};
+  if (n < kParallelThreshold) {
+    fn(std::size_t{0}, n, a);
+    return {std::move(a), std::move(b)};
+  }
+  const std::size_t mid = n / 2;
+  std::thread worker([&] { fn(mid, n, b); });
+  fn(std::size_t{0}, mid, a);
+  worker.join();
+  return {std::move(a), std::move(b)};
+}
+
+// Per-component constant parts of the log density.
+struct Precomputed {
+  std::vector<double> log_alpha;
+  std::vector<double> inv_var;
+  std::vector<double> log_norm;  // -0.5 log(2 pi tau^2)
+  double log_stand = -INFINITY;
+  double stand_inv_var = 0.0;
+  double log_clutch = -INFINITY;
+  std::vector<double> log_g;
+  double g_scale = 0.0;
+};
+
+Precomputed precompute(const MixtureParams& p) {
+  Precomputed c;
+  const int m = p.gears();
+  const double a = p.sigma_s * p.sigma_s;
+  const double b = p.sigma_v * p.sigma_v;
+  for (int i = 0; i < m; ++i) {
+    const double var = p.theta[i] * p.theta[i] * a + b;
+    c.log_alpha.push_back(std::log(std::max(p.alpha[i], kTiny)));
+    c.inv_var.push_back(1.0 / var);
+    c.log_norm.push_back(-0.5 * (kLogTwoPi + std::log(var)));
+  }
+  if (p.beta_stand > 0.0) {
+    // Half-normal on v >= 0: 2 N(v; 0, stand_sigma^2).
+    c.log_stand = std::log(p.beta_stand) + std::log(2.0) - 0.5 * (kLogTwoPi + 2.0 * std::log(p.stand_sigma));
+    c.stand_inv_var = 1.0 / (p.stand_sigma * p.stand_sigma);
+  }
+  if (p.beta_clutch > 0.0 && !p.g_density.empty()) {
+    c.log_clutch = std::log(p.beta_clutch);
+    for (double d : p.g_density)
+      c.log_g.push_back(std::log(std::max(d, kTiny)));
+    c.g_scale = static_cast<double>(p.g_density.size()) / (p.g_hi - p.g_lo);
+  }
+  return c;
+}
+
+inline int g_bin(const MixtureParams& p, const Precomputed& c, double v) {
+  const double x = (v - p.g_lo) * c.g_scale;
+  if (!(x >= 0.0)) return -1;
+  const auto bin = static_cast<std::size_t>(x);
+  if (bin >= p.g_density.size())
+    return x <= static_cast<double>(p.g_density.size()) + 1e-9 ? static_cast<int>(p.g_density.size()) - 1
+                                                               : -1;
+  return static_cast<int>(bin);
+}
+
+// Log terms of every component for one sample; returns log p and fills `terms` (gears, stand, clutch).
+inline double sample_terms(const MixtureParams& p, const Precomputed& c, double v, double s, double* terms,
+                           int& bin) {
+  const int m = p.gears();
+  double best = -INFINITY;
+  for (int i = 0; i < m; ++i) {
+    const double e = v - p.theta[i] * s;
+    terms[i] = c.log_alpha[i] + c.log_norm[i] - 0.5 * e * e * c.inv_var[i];
+    best = std::max(best, terms[i]);
+  }
+  terms[m] = c.log_stand > -INFINITY && v >= 0.0 ? c.log_stand - 0.5 * v * v * c.stand_inv_var : -INFINITY;
+  best = std::max(best, terms[m]);
+  bin = c.log_clutch > -INFINITY ? g_bin(p, c, v) : -1;
+  terms[m + 1] = bin >= 0 ? c.log_clutch + c.log_g[static_cast<std::size_t>(bin)] : -INFINITY;
+  best = std::max(best, terms[m + 1]);
+  if (best == -INFINITY) return std::log(kTiny);
+  double sum = 0.0;
+  for (int i = 0; i < m + 2; ++i) {
+    terms[i] = std::exp(terms[i] - best);
+    sum += terms[i];
+  }
+  for (int i = 0; i < m + 2; ++i)
+    terms[i] /= sum;  // now responsibilities
+  return best + std::log(sum);
+}
+
+}  // namespace
+
+double MixtureParams::g_at(double v) const noexcept {
+  if (g_density.empty() || !(v >= g_lo) || !(v <= g_hi)) return 0.0;
+  const auto bins = g_density.size();
+  auto bin = static_cast<std::size_t>((v - g_lo) / (g_hi - g_lo) * static_cast<double>(bins));
+  return g_density[std::min(bin, bins - 1)];
+}
+
+double log_likelihood(const MixtureData& data, const MixtureParams& p) {
+  const Precomputed c = precompute(p);
+  auto [a, b] = split_two<double>(data.size(), [&](std::size_t begin, std::size_t end, double& out) {
+    std::vector<double> terms(static_cast<std::size_t>(p.gears()) + 2);
+    int bin = 0;
+    double sum = 0.0;
+    for (std::size_t k = begin; k < end; ++k)
+      sum += sample_terms(p, c, data.v[k], data.s[k], terms.data(), bin);
+    out = sum;
+  });
+  return a + b;
+}
+
+double log_likelihood_gradient(const MixtureData& data, const MixtureParams& p, const GradientLayout& layout,
+                               Eigen::VectorXd& gradient) {
+  const Precomputed c = precompute(p);
+  const int m = p.gears();
+  const int n_par = layout.size();
+  const double a = p.sigma_s * p.sigma_s;
+  struct Acc {
+    double ll = 0.0;
+    Eigen::VectorXd g;
+  };
+  auto [x, y] = split_two<Acc>(data.size(), [&](std::size_t begin, std::size_t end, Acc& out) {
+    out.g = Eigen::VectorXd::Zero(n_par);
+    std::vector<double> r(static_cast<std::size_t>(m) + 2);
+    int bin = 0;
+    double ll = 0.0;
+    for (std::size_t k = begin; k < end; ++k) {
+      const double v = data.v[k];
+      const double s = data.s[k];
+      ll += sample_terms(p, c, v, s, r.data(), bin);
+      double d_a = 0.0;
+      double d_b = 0.0;
+      for (int i = 0; i < m; ++i) {
+        if (r[i] < 1e-12) continue;
+        const double e = v - p.theta[i] * s;
+        const double iv = c.inv_var[i];
+        const double common = -0.5 * iv + 0.5 * e * e * iv * iv;  // d log phi / d tau^2
+        out.g[i] += r[i] * (e * s * iv + common * 2.0 * p.theta[i] * a);
+        d_a += r[i] * common * p.theta[i] * p.theta[i];
+        d_b += r[i] * common;
+      }
+      out.g[m] += d_a * 2.0 * p.sigma_s;
+      out.g[m + 1] += d_b * 2.0 * p.sigma_v;
+      if (layout.with_weights) {
+        // d log p / d eta_j = r_j - alpha_j (softmax with beta_clutch as reference).
+        for (int i = 0; i < m; ++i)
+          out.g[m + 2 + i] += r[i] - p.alpha[i];
+        if (layout.with_stand) out.g[2 * m + 2] += r[m] - p.beta_stand;
+      }
+    }
+    out.ll = ll;
+  });
+  gradient = x.g;
+  if (y.g.size() == gradient.size()) gradient += y.g;
+  return x.ll + y.ll;
+}
+
+Eigen::VectorXd to_vector(const MixtureParams& p, const GradientLayout& layout) {
+  Eigen::VectorXd x(layout.size());
+  const int m = p.gears();
+  for (int i = 0; i < m; ++i)
+    x[i] = p.theta[i];
+  x[m] = p.sigma_s;
+  x[m + 1] = p.sigma_v;
+  if (layout.with_weights) {
+    const double ref = std::log(std::max(p.beta_clutch, kTiny));
+    for (int i = 0; i < m; ++i)
+      x[m + 2 + i] = std::log(std::max(p.alpha[i], kTiny)) - ref;
+    if (layout.with_stand) x[2 * m + 2] = std::log(std::max(p.beta_stand, kTiny)) - ref;
+  }
+  return x;
+}
+
+MixtureParams with_vector(const MixtureParams& p, const GradientLayout& layout, const Eigen::VectorXd& x) {
+  MixtureParams q = p;
+  const int m = p.gears();
+  for (int i = 0; i < m; ++i)
+    q.theta[i] = x[i];
+  q.sigma_s = std::abs(x[m]);
+  q.sigma_v = std::abs(x[m + 1]);
+  if (layout.with_weights) {
+    double sum = 1.0;  // the reference (clutch) has eta = 0
+    for (int i = 0; i < m; ++i)
+      sum += std::exp(x[m + 2 + i]);
+    if (layout.with_stand) sum += std::exp(x[2 * m + 2]);
+    for (int i = 0; i < m; ++i)
+      q.alpha[i] = std::exp(x[m + 2 + i]) / sum;
+    if (layout.with_stand) q.beta_stand = std::exp(x[2 * m + 2]) / sum;
+    q.beta_clutch = 1.0 / sum;
+  }
+  return q;
+}
+
+Eigen::MatrixXd observed_information(const MixtureData& data, const MixtureParams& p,
+                                     const GradientLayout& layout) {
+  const int n_par = layout.size();
+  const Eigen::VectorXd x0 = to_vector(p, layout);
+  Eigen::MatrixXd h(n_par, n_par);
+  Eigen::VectorXd gp;
+  Eigen::VectorXd gm;
+  for (int j = 0; j < n_par; ++j) {
+    const double step = 1e-5 * std::max(std::abs(x0[j]), 1e-3);
+    Eigen::VectorXd xp = x0;
+    Eigen::VectorXd xm = x0;
+    xp[j] += step;
+    xm[j] -= step;
+    (void)log_likelihood_gradient(data, with_vector(p, layout, xp), layout, gp);
+    (void)log_likelihood_gradient(data, with_vector(p, layout, xm), layout, gm);
+    h.col(j) = (gp - gm) / (2.0 * step);
+  }
+  return -0.5 * (h + h.transpose());
+}
+
+void EStepStats::reset(int gears, std::size_t bins) {
+  const auto m = static_cast<std::size_t>(gears);
+  log_likelihood = 0.0;
+  r.assign(m, 0.0);
+  rvs.assign(m, 0.0);
+  rss.assign(m, 0.0);
+  rvv.assign(m, 0.0);
+  r_stand = r_stand_vv = r_clutch = 0.0;
+  r_clutch_bins.assign(bins, 0.0);
+}
+
+void EStepStats::add(const EStepStats& other) {
+  log_likelihood += other.log_likelihood;
+  for (std::size_t i = 0; i < r.size() && i < other.r.size(); ++i) {
+    r[i] += other.r[i];
+    rvs[i] += other.rvs[i];
+    rss[i] += other.rss[i];
+    rvv[i] += other.rvv[i];
+  }
+  r_stand += other.r_stand;
+  r_stand_vv += other.r_stand_vv;
+  r_clutch += other.r_clutch;
+  for (std::size_t i = 0; i < r_clutch_bins.size() && i < other.r_clutch_bins.size(); ++i)
+    r_clutch_bins[i] += other.r_clutch_bins[i];
+}
+
+EStepStats e_step(const MixtureData& data, const MixtureParams& p) {
+  const Precomputed c = precompute(p);
+  const int m = p.gears();
+  auto [x, y] = split_two<EStepStats>(data.size(), [&](std::size_t begin, std::size_t end, EStepStats& out) {
+    out.reset(m, p.g_density.size());
+    std::vector<double> r(static_cast<std::size_t>(m) + 2);
+    int bin = 0;
+    for (std::size_t k = begin; k < end; ++k) {
+      const double v = data.v[k];
+      const double s = data.s[k];
+      out.log_likelihood += sample_terms(p, c, v, s, r.data(), bin);
+      for (int i = 0; i < m; ++i) {
+        out.r[i] += r[i];
+        out.rvs[i] += r[i] * v * s;
+        out.rss[i] += r[i] * s * s;
+        out.rvv[i] += r[i] * v * v;
+      }
+      out.r_stand += r[m];
+      out.r_stand_vv += r[m] * v * v;
+      out.r_clutch += r[m + 1];
+      if (bin >= 0) out.r_clutch_bins[static_cast<std::size_t>(bin)] += r[m + 1];
+    }
+  });
+  if (!y.r.empty()) x.add(y);
+  return x;
+}
+
+namespace {
+
+// Minimises F(a, b) = sum_i R_i log(theta_i^2 a + b) + S_i / (theta_i^2 a + b) over a = sigma_s^2,
+// b = sigma_v^2 (the sigma part of the expected negative log-likelihood) by damped Newton in log space.
+void minimise_sigmas(const std::vector<double>& theta, const std::vector<double>& r_sum,
+                     const std::vector<double>& sq, double& a, double& b) {
+  const double floor_a = 1e-12;
+  const double floor_b = 1e-12;
+  auto objective = [&](double la, double lb) {
+    const double aa = std::exp(la);
+    const double bb = std::exp(lb);
+    double f = 0.0;
+    for (std::size_t i = 0; i < theta.size(); ++i) {
+      const double var = theta[i] * theta[i] * aa + bb;
+      f += r_sum[i] * std::log(var) + sq[i] / var;
+    }
+    return f;
+  };
+  double la = std::log(std::max(a, floor_a));
+  double lb = std::log(std::max(b, floor_b));
+  for (int iter = 0; iter < 40; ++iter) {
+    // Gradient and Hessian in (la, lb) by finite differences: tiny 2-D problem, cost negligible.
+    const double h = 1e-4;
+    const double f0 = objective(la, lb);
+    const double fa = objective(la + h, lb);
+    const double fa_ = objective(la - h, lb);
+    const double fb = objective(la, lb + h);
+    const double fb_ = objective(la, lb - h);
+    const double fab = objective(la + h, lb + h);
+    const double ga = (fa - fa_) / (2 * h);
+    const double gb = (fb - fb_) / (2 * h);
+    const double haa = (fa - 2 * f0 + fa_) / (h * h);
+    const double hbb = (fb - 2 * f0 + fb_) / (h * h);
+    const double hab = (fab - fa - fb + f0) / (h * h);
+    double da = -ga;
+    double db = -gb;
+    const double det = haa * hbb - hab * hab;
+    if (haa > 0 && hbb > 0 && det > 0) {
+      da = -(hbb * ga - hab * gb) / det;
+      db = -(haa * gb - hab * ga) / det;
+    }
+    const double norm = std::hypot(da, db);
+    if (norm > 1.0) {
+      da /= norm;
+      db /= norm;
+    }
+    double step = 1.0;
+    bool improved = false;
+    for (int ls = 0; ls < 30; ++ls) {
+      const double nla = std::max(la + step * da, std::log(floor_a));
+      const double nlb = std::max(lb + step * db, std::log(floor_b));
+      if (objective(nla, nlb) < f0) {
+        la = nla;
+        lb = nlb;
+        improved = true;
+        break;
+      }
+      step *= 0.5;
+    }
+    if (!improved || std::abs(step * norm) < 1e-9) break;
+  }
+  a = std::exp(la);
+  b = std::exp(lb);
+}
+
+}  // namespace
+
+void m_step(const EStepStats& st, MixtureParams& p, bool fixed_weights, bool fixed_g) {
+  const int m = p.gears();
+  double total = st.r_clutch + st.r_stand;
+  for (int i = 0; i < m; ++i)
+    total += st.r[i];
+  if (!(total > 0.0)) return;
+  if (!fixed_weights) {
+    for (int i = 0; i < m; ++i)
+      p.alpha[i] = std::max(st.r[i] / total, 1e-9);
+    if (p.beta_stand > 0.0) p.beta_stand = std::max(st.r_stand / total, 1e-9);
+    if (p.beta_clutch > 0.0) p.beta_clutch = std::max(st.r_clutch / total, 1e-9);
+  }
+  if (p.beta_stand > 0.0 && st.r_stand > 1e-9) {
+    p.stand_sigma = std::max(std::sqrt(st.r_stand_vv / st.r_stand), 1e-3);
+  }
+  if (!fixed_g && st.r_clutch > 1e-9 && !p.g_density.empty()) {
+    const double width = (p.g_hi - p.g_lo) / static_cast<double>(p.g_density.size());
+    // A light floor keeps g a broad density: a bin never drops to zero and captures a gear line.
+    const double floor = 0.02 / (p.g_hi - p.g_lo);
+    double norm = 0.0;
+    for (std::size_t b = 0; b < p.g_density.size(); ++b) {
+      p.g_density[b] = st.r_clutch_bins[b] / (st.r_clutch * width) + floor;
+      norm += p.g_density[b] * width;
+    }
+    for (double& d : p.g_density)
+      d /= norm;
+  }
+  // Thetas by weighted least squares with each component's variance held (exact for fixed tau_i).
+  std::vector<double> sq(static_cast<std::size_t>(m));
+  for (int i = 0; i < m; ++i) {
+    if (st.rss[i] > 0.0 && st.r[i] > 1e-6) p.theta[i] = st.rvs[i] / st.rss[i];
+    sq[i] = std::max(st.rvv[i] - 2.0 * p.theta[i] * st.rvs[i] + p.theta[i] * p.theta[i] * st.rss[i], 0.0);
+  }
+  double a = p.sigma_s * p.sigma_s;
+  double b = p.sigma_v * p.sigma_v;
+  minimise_sigmas(p.theta, st.r, sq, a, b);
+  p.sigma_s = std::sqrt(a);
+  p.sigma_v = std::sqrt(b);
+}
+
+}  // namespace gearpulse::detail

@@ -1,0 +1,96 @@
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstdio>
+
+#include "tools/sim/vehicle_sim.hpp"
+
+using namespace gearpulse;
+
+TEST_CASE("sim: same seed gives the same drive and engaged samples lie on their gear line") {
+  const sim::Vehicle car = sim::bmw_520i();
+  const std::uint64_t seed = 11;
+  std::printf("sim seed %llu\n", static_cast<unsigned long long>(seed));
+  const sim::Drive a = sim::simulate_drive(car, {sim::DrivingStyle::kMixed, 1200.0, 1.0, seed});
+  const sim::Drive b = sim::simulate_drive(car, {sim::DrivingStyle::kMixed, 1200.0, 1.0, seed});
+  REQUIRE(a.truth.size() == 1201);
+  REQUIRE(b.truth.size() == a.truth.size());
+  int engaged = 0;
+  int standing = 0;
+  for (std::size_t k = 0; k < a.truth.size(); ++k) {
+    const sim::TruthSample& t = a.truth[k];
+    CHECK(t.speed == b.truth[k].speed);
+    CHECK(t.speed >= 0.0);
+    if (t.clutch == sim::Clutch::kEngaged) {
+      REQUIRE(t.gear >= 1);
+      REQUIRE(t.gear <= 5);
+      CHECK(t.speed == Approx(car.theta[static_cast<std::size_t>(t.gear - 1)] * t.freq).epsilon(1e-6));
+      ++engaged;
+    }
+    if (t.speed == 0.0) {
+      ++standing;
+      CHECK(t.gear == 0);
+      CHECK(t.freq == Approx(car.idle_freq).epsilon(0.05));
+    }
+  }
+  CHECK(engaged > 600);
+  CHECK(standing > 10);
+}
+
+TEST_CASE("sim: the output grid does not change the drive") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const sim::Drive coarse = sim::simulate_drive(car, {sim::DrivingStyle::kUrban, 300.0, 1.0, 5});
+  const sim::Drive fine = sim::simulate_drive(car, {sim::DrivingStyle::kUrban, 300.0, 0.01, 5});
+  REQUIRE(fine.truth.size() == 30001);
+  for (std::size_t k = 0; k < coarse.truth.size(); ++k) {
+    CHECK(fine.truth[k * 100].speed == Approx(coarse.truth[k].speed).margin(1e-9));
+    CHECK(sim::truth_at(fine, static_cast<double>(k)).freq == Approx(coarse.truth[k].freq).margin(1e-9));
+  }
+}
+
+TEST_CASE("sim: GPS observations are noisy and non-negative and a band floor hides low frequencies") {
+  const sim::Vehicle car = sim::bmw_520i();
+  const sim::Drive drive = sim::simulate_drive(car, {sim::DrivingStyle::kUrban, 600.0, 1.0, 3});
+  sim::ObservationOptions o;
+  o.freq_floor = 50.0;
+  const auto obs = sim::observe(drive, o);
+  REQUIRE(obs.size() == drive.truth.size());
+  double sq = 0.0;
+  int moving = 0;
+  for (const auto& ob : obs) {
+    CHECK(ob.speed >= 0.0);
+    if (ob.truth.freq < 50.0) CHECK(std::isnan(ob.freq));
+    if (ob.truth.speed > 3.0) {
+      sq += (ob.speed - ob.truth.speed) * (ob.speed - ob.truth.speed);
+      ++moving;
+    }
+  }
+  REQUIRE(moving > 50);
+  CHECK(std::sqrt(sq / moving) == Approx(o.sigma_speed).epsilon(0.3));
+}
+
+TEST_CASE("sim: OBD mode gives integer km/h and repeated rows") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const sim::Drive drive = sim::simulate_drive(car, {sim::DrivingStyle::kUrban, 600.0, 0.5, 4});
+  sim::ObservationOptions o;
+  o.obd = true;
+  o.period = 0.5;
+  const auto obs = sim::observe(drive, o);
+  int repeats = 0;
+  for (std::size_t k = 1; k < obs.size(); ++k) {
+    if (std::isnan(obs[k].speed)) continue;
+    const double kmh = obs[k].speed * 3.6;
+    CHECK(std::abs(kmh - std::round(kmh)) < 1e-9);
+    if (obs[k].speed == obs[k - 1].speed && obs[k].freq == obs[k - 1].freq) ++repeats;
+  }
+  CHECK(repeats > static_cast<int>(obs.size()) / 3);
+}
+
+TEST_CASE("sim: CVT and presets are valid and unknown names are rejected") {
+  for (const sim::Vehicle& v : sim::vehicle_presets()) {
+    const sim::Drive d = sim::simulate_drive(v, {sim::DrivingStyle::kMixed, 120.0, 1.0, 1});
+    CHECK(d.truth.size() == 121);
+  }
+  CHECK_THROWS_AS(sim::vehicle_preset("no-such-car"), std::invalid_argument);
+  CHECK_THROWS_AS(sim::parse_style("rally"), std::invalid_argument);
+}
