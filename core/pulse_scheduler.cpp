@@ -1,0 +1,103 @@
+#include "core/pulse_scheduler.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace gearpulse {
+namespace {
+
+constexpr double kNsPerS = 1e9;
+
+[[noreturn]] void bad(const std::string& field, const std::string& why) {
+  throw std::invalid_argument("pulse config: " + field + " " + why);
+}
+
+}  // namespace
+
+void validate(const PulseConfig& c) {
+  if (!(std::isfinite(c.pulses_per_km) && c.pulses_per_km > 0)) bad("pulses_per_km", "must be positive");
+  if (!(std::isfinite(c.min_freq_hz) && c.min_freq_hz > 0)) bad("min_freq_hz", "must be positive");
+  if (!(std::isfinite(c.max_freq_hz) && c.max_freq_hz > c.min_freq_hz))
+    bad("max_freq_hz", "must be finite and above min_freq_hz");
+  if (!(std::isfinite(c.pulse_width_s) && c.pulse_width_s >= 0)) bad("pulse_width_s", "must be >= 0");
+  if (c.pulse_width_s > 0 && c.pulse_width_s * c.max_freq_hz >= 1.0)
+    bad("pulse_width_s", "must be shorter than one period at max_freq_hz");
+  if (c.pulse_width_s == 0 && !(c.duty > 0 && c.duty < 1)) bad("duty", "must lie in (0, 1)");
+}
+
+PulseScheduler::PulseScheduler(const PulseConfig& config, std::int64_t t0_ns)
+    : config_(config), min_spacing_ns_(0), t_(t0_ns) {
+  validate(config_);
+  min_spacing_ns_ = kNsPerS / config_.max_freq_hz;
+  // The shortest low time the train ever has (at max frequency); a rise that is late never comes sooner
+  // than this after the previous fall, so a counter on the line sees every pulse.
+  min_low_ns_ = config_.pulse_width_s > 0 ? min_spacing_ns_ - config_.pulse_width_s * kNsPerS
+                                          : (1.0 - config_.duty) * min_spacing_ns_;
+}
+
+void PulseScheduler::advance_to(std::int64_t t_ns) noexcept {
+  if (t_ns <= t_) return;
+  owed_ += freq_ * static_cast<double>(t_ns - t_) / kNsPerS;
+  t_ = t_ns;
+}
+
+void PulseScheduler::set_speed(std::int64_t t_ns, double speed_mps) noexcept {
+  advance_to(t_ns);
+  speed_ = speed_mps > 0 && std::isfinite(speed_mps) ? speed_mps : 0.0;
+  double f = speed_ * config_.pulses_per_km / 1000.0;
+  if (f < config_.min_freq_hz) f = 0.0;
+  freq_ = std::min(f, config_.max_freq_hz);
+}
+
+std::int64_t PulseScheduler::next_rise_ns() const noexcept {
+  double rise;
+  if (owed_ >= 1.0) {
+    rise = static_cast<double>(t_);  // late: due now
+  } else if (freq_ > 0.0) {
+    rise = static_cast<double>(t_) + std::ceil((1.0 - owed_) / freq_ * kNsPerS);
+  } else {
+    return PulseEdge::kNever;
+  }
+  rise = std::max({rise, static_cast<double>(last_rise_ns_) + min_spacing_ns_,
+                   static_cast<double>(last_fall_ns_) + min_low_ns_});
+  return static_cast<std::int64_t>(std::ceil(rise));
+}
+
+PulseEdge PulseScheduler::next_edge() const noexcept {
+  if (high_) return {fall_ns_, EdgeKind::kFall};
+  const std::int64_t rise = next_rise_ns();
+  if (rise == PulseEdge::kNever) return {};
+  return {rise, EdgeKind::kRise};
+}
+
+PulseEdge PulseScheduler::pop_due(std::int64_t t_ns) noexcept {
+  const PulseEdge e = next_edge();
+  if (e.kind == EdgeKind::kNone || e.t_ns > t_ns) return {};
+  if (e.kind == EdgeKind::kFall) {
+    high_ = false;
+    last_fall_ns_ = e.t_ns;
+    fall_ns_ = PulseEdge::kNever;
+    return e;
+  }
+  advance_to(e.t_ns);
+  owed_ -= 1.0;
+  ++pulses_;
+  high_ = true;
+  last_rise_ns_ = e.t_ns;
+  // The width is fixed at the rise: a speed change while high moves later pulses, never this fall.
+  const double width_s =
+      config_.pulse_width_s > 0
+          ? config_.pulse_width_s
+          : config_.duty / std::max(freq_ > 0 ? freq_ : config_.max_freq_hz, config_.min_freq_hz);
+  fall_ns_ = e.t_ns + static_cast<std::int64_t>(std::llround(width_s * kNsPerS));
+  return e;
+}
+
+double PulseScheduler::phase_pulses(std::int64_t t_ns) const noexcept {
+  const double ahead = t_ns > t_ ? freq_ * static_cast<double>(t_ns - t_) / kNsPerS : 0.0;
+  return static_cast<double>(pulses_) + owed_ + ahead;
+}
+
+}  // namespace gearpulse

@@ -1,0 +1,122 @@
+#pragma once
+// ALSA capture into the SPSC ring, with sample-clock timestamps.
+//
+// A capture thread reads periods (non-blocking PCM, snd_pcm_wait with a timeout so stop() is prompt and
+// the thread never spins), converts S16/S32/FLOAT interleaved frames to float mono (one chosen channel or
+// the mean of all) and pushes them with try_push_bulk. Recovery follows the PCM state as PipeWire does:
+// -EPIPE (XRUN) and -ESTRPIPE (SUSPENDED: resume, else prepare) are handled separately, then the stream
+// is prepared and restarted; -ENODEV and other fatal errors close the PCM and reopen it with backoff.
+//
+// Timestamps: the ring stream (what the consumer reads, frame 0 = first frame pushed) is mapped to
+// CLOCK_MONOTONIC by anchors {ring frame, time, ns per frame}. The first anchor comes from the stream
+// start; ALSA's status timestamps (htstamp minus the frames still waiting in the buffer) then correct
+// offset and rate slowly. Frames lost before the ring — an XRUN, a restart, or frames dropped because
+// the ring was full — do not exist in the ring stream: the next frame that is pushed gets a new anchor
+// at its true capture time, so timestamps jump forward across a hole and are monotonic throughout. The
+// anchors live in a small seqlock history so the consumer finds the one for any frame it still holds.
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/spsc_ring.hpp"
+#include "drivers/audio_source.hpp"
+
+namespace gearpulse {
+
+enum class SampleFormat : std::uint8_t { kS16, kS32, kFloat };
+
+[[nodiscard]] const char* to_string(SampleFormat format) noexcept;
+
+struct AlsaCaptureConfig {
+  std::string device = "default";
+  unsigned rate = 48000;                     // requested; the nearest the device offers is used
+  unsigned channels = 1;                     // requested; the nearest the device offers is used
+  SampleFormat format = SampleFormat::kS16;  // preferred; the others are tried if it is refused
+  int channel = -1;                          // channel to keep, -1 = mean of all channels
+  unsigned period_frames = 1024;
+  unsigned periods = 4;   // buffer = periods * period_frames
+  bool realtime = false;  // SCHED_FIFO for the capture thread (failure reported)
+  int rt_priority = 70;
+  bool lock_memory = false;                     // mlockall (failure reported)
+  std::chrono::milliseconds wait_timeout{200};  // snd_pcm_wait bound: how late stop() can be
+  std::chrono::milliseconds reopen_min{100};    // backoff after a lost device, doubled up to reopen_max
+  std::chrono::milliseconds reopen_max{2000};
+};
+
+struct AlsaCaptureStats {
+  std::uint64_t frames = 0;        // frames read from ALSA
+  std::uint64_t pushed = 0;        // frames pushed into the ring (= ring frame index of the next frame)
+  std::uint64_t dropped = 0;       // frames the ring had no room for
+  std::uint64_t xruns = 0;         // -EPIPE recoveries
+  std::uint64_t suspends = 0;      // -ESTRPIPE recoveries
+  std::uint64_t reopens = 0;       // successful reopens after a lost device
+  std::uint64_t clock_resets = 0;  // anchors placed after a discontinuity or a large clock error
+  int last_error = 0;              // last negative ALSA error code seen, 0 if none
+  bool realtime_ok = false;
+  bool memory_locked = false;
+  bool running = false;
+};
+
+class AlsaCapture final : public AudioSource {
+ public:
+  // Opens and configures the PCM now, so a bad name or a refused format fails here with a one-line
+  // std::runtime_error ("ALSA capture 'foo': cannot open: No such file or directory"). `ring` is
+  // borrowed and must outlive this object; this object is its only producer.
+  AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring);
+  ~AlsaCapture() override;  // stop()
+  AlsaCapture(const AlsaCapture&) = delete;
+  AlsaCapture& operator=(const AlsaCapture&) = delete;
+
+  void start() override;  // starts the capture thread (idempotent)
+  void stop() override;   // joins within about wait_timeout
+
+  [[nodiscard]] unsigned rate() const noexcept override { return rate_; }
+  [[nodiscard]] unsigned channels() const noexcept { return channels_; }
+  [[nodiscard]] SampleFormat format() const noexcept { return format_; }
+  [[nodiscard]] unsigned period_frames() const noexcept { return period_frames_; }
+  [[nodiscard]] bool frame_time(std::uint64_t index, std::int64_t& t_ns) const noexcept override;
+  [[nodiscard]] AlsaCaptureStats stats() const noexcept;
+  [[nodiscard]] std::string describe() const;  // "hw:0 48000 Hz S16 2 ch, period 1024"
+
+  struct Anchor {
+    std::uint64_t frame = 0;    // ring frame index
+    std::int64_t t_ns = 0;      // CLOCK_MONOTONIC of that frame
+    double ns_per_frame = 0.0;  // local rate of the sample clock
+  };
+
+ private:
+  void run() noexcept;
+  void publish_anchor(const Anchor& anchor) noexcept;
+
+  static constexpr std::size_t kAnchors = 64;
+  struct alignas(kCacheLine) AnchorSlot {
+    std::atomic<std::uint32_t> seq{0};
+    std::atomic<std::uint64_t> frame{0};
+    std::atomic<std::int64_t> t_ns{0};
+    std::atomic<double> ns_per_frame{0.0};
+  };
+
+  AlsaCaptureConfig config_;
+  SpscRing<float>& ring_;
+  void* pcm_ = nullptr;  // snd_pcm_t*, kept opaque so users need no ALSA headers
+  unsigned rate_ = 0;
+  unsigned channels_ = 0;
+  SampleFormat format_ = SampleFormat::kS16;
+  unsigned period_frames_ = 0;
+  std::vector<std::byte> raw_;  // one period as read
+  std::vector<float> mono_;     // one period converted
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> running_{false};
+  AnchorSlot anchors_[kAnchors];
+  std::atomic<std::uint64_t> anchor_count_{0};
+  std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
+      clock_resets_{0};
+  std::atomic<int> last_error_{0};
+  std::atomic<bool> realtime_ok_{false}, memory_locked_{false};
+};
+
+}  // namespace gearpulse

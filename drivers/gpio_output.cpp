@@ -1,0 +1,76 @@
+#include "drivers/gpio_output.hpp"
+
+#include <gpiod.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <stdexcept>
+
+namespace gearpulse {
+namespace {
+
+[[noreturn]] void fail(const std::string& chip, unsigned offset, const std::string& what, int err = 0) {
+  std::string msg = "gpio output " + chip + " line " + std::to_string(offset) + ": " + what;
+  if (err) msg += ": " + std::string(std::strerror(err));
+  throw std::runtime_error(msg);
+}
+
+}  // namespace
+
+bool gpio_chip_available() {
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator("/dev", ec))
+    if (entry.path().filename().string().rfind("gpiochip", 0) == 0) return true;
+  return false;
+}
+
+GpioOutput::GpioOutput(const std::string& chip, unsigned offset) : chip_name_(chip), offset_(offset) {
+  errno = 0;
+  chip_ = ::gpiod_chip_open_lookup(chip.c_str());  // name, path or number
+  if (!chip_) fail(chip, offset, "cannot open the GPIO chip", errno ? errno : ENODEV);
+  if (offset >= ::gpiod_chip_num_lines(chip_)) {
+    const unsigned n = ::gpiod_chip_num_lines(chip_);
+    ::gpiod_chip_close(chip_);
+    fail(chip, offset, "offset out of range (the chip has " + std::to_string(n) + " lines)");
+  }
+  line_ = ::gpiod_chip_get_line(chip_, offset);
+  if (!line_) {
+    const int err = errno;
+    ::gpiod_chip_close(chip_);
+    fail(chip, offset, "cannot get the line", err);
+  }
+  if (::gpiod_line_is_used(line_)) {
+    const char* owner = ::gpiod_line_consumer(line_);
+    const std::string who = owner ? owner : "the kernel or another process";
+    ::gpiod_chip_close(chip_);
+    fail(chip, offset, "line is busy (used by " + who + ")");
+  }
+  if (::gpiod_line_request_output(line_, kConsumer, 0) != 0) {
+    const int err = errno;
+    ::gpiod_chip_close(chip_);
+    fail(chip, offset, err == EBUSY ? "line is busy" : "cannot request the line as output", err);
+  }
+}
+
+GpioOutput::~GpioOutput() {
+  if (line_) {
+    ::gpiod_line_set_value(line_, 0);
+    ::gpiod_line_release(line_);
+  }
+  if (chip_) ::gpiod_chip_close(chip_);
+}
+
+void GpioOutput::rise() noexcept {
+  if (::gpiod_line_set_value(line_, 1) != 0) errors_.fetch_add(1, std::memory_order_relaxed);
+}
+
+void GpioOutput::fall() noexcept {
+  if (::gpiod_line_set_value(line_, 0) != 0) errors_.fetch_add(1, std::memory_order_relaxed);
+}
+
+std::string GpioOutput::describe() const {
+  return "gpio " + chip_name_ + " line " + std::to_string(offset_);
+}
+
+}  // namespace gearpulse

@@ -1,0 +1,211 @@
+#include "drivers/gpsd_client.hpp"
+
+#include <gps.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+
+#include "drivers/clock.hpp"
+
+namespace gearpulse {
+namespace {
+
+constexpr int kPollUs = 100'000;  // how long one wait for data may delay stop()
+
+// libgps closes and frees what gps_open set up; this keeps that pairing exception-safe.
+class GpsConnection {
+ public:
+  GpsConnection(const std::string& host, const std::string& port) {
+    errno = 0;
+    if (::gps_open(host.c_str(), port.c_str(), &data_) != 0) {
+      const int err = errno;
+      error_ = "cannot connect to gpsd at " + host + ":" + port + ": " + ::gps_errstr(err);
+      return;
+    }
+    open_ = true;
+    if (::gps_stream(&data_, WATCH_ENABLE | WATCH_JSON, nullptr) != 0) {
+      error_ = "gpsd at " + host + ":" + port + " refused the watch request";
+    }
+  }
+  ~GpsConnection() {
+    if (open_) ::gps_close(&data_);
+  }
+  GpsConnection(const GpsConnection&) = delete;
+  GpsConnection& operator=(const GpsConnection&) = delete;
+
+  [[nodiscard]] bool ok() const noexcept { return open_ && error_.empty(); }
+  [[nodiscard]] const std::string& error() const noexcept { return error_; }
+  gps_data_t& data() noexcept { return data_; }
+
+ private:
+  gps_data_t data_{};
+  bool open_ = false;
+  std::string error_;
+};
+
+double fix_seconds(const timespec_t& ts) noexcept {
+  if (ts.tv_sec == 0 && ts.tv_nsec == 0) return std::nan("");
+  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
+}
+
+}  // namespace
+
+const char* to_string(GpsdState state) noexcept {
+  switch (state) {
+    case GpsdState::kStopped:
+      return "stopped";
+    case GpsdState::kConnecting:
+      return "connecting";
+    case GpsdState::kConnected:
+      return "connected";
+  }
+  return "unknown";
+}
+
+GpsdClient::GpsdClient(GpsdConfig config, Callback on_report)
+    : config_(std::move(config)), on_report_(std::move(on_report)) {}
+
+GpsdClient::~GpsdClient() {
+  stop();
+}
+
+void GpsdClient::start() {
+  std::lock_guard lock(mutex_);
+  if (thread_.joinable()) return;
+  stop_requested_ = false;
+  status_.state = GpsdState::kConnecting;
+  thread_ = std::thread([this] { run(); });
+}
+
+void GpsdClient::stop() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_requested_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+  std::lock_guard lock(mutex_);
+  status_.state = GpsdState::kStopped;
+}
+
+std::optional<GpsReport> GpsdClient::latest() const {
+  std::lock_guard lock(mutex_);
+  return latest_;
+}
+
+bool GpsdClient::has_gps(std::int64_t now_ns) const {
+  std::lock_guard lock(mutex_);
+  if (!latest_ || !latest_->usable()) return false;
+  const std::int64_t timeout_ns = std::chrono::nanoseconds(config_.no_fix_timeout).count();
+  return now_ns - latest_->rx_ns <= timeout_ns;
+}
+
+GpsdStatus GpsdClient::status() const {
+  std::lock_guard lock(mutex_);
+  return status_;
+}
+
+bool GpsdClient::wait_backoff(std::chrono::milliseconds delay) {
+  std::unique_lock lock(mutex_);
+  return !wake_.wait_for(lock, delay, [this] { return stop_requested_; });
+}
+
+void GpsdClient::set_error(std::string message, bool connection_lost) {
+  std::lock_guard lock(mutex_);
+  status_.last_error = std::move(message);
+  ++status_.failures;
+  if (connection_lost) status_.state = GpsdState::kConnecting;
+}
+
+void GpsdClient::run() {
+  std::chrono::milliseconds backoff = config_.backoff_min;
+  auto stopping = [this] {
+    std::lock_guard lock(mutex_);
+    return stop_requested_;
+  };
+  while (!stopping()) {
+    GpsConnection conn(config_.host, config_.port);
+    if (!conn.ok()) {
+      set_error(conn.error(), true);
+      if (!wait_backoff(backoff)) break;
+      backoff = std::min(backoff * 2, config_.backoff_max);
+      continue;
+    }
+    {
+      std::lock_guard lock(mutex_);
+      status_.state = GpsdState::kConnected;
+      ++status_.connects;
+    }
+    bool got_data = false;
+    char message[4096];
+    while (!stopping()) {
+      errno = 0;
+      if (!::gps_waiting(&conn.data(), kPollUs)) {
+        if (errno != 0 && errno != EINTR && errno != EAGAIN) {
+          set_error(std::string("waiting for gpsd: ") + std::strerror(errno), true);
+          break;
+        }
+        continue;
+      }
+      // Drain everything that is already buffered; only the newest position/velocity report counts.
+      std::optional<GpsReport> newest;
+      std::uint64_t drained = 0;
+      std::uint64_t bad = 0;
+      bool lost = false;
+      do {
+        message[0] = '\0';
+        errno = 0;
+        const int n = ::gps_read(&conn.data(), message, sizeof message);
+        if (n < 0) {
+          lost = true;
+          break;
+        }
+        if (n == 0) break;
+        got_data = true;
+        if (std::strstr(message, "\"class\":\"TPV\"") == nullptr) {
+          if (message[0] != '{') ++bad;  // not JSON at all: counted, skipped
+          continue;
+        }
+        const gps_fix_t& fix = conn.data().fix;
+        GpsReport r;
+        r.rx_ns = monotonic_ns();
+        r.mode = (fix.mode >= 0 && fix.mode <= 3) ? fix.mode : 0;
+        r.speed = std::isfinite(fix.speed) && fix.speed >= 0.0 ? fix.speed : std::nan("");
+        r.eps = std::isfinite(fix.eps) && fix.eps >= 0.0 ? fix.eps : std::nan("");
+        r.fix_time = fix_seconds(fix.time);
+        if (newest) ++drained;
+        newest = r;
+      } while (::gps_waiting(&conn.data(), 0));
+      if (newest) {
+        {
+          std::lock_guard lock(mutex_);
+          latest_ = newest;
+          ++status_.reports;
+          status_.superseded += drained;
+          status_.bad_reads += bad;
+        }
+        backoff = config_.backoff_min;
+        if (on_report_) on_report_(*newest);
+      } else if (bad) {
+        std::lock_guard lock(mutex_);
+        status_.bad_reads += bad;
+      }
+      if (lost) {
+        const int err = errno;
+        set_error(err ? std::string("reading from gpsd: ") + std::strerror(err)
+                      : std::string("gpsd closed the connection"),
+                  true);
+        break;
+      }
+    }
+    if (stopping()) break;
+    // Lost the connection: back off before reconnecting so a crashing gpsd is not hammered; a
+    // connection that delivered data resets the delay.
+    if (got_data) backoff = config_.backoff_min;
+    if (!wait_backoff(backoff)) break;
+    backoff = std::min(backoff * 2, config_.backoff_max);
+  }
+}
+
+}  // namespace gearpulse

@@ -1,0 +1,72 @@
+#pragma once
+// GPS speed from gpsd through libgps (JSON watch). A thread connects, drains every batch of buffered
+// reports so only the newest position/velocity report counts, and publishes it; when gpsd is absent,
+// dies or restarts it reconnects with exponential backoff and says so in its status. Garbage from the
+// socket is counted and skipped; it never ends the thread.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "drivers/speed_source.hpp"
+
+namespace gearpulse {
+
+struct GpsdConfig {
+  std::string host = "127.0.0.1";
+  std::string port = "2947";
+  std::chrono::milliseconds no_fix_timeout{1500};  // no usable report for longer: "no GPS"
+  std::chrono::milliseconds backoff_min{200};      // first reconnect delay, doubled up to backoff_max
+  std::chrono::milliseconds backoff_max{5000};
+};
+
+enum class GpsdState : std::uint8_t { kStopped, kConnecting, kConnected };
+
+struct GpsdStatus {
+  GpsdState state = GpsdState::kStopped;
+  std::uint64_t reports = 0;     // position/velocity reports published
+  std::uint64_t superseded = 0;  // reports drained and replaced by a newer one in the same batch
+  std::uint64_t connects = 0;    // successful connections (1 = first, more = reconnects)
+  std::uint64_t failures = 0;    // failed connection attempts and lost connections
+  std::uint64_t bad_reads = 0;   // reads libgps could not parse
+  std::string last_error;        // empty if none yet
+};
+
+[[nodiscard]] const char* to_string(GpsdState state) noexcept;
+
+class GpsdClient final : public SpeedSource {
+ public:
+  // `on_report` (optional) runs on the client thread for every published report; keep it short.
+  explicit GpsdClient(GpsdConfig config, Callback on_report = {});
+  ~GpsdClient() override;  // stop()
+  GpsdClient(const GpsdClient&) = delete;
+  GpsdClient& operator=(const GpsdClient&) = delete;
+
+  void start();  // starts the thread (idempotent); never throws for an absent gpsd: it keeps trying
+  void stop();   // joins the thread within ~100 ms
+
+  [[nodiscard]] std::optional<GpsReport> latest() const override;
+  [[nodiscard]] bool has_gps(std::int64_t now_ns) const override;
+  [[nodiscard]] GpsdStatus status() const;
+  [[nodiscard]] const GpsdConfig& config() const noexcept { return config_; }
+
+ private:
+  void run();
+  bool wait_backoff(std::chrono::milliseconds delay);  // false if stop was requested
+  void set_error(std::string message, bool connection_lost);
+
+  const GpsdConfig config_;
+  const Callback on_report_;
+  std::thread thread_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_requested_ = false;
+  std::optional<GpsReport> latest_;
+  GpsdStatus status_;
+};
+
+}  // namespace gearpulse

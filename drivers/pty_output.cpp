@@ -1,0 +1,120 @@
+#include "drivers/pty_output.hpp"
+
+#include <fcntl.h>
+#include <poll.h>
+#include <sys/ioctl.h>
+#include <sys/stat.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <stdexcept>
+#include <system_error>
+
+namespace gearpulse {
+namespace {
+
+[[noreturn]] void fail(const std::filesystem::path& link, const std::string& what, int err = 0) {
+  std::string msg = "pty output " + link.string() + ": " + what;
+  if (err) msg += ": " + std::string(std::strerror(err));
+  throw std::runtime_error(msg);
+}
+
+// A file descriptor for the slave side without a path lookup where the kernel offers it (Linux >= 4.13).
+int open_peer(int master, const std::string& slave_name) noexcept {
+#ifdef TIOCGPTPEER
+  const int fd = ::ioctl(master, TIOCGPTPEER, O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+  if (fd >= 0) return fd;
+#endif
+  return ::open(slave_name.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+}
+
+}  // namespace
+
+PtyOutput::PtyOutput(std::filesystem::path link) : link_(std::move(link)) {
+  if (link_.empty()) fail(link_, "empty path");
+  const std::filesystem::path dir = link_.has_parent_path() ? link_.parent_path() : ".";
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec))
+    fail(link_, "directory " + dir.string() + " does not exist (create it, e.g. with systemd-tmpfiles)");
+  const auto st = std::filesystem::symlink_status(link_, ec);
+  if (std::filesystem::exists(st) && !std::filesystem::is_symlink(st))
+    fail(link_, "exists and is not a symlink (refusing to replace it)");
+
+  master_ = ::posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+  if (master_ < 0) fail(link_, "posix_openpt", errno);
+  char name[128];
+  if (::grantpt(master_) != 0 || ::unlockpt(master_) != 0 || ::ptsname_r(master_, name, sizeof name) != 0) {
+    const int err = errno;
+    ::close(master_);
+    fail(link_, "cannot set up the pseudo-terminal", err);
+  }
+  slave_name_ = name;
+  // Raw mode on the pair (termios ioctls on a Linux master act on the slave): bytes pass unchanged, no
+  // echo, no line buffering, so every pulse byte is readable at once.
+  termios tio{};
+  if (::tcgetattr(master_, &tio) == 0) {
+    ::cfmakeraw(&tio);
+    ::tcsetattr(master_, TCSANOW, &tio);
+  }
+  ::chmod(slave_name_.c_str(), 0660);
+  // Open and close the slave once: from then on the master reports POLLHUP whenever no reader has the
+  // slave open, which is how rise() knows that a pulse would only be queued for nobody.
+  const int peer = open_peer(master_, slave_name_);
+  if (peer >= 0) ::close(peer);
+
+  // Publish atomically: a reader never sees a missing or half-made link.
+  const std::filesystem::path tmp = link_.string() + ".tmp" + std::to_string(::getpid());
+  ::unlink(tmp.c_str());
+  if (::symlink(slave_name_.c_str(), tmp.c_str()) != 0 || ::rename(tmp.c_str(), link_.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    ::close(master_);
+    fail(link_, "cannot create the symlink to " + slave_name_, err);
+  }
+}
+
+PtyOutput::~PtyOutput() {
+  char target[256];
+  const ssize_t n = ::readlink(link_.c_str(), target, sizeof target - 1);
+  if (n > 0 && std::string(target, static_cast<std::size_t>(n)) == slave_name_) ::unlink(link_.c_str());
+  if (master_ >= 0) ::close(master_);
+}
+
+void PtyOutput::rise() noexcept {
+  pollfd p{master_, 0, 0};
+  if (::poll(&p, 1, 0) > 0 && (p.revents & POLLHUP)) {
+    if (!idle_) {
+      // The reader just left: bytes it did not read would otherwise greet the next reader as a burst of
+      // stale pulses. Drop them once, then count pulses as unheard until somebody opens the slave.
+      const int peer = open_peer(master_, slave_name_);
+      if (peer >= 0) {
+        ::tcflush(peer, TCIFLUSH);
+        ::close(peer);
+      }
+      idle_ = true;
+    }
+    unheard_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  idle_ = false;
+  static constexpr char kPulse = 'P';
+  const ssize_t n = ::write(master_, &kPulse, 1);
+  if (n == 1) {
+    written_.fetch_add(1, std::memory_order_relaxed);
+  } else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+    overflowed_.fetch_add(1, std::memory_order_relaxed);
+  } else if (n < 0 && errno == EIO) {
+    unheard_.fetch_add(1, std::memory_order_relaxed);  // the reader vanished between poll and write
+  } else {
+    errors_.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+std::string PtyOutput::describe() const {
+  return "pty " + link_.string() + " -> " + slave_name_;
+}
+
+}  // namespace gearpulse

@@ -1,0 +1,36 @@
+#pragma once
+// The device end of the pulse train. The pulse thread calls rise() at every rising edge and fall() at
+// every falling edge; both run on the real-time path, so they never block, allocate, log or throw:
+// failures are counted and the slower threads read the counters.
+#include <cstdint>
+#include <string>
+
+namespace gearpulse {
+
+class PulseOutput {
+ public:
+  virtual ~PulseOutput() = default;
+  virtual void rise() noexcept = 0;
+  virtual void fall() noexcept = 0;
+  // Writes to the device that failed (or found nobody listening) since construction.
+  [[nodiscard]] virtual std::uint64_t errors() const noexcept = 0;
+  // One line for logs and status ("pty /run/gearpulse/pulse -> /dev/pts/3").
+  [[nodiscard]] virtual std::string describe() const = 0;
+};
+
+// Counts edges and does nothing else: output kind "none", and a stand-in for tests.
+class NullPulseOutput final : public PulseOutput {
+ public:
+  void rise() noexcept override { ++rises_; }
+  void fall() noexcept override { ++falls_; }
+  [[nodiscard]] std::uint64_t errors() const noexcept override { return 0; }
+  [[nodiscard]] std::string describe() const override { return "none"; }
+  [[nodiscard]] std::uint64_t rises() const noexcept { return rises_; }
+  [[nodiscard]] std::uint64_t falls() const noexcept { return falls_; }
+
+ private:
+  std::uint64_t rises_ = 0;
+  std::uint64_t falls_ = 0;
+};
+
+}  // namespace gearpulse

@@ -1,0 +1,113 @@
+#include "drivers/pulse_thread.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+
+#include <algorithm>
+#include <cerrno>
+
+#include "drivers/clock.hpp"
+
+namespace gearpulse {
+namespace {
+
+constexpr std::int64_t kLateNs = 1'000'000;  // an edge more than this behind schedule counts as late
+
+void sleep_until(std::int64_t t_ns) noexcept {
+  const timespec ts = to_timespec(t_ns);
+  while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+}  // namespace
+
+PulseThread::PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<std::int64_t> rise_log)
+    : output_(output), config_(std::move(config)), rise_log_(rise_log) {}
+
+PulseThread::~PulseThread() {
+  stop();
+}
+
+void PulseThread::start() {
+  if (thread_.joinable()) return;
+  validate(config_.pulse);  // fail here, not on the real-time thread
+  stop_.store(false);
+  const std::int64_t t0 = monotonic_ns();
+  thread_ = std::thread([this, t0] { run(t0); });
+}
+
+void PulseThread::stop() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+}
+
+PulseThreadStatus PulseThread::status() const noexcept {
+  PulseThreadStatus s;
+  s.pulses = pulses_.load(std::memory_order_relaxed);
+  s.late_edges = late_edges_.load(std::memory_order_relaxed);
+  s.max_late_ns = max_late_ns_.load(std::memory_order_relaxed);
+  s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
+  s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
+  s.running = running_.load(std::memory_order_relaxed);
+  return s;
+}
+
+void PulseThread::run(std::int64_t t0_ns) noexcept {
+  if (config_.realtime) {
+    sched_param sp{};
+    sp.sched_priority = config_.rt_priority;
+    realtime_ok_.store(::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp) == 0);
+  }
+  if (config_.lock_memory) memory_locked_.store(::mlockall(MCL_CURRENT | MCL_FUTURE) == 0);
+  running_.store(true);
+
+  PulseScheduler sched(config_.pulse, t0_ns);  // validated in start(): cannot throw here
+  const std::int64_t poll_ns = std::max<std::int64_t>(
+      1'000'000, std::chrono::duration_cast<std::chrono::nanoseconds>(config_.speed_poll).count());
+  double applied = 0.0;
+  bool high = false;
+  std::int64_t max_late = 0;
+  auto emit_due = [&](std::int64_t now) noexcept {
+    for (PulseEdge e = sched.pop_due(now); e.kind != EdgeKind::kNone; e = sched.pop_due(now)) {
+      if (e.kind == EdgeKind::kRise) {
+        output_.rise();
+        high = true;
+        pulses_.fetch_add(1, std::memory_order_relaxed);
+        const std::size_t n = logged_.load(std::memory_order_relaxed);
+        if (n < rise_log_.size()) {
+          rise_log_[n] = e.t_ns;
+          logged_.store(n + 1, std::memory_order_release);
+        }
+      } else {
+        output_.fall();
+        high = false;
+      }
+      const std::int64_t late = now - e.t_ns;
+      if (late > kLateNs) late_edges_.fetch_add(1, std::memory_order_relaxed);
+      if (late > max_late) {
+        max_late = late;
+        max_late_ns_.store(late, std::memory_order_relaxed);
+      }
+    }
+  };
+
+  while (!stop_.load(std::memory_order_relaxed)) {
+    std::int64_t now = monotonic_ns();
+    // Edges due under the old speed first: a change is only known from the moment it is seen.
+    emit_due(now);
+    double target = target_.load(std::memory_order_relaxed);
+    if (!(target > 0.0)) target = 0.0;  // NaN and negatives are standstill
+    if (target != applied) {
+      sched.set_speed(now, target);
+      applied = target;
+      emit_due(now);
+    }
+    const std::int64_t wake = std::min(sched.next_edge().t_ns, now + poll_ns);
+    sleep_until(wake);
+  }
+  if (high) output_.fall();  // leave the line low
+  running_.store(false);
+}
+
+}  // namespace gearpulse

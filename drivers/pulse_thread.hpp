@@ -1,0 +1,71 @@
+#pragma once
+// The real-time pulse thread: sleeps with clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME) to each edge
+// the PulseScheduler computes and calls the output's rise()/fall(). The target speed comes from another
+// thread through an atomic; the thread looks at it at every edge and at least every speed_poll, so a
+// start from standstill is picked up within that time. The loop never allocates, locks, logs or throws.
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <span>
+#include <thread>
+
+#include "core/pulse_scheduler.hpp"
+#include "drivers/pulse_output.hpp"
+
+namespace gearpulse {
+
+struct PulseThreadConfig {
+  PulseConfig pulse;
+  std::chrono::microseconds speed_poll{5000};  // longest wait before a new target speed is applied
+  bool realtime = false;                       // request SCHED_FIFO (failure is reported, not fatal)
+  int rt_priority = 80;
+  bool lock_memory = false;  // mlockall(MCL_CURRENT | MCL_FUTURE) (failure reported)
+};
+
+struct PulseThreadStatus {
+  std::uint64_t pulses = 0;      // rising edges emitted
+  std::uint64_t late_edges = 0;  // edges emitted more than 1 ms after their scheduled time
+  std::int64_t max_late_ns = 0;  // worst lateness seen
+  bool realtime_ok = false;      // SCHED_FIFO granted
+  bool memory_locked = false;    // mlockall succeeded
+  bool running = false;
+};
+
+class PulseThread {
+ public:
+  // `output` is borrowed and must outlive the thread. `rise_log` (optional, borrowed) receives the
+  // scheduled time of each rising edge, in order, until it is full: for benches and tests.
+  PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<std::int64_t> rise_log = {});
+  ~PulseThread();  // stop()
+  PulseThread(const PulseThread&) = delete;
+  PulseThread& operator=(const PulseThread&) = delete;
+
+  void start();  // throws std::invalid_argument for a bad PulseConfig, std::system_error if no thread
+  void stop();   // joins; the output is left low
+
+  // Lock-free, callable from any thread at any time. NaN or negative means standstill.
+  void set_speed(double speed_mps) noexcept { target_.store(speed_mps, std::memory_order_relaxed); }
+  [[nodiscard]] double target_speed() const noexcept { return target_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t pulses() const noexcept { return pulses_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::size_t logged() const noexcept { return logged_.load(std::memory_order_acquire); }
+  [[nodiscard]] PulseThreadStatus status() const noexcept;
+
+ private:
+  void run(std::int64_t t0_ns) noexcept;
+
+  PulseOutput& output_;
+  const PulseThreadConfig config_;
+  std::span<std::int64_t> rise_log_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> running_{false};
+  std::atomic<double> target_{0.0};
+  std::atomic<std::uint64_t> pulses_{0};
+  std::atomic<std::uint64_t> late_edges_{0};
+  std::atomic<std::int64_t> max_late_ns_{0};
+  std::atomic<std::size_t> logged_{0};
+  std::atomic<bool> realtime_ok_{false};
+  std::atomic<bool> memory_locked_{false};
+};
+
+}  // namespace gearpulse

@@ -1,0 +1,193 @@
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <vector>
+
+#include "core/pulse_scheduler.hpp"
+
+using gearpulse::EdgeKind;
+using gearpulse::PulseConfig;
+using gearpulse::PulseEdge;
+using gearpulse::PulseScheduler;
+
+namespace {
+
+constexpr std::int64_t kS = 1'000'000'000;
+
+// Drives the scheduler like the pulse thread does, but in simulated time: edges are committed at their
+// scheduled instants, speed changes at `changes` (t_ns, speed). Returns the edges.
+struct Run {
+  std::vector<PulseEdge> edges;
+  std::uint64_t pulses = 0;
+};
+
+Run drive(PulseScheduler& s, const std::vector<std::pair<std::int64_t, double>>& changes, std::int64_t end) {
+  Run run;
+  std::size_t next = 0;
+  for (;;) {
+    const std::int64_t change_t = next < changes.size() ? changes[next].first : end;
+    const PulseEdge e = s.next_edge();
+    if (e.kind != EdgeKind::kNone && e.t_ns <= change_t && e.t_ns <= end) {
+      run.edges.push_back(s.pop_due(e.t_ns));
+      continue;
+    }
+    if (next >= changes.size()) break;
+    s.set_speed(changes[next].first, changes[next].second);
+    ++next;
+  }
+  run.pulses = s.pulses();
+  return run;
+}
+
+double distance_m(const std::vector<std::pair<std::int64_t, double>>& changes, std::int64_t end) {
+  double d = 0;
+  for (std::size_t i = 0; i < changes.size(); ++i) {
+    const std::int64_t t1 = i + 1 < changes.size() ? changes[i + 1].first : end;
+    d += changes[i].second * static_cast<double>(t1 - changes[i].first) / kS;
+  }
+  return d;
+}
+
+}  // namespace
+
+TEST_CASE("pulse: constant speed gives the exact frequency and duty") {
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;  // 1 pulse per metre
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 20.0);  // 20 Hz
+  const Run r = drive(s, {}, 10 * kS);
+  REQUIRE(r.pulses == 200);  // rise k at k / 20 s, k = 1..200
+  REQUIRE(r.edges.size() >= 399);
+  CHECK(r.edges[0].kind == EdgeKind::kRise);
+  CHECK(r.edges[0].t_ns == 50'000'000);
+  CHECK(r.edges[1].kind == EdgeKind::kFall);
+  CHECK(r.edges[1].t_ns == 75'000'000);  // duty 0.5
+  CHECK(r.edges[2].t_ns == 100'000'000);
+}
+
+TEST_CASE("pulse: count equals distance times pulses per km over random profiles") {
+  const unsigned seed = std::random_device{}();
+  INFO("seed " << seed);
+  std::printf("pulse: random profile seed %u\n", seed);
+  std::mt19937_64 rng(seed);
+  for (int trial = 0; trial < 50; ++trial) {
+    PulseConfig c;
+    c.pulses_per_km = std::uniform_real_distribution<double>(500, 20000)(rng);
+    c.max_freq_hz = 1e6;  // never clamp here
+    c.min_freq_hz = 0.01;
+    if (trial % 2) c.pulse_width_s = 1e-7;
+    PulseScheduler s(c, 0);
+    std::vector<std::pair<std::int64_t, double>> changes;
+    std::int64_t t = 0;
+    const std::int64_t end = 120 * kS;
+    std::uniform_int_distribution<std::int64_t> gap(1, 3 * kS);
+    std::uniform_real_distribution<double> speed(0.5, 60.0);
+    while (t < end) {
+      const double v = (rng() % 7 == 0) ? 0.0 : speed(rng);  // standstills too
+      changes.emplace_back(t, v);
+      t += gap(rng);
+    }
+    const Run r = drive(s, changes, end);
+    const double expected = distance_m(changes, end) * c.pulses_per_km / 1000.0;
+    INFO("trial " << trial << " expected " << expected << " got " << r.pulses);
+    CHECK(std::fabs(static_cast<double>(r.pulses) - expected) <= 1.0);
+    CHECK(s.phase_pulses(end) == Approx(expected).epsilon(1e-9));
+    // Edges alternate rise/fall and never go back in time.
+    bool ordered = true;
+    for (std::size_t i = 1; i < r.edges.size(); ++i)
+      ordered = ordered && r.edges[i].t_ns >= r.edges[i - 1].t_ns && r.edges[i].kind != r.edges[i - 1].kind;
+    CHECK(ordered);
+  }
+}
+
+TEST_CASE("pulse: zero speed stops cleanly and resumes with the phase it had") {
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 10.0);                                  // a pulse every 100 ms
+  const Run a = drive(s, {{250'000'000, 0.0}}, 5 * kS);  // stop after 2.5 periods
+  CHECK(a.pulses == 2);
+  CHECK_FALSE(s.high());  // the last pulse fell
+  CHECK(s.next_edge().kind == EdgeKind::kNone);
+  s.set_speed(5 * kS, 10.0);
+  // Half a period was owed: the next rise comes 50 ms after restarting, not 100 ms.
+  CHECK(s.next_edge().kind == EdgeKind::kRise);
+  CHECK(s.next_edge().t_ns == 5 * kS + 50'000'000);
+}
+
+TEST_CASE("pulse: a stop while the line is high still lets it fall") {
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 10.0);
+  REQUIRE(s.pop_due(100'000'000).kind == EdgeKind::kRise);
+  s.set_speed(120'000'000, 0.0);
+  CHECK(s.high());
+  const PulseEdge fall = s.next_edge();
+  CHECK(fall.kind == EdgeKind::kFall);
+  CHECK(fall.t_ns == 150'000'000);
+  CHECK(s.pop_due(fall.t_ns).kind == EdgeKind::kFall);
+  CHECK(s.next_edge().kind == EdgeKind::kNone);
+}
+
+TEST_CASE("pulse: below the minimum frequency there is no pulse and above the maximum it clamps") {
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.min_freq_hz = 0.5;
+  c.max_freq_hz = 100.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 0.3);  // 0.3 Hz < min
+  CHECK(s.frequency_hz() == 0.0);
+  CHECK(drive(s, {}, 20 * kS).pulses == 0);
+  s.set_speed(20 * kS, 500.0);  // 500 Hz > max
+  CHECK(s.frequency_hz() == 100.0);
+  CHECK(drive(s, {}, 30 * kS).pulses == 1000);
+  s.set_speed(30 * kS, std::nan(""));
+  CHECK(s.frequency_hz() == 0.0);
+  s.set_speed(30 * kS, -4.0);
+  CHECK(s.frequency_hz() == 0.0);
+}
+
+TEST_CASE("pulse: fixed width and late callers keep the count and a low gap") {
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.pulse_width_s = 0.002;
+  c.max_freq_hz = 200.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 100.0);  // 100 Hz
+  // A caller that wakes only every 50 ms gets the overdue edges one after another, in order.
+  std::uint64_t rises = 0;
+  std::int64_t last_fall = -kS, last_rise = -kS;
+  for (std::int64_t now = 0; now <= kS; now += 50'000'000) {
+    for (PulseEdge e = s.pop_due(now); e.kind != EdgeKind::kNone; e = s.pop_due(now)) {
+      if (e.kind == EdgeKind::kRise) {
+        ++rises;
+        CHECK(e.t_ns - last_rise >= 5'000'000);  // never faster than max_freq_hz
+        last_rise = e.t_ns;
+      } else {
+        CHECK(e.t_ns - last_rise == 2'000'000);
+        last_fall = e.t_ns;
+      }
+    }
+  }
+  CHECK(rises == 100);
+  CHECK(last_fall > 0);
+}
+
+TEST_CASE("pulse: bad configurations are refused with the field name") {
+  PulseConfig c;
+  c.pulses_per_km = 0;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("pulses_per_km"));
+  c = {};
+  c.duty = 1.0;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("duty"));
+  c = {};
+  c.pulse_width_s = 0.01;
+  c.max_freq_hz = 200;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("pulse_width_s"));
+  c = {};
+  c.min_freq_hz = 0;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("min_freq_hz"));
+}

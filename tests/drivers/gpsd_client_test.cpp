@@ -1,0 +1,292 @@
+#include <catch2/catch.hpp>
+
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cmath>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <sstream>
+
+#include "drivers/clock.hpp"
+#include "drivers/gpsd_client.hpp"
+#include "tests/drivers/test_util.hpp"
+#include "tools/sim/nmea.hpp"
+
+using namespace std::chrono_literals;
+using gearpulse::GpsdClient;
+using gearpulse::GpsdConfig;
+using gearpulse::GpsdState;
+using gearpulse::GpsReport;
+using gearpulse::test::GpsFake;
+using gearpulse::test::TempDir;
+using gearpulse::test::wait_for;
+
+namespace {
+
+constexpr double kKnot = 1852.0 / 3600.0;
+
+// Every report the client publishes, for checks after the run.
+struct Recorder {
+  std::mutex mutex;
+  std::vector<GpsReport> reports;
+  GpsdClient::Callback callback() {
+    return [this](const GpsReport& r) {
+      std::lock_guard lock(mutex);
+      reports.push_back(r);
+    };
+  }
+  std::vector<GpsReport> snapshot() {
+    std::lock_guard lock(mutex);
+    return reports;
+  }
+  std::size_t usable() {
+    std::lock_guard lock(mutex);
+    return static_cast<std::size_t>(
+        std::count_if(reports.begin(), reports.end(), [](const GpsReport& r) { return r.usable(); }));
+  }
+};
+
+GpsdConfig config_for(int port) {
+  GpsdConfig c;
+  c.port = std::to_string(port);
+  c.backoff_min = 50ms;
+  c.backoff_max = 400ms;
+  return c;
+}
+
+double utc_of(int y, int mo, int d, int h, int mi, int s) {
+  std::tm tm{};
+  tm.tm_year = y - 1900;
+  tm.tm_mon = mo - 1;
+  tm.tm_mday = d;
+  tm.tm_hour = h;
+  tm.tm_min = mi;
+  tm.tm_sec = s;
+  return static_cast<double>(::timegm(&tm));
+}
+
+// A generated drive: `speeds` at 1 Hz of log time (NaN = outage) written as NMEA.
+std::filesystem::path write_log(const TempDir& dir, const std::vector<double>& speeds) {
+  const auto path = dir / "drive.nmea";
+  gearpulse::sim::write_nmea_log(path, gearpulse::sim::epochs_at_1hz(speeds));
+  return path;
+}
+
+}  // namespace
+
+TEST_CASE("gpsd: generated NMEA speeds arrive within NMEA precision and an outage is no GPS") {
+  TempDir dir;
+  const double nan = std::nan("");
+  // A lead-in at 5 m/s covers gpsd's start (gpsfake feeds before gpsd has opened its device).
+  const std::vector<double> speeds = {5.0, 5.0, 5.0, 5.0, 5.0, 3.7,  8.25,  13.9, 22.22, 27.5, 31.1, 33.3,
+                                      nan, nan, nan, nan, nan, 17.3, 12.05, 9.4,  4.44,  0.0,  0.0,  2.5};
+  const auto log = write_log(dir, speeds);
+  const int port = gearpulse::test::free_port();
+  GpsFake fake(log, port, 0.1, true);  // 5 epochs per second of real time
+  REQUIRE(GpsFake::wait_listening(port, 10s));
+  Recorder rec;
+  GpsdClient client(config_for(port), rec.callback());
+  client.start();
+  const double last_fix = utc_of(2026, 1, 15, 12, 0, static_cast<int>(speeds.size()) - 1);
+  REQUIRE(wait_for(
+      [&] {
+        const auto r = client.latest();
+        return r && r->fix_time >= last_fix;
+      },
+      20s));
+  const double t0 = utc_of(2026, 1, 15, 12, 0, 0);  // NmeaTrack's default date and time of day
+  std::size_t checked = 0, outage_reports = 0;
+  for (const GpsReport& r : rec.snapshot()) {
+    if (!std::isfinite(r.fix_time)) {
+      CHECK_FALSE(r.usable());
+      continue;
+    }
+    const long epoch = std::lround(r.fix_time - t0);
+    REQUIRE(epoch >= 0);
+    REQUIRE(epoch < static_cast<long>(speeds.size()));
+    const double want = speeds[static_cast<std::size_t>(epoch)];
+    if (std::isnan(want)) {
+      CHECK_FALSE(r.usable());
+      ++outage_reports;
+    } else if (r.usable()) {
+      // RMC carries knots with 3 decimals, gpsd's JSON m/s with 3 decimals.
+      CHECK(std::fabs(r.speed - want) <= 0.0005 * kKnot + 0.0005 + 1e-9);
+      ++checked;
+    }
+  }
+  CHECK(checked >= 8);
+  // During the outage gpsd reports no fix (or nothing at all, which the timeout turns into no GPS).
+  const auto all = rec.snapshot();
+  const bool saw_no_fix = outage_reports > 0 ||
+                          std::any_of(all.begin(), all.end(), [](const GpsReport& r) { return r.mode == 1; });
+  CHECK(saw_no_fix);
+  // Freshness: the newest report is GPS when just received, and "no GPS" once older than the timeout.
+  const auto newest = client.latest();
+  REQUIRE(newest);
+  REQUIRE(newest->usable());
+  CHECK(client.has_gps(newest->rx_ns));
+  CHECK(client.has_gps(newest->rx_ns + 1'400'000'000));
+  CHECK_FALSE(client.has_gps(newest->rx_ns + 1'600'000'000));
+  CHECK(client.status().connects == 1);
+}
+
+TEST_CASE("gpsd: keeps trying while gpsd is absent and connects once it starts") {
+  TempDir dir;
+  std::vector<double> speeds(40, 12.5);
+  const auto log = write_log(dir, speeds);
+  const int port = gearpulse::test::free_port();
+  GpsdClient client(config_for(port));
+  client.start();
+  REQUIRE(wait_for([&] { return client.status().failures >= 3; }, 10s));
+  const auto absent = client.status();
+  CHECK(absent.state == GpsdState::kConnecting);
+  CHECK(absent.connects == 0);
+  CHECK(absent.last_error.find(std::to_string(port)) != std::string::npos);
+  CHECK_FALSE(client.has_gps(gearpulse::monotonic_ns()));
+  CHECK_FALSE(client.latest());
+
+  GpsFake fake(log, port, 0.05, false);
+  REQUIRE(wait_for([&] { return client.has_gps(gearpulse::monotonic_ns()); }, 20s));
+  CHECK(client.status().state == GpsdState::kConnected);
+  CHECK(client.latest()->speed == Approx(12.5).margin(0.001));
+}
+
+TEST_CASE("gpsd: reconnects after gpsd is killed mid-stream and started again") {
+  TempDir dir;
+  std::vector<double> speeds(40, 7.25);
+  const auto log = write_log(dir, speeds);
+  const int port = gearpulse::test::free_port();
+  auto fake = std::make_unique<GpsFake>(log, port, 0.05, false);
+  REQUIRE(GpsFake::wait_listening(port, 10s));
+  GpsdClient client(config_for(port));
+  client.start();
+  REQUIRE(wait_for([&] { return client.has_gps(gearpulse::monotonic_ns()); }, 20s));
+  const auto before = client.status();
+  CHECK(before.connects == 1);
+
+  fake->kill();  // SIGKILL: gpsd vanishes without closing anything politely
+  REQUIRE(wait_for([&] { return client.status().state == GpsdState::kConnecting; }, 10s));
+  const std::int64_t killed_at = gearpulse::monotonic_ns();
+  CHECK(client.status().failures > before.failures);
+  // No reports while gpsd is dead: after the no-fix timeout it is "no GPS".
+  CHECK_FALSE(client.has_gps(killed_at + 1'600'000'000));
+
+  const auto reports_dead = client.status().reports;
+  fake = std::make_unique<GpsFake>(log, port, 0.05, false);
+  REQUIRE(wait_for([&] { return client.status().reports > reports_dead + 2; }, 20s));
+  CHECK(client.status().connects == 2);
+  CHECK(client.has_gps(gearpulse::monotonic_ns()));
+  CHECK(client.latest()->speed == Approx(7.25).margin(0.001));
+  client.stop();
+  CHECK(client.status().state == GpsdState::kStopped);
+}
+
+namespace {
+
+// RMC speeds of a real log, keyed by UTC centisecond of day.
+std::map<long, double> rmc_speeds(const std::filesystem::path& path) {
+  std::map<long, double> out;
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line)) {
+    if (line.size() < 7 || line.compare(3, 3, "RMC") != 0) continue;
+    std::vector<std::string> fields;
+    std::stringstream ss(line);
+    std::string field;
+    while (std::getline(ss, field, ','))
+      fields.push_back(field);
+    if (fields.size() < 8 || fields[2] != "A" || fields[1].size() < 6 || fields[7].empty()) continue;
+    const double sod = std::stol(fields[1].substr(0, 2)) * 3600 + std::stol(fields[1].substr(2, 2)) * 60 +
+                       std::stod(fields[1].substr(4));
+    out[std::lround(sod * 100)] = std::stod(fields[7]) * kKnot;
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("gpsd: real receiver logs deliver their RMC speeds") {
+  const std::filesystem::path dir = GEARPULSE_SOURCE_DIR "/../../shared/data/real/gpsd-nmea";
+  std::filesystem::path base = "/work/shared/data/real/gpsd-nmea";
+  if (!std::filesystem::exists(base)) base = dir;
+  if (!std::filesystem::exists(base / "nl2008u.log")) {
+    WARN("skipped: real gpsd logs not found at " << base);
+    return;
+  }
+  for (const char* name : {"nl2008u.log", "bt451.log"}) {
+    INFO(name);
+    const auto log = base / name;
+    const auto truth = rmc_speeds(log);
+    REQUIRE(truth.size() >= 3);
+    const int port = gearpulse::test::free_port();
+    GpsFake fake(log, port, 0.01, false);  // repeats the log: the start gpsd misses comes round again
+    REQUIRE(GpsFake::wait_listening(port, 10s));
+    Recorder rec;
+    GpsdClient client(config_for(port), rec.callback());
+    client.start();
+    REQUIRE(wait_for([&] { return rec.usable() >= 6; }, 20s));
+    client.stop();
+    std::size_t matched = 0;
+    for (const GpsReport& r : rec.snapshot()) {
+      if (!r.usable() || !std::isfinite(r.fix_time)) continue;
+      const auto it = truth.find(std::lround(std::fmod(r.fix_time, 86400.0) * 100));
+      if (it == truth.end()) continue;  // a fix from another sentence of the same second
+      INFO("fix time " << std::fixed << r.fix_time);
+      CHECK(r.speed == Approx(it->second).margin(0.0006));
+      ++matched;
+    }
+    CHECK(matched >= 3);
+  }
+}
+
+TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") {
+  // A fake gpsd: answers every connection with junk, a malformed TPV, binary noise, then one good TPV.
+  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  REQUIRE(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len) == 0);
+  REQUIRE(::listen(listener, 4) == 0);
+  const int port = ntohs(a.sin_port);
+  std::atomic<bool> done{false};
+  std::thread server([&] {
+    while (!done) {
+      const int c = ::accept(listener, nullptr, nullptr);
+      if (c < 0) break;
+      std::string junk = "this is not json\n{\"class\":\"TPV\",\"mode\":\"three\",\"speed\":[1,2]}\n";
+      junk += std::string("\x01\xff\xfe{{{{\"\n", 9);
+      junk += "{\"class\":\"TPV\",\"speed\":1e999999,\"mode\":3}\n";
+      junk +=
+          "{\"class\":\"TPV\",\"device\":\"x\",\"mode\":3,\"time\":\"2026-01-15T12:00:00.000Z\",\"speed\":4."
+          "125}\n";
+      (void)!::write(c, junk.data(), junk.size());
+      std::this_thread::sleep_for(100ms);
+      ::close(c);
+    }
+  });
+  GpsdClient client(config_for(port));
+  client.start();
+  const bool got = wait_for(
+      [&] {
+        const auto r = client.latest();
+        return r && r->usable() && std::fabs(r->speed - 4.125) < 1e-9;
+      },
+      5s);
+  const auto st = client.status();
+  client.stop();
+  done = true;
+  ::shutdown(listener, SHUT_RDWR);
+  ::close(listener);
+  server.join();
+  CHECK(got);
+  CHECK(st.connects >= 1);
+  CHECK(st.bad_reads + st.failures >= 1);
+}

@@ -1,0 +1,136 @@
+#include <catch2/catch.hpp>
+
+#include <fcntl.h>
+#include <poll.h>
+#include <termios.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "drivers/pty_output.hpp"
+#include "tests/drivers/test_util.hpp"
+
+using gearpulse::PtyOutput;
+using gearpulse::test::TempDir;
+
+namespace {
+
+// A reader of the pulse device, opened through the symlink as a user would.
+class Reader {
+ public:
+  explicit Reader(const std::filesystem::path& path)
+      : fd_(::open(path.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK)) {
+    REQUIRE(fd_ >= 0);
+  }
+  ~Reader() { close(); }
+  void close() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+  // Reads whatever is there, waiting up to `quiet` for more after each chunk; returns the bytes.
+  std::string drain(std::chrono::milliseconds quiet = std::chrono::milliseconds(50)) {
+    std::string out;
+    for (;;) {
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>(quiet.count())) <= 0) break;
+      char buf[4096];
+      const ssize_t n = ::read(fd_, buf, sizeof buf);
+      if (n <= 0) break;
+      out.append(buf, static_cast<std::size_t>(n));
+    }
+    return out;
+  }
+  [[nodiscard]] int fd() const noexcept { return fd_; }
+
+ private:
+  int fd_;
+};
+
+}  // namespace
+
+TEST_CASE("pty: one byte per rising edge reaches the reader through the symlink") {
+  TempDir dir;
+  const auto link = dir / "pulse";
+  PtyOutput out(link);
+  REQUIRE(std::filesystem::is_symlink(link));
+  CHECK(std::filesystem::read_symlink(link) == out.slave_name());
+  Reader reader(link);
+  for (int i = 0; i < 1000; ++i) {
+    out.rise();
+    out.fall();
+  }
+  const std::string got = reader.drain();
+  CHECK(got.size() == 1000);
+  CHECK(got.find_first_not_of('P') == std::string::npos);
+  CHECK(out.written() == 1000);
+  CHECK(out.errors() == 0);
+  // Raw mode: a byte that a cooked terminal would translate (CR) or hold back passes unchanged.
+  termios tio{};
+  REQUIRE(::tcgetattr(reader.fd(), &tio) == 0);
+  CHECK((tio.c_lflag & (ICANON | ECHO)) == 0);
+}
+
+TEST_CASE("pty: survives the reader closing and reopening and sends no stale pulses") {
+  TempDir dir;
+  const auto link = dir / "pulse";
+  PtyOutput out(link);
+  for (int i = 0; i < 5; ++i)
+    out.rise();  // nobody listens yet
+  CHECK(out.unheard() == 5);
+  {
+    Reader reader(link);
+    for (int i = 0; i < 300; ++i)
+      out.rise();
+    CHECK(reader.drain().size() == 300);
+    for (int i = 0; i < 7; ++i)
+      out.rise();  // written, then the reader leaves without reading them
+  }
+  for (int i = 0; i < 400; ++i)
+    out.rise();  // nobody listens: must neither block nor fail
+  CHECK(out.errors() == 0);
+  Reader again(link);
+  CHECK(again.drain(std::chrono::milliseconds(20)).empty());  // nothing from before it opened
+  for (int i = 0; i < 250; ++i)
+    out.rise();
+  CHECK(again.drain().size() == 250);
+  CHECK(out.written() == 557);
+  CHECK(out.unheard() == 405);
+}
+
+TEST_CASE("pty: a reader that does not read never blocks the pulse thread") {
+  TempDir dir;
+  PtyOutput out(dir / "pulse");
+  Reader idle(dir / "pulse");
+  for (int i = 0; i < 100000; ++i)
+    out.rise();  // a blocking write would hang here once the queue is full
+  CHECK(out.written() + out.overflowed() == 100000);
+  CHECK(out.overflowed() > 0);
+  CHECK(out.errors() == 0);
+}
+
+TEST_CASE("pty: a missing directory or a non-symlink path is a clear error") {
+  TempDir dir;
+  try {
+    PtyOutput out(dir / "no-such-dir" / "pulse");
+    FAIL("no error for a missing directory");
+  } catch (const std::runtime_error& e) {
+    CHECK(std::string(e.what()).find("does not exist") != std::string::npos);
+    CHECK(std::string(e.what()).find("no-such-dir") != std::string::npos);
+  }
+  std::ofstream(dir / "file") << "x";
+  CHECK_THROWS_WITH(PtyOutput(dir / "file"), Catch::Contains("not a symlink"));
+}
+
+TEST_CASE("pty: a stale symlink is replaced and the link is removed on close") {
+  TempDir dir;
+  const auto link = dir / "pulse";
+  std::filesystem::create_symlink("/dev/pts/does-not-exist", link);
+  {
+    PtyOutput out(link);
+    CHECK(std::filesystem::read_symlink(link) == out.slave_name());
+  }
+  CHECK_FALSE(std::filesystem::exists(std::filesystem::symlink_status(link)));
+}
