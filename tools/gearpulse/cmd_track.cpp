@@ -1,15 +1,139 @@
-// Placeholder until the 'track' subcommand lands.
+// gearpulse track: engine-frequency track of a lighter-voltage recording, as CSV t,freq,snr_db.
+#include <sndfile.h>
+
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
 #include <CLI/CLI.hpp>
 
+#include "core/sliding_dft_tracker.hpp"
 #include "tools/gearpulse/commands.hpp"
 
 namespace gearpulse::cli {
+namespace {
+
+struct TrackOptions {
+  std::string band = "50:200";
+  double hop_s = 0.1;
+  double window_s = 0.1;
+  int channel = -1;  // -1: mix all channels
+  double max_slew = 60.0;
+  bool any_line = false;
+  std::string file;
+};
+
+struct SndfileCloser {
+  void operator()(SNDFILE* f) const noexcept { sf_close(f); }
+};
+
+void parse_band(const std::string& text, TrackerConfig& config) {
+  const auto colon = text.find(':');
+  std::size_t used_lo = 0, used_hi = 0;
+  try {
+    if (colon == std::string::npos) throw std::invalid_argument("no colon");
+    config.band_lo_hz = std::stod(text.substr(0, colon), &used_lo);
+    config.band_hi_hz = std::stod(text.substr(colon + 1), &used_hi);
+  } catch (const std::exception&) {
+    throw UsageError("track: --band '" + text + "' is not LO:HI in Hz");
+  }
+  if (used_lo != colon || used_hi != text.size() - colon - 1)
+    throw UsageError("track: --band '" + text + "' is not LO:HI in Hz");
+}
+
+bool readable_encoding(int format) {
+  switch (format & SF_FORMAT_SUBMASK) {
+    case SF_FORMAT_PCM_S8:
+    case SF_FORMAT_PCM_U8:
+    case SF_FORMAT_PCM_16:
+    case SF_FORMAT_PCM_24:
+    case SF_FORMAT_PCM_32:
+    case SF_FORMAT_FLOAT:
+    case SF_FORMAT_DOUBLE:
+    case SF_FORMAT_ULAW:
+    case SF_FORMAT_ALAW:
+      return true;
+    default:
+      return false;
+  }
+}
+
+void print_point(const TrackPoint& p) {
+  char freq[32] = "", snr[32] = "";
+  if (p.tracked && std::isfinite(p.freq)) std::snprintf(freq, sizeof freq, "%.3f", p.freq);
+  if (std::isfinite(p.snr_db)) std::snprintf(snr, sizeof snr, "%.1f", p.snr_db);
+  std::printf("%.4f,%s,%s\n", p.t, freq, snr);
+}
+
+int run_track(const TrackOptions& o) {
+  TrackerConfig config;
+  parse_band(o.band, config);
+  config.hop_s = o.hop_s;
+  config.window_s = o.window_s;
+  config.max_slew_hz_per_s = o.max_slew;
+  config.require_harmonics = !o.any_line;
+  config.history_s = 0.0;  // offline: no queries into the past
+
+  SF_INFO info{};
+  std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.file.c_str(), SFM_READ, &info));
+  if (!file) throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr));
+  if (!readable_encoding(info.format))
+    throw UsageError(o.file + ": unsupported sample encoding (PCM, float or G.711 expected)");
+  if (info.frames <= 0 || info.channels <= 0) throw UsageError(o.file + ": no audio frames");
+  if (o.channel >= info.channels)
+    throw UsageError(o.file + ": --channel " + std::to_string(o.channel) + " but the file has " +
+                     std::to_string(info.channels) + " channel(s)");
+  config.sample_rate_hz = info.samplerate;
+  std::string error;
+  auto tracker = SlidingDftTracker::create(config, error);
+  if (!tracker) throw UsageError(o.file + ": " + error);
+
+  constexpr sf_count_t kBlock = 4096;
+  const auto channels = static_cast<std::size_t>(info.channels);
+  std::vector<float> interleaved(static_cast<std::size_t>(kBlock) * channels);
+  std::vector<float> mono(static_cast<std::size_t>(kBlock));
+  std::printf("t,freq,snr_db\n");
+  sf_count_t total = 0;
+  for (;;) {
+    const sf_count_t got = sf_readf_float(file.get(), interleaved.data(), kBlock);
+    if (got <= 0) break;
+    total += got;
+    const std::size_t frames =
+        extract_channel(std::span<const float>(interleaved.data(), static_cast<std::size_t>(got) * channels),
+                        info.channels, o.channel, mono);
+    tracker->push(std::span<const float>(mono.data(), frames));
+    TrackPoint p;
+    while (tracker->pop(p))
+      print_point(p);
+  }
+  if (sf_error(file.get()) != SF_ERR_NO_ERROR)
+    throw UsageError(o.file + ": read error after " + std::to_string(total) +
+                     " frames: " + sf_strerror(file.get()));
+  if (total < info.frames)
+    throw UsageError(o.file + ": truncated: header announces " + std::to_string(info.frames) +
+                     " frames, file holds " + std::to_string(total));
+  std::fflush(stdout);
+  return 0;
+}
+
+}  // namespace
 
 void add_track(CLI::App& app, int& status) {
-  app.add_subcommand("track", "(not built yet)")->callback([&status] {
-    throw UsageError("'track' is not implemented in this build");
-    status = 2;
-  });
+  auto options = std::make_shared<TrackOptions>();
+  CLI::App* cmd =
+      app.add_subcommand("track", "print the engine-frequency track of a WAV recording (t,freq,snr_db)");
+  cmd->add_option("--band", options->band, "search band of the fundamental, LO:HI in Hz")
+      ->capture_default_str();
+  cmd->add_option("--hop", options->hop_s, "time between outputs (s)")->capture_default_str();
+  cmd->add_option("--window", options->window_s, "analysis window (s)")->capture_default_str();
+  cmd->add_option("--channel", options->channel, "channel to use (0-based); default: mix all channels");
+  cmd->add_option("--max-slew", options->max_slew, "fastest followed frequency change (Hz/s)")
+      ->capture_default_str();
+  cmd->add_flag("--any-line", options->any_line, "also acquire lines without harmonics (pure-sine ripple)");
+  cmd->add_option("FILE", options->file, "WAV recording (any rate, mono or multi-channel)")->required();
+  cmd->callback([options, &status] { status = run_track(*options); });
 }
 
 }  // namespace gearpulse::cli

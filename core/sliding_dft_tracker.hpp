@@ -1,0 +1,102 @@
+#pragma once
+// Engine-frequency tracker over the lighter-voltage ripple (the frequency component s_k that the paper
+// tracks with a 100 ms FFT in the 50-200 Hz range, section 4).
+//
+// Per hop: the input is low-pass filtered and decimated (polyphase FIR, computed only for the samples a
+// window needs), detrended (a 12-14 V line shows ripple, not the level), Hann-windowed, zero-padded and
+// transformed with FFTW. The engine component is told apart from fixed tones by its harmonic ladder
+// (f/2, f, 2f, 3f) and by continuity (a forward dynamic program with a slew gate and a jump penalty), then
+// refined below the bin width by Gaussian interpolation and a Newton search of the maximum-likelihood
+// harmonic periodogram. Every output carries an SNR; "not tracked" when the component is absent.
+//
+// Real-time contract: all memory and FFT plans are made at construction; push(), pop(), at() and
+// nearest() never allocate, never lock and never throw.
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <span>
+#include <string>
+
+namespace gearpulse {
+
+struct TrackerConfig {
+  double sample_rate_hz = 48000.0;  // input frame rate
+  double window_s = 0.1;            // analysis window (the paper's 100 ms)
+  double hop_s = 0.1;               // time between outputs
+  double band_lo_hz = 50.0;         // search band of the fundamental (the paper's 50-200 Hz)
+  double band_hi_hz = 200.0;
+  double max_slew_hz_per_s = 60.0;  // fastest engine-frequency change followed without a re-acquisition
+  double history_s = 2.0;           // input kept for at() (windows centred up to this far back)
+  // Acquire only a line with a harmonic ladder (f/2, 2f or 3f present). A fan or pump tone has none;
+  // set false for a signal whose engine component is a pure sinusoid.
+  bool require_harmonics = true;
+};
+
+// One tracker output. `t` is the centre of the analysis window in the caller's time base.
+struct TrackPoint {
+  double t = 0.0;
+  double freq = std::numeric_limits<double>::quiet_NaN();    // Hz, NaN when not tracked
+  double snr_db = std::numeric_limits<double>::quiet_NaN();  // fundamental power over in-band noise power;
+                                                             // NaN on silence or missing input
+  bool tracked = false;
+};
+
+// Picks one channel (channel >= 0) or the mean of all channels (channel < 0) out of interleaved frames.
+// Writes min(out.size(), interleaved.size() / channels) frames and returns that count.
+std::size_t extract_channel(std::span<const float> interleaved, int channels, int channel,
+                            std::span<float> out) noexcept;
+
+class SlidingDftTracker {
+ public:
+  // Empty when the configuration is usable, else a one-line reason (band outside Nyquist, rate too low,
+  // window too short for the band, ...).
+  [[nodiscard]] static std::string validate(const TrackerConfig& config);
+  // Factory that never throws: nullptr and `error` set on an invalid configuration.
+  [[nodiscard]] static std::unique_ptr<SlidingDftTracker> create(const TrackerConfig& config,
+                                                                 std::string& error);
+  // Throws std::invalid_argument (with validate()'s text) on an invalid configuration; only here.
+  explicit SlidingDftTracker(const TrackerConfig& config);
+  ~SlidingDftTracker();
+  SlidingDftTracker(const SlidingDftTracker&) = delete;
+  SlidingDftTracker& operator=(const SlidingDftTracker&) = delete;
+
+  // Starts a new stream: the next frame pushed is at time t0 (caller's time base, seconds). Clears all
+  // state. A fresh tracker behaves as after start(0.0).
+  void start(double t0) noexcept;
+  // Re-anchors the time base without touching the signal (e.g. drift correction against device
+  // timestamps): the next frame pushed is at time t_next.
+  void retime(double t_next) noexcept;
+  // The stream has a hole of `frames` frames (capture overrun): windows that overlap it give
+  // not-tracked outputs, and the continuity state is dropped.
+  void skip(std::uint64_t frames) noexcept;
+
+  // Feeds mono frames. Every completed hop appends one TrackPoint to an internal queue (capacity
+  // queue_capacity(); if nobody pops, the oldest are dropped and counted).
+  void push(std::span<const float> frames) noexcept;
+  // Next output in time order; false when none is pending.
+  bool pop(TrackPoint& out) noexcept;
+
+  // Estimate from a window centred at time t, computed now from retained input (the daemon asks at GPS
+  // fix times). Uses the surrounding hops' track as the prior. Not tracked when t is too old (beyond
+  // history_s), too recent (its window is not complete yet) or inside a hole.
+  [[nodiscard]] TrackPoint at(double t) noexcept;
+  // The hop output whose centre is closest to t among the last history_size() hops; not tracked (with
+  // t as given) when there is none within half a hop.
+  [[nodiscard]] TrackPoint nearest(double t) const noexcept;
+  // Time of the latest window centre that at() can serve now (NaN before the first complete window).
+  [[nodiscard]] double latest_time() const noexcept;
+
+  [[nodiscard]] const TrackerConfig& config() const noexcept;
+  [[nodiscard]] double decimated_rate_hz() const noexcept;
+  [[nodiscard]] std::size_t queue_capacity() const noexcept;
+  [[nodiscard]] std::size_t history_size() const noexcept;
+  [[nodiscard]] std::uint64_t dropped_outputs() const noexcept;  // outputs lost because nobody popped
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace gearpulse
