@@ -1,0 +1,240 @@
+// `gearpulse simulate` and `gearpulse feed`, run as the built binary.
+#include <fcntl.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <catch2/catch.hpp>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kCli = GEARPULSE_BINARY_DIR "/tools/gearpulse";
+
+struct Result {
+  int status = -1;
+  std::string out;
+};
+
+Result run(const std::string& command) {
+  Result r;
+  std::FILE* p = ::popen((command + " 2>&1").c_str(), "r");
+  if (p == nullptr) return r;
+  char buf[4096];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0)
+    r.out.append(buf, n);
+  const int rc = ::pclose(p);
+  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  return r;
+}
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    std::string templ = (fs::temp_directory_path() / "gearpulse-sim.XXXXXX").string();
+    if (::mkdtemp(templ.data()) != nullptr) path = templ;
+  }
+  ~TempDir() {
+    std::error_code ec;
+    if (!path.empty()) fs::remove_all(path, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::vector<std::vector<std::string>> csv_rows(const fs::path& p) {
+  std::ifstream in(p);
+  std::string line;
+  std::vector<std::vector<std::string>> rows;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ','))
+      cells.push_back(cell);
+    if (!line.empty() && line.back() == ',') cells.emplace_back();
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+std::uint32_t le32(const std::string& s, std::size_t at) {
+  std::uint32_t v = 0;
+  for (int i = 3; i >= 0; --i)
+    v = (v << 8) | static_cast<unsigned char>(s[at + static_cast<std::size_t>(i)]);
+  return v;
+}
+
+}  // namespace
+
+TEST_CASE("simulate: writes a drive whose files agree with each other", "[simulate]") {
+  TempDir dir;
+  REQUIRE(!dir.path.empty());
+  const Result r = run(kCli + " simulate --out " + dir.path.string() +
+                       " --seed 5 --duration 60 --outage 20:15 --rate 8000");
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("km") != std::string::npos);
+
+  // truth.csv: header, rows every 0.1 s, the car starts and ends at rest.
+  const auto truth = csv_rows(dir.path / "truth.csv");
+  REQUIRE(truth.size() > 100);
+  CHECK(truth[0] == std::vector<std::string>{"t", "speed", "freq", "gear"});
+  CHECK(std::stod(truth[1][1]) == Approx(0.0).margin(1e-9));
+  double distance = 0.0, max_speed = 0.0;
+  for (std::size_t i = 2; i < truth.size(); ++i) {
+    const double dt = std::stod(truth[i][0]) - std::stod(truth[i - 1][0]);
+    distance += 0.5 * (std::stod(truth[i][1]) + std::stod(truth[i - 1][1])) * dt;
+    max_speed = std::max(max_speed, std::stod(truth[i][1]));
+  }
+  const double length = std::stod(truth.back()[0]);
+  CHECK(length >= 60.0);
+  CHECK(max_speed > 3.0);
+
+  // Audio: raw S16 and a WAV with the same samples, length = drive length at the rate.
+  const std::string raw = slurp(dir.path / "drive.raw");
+  const std::string wav = slurp(dir.path / "drive.wav");
+  CHECK(static_cast<double>(raw.size()) == Approx(length * 8000 * 2).margin(2 * 8000 * 0.2));
+  REQUIRE(wav.size() == raw.size() + 44);
+  CHECK(wav.substr(0, 4) == "RIFF");
+  CHECK(le32(wav, 24) == 8000);
+  CHECK(le32(wav, 40) == raw.size());
+  CHECK(wav.substr(44) == raw);
+
+  // samples.csv: 1 Hz, speed blank exactly inside the outage, freq everywhere.
+  const auto samples = csv_rows(dir.path / "samples.csv");
+  REQUIRE(samples.size() > 60);
+  CHECK(samples[0] == std::vector<std::string>{"t", "speed", "freq"});
+  for (std::size_t i = 1; i < samples.size(); ++i) {
+    const double t = std::stod(samples[i][0]);
+    INFO("samples.csv row " << i + 1);
+    REQUIRE(samples[i].size() == 3);
+    CHECK(samples[i][1].empty() == (t >= 20.0 && t < 35.0));
+    CHECK(!samples[i][2].empty());
+  }
+
+  // NMEA: two sentences per second; void fixes exactly inside the outage.
+  std::ifstream nmea(dir.path / "drive.nmea");
+  std::string line;
+  int gga = 0, rmc = 0, void_rmc = 0;
+  while (std::getline(nmea, line)) {
+    if (line.rfind("$GPGGA", 0) == 0) ++gga;
+    if (line.rfind("$GPRMC", 0) == 0) {
+      ++rmc;
+      if (line.find(",V,") != std::string::npos) ++void_rmc;
+    }
+  }
+  CHECK(gga == rmc);
+  CHECK(rmc == static_cast<int>(samples.size()) - 1);
+  CHECK(void_rmc == 15);
+
+  // drive.env agrees with the truth.
+  const std::string env = slurp(dir.path / "drive.env");
+  const auto at = env.find("distance_m=");
+  REQUIRE(at != std::string::npos);
+  CHECK(std::stod(env.substr(at + 11)) == Approx(distance).epsilon(1e-3));
+}
+
+TEST_CASE("simulate: the same seed gives the same drive and another seed another", "[simulate]") {
+  TempDir dir;
+  REQUIRE(!dir.path.empty());
+  const auto sim = [&](const std::string& sub, int seed) {
+    return run(kCli + " simulate --out " + (dir.path / sub).string() + " --duration 30 --rate 8000 --seed " +
+               std::to_string(seed))
+        .status;
+  };
+  REQUIRE(sim("a", 3) == 0);
+  REQUIRE(sim("b", 3) == 0);
+  REQUIRE(sim("c", 4) == 0);
+  CHECK(slurp(dir.path / "a" / "drive.raw") == slurp(dir.path / "b" / "drive.raw"));
+  CHECK(slurp(dir.path / "a" / "truth.csv") == slurp(dir.path / "b" / "truth.csv"));
+  CHECK(slurp(dir.path / "a" / "truth.csv") != slurp(dir.path / "c" / "truth.csv"));
+}
+
+TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
+  TempDir dir;
+  REQUIRE(!dir.path.empty());
+  const std::string out = " --out " + (dir.path / "x").string();
+  for (const std::string args : {" --outage 20", " --outage a:5", " --outage 10:-3", " --vehicle nosuchcar",
+                                 " --style racing", " --duration 2", " --rate 10"}) {
+    const Result r = run(kCli + " simulate" + out + args);
+    INFO(args << ": " << r.out);
+    CHECK(r.status == 2);
+    CHECK(r.out.find("gearpulse:") != std::string::npos);
+  }
+  CHECK(!fs::exists(dir.path / "x" / "drive.raw"));
+}
+
+TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-time pace", "[feed]") {
+  TempDir dir;
+  REQUIRE(!dir.path.empty());
+  const fs::path in = dir.path / "in.raw", fifo = dir.path / "fifo";
+  // 0.5 s at 8 kHz, 3 channels: 4000 frames, not a whole number of 256-frame periods.
+  std::string data;
+  for (int i = 0; i < 4000 * 3; ++i) {
+    const auto v = static_cast<std::int16_t>((i * 37) % 65536 - 32768);
+    data.push_back(static_cast<char>(v & 0xff));
+    data.push_back(static_cast<char>((v >> 8) & 0xff));
+  }
+  std::ofstream(in, std::ios::binary) << data;
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+
+  const auto start = std::chrono::steady_clock::now();
+  std::FILE* feeder = ::popen((kCli + " feed --quiet --period 256 --rate 8000 --channels 3 " + in.string() +
+                               " " + fifo.string() + " 2>&1")
+                                  .c_str(),
+                              "r");
+  REQUIRE(feeder != nullptr);
+  const int fd = ::open(fifo.c_str(), O_RDONLY);
+  REQUIRE(fd >= 0);
+  std::string got;
+  char buf[8192];
+  ssize_t n = 0;
+  while ((n = ::read(fd, buf, sizeof buf)) > 0)
+    got.append(buf, static_cast<std::size_t>(n));
+  ::close(fd);
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const int rc = ::pclose(feeder);
+  CHECK(WIFEXITED(rc));
+  CHECK(WEXITSTATUS(rc) == 0);
+  // 16 whole periods: the file, then silence up to the period boundary.
+  REQUIRE(got.size() == 16u * 256 * 3 * 2);
+  CHECK(got.substr(0, data.size()) == data);
+  CHECK(got.find_first_not_of('\0', data.size()) == std::string::npos);
+  // Paced: the last period cannot be out before its deadline (a lower bound, never flaky).
+  CHECK(elapsed >= 15.0 * 256 / 8000);
+}
+
+TEST_CASE("feed: a missing input or a bad format is an error", "[feed]") {
+  TempDir dir;
+  REQUIRE(!dir.path.empty());
+  Result r = run(kCli + " feed " + (dir.path / "none.raw").string() + " " + (dir.path / "fifo").string());
+  CHECK(r.status == 2);
+  CHECK(r.out.find("none.raw") != std::string::npos);
+  std::ofstream(dir.path / "odd.raw", std::ios::binary) << "abc";
+  r = run(kCli + " feed " + (dir.path / "odd.raw").string() + " " + (dir.path / "fifo").string());
+  CHECK(r.status == 2);
+  CHECK(r.out.find("odd.raw") != std::string::npos);
+  r = run(kCli + " feed --format s24 " + (dir.path / "odd.raw").string() + " x");
+  CHECK(r.status == 2);
+}
