@@ -72,7 +72,8 @@ def main():
 
     last_print = -1e9
     last_source = None
-    first_engine = None   # first status with source engine: (elapsed, gps age)
+    seen_gps = False
+    first_engine = None   # first status with source engine after GPS was used: (elapsed, gps age)
     outage_polls = {}
     samples = []
     while alive(a.until_pid):
@@ -89,7 +90,8 @@ def main():
         samples.append((el, source, speed, at(ts, speeds, el)))
         if out_start is not None and out_start + 5 <= el <= out_start + out_len - 2:
             outage_polls[source] = outage_polls.get(source, 0) + 1
-        if source == "engine" and first_engine is None:
+        seen_gps = seen_gps or source == "gps"
+        if source == "engine" and seen_gps and first_engine is None:
             first_engine = (el, gps.get("age"))
         if not a.quiet and (el - last_print >= a.print_every or source != last_source):
             last_print = el
@@ -120,7 +122,7 @@ def main():
         json.dump(summary, f, indent=1)
     print(f"drive over: {distance / 1000:.3f} km -> {expected:.0f} pulses expected at {a.ppk:g}/km; "
           f"counted on the PTY {counted} ({error:+.2f} %), daemon reports {final.get('pulses')}")
-    if first_engine:
+    if first_engine and first_engine[1] is not None:
         print(f"GPS loss -> engine-derived speed: {first_engine[1]:.2f} s after the last fix "
               f"(at t={first_engine[0]:.0f}s of the drive)")
     else:
