@@ -1,0 +1,318 @@
+#include "daemon/config.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string_view>
+
+#include <toml++/toml.h>
+
+namespace gearpulse::daemon {
+namespace {
+
+std::string where(const std::string& file, const toml::source_region& region) {
+  std::string out = file;
+  if (region.begin.line > 0) out += ":" + std::to_string(region.begin.line);
+  return out;
+}
+
+// Reads one [section]: every key read is remembered so that the rest can be reported as unknown.
+class Section {
+ public:
+  Section(const toml::table* table, std::string name, const std::string& file)
+      : table_(table), name_(std::move(name)), file_(file) {}
+
+  void string(std::string_view key, std::string& out) {
+    const toml::node* node = find(key);
+    if (!node) return;
+    const auto* value = node->as_string();
+    if (!value) fail(*node, key, "expected a string");
+    if (value->get().empty()) fail(*node, key, "must not be empty");
+    out = value->get();
+  }
+
+  void boolean(std::string_view key, bool& out) {
+    const toml::node* node = find(key);
+    if (!node) return;
+    const auto* value = node->as_boolean();
+    if (!value) fail(*node, key, "expected true or false");
+    out = value->get();
+  }
+
+  // Accepts integers and floats.
+  void number(std::string_view key, double& out, double lo, double hi) {
+    const toml::node* node = find(key);
+    if (!node) return;
+    double v = 0.0;
+    if (const auto* f = node->as_floating_point())
+      v = f->get();
+    else if (const auto* i = node->as_integer())
+      v = static_cast<double>(i->get());
+    else
+      fail(*node, key, "expected a number");
+    if (!std::isfinite(v) || v < lo || v > hi) fail(*node, key, range_text(v, lo, hi));
+    out = v;
+  }
+
+  template <typename Int>
+  void integer(std::string_view key, Int& out, std::int64_t lo, std::int64_t hi) {
+    const toml::node* node = find(key);
+    if (!node) return;
+    const auto* i = node->as_integer();
+    if (!i) fail(*node, key, "expected an integer");
+    const std::int64_t v = i->get();
+    if (v < lo || v > hi)
+      fail(*node, key,
+           "value " + std::to_string(v) + " out of range [" + std::to_string(lo) + ", " + std::to_string(hi) +
+               "]");
+    out = static_cast<Int>(v);
+  }
+
+  // A string that must be one of `choices`.
+  std::string choice(std::string_view key, const std::string& current,
+                     std::initializer_list<std::string_view> choices) {
+    const toml::node* node = find(key);
+    if (!node) return current;
+    const auto* value = node->as_string();
+    std::string allowed;
+    for (auto c : choices)
+      allowed += (allowed.empty() ? "" : ", ") + std::string(c);
+    if (!value) fail(*node, key, "expected one of " + allowed);
+    for (auto c : choices)
+      if (value->get() == c) return value->get();
+    fail(*node, key, "'" + value->get() + "' is not one of " + allowed);
+  }
+
+  // Raw access for keys with mixed types (e.g. audio.channel = 0 or "mix").
+  const toml::node* raw(std::string_view key) { return find(key); }
+
+  [[noreturn]] void fail(const toml::node& node, std::string_view key, const std::string& reason) const {
+    throw ConfigError(where(file_, node.source()) + ": " + name_ + "." + std::string(key) + ": " + reason);
+  }
+
+  // Every key that nobody asked for is a typo or a key of another version: refuse it.
+  void reject_unknown() const {
+    if (!table_) return;
+    for (auto&& [key, node] : *table_) {
+      if (known_.count(std::string(key.str()))) continue;
+      const auto& region = key.source().begin.line > 0 ? key.source() : node.source();
+      throw ConfigError(where(file_, region) + ": " + name_ + "." + std::string(key.str()) + ": unknown key");
+    }
+  }
+
+ private:
+  const toml::node* find(std::string_view key) {
+    known_.insert(std::string(key));
+    return table_ ? table_->get(key) : nullptr;
+  }
+  static std::string range_text(double v, double lo, double hi) {
+    std::ostringstream s;
+    s << "value " << v << " out of range [" << lo << ", " << hi << "]";
+    return s.str();
+  }
+
+  const toml::table* table_;
+  std::string name_;
+  const std::string& file_;
+  std::set<std::string> known_;
+};
+
+void read_audio(Section& s, AudioConfig& a) {
+  s.string("device", a.device);
+  s.integer("rate", a.rate, 5100, 384000);
+  s.integer("channels", a.channels, 1, 32);
+  if (const toml::node* node = s.raw("channel")) {
+    if (const auto* text = node->as_string()) {
+      if (text->get() != "mix") s.fail(*node, "channel", "expected a channel index or \"mix\"");
+      a.channel = -1;
+    } else if (const auto* i = node->as_integer()) {
+      if (i->get() < 0 || i->get() >= static_cast<std::int64_t>(a.channels))
+        s.fail(*node, "channel",
+               "channel " + std::to_string(i->get()) + " out of range [0, " + std::to_string(a.channels - 1) +
+                   "]");
+      a.channel = static_cast<int>(i->get());
+    } else {
+      s.fail(*node, "channel", "expected a channel index or \"mix\"");
+    }
+  }
+  a.format = s.choice("format", a.format, {"auto", "S16_LE", "S32_LE", "FLOAT_LE"});
+  s.integer("period_frames", a.period_frames, 16, 65536);
+  s.boolean("realtime", a.realtime);
+  s.integer("rt_priority", a.rt_priority, 1, 99);
+  s.number("ring_seconds", a.ring_seconds, 0.1, 60.0);
+}
+
+void read_tracker(Section& s, TrackerConfig& t) {
+  s.number("band_low", t.band_low, 1.0, 20000.0);
+  s.number("band_high", t.band_high, 1.0, 20000.0);
+  s.number("window", t.window, 0.01, 2.0);
+  s.number("hop", t.hop, 0.005, 2.0);
+  s.number("min_snr_db", t.min_snr_db, -30.0, 60.0);
+}
+
+void read_gps(Section& s, GpsConfig& g) {
+  s.string("host", g.host);
+  s.integer("port", g.port, 1, 65535);
+  s.number("latency", g.latency, 0.0, 5.0);
+  s.number("timeout", g.timeout, 0.1, 60.0);
+}
+
+void read_output(Section& s, OutputConfig& o) {
+  const std::string kind = s.choice("kind", to_string(o.kind), {"pty", "gpio", "none"});
+  o.kind = kind == "pty" ? OutputKind::kPty : kind == "gpio" ? OutputKind::kGpio : OutputKind::kNone;
+  s.string("path", o.path);
+  s.string("chip", o.chip);
+  s.integer("line", o.line, 0, 4095);
+  s.number("pulses_per_km", o.pulses_per_km, 1.0, 1.0e6);
+  s.number("pulse_width", o.pulse_width, 1.0e-6, 1.0);
+  s.number("duty", o.duty, 0.0, 0.9);
+  s.number("min_frequency", o.min_frequency, 0.0, 1000.0);
+  s.number("max_frequency", o.max_frequency, 1.0, 100000.0);
+}
+
+void read_model(Section& s, ModelConfig& m) {
+  s.string("state_dir", m.state_dir);
+  s.number("retrain_interval", m.retrain_interval, 1.0, 7.0 * 86400.0);
+  s.integer("min_new_samples", m.min_new_samples, 1, 100'000'000);
+  s.number("store_hours", m.store_hours, 0.01, 24.0 * 365.0);
+  s.integer("max_samples", m.max_samples, 100, 50'000'000);
+  s.number("save_interval", m.save_interval, 1.0, 86400.0);
+}
+
+void read_control(Section& s, ControlConfig& c) {
+  s.string("socket", c.socket);
+  s.integer("max_clients", c.max_clients, 1, 1024);
+}
+
+void read_log(Section& s, LogConfig& l) {
+  l.level = s.choice("level", l.level, {"trace", "debug", "info", "warn", "error", "critical", "off"});
+}
+
+// Checks between keys, after every key on its own is known to be valid.
+void check_relations(const Config& c, const toml::table& root, const std::string& file) {
+  const auto at = [&](std::string_view section, std::string_view key) {
+    const toml::node* n = root.at_path(std::string(section) + "." + std::string(key)).node();
+    return n ? where(file, n->source()) : file;
+  };
+  if (c.tracker.band_high <= c.tracker.band_low)
+    throw ConfigError(at("tracker", "band_high") + ": tracker.band_high: must be above tracker.band_low");
+  if (c.tracker.band_high >= c.audio.rate / 2.0)
+    throw ConfigError(at("tracker", "band_high") + ": tracker.band_high: must be below half of audio.rate (" +
+                      std::to_string(c.audio.rate / 2) + " Hz)");
+  if (c.tracker.hop > c.tracker.window * 4.0)
+    throw ConfigError(at("tracker", "hop") +
+                      ": tracker.hop: more than 4 windows; audio between windows would be ignored");
+  // sun_path holds 108 bytes including the terminator.
+  if (c.control.socket.size() > 107)
+    throw ConfigError(at("control", "socket") + ": control.socket: path longer than 107 bytes");
+  if (c.output.max_frequency <= c.output.min_frequency)
+    throw ConfigError(at("output", "max_frequency") +
+                      ": output.max_frequency: must be above output.min_frequency");
+  // A fixed-width pulse must fit in the shortest period, or pulses would merge.
+  if (c.output.duty == 0.0 && c.output.pulse_width * c.output.max_frequency >= 1.0)
+    throw ConfigError(at("output", "pulse_width") +
+                      ": output.pulse_width: not shorter than the period at output.max_frequency");
+}
+
+Config from_table(const toml::table& root, const std::string& file) {
+  Config config;
+  config.source = file;
+  static constexpr std::string_view kSections[] = {"audio", "tracker", "gps", "output",
+                                                   "model", "control", "log"};
+  for (auto&& [key, node] : root) {
+    bool known = false;
+    for (auto s : kSections)
+      known = known || key.str() == s;
+    const auto& region = key.source().begin.line > 0 ? key.source() : node.source();
+    if (!known) throw ConfigError(where(file, region) + ": " + std::string(key.str()) + ": unknown section");
+    if (!node.is_table())
+      throw ConfigError(where(file, region) + ": " + std::string(key.str()) + ": expected a [section]");
+  }
+  const auto table = [&](std::string_view name) { return root.get_as<toml::table>(name); };
+  Section audio(table("audio"), "audio", file);
+  read_audio(audio, config.audio);
+  audio.reject_unknown();
+  Section tracker(table("tracker"), "tracker", file);
+  read_tracker(tracker, config.tracker);
+  tracker.reject_unknown();
+  Section gps(table("gps"), "gps", file);
+  read_gps(gps, config.gps);
+  gps.reject_unknown();
+  Section output(table("output"), "output", file);
+  read_output(output, config.output);
+  output.reject_unknown();
+  Section model(table("model"), "model", file);
+  read_model(model, config.model);
+  model.reject_unknown();
+  Section control(table("control"), "control", file);
+  read_control(control, config.control);
+  control.reject_unknown();
+  Section log(table("log"), "log", file);
+  read_log(log, config.log);
+  log.reject_unknown();
+  check_relations(config, root, file);
+  return config;
+}
+
+}  // namespace
+
+const char* to_string(OutputKind kind) noexcept {
+  switch (kind) {
+    case OutputKind::kPty:
+      return "pty";
+    case OutputKind::kGpio:
+      return "gpio";
+    case OutputKind::kNone:
+      return "none";
+  }
+  return "none";
+}
+
+Config parse_config(std::string_view text, const std::string& source_name) {
+  toml::table root;
+  try {
+    root = toml::parse(text, std::string_view(source_name));
+  } catch (const toml::parse_error& e) {
+    throw ConfigError(where(source_name, e.source()) + ": " + std::string(e.description()));
+  }
+  return from_table(root, source_name);
+}
+
+Config load_config(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ConfigError(path + ": cannot open config file");
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw ConfigError(path + ": read error");
+  return parse_config(text.str(), path);
+}
+
+std::vector<std::string> restart_required_changes(const Config& a, const Config& b) {
+  std::vector<std::string> changed;
+  const auto check = [&](bool differs, const char* name) {
+    if (differs) changed.emplace_back(name);
+  };
+  check(a.audio.device != b.audio.device || a.audio.rate != b.audio.rate ||
+            a.audio.channels != b.audio.channels || a.audio.channel != b.audio.channel ||
+            a.audio.format != b.audio.format || a.audio.period_frames != b.audio.period_frames ||
+            a.audio.realtime != b.audio.realtime || a.audio.rt_priority != b.audio.rt_priority ||
+            a.audio.ring_seconds != b.audio.ring_seconds,
+        "[audio]");
+  check(a.tracker.band_low != b.tracker.band_low || a.tracker.band_high != b.tracker.band_high ||
+            a.tracker.window != b.tracker.window || a.tracker.hop != b.tracker.hop,
+        "[tracker] band/window/hop");
+  check(a.gps.host != b.gps.host || a.gps.port != b.gps.port || a.gps.timeout != b.gps.timeout,
+        "gps.host/port/timeout");
+  check(a.output.kind != b.output.kind || a.output.path != b.output.path || a.output.chip != b.output.chip ||
+            a.output.line != b.output.line || a.output.pulses_per_km != b.output.pulses_per_km ||
+            a.output.pulse_width != b.output.pulse_width || a.output.duty != b.output.duty ||
+            a.output.min_frequency != b.output.min_frequency ||
+            a.output.max_frequency != b.output.max_frequency,
+        "[output]");
+  check(a.model.state_dir != b.model.state_dir, "model.state_dir");
+  check(a.control.socket != b.control.socket || a.control.max_clients != b.control.max_clients, "[control]");
+  return changed;
+}
+
+}  // namespace gearpulse::daemon

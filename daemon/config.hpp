@@ -1,0 +1,97 @@
+#pragma once
+// The daemon's configuration (TOML). Every key has a default; unknown keys, wrong types and out-of-range
+// values are errors of the form "file:line: key: reason", raised before any device is opened.
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace gearpulse::daemon {
+
+struct AudioConfig {
+  std::string device = "default";  // ALSA PCM name
+  unsigned rate = 48000;           // Hz
+  unsigned channels = 1;           // channels negotiated with the PCM
+  int channel = -1;                // channel fed to the tracker; -1 = mix of all channels ("mix")
+  std::string format = "auto";     // "auto", "S16_LE", "S32_LE", "FLOAT_LE"
+  unsigned period_frames = 1024;   // ALSA period size
+  bool realtime = false;           // SCHED_FIFO capture and pulse threads (+ mlockall)
+  int rt_priority = 50;            // SCHED_FIFO priority when realtime
+  double ring_seconds = 2.0;       // capacity of the capture ring
+};
+
+struct TrackerConfig {
+  double band_low = 50.0;    // Hz
+  double band_high = 200.0;  // Hz
+  double window = 0.1;       // s, as the paper's 100 ms frames
+  double hop = 0.1;          // s
+  double min_snr_db = 6.0;   // below this a track is not trusted for training or synthesis
+};
+
+struct GpsConfig {
+  std::string host = "127.0.0.1";
+  unsigned port = 2947;
+  double latency = 0.0;  // s between the fix's true instant and its receive time
+  double timeout = 1.5;  // s without a usable fix before GPS counts as lost
+};
+
+enum class OutputKind { kPty, kGpio, kNone };
+
+struct OutputConfig {
+  OutputKind kind = OutputKind::kPty;
+  std::string path = "/run/gearpulse/pulse";  // pty: symlink to the slave side
+  std::string chip = "gpiochip0";             // gpio
+  unsigned line = 17;                         // gpio line offset
+  double pulses_per_km = 2485.0;
+  double pulse_width = 0.0005;  // s high per pulse (used when duty is 0)
+  double duty = 0.0;            // 0 = fixed pulse_width; otherwise fraction of the period
+  double min_frequency = 0.5;   // Hz; below it the train stops (standstill)
+  double max_frequency = 1000;  // Hz; above it the train clamps
+};
+
+struct ModelConfig {
+  std::string state_dir = "/var/lib/gearpulse";
+  double retrain_interval = 600.0;      // s between retrain attempts
+  std::size_t min_new_samples = 600;    // new training pairs needed before a retrain
+  double store_hours = 50.0;            // training pairs older than this are dropped
+  std::size_t max_samples = 1'000'000;  // hard cap on the store, whatever the age
+  double save_interval = 300.0;         // s between periodic saves of the training store
+};
+
+struct ControlConfig {
+  std::string socket = "/run/gearpulse/control.sock";
+  unsigned max_clients = 32;
+};
+
+struct LogConfig {
+  std::string level = "info";  // trace, debug, info, warn, error, critical, off
+};
+
+struct Config {
+  AudioConfig audio;
+  TrackerConfig tracker;
+  GpsConfig gps;
+  OutputConfig output;
+  ModelConfig model;
+  ControlConfig control;
+  LogConfig log;
+  std::string source;  // file it came from, for messages
+};
+
+// One line: "file:line: key: reason" (line omitted when unknown).
+struct ConfigError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Parses and validates; throws ConfigError.
+[[nodiscard]] Config load_config(const std::string& path);
+// Same from text (tests); `source_name` is used in messages.
+[[nodiscard]] Config parse_config(std::string_view text, const std::string& source_name);
+
+[[nodiscard]] const char* to_string(OutputKind kind) noexcept;
+
+// Keys whose change takes effect on SIGHUP; everything else needs a restart.
+// Returns the dotted names of keys that differ between `a` and `b` and need a restart.
+[[nodiscard]] std::vector<std::string> restart_required_changes(const Config& a, const Config& b);
+
+}  // namespace gearpulse::daemon

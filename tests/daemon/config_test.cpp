@@ -1,0 +1,158 @@
+#include <catch2/catch.hpp>
+
+#include <string>
+
+#include "daemon/config.hpp"
+
+using gearpulse::daemon::Config;
+using gearpulse::daemon::ConfigError;
+using gearpulse::daemon::OutputKind;
+using gearpulse::daemon::parse_config;
+
+namespace {
+
+// The message of the ConfigError raised by `text`, or "" if it parsed.
+std::string error_of(const std::string& text) {
+  try {
+    (void)parse_config(text, "test.toml");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return {};
+}
+
+}  // namespace
+
+TEST_CASE("config: an empty file gives the documented defaults") {
+  const Config c = parse_config("", "empty.toml");
+  CHECK(c.audio.device == "default");
+  CHECK(c.audio.rate == 48000);
+  CHECK(c.audio.channel == -1);
+  CHECK(c.gps.host == "127.0.0.1");
+  CHECK(c.gps.port == 2947);
+  CHECK(c.gps.timeout == Approx(1.5));
+  CHECK(c.output.kind == OutputKind::kPty);
+  CHECK(c.output.path == "/run/gearpulse/pulse");
+  CHECK(c.output.pulses_per_km == Approx(2485.0));
+  CHECK(c.model.state_dir == "/var/lib/gearpulse");
+  CHECK(c.model.store_hours == Approx(50.0));
+  CHECK(c.control.socket == "/run/gearpulse/control.sock");
+  CHECK(c.log.level == "info");
+}
+
+TEST_CASE("config: the interface keys are read") {
+  const Config c = parse_config(R"(
+[audio]
+device = "hw:1,0"
+rate = 8000
+[gps]
+host = "gps.local"
+port = 3000
+[output]
+kind = "gpio"
+path = "/tmp/p"
+chip = "gpiochip2"
+line = 5
+pulses_per_km = 4000.5
+[model]
+state_dir = "/tmp/state"
+[control]
+socket = "/tmp/ctl.sock"
+)",
+                                "ok.toml");
+  CHECK(c.audio.device == "hw:1,0");
+  CHECK(c.audio.rate == 8000);
+  CHECK(c.gps.host == "gps.local");
+  CHECK(c.gps.port == 3000);
+  CHECK(c.output.kind == OutputKind::kGpio);
+  CHECK(c.output.chip == "gpiochip2");
+  CHECK(c.output.line == 5);
+  CHECK(c.output.pulses_per_km == Approx(4000.5));
+  CHECK(c.model.state_dir == "/tmp/state");
+  CHECK(c.control.socket == "/tmp/ctl.sock");
+}
+
+TEST_CASE("config: an unknown key names file line and key") {
+  CHECK(error_of("[audio]\ndevice = \"x\"\n\nrte = 48000\n") == "test.toml:4: audio.rte: unknown key");
+  CHECK(error_of("[gps]\nlatency = 0.1\ntimout = 2\n") == "test.toml:3: gps.timout: unknown key");
+}
+
+TEST_CASE("config: an unknown section names file line and section") {
+  CHECK(error_of("[audio]\nrate = 48000\n[outptu]\nkind = \"pty\"\n") ==
+        "test.toml:3: outptu: unknown section");
+  CHECK(error_of("verbose = true\n") == "test.toml:1: verbose: unknown section");
+  CHECK(error_of("audio = 5\n") == "test.toml:1: audio: expected a [section]");
+}
+
+TEST_CASE("config: an out of range value names file line and key") {
+  const std::string e = error_of("[audio]\nrate = 1000\n");
+  CHECK(e.starts_with("test.toml:2: audio.rate: value 1000 out of range"));
+  CHECK(error_of("[gps]\nport = 70000\n").starts_with("test.toml:2: gps.port: value 70000 out of range"));
+  CHECK(error_of("\n[output]\npulses_per_km = -3\n")
+            .starts_with("test.toml:3: output.pulses_per_km: value -3"));
+  CHECK(error_of("[model]\nstore_hours = 0\n").starts_with("test.toml:2: model.store_hours: value 0"));
+  CHECK(error_of("[output]\nkind = \"usb\"\n") ==
+        "test.toml:2: output.kind: 'usb' is not one of pty, gpio, none");
+  CHECK(
+      error_of("[audio]\nchannels = 2\nchannel = 2\n").starts_with("test.toml:3: audio.channel: channel 2"));
+}
+
+TEST_CASE("config: a wrong type names file line and key") {
+  CHECK(error_of("[audio]\nrate = \"fast\"\n") == "test.toml:2: audio.rate: expected an integer");
+  CHECK(error_of("[gps]\nhost = 12\n") == "test.toml:2: gps.host: expected a string");
+  CHECK(error_of("[audio]\nrealtime = 1\n") == "test.toml:2: audio.realtime: expected true or false");
+  CHECK(error_of("[output]\npulses_per_km = \"2485\"\n") ==
+        "test.toml:2: output.pulses_per_km: expected a number");
+  CHECK(error_of("[audio]\nrate = 48000.5\n") == "test.toml:2: audio.rate: expected an integer");
+}
+
+TEST_CASE("config: malformed TOML names file and line") {
+  const std::string e = error_of("[audio]\nrate = 48000\n[gps\nport = 1\n");
+  CHECK(e.starts_with("test.toml:3: "));
+  CHECK(error_of("[audio]\ndevice = \"unterminated\n").starts_with("test.toml:2: "));
+  CHECK(error_of("[audio]\nrate = 1\nrate = 2\n").starts_with("test.toml:3: "));
+}
+
+TEST_CASE("config: relations between keys are checked") {
+  CHECK(error_of("[tracker]\nband_low = 300\nband_high = 200\n")
+            .starts_with("test.toml:3: tracker.band_high: must be above"));
+  CHECK(error_of("[audio]\nrate = 8000\n[tracker]\nband_high = 4500\n")
+            .starts_with("test.toml:4: tracker.band_high: must be below half"));
+  CHECK(error_of("[output]\npulse_width = 0.01\nmax_frequency = 500\n")
+            .starts_with("test.toml:2: output.pulse_width:"));
+  CHECK(error_of("[output]\nmin_frequency = 5\nmax_frequency = 2\n")
+            .starts_with("test.toml:3: output.max_frequency:"));
+}
+
+TEST_CASE("config: channel takes an index or mix") {
+  CHECK(parse_config("[audio]\nchannels = 2\nchannel = 1\n", "a").audio.channel == 1);
+  CHECK(parse_config("[audio]\nchannels = 2\nchannel = \"mix\"\n", "a").audio.channel == -1);
+  CHECK(error_of("[audio]\nchannel = \"left\"\n").starts_with("test.toml:2: audio.channel:"));
+}
+
+TEST_CASE("config: the shipped default config is valid") {
+  const Config c = gearpulse::daemon::load_config(GEARPULSE_SOURCE_DIR "/config/gearpulse.toml");
+  const Config d = parse_config("", "empty");
+  // The file documents the defaults: loading it changes nothing.
+  CHECK(gearpulse::daemon::restart_required_changes(c, d).empty());
+  CHECK(c.model.retrain_interval == d.model.retrain_interval);
+  CHECK(c.log.level == d.log.level);
+}
+
+TEST_CASE("config: a missing file is an error naming it") {
+  try {
+    (void)gearpulse::daemon::load_config("/nonexistent/gearpulse.toml");
+    FAIL("no error");
+  } catch (const ConfigError& e) {
+    CHECK(std::string(e.what()).starts_with("/nonexistent/gearpulse.toml: "));
+  }
+}
+
+TEST_CASE("config: changes that need a restart are named") {
+  const Config a = parse_config("", "a");
+  const Config b = parse_config(
+      "[audio]\ndevice = \"hw:2\"\n[log]\nlevel = \"debug\"\n[model]\nmin_new_samples = 5\n", "b");
+  const auto changed = gearpulse::daemon::restart_required_changes(a, b);
+  REQUIRE(changed.size() == 1);
+  CHECK(changed[0] == "[audio]");
+}
