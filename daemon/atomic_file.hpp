@@ -1,0 +1,22 @@
+#pragma once
+// Files that must survive a power cut: a car PC loses power without warning, so a reader sees either
+// the old content or the new one, never a torn mix.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace gearpulse::daemon {
+
+// Writes `data` to a temp file in the same directory, fsyncs it, renames it over `path` and fsyncs the
+// directory. Throws std::system_error naming the path on failure (the old file is then untouched).
+void write_file_atomic(const std::filesystem::path& path, std::string_view data);
+
+// Whole file, or nullopt if it does not exist. Throws std::system_error on other read errors.
+[[nodiscard]] std::optional<std::string> read_file(const std::filesystem::path& path);
+
+// Removes temp files that a crash between create and rename left behind next to `path`.
+// Returns how many were removed.
+std::size_t remove_stale_temp_files(const std::filesystem::path& path) noexcept;
+
+}  // namespace gearpulse::daemon

@@ -1,0 +1,158 @@
+#include "daemon/retrainer.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <ctime>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+namespace gearpulse::daemon {
+namespace {
+
+double wall_now() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
+}
+
+// A fit may take a second of CPU on a week of data; the capture, tracker and pulse threads must not
+// notice, so this thread only runs when nothing else wants the CPU.
+void lower_priority() {
+  const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
+  if (::setpriority(PRIO_PROCESS, tid, 19) != 0) spdlog::debug("retrain: setpriority failed");
+  sched_param param{};
+  if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &param) != 0)
+    spdlog::debug("retrain: SCHED_IDLE not available; running at nice 19");
+}
+
+}  // namespace
+
+Retrainer::Retrainer(TrainingStore& store, ModelHolder& model, std::filesystem::path model_path,
+                     Fitter fitter, Settings settings)
+    : store_(store),
+      model_(model),
+      model_path_(std::move(model_path)),
+      fitter_(std::move(fitter)),
+      settings_(settings) {}
+
+Retrainer::~Retrainer() {
+  stop();
+}
+
+void Retrainer::start() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = false;
+  }
+  thread_ = std::thread([this] { run(); });
+}
+
+void Retrainer::stop() noexcept {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void Retrainer::request() noexcept {
+  {
+    std::lock_guard lock(mutex_);
+    requested_ = true;
+  }
+  wake_.notify_all();
+}
+
+void Retrainer::set_settings(Settings settings) noexcept {
+  {
+    std::lock_guard lock(mutex_);
+    settings_ = settings;
+  }
+  wake_.notify_all();
+}
+
+Retrainer::Status Retrainer::status() const {
+  std::lock_guard lock(mutex_);
+  return status_;
+}
+
+bool Retrainer::retrain_now() {
+  const std::size_t fresh = store_.new_samples();
+  const std::vector<Sample> samples = store_.snapshot();
+  {
+    std::lock_guard lock(mutex_);
+    status_.busy = true;
+    ++status_.runs;
+    status_.last_run_wall = wall_now();
+  }
+  std::string result;
+  bool changed = false;
+  try {
+    if (samples.empty()) {
+      result = "no training samples yet";
+    } else {
+      const auto t0 = std::chrono::steady_clock::now();
+      GearModel fitted = fitter_(samples);
+      const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (fitted.empty()) {
+        result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
+                             fitted.reason.empty() ? "no reason given" : fitted.reason);
+        spdlog::warn("retrain: {}", result);
+      } else {
+        const std::size_t gears = fitted.gears.size();
+        auto next = std::make_shared<const GearModel>(std::move(fitted));
+        model_.set(next);
+        changed = true;
+        result = fmt::format("fit on {} samples: {} gears in {:.2f} s", samples.size(), gears, secs);
+        spdlog::info("retrain: {}; new model in use", result);
+        try {
+          save_model_file(model_path_, *next);
+        } catch (const std::exception& e) {
+          spdlog::error("retrain: cannot save {}: {}; the new model is used but will be lost at restart",
+                        model_path_.string(), e.what());
+          result += "; not saved: " + std::string(e.what());
+        }
+      }
+    }
+    store_.mark_trained(fresh);
+  } catch (const std::exception& e) {
+    result = std::string("fit failed: ") + e.what() + "; model kept";
+    spdlog::error("retrain: {}", result);
+    store_.mark_trained(fresh);
+  }
+  std::lock_guard lock(mutex_);
+  status_.busy = false;
+  status_.last_result = result;
+  if (changed) ++status_.accepted;
+  return changed;
+}
+
+void Retrainer::run() noexcept {
+  lower_priority();
+  std::unique_lock lock(mutex_);
+  // A store restored at start but no model yet: learn right away instead of after a full interval.
+  bool first = !model_.trained();
+  while (!stop_) {
+    if (!first && !requested_) {
+      wake_.wait_for(lock, settings_.interval, [this] { return stop_ || requested_; });
+      if (stop_) break;
+    }
+    const bool forced = requested_;
+    requested_ = false;
+    const std::size_t needed = settings_.min_new_samples;
+    const bool enough = first ? store_.size() >= needed : store_.new_samples() >= needed;
+    first = false;
+    if (!forced && !enough) continue;
+    lock.unlock();
+    retrain_now();
+    lock.lock();
+  }
+}
+
+}  // namespace gearpulse::daemon

@@ -1,0 +1,72 @@
+#pragma once
+// Periodic retraining in a low-priority thread (nice 19, SCHED_IDLE): fits a new gear model on the
+// training store and swaps it in atomically. Pulses never wait for it; an empty fit (no gear ladder)
+// or a failed one never replaces a good model.
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+
+#include "core/gear_model.hpp"
+#include "core/sample.hpp"
+#include "daemon/model_store.hpp"
+#include "daemon/training_store.hpp"
+
+namespace gearpulse::daemon {
+
+class Retrainer {
+ public:
+  // Fits a model on the samples; an empty model (gears empty, reason set) means "no ladder".
+  using Fitter = std::function<GearModel(std::span<const Sample>)>;
+
+  struct Settings {
+    std::chrono::duration<double> interval{600.0};
+    std::size_t min_new_samples = 600;
+  };
+
+  struct Status {
+    std::uint64_t runs = 0;      // fits attempted
+    std::uint64_t accepted = 0;  // fits that replaced the model
+    double last_run_wall = 0.0;  // UNIX seconds of the last attempt, 0 = never
+    std::string last_result;     // one line for status
+    bool busy = false;
+  };
+
+  Retrainer(TrainingStore& store, ModelHolder& model, std::filesystem::path model_path, Fitter fitter,
+            Settings settings);
+  ~Retrainer();
+  Retrainer(const Retrainer&) = delete;
+  Retrainer& operator=(const Retrainer&) = delete;
+
+  void start();
+  void stop() noexcept;
+  // Fit as soon as possible, whatever the count of new samples.
+  void request() noexcept;
+  void set_settings(Settings settings) noexcept;
+  [[nodiscard]] Status status() const;
+  // Runs one fit now on the calling thread (what the thread does); returns true if the model changed.
+  bool retrain_now();
+
+ private:
+  void run() noexcept;
+
+  TrainingStore& store_;
+  ModelHolder& model_;
+  std::filesystem::path model_path_;
+  Fitter fitter_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  Settings settings_;
+  Status status_;
+  bool requested_ = false;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
+}  // namespace gearpulse::daemon

@@ -1,0 +1,269 @@
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <random>
+#include <string>
+#include <thread>
+
+#include "daemon/atomic_file.hpp"
+#include "daemon/model_store.hpp"
+#include "daemon/retrainer.hpp"
+#include "daemon/training_store.hpp"
+#include "tests/daemon/test_util.hpp"
+
+using namespace gearpulse;
+using namespace gearpulse::daemon;
+using gearpulse::test::read_text;
+using gearpulse::test::TempDir;
+using gearpulse::test::write_text;
+
+namespace {
+
+std::size_t count_entries(const std::filesystem::path& dir) {
+  std::size_t n = 0;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir))
+    ++n;
+  return n;
+}
+
+GearModel three_gears() {
+  GearModel m;
+  m.gears = {{0.05, 0.3, 0.001}, {0.09, 0.4, 0.001}, {0.14, 0.3, 0.002}};
+  m.samples = 1000;
+  m.sigma_speed = 0.3;
+  m.sigma_freq = 0.5;
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("daemon: atomic write replaces the content and leaves no temp file") {
+  TempDir dir;
+  const auto file = dir / "model.json";
+  write_file_atomic(file, "first");
+  CHECK(read_text(file) == "first");
+  write_file_atomic(file, "second, longer content");
+  CHECK(read_text(file) == "second, longer content");
+  CHECK(count_entries(dir.path()) == 1);
+  CHECK(read_file(dir / "absent").has_value() == false);
+}
+
+TEST_CASE("daemon: atomic write into a missing directory fails and names the path") {
+  TempDir dir;
+  try {
+    write_file_atomic(dir / "missing/model.json", "x");
+    FAIL("no error");
+  } catch (const std::system_error& e) {
+    CHECK(std::string(e.what()).find("missing/model.json") != std::string::npos);
+  }
+}
+
+TEST_CASE("daemon: atomic write survives a crash at any moment") {
+  TempDir dir;
+  const auto file = dir / "store.bin";
+  // Two contents large enough that a write takes many syscalls; a reader must only ever see one of them.
+  const std::string a(1 << 20, 'a');
+  const std::string b(1 << 20, 'b');
+  write_file_atomic(file, a);
+  std::mt19937 rng(12345);
+  for (int round = 0; round < 6; ++round) {
+    const pid_t child = ::fork();
+    if (child == 0) {
+      for (int i = 0;; ++i)
+        write_file_atomic(file, i % 2 ? a : b);
+    }
+    std::this_thread::sleep_for(
+        std::chrono::microseconds(std::uniform_int_distribution<int>(2000, 40000)(rng)));
+    ::kill(child, SIGKILL);
+    ::waitpid(child, nullptr, 0);
+    const std::string seen = read_text(file);
+    INFO("round " << round << ": " << seen.size() << " bytes");
+    CHECK((seen == a || seen == b));
+  }
+  // Temp files a killed writer left behind are recognised, ignored by readers and cleaned up.
+  write_text(dir / "store.bin.tmp.Xy12Zq", "partial");
+  CHECK(remove_stale_temp_files(file) >= 1);
+  CHECK(count_entries(dir.path()) == 1);
+}
+
+TEST_CASE("daemon: training store is bounded by age and by count") {
+  TrainingStore store(100.0, 1000);
+  for (int i = 0; i < 300; ++i)
+    CHECK(store.add({1000.0 + i, 10.0, 100.0}));
+  // Only the last 100 s relative to the newest pair remain.
+  CHECK(store.size() == 101);
+  CHECK(store.snapshot().front().t == Approx(1199.0));
+  store.set_limits(1e9, 50);
+  CHECK(store.size() == 50);
+  CHECK(store.snapshot().front().t == Approx(1250.0));
+  store.prune(1299.0 + 1e9 + 10.0);
+  CHECK(store.size() == 0);
+  // Incomplete or implausible pairs are refused.
+  CHECK_FALSE(store.add({1.0, kMissing, 50.0}));
+  CHECK_FALSE(store.add({1.0, 5.0, kMissing}));
+  CHECK_FALSE(store.add({1.0, -1.0, 50.0}));
+  CHECK(store.size() == 0);
+}
+
+TEST_CASE("daemon: training store counts new pairs for the retrainer") {
+  TrainingStore store(1e9, 1000);
+  for (int i = 0; i < 10; ++i)
+    store.add({double(i), 1.0, 10.0});
+  CHECK(store.new_samples() == 10);
+  store.mark_trained(7);
+  CHECK(store.new_samples() == 3);
+}
+
+TEST_CASE("daemon: training store round-trips through its file") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 500; ++i)
+    store.add({1.7e9 + i * 0.5, 0.1 * i, 20.0 + i * 0.25});
+  store.save(dir / "training.bin");
+  TrainingStore back(1e9, 10000);
+  CHECK(back.load(dir / "training.bin").empty());
+  const auto a = store.snapshot();
+  const auto b = back.snapshot();
+  REQUIRE(a.size() == b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i].t == b[i].t);
+    CHECK(a[i].speed == b[i].speed);
+    CHECK(a[i].freq == b[i].freq);
+  }
+  // A missing file is an empty store, not an error.
+  TrainingStore none(1e9, 10);
+  CHECK(none.load(dir / "absent.bin").empty());
+  CHECK(none.size() == 0);
+}
+
+TEST_CASE("daemon: training store rejects a torn or corrupt file") {
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 100; ++i)
+    store.add({1.0 + i, 3.0, 40.0});
+  const std::string good = store.serialize();
+  TrainingStore back(1e9, 10000);
+  REQUIRE(back.deserialize(good).empty());
+  REQUIRE(back.size() == 100);
+
+  SECTION("truncated") {
+    CHECK_FALSE(back.deserialize(good.substr(0, good.size() - 30)).empty());
+  }
+  SECTION("a flipped byte") {
+    std::string bad = good;
+    bad[bad.size() / 2] ^= 0x10;
+    CHECK(back.deserialize(bad) == "checksum mismatch");
+  }
+  SECTION("padded") {
+    CHECK_FALSE(back.deserialize(good + std::string(24, '\0')).empty());
+  }
+  SECTION("not a store") {
+    CHECK(back.deserialize(std::string(200, 'x')) == "not a training store (bad magic)");
+  }
+  SECTION("empty") {
+    CHECK_FALSE(back.deserialize("").empty());
+  }
+  CHECK(back.size() == 0);
+}
+
+TEST_CASE("daemon: a corrupt model file is reported and ignored") {
+  TempDir dir;
+  write_text(dir / "model.json", "{\"version\":1,\"gears\":[{\"theta\":0.1},{\"theta\":0.05}]");
+  const ModelLoad torn = load_model_file(dir / "model.json");
+  CHECK(torn.model == nullptr);
+  CHECK_FALSE(torn.error.empty());
+  write_text(dir / "model.json", "{\"version\":1,\"gears\":[{\"theta\":0.1},{\"theta\":0.05}]}");
+  const ModelLoad unordered = load_model_file(dir / "model.json");
+  CHECK(unordered.model == nullptr);
+  CHECK_FALSE(unordered.error.empty());
+  const ModelLoad absent = load_model_file(dir / "none.json");
+  CHECK(absent.model == nullptr);
+  CHECK(absent.error.empty());
+}
+
+TEST_CASE("daemon: model file round-trips in the format of gearpulse fit") {
+  TempDir dir;
+  save_model_file(dir / "model.json", three_gears());
+  const ModelLoad back = load_model_file(dir / "model.json");
+  REQUIRE(back.model);
+  REQUIRE(back.model->gears.size() == 3);
+  CHECK(back.model->gears[1].theta == Approx(0.09));
+  const auto json = nlohmann::json::parse(read_text(dir / "model.json"));
+  CHECK(json["version"] == 1);
+  CHECK(json["gears"][2]["stderr"].get<double>() == Approx(0.002));
+}
+
+TEST_CASE("daemon: retrainer swaps in and saves a fitted model") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 20; ++i)
+    store.add({double(i), 10.0, 100.0});
+  ModelHolder model;
+  std::size_t seen = 0;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample> s) {
+                        seen = s.size();
+                        return three_gears();
+                      },
+                      {});
+  CHECK(retrainer.retrain_now());
+  CHECK(seen == 20);
+  REQUIRE(model.trained());
+  CHECK(model.get()->gears.size() == 3);
+  CHECK(load_model_file(dir / "model.json").model != nullptr);
+  CHECK(store.new_samples() == 0);
+  CHECK(retrainer.status().accepted == 1);
+}
+
+TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  store.add({1.0, 10.0, 100.0});
+  ModelHolder model;
+  const auto good = std::make_shared<const GearModel>(three_gears());
+  model.set(good);
+  int calls = 0;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) -> GearModel {
+                        if (++calls == 1) {
+                          GearModel none;
+                          none.reason = "no discrete ladder";
+                          return none;
+                        }
+                        throw std::runtime_error("optimizer diverged");
+                      },
+                      {});
+  CHECK_FALSE(retrainer.retrain_now());
+  CHECK(model.get() == good);
+  CHECK(retrainer.status().last_result.find("no discrete ladder") != std::string::npos);
+  CHECK_FALSE(retrainer.retrain_now());
+  CHECK(model.get() == good);
+  CHECK(retrainer.status().last_result.find("optimizer diverged") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
+}
+
+TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 5; ++i)
+    store.add({double(i), 10.0, 100.0});
+  ModelHolder model;
+  std::atomic<int> fits{0};
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) {
+                        ++fits;
+                        return three_gears();
+                      },
+                      {std::chrono::duration<double>(3600.0), 1000});
+  retrainer.start();
+  retrainer.request();
+  for (int i = 0; i < 500 && fits.load() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  retrainer.stop();
+  CHECK(fits.load() == 1);
+  CHECK(model.trained());
+}
