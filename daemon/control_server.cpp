@@ -1,0 +1,321 @@
+#include "daemon/control_server.hpp"
+
+#include <fcntl.h>
+#include <sys/epoll.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <system_error>
+
+#include <spdlog/spdlog.h>
+
+#include "daemon/control_protocol.hpp"
+
+namespace gearpulse::daemon {
+namespace {
+
+[[noreturn]] void throw_errno(const std::string& what) {
+  throw std::system_error(errno, std::generic_category(), what);
+}
+
+sockaddr_un make_address(const std::string& path) {
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (path.size() >= sizeof addr.sun_path) throw std::runtime_error("control socket path too long: " + path);
+  std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+  return addr;
+}
+
+// A socket file at `path`: live daemon -> error; dead one (connection refused) -> removed.
+void clear_stale_socket(const std::string& path) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) return;
+  if (!S_ISSOCK(st.st_mode))
+    throw std::runtime_error("control socket path " + path + " exists and is not a socket; not touching it");
+  const int probe = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (probe < 0) throw_errno("socket");
+  const sockaddr_un addr = make_address(path);
+  const int rc = ::connect(probe, reinterpret_cast<const sockaddr*>(&addr), sizeof addr);
+  const int err = errno;
+  ::close(probe);
+  if (rc == 0) throw std::runtime_error("another gearpulsed is already serving " + path);
+  if (err != ECONNREFUSED && err != ENOENT)
+    throw std::system_error(err, std::generic_category(), "cannot probe existing socket " + path);
+  spdlog::info("control: removing stale socket {} left by a previous run", path);
+  if (::unlink(path.c_str()) != 0 && errno != ENOENT) throw_errno("cannot remove stale socket " + path);
+}
+
+struct Client {
+  int fd = -1;
+  std::string in;
+  std::string out;
+  bool close_after_flush = false;
+  std::uint32_t events = EPOLLIN | EPOLLRDHUP;
+  std::chrono::steady_clock::time_point last_activity;
+  ~Client() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+}  // namespace
+
+ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLimits limits)
+    : path_(std::move(socket_path)), handler_(std::move(handler)), limits_(limits) {
+  const std::filesystem::path parent = std::filesystem::path(path_).parent_path();
+  if (!parent.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(parent, ec);
+    if (ec)
+      throw std::system_error(ec, "cannot create directory " + parent.string() + " for the control socket");
+  }
+  clear_stale_socket(path_);
+  listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+  if (listen_fd_ < 0) throw_errno("socket");
+  const sockaddr_un addr = make_address(path_);
+  try {
+    if (::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0)
+      throw_errno("cannot bind control socket " + path_);
+    // Owner and group (the gearpulse group) may talk to the daemon; nobody else. Set before listen so
+    // no connection is ever accepted under a wider mode.
+    if (::chmod(path_.c_str(), 0660) != 0) throw_errno("cannot chmod control socket " + path_);
+    if (::listen(listen_fd_, 16) != 0) throw_errno("cannot listen on " + path_);
+    epoll_fd_ = ::epoll_create1(EPOLL_CLOEXEC);
+    if (epoll_fd_ < 0) throw_errno("epoll_create1");
+    wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (wake_fd_ < 0) throw_errno("eventfd");
+  } catch (...) {
+    if (epoll_fd_ >= 0) ::close(epoll_fd_);
+    ::close(listen_fd_);
+    ::unlink(path_.c_str());
+    throw;
+  }
+}
+
+ControlServer::~ControlServer() {
+  stop();
+  if (wake_fd_ >= 0) ::close(wake_fd_);
+  if (epoll_fd_ >= 0) ::close(epoll_fd_);
+  if (listen_fd_ >= 0) {
+    ::close(listen_fd_);
+    ::unlink(path_.c_str());
+  }
+}
+
+void ControlServer::start() {
+  running_.store(true);
+  thread_ = std::thread([this] { run(); });
+}
+
+void ControlServer::stop() noexcept {
+  if (!thread_.joinable()) return;
+  running_.store(false);
+  const std::uint64_t one = 1;
+  [[maybe_unused]] const ssize_t n = ::write(wake_fd_, &one, sizeof one);
+  thread_.join();
+}
+
+std::string ControlServer::handle_line(std::string_view line) const {
+  nlohmann::json reply;
+  try {
+    nlohmann::json request;
+    try {
+      request = nlohmann::json::parse(line);
+    } catch (const nlohmann::json::exception&) {
+      throw ControlError("request is not valid JSON");
+    }
+    if (!request.is_object()) throw ControlError("request must be a JSON object");
+    if (request.contains("v")) {
+      const auto& v = request["v"];
+      if (!v.is_number_integer()) throw ControlError("\"v\" must be an integer protocol version");
+      if (v.get<long long>() > control::kProtocolVersion || v.get<long long>() < 1)
+        throw ControlError("unsupported protocol version " + v.dump() + " (this daemon speaks " +
+                           std::to_string(control::kProtocolVersion) + ")");
+    }
+    if (!request.contains("cmd") || !request["cmd"].is_string())
+      throw ControlError("missing string field \"cmd\"");
+    reply = handler_(request);
+    if (!reply.is_object()) reply = nlohmann::json::object();
+    if (!reply.contains("ok")) reply["ok"] = true;
+  } catch (const ControlError& e) {
+    reply = {{"ok", false}, {"error", e.what()}};
+  } catch (const std::exception& e) {
+    reply = {{"ok", false}, {"error", std::string("internal error: ") + e.what()}};
+  }
+  reply["v"] = control::kProtocolVersion;
+  // Replacement of invalid UTF-8 keeps a reply valid whatever a handler echoed back.
+  return reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+void ControlServer::run() noexcept {
+  std::map<int, std::unique_ptr<Client>> clients;
+  const auto add_fd = [this](int fd, std::uint32_t events) {
+    epoll_event ev{};
+    ev.events = events;
+    ev.data.fd = fd;
+    return ::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, fd, &ev) == 0;
+  };
+  const auto set_events = [this](int fd, std::uint32_t events) {
+    epoll_event ev{};
+    ev.events = events;
+    ev.data.fd = fd;
+    ::epoll_ctl(epoll_fd_, EPOLL_CTL_MOD, fd, &ev);
+  };
+  const auto drop = [&](int fd, const char* why) {
+    if (why) {
+      dropped_.fetch_add(1, std::memory_order_relaxed);
+      spdlog::debug("control: dropping client fd {}: {}", fd, why);
+    }
+    ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
+    clients.erase(fd);
+    clients_.store(clients.size(), std::memory_order_relaxed);
+  };
+  // Writes what the socket accepts now; returns false if the client must go.
+  const auto flush = [&](Client& c) {
+    while (!c.out.empty()) {
+      const ssize_t n = ::send(c.fd, c.out.data(), c.out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        if (errno == EAGAIN || errno == EWOULDBLOCK) break;
+        return false;
+      }
+      c.out.erase(0, static_cast<std::size_t>(n));
+    }
+    if (c.out.empty() && c.close_after_flush) return false;
+    // After the last request only the pending replies matter; level-triggered EOF must not spin.
+    const std::uint32_t events = (c.close_after_flush ? 0u : std::uint32_t{EPOLLIN | EPOLLRDHUP}) |
+                                 (c.out.empty() ? 0u : std::uint32_t{EPOLLOUT});
+    if (events != c.events) {
+      c.events = events;
+      set_events(c.fd, events);
+    }
+    return true;
+  };
+  const auto queue = [&](Client& c, std::string line) {
+    c.out += line;
+    c.out += '\n';
+    return c.out.size() <= limits_.max_output_bytes;
+  };
+
+  if (!add_fd(listen_fd_, EPOLLIN) || !add_fd(wake_fd_, EPOLLIN)) {
+    spdlog::error("control: epoll registration failed: {}; control socket unavailable", std::strerror(errno));
+    return;
+  }
+  epoll_event events[32];
+  while (running_.load()) {
+    const int n = ::epoll_wait(epoll_fd_, events, 32, 1000);
+    if (n < 0 && errno != EINTR) {
+      spdlog::error("control: epoll_wait failed: {}", std::strerror(errno));
+      break;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    for (int i = 0; i < n; ++i) {
+      const int fd = events[i].data.fd;
+      if (fd == wake_fd_) continue;
+      if (fd == listen_fd_) {
+        for (;;) {
+          const int cfd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
+          if (cfd < 0) break;
+          if (clients.size() >= limits_.max_clients) {
+            static constexpr char kBusy[] = "{\"ok\":false,\"error\":\"too many clients\",\"v\":1}\n";
+            [[maybe_unused]] const ssize_t w =
+                ::send(cfd, kBusy, sizeof kBusy - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+            ::close(cfd);
+            dropped_.fetch_add(1, std::memory_order_relaxed);
+            continue;
+          }
+          auto c = std::make_unique<Client>();
+          c->fd = cfd;
+          c->last_activity = now;
+          if (!add_fd(cfd, EPOLLIN | EPOLLRDHUP)) continue;  // unique_ptr closes it
+          clients.emplace(cfd, std::move(c));
+          clients_.store(clients.size(), std::memory_order_relaxed);
+        }
+        continue;
+      }
+      const auto it = clients.find(fd);
+      if (it == clients.end()) continue;
+      Client& c = *it->second;
+      c.last_activity = now;
+      if (c.close_after_flush || !(events[i].events & (EPOLLIN | EPOLLRDHUP | EPOLLHUP | EPOLLERR))) {
+        if (!flush(c)) drop(fd, nullptr);
+        continue;
+      }
+      bool eof = false, error = false, overflow = false, too_long = false;
+      char buf[4096];
+      while (!eof && !error && !overflow && !too_long) {
+        const ssize_t r = ::recv(fd, buf, sizeof buf, MSG_DONTWAIT);
+        if (r == 0) {
+          eof = true;
+          break;
+        }
+        if (r < 0) {
+          if (errno == EINTR) continue;
+          if (errno != EAGAIN && errno != EWOULDBLOCK) error = true;
+          break;
+        }
+        c.in.append(buf, static_cast<std::size_t>(r));
+        // Complete lines are answered in order.
+        std::size_t start = 0;
+        for (std::size_t nl; (nl = c.in.find('\n', start)) != std::string::npos; start = nl + 1) {
+          std::string_view line(c.in.data() + start, nl - start);
+          if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+          if (line.size() > limits_.max_request_bytes) {
+            too_long = true;
+            break;
+          }
+          if (line.find_first_not_of(" \t") == std::string_view::npos) continue;
+          requests_.fetch_add(1, std::memory_order_relaxed);
+          if (!queue(c, handle_line(line))) {
+            overflow = true;
+            break;
+          }
+        }
+        c.in.erase(0, start);
+        if (c.in.size() > limits_.max_request_bytes) too_long = true;
+      }
+      if (error) {
+        drop(fd, "socket error");
+        continue;
+      }
+      if (overflow) {
+        drop(fd, "output buffer full (client does not read its replies)");
+        continue;
+      }
+      if (too_long) {
+        c.in.clear();
+        c.close_after_flush = true;
+        queue(c,
+              nlohmann::json({{"v", control::kProtocolVersion},
+                              {"ok", false},
+                              {"error", "request longer than " + std::to_string(limits_.max_request_bytes) +
+                                            " bytes; closing the connection"}})
+                  .dump());
+      }
+      // A peer that shut down its sending side still gets the replies it asked for.
+      if (eof) c.close_after_flush = true;
+      if (!flush(c)) drop(fd, too_long ? "request too long" : nullptr);
+    }
+    // Idle clients hold a slot; give it back.
+    for (auto it = clients.begin(); it != clients.end();) {
+      const auto idle =
+          std::chrono::duration_cast<std::chrono::milliseconds>(now - it->second->last_activity);
+      if (idle.count() > limits_.idle_timeout_ms) {
+        const int fd = (it++)->first;
+        drop(fd, "idle timeout");
+      } else {
+        ++it;
+      }
+    }
+  }
+}
+
+}  // namespace gearpulse::daemon

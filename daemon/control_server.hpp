@@ -1,0 +1,71 @@
+#pragma once
+// The control socket: a Unix stream socket (mode 0660) speaking JSON lines (control_protocol.hpp),
+// served by one thread with epoll and non-blocking sockets. Many clients may be connected at once; a
+// client that sends too long a request gets an error reply and is disconnected; a client that does not
+// read its replies is dropped once its output buffer is full, so no client can ever block the daemon.
+#include <atomic>
+#include <cstddef>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+namespace gearpulse::daemon {
+
+// Thrown by a handler to answer {"ok":false,"error":what()}.
+struct ControlError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct ControlLimits {
+  std::size_t max_request_bytes = 4096;
+  std::size_t max_output_bytes = 256 * 1024;  // per client: beyond it the client is dropped
+  unsigned max_clients = 32;
+  int idle_timeout_ms = 60'000;  // a connection silent this long is closed
+};
+
+class ControlServer {
+ public:
+  // Called on the server thread with a validated request (an object with a string "cmd"); returns the
+  // reply fields. Must not block for long.
+  using Handler = std::function<nlohmann::json(const nlohmann::json& request)>;
+
+  // Binds and listens (a stale socket file left by a dead daemon is replaced; a live one is an error).
+  // Throws std::system_error / std::runtime_error naming the path.
+  ControlServer(std::string socket_path, Handler handler, ControlLimits limits = {});
+  ~ControlServer();
+  ControlServer(const ControlServer&) = delete;
+  ControlServer& operator=(const ControlServer&) = delete;
+
+  void start();
+  void stop() noexcept;
+
+  [[nodiscard]] std::size_t clients() const noexcept { return clients_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t requests() const noexcept { return requests_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t dropped_clients() const noexcept {
+    return dropped_.load(std::memory_order_relaxed);
+  }
+  [[nodiscard]] const std::string& path() const noexcept { return path_; }
+
+  // Builds the reply line for one request line (without the newline); exposed for tests.
+  [[nodiscard]] std::string handle_line(std::string_view line) const;
+
+ private:
+  void run() noexcept;
+
+  std::string path_;
+  Handler handler_;
+  ControlLimits limits_;
+  int listen_fd_ = -1;
+  int epoll_fd_ = -1;
+  int wake_fd_ = -1;
+  std::thread thread_;
+  std::atomic<bool> running_{false};
+  std::atomic<std::size_t> clients_{0};
+  std::atomic<std::uint64_t> requests_{0};
+  std::atomic<std::uint64_t> dropped_{0};
+};
+
+}  // namespace gearpulse::daemon

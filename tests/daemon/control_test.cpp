@@ -1,0 +1,233 @@
+#include <catch2/catch.hpp>
+
+#include <sys/stat.h>
+
+#include <atomic>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "daemon/control_server.hpp"
+#include "tests/daemon/test_util.hpp"
+
+using gearpulse::daemon::ControlError;
+using gearpulse::daemon::ControlLimits;
+using gearpulse::daemon::ControlServer;
+using gearpulse::test::LineClient;
+using gearpulse::test::TempDir;
+using nlohmann::json;
+
+namespace {
+
+// A handler that counts calls and echoes the command; "boom" fails like a refused command.
+struct EchoHandler {
+  std::shared_ptr<std::atomic<int>> calls = std::make_shared<std::atomic<int>>(0);
+  json operator()(const json& request) const {
+    ++*calls;
+    const std::string cmd = request["cmd"].get<std::string>();
+    if (cmd == "boom") throw ControlError("refused on purpose");
+    if (cmd == "big") return {{"blob", std::string(8192, 'x')}};
+    return {{"echo", cmd}, {"n", calls->load()}};
+  }
+};
+
+json ask(LineClient& c, const std::string& line) {
+  REQUIRE(c.send_all(line + "\n"));
+  const auto reply = c.read_line();
+  REQUIRE(reply.has_value());
+  return json::parse(*reply);
+}
+
+}  // namespace
+
+TEST_CASE("control: answers one JSON line per request with the protocol version") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  struct stat st {};
+  REQUIRE(::stat((dir / "ctl.sock").c_str(), &st) == 0);
+  CHECK((st.st_mode & 0777) == 0660);
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.connected());
+  const json r = ask(c, R"({"v":1,"cmd":"status"})");
+  CHECK(r["v"] == 1);
+  CHECK(r["ok"] == true);
+  CHECK(r["echo"] == "status");
+  // Two requests in one write are answered in order.
+  REQUIRE(c.send_all("{\"cmd\":\"a\"}\n{\"cmd\":\"b\"}\n"));
+  CHECK(json::parse(*c.read_line())["echo"] == "a");
+  CHECK(json::parse(*c.read_line())["echo"] == "b");
+}
+
+TEST_CASE("control: bad requests get error replies and the connection stays usable") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.connected());
+  for (const char* bad : {"not json", "[1,2]", "{\"v\":1}", "{\"cmd\":5}", "{\"v\":99,\"cmd\":\"status\"}",
+                          "{\"v\":\"1\",\"cmd\":\"status\"}", "{\"cmd\":\"boom\"}", "\xff\xfe{"}) {
+    INFO(bad);
+    const json r = ask(c, bad);
+    CHECK(r["ok"] == false);
+    CHECK(r["error"].is_string());
+    CHECK(r["v"] == 1);
+  }
+  CHECK(ask(c, R"({"cmd":"status"})")["ok"] == true);
+}
+
+TEST_CASE("control: an oversize request gets an error reply and is disconnected") {
+  TempDir dir;
+  EchoHandler handler;
+  ControlServer server((dir / "ctl.sock").string(), handler, ControlLimits{.max_request_bytes = 1024});
+  server.start();
+  SECTION("one long line") {
+    LineClient c((dir / "ctl.sock").string());
+    REQUIRE(c.send_all("{\"cmd\":\"" + std::string(5000, 'a') + "\"}\n"));
+    const auto line = c.read_line();
+    REQUIRE(line.has_value());
+    const json r = json::parse(*line);
+    CHECK(r["ok"] == false);
+    CHECK(r["error"].get<std::string>().find("longer than 1024") != std::string::npos);
+    CHECK(c.closed_by_peer());
+  }
+  SECTION("endless bytes without a newline") {
+    LineClient c((dir / "ctl.sock").string());
+    c.send_all(std::string(3000, ' '));
+    const auto line = c.read_line();
+    REQUIRE(line.has_value());
+    CHECK(json::parse(*line)["ok"] == false);
+    CHECK(c.closed_by_peer());
+  }
+  CHECK(handler.calls->load() == 0);
+  // The server still serves others.
+  LineClient d((dir / "ctl.sock").string());
+  CHECK(ask(d, R"({"cmd":"status"})")["ok"] == true);
+}
+
+TEST_CASE("control: many clients at once") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{}, ControlLimits{.max_clients = 64});
+  server.start();
+  constexpr int kClients = 40;
+  std::vector<std::unique_ptr<LineClient>> clients;
+  for (int i = 0; i < kClients; ++i) {
+    clients.push_back(std::make_unique<LineClient>((dir / "ctl.sock").string()));
+    REQUIRE(clients.back()->connected());
+  }
+  // All connected at the same time, each gets its own answers.
+  for (int round = 0; round < 3; ++round)
+    for (int i = 0; i < kClients; ++i)
+      REQUIRE(clients[i]->send_all("{\"cmd\":\"c" + std::to_string(i) + "\"}\n"));
+  for (int round = 0; round < 3; ++round)
+    for (int i = 0; i < kClients; ++i) {
+      const auto line = clients[i]->read_line();
+      REQUIRE(line.has_value());
+      CHECK(json::parse(*line)["echo"] == "c" + std::to_string(i));
+    }
+  // Concurrent threads too.
+  std::atomic<int> good{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 8; ++t)
+    threads.emplace_back([&] {
+      for (int k = 0; k < 20; ++k) {
+        LineClient c((dir / "ctl.sock").string());
+        if (!c.connected() || !c.send_all("{\"cmd\":\"t\"}\n")) continue;
+        if (const auto line = c.read_line(); line && json::parse(*line)["ok"] == true) ++good;
+      }
+    });
+  for (auto& t : threads)
+    t.join();
+  CHECK(good.load() == 160);
+}
+
+TEST_CASE("control: clients beyond the limit are refused with an error") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{}, ControlLimits{.max_clients = 2});
+  server.start();
+  LineClient a((dir / "ctl.sock").string()), b((dir / "ctl.sock").string());
+  CHECK(ask(a, R"({"cmd":"x"})")["ok"] == true);
+  CHECK(ask(b, R"({"cmd":"x"})")["ok"] == true);
+  LineClient c((dir / "ctl.sock").string());
+  const auto line = c.read_line();
+  REQUIRE(line.has_value());
+  CHECK(json::parse(*line)["error"] == "too many clients");
+  CHECK(c.closed_by_peer());
+}
+
+TEST_CASE("control: a stuck client never blocks the others") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{},
+                       ControlLimits{.max_output_bytes = 64 * 1024});
+  server.start();
+  LineClient stuck((dir / "ctl.sock").string());
+  REQUIRE(stuck.connected());
+  // It asks for large replies and never reads them: the socket buffer fills, then its output buffer.
+  std::string burst;
+  for (int i = 0; i < 50; ++i)
+    burst += "{\"cmd\":\"big\"}\n";
+  bool sending = true;
+  for (int i = 0; i < 200 && sending; ++i) {
+    pollfd pfd{stuck.fd(), POLLOUT, 0};
+    if (::poll(&pfd, 1, 50) <= 0) break;
+    sending = ::send(stuck.fd(), burst.data(), burst.size(), MSG_NOSIGNAL | MSG_DONTWAIT) > 0;
+    LineClient other((dir / "ctl.sock").string());
+    REQUIRE(other.connected());
+    CHECK(ask(other, R"({"cmd":"status"})")["ok"] == true);
+  }
+  // The server dropped it rather than buffering without bound.
+  for (int i = 0; i < 200 && server.dropped_clients() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  CHECK(server.dropped_clients() >= 1);
+  LineClient after((dir / "ctl.sock").string());
+  CHECK(ask(after, R"({"cmd":"status"})")["ok"] == true);
+}
+
+TEST_CASE("control: a client that half-closes still gets its reply") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.send_all("{\"cmd\":\"status\"}\n"));
+  ::shutdown(c.fd(), SHUT_WR);
+  const auto line = c.read_line();
+  REQUIRE(line.has_value());
+  CHECK(json::parse(*line)["echo"] == "status");
+  CHECK(c.closed_by_peer());
+}
+
+TEST_CASE("control: a stale socket file is replaced and a live one is refused") {
+  TempDir dir;
+  const std::string path = (dir / "ctl.sock").string();
+  {
+    // A socket file whose owner died: bound, never unlinked.
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
+    REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+    ::close(fd);
+  }
+  REQUIRE(std::filesystem::exists(path));
+  ControlServer server(path, EchoHandler{});
+  server.start();
+  LineClient c(path);
+  CHECK(ask(c, R"({"cmd":"x"})")["ok"] == true);
+  CHECK_THROWS_WITH(ControlServer(path, EchoHandler{}), Catch::Contains("already serving"));
+  // A regular file at the path is never deleted.
+  gearpulse::test::write_text(dir / "file.sock", "precious");
+  CHECK_THROWS_WITH(ControlServer((dir / "file.sock").string(), EchoHandler{}),
+                    Catch::Contains("not a socket"));
+  CHECK(gearpulse::test::read_text(dir / "file.sock") == "precious");
+}
+
+TEST_CASE("control: stopping removes the socket file") {
+  TempDir dir;
+  {
+    ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+    server.start();
+    CHECK(std::filesystem::exists(dir / "ctl.sock"));
+  }
+  CHECK_FALSE(std::filesystem::exists(dir / "ctl.sock"));
+}

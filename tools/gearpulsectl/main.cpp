@@ -1,0 +1,207 @@
+// gearpulsectl: asks a running gearpulsed over its control socket.
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <iostream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "daemon/control_protocol.hpp"
+
+namespace {
+
+constexpr int kReplyTimeoutMs = 10'000;
+
+struct Failure {
+  std::string message;
+  int status;
+};
+
+// One request, one reply line.
+nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request) {
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (path.size() >= sizeof addr.sun_path) throw Failure{"socket path too long: " + path, 2};
+  std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) throw Failure{std::string("socket: ") + std::strerror(errno), 1};
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    const int err = errno;
+    if (err == ENOENT || err == ECONNREFUSED)
+      throw Failure{"gearpulsed is not running (no daemon at " + path + ")", 3};
+    if (err == EACCES)
+      throw Failure{"permission denied on " + path + " (are you in the gearpulse group?)", 3};
+    throw Failure{"cannot connect to " + path + ": " + std::strerror(err), 3};
+  }
+  const std::string line = request.dump() + "\n";
+  for (std::size_t done = 0; done < line.size();) {
+    const ssize_t n = ::send(fd, line.data() + done, line.size() - done, MSG_NOSIGNAL);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw Failure{std::string("cannot send request: ") + std::strerror(errno), 1};
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  std::string reply;
+  char buf[4096];
+  while (reply.find('\n') == std::string::npos) {
+    pollfd pfd{fd, POLLIN, 0};
+    const int ready = ::poll(&pfd, 1, kReplyTimeoutMs);
+    if (ready == 0) throw Failure{"no reply from gearpulsed within 10 s", 1};
+    if (ready < 0) {
+      if (errno == EINTR) continue;
+      throw Failure{std::string("poll: ") + std::strerror(errno), 1};
+    }
+    const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+    if (n == 0) throw Failure{"gearpulsed closed the connection without a reply", 1};
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw Failure{std::string("cannot read reply: ") + std::strerror(errno), 1};
+    }
+    reply.append(buf, static_cast<std::size_t>(n));
+  }
+  reply.resize(reply.find('\n'));
+  try {
+    return nlohmann::json::parse(reply);
+  } catch (const nlohmann::json::exception&) {
+    throw Failure{"gearpulsed sent a reply that is not JSON", 1};
+  }
+}
+
+std::string num(const nlohmann::json& v, int decimals, const char* unit = "") {
+  if (!v.is_number()) return "-";
+  char text[64];
+  std::snprintf(text, sizeof text, "%.*f%s", decimals, v.get<double>(), unit);
+  return text;
+}
+
+std::string str(const nlohmann::json& obj, const char* key) {
+  const auto it = obj.find(key);
+  if (it == obj.end() || it->is_null()) return "-";
+  if (it->is_string()) return it->get<std::string>();
+  return it->dump();
+}
+
+void print_gears(const nlohmann::json& gears) {
+  if (!gears.is_array() || gears.empty()) {
+    std::cout << "  (no gears learned yet)\n";
+    return;
+  }
+  std::cout << "  gear  theta (m/s)/Hz   stderr       weight  km/h per 1000 rpm\n";
+  for (const auto& g : gears) {
+    const double theta = g.value("theta", 0.0);
+    char row[160];
+    // km/h at 1000 rpm assumes the tracked component is the crank rotation frequency (rpm / 60).
+    std::snprintf(row, sizeof row, "  %4d  %14.5f  %10.6f  %8.3f  %8.1f\n", g.value("gear", 0), theta,
+                  g.value("stderr", 0.0), g.value("weight", 0.0), theta * 1000.0 / 60.0 * 3.6);
+    std::cout << row;
+  }
+}
+
+void print_status(const nlohmann::json& s) {
+  const auto obj = [&](const char* key) { return s.contains(key) ? s[key] : nlohmann::json::object(); };
+  const auto gps = obj("gps"), audio = obj("audio"), tracker = obj("tracker"), model = obj("model"),
+             output = obj("output");
+  std::cout << "speed        " << num(s.value("speed", nlohmann::json()), 2, " m/s") << "  ("
+            << num(s.value("speed_kmh", nlohmann::json()), 1, " km/h") << ")\n"
+            << "source       " << str(s, "source") << "\n"
+            << "gear         " << (s.value("gear", 0) > 0 ? std::to_string(s.value("gear", 0)) : "-") << "\n"
+            << "pulses       " << str(s, "pulses") << "  at "
+            << num(s.value("pulse_frequency", nlohmann::json()), 1, " Hz") << "  output "
+            << str(output, "kind") << " " << str(output, "state") << "\n"
+            << "gps          " << str(gps, "state") << "  speed "
+            << num(gps.value("speed", nlohmann::json()), 2, " m/s") << "  age "
+            << num(gps.value("age", nlohmann::json()), 1, " s") << "  (" << str(gps, "server") << ")\n"
+            << "audio        " << str(audio, "state") << "  " << str(audio, "device") << " @ "
+            << str(audio, "rate") << " Hz  xruns " << str(audio, "xruns") << "  ring drops "
+            << str(audio, "ring_drops") << "\n"
+            << "tracker      " << num(tracker.value("freq", nlohmann::json()), 2, " Hz") << "  SNR "
+            << num(tracker.value("snr_db", nlohmann::json()), 1, " dB")
+            << (tracker.value("confident", false) ? "  confident" : "") << "\n"
+            << "model        " << str(model, "state") << "  " << str(model, "gears") << " gears, "
+            << str(model, "training_samples") << " training pairs (" << str(model, "new_samples")
+            << " new)\n";
+  if (model.contains("last_result") && model["last_result"].is_string() &&
+      !model["last_result"].get<std::string>().empty())
+    std::cout << "last retrain " << model["last_result"].get<std::string>() << "\n";
+  std::cout << "uptime       " << num(s.value("uptime", nlohmann::json()), 0, " s") << "\n";
+  for (const auto& [name, part] : {std::pair{"output", output}, {"gps", gps}, {"audio", audio}}) {
+    const std::string err = str(part, "error");
+    if (err != "-" && !err.empty()) std::cout << "! " << name << ": " << err << "\n";
+  }
+  std::cout << "gears\n";
+  print_gears(s.value("gears", nlohmann::json::array()));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"gearpulsectl: query and control a running gearpulsed"};
+  std::string socket = "/run/gearpulse/control.sock";
+  bool json = false;
+  bool confirm = false;
+  bool keep_samples = false;
+  app.add_option("--socket", socket, "control socket of gearpulsed")->capture_default_str();
+  app.add_flag("--json", json, "print the daemon's raw JSON reply");
+  app.require_subcommand(1);
+  app.add_subcommand("status", "speed, source, gear, pulses, GPS, audio, tracker and model");
+  app.add_subcommand("gears", "the learned gear scales");
+  app.add_subcommand("retrain", "fit a new model from the training pairs now");
+  auto* reset = app.add_subcommand("reset-model", "forget the learned model (needs --confirm)");
+  reset->add_flag("--confirm", confirm, "really forget the model");
+  reset->add_flag("--keep-samples", keep_samples, "keep the stored training pairs");
+  for (auto* sub : app.get_subcommands({})) {
+    sub->add_flag("--json", json, "print the daemon's raw JSON reply");
+    sub->add_option("--socket", socket, "control socket of gearpulsed");
+  }
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  const std::string command = app.get_subcommands().front()->get_name();
+  nlohmann::json request = {{"v", gearpulse::control::kProtocolVersion}, {"cmd", command}};
+  if (command == "reset-model") {
+    if (!confirm) {
+      std::cerr << "gearpulsectl: reset-model forgets every learned gear; add --confirm to do it\n";
+      return 2;
+    }
+    request["confirm"] = true;
+    if (keep_samples) request["keep_samples"] = true;
+  }
+  try {
+    const nlohmann::json reply = ask_daemon(socket, request);
+    const bool ok = reply.value("ok", false);
+    if (json) {
+      std::cout << reply.dump(2) << "\n";
+    } else if (!ok) {
+      std::cerr << "gearpulsectl: " << reply.value("error", std::string("request failed")) << "\n";
+    } else if (command == "status") {
+      print_status(reply);
+    } else if (command == "gears") {
+      std::cout << "model " << str(reply, "model_state") << ", " << str(reply, "training_samples")
+                << " training pairs\n";
+      print_gears(reply.value("gears", nlohmann::json::array()));
+    } else if (command == "retrain") {
+      std::cout << "retrain queued on " << str(reply, "training_samples")
+                << " training pairs; see 'gearpulsectl status' for the result\n";
+    } else {
+      std::cout << "model reset; " << str(reply, "training_samples") << " training pairs kept\n";
+    }
+    return ok ? 0 : 1;
+  } catch (const Failure& f) {
+    std::cerr << "gearpulsectl: " << f.message << "\n";
+    return f.status;
+  }
+}
