@@ -1,0 +1,373 @@
+#include "daemon/daemon.hpp"
+
+#include <poll.h>
+#include <signal.h>
+#include <sys/signalfd.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <optional>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include "daemon/atomic_file.hpp"
+#include "daemon/control_server.hpp"
+#include "daemon/model_store.hpp"
+#include "daemon/pipeline.hpp"
+#include "daemon/systemd_notify.hpp"
+#include "daemon/training_store.hpp"
+
+namespace gearpulse::daemon {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double wall_now() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
+}
+
+// JSON null for "not available" rather than a magic number.
+nlohmann::json number_or_null(double v, bool available) {
+  return available && std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+
+nlohmann::json gears_json(const ModelPtr& model) {
+  nlohmann::json gears = nlohmann::json::array();
+  if (!model) return gears;
+  int index = 1;
+  for (const Gear& g : model->gears)
+    gears.push_back({{"gear", index++}, {"theta", g.theta}, {"stderr", g.std_error}, {"weight", g.weight}});
+  return gears;
+}
+
+Retrainer::Settings retrain_settings(const ModelConfig& m) {
+  return {std::chrono::duration<double>(m.retrain_interval), m.min_new_samples};
+}
+
+}  // namespace
+
+bool apply_log_level(const std::string& level) {
+  const auto parsed = spdlog::level::from_str(level);
+  if (parsed == spdlog::level::off && level != "off") return false;
+  spdlog::set_level(parsed);
+  return true;
+}
+
+struct Daemon::Impl {
+  Impl(Config c, std::string path, Retrainer::Fitter fitter)
+      : config(std::move(c)),
+        config_path(std::move(path)),
+        state_dir(config.model.state_dir),
+        model_path(state_dir / "model.json"),
+        store_path(state_dir / "training.bin"),
+        store(config.model.store_hours * 3600.0, config.model.max_samples),
+        retrainer(store, model, model_path, std::move(fitter), retrain_settings(config.model)) {}
+
+  Config config;
+  std::string config_path;
+  std::filesystem::path state_dir;
+  std::filesystem::path model_path;
+  std::filesystem::path store_path;
+  ModelHolder model;
+  TrainingStore store;
+  Retrainer retrainer;
+  std::optional<Pipeline> pipeline;
+  std::optional<ControlServer> control;
+  Clock::time_point started = Clock::now();
+  std::uint64_t pairs_at_last_save = 0;
+
+  void load_state();
+  void save_store(const char* why) noexcept;
+  void reload();
+  nlohmann::json handle(const nlohmann::json& request);
+  nlohmann::json status_json();
+  std::string status_line();
+};
+
+void Daemon::Impl::load_state() {
+  std::error_code ec;
+  std::filesystem::create_directories(state_dir, ec);
+  if (ec)
+    spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
+                  state_dir.string(), ec.message());
+  // A crash between writing a temp file and renaming it leaves the temp file; the real file is intact.
+  for (const auto& p : {model_path, store_path})
+    if (const std::size_t n = remove_stale_temp_files(p))
+      spdlog::info("state: removed {} temp file(s) of an interrupted save of {}", n, p.string());
+
+  const ModelLoad loaded = load_model_file(model_path);
+  if (loaded.model) {
+    model.set(loaded.model);
+    spdlog::info("model: loaded {} ({} gears, fitted on {} samples)", model_path.string(),
+                 loaded.model->gears.size(), loaded.model->samples);
+  } else if (!loaded.error.empty()) {
+    spdlog::error("model: ignoring {}: {}; learning from scratch (the file is left for inspection)",
+                  model_path.string(), loaded.error);
+  } else {
+    spdlog::info("model: no {} yet; pulses follow GPS while the model is learning", model_path.string());
+  }
+
+  try {
+    const std::string problem = store.load(store_path);
+    if (!problem.empty())
+      spdlog::error("training: discarding {}: {}; starting with an empty training store", store_path.string(),
+                    problem);
+    else
+      spdlog::info("training: {} stored pairs restored from {}", store.size(), store_path.string());
+  } catch (const std::exception& e) {
+    spdlog::error("training: cannot read {}: {}; starting with an empty training store", store_path.string(),
+                  e.what());
+  }
+  store.prune(wall_now());
+}
+
+void Daemon::Impl::save_store(const char* why) noexcept {
+  try {
+    store.save(store_path);
+    spdlog::debug("training: saved {} pairs to {} ({})", store.size(), store_path.string(), why);
+  } catch (const std::exception& e) {
+    spdlog::error("training: cannot save {} ({}): {}", store_path.string(), why, e.what());
+  }
+}
+
+void Daemon::Impl::reload() {
+  spdlog::info("reload: re-reading {}", config_path);
+  Config next;
+  try {
+    next = load_config(config_path);
+  } catch (const ConfigError& e) {
+    spdlog::error("reload: {}; keeping the running configuration", e.what());
+    return;
+  }
+  if (!apply_log_level(next.log.level)) spdlog::error("reload: unknown log level {}", next.log.level);
+  retrainer.set_settings(retrain_settings(next.model));
+  store.set_limits(next.model.store_hours * 3600.0, next.model.max_samples);
+  if (pipeline) pipeline->set_tunables({next.gps.latency, next.tracker.min_snr_db});
+  const auto restart = restart_required_changes(config, next);
+  for (const auto& key : restart)
+    spdlog::warn("reload: {} changed; this takes effect only after a restart", key);
+  // What was applied now replaces the running values; the rest stays as the threads use it.
+  config.log = next.log;
+  config.model.retrain_interval = next.model.retrain_interval;
+  config.model.min_new_samples = next.model.min_new_samples;
+  config.model.store_hours = next.model.store_hours;
+  config.model.max_samples = next.model.max_samples;
+  config.model.save_interval = next.model.save_interval;
+  config.gps.latency = next.gps.latency;
+  config.tracker.min_snr_db = next.tracker.min_snr_db;
+  spdlog::info(
+      "reload: applied log level, retrain settings, training store limits, GPS latency, SNR threshold");
+}
+
+nlohmann::json Daemon::Impl::status_json() {
+  const PipelineSnapshot p = pipeline ? pipeline->snapshot() : PipelineSnapshot{};
+  const ModelPtr m = model.get();
+  const Retrainer::Status r = retrainer.status();
+  const bool trained = m && !m->empty();
+  nlohmann::json reply = {
+      {"speed", p.speed},
+      {"speed_kmh", p.speed * 3.6},
+      {"source", p.source},
+      {"gear", p.gear},
+      {"pulses", p.pulses},
+      {"pulse_frequency", p.pulse_frequency},
+      {"gears", gears_json(m)},
+      {"model_state", trained ? "trained" : "learning"},
+      {"training_samples", store.size()},
+      {"uptime", std::chrono::duration<double>(Clock::now() - started).count()},
+  };
+  reply["output"] = {
+      {"kind", to_string(config.output.kind)}, {"state", p.output_state}, {"error", p.output_error}};
+  if (config.output.kind == OutputKind::kPty) reply["output"]["path"] = config.output.path;
+  if (config.output.kind == OutputKind::kGpio)
+    reply["output"]["path"] = fmt::format("{}:{}", config.output.chip, config.output.line);
+  reply["gps"] = {{"state", p.gps_state},
+                  {"speed", number_or_null(p.gps_speed, p.gps_speed >= 0)},
+                  {"mode", p.gps_mode},
+                  {"age", number_or_null(p.gps_age, p.gps_age >= 0)},
+                  {"reconnects", p.gps_reconnects},
+                  {"server", fmt::format("{}:{}", config.gps.host, config.gps.port)},
+                  {"error", p.gps_error}};
+  reply["audio"] = {{"state", p.audio_state}, {"device", config.audio.device}, {"rate", config.audio.rate},
+                    {"xruns", p.xruns},       {"ring_drops", p.ring_drops},    {"error", p.audio_error}};
+  reply["tracker"] = {{"freq", number_or_null(p.tracker_freq, p.tracker_freq >= 0)},
+                      {"snr_db", number_or_null(p.tracker_snr_db, p.tracker_freq >= 0)},
+                      {"confident", p.tracker_confident}};
+  reply["model"] = {{"state", trained ? "trained" : "learning"},
+                    {"gears", m ? m->gears.size() : 0},
+                    {"fit_samples", m ? m->samples : 0},
+                    {"training_samples", store.size()},
+                    {"new_samples", store.new_samples()},
+                    {"retrain_runs", r.runs},
+                    {"retrain_busy", r.busy},
+                    {"last_retrain", number_or_null(r.last_run_wall, r.runs > 0)},
+                    {"last_result", r.last_result}};
+  if (m && !trained && !m->reason.empty()) reply["model"]["reason"] = m->reason;
+  reply["threads"] = {{"stalled", p.stalled}, {"missing", p.missing}};
+  reply["clients"] = control ? control->clients() : 0;
+  return reply;
+}
+
+nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
+  const std::string cmd = request["cmd"].get<std::string>();
+  if (cmd == "status") return status_json();
+  if (cmd == "gears") {
+    const ModelPtr m = model.get();
+    return {{"gears", gears_json(m)},
+            {"model_state", m && !m->empty() ? "trained" : "learning"},
+            {"model", m ? model_to_json(*m) : nlohmann::json(nullptr)},
+            {"training_samples", store.size()}};
+  }
+  if (cmd == "retrain") {
+    retrainer.request();
+    spdlog::info("control: retrain requested ({} training pairs)", store.size());
+    return {{"queued", true}, {"training_samples", store.size()}};
+  }
+  if (cmd == "reset-model") {
+    const auto it = request.find("confirm");
+    if (it == request.end() || !it->is_boolean() || !it->get<bool>())
+      throw ControlError("reset-model forgets the learned gears; send \"confirm\": true to do it");
+    const bool keep = request.value("keep_samples", false);
+    model.set(nullptr);
+    std::error_code ec;
+    std::filesystem::remove(model_path, ec);
+    if (ec) throw ControlError("cannot remove " + model_path.string() + ": " + ec.message());
+    if (!keep) {
+      store.clear();
+      save_store("reset-model");
+    }
+    spdlog::warn("control: model reset{}; pulses follow GPS while the model is learning again",
+                 keep ? " (training pairs kept)" : " and training pairs cleared");
+    return {{"reset", true}, {"training_samples", store.size()}};
+  }
+  throw ControlError("unknown command '" + cmd + "' (status, gears, retrain, reset-model)");
+}
+
+std::string Daemon::Impl::status_line() {
+  const PipelineSnapshot p = pipeline ? pipeline->snapshot() : PipelineSnapshot{};
+  const ModelPtr m = model.get();
+  return fmt::format("{:.1f} km/h from {}, gear {}, model {}, gps {}, audio {}", p.speed * 3.6, p.source,
+                     p.gear,
+                     m && !m->empty() ? fmt::format("{} gears", m->gears.size()) : std::string("learning"),
+                     p.gps_state, p.audio_state);
+}
+
+Daemon::Daemon(Config config, std::string config_path, Retrainer::Fitter fitter)
+    : impl_(std::make_unique<Impl>(std::move(config), std::move(config_path), std::move(fitter))) {}
+
+Daemon::~Daemon() = default;
+
+int Daemon::run() {
+  Impl& d = *impl_;
+  // Signals are taken synchronously on this thread; every thread started later inherits the mask.
+  sigset_t mask;
+  sigemptyset(&mask);
+  for (int sig : {SIGTERM, SIGINT, SIGHUP})
+    sigaddset(&mask, sig);
+  if (pthread_sigmask(SIG_BLOCK, &mask, nullptr) != 0) {
+    spdlog::critical("cannot block signals");
+    return 1;
+  }
+  const int sfd = signalfd(-1, &mask, SFD_CLOEXEC | SFD_NONBLOCK);
+  if (sfd < 0) {
+    spdlog::critical("signalfd failed: {}", std::strerror(errno));
+    return 1;
+  }
+  ::signal(SIGPIPE, SIG_IGN);
+
+  d.load_state();
+  try {
+    d.control.emplace(
+        d.config.control.socket, [&d](const nlohmann::json& req) { return d.handle(req); },
+        ControlLimits{.max_clients = d.config.control.max_clients});
+  } catch (const std::exception& e) {
+    spdlog::critical("control: {}; exiting", e.what());
+    ::close(sfd);
+    return 1;
+  }
+  d.pipeline.emplace(d.config, d.model, d.store);
+  d.pipeline->start();
+  d.retrainer.start();
+  d.control->start();
+  spdlog::info("gearpulsed ready: control socket {}, output {}, state in {}", d.config.control.socket,
+               to_string(d.config.output.kind), d.state_dir.string());
+  systemd::ready(d.status_line());
+
+  const auto watchdog = systemd::watchdog_interval();
+  const auto tick = watchdog.count() > 0
+                        ? std::min<std::chrono::milliseconds>(
+                              std::chrono::duration_cast<std::chrono::milliseconds>(watchdog / 3),
+                              std::chrono::milliseconds(1000))
+                        : std::chrono::milliseconds(1000);
+  auto last_save = Clock::now();
+  auto last_status = Clock::now();
+  std::string last_line;
+  std::vector<std::string> last_stalled;
+  bool running = true;
+  while (running) {
+    pollfd pfd{sfd, POLLIN, 0};
+    const int n = ::poll(&pfd, 1, static_cast<int>(std::max<long long>(tick.count(), 50)));
+    if (n > 0) {
+      signalfd_siginfo info{};
+      while (::read(sfd, &info, sizeof info) == static_cast<ssize_t>(sizeof info)) {
+        if (info.ssi_signo == SIGHUP) {
+          d.reload();
+        } else {
+          spdlog::info("received {}; stopping", info.ssi_signo == SIGTERM ? "SIGTERM" : "SIGINT");
+          running = false;
+        }
+      }
+    }
+    const auto now = Clock::now();
+    const PipelineSnapshot snap = d.pipeline->snapshot();
+    // The watchdog is fed only while every pipeline thread shows a recent heartbeat: a hung thread
+    // lets systemd restart the daemon.
+    if (snap.stalled.empty()) {
+      if (watchdog.count() > 0) systemd::watchdog();
+    } else if (snap.stalled != last_stalled) {
+      spdlog::error("pipeline: thread(s) not responding: {}; withholding the watchdog so systemd restarts us",
+                    fmt::join(snap.stalled, ", "));
+    }
+    last_stalled = snap.stalled;
+    if (now - last_status >= std::chrono::seconds(2)) {
+      last_status = now;
+      std::string line = d.status_line();
+      if (line != last_line) systemd::status(line);
+      last_line = std::move(line);
+    }
+    if (now - last_save >= std::chrono::duration<double>(d.config.model.save_interval)) {
+      last_save = now;
+      d.store.prune(wall_now());
+      if (snap.pairs_added != d.pairs_at_last_save) {
+        d.pairs_at_last_save = snap.pairs_added;
+        d.save_store("periodic");
+      }
+    }
+  }
+
+  systemd::stopping();
+  d.control->stop();
+  d.pipeline->stop();  // output left low
+  d.retrainer.stop();
+  d.save_store("shutdown");
+  if (const ModelPtr m = d.model.get(); m && !m->empty()) {
+    try {
+      save_model_file(d.model_path, *m);
+    } catch (const std::exception& e) {
+      spdlog::error("model: cannot save {} at shutdown: {}", d.model_path.string(), e.what());
+    }
+  }
+  d.control.reset();
+  ::close(sfd);
+  spdlog::info("gearpulsed stopped");
+  return 0;
+}
+
+}  // namespace gearpulse::daemon

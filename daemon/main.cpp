@@ -1,0 +1,80 @@
+// gearpulsed: learns gear scales from engine ripple and GPS, emits a synthetic speed-pulse train.
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <string_view>
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include "daemon/config.hpp"
+#include "daemon/daemon.hpp"
+#include "daemon/fitter.hpp"
+
+namespace {
+
+constexpr const char* kDefaultConfig = "/etc/gearpulse/gearpulse.toml";
+
+void usage(std::FILE* to) {
+  std::fprintf(to,
+               "usage: gearpulsed [--config FILE] [--check-config]\n"
+               "  --config FILE    TOML configuration (default %s)\n"
+               "  --check-config   validate the configuration and exit (0 = valid, 2 = invalid)\n",
+               kDefaultConfig);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string config_path = kDefaultConfig;
+  bool check_only = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view arg = argv[i];
+    if (arg == "--config" || arg == "-c") {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "gearpulsed: --config needs a file\n");
+        return 2;
+      }
+      config_path = argv[++i];
+    } else if (arg.starts_with("--config=")) {
+      config_path = std::string(arg.substr(9));
+    } else if (arg == "--check-config") {
+      check_only = true;
+    } else if (arg == "--help" || arg == "-h") {
+      usage(stdout);
+      return 0;
+    } else {
+      std::fprintf(stderr, "gearpulsed: unknown argument '%s'\n", argv[i]);
+      usage(stderr);
+      return 2;
+    }
+  }
+
+  gearpulse::daemon::Config config;
+  try {
+    config = gearpulse::daemon::load_config(config_path);
+  } catch (const gearpulse::daemon::ConfigError& e) {
+    std::fprintf(stderr, "gearpulsed: %s\n", e.what());
+    return 2;
+  }
+  if (check_only) {
+    std::printf("%s: configuration OK\n", config_path.c_str());
+    return 0;
+  }
+
+  // journald stamps every line itself; keep level and text only.
+  auto logger = spdlog::stderr_color_mt("gearpulsed");
+  logger->set_pattern("%^%l%$: %v");
+  spdlog::set_default_logger(logger);
+  gearpulse::daemon::apply_log_level(config.log.level);
+  spdlog::info("gearpulsed starting with {}", config_path);
+
+  try {
+    gearpulse::daemon::Daemon daemon(std::move(config), config_path,
+                                     gearpulse::daemon::make_estimator_fitter());
+    return daemon.run();
+  } catch (const std::exception& e) {
+    spdlog::critical("fatal: {}", e.what());
+    return 1;
+  }
+}

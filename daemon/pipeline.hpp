@@ -1,0 +1,72 @@
+#pragma once
+// The live chain: ALSA capture -> ring -> tracker; gpsd -> speed synthesis -> pulse output; aligned
+// (speed, frequency) pairs -> training store. Devices are opened inside their threads and retried with
+// backoff, so a missing sound card or gpsd never stops the daemon; faults show in the snapshot.
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "daemon/model_store.hpp"
+#include "daemon/training_store.hpp"
+
+namespace gearpulse::daemon {
+
+struct PipelineSnapshot {
+  // Synthesis / output.
+  double speed = 0.0;           // m/s carried by the pulse train
+  std::string source = "none";  // gps, engine, coast, none
+  int gear = 0;
+  std::uint64_t pulses = 0;
+  double pulse_frequency = 0.0;      // Hz
+  std::string output_state = "off";  // ok, error, off
+  std::string output_error;
+  // GPS.
+  std::string gps_state = "disconnected";  // fix, no-fix, disconnected
+  double gps_speed = -1.0;                 // m/s of the last fix, < 0 none
+  int gps_mode = 0;
+  double gps_age = -1.0;  // s since the last usable fix, < 0 never
+  std::uint64_t gps_reconnects = 0;
+  std::string gps_error;
+  // Audio and tracker.
+  std::string audio_state = "stopped";  // running, retrying, stopped
+  std::string audio_error;
+  std::uint64_t xruns = 0;
+  std::uint64_t ring_drops = 0;
+  double tracker_freq = -1.0;  // Hz, < 0 not tracked
+  double tracker_snr_db = 0.0;
+  bool tracker_confident = false;
+  // Training.
+  std::uint64_t pairs_added = 0;
+  // Threads whose heartbeat is stale (empty = all alive).
+  std::vector<std::string> stalled;
+  std::vector<std::string> missing;  // components not built into this daemon
+};
+
+// Settings that may change on SIGHUP without restarting the threads.
+struct PipelineTunables {
+  double gps_latency = 0.0;
+  double min_snr_db = 6.0;
+};
+
+class Pipeline {
+ public:
+  Pipeline(const Config& config, ModelHolder& model, TrainingStore& store);
+  ~Pipeline();
+  Pipeline(const Pipeline&) = delete;
+  Pipeline& operator=(const Pipeline&) = delete;
+
+  void start();
+  // Stops every thread; the output is left low.
+  void stop() noexcept;
+  void set_tunables(const PipelineTunables& tunables) noexcept;
+  [[nodiscard]] PipelineSnapshot snapshot() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace gearpulse::daemon

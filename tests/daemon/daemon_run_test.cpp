@@ -1,0 +1,165 @@
+// Runs the built gearpulsed as a process: no gpsd, no sound card, output "none".
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+
+#include <chrono>
+#include <string>
+#include <thread>
+
+#include "tests/daemon/test_util.hpp"
+
+using gearpulse::test::LineClient;
+using gearpulse::test::Process;
+using gearpulse::test::read_text;
+using gearpulse::test::TempDir;
+using gearpulse::test::write_text;
+using nlohmann::json;
+
+namespace {
+
+const std::string kDaemon = GEARPULSE_BINARY_DIR "/daemon/gearpulsed";
+
+std::string config_for(const TempDir& dir, const std::string& extra_output = "") {
+  return "[audio]\ndevice = \"gearpulse_test_no_such_pcm\"\n"
+         "[gps]\nhost = \"127.0.0.1\"\nport = " +
+         std::to_string(gearpulse::test::free_port()) +
+         "\n"
+         "[output]\nkind = \"none\"\n" +
+         extra_output + "[model]\nstate_dir = \"" + (dir / "state").string() +
+         "\"\n"
+         "[control]\nsocket = \"" +
+         (dir / "ctl.sock").string() + "\"\n[log]\nlevel = \"debug\"\n";
+}
+
+// Status once the daemon answers, or null after the timeout.
+json wait_for_status(const TempDir& dir, Process& daemon, int timeout_ms = 15'000) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (std::chrono::steady_clock::now() < deadline && daemon.running()) {
+    LineClient c((dir / "ctl.sock").string());
+    if (c.connected() && c.send_all("{\"v\":1,\"cmd\":\"status\"}\n"))
+      if (const auto line = c.read_line()) return json::parse(*line);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return nullptr;
+}
+
+json ask(const TempDir& dir, const std::string& request) {
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.connected());
+  REQUIRE(c.send_all(request + "\n"));
+  const auto line = c.read_line();
+  REQUIRE(line.has_value());
+  return json::parse(*line);
+}
+
+const char* kModel = R"({"version":1,"gears":[{"theta":0.043,"weight":0.2,"stderr":0.0002},
+{"theta":0.072,"weight":0.3,"stderr":0.0003},{"theta":0.106,"weight":0.5,"stderr":0.0004}],
+"sigma_speed":0.3,"sigma_freq":0.6,"samples":1234,"log_likelihood":-10.5})";
+
+}  // namespace
+
+TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status") {
+  TempDir dir;
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["v"] == 1);
+  CHECK(status["ok"] == true);
+  for (const char* key :
+       {"speed", "source", "gear", "pulses", "gears", "uptime", "gps", "audio", "tracker", "model"})
+    CHECK(status.contains(key));
+  CHECK(status["gears"].is_array());
+  CHECK(status["gears"].empty());
+  CHECK(status["model"]["state"] == "learning");
+  CHECK(status["gps"]["state"] != "fix");
+  CHECK(status["pulses"] == 0);
+
+  // reset-model needs an explicit confirmation.
+  const json refused = ask(dir, R"({"v":1,"cmd":"reset-model"})");
+  CHECK(refused["ok"] == false);
+  CHECK(refused["error"].get<std::string>().find("confirm") != std::string::npos);
+  CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":false})")["ok"] == false);
+  CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true})")["ok"] == true);
+  CHECK(ask(dir, R"({"v":1,"cmd":"nonsense"})")["ok"] == false);
+  CHECK(ask(dir, R"({"v":1,"cmd":"gears"})")["model_state"] == "learning");
+  CHECK(ask(dir, R"({"v":1,"cmd":"retrain"})")["ok"] == true);
+
+  // Still up a moment later, with missing devices retried rather than fatal.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  CHECK(daemon.running());
+  CHECK(wait_for_status(dir, daemon)["ok"] == true);
+
+  daemon.signal(SIGHUP);
+  CHECK(wait_for_status(dir, daemon)["ok"] == true);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  CHECK_FALSE(std::filesystem::exists(dir / "ctl.sock"));
+  CHECK(std::filesystem::exists(dir / "state/training.bin"));
+}
+
+TEST_CASE("daemon: a malformed config is refused with file and line before anything opens") {
+  TempDir dir;
+  write_text(dir / "bad.toml",
+             "[audio]\nrate = 48000\n\n[output]\nkind = \"none\"\npulses_per_km = 0\n[control]\nsocket = \"" +
+                 (dir / "ctl.sock").string() + "\"\n");
+  Process daemon({kDaemon, "--config", (dir / "bad.toml").string()}, dir / "log.txt");
+  const auto rc = daemon.wait();
+  REQUIRE(rc.has_value());
+  CHECK(*rc != 0);
+  const std::string log = read_text(dir / "log.txt");
+  CHECK(log.find((dir / "bad.toml").string() + ":6: output.pulses_per_km:") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir / "ctl.sock"));
+
+  Process check({kDaemon, "--config", (dir / "bad.toml").string(), "--check-config"}, dir / "log2.txt");
+  CHECK(check.wait() == 2);
+  write_text(dir / "good.toml", config_for(dir));
+  Process good({kDaemon, "--config", (dir / "good.toml").string(), "--check-config"}, dir / "log3.txt");
+  CHECK(good.wait() == 0);
+}
+
+TEST_CASE("daemon: model.json is loaded at start and survives kill -9") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  write_text(dir / "state/model.json", kModel);
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  {
+    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+    const json status = wait_for_status(dir, daemon);
+    REQUIRE(status.is_object());
+    CHECK(status["model"]["state"] == "trained");
+    REQUIRE(status["gears"].size() == 3);
+    CHECK(status["gears"][1]["theta"].get<double>() == Approx(0.072));
+    CHECK(status["gears"][1]["stderr"].get<double>() == Approx(0.0003));
+    daemon.signal(SIGKILL);
+    CHECK(daemon.wait() == 128 + SIGKILL);
+  }
+  // The socket file of the killed daemon is stale; the new one takes over.
+  Process again({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, again);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["gears"].size() == 3);
+  again.signal(SIGTERM);
+  CHECK(again.wait() == 0);
+}
+
+TEST_CASE("daemon: a corrupt model and training store are logged and ignored") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  write_text(dir / "state/model.json", std::string(kModel).substr(0, 60));
+  write_text(dir / "state/training.bin", "GPTRAIN\ngarbage");
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  REQUIRE(status.is_object());
+  CHECK(status["model"]["state"] == "learning");
+  CHECK(status["training_samples"] == 0);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  const std::string log = read_text(dir / "log.txt");
+  CHECK(log.find("model: ignoring") != std::string::npos);
+  CHECK(log.find("training: discarding") != std::string::npos);
+}
