@@ -1,12 +1,13 @@
 #include "daemon/fitter.hpp"
 
-#include <stdexcept>
+#include "core/estimator.hpp"
 
 namespace gearpulse::daemon {
 
 Retrainer::Fitter make_estimator_fitter() {
-  return [](std::span<const Sample>) -> GearModel {
-    throw std::runtime_error("the gear-scale estimator is not built into this daemon");
+  // The default "auto" mode: no priors, the gear count comes from the data, as `gearpulse fit`.
+  return [](std::span<const Sample> samples) -> GearModel {
+    return fit_gear_model(samples, FitOptions{}).model;
   };
 }
 
