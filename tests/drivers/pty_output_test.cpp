@@ -6,11 +6,14 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <vector>
 
 #include "drivers/pty_output.hpp"
+#include "drivers/pulse_thread.hpp"
 #include "tests/drivers/test_util.hpp"
 
 using gearpulse::PtyOutput;
@@ -29,6 +32,14 @@ class Reader {
   void close() {
     if (fd_ >= 0) ::close(fd_);
     fd_ = -1;
+  }
+  // Reads what arrives within `wait` (one read at most).
+  std::string read_once(std::chrono::milliseconds wait) {
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(wait.count())) <= 0) return {};
+    char buf[4096];
+    const ssize_t n = ::read(fd_, buf, sizeof buf);
+    return n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string();
   }
   // Reads whatever is there, waiting up to `quiet` for more after each chunk; returns the bytes.
   std::string drain(std::chrono::milliseconds quiet = std::chrono::milliseconds(50)) {
@@ -133,4 +144,41 @@ TEST_CASE("pty: a stale symlink is replaced and the link is removed on close") {
     CHECK(std::filesystem::read_symlink(link) == out.slave_name());
   }
   CHECK_FALSE(std::filesystem::exists(std::filesystem::symlink_status(link)));
+}
+
+TEST_CASE("pty: the pulse thread writes one byte per pulse and stops low") {
+  TempDir dir;
+  PtyOutput out(dir / "pulse");
+  Reader reader(dir / "pulse");
+  gearpulse::PulseThreadConfig cfg;
+  cfg.pulse.pulses_per_km = 10000.0;  // 10 pulses per metre
+  std::vector<std::int64_t> log(4096);
+  gearpulse::PulseThread thread(out, cfg, log);
+  thread.start();
+  std::string got;
+  auto read_for = [&](std::chrono::milliseconds d) {
+    const auto end = std::chrono::steady_clock::now() + d;
+    while (std::chrono::steady_clock::now() < end)
+      got += reader.read_once(std::chrono::milliseconds(10));
+  };
+  thread.set_speed(20.0);  // 200 Hz
+  read_for(std::chrono::milliseconds(300));
+  thread.set_speed(5.0);  // 50 Hz
+  read_for(std::chrono::milliseconds(200));
+  thread.set_speed(std::nan(""));  // standstill
+  read_for(std::chrono::milliseconds(50));
+  const auto pulses_stopped = thread.pulses();
+  read_for(std::chrono::milliseconds(100));
+  CHECK(thread.pulses() == pulses_stopped);  // no pulse at standstill
+  thread.stop();
+  got += reader.drain();
+  CHECK(thread.pulses() > 20);
+  CHECK(got.size() == thread.pulses());
+  CHECK(out.written() == thread.pulses());
+  CHECK(thread.logged() == thread.pulses());
+  bool increasing = true;
+  for (std::size_t i = 1; i < thread.logged(); ++i)
+    increasing = increasing && log[i] > log[i - 1];
+  CHECK(increasing);
+  CHECK_FALSE(thread.status().running);
 }

@@ -1,0 +1,425 @@
+#include "drivers/alsa_capture.hpp"
+
+#include <alsa/asoundlib.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+#include "drivers/clock.hpp"
+
+namespace gearpulse {
+namespace {
+
+snd_pcm_t* as_pcm(void* p) noexcept {
+  return static_cast<snd_pcm_t*>(p);
+}
+
+snd_pcm_format_t to_alsa(SampleFormat f) noexcept {
+  switch (f) {
+    case SampleFormat::kS16:
+      return SND_PCM_FORMAT_S16;
+    case SampleFormat::kS32:
+      return SND_PCM_FORMAT_S32;
+    case SampleFormat::kFloat:
+      return SND_PCM_FORMAT_FLOAT;
+  }
+  return SND_PCM_FORMAT_UNKNOWN;
+}
+
+std::size_t bytes_per_sample(SampleFormat f) noexcept {
+  return f == SampleFormat::kS16 ? 2 : 4;
+}
+
+void sleep_ns(std::int64_t ns) noexcept {
+  const timespec ts = to_timespec(monotonic_ns() + ns);
+  while (::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+// What the device agreed to.
+struct Negotiated {
+  unsigned rate = 0;
+  unsigned channels = 0;
+  SampleFormat format = SampleFormat::kS16;
+  unsigned period = 0;
+};
+
+// Opens and configures the PCM; on failure returns the negative ALSA error and a reason in `why`.
+int open_pcm(const AlsaCaptureConfig& c, snd_pcm_t** out, Negotiated& got, std::string& why) noexcept {
+  snd_pcm_t* pcm = nullptr;
+  int err = ::snd_pcm_open(&pcm, c.device.c_str(), SND_PCM_STREAM_CAPTURE, SND_PCM_NONBLOCK);
+  if (err < 0) {
+    why = std::string("cannot open: ") + ::snd_strerror(err);
+    return err;
+  }
+  auto bail = [&](const char* what, int e) {
+    why = std::string(what) + ": " + ::snd_strerror(e);
+    ::snd_pcm_close(pcm);
+    return e;
+  };
+  snd_pcm_hw_params_t* hw = nullptr;
+  snd_pcm_hw_params_alloca(&hw);
+  if ((err = ::snd_pcm_hw_params_any(pcm, hw)) < 0) return bail("no hardware parameters", err);
+  if ((err = ::snd_pcm_hw_params_set_access(pcm, hw, SND_PCM_ACCESS_RW_INTERLEAVED)) < 0)
+    return bail("interleaved access refused", err);
+  // The preferred format first, then the others.
+  const SampleFormat order[] = {c.format, SampleFormat::kS16, SampleFormat::kS32, SampleFormat::kFloat};
+  err = -EINVAL;
+  for (const SampleFormat f : order) {
+    if (::snd_pcm_hw_params_test_format(pcm, hw, to_alsa(f)) == 0) {
+      err = ::snd_pcm_hw_params_set_format(pcm, hw, to_alsa(f));
+      if (err == 0) {
+        got.format = f;
+        break;
+      }
+    }
+  }
+  if (err < 0) return bail("none of S16, S32, FLOAT is supported", err);
+  unsigned channels = c.channels;
+  if ((err = ::snd_pcm_hw_params_set_channels_near(pcm, hw, &channels)) < 0)
+    return bail("channels refused", err);
+  unsigned rate = c.rate;
+  if ((err = ::snd_pcm_hw_params_set_rate_near(pcm, hw, &rate, nullptr)) < 0)
+    return bail("rate refused", err);
+  snd_pcm_uframes_t period = c.period_frames;
+  if ((err = ::snd_pcm_hw_params_set_period_size_near(pcm, hw, &period, nullptr)) < 0)
+    return bail("period size refused", err);
+  snd_pcm_uframes_t buffer = period * std::max(2u, c.periods);
+  if ((err = ::snd_pcm_hw_params_set_buffer_size_near(pcm, hw, &buffer)) < 0)
+    return bail("buffer size refused", err);
+  if ((err = ::snd_pcm_hw_params(pcm, hw)) < 0) return bail("hardware parameters refused", err);
+
+  snd_pcm_sw_params_t* sw = nullptr;
+  snd_pcm_sw_params_alloca(&sw);
+  if ((err = ::snd_pcm_sw_params_current(pcm, sw)) < 0) return bail("no software parameters", err);
+  ::snd_pcm_sw_params_set_avail_min(pcm, sw, period);
+  // Timestamps on CLOCK_MONOTONIC, the daemon's time base.
+  ::snd_pcm_sw_params_set_tstamp_mode(pcm, sw, SND_PCM_TSTAMP_ENABLE);
+  ::snd_pcm_sw_params_set_tstamp_type(pcm, sw, SND_PCM_TSTAMP_TYPE_MONOTONIC);
+  if ((err = ::snd_pcm_sw_params(pcm, sw)) < 0) return bail("software parameters refused", err);
+
+  got.rate = rate;
+  got.channels = channels;
+  got.period = static_cast<unsigned>(period);
+  *out = pcm;
+  return 0;
+}
+
+}  // namespace
+
+const char* to_string(SampleFormat format) noexcept {
+  switch (format) {
+    case SampleFormat::kS16:
+      return "S16";
+    case SampleFormat::kS32:
+      return "S32";
+    case SampleFormat::kFloat:
+      return "FLOAT";
+  }
+  return "?";
+}
+
+AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
+    : config_(std::move(config)), ring_(ring) {
+  if (config_.period_frames == 0) throw std::runtime_error("ALSA capture: period_frames must be positive");
+  Negotiated got;
+  std::string why;
+  snd_pcm_t* pcm = nullptr;
+  if (open_pcm(config_, &pcm, got, why) < 0)
+    throw std::runtime_error("ALSA capture '" + config_.device + "': " + why);
+  pcm_ = pcm;
+  rate_ = got.rate;
+  channels_ = got.channels;
+  format_ = got.format;
+  period_frames_ = got.period;
+  if (config_.channel >= static_cast<int>(channels_)) {
+    ::snd_pcm_close(pcm);
+    pcm_ = nullptr;
+    throw std::runtime_error("ALSA capture '" + config_.device + "': channel " +
+                             std::to_string(config_.channel) + " requested but the device gives " +
+                             std::to_string(channels_));
+  }
+  raw_.resize(static_cast<std::size_t>(period_frames_) * channels_ * bytes_per_sample(format_));
+  mono_.resize(period_frames_);
+}
+
+AlsaCapture::~AlsaCapture() {
+  stop();
+  if (pcm_) ::snd_pcm_close(as_pcm(pcm_));
+}
+
+std::string AlsaCapture::describe() const {
+  return config_.device + " " + std::to_string(rate_) + " Hz " + to_string(format_) + " " +
+         std::to_string(channels_) + " ch, period " + std::to_string(period_frames_);
+}
+
+void AlsaCapture::start() {
+  if (thread_.joinable()) return;
+  stop_.store(false);
+  thread_ = std::thread([this] { run(); });
+}
+
+void AlsaCapture::stop() {
+  stop_.store(true);
+  if (thread_.joinable()) thread_.join();
+}
+
+AlsaCaptureStats AlsaCapture::stats() const noexcept {
+  AlsaCaptureStats s;
+  s.frames = frames_.load(std::memory_order_relaxed);
+  s.pushed = pushed_.load(std::memory_order_relaxed);
+  s.dropped = dropped_.load(std::memory_order_relaxed);
+  s.xruns = xruns_.load(std::memory_order_relaxed);
+  s.suspends = suspends_.load(std::memory_order_relaxed);
+  s.reopens = reopens_.load(std::memory_order_relaxed);
+  s.clock_resets = clock_resets_.load(std::memory_order_relaxed);
+  s.last_error = last_error_.load(std::memory_order_relaxed);
+  s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
+  s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
+  s.running = running_.load(std::memory_order_relaxed);
+  return s;
+}
+
+void AlsaCapture::publish_anchor(const Anchor& a) noexcept {
+  std::uint64_t n = anchor_count_.load(std::memory_order_relaxed);
+  // An anchor whose frame was never pushed (the ring was full) is replaced, not kept: a long stall must
+  // not push the anchors of frames the consumer still holds out of the history.
+  if (n > 0 && anchors_[(n - 1) % kAnchors].frame.load(std::memory_order_relaxed) == a.frame) --n;
+  AnchorSlot& slot = anchors_[n % kAnchors];
+  const std::uint32_t seq = slot.seq.load(std::memory_order_relaxed);
+  slot.seq.store(seq + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  slot.frame.store(a.frame, std::memory_order_relaxed);
+  slot.t_ns.store(a.t_ns, std::memory_order_relaxed);
+  slot.ns_per_frame.store(a.ns_per_frame, std::memory_order_relaxed);
+  slot.seq.store(seq + 2, std::memory_order_release);
+  anchor_count_.store(n + 1, std::memory_order_release);
+}
+
+bool AlsaCapture::frame_time(std::uint64_t index, std::int64_t& t_ns) const noexcept {
+  const std::uint64_t n = anchor_count_.load(std::memory_order_acquire);
+  const std::uint64_t oldest = n > kAnchors ? n - kAnchors : 0;
+  for (std::uint64_t i = n; i-- > oldest;) {
+    const AnchorSlot& slot = anchors_[i % kAnchors];
+    Anchor a;
+    for (;;) {  // seqlock read: retry while the capture thread is rewriting this slot
+      const std::uint32_t s1 = slot.seq.load(std::memory_order_acquire);
+      a.frame = slot.frame.load(std::memory_order_relaxed);
+      a.t_ns = slot.t_ns.load(std::memory_order_relaxed);
+      a.ns_per_frame = slot.ns_per_frame.load(std::memory_order_relaxed);
+      std::atomic_thread_fence(std::memory_order_acquire);
+      const std::uint32_t s2 = slot.seq.load(std::memory_order_relaxed);
+      if (s1 == s2 && (s1 & 1u) == 0) break;
+    }
+    if (a.frame <= index) {
+      t_ns = a.t_ns +
+             static_cast<std::int64_t>(std::llround(static_cast<double>(index - a.frame) * a.ns_per_frame));
+      return true;
+    }
+  }
+  return false;
+}
+
+void AlsaCapture::run() noexcept {
+  if (config_.realtime) {
+    sched_param sp{};
+    sp.sched_priority = config_.rt_priority;
+    realtime_ok_.store(::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp) == 0);
+  }
+  if (config_.lock_memory) memory_locked_.store(::mlockall(MCL_CURRENT | MCL_FUTURE) == 0);
+  snd_pcm_status_t* status = nullptr;
+  if (::snd_pcm_status_malloc(&status) < 0) {
+    last_error_.store(-ENOMEM);
+    return;
+  }
+  running_.store(true);
+
+  const double nominal_npf = 1e9 / rate_;
+  const double period_ns = nominal_npf * period_frames_;
+  // Sample clock over the capture stream (every frame read from ALSA, frame c): t(c) = t0 + (c - c0) * npf.
+  std::uint64_t c = 0;
+  std::uint64_t c0 = 0;
+  double t0 = 0.0;
+  double npf = nominal_npf;
+  std::uint64_t corrected_at = 0;
+  bool have_clock = false;
+  bool discontinuity = true;  // the next block starts a new stretch of the clock
+  bool republish = true;      // the ring needs a new anchor before its next frame
+  std::uint64_t ring_index = pushed_.load(std::memory_order_relaxed);  // continues across stop/start
+  auto clock_at = [&](std::uint64_t frame) noexcept { return t0 + static_cast<double>(frame - c0) * npf; };
+
+  // Capture time of the first frame of the block of n frames just read: ALSA's timestamp belongs to the
+  // hardware position, which is `avail` frames beyond what has been read.
+  auto measure = [&](snd_pcm_t* pcm, snd_pcm_sframes_t n) noexcept -> double {
+    if (::snd_pcm_status(pcm, status) == 0) {
+      snd_htimestamp_t ts{};
+      ::snd_pcm_status_get_htstamp(status, &ts);
+      if (ts.tv_sec != 0 || ts.tv_nsec != 0) {
+        const double hw = static_cast<double>(ts.tv_sec) * 1e9 + static_cast<double>(ts.tv_nsec);
+        return hw - static_cast<double>(::snd_pcm_status_get_avail(status) + n) * nominal_npf;
+      }
+    }
+    return static_cast<double>(monotonic_ns()) - static_cast<double>(n) * nominal_npf;
+  };
+
+  auto stopping = [this] { return stop_.load(std::memory_order_relaxed); };
+  // Sleeps in short steps so stop() is never kept waiting by a long backoff.
+  auto pause = [&](std::int64_t ns) noexcept {
+    const std::int64_t end = monotonic_ns() + ns;
+    while (!stopping() && monotonic_ns() < end)
+      sleep_ns(std::min<std::int64_t>(50'000'000, end - monotonic_ns()));
+  };
+
+  snd_pcm_t* pcm = as_pcm(pcm_);
+  auto restart = [&]() noexcept {
+    int err = ::snd_pcm_prepare(pcm);
+    if (err == 0) err = ::snd_pcm_start(pcm);
+    return err;
+  };
+  // Recovery by state, as PipeWire's alsa_recover: overrun and suspend are told apart; anything else
+  // means the device is gone or broken and is closed for a reopen with backoff.
+  auto recover = [&](int err) noexcept {
+    last_error_.store(err, std::memory_order_relaxed);
+    discontinuity = true;
+    if (err == -EPIPE) {
+      xruns_.fetch_add(1, std::memory_order_relaxed);
+      if (restart() == 0) return;
+    } else if (err == -ESTRPIPE) {
+      suspends_.fetch_add(1, std::memory_order_relaxed);
+      int e;
+      while ((e = ::snd_pcm_resume(pcm)) == -EAGAIN && !stopping())
+        pause(100'000'000);
+      if (e == 0 || restart() == 0) return;
+    }
+    ::snd_pcm_close(pcm);
+    pcm = nullptr;
+  };
+
+  if (pcm) {
+    if (const int err = restart(); err < 0) recover(err);
+  }
+  std::int64_t backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
+  const std::int64_t backoff_max =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_max).count();
+  const int wait_ms = static_cast<int>(std::max<std::int64_t>(1, config_.wait_timeout.count()));
+  const std::size_t sample_bytes = bytes_per_sample(format_);
+
+  while (!stopping()) {
+    if (!pcm) {
+      pause(backoff);
+      if (stopping()) break;
+      Negotiated got;
+      std::string why;
+      snd_pcm_t* fresh = nullptr;
+      const int err = open_pcm(config_, &fresh, got, why);
+      if (err < 0 || got.rate != rate_ || got.channels != channels_ || got.format != format_ ||
+          got.period != period_frames_) {
+        if (err == 0) ::snd_pcm_close(fresh);
+        last_error_.store(err < 0 ? err : -EINVAL, std::memory_order_relaxed);
+        backoff = std::min(backoff * 2, backoff_max);
+        continue;
+      }
+      pcm = fresh;
+      reopens_.fetch_add(1, std::memory_order_relaxed);
+      backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
+      if (const int e = ::snd_pcm_start(pcm); e < 0) recover(e);
+      continue;
+    }
+    const int ready = ::snd_pcm_wait(pcm, wait_ms);
+    if (ready < 0) {
+      recover(ready);
+      continue;
+    }
+    if (ready == 0) continue;  // timeout: look at stop_ again
+    const snd_pcm_sframes_t n = ::snd_pcm_readi(pcm, raw_.data(), period_frames_);
+    if (n == -EAGAIN || n == 0) {
+      pause(static_cast<std::int64_t>(period_ns / 4));  // ready but nothing to read: never spin
+      continue;
+    }
+    if (n < 0) {
+      recover(static_cast<int>(n));
+      continue;
+    }
+    const double measured = measure(pcm, n);
+    frames_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_relaxed);
+
+    // Convert to float mono.
+    const std::size_t frames = static_cast<std::size_t>(n);
+    for (std::size_t i = 0; i < frames; ++i) {
+      float acc = 0.0f;
+      for (unsigned ch = 0; ch < channels_; ++ch) {
+        if (config_.channel >= 0 && static_cast<int>(ch) != config_.channel) continue;
+        const std::byte* p = raw_.data() + (i * channels_ + ch) * sample_bytes;
+        float v;
+        if (format_ == SampleFormat::kS16) {
+          std::int16_t s;
+          std::memcpy(&s, p, 2);
+          v = static_cast<float>(s) / 32768.0f;
+        } else if (format_ == SampleFormat::kS32) {
+          std::int32_t s;
+          std::memcpy(&s, p, 4);
+          v = static_cast<float>(static_cast<double>(s) / 2147483648.0);
+        } else {
+          std::memcpy(&v, p, 4);
+        }
+        acc += v;
+      }
+      mono_[i] = config_.channel >= 0 ? acc : acc / static_cast<float>(channels_);
+    }
+
+    // Sample clock: anchor on a discontinuity, otherwise slew slowly towards ALSA's timestamps.
+    if (!have_clock || discontinuity) {
+      // Never back in time: frames after a hole were captured after those before it.
+      const double t = have_clock ? std::max(measured, clock_at(c)) : measured;
+      if (have_clock) clock_resets_.fetch_add(1, std::memory_order_relaxed);
+      c0 = c;
+      t0 = t;
+      corrected_at = c;
+      have_clock = true;
+      discontinuity = false;
+      republish = true;
+    } else if (c - corrected_at >= rate_ / 4) {
+      const double err = measured - clock_at(c);
+      const double max_err = std::max(20e6, 4 * period_ns);
+      if (err > max_err) {  // frames went missing without an xrun report: jump forward
+        t0 = measured;
+        c0 = c;
+        clock_resets_.fetch_add(1, std::memory_order_relaxed);
+        republish = true;
+      } else if (err >= -max_err) {
+        // Rate from the error accumulated since the last correction, offset by a fraction of it; a
+        // backward step stays under one frame so frame times remain increasing across anchors.
+        const double now_t = clock_at(c);  // on the old rate: the anchor must continue the old line
+        const double step = std::clamp(err / 8.0, -0.5 * npf, period_ns / 8.0);
+        npf += err / static_cast<double>(c - corrected_at) / 16.0;
+        npf = std::clamp(npf, nominal_npf * (1 - 500e-6), nominal_npf * (1 + 500e-6));
+        t0 = now_t + step;
+        c0 = c;
+        republish = true;
+      }
+      // err < -max_err: frames arrive faster than real time (a file source); keep the sample clock.
+      corrected_at = c;
+    }
+    if (republish) {
+      publish_anchor({ring_index, static_cast<std::int64_t>(std::llround(clock_at(c))), npf});
+    }
+    const std::size_t pushed = ring_.try_push_bulk(std::span<const float>(mono_.data(), frames));
+    ring_index += pushed;
+    pushed_.store(ring_index, std::memory_order_relaxed);
+    // Frames the ring had no room for are the block's tail: the next frame pushed needs a fresh anchor.
+    republish = pushed < frames;
+    if (pushed < frames) dropped_.fetch_add(frames - pushed, std::memory_order_relaxed);
+    c += frames;
+  }
+  if (pcm) ::snd_pcm_drop(pcm);
+  pcm_ = pcm;
+  ::snd_pcm_status_free(status);
+  running_.store(false);
+}
+
+}  // namespace gearpulse

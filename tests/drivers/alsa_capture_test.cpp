@@ -1,0 +1,320 @@
+#include <catch2/catch.hpp>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "core/spsc_ring.hpp"
+#include "drivers/alsa_capture.hpp"
+#include "drivers/clock.hpp"
+#include "tests/drivers/test_util.hpp"
+
+using namespace std::chrono_literals;
+using gearpulse::AlsaCapture;
+using gearpulse::AlsaCaptureConfig;
+using gearpulse::SampleFormat;
+using gearpulse::SpscRing;
+using gearpulse::test::TempDir;
+using gearpulse::test::wait_for;
+
+// No sound card here: the ALSA `file` plugin over a `null` slave returns the bytes of `infile` as the
+// captured frames (the null slave accepts whatever rate, format and channels are asked for). A regular
+// file is read as fast as the capture asks (unpaced); a FIFO fed one period per period time paces it.
+namespace {
+
+void use_alsa_config(const TempDir& dir, const std::string& pcm_name, const std::filesystem::path& infile) {
+  const auto conf = dir / "asound.conf";
+  std::ofstream f(conf, std::ios::app);
+  f << "pcm." << pcm_name << " { type file slave.pcm null file \"/dev/null\" infile \"" << infile.string()
+    << "\" format raw }\n";
+  f.close();
+  ::setenv("ALSA_CONFIG_PATH", ("/usr/share/alsa/alsa.conf:" + conf.string()).c_str(), 1);
+}
+
+template <typename T>
+void write_raw(const std::filesystem::path& path, const std::vector<T>& samples) {
+  std::ofstream f(path, std::ios::binary);
+  f.write(reinterpret_cast<const char*>(samples.data()),
+          static_cast<std::streamsize>(samples.size() * sizeof(T)));
+}
+
+// Reads `n` frames from the ring (waiting for them), as the tracker thread would.
+std::vector<float> read_frames(SpscRing<float>& ring, std::size_t n) {
+  std::vector<float> out(n);
+  std::size_t got = 0;
+  wait_for(
+      [&] {
+        got += ring.read_bulk(std::span<float>(out.data() + got, n - got));
+        return got == n;
+      },
+      20s);
+  out.resize(got);
+  return out;
+}
+
+// Every frame's timestamp is later than the previous one's.
+bool timestamps_increase(const AlsaCapture& cap, std::uint64_t first, std::uint64_t last) {
+  std::int64_t prev = 0;
+  if (!cap.frame_time(first, prev)) return false;
+  for (std::uint64_t i = first + 1; i <= last; ++i) {
+    std::int64_t t = 0;
+    if (!cap.frame_time(i, t) || t <= prev) {
+      std::printf("frame %lu: t %ld after %ld\n", static_cast<unsigned long>(i), static_cast<long>(t),
+                  static_cast<long>(prev));
+      return false;
+    }
+    prev = t;
+  }
+  return true;
+}
+
+// Feeds a FIFO exactly one period per write at the period rate (other write sizes leave holes). After
+// the samples it keeps feeding silence until destroyed, so the capture (whose file plugin blocks in
+// read() on the FIFO) can always be stopped first.
+class FifoFeeder {
+ public:
+  FifoFeeder(std::filesystem::path fifo, std::vector<std::int16_t> samples, unsigned period, unsigned rate)
+      : thread_([=, this] {
+          ::signal(SIGPIPE, SIG_IGN);  // the capture closing its end must not kill the test
+          const int fd = ::open(fifo.c_str(), O_WRONLY);  // blocks until ALSA opens the infile
+          if (fd < 0) return;
+          // The pipe would buffer the first ~0.7 s unpaced if writing began before the capture reads.
+          while (!go_ && !stop_)
+            std::this_thread::sleep_for(1ms);
+          const std::int64_t period_ns = static_cast<std::int64_t>(period) * 1'000'000'000 / rate;
+          const std::vector<std::int16_t> silence(period, 0);
+          std::int64_t next = gearpulse::monotonic_ns();
+          for (std::size_t off = 0; !stop_; off += period) {
+            const timespec ts = gearpulse::to_timespec(next);
+            ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+            const bool data = off + period <= samples.size();
+            if (!data) done_ = true;
+            if (::write(fd, data ? samples.data() + off : silence.data(), period * sizeof(std::int16_t)) < 0)
+              break;
+            next += period_ns;
+          }
+          ::close(fd);
+        }) {}
+  ~FifoFeeder() {
+    stop_ = true;
+    thread_.join();
+  }
+  [[nodiscard]] bool done() const { return done_; }
+  void go() { go_ = true; }
+
+ private:
+  std::atomic<bool> go_{false};
+  std::atomic<bool> stop_{false};
+  std::atomic<bool> done_{false};
+  std::thread thread_;
+};
+
+}  // namespace
+
+TEST_CASE("alsa: unpaced S16 mono frames arrive bit-exact with increasing timestamps") {
+  TempDir dir;
+  std::vector<std::int16_t> src(40000);
+  std::mt19937 rng(7);
+  for (auto& s : src)
+    s = static_cast<std::int16_t>(rng() & 0xFFFF);
+  write_raw(dir / "in.raw", src);
+  use_alsa_config(dir, "replay", dir / "in.raw");
+  SpscRing<float> ring(1 << 16);
+  AlsaCaptureConfig cfg;
+  cfg.device = "replay";
+  cfg.format = SampleFormat::kS16;
+  AlsaCapture cap(cfg, ring);
+  CHECK(cap.rate() == 48000);
+  CHECK(cap.channels() == 1);
+  CHECK(cap.format() == SampleFormat::kS16);
+  std::int64_t t = 0;
+  CHECK_FALSE(cap.frame_time(0, t));  // nothing captured yet
+  cap.start();
+  const auto got = read_frames(ring, src.size());
+  REQUIRE(got.size() == src.size());
+  std::size_t mismatches = 0;
+  for (std::size_t i = 0; i < src.size(); ++i)
+    mismatches += got[i] != static_cast<float>(src[i]) / 32768.0f;
+  CHECK(mismatches == 0);
+  CHECK(timestamps_increase(cap, 0, src.size() - 1));
+  cap.stop();
+  const auto st = cap.stats();
+  CHECK(st.frames >= src.size());
+  CHECK_FALSE(st.running);
+}
+
+TEST_CASE("alsa: S32 and FLOAT stereo are converted per channel or mixed") {
+  TempDir dir;
+  std::vector<std::int32_t> s32(2 * 8192);
+  std::vector<float> f32(2 * 8192);
+  std::mt19937 rng(11);
+  for (auto& s : s32)
+    s = static_cast<std::int32_t>(rng());
+  std::uniform_real_distribution<float> u(-1, 1);
+  for (auto& s : f32)
+    s = u(rng);
+  write_raw(dir / "s32.raw", s32);
+  write_raw(dir / "f32.raw", f32);
+  use_alsa_config(dir, "s32", dir / "s32.raw");
+  use_alsa_config(dir, "f32", dir / "f32.raw");
+  {
+    SpscRing<float> ring(1 << 15);
+    AlsaCaptureConfig cfg;
+    cfg.device = "s32";
+    cfg.format = SampleFormat::kS32;
+    cfg.channels = 2;
+    cfg.channel = 1;  // the right channel only
+    AlsaCapture cap(cfg, ring);
+    REQUIRE(cap.format() == SampleFormat::kS32);
+    REQUIRE(cap.channels() == 2);
+    cap.start();
+    const auto got = read_frames(ring, 8192);
+    cap.stop();
+    REQUIRE(got.size() == 8192);
+    std::size_t bad = 0;
+    for (std::size_t i = 0; i < got.size(); ++i)
+      bad += got[i] != static_cast<float>(static_cast<double>(s32[2 * i + 1]) / 2147483648.0);
+    CHECK(bad == 0);
+  }
+  {
+    SpscRing<float> ring(1 << 15);
+    AlsaCaptureConfig cfg;
+    cfg.device = "f32";
+    cfg.format = SampleFormat::kFloat;
+    cfg.channels = 2;
+    cfg.channel = -1;  // mean of both
+    AlsaCapture cap(cfg, ring);
+    REQUIRE(cap.format() == SampleFormat::kFloat);
+    cap.start();
+    const auto got = read_frames(ring, 8192);
+    cap.stop();
+    REQUIRE(got.size() == 8192);
+    std::size_t bad = 0;
+    for (std::size_t i = 0; i < got.size(); ++i)
+      bad += got[i] != (0.0f + f32[2 * i] + f32[2 * i + 1]) / 2.0f;
+    CHECK(bad == 0);
+  }
+}
+
+TEST_CASE("alsa: FIFO-paced capture is bit-exact and its sample clock runs at the rate") {
+  TempDir dir;
+  const auto fifo = dir / "in.fifo";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  constexpr unsigned kPeriod = 480, kRate = 48000;  // 10 ms periods
+  std::vector<std::int16_t> src(kPeriod * 60);      // 0.6 s
+  for (std::size_t i = 0; i < src.size(); ++i)
+    src[i] = static_cast<std::int16_t>(static_cast<int>(i % 65536) - 32768);
+  use_alsa_config(dir, "paced", fifo);
+  FifoFeeder feeder(fifo, src, kPeriod, kRate);
+  SpscRing<float> ring(1 << 16);
+  AlsaCaptureConfig cfg;
+  cfg.device = "paced";
+  cfg.period_frames = kPeriod;
+  AlsaCapture cap(cfg, ring);
+  REQUIRE(cap.period_frames() == kPeriod);
+  cap.start();
+  feeder.go();
+  const auto got = read_frames(ring, src.size());
+  REQUIRE(got.size() == src.size());
+  std::size_t bad = 0;
+  for (std::size_t i = 0; i < src.size(); ++i)
+    bad += got[i] != static_cast<float>(src[i]) / 32768.0f;
+  CHECK(bad == 0);
+  CHECK(timestamps_increase(cap, 0, src.size() - 1));
+  // The sample clock's rate stays within its correction bound of the nominal rate.
+  std::int64_t t0 = 0, t1 = 0;
+  REQUIRE(cap.frame_time(0, t0));
+  REQUIRE(cap.frame_time(src.size() - 1, t1));
+  const double nominal = (src.size() - 1) * 1e9 / kRate;
+  CHECK(static_cast<double>(t1 - t0) == Approx(nominal).epsilon(1e-3));
+  cap.stop();
+  CHECK(cap.stats().dropped == 0);
+}
+
+TEST_CASE("alsa: a stalled consumer overruns the ring and the stream recovers with a time jump") {
+  TempDir dir;
+  const auto fifo = dir / "in.fifo";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  constexpr unsigned kPeriod = 480, kRate = 48000;
+  std::vector<std::int16_t> src(kPeriod * 50);  // unique values: where a frame came from is known
+  for (std::size_t i = 0; i < src.size(); ++i)
+    src[i] = static_cast<std::int16_t>(static_cast<int>(i) - 32768);
+  use_alsa_config(dir, "paced", fifo);
+  FifoFeeder feeder(fifo, src, kPeriod, kRate);
+  SpscRing<float> ring(2048);  // ~43 ms
+  AlsaCaptureConfig cfg;
+  cfg.device = "paced";
+  cfg.period_frames = kPeriod;
+  AlsaCapture cap(cfg, ring);
+  cap.start();
+  feeder.go();
+  // The consumer stalls until the capture had to drop a few periods.
+  REQUIRE(wait_for([&] { return cap.stats().dropped >= 4 * kPeriod; }, 10s));
+  CHECK(ring.take_overrun());
+  // It catches up and reads to the end of the source.
+  std::vector<float> got;
+  const float last = static_cast<float>(src.back()) / 32768.0f;
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while (std::find(got.begin(), got.end(), last) == got.end() &&
+         std::chrono::steady_clock::now() < deadline) {
+    float buf[4096];
+    const std::size_t n = ring.read_bulk(buf);
+    got.insert(got.end(), buf, buf + n);
+    if (n == 0) std::this_thread::sleep_for(2ms);
+  }
+  const auto st = cap.stats();
+  cap.stop();
+  const auto end = std::find(got.begin(), got.end(), last);
+  REQUIRE(end != got.end());
+  got.erase(end + 1, got.end());  // the silence that follows the source
+  CHECK(st.dropped >= 4 * kPeriod);
+  // The frames before the hole are the first of the source; after the hole the stream continues from
+  // a later source frame without further gaps.
+  auto source_index = [](float v) { return static_cast<long>(std::lround(v * 32768.0f)) + 32768; };
+  REQUIRE(got.size() > 2048);
+  std::size_t hole = 0, holes = 0;
+  for (std::size_t i = 1; i < got.size(); ++i)
+    if (source_index(got[i]) != source_index(got[i - 1]) + 1) {
+      ++holes;
+      hole = i;
+    }
+  if (holes != 1) {
+    std::size_t shown = 0;
+    for (std::size_t i = 1; i < got.size() && shown < 10; ++i)
+      if (source_index(got[i]) != source_index(got[i - 1]) + 1) {
+        std::printf("hole at %zu: %ld -> %ld\n", i, source_index(got[i - 1]), source_index(got[i]));
+        ++shown;
+      }
+    std::printf("got %zu dropped %lu pushed %lu\n", got.size(), (unsigned long)st.dropped,
+                (unsigned long)st.pushed);
+  }
+  REQUIRE(holes == 1);
+  CHECK(source_index(got[0]) == 0);
+  const long skipped = source_index(got[hole]) - source_index(got[hole - 1]) - 1;
+  CHECK(skipped == static_cast<long>(st.dropped));
+  // Timestamps jump across the hole by exactly the dropped frames' duration (sample clock).
+  std::int64_t before = 0, after = 0;
+  REQUIRE(cap.frame_time(hole - 1, before));
+  REQUIRE(cap.frame_time(hole, after));
+  CHECK(static_cast<double>(after - before) == Approx((skipped + 1) * 1e9 / kRate).epsilon(1e-3));
+  CHECK(timestamps_increase(cap, 0, got.size() - 1));
+}
+
+TEST_CASE("alsa: an unknown PCM name is a clear error") {
+  TempDir dir;
+  use_alsa_config(dir, "replay", dir / "in.raw");
+  SpscRing<float> ring(1024);
+  AlsaCaptureConfig cfg;
+  cfg.device = "no_such_pcm_gearpulse";
+  CHECK_THROWS_WITH(AlsaCapture(cfg, ring),
+                    Catch::Contains("no_such_pcm_gearpulse") && Catch::Contains("cannot open"));
+}
