@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <istream>
+#include <limits>
 #include <optional>
 #include <ostream>
 
@@ -228,6 +229,38 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   }
 }
 
+// The Carloop logger writes rows at a steady rate (it polls its PIDs round-robin) but its run-time
+// counter has a resolution of one second and is itself refreshed only once per cycle (~1.8 s). The time of
+// a row is therefore estimated from its row number by a local straight-line fit through the points where
+// the counter changed (middle of its one-second step), which brings the timing error well below a second.
+std::vector<double> smooth_row_times(const std::vector<double>& rows, const std::vector<double>& refresh_row,
+                                     const std::vector<double>& refresh_t) {
+  constexpr std::size_t kHalfWindow = 8;  // refresh points each side (~15 s)
+  std::vector<double> out(rows.size());
+  double previous = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const auto k = static_cast<std::size_t>(
+        std::lower_bound(refresh_row.begin(), refresh_row.end(), rows[i]) - refresh_row.begin());
+    const std::size_t lo = k > kHalfWindow ? k - kHalfWindow : 0;
+    const std::size_t hi = std::min(refresh_row.size(), k + kHalfWindow + 1);
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    const double n = static_cast<double>(hi - lo);
+    for (std::size_t m = lo; m < hi; ++m) {
+      const double x = refresh_row[m] - rows[i];
+      sx += x;
+      sy += refresh_t[m];
+      sxx += x * x;
+      sxy += x * refresh_t[m];
+    }
+    const double det = n * sxx - sx * sx;
+    double t = n > 0 ? sy / n : rows[i];
+    if (n >= 2 && det > 1e-9) t = (sy * sxx - sx * sxy) / det;  // intercept at rows[i]
+    out[i] = std::max(t, previous);
+    previous = out[i];
+  }
+  return out;
+}
+
 // Carloop and `speed,rpm` logs: OBD values held between refreshes. A row whose rpm and speed both equal
 // the previous row's carries nothing new (the logger polls many PIDs round-robin), so it is dropped.
 void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
@@ -249,8 +282,11 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
   std::vector<std::string_view> cells;
   std::size_t row = 0;
-  double last_rpm = kMissing, last_speed = kMissing;
+  double last_rpm = kMissing, last_speed = kMissing, last_t = -std::numeric_limits<double>::infinity();
   bool have_last = false;
+  std::vector<std::size_t> lines;
+  std::vector<double> rows, refresh_row, refresh_t;
+  std::vector<Sample> kept;
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double counter = static_cast<double>(row++);
@@ -274,17 +310,36 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
       out.skip(reader.number, bad->problem);
       continue;
     }
+    if (t.value < last_t) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", t.value, last_t);
+      out.skip(reader.number, buf);
+      continue;
+    }
+    if (t.value != last_t) {
+      refresh_row.push_back(counter);
+      refresh_t.push_back(t.value + 0.5);
+    }
+    last_t = t.value;
     const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
     if (have_last && same(rpm.value, last_rpm) && same(speed.value, last_speed)) {
       ++out.log().repeated_rows;
       continue;
     }
-    if (out.add(reader.number, Sample{t.value, speed.value * kKmhToMs, rpm.value / kSecondsPerMinute})) {
-      last_rpm = rpm.value;
-      last_speed = speed.value;
-      have_last = true;
-    }
+    last_rpm = rpm.value;
+    last_speed = speed.value;
+    have_last = true;
+    lines.push_back(reader.number);
+    rows.push_back(counter);
+    kept.push_back(Sample{t.value, speed.value * kKmhToMs, rpm.value / kSecondsPerMinute});
   }
+  if (format == SampleFormat::kCarloop && it && refresh_row.size() >= 2) {
+    const std::vector<double> times = smooth_row_times(rows, refresh_row, refresh_t);
+    for (std::size_t i = 0; i < kept.size(); ++i)
+      kept[i].t = times[i];
+  }
+  for (std::size_t i = 0; i < kept.size(); ++i)
+    out.add(lines[i], kept[i]);
 }
 
 struct SpeedColumn {
