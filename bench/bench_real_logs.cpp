@@ -1,0 +1,198 @@
+// Real-log bench: fit gear scales on some drives, replay others with GPS outages blanked out of the speed
+// column, and measure the synthesized speed inside the outages against the logged speed.
+//
+// Outages: 60 s long, the first 120 s after the log starts, then one every 180 s. Methods compared:
+//   (a) hold the last GPS speed;
+//   (b) the paper's method (Table 2 ratios 1.25,1.35,1.50,1.7) with the gear at the outage start kept;
+//   (c) the gear chosen with hindsight (theta x freq closest to the truth), auto model: a floor;
+//   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
+// Usage: bench_real_logs [DATA_DIR]   (default /work/shared/data/real)
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/estimator.hpp"
+#include "core/sample_io.hpp"
+#include "core/speed_synth.hpp"
+
+namespace fs = std::filesystem;
+using gearpulse::GearModel;
+using gearpulse::Sample;
+
+namespace {
+
+constexpr double kOutageStart = 120.0;   // s after the log starts
+constexpr double kOutagePeriod = 180.0;  // s between outage starts
+constexpr double kOutageLength = 60.0;   // s
+constexpr double kMsToKmh = 3.6;
+
+struct Log {
+  std::string name;
+  std::vector<Sample> samples;
+};
+
+std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
+  std::vector<Log> logs;
+  if (!fs::exists(dir)) return logs;
+  std::vector<fs::path> paths;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".csv" && e.path().filename().string().rfind(prefix, 0) == 0)
+      paths.push_back(e.path());
+  std::sort(paths.begin(), paths.end());
+  for (const auto& p : paths) {
+    std::ifstream in(p, std::ios::binary);
+    logs.push_back({p.filename().string(), gearpulse::read_samples(in, p.string()).samples});
+  }
+  return logs;
+}
+
+bool in_outage(double t_rel) {
+  if (t_rel < kOutageStart) return false;
+  return std::fmod(t_rel - kOutageStart, kOutagePeriod) < kOutageLength;
+}
+
+int nearest_gear(const GearModel& m, double speed, double freq) {
+  int best = -1;
+  double err = 0.0;
+  for (std::size_t i = 0; i < m.gears.size(); ++i) {
+    const double e = std::abs(m.gears[i].theta * freq - speed);
+    if (best < 0 || e < err) best = static_cast<int>(i), err = e;
+  }
+  return best;
+}
+
+struct Errors {
+  std::vector<double> a, b, c, d;
+};
+
+// Replays one log with outages; appends |error| in km/h of every sample inside an outage.
+void replay(const std::vector<Sample>& samples, const GearModel& paper, const GearModel& model, Errors& err) {
+  if (samples.empty()) return;
+  gearpulse::SpeedSynthesizer synth(std::make_shared<const GearModel>(model));
+  const double t0 = samples.front().t;
+  double last_gps = 0.0, hold_b = 0.0, hold_c = 0.0;
+  int paper_gear = -1;
+  bool was_out = false;
+  for (const Sample& s : samples) {
+    const bool out = in_outage(s.t - t0);
+    const double gps = out ? gearpulse::kMissing : s.speed;
+    const gearpulse::SynthOutput o = synth.step(s.t, gps, s.freq);
+    if (!out) {
+      if (s.has_speed()) last_gps = s.speed;
+      if (s.has_speed() && s.has_freq())
+        paper_gear = s.speed > 0.5 ? nearest_gear(paper, s.speed, s.freq) : -1;
+      was_out = false;
+      continue;
+    }
+    if (!was_out) hold_b = hold_c = last_gps;
+    was_out = true;
+    if (!s.has_speed()) continue;  // no truth to compare with
+    if (s.has_freq() && paper_gear >= 0 && !paper.gears.empty())
+      hold_b = paper.gears[static_cast<std::size_t>(paper_gear)].theta * s.freq;
+    else if (paper_gear < 0)
+      hold_b = last_gps;
+    if (s.has_freq() && !model.gears.empty()) {
+      const int g = nearest_gear(model, s.speed, s.freq);
+      hold_c = model.gears[static_cast<std::size_t>(g)].theta * s.freq;
+    }
+    err.a.push_back(std::abs(last_gps - s.speed) * kMsToKmh);
+    err.b.push_back(std::abs(hold_b - s.speed) * kMsToKmh);
+    err.c.push_back(std::abs(hold_c - s.speed) * kMsToKmh);
+    err.d.push_back(std::abs(o.speed - s.speed) * kMsToKmh);
+  }
+}
+
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const double pos = q * static_cast<double>(v.size() - 1);
+  const auto lo = static_cast<std::size_t>(pos);
+  const std::size_t hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+std::vector<Sample> pool(const std::vector<Log>& logs) {
+  std::vector<Sample> all;
+  for (const Log& l : logs)
+    all.insert(all.end(), l.samples.begin(), l.samples.end());
+  return all;
+}
+
+struct Fold {
+  GearModel paper, model;
+};
+
+Fold fit_both(const std::vector<Sample>& train) {
+  gearpulse::FitOptions paper_opt;
+  paper_opt.ratios = {1.25, 1.35, 1.50, 1.7};  // Table 2, c1..c4 (top gear down)
+  return {gearpulse::fit_gear_model(train, paper_opt).model, gearpulse::fit_gear_model(train, {}).model};
+}
+
+std::string thetas(const GearModel& m) {
+  std::string s;
+  char buf[32];
+  for (const auto& g : m.gears) {
+    std::snprintf(buf, sizeof buf, "%s%.4f", s.empty() ? "" : ",", g.theta);
+    s += buf;
+  }
+  return s.empty() ? "(none)" : s;
+}
+
+void report(const char* title, const Errors& e) {
+  std::printf("%s: %zu samples inside outages, |error| km/h median / p95\n", title, e.d.size());
+  std::printf("  (a) hold last GPS speed        %6.2f / %6.2f\n", quantile(e.a, 0.5), quantile(e.a, 0.95));
+  std::printf("  (b) paper thetas, gear kept    %6.2f / %6.2f\n", quantile(e.b, 0.5), quantile(e.b, 0.95));
+  std::printf("  (c) auto thetas, hindsight gear%6.2f / %6.2f\n", quantile(e.c, 0.5), quantile(e.c, 0.95));
+  std::printf("  (d) gearpulse synthesis        %6.2f / %6.2f\n", quantile(e.d, 0.5), quantile(e.d, 0.95));
+}
+
+// Fit on `train`, replay every log of `test`.
+void run_fold(const char* label, const std::vector<Log>& train, const std::vector<Log>& test, Errors& e) {
+  const Fold f = fit_both(pool(train));
+  std::printf("  fold %-28s paper theta %s\n", label, thetas(f.paper).c_str());
+  std::printf("  %-33s auto  theta %s\n", "", thetas(f.model).c_str());
+  for (const Log& l : test)
+    replay(l.samples, f.paper, f.model, e);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const fs::path root = argc > 1 ? fs::path(argv[1]) : fs::path("/work/shared/data/real");
+  const auto start = std::chrono::steady_clock::now();
+
+  const fs::path etios = root / "carloop-etios";
+  const std::vector<Log> drives = read_logs(etios, "drive");
+  const std::vector<Log> longs = read_logs(etios, "long");
+  if (!drives.empty() && !longs.empty()) {
+    Errors e;
+    std::printf("Etios (Carloop OBD, ~1.8 s refresh): two folds, fit on one set, replay the other\n");
+    run_fold("fit drive*, replay long*", drives, longs, e);
+    run_fold("fit long*, replay drive*", longs, drives, e);
+    report("Etios", e);
+  } else {
+    std::printf("Etios logs not found under %s\n", etios.c_str());
+  }
+
+  const std::vector<Log> louis = read_logs(root / "torque-louisville", "");
+  if (!louis.empty()) {
+    const std::vector<Sample>& all = louis.front().samples;
+    const std::size_t half = all.size() / 2;
+    const std::vector<Log> first = {{"first half", {all.begin(), all.begin() + static_cast<long>(half)}}};
+    const std::vector<Log> second = {{"second half", {all.begin() + static_cast<long>(half), all.end()}}};
+    Errors e;
+    std::printf("\nLouisville (Torque, 1 Hz GPS speed): cross-validation halves\n");
+    run_fold("fit 1st half, replay 2nd", first, second, e);
+    run_fold("fit 2nd half, replay 1st", second, first, e);
+    report("Louisville", e);
+  }
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("\n(%.1f s)\n", secs);
+  return 0;
+}
