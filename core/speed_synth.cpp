@@ -58,6 +58,15 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   for (int j = 1; j <= gears_; ++j)
     weight_[j] *= (1.0 - clutch) / total;
   weight_[0] = gears_ > 0 ? clutch : 1.0;
+  // A gear used for a small share of the time is one a driver passes through quickly (first gear when
+  // moving off): its dwell time, hence its rate of being left, scales with its weight alpha_i.
+  leave_rate_.fill(0.0);
+  for (int j = 1; j <= gears_; ++j) {
+    constexpr double kMaxRateFactor = 5.0;
+    const double typical = (1.0 - clutch) / gears_;
+    leave_rate_[j] =
+        tuning_.gear_leave_rate * std::clamp(typical / weight_[j], 1.0 / kMaxRateFactor, kMaxRateFactor);
+  }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
 }
@@ -65,8 +74,8 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
 void SpeedSynthesizer::reset() noexcept {
   for (int j = 0; j < kModes; ++j)
     prob_[j] = j <= gears_ ? weight_[j] : 0.0;
-  track_ = 0.0;
-  track_var_ = kInitialSpeedVar;
+  speed_.fill(0.0);
+  var_.fill(kInitialSpeedVar);
   started_ = false;
   t_ = 0.0;
   out_speed_ = 0.0;
@@ -78,14 +87,18 @@ void SpeedSynthesizer::reset() noexcept {
 bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
   const int old_gears = gears_;
-  const ModeArray old_theta = theta_, old_prob = prob_;
+  const ModeArray old_theta = theta_, old_prob = prob_, old_speed = speed_, old_var = var_;
   model_ = std::move(model);
   load_model(model_.get());
   // Carry the belief over: each old gear hands its probability to the new gear with the nearest theta
-  // (in ratio), so a retrained model of the same car continues exactly where it was. The speed track is
-  // the car's, not the model's, and stays.
+  // (in ratio) with its speed track, so a retrained model of the same car continues where it was.
   prob_.fill(0.0);
   prob_[0] = old_prob[0];
+  for (int j = 1; j <= gears_; ++j) {
+    speed_[j] = out_speed_;
+    var_[j] = old_var[0];
+  }
+  next_p_.fill(0.0);  // strongest old gear handed to each new gear so far
   for (int i = 1; i <= old_gears && gears_ > 0; ++i) {
     int best = 1;
     for (int j = 2; j <= gears_; ++j) {
@@ -93,6 +106,11 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
         best = j;
     }
     prob_[best] += old_prob[i];
+    if (old_prob[i] > next_p_[best]) {
+      next_p_[best] = old_prob[i];
+      speed_[best] = old_speed[i];
+      var_[best] = old_var[i];
+    }
   }
   if (gears_ == 0) {
     prob_[0] = 1.0;
@@ -113,6 +131,12 @@ double SpeedSynthesizer::freq_sigma(double freq) const noexcept {
   return std::max(sigma_s_, tuning_.min_freq_rel * freq);
 }
 
+// Spread of the idle frequency, bounded so that a cold start's high idle or a single blip cannot make the
+// spike cover the whole driving range.
+double SpeedSynthesizer::idle_sd() const noexcept {
+  return std::clamp(std::sqrt(idle_var_), 0.03 * idle_mean_, 0.1 * idle_mean_);
+}
+
 // Likelihood of clutch-out, in the speed units of the gear likelihoods: the density of the engine
 // frequency while declutched, mapped to speed by the top gear's scale. The engine falls to idle (a spike,
 // as the paper's g() has one at standstill, section 3.1) or runs free anywhere in its range (flat).
@@ -120,11 +144,29 @@ double SpeedSynthesizer::clutch_likelihood(double freq) const noexcept {
   const double flat = 1.0 / std::max({freq_max_, freq, 1.0});
   double density = flat;
   if (idle_count_ > 0.0) {
-    const double idle_sd = std::max(std::sqrt(idle_var_), 0.02 * idle_mean_);
-    density = tuning_.idle_weight * gaussian(freq - idle_mean_, idle_sd * idle_sd) +
-              (1.0 - tuning_.idle_weight) * flat;
+    const double sd = idle_sd();
+    density = tuning_.idle_weight * gaussian(freq - idle_mean_, sd * sd) + (1.0 - tuning_.idle_weight) * flat;
   }
   return density / theta_[gears_];
+}
+
+// Relative chance of driving in `gear` with the engine at `freq`: near idle a driver declutches rather than
+// lug the engine, except when creeping in first gear.
+double SpeedSynthesizer::lugging(int gear, double freq) const noexcept {
+  if (idle_count_ <= 0.0) return 1.0;
+  const double x = (freq - idle_mean_) / idle_sd();
+  const double at_idle = 1.0 / (1.0 + std::exp(3.0 * (x - 2.5)));  // ~1 up to 2 sd above idle, ~0 past 3.5
+  const double floor = gear == 1 ? tuning_.lugging_first : tuning_.lugging_other;
+  return 1.0 - (1.0 - floor) * at_idle;
+}
+
+// How much more likely an upshift (and less likely a downshift) is at this engine frequency than at the
+// frequency this driver usually runs at in gear: drivers shift up as revs rise and down as they sag.
+double SpeedSynthesizer::shift_urge(double freq) const noexcept {
+  constexpr double kMinDriveSamples = 20.0;
+  if (!std::isfinite(freq) || drive_count_ < kMinDriveSamples) return 1.0;
+  const double sd = std::max(std::sqrt(drive_var_), 0.05 * drive_mean_);
+  return std::exp(std::clamp((freq - drive_mean_) / sd, -3.0, 3.0));
 }
 
 void SpeedSynthesizer::normalise() noexcept {
@@ -147,25 +189,52 @@ int SpeedSynthesizer::map_mode() const noexcept {
   return best;
 }
 
-// Mode transitions over dt: a gear is left for the clutch or for a neighbouring gear (a quick shift
-// between two samples); the clutch is left for any gear, in proportion to how much each is used.
-void SpeedSynthesizer::predict_modes(double dt) noexcept {
+// Mode transitions over dt: a gear is left for the clutch or for a neighbouring gear (a quick shift between
+// two samples, up more likely at high revs, down at low revs); the clutch is left for any gear, in
+// proportion to how much each is used. Then each mode's track starts from the mix of the tracks of the
+// modes it may have come from (moment matching), with the spread between them as extra variance.
+void SpeedSynthesizer::predict_modes(double dt, double freq) noexcept {
   if (dt <= 0.0) return;
-  const double leave_gear = 1.0 - std::exp(-tuning_.gear_leave_rate * dt);
+  constexpr double kToClutch = 0.6, kToNeighbour = 0.2;
+  const double urge = shift_urge(freq);
   const double leave_clutch = 1.0 - std::exp(-tuning_.clutch_leave_rate * dt);
-  scratch_.fill(0.0);
-  scratch_[0] = prob_[0] * (1.0 - leave_clutch);
-  for (int j = 1; j <= gears_; ++j)
-    scratch_[j] = prob_[0] * leave_clutch * weight_[j] / (1.0 - weight_[0]);
-  for (int i = 1; i <= gears_; ++i) {
-    const int neighbours = (i > 1) + (i < gears_);
-    const double to_clutch = neighbours > 0 ? 0.6 : 1.0;
-    scratch_[i] += prob_[i] * (1.0 - leave_gear);
-    scratch_[0] += prob_[i] * leave_gear * to_clutch;
-    if (i > 1) scratch_[i - 1] += prob_[i] * leave_gear * (1.0 - to_clutch) / neighbours;
-    if (i < gears_) scratch_[i + 1] += prob_[i] * leave_gear * (1.0 - to_clutch) / neighbours;
+  // flow(i, j): probability mass moving from mode i to mode j over dt.
+  const auto flow = [&](int i, int j) noexcept {
+    if (i == 0)
+      return prob_[0] * (j == 0 ? 1.0 - leave_clutch : leave_clutch * weight_[j] / (1.0 - weight_[0]));
+    const double up = i < gears_ ? kToNeighbour * urge : 0.0;
+    const double down = i > 1 ? kToNeighbour / urge : 0.0;
+    const double total = kToClutch + up + down;
+    const double leave = 1.0 - std::exp(-leave_rate_[i] * total * dt);
+    if (j == i) return prob_[i] * (1.0 - leave);
+    if (j == 0) return prob_[i] * leave * kToClutch / total;
+    if (j == i + 1) return prob_[i] * leave * up / total;
+    if (j == i - 1) return prob_[i] * leave * down / total;
+    return 0.0;
+  };
+  for (int j = 0; j <= gears_; ++j) {
+    double mass = 0.0, v = 0.0;
+    for (int i = 0; i <= gears_; ++i) {
+      const double w = flow(i, j);
+      mass += w;
+      v += w * speed_[i];
+    }
+    v = mass > 0.0 ? v / mass : speed_[j];
+    double var = 0.0;
+    for (int i = 0; i <= gears_; ++i) {
+      const double d = speed_[i] - v;
+      // Engaging a gear after clutch-out: the clutch slips until the engine matches the wheels, so the
+      // speed the engine will show is uncertain by about what a launch gains in a second.
+      const double engage = i == 0 && j > 0 ? tuning_.launch_accel * tuning_.launch_accel : 0.0;
+      var += flow(i, j) * (var_[i] + d * d + engage);
+    }
+    next_p_[j] = mass;
+    next_v_[j] = v;
+    next_var_[j] = mass > 0.0 ? var / mass : var_[j];
   }
-  prob_ = scratch_;
+  prob_ = next_p_;
+  speed_ = next_v_;
+  var_ = next_var_;
 }
 
 void SpeedSynthesizer::update_accel(double dt, double speed) noexcept {
@@ -175,110 +244,108 @@ void SpeedSynthesizer::update_accel(double dt, double speed) noexcept {
   accel_ += k * (a - accel_);
 }
 
+// What GPS teaches about this engine and driver: the idle frequency (standing) and the frequencies run at
+// in gear (moving). Running means with a bounded memory, so they follow a warming engine.
 void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
   if (!std::isfinite(freq)) return;
   freq_max_ = std::max(freq_max_, freq);
-  if (gps >= tuning_.stationary_speed || freq <= 0.0) return;
-  // Idle frequency: a running mean over standing samples, forgetting slowly (about a minute) so that a
-  // warm engine's lower idle replaces the cold-start one.
-  constexpr double kIdleMemory = 60.0;
-  idle_count_ = std::min(idle_count_ + 1.0, kIdleMemory / std::max(dt, 0.1));
-  const double k = 1.0 / idle_count_;
-  const double d = freq - idle_mean_;
-  idle_mean_ += k * d;
-  idle_var_ += k * (d * d * (1.0 - k) - idle_var_);
+  if (freq <= 0.0) return;
+  const auto accumulate = [&](double& mean, double& var, double& count, double memory) {
+    count = std::min(count + 1.0, memory / std::max(dt, 0.1));
+    const double k = 1.0 / count;
+    const double d = freq - mean;
+    mean += k * d;
+    var += k * (d * d * (1.0 - k) - var);
+  };
+  constexpr double kIdleMemory = 60.0;    // s
+  constexpr double kDriveMemory = 600.0;  // s
+  constexpr double kSureGear = 0.8;
+  if (gps < tuning_.stationary_speed) {
+    accumulate(idle_mean_, idle_var_, idle_count_, kIdleMemory);
+  } else if (mode_ > 0 && prob_[mode_] > kSureGear && gps > 10.0 * tuning_.stationary_speed) {
+    accumulate(drive_mean_, drive_var_, drive_count_, kDriveMemory);
+  }
 }
 
 SynthOutput SpeedSynthesizer::gps_step(double dt, double gps, double freq) noexcept {
-  predict_modes(dt);
+  predict_modes(dt, freq);
   if (std::isfinite(freq) && gears_ > 0) {
     const double sf = freq_sigma(freq);
     prob_[0] *= clutch_likelihood(freq);
     for (int j = 1; j <= gears_; ++j) {
       const double s = sigma_v_ * sigma_v_ + theta_[j] * theta_[j] * sf * sf;
-      prob_[j] *= gaussian(gps - theta_[j] * freq, s);
+      prob_[j] *= gaussian(gps - theta_[j] * freq, s) * lugging(j, freq);
     }
     normalise();
   }
-  track_ = gps;
-  track_var_ = sigma_v_ * sigma_v_;
+  speed_.fill(gps);
+  var_.fill(sigma_v_ * sigma_v_);
+  mode_ = map_mode();
   learn(dt, gps, freq);
   update_accel(dt, gps);
-  mode_ = map_mode();
   return {gps, gps >= tuning_.stationary_speed ? mode_ : 0, SpeedSource::kGps};
 }
 
 SynthOutput SpeedSynthesizer::engine_step(double dt, double freq) noexcept {
   const bool have_freq = std::isfinite(freq);
   if (have_freq) freq_max_ = std::max(freq_max_, freq);
-  predict_modes(dt);
+  predict_modes(dt, freq);
   // Declutched at (or without) idle the driver is braking to a stop: keep the recent deceleration,
   // within ordinary bounds. Declutched above idle is a shift: the car rolls on, slowing gently.
-  const double idle_sd = std::max(std::sqrt(idle_var_), 0.02 * idle_mean_);
-  const bool at_idle = !have_freq || (idle_count_ > 0.0 && freq < idle_mean_ + 3.0 * idle_sd);
+  const bool at_idle = !have_freq || (idle_count_ > 0.0 && freq < idle_mean_ + 3.0 * idle_sd());
   const double decel = at_idle ? std::clamp(-accel_, tuning_.stop_decel_min, tuning_.stop_decel_max)
                                : tuning_.shift_coast_decel;
+  // In gear the acceleration trend is as likely to go on as to stop (a driver releases the brake or the
+  // throttle at any moment): predict half of it, and count the other half as uncertainty.
+  const double trend = 0.5 * accel_ * dt;
   const double q = tuning_.accel_sigma * dt * tuning_.accel_sigma * dt;
-  const double var = std::min(track_var_ + q, kMaxSpeedVar);
-  const double in_gear = std::max(0.0, track_ + accel_ * dt);
-
-  mode_speed_[0] = std::max(0.0, track_ - decel * dt);
-  mode_var_[0] = var;
+  for (int j = 0; j <= gears_; ++j) {
+    var_[j] = std::min(var_[j] + q + (j == 0 ? 0.0 : trend * trend), kMaxSpeedVar);
+    speed_[j] = std::max(0.0, speed_[j] + (j == 0 ? -decel * dt : trend));
+  }
   if (have_freq) {
     const double sf = freq_sigma(freq);
     prob_[0] *= clutch_likelihood(freq);
     for (int j = 1; j <= gears_; ++j) {
       const double z = theta_[j] * freq;
-      const double s = var + theta_[j] * theta_[j] * sf * sf + 1e-6;
-      prob_[j] *= gaussian(z - in_gear, s);
-      const double k = var / s;
-      mode_speed_[j] = in_gear + k * (z - in_gear);
-      mode_var_[j] = (1.0 - k) * var;
+      const double s = var_[j] + theta_[j] * theta_[j] * sf * sf + 1e-6;
+      prob_[j] *= gaussian(z - speed_[j], s) * lugging(j, freq);
+      const double k = var_[j] / s;
+      speed_[j] += k * (z - speed_[j]);
+      var_[j] *= 1.0 - k;
     }
   } else {
-    for (int j = 1; j <= gears_; ++j) {
+    for (int j = 1; j <= gears_; ++j)
       prob_[j] *= kLostGearLikelihood;
-      mode_speed_[j] = in_gear;
-      mode_var_[j] = var;
-    }
   }
   normalise();
-  // Collapse the modes into the shared track (moment matching); the output follows the likeliest mode.
-  track_ = 0.0;
-  for (int j = 0; j <= gears_; ++j)
-    track_ += prob_[j] * mode_speed_[j];
-  track_var_ = 0.0;
-  for (int j = 0; j <= gears_; ++j) {
-    const double d = mode_speed_[j] - track_;
-    track_var_ += prob_[j] * (mode_var_[j] + d * d);
-  }
-  track_var_ = std::min(track_var_, kMaxSpeedVar);
   const int previous_mode = mode_;
   mode_ = map_mode();
   if (mode_ == 0) {
     // Standing still is certain enough: do not let the guess drift while the car waits at a light.
-    if (mode_speed_[0] <= 0.0) track_var_ = std::min(track_var_, kInitialSpeedVar);
-    accel_ *= std::exp(-dt / tuning_.accel_time);
-    return {mode_speed_[0], 0, SpeedSource::kCoast};
+    if (speed_[0] <= 0.0) var_[0] = std::min(var_[0], kInitialSpeedVar);
+    // Braking to a stop goes on as it was; the trend of a shift (declutched above idle) fades.
+    if (!at_idle) accel_ *= std::exp(-dt / tuning_.accel_time);
+    return {speed_[0], 0, SpeedSource::kCoast};
   }
+  // Moving off, the clutch slips: the car gains speed no faster than a brisk launch even though the engine
+  // already turns at theta x freq.
+  const double speed = std::min(speed_[mode_], out_speed_ + tuning_.launch_accel * dt);
   // A change of gear hypothesis moves the output by a step that is no acceleration of the car.
-  if (mode_ == previous_mode && last_.source == SpeedSource::kEngine) update_accel(dt, mode_speed_[mode_]);
-  return {mode_speed_[mode_], mode_, SpeedSource::kEngine};
+  if (mode_ == previous_mode && last_.source == SpeedSource::kEngine) update_accel(dt, speed);
+  return {speed, mode_, SpeedSource::kEngine};
 }
 
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noexcept {
   if (!std::isfinite(t)) return last_;
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
-  if (started_ && t > t_) t_ = t;
-  if (!started_) {
-    t_ = t;
-    started_ = true;
-  }
+  if (!started_ || t > t_) t_ = t;
+  started_ = true;
   if (dt > tuning_.max_gap) {
     for (int j = 0; j <= gears_; ++j)
       prob_[j] = weight_[j];
-    track_var_ = kMaxSpeedVar;
+    var_.fill(kMaxSpeedVar);
     accel_ = 0.0;
     dt = 0.0;
   }

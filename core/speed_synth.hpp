@@ -4,9 +4,10 @@
 // gear; through a GPS outage it outputs theta_gear x frequency, following shifts (a jump of frequency
 // while speed stays continuous), coasting through clutch-out moments and coming to zero at a stop.
 //
-// The gear is tracked by a forward filter over the modes {clutch out, gear 1..M} sharing one speed track
-// (a first-order generalised pseudo-Bayesian filter): evidence for a gear is how well theta_i x freq
-// continues the track with a plausible acceleration (with GPS: how well it matches the GPS speed);
+// The gear is tracked by a forward filter over the modes {clutch out, gear 1..M}, each with its own speed
+// track, mixed at every step (an interacting-multiple-model filter, so competing gear hypotheses survive
+// until a later shift or stop tells them apart): evidence for a gear is how well theta_i x freq continues
+// the speed with a plausible acceleration (with GPS: how well it matches the GPS speed);
 // evidence for clutch-out is the density of the engine frequency when declutched, a spike at the idle
 // frequency (learned while GPS says the car stands still) over a flat floor. The output follows the most
 // probable mode. No look-ahead: every output depends only on past input.
@@ -36,19 +37,22 @@ struct SynthOutput {
 // Driving-physics constants (not from the paper): plausible accelerations of a road car and how often a
 // driver shifts. They are deliberately generic, not fitted to any one log.
 struct SynthTuning {
-  double accel_sigma = 1.0;        // m/s^2: spread of the change of acceleration a driver makes per second
-  double max_accel = 3.5;          // m/s^2: bound on |acceleration| used to smooth the acceleration trend
+  double accel_sigma = 1.0;        // m/s^2: how far a driver's acceleration strays from its trend in 1 s
+  double max_accel = 3.5;          // m/s^2: bound on the acceleration trend
+  double launch_accel = 2.5;       // m/s^2: the output rises no faster (clutch slip when moving off)
   double accel_time = 2.0;         // s: time constant of the acceleration trend
   double shift_coast_decel = 0.3;  // m/s^2: rolling resistance + drag while declutched during a shift
   double stop_decel_min = 0.8;     // m/s^2: at least this while declutched at idle (braking to a stop)
   double stop_decel_max = 2.5;     // m/s^2: at most this (a firm but ordinary stop)
-  double gear_leave_rate = 0.15;   // 1/s: rate of leaving a gear (shift or clutch-in)
+  double gear_leave_rate = 0.15;   // 1/s: rate of leaving a gear (shift or clutch-in) at ordinary rpm
   double clutch_leave_rate = 0.6;  // 1/s: rate of engaging a gear after clutch-out
   double idle_weight = 0.6;        // share of the declutched frequency density in the idle spike
+  double lugging_first = 0.2;      // relative chance of first gear with the engine at idle (creeping)
+  double lugging_other = 0.05;     // same for higher gears: drivers do not lug an engine at idle
   double min_speed_sigma = 0.15;   // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
   double min_freq_rel = 0.01;      // floor on sigma_s as a fraction of the frequency (tracking jitter)
   double stationary_speed = 0.3;   // m/s: GPS speed below this is "standing" (idle is learned there)
-  double max_gap = 30.0;           // s: a longer gap between steps forgets the speed tracks
+  double max_gap = 30.0;           // s: a longer gap between steps forgets the speed track
 };
 
 class SpeedSynthesizer {
@@ -83,11 +87,14 @@ class SpeedSynthesizer {
   using ModeArray = std::array<double, kModes>;
 
   void load_model(const GearModel* model) noexcept;
-  void predict_modes(double dt) noexcept;
+  void predict_modes(double dt, double freq) noexcept;
   SynthOutput gps_step(double dt, double gps, double freq) noexcept;
   SynthOutput engine_step(double dt, double freq) noexcept;
   [[nodiscard]] double clutch_likelihood(double freq) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
+  [[nodiscard]] double idle_sd() const noexcept;
+  [[nodiscard]] double lugging(int gear, double freq) const noexcept;
+  [[nodiscard]] double shift_urge(double freq) const noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   void learn(double dt, double gps, double freq) noexcept;
   void update_accel(double dt, double speed) noexcept;
@@ -97,15 +104,14 @@ class SpeedSynthesizer {
   std::shared_ptr<const GearModel> model_;
   int gears_ = 0;
   ModeArray theta_{};
-  ModeArray weight_{};  // stationary share of each mode (mode 0 = clutch out)
+  ModeArray weight_{};      // stationary share of each mode (mode 0 = clutch out)
+  ModeArray leave_rate_{};  // 1/s, per gear
   double sigma_v_ = 0.0;
   double sigma_s_ = 0.0;
 
-  ModeArray prob_{};                     // forward probabilities of the modes
-  ModeArray mode_speed_{}, mode_var_{};  // per-mode posterior of the current step
-  ModeArray scratch_{};
-  double track_ = 0.0;      // speed track shared by the modes, m/s
-  double track_var_ = 0.0;  // its variance, (m/s)^2
+  ModeArray prob_{};           // forward probabilities of the modes
+  ModeArray speed_{}, var_{};  // per-mode speed track (m/s) and its variance ((m/s)^2)
+  ModeArray next_p_{}, next_v_{}, next_var_{};
 
   bool started_ = false;
   double t_ = 0.0;
@@ -113,6 +119,7 @@ class SpeedSynthesizer {
   double accel_ = 0.0;  // acceleration trend, m/s^2
   int mode_ = 0;        // current MAP mode
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
+  double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
   double freq_max_ = 0.0;  // highest frequency seen (flat part of the declutched density)
   SynthOutput last_{};
 };

@@ -1,0 +1,258 @@
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <memory>
+#include <new>
+#include <vector>
+
+#include "core/speed_synth.hpp"
+#include "tools/sim/vehicle_sim.hpp"
+
+using gearpulse::GearModel;
+using gearpulse::kMissing;
+using gearpulse::SpeedSource;
+using gearpulse::SpeedSynthesizer;
+using gearpulse::SynthOutput;
+
+// Counting global allocator: lets a test prove that step() never allocates. GCC cannot see that the
+// replacement new and delete below pair malloc with free, hence the pragma.
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+namespace {
+std::atomic<long> g_allocations{0};
+}  // namespace
+
+void* operator new(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size ? size : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept {
+  std::free(p);
+}
+void operator delete(void* p, std::size_t) noexcept {
+  std::free(p);
+}
+
+namespace {
+
+constexpr double kKmh = 1.0 / 3.6;
+constexpr double kIdle = 13.3;  // Hz
+
+std::shared_ptr<const GearModel> model_of(const std::vector<double>& theta, double scale = 1.0) {
+  auto m = std::make_shared<GearModel>();
+  for (double t : theta)
+    m->gears.push_back({t * scale, 1.0 / static_cast<double>(theta.size()), 0.0});
+  m->sigma_speed = 0.1;
+  m->sigma_freq = 0.3;
+  m->outlier_weight = 0.1;
+  return m;
+}
+
+const std::vector<double> kHatch = {0.125, 0.225, 0.347, 0.471, 0.574};  // Etios-like, (m/s)/Hz
+
+// A scripted drive at 1 Hz: each phase holds a gear (0 = declutched at idle) and an acceleration.
+struct Phase {
+  int gear;
+  double accel;  // m/s^2
+  double seconds;
+};
+struct Row {
+  double t, speed, freq;
+  int gear;
+};
+std::vector<Row> script(double v0, const std::vector<Phase>& phases, const std::vector<double>& theta) {
+  std::vector<Row> rows;
+  double t = 0.0, v = v0;
+  for (const Phase& p : phases) {
+    for (int k = 0; k < static_cast<int>(p.seconds); ++k) {
+      v = std::max(0.0, v + p.accel);
+      const double f = p.gear > 0 ? v / theta[static_cast<std::size_t>(p.gear - 1)] : kIdle;
+      rows.push_back({t, v, f, p.gear});
+      t += 1.0;
+    }
+  }
+  return rows;
+}
+
+// Feeds rows with GPS up to `outage_from` (s), engine frequency only afterwards.
+std::vector<SynthOutput> replay(SpeedSynthesizer& synth, const std::vector<Row>& rows, double outage_from) {
+  std::vector<SynthOutput> out;
+  for (const Row& r : rows)
+    out.push_back(synth.step(r.t, r.t < outage_from ? r.speed : kMissing, r.freq));
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("synth: without a model GPS passes through and outages give none") {
+  SpeedSynthesizer synth;
+  SynthOutput o = synth.step(0.0, 12.5, 40.0);
+  CHECK(o.source == SpeedSource::kGps);
+  CHECK(o.speed == 12.5);
+  CHECK(o.gear == 0);
+  o = synth.step(1.0, kMissing, 40.0);
+  CHECK(o.source == SpeedSource::kNone);
+  CHECK(o.speed == 0.0);
+  CHECK(gearpulse::source_name(o.source) == "none");
+
+  SpeedSynthesizer empty(std::make_shared<const GearModel>());
+  CHECK(empty.step(0.0, 3.0, 20.0).source == SpeedSource::kGps);
+  CHECK(empty.step(1.0, kMissing, 20.0).source == SpeedSource::kNone);
+}
+
+TEST_CASE("synth: tracks the gear while GPS is present") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  const auto rows = script(0.0, {{0, 0.0, 10}, {1, 1.5, 4}, {2, 1.0, 6}, {3, 0.5, 10}}, kHatch);
+  const auto out = replay(synth, rows, 1e9);
+  CHECK(out[5].gear == 0);  // standing
+  CHECK(out[12].gear == 1);
+  CHECK(out.back().gear == 3);
+  CHECK(out.back().source == SpeedSource::kGps);
+  CHECK(synth.idle_freq() == Approx(kIdle));
+}
+
+TEST_CASE("synth: keeps the gear and follows the frequency through an outage") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  const auto rows = script(
+      0.0, {{0, 0.0, 10}, {1, 1.5, 4}, {2, 1.0, 6}, {3, 0.4, 10}, {3, -0.3, 20}, {3, 0.2, 20}}, kHatch);
+  const auto out = replay(synth, rows, 35.0);
+  for (std::size_t i = 36; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t);
+    CHECK(out[i].source == SpeedSource::kEngine);
+    CHECK(out[i].gear == 3);
+    CHECK(out[i].speed == Approx(rows[i].speed).margin(0.5 * kKmh));
+  }
+}
+
+TEST_CASE("synth: follows up- and downshifts inside an outage") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  // Outage from 20 s: 2nd -> 3rd -> 4th while accelerating, then back down to 3rd while slowing.
+  const auto rows = script(0.0,
+                           {{0, 0.0, 8},
+                            {1, 1.8, 3},
+                            {2, 1.2, 12},
+                            {3, 0.8, 10},
+                            {4, 0.4, 15},
+                            {4, -0.8, 8},
+                            {3, -0.5, 10},
+                            {3, 0.0, 10}},
+                           kHatch);
+  const auto out = replay(synth, rows, 20.0);
+  int right = 0, total = 0;
+  double worst = 0.0;
+  for (std::size_t i = 20; i < rows.size(); ++i) {
+    ++total;
+    right += out[i].gear == rows[i].gear;
+    worst = std::max(worst, std::abs(out[i].speed - rows[i].speed));
+  }
+  CHECK(right >= total - 3);  // a shift may be recognised one sample late
+  CHECK(worst < 12.0 * kKmh);
+  CHECK(out.back().gear == 3);
+  CHECK(out.back().speed == Approx(rows.back().speed).margin(1.0 * kKmh));
+}
+
+TEST_CASE("synth: coasts through clutch-out and comes to zero at a stop") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  // Drive, GPS lost at 30 s in 3rd, brake in gear, declutch at idle, stand for 20 s at the light.
+  const auto rows = script(
+      0.0, {{0, 0.0, 8}, {1, 1.8, 3}, {2, 1.2, 8}, {3, 0.3, 15}, {3, -1.0, 5}, {0, -1.5, 10}, {0, 0.0, 20}},
+      kHatch);
+  const auto out = replay(synth, rows, 30.0);
+  const std::size_t declutch = 8 + 3 + 8 + 15 + 5;
+  bool coasted = false;
+  for (std::size_t i = declutch; i < declutch + 6; ++i)
+    coasted = coasted || out[i].source == SpeedSource::kCoast;
+  CHECK(coasted);
+  REQUIRE(rows[declutch + 10].speed == 0.0);
+  for (std::size_t i = declutch + 16; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t);
+    CHECK(out[i].speed == 0.0);
+    CHECK(out[i].gear == 0);
+    CHECK(out[i].source == SpeedSource::kCoast);
+  }
+  // Never faster than the car was, never negative.
+  for (std::size_t i = 30; i < rows.size(); ++i)
+    CHECK(out[i].speed >= 0.0);
+}
+
+TEST_CASE("synth: a frequency no gear explains is coasted through") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  auto rows = script(0.0, {{0, 0.0, 8}, {1, 1.8, 3}, {2, 1.2, 8}, {3, 0.0, 20}}, kHatch);
+  const double v = rows.back().speed;
+  // Clutch pressed with a blip of throttle: revs far above any gear's, or the tone lost entirely.
+  rows.push_back({rows.back().t + 1, v, 95.0, 0});
+  rows.push_back({rows.back().t + 1, v, kMissing, 0});
+  rows.push_back({rows.back().t + 1, v, v / kHatch[2], 3});
+  const auto out = replay(synth, rows, 30.0);
+  const std::size_t n = rows.size();
+  CHECK(out[n - 3].source == SpeedSource::kCoast);
+  CHECK(out[n - 2].source == SpeedSource::kCoast);
+  CHECK(out[n - 3].speed < v);
+  CHECK(out[n - 3].speed > v - 1.0);  // gentle: a shift does not stop the car
+  CHECK(out[n - 1].gear == 3);
+  CHECK(out[n - 1].speed == Approx(v).margin(1.0 * kKmh));
+}
+
+TEST_CASE("synth: a model swap mid-outage keeps the output continuous") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  const auto rows = script(0.0, {{0, 0.0, 8}, {1, 1.8, 3}, {2, 1.2, 8}, {3, 0.0, 30}}, kHatch);
+  std::vector<SynthOutput> out;
+  for (const Row& r : rows) {
+    if (r.t == 40.0) {
+      CHECK(synth.set_model(model_of(kHatch, 1.004)));  // retrained: thetas moved by 0.4 %
+    }
+    if (r.t == 45.0) {
+      CHECK(synth.set_model(model_of({0.2, 0.35, 0.47, 0.58})));  // a different ladder
+    }
+    out.push_back(synth.step(r.t, r.t < 30.0 ? r.speed : kMissing, r.freq));
+  }
+  CHECK(out[40].gear == 3);
+  CHECK(std::abs(out[40].speed - out[39].speed) < 0.01 * out[39].speed);
+  CHECK(std::abs(out[45].speed - out[44].speed) < 0.05 * out[44].speed);
+  CHECK(out[45].source == SpeedSource::kEngine);
+
+  // Dropping the model: outages then give none, GPS still passes.
+  synth.set_model(nullptr);
+  CHECK(synth.step(100.0, kMissing, 30.0).source == SpeedSource::kNone);
+  CHECK(synth.step(101.0, 5.0, 30.0).source == SpeedSource::kGps);
+  // More gears than the fixed capacity: refused, the old model stays.
+  std::vector<double> many;
+  for (int i = 0; i < SpeedSynthesizer::kMaxGears + 1; ++i)
+    many.push_back(0.05 * (i + 1));
+  CHECK_FALSE(synth.set_model(model_of(many)));
+  CHECK(synth.model() == nullptr);
+}
+
+TEST_CASE("synth: step never allocates") {
+  auto vehicle = gearpulse::sim::vehicle_preset("hatch-5");
+  const auto drive = gearpulse::sim::simulate_drive(vehicle, {.duration = 600.0, .seed = 3});
+  const auto samples = gearpulse::sim::to_samples(gearpulse::sim::observe(drive, {.seed = 4}));
+  SpeedSynthesizer synth(model_of(vehicle.theta));
+  const auto replacement = model_of(vehicle.theta, 1.01);
+  const long before = g_allocations.load();
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const auto& s = samples[i];
+    const bool outage = (i / 60) % 2 == 1;
+    (void)synth.step(s.t, outage ? kMissing : s.speed, s.freq);
+    if (i == samples.size() / 2) synth.set_model(replacement);
+  }
+  CHECK(g_allocations.load() == before);
+  static_assert(noexcept(synth.step(0.0, 0.0, 0.0)));
+}
+
+TEST_CASE("synth: bad input never produces a bad output") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double nan = kMissing, inf = std::numeric_limits<double>::infinity();
+  const double inputs[][3] = {{0, 10, 30},   {1, nan, nan},  {nan, 5, 5}, {0.5, -3, 30},      {2, inf, -5},
+                              {2, nan, inf}, {1e9, nan, 40}, {1e9, 0, 0}, {1e9 + 1, nan, 1e6}};
+  for (const auto& in : inputs) {
+    const SynthOutput o = synth.step(in[0], in[1], in[2]);
+    CHECK(std::isfinite(o.speed));
+    CHECK(o.speed >= 0.0);
+    CHECK(o.gear >= 0);
+    CHECK(o.gear <= 5);
+  }
+}
