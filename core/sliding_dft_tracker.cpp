@@ -31,11 +31,13 @@ constexpr double kMemory = 0.7;
 constexpr double kJumpPenalty = 2.0;
 // Detection thresholds on the per-bin SNR of the fundamental (noise-only bins are Exp(1) distributed):
 // acquisition must beat the maximum of ~20 noise bins, keeping a line already followed need not.
-constexpr double kAcquireSnr = 8.0;
-constexpr double kKeepSnr = 3.0;
-// Ladder evidence: summed per-bin SNR of the other orders minus its noise-only expectation.
-constexpr double kAcquireLadder = 5.0;
-constexpr double kKeepLadder = 0.8;
+constexpr double kAcquireSnr = 4.0;  // on the accumulated SNR (see kLadderMemory)
+constexpr double kKeepSnr = 3.0;     // accumulated
+constexpr double kKeepSnrNow = 1.5;  // this hop alone
+// Ladder evidence: summed per-bin SNR of the other orders minus its noise-only expectation, averaged
+// exponentially along a run of consistent estimates (noise-only: mean 0, standard deviation ~0.7).
+constexpr double kAcquireLadder = 2.5;
+constexpr double kKeepLadder = 0.5;
 constexpr double kLadderMemory = 0.7;
 // A line lost for longer than this is re-acquired, not kept.
 constexpr double kCoastS = 0.5;
@@ -141,6 +143,16 @@ struct SlidingDftTracker::Impl {
   double last_freq = kNaN;
   double last_tracked_t = kNaN;
   double ladder_acc = 0.0;
+  double snr_acc = 0.0;
+  double half_acc = 0.0;
+  double cand_freq = kNaN;  // latest estimate, tracked or not
+  double cand_t = kNaN;
+  int cand_hops = 0;
+
+  // Largest plausible change of the engine frequency over dt seconds.
+  [[nodiscard]] double slew_gate(double dt) const noexcept {
+    return cfg.max_slew_hz_per_s * dt + 2.0 * df + 1.0;
+  }
 
   // Output queue and hop history (fixed rings).
   std::vector<TrackPoint> queue;
@@ -162,6 +174,7 @@ struct SlidingDftTracker::Impl {
 
   [[nodiscard]] double time_of(double frame) const noexcept { return t0 + frame / fs; }
   void write_frame(float x) noexcept {
+    if (!std::isfinite(x)) x = 0.0f;  // a glitch must not poison every window that sees it
     const std::size_t i = static_cast<std::size_t>(n_in) & (ring_size - 1);
     ring[i] = x;
     ring[i + ring_size] = x;
@@ -175,7 +188,7 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] Evidence refine(double f0) const noexcept;
   void dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
             std::complex<double>& ddx) const noexcept;
-  [[nodiscard]] double harmonic_fit(double f, double* fundamental_amp2) const noexcept;
+  [[nodiscard]] double harmonic_fit(double f, const bool* use, double* fundamental_amp2) const noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
   void emit(const TrackPoint& p) noexcept;
 };
@@ -405,7 +418,8 @@ void SlidingDftTracker::Impl::dtft(double omega, std::complex<double>& x, std::c
 // every order the decimated signal holds, fitted jointly by least squares (so the orders do not leak
 // into each other as they would through a window). Its maximum over f is the ML estimate of f for a
 // harmonic signal in white noise. Optionally returns the fitted fundamental's squared amplitude.
-double SlidingDftTracker::Impl::harmonic_fit(double f, double* fundamental_amp2) const noexcept {
+double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use,
+                                             double* fundamental_amp2) const noexcept {
   constexpr int kMaxCols = 2 + 2 * kOrders;
   double gram[kMaxCols][kMaxCols] = {};
   double rhs[kMaxCols] = {};
@@ -416,7 +430,7 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, double* fundamental_amp2)
   for (int o = 0; o < kOrders; ++o) {
     order_col[o] = -1;
     const double fo = kOrder[o] * f;
-    if (fo > harmonic_limit_hz || fo / df < noise_lo) continue;
+    if (!use[o] || fo > harmonic_limit_hz || fo / df < noise_lo) continue;
     order_col[o] = cols;
     cols += 2;
     const double w = 2.0 * kPi * fo / fd;
@@ -483,13 +497,28 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, double* fundamental_amp2)
 SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0) const noexcept {
   Evidence ev;
   std::complex<double> x, dx, ddx;
+  // An order whose neighbourhood is dominated by a line elsewhere (a fan next to the 2nd harmonic) would
+  // pull the fit; leave it out. The fundamental always stays.
+  const double bin = fd / n_win;  // resolution of the window, Hz
+  bool use[kOrders];
+  for (int o = 0; o < kOrders; ++o) {
+    use[o] = true;
+    if (o == 1) continue;
+    const double centre = kOrder[o] * f0 / df;
+    const int reach = static_cast<int>(std::ceil(1.5 * bin / df));
+    int best = static_cast<int>(std::lround(centre));
+    for (int k = std::max(1, best - reach); k <= std::min(nfft / 2 - 1, best + reach); ++k)
+      if (power[static_cast<std::size_t>(k)] > power[static_cast<std::size_t>(best)]) best = k;
+    const bool strong = power[static_cast<std::size_t>(best)] > 4.0 * noise_at(best);
+    use[o] = !(strong && std::abs(best - centre) * df > 0.4 * bin);
+  }
   // The coarse estimate is within a fraction of the window's resolution (1 / T); search +-0.3 / T.
   const double reach = 0.3 * fd / n_win;
   constexpr int kGrid = 6;
   double best_f = f0, best_j = -1.0;
   for (int i = 0; i <= kGrid; ++i) {
     const double f = f0 - reach + 2.0 * reach * i / kGrid;
-    const double j = harmonic_fit(f, nullptr);
+    const double j = harmonic_fit(f, use, nullptr);
     if (j > best_j) {
       best_j = j;
       best_f = f;
@@ -498,25 +527,25 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0) con
   double a = best_f - 2.0 * reach / kGrid, b = best_f + 2.0 * reach / kGrid;
   constexpr double kGolden = 0.6180339887498949;
   double c = b - kGolden * (b - a), d = a + kGolden * (b - a);
-  double jc = harmonic_fit(c, nullptr), jd = harmonic_fit(d, nullptr);
+  double jc = harmonic_fit(c, use, nullptr), jd = harmonic_fit(d, use, nullptr);
   for (int iter = 0; iter < 14; ++iter) {
     if (jc > jd) {
       b = d;
       d = c;
       jd = jc;
       c = b - kGolden * (b - a);
-      jc = harmonic_fit(c, nullptr);
+      jc = harmonic_fit(c, use, nullptr);
     } else {
       a = c;
       c = d;
       jc = jd;
       d = a + kGolden * (b - a);
-      jd = harmonic_fit(d, nullptr);
+      jd = harmonic_fit(d, use, nullptr);
     }
   }
   const double f = 0.5 * (a + b);
   double amp2 = 0.0;
-  (void)harmonic_fit(f, &amp2);
+  (void)harmonic_fit(f, use, &amp2);
   ev.freq = f;
   int n_ladder = 0;
   double ladder = 0.0;
@@ -571,16 +600,33 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   out.snr_db = ev.snr_db;
 
   const double since = std::isfinite(last_tracked_t) ? out.t - last_tracked_t : 1e9;
-  const bool near = tracking && since <= kCoastS + 1e-9 &&
-                    std::abs(ev.freq - last_freq) <= cfg.max_slew_hz_per_s * since + 2.0 * df + 1.0;
-  ladder_acc =
-      near ? kLadderMemory * ladder_acc + (1.0 - kLadderMemory) * ev.ladder_excess : ev.ladder_excess;
-  const bool keep = near && ev.snr[1] >= kKeepSnr && (!cfg.require_harmonics || ladder_acc >= kKeepLadder);
+  const double gap = std::isfinite(cand_t) ? out.t - cand_t : 1e9;
+  // Evidence accumulates along a run of mutually consistent estimates (tracked or not), starting from
+  // zero: one lucky hop of noise cannot acquire, a fixed tone never builds a ladder.
+  const bool consistent = gap <= kCoastS + 1e-9 && std::abs(ev.freq - cand_freq) <= slew_gate(gap);
+  if (!consistent) {
+    ladder_acc = snr_acc = half_acc = 0.0;
+    cand_hops = 0;
+  }
+  half_acc = kLadderMemory * half_acc + (1.0 - kLadderMemory) * ev.snr[0];
+  ladder_acc = kLadderMemory * ladder_acc + (1.0 - kLadderMemory) * ev.ladder_excess;
+  snr_acc = kLadderMemory * snr_acc + (1.0 - kLadderMemory) * ev.snr[1];
+  ++cand_hops;
+  cand_freq = ev.freq;
+  cand_t = out.t;
+  // A half order stronger than the "fundamental" means the line is the 2nd harmonic of an engine
+  // turning below the band (idle).
+  const bool octave = ev.available[0] && half_acc > snr_acc;
+  const bool ladder_keep = !cfg.require_harmonics || ladder_acc >= kKeepLadder;
+  const bool ladder_acquire = !cfg.require_harmonics || ladder_acc >= kAcquireLadder;
+  const bool keep = tracking && since <= kCoastS + 1e-9 &&
+                    std::abs(ev.freq - last_freq) <= slew_gate(since) && snr_acc >= kKeepSnr &&
+                    ev.snr[1] >= kKeepSnrNow && ladder_keep && !octave;
   const bool acquire =
-      ev.snr[1] >= kAcquireSnr && (!cfg.require_harmonics || ev.ladder_excess >= kAcquireLadder);
+      cand_hops >= 2 && snr_acc >= kAcquireSnr && ev.snr[1] >= kKeepSnr && ladder_acquire && !octave;
 #ifdef GEARPULSE_TRACKER_DEBUG
-  std::fprintf(stderr, "t %.2f f %.2f snr %.1f %.1f %.1f %.1f lad %.1f acc %.1f near %d keep %d acq %d\n",
-               out.t, ev.freq, ev.snr[0], ev.snr[1], ev.snr[2], ev.snr[3], ev.ladder_excess, ladder_acc, near,
+  std::fprintf(stderr, "t %.2f f %.2f snr %.1f %.1f %.1f %.1f lad %.1f acc %.1f %.1f keep %d acq %d\n", out.t,
+               ev.freq, ev.snr[0], ev.snr[1], ev.snr[2], ev.snr[3], ev.ladder_excess, ladder_acc, snr_acc,
                keep, acquire);
 #endif
   const bool in_band = ev.freq >= cfg.band_lo_hz - df && ev.freq <= cfg.band_hi_hz + df;
@@ -673,7 +719,9 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.tracking = false;
   s.last_freq = kNaN;
   s.last_tracked_t = kNaN;
-  s.ladder_acc = 0.0;
+  s.ladder_acc = s.snr_acc = s.half_acc = 0.0;
+  s.cand_freq = s.cand_t = kNaN;
+  s.cand_hops = 0;
   s.q_head = s.q_size = 0;
   s.h_head = s.h_size = 0;
 }

@@ -25,8 +25,8 @@ class SpscRing {
 
  public:
   // Capacity is rounded up to a power of two; allocation happens here and nowhere else.
-  explicit SpscRing(std::size_t min_capacity) : capacity_(round_up_pow2(min_capacity)), mask_(capacity_ - 1) {
-    if (min_capacity == 0) throw std::invalid_argument("SpscRing: capacity must be positive");
+  explicit SpscRing(std::size_t min_capacity)
+      : capacity_(checked_capacity(min_capacity)), mask_(capacity_ - 1) {
     storage_ = std::make_unique<Slot[]>(capacity_);
   }
   ~SpscRing() {
@@ -60,6 +60,7 @@ class SpscRing {
   }
 
   // Writes as many leading elements of `items` as fit (with wrap-around), counts the rest as dropped.
+  // If a copy throws, the elements of this call already built are destroyed and nothing is published.
   std::size_t try_push_bulk(std::span<const T> items) noexcept(std::is_nothrow_copy_constructible_v<T>) {
     const std::uint64_t w = write_.load(std::memory_order_relaxed);
     std::size_t free_slots = capacity_ - static_cast<std::size_t>(w - read_cache_);
@@ -68,16 +69,30 @@ class SpscRing {
       free_slots = capacity_ - static_cast<std::size_t>(w - read_cache_);
     }
     const std::size_t n = std::min(free_slots, items.size());
-    const std::size_t first = std::min(n, capacity_ - static_cast<std::size_t>(w & mask_));
-    copy_in(slot(w), items.data(), first);
-    copy_in(slot(w + first), items.data() + first, n - first);
+    if constexpr (std::is_trivially_copyable_v<T>) {
+      const std::size_t first = std::min(n, capacity_ - static_cast<std::size_t>(w & mask_));
+      if (first) std::memcpy(static_cast<void*>(slot(w)), items.data(), first * sizeof(T));
+      if (n > first)
+        std::memcpy(static_cast<void*>(slot(w + first)), items.data() + first, (n - first) * sizeof(T));
+    } else {
+      std::size_t built = 0;
+      try {
+        for (; built < n; ++built)
+          ::new (static_cast<void*>(slot(w + built))) T(items[built]);
+      } catch (...) {
+        while (built > 0)
+          slot(w + --built)->~T();
+        throw;
+      }
+    }
     write_.store(w + n, std::memory_order_release);
     if (n < items.size()) note_drop(items.size() - n);
     return n;
   }
 
   // ---- consumer side ----
-  // Pointer to the oldest element, or nullptr when empty. Valid until pop().
+  // Pointer to the oldest element, or nullptr when empty. Valid until pop(). pop() requires a non-null
+  // front() before it (it does not check, to stay branch-free on the consumer's fast path).
   [[nodiscard]] T* front() noexcept {
     const std::uint64_t r = read_.load(std::memory_order_relaxed);
     if (r == write_cache_) {
@@ -92,7 +107,7 @@ class SpscRing {
     read_.store(r + 1, std::memory_order_release);
   }
   // Moves up to out.size() oldest elements into `out` (with wrap-around); returns how many.
-  std::size_t read_bulk(std::span<T> out) noexcept(std::is_nothrow_move_assignable_v<T>) {
+  std::size_t read_bulk(std::span<T> out) noexcept requires std::is_nothrow_move_assignable_v<T> {
     const std::uint64_t r = read_.load(std::memory_order_relaxed);
     std::size_t available = static_cast<std::size_t>(write_cache_ - r);
     if (available < out.size()) {
@@ -109,10 +124,11 @@ class SpscRing {
 
   // ---- either side ----
   [[nodiscard]] std::size_t capacity() const noexcept { return capacity_; }
-  // Approximate fill level (exact when called from one side while the other is idle).
+  // Approximate fill level (exact when called from one side while the other is idle). The read index
+  // is loaded first: it can only run up to the write index, so a later write load is never behind it.
   [[nodiscard]] std::size_t size() const noexcept {
-    const std::uint64_t w = write_.load(std::memory_order_acquire);
     const std::uint64_t r = read_.load(std::memory_order_acquire);
+    const std::uint64_t w = write_.load(std::memory_order_acquire);
     return static_cast<std::size_t>(w - r);
   }
   [[nodiscard]] bool empty() const noexcept { return size() == 0; }
@@ -126,7 +142,10 @@ class SpscRing {
     std::byte bytes[sizeof(T)];
   };
 
-  static std::size_t round_up_pow2(std::size_t n) {
+  static std::size_t checked_capacity(std::size_t n) {
+    if (n == 0) throw std::invalid_argument("SpscRing: capacity must be positive");
+    constexpr std::size_t kMax = (std::size_t{1} << (8 * sizeof(std::size_t) - 2)) / sizeof(T);
+    if (n > kMax) throw std::length_error("SpscRing: capacity too large");
     std::size_t p = 1;
     while (p < n)
       p <<= 1;
@@ -135,15 +154,7 @@ class SpscRing {
   T* slot(std::uint64_t index) noexcept {
     return std::launder(reinterpret_cast<T*>(storage_[static_cast<std::size_t>(index & mask_)].bytes));
   }
-  static void copy_in(T* dst, const T* src, std::size_t n) noexcept(std::is_nothrow_copy_constructible_v<T>) {
-    if constexpr (std::is_trivially_copyable_v<T>) {
-      if (n) std::memcpy(static_cast<void*>(dst), src, n * sizeof(T));
-    } else {
-      for (std::size_t i = 0; i < n; ++i)
-        ::new (static_cast<void*>(dst + i)) T(src[i]);
-    }
-  }
-  static void move_out(T* dst, T* src, std::size_t n) noexcept(std::is_nothrow_move_assignable_v<T>) {
+  static void move_out(T* dst, T* src, std::size_t n) noexcept {
     if constexpr (std::is_trivially_copyable_v<T>) {
       if (n) std::memcpy(static_cast<void*>(dst), src, n * sizeof(T));
     } else {
