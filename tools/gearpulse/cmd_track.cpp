@@ -60,6 +60,22 @@ bool readable_encoding(int format) {
   }
 }
 
+// libsndfile opens a WAV whose data chunk runs past the end of the file and quietly reads what is
+// there; its log says "data : <declared> (should be <actual>)". A cut recording is bad input.
+bool truncated(SNDFILE* file, long long& declared, long long& actual) {
+  std::string log(16384, '\0');
+  sf_command(file, SFC_GET_LOG_INFO, log.data(), static_cast<int>(log.size()));
+  for (std::size_t at = log.find("data"); at != std::string::npos; at = log.find("data", at + 4)) {
+    if (at != 0 && log[at - 1] != '\n') continue;
+    const std::size_t eol = log.find('\n', at);
+    const std::string line = log.substr(at, eol == std::string::npos ? std::string::npos : eol - at);
+    if (std::sscanf(line.c_str(), "data : %lld (should be %lld)", &declared, &actual) == 2 &&
+        declared > actual)
+      return true;
+  }
+  return false;
+}
+
 void print_point(const TrackPoint& p) {
   char freq[32] = "", snr[32] = "";
   if (p.tracked && std::isfinite(p.freq)) std::snprintf(freq, sizeof freq, "%.3f", p.freq);
@@ -81,6 +97,9 @@ int run_track(const TrackOptions& o) {
   if (!file) throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr));
   if (!readable_encoding(info.format))
     throw UsageError(o.file + ": unsupported sample encoding (PCM, float or G.711 expected)");
+  if (long long declared = 0, actual = 0; truncated(file.get(), declared, actual))
+    throw UsageError(o.file + ": truncated: the data chunk declares " + std::to_string(declared) +
+                     " bytes, the file holds " + std::to_string(actual));
   if (info.frames <= 0 || info.channels <= 0) throw UsageError(o.file + ": no audio frames");
   if (o.channel >= info.channels)
     throw UsageError(o.file + ": --channel " + std::to_string(o.channel) + " but the file has " +
