@@ -335,8 +335,14 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
   }
   if (format == SampleFormat::kCarloop && it && refresh_row.size() >= 2) {
     const std::vector<double> times = smooth_row_times(rows, refresh_row, refresh_t);
-    for (std::size_t i = 0; i < kept.size(); ++i)
-      kept[i].t = times[i];
+    // The counter on a row is the whole second at its last refresh, at most one polling round old: the
+    // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
+    constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
+    double previous = -std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < kept.size(); ++i) {
+      kept[i].t = std::max(previous, std::clamp(times[i], kept[i].t, kept[i].t + kMaxCounterAge));
+      previous = kept[i].t;
+    }
   }
   for (std::size_t i = 0; i < kept.size(); ++i)
     out.add(lines[i], kept[i]);

@@ -1,15 +1,149 @@
-// Placeholder until the 'fit' subcommand lands.
+// `gearpulse fit`: learns the gear scales from sample logs and prints the model as JSON (INTERFACES.md).
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
 #include <CLI/CLI.hpp>
 
+#include "core/estimator.hpp"
+#include "core/gear_model.hpp"
 #include "tools/gearpulse/commands.hpp"
+#include "tools/gearpulse/fit_plot.hpp"
+#include "tools/gearpulse/sample_files.hpp"
 
 namespace gearpulse::cli {
+namespace {
+
+constexpr int kMaxGears = 12;
+
+struct FitCommand {
+  std::string gears = "auto";
+  std::string ratios;
+  std::string out;
+  std::string plot;
+  std::string speed = "auto";
+  std::vector<std::string> files;
+};
+
+int parse_gears(const std::string& text) {
+  if (text == "auto") return 0;
+  int n = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), n);
+  if (ec != std::errc() || ptr != text.data() + text.size() || n < 1 || n > kMaxGears)
+    throw UsageError("--gears must be 'auto' or a gear count from 1 to " + std::to_string(kMaxGears) +
+                     ", not '" + text + "'");
+  return n;
+}
+
+std::vector<double> parse_ratios(const std::string& text) {
+  std::vector<double> ratios;
+  if (text.empty()) return ratios;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    std::size_t comma = text.find(',', start);
+    if (comma == std::string::npos) comma = text.size();
+    const std::string item = text.substr(start, comma - start);
+    double c = 0.0;
+    const auto [ptr, ec] = std::from_chars(item.data(), item.data() + item.size(), c);
+    if (item.empty() || ec != std::errc() || ptr != item.data() + item.size() || !std::isfinite(c) ||
+        c <= 1.0)
+      throw UsageError(
+          "--ratios must be numbers above 1 separated by commas (as the paper's Table 2), not '" + text +
+          "'");
+    ratios.push_back(c);
+    start = comma + 1;
+  }
+  if (ratios.size() + 1 > static_cast<std::size_t>(kMaxGears)) throw UsageError("--ratios: too many gears");
+  return ratios;
+}
+
+// Written next to the target and renamed over it, so a reader never sees half a file.
+void write_file_atomically(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw UsageError(path + ": cannot write");
+    out << text;
+    out.flush();
+    if (!out) throw UsageError(path + ": write failed");
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw UsageError(path + ": cannot write");
+  }
+}
+
+int run_fit(const FitCommand& cmd) {
+  FitOptions options;
+  options.gears = parse_gears(cmd.gears);
+  options.ratios = parse_ratios(cmd.ratios);
+  if (!options.ratios.empty() && options.gears != 0 &&
+      options.gears != static_cast<int>(options.ratios.size()) + 1)
+    throw UsageError("--gears " + cmd.gears + " does not match --ratios (" +
+                     std::to_string(options.ratios.size()) + " ratios mean " +
+                     std::to_string(options.ratios.size() + 1) + " gears)");
+  ReadOptions read;
+  read.torque_speed = parse_torque_speed(cmd.speed);
+
+  const std::vector<SampleLog> logs = read_sample_files(cmd.files, read);
+  std::vector<Sample> samples;
+  for (const SampleLog& log : logs)
+    samples.insert(samples.end(), log.samples.begin(), log.samples.end());
+  std::size_t moving = 0;
+  for (const Sample& s : samples)
+    moving += s.has_speed() && s.has_freq() && s.speed > 0.0 && s.freq > 0.0;
+  if (moving == 0) {
+    const std::string what = cmd.files.size() == 1 ? cmd.files.front() : "the input files";
+    throw UsageError(what +
+                     ": nothing to fit: no sample has both a speed above zero and an engine frequency");
+  }
+
+  FitResult result;
+  try {
+    result = fit_gear_model(samples, options);
+  } catch (const std::invalid_argument& e) {
+    throw UsageError(e.what());
+  }
+  const std::string json = serialize_model(result.model);
+  std::fwrite(json.data(), 1, json.size(), stdout);
+  std::fflush(stdout);
+  if (result.model.gears.empty()) {
+    const std::string reason =
+        result.model.reason.empty() ? "no discrete gear ladder in the data" : result.model.reason;
+    std::fprintf(stderr, "gearpulse: no gear ladder: %s\n", reason.c_str());
+  }
+  if (!cmd.out.empty()) write_file_atomically(cmd.out, json);
+  if (!cmd.plot.empty()) write_file_atomically(cmd.plot, ratio_histogram_svg(samples, result.model));
+  return 0;
+}
+
+}  // namespace
 
 void add_fit(CLI::App& app, int& status) {
-  app.add_subcommand("fit", "(not built yet)")->callback([&status] {
-    throw UsageError("'fit' is not implemented in this build");
-    status = 2;
-  });
+  auto cmd = std::make_shared<FitCommand>();
+  CLI::App* sub =
+      app.add_subcommand("fit", "Learn the gear scales (theta per gear) from sample logs; print JSON");
+  sub->add_option("--gears", cmd->gears, "Number of gears, or 'auto' to choose from the data")
+      ->capture_default_str();
+  sub->add_option(
+      "--ratios", cmd->ratios,
+      "Prior ratios c1,... top gear down (paper's Table 2, e.g. 1.25,1.35,1.50,1.7): the paper's method");
+  sub->add_option("--out", cmd->out, "Also write the model JSON to this file");
+  sub->add_option("--plot", cmd->plot, "Write an SVG of the ratio histogram with the fitted gears");
+  sub->add_option("--speed", cmd->speed,
+                  "Torque Pro logs: speed column to use, auto (GPS if any), gps or obd")
+      ->capture_default_str();
+  sub->add_option("files", cmd->files, "Sample logs: t,speed,freq CSV, Torque Pro, Carloop or speed,rpm")
+      ->required();
+  sub->callback([cmd, &status] { status = run_fit(*cmd); });
 }
 
 }  // namespace gearpulse::cli

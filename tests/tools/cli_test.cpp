@@ -1,0 +1,271 @@
+// `gearpulse fit` and `gearpulse replay`, run as the built binary (INTERFACES.md contracts).
+#include <stdlib.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/sample_io.hpp"
+#include "tools/sim/vehicle_sim.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kCli = GEARPULSE_BINARY_DIR "/tools/gearpulse";
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    std::string templ = (fs::temp_directory_path() / "gearpulse-cli.XXXXXX").string();
+    if (::mkdtemp(templ.data()) != nullptr) path = templ;
+  }
+  ~TempDir() {
+    std::error_code ec;
+    if (!path.empty()) fs::remove_all(path, ec);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  [[nodiscard]] std::string file(const std::string& name) const { return (path / name).string(); }
+};
+
+std::string slurp(const std::string& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void write(const std::string& p, const std::string& text) {
+  std::ofstream out(p, std::ios::binary);
+  out << text;
+}
+
+struct Result {
+  int status = -1;
+  std::string out, err;
+};
+
+// Runs the CLI with `args` (already quoted as needed); stdout and stderr captured apart.
+Result run(const TempDir& dir, const std::string& args) {
+  Result r;
+  const std::string err_path = dir.file("stderr.txt");
+  std::FILE* p = ::popen((kCli + " " + args + " 2>" + err_path).c_str(), "r");
+  if (p == nullptr) return r;
+  char buf[4096];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0)
+    r.out.append(buf, n);
+  const int rc = ::pclose(p);
+  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  r.err = slurp(err_path);
+  return r;
+}
+
+std::size_t lines(const std::string& text) {
+  std::size_t n = 0;
+  for (char c : text)
+    n += c == '\n';
+  return n;
+}
+
+// A simulated 20-minute drive of an Etios-like hatchback at 1 Hz, as a generic CSV.
+std::string simulated_log(const TempDir& dir, std::uint64_t seed, double outage_from = -1.0) {
+  using namespace gearpulse::sim;
+  const auto obs = simulate_observations(vehicle_preset("hatch-5"), DrivingStyle::kMixed, 1200.0, 1, seed,
+                                         {.seed = seed + 100});
+  auto samples = to_samples(obs);
+  if (outage_from >= 0.0) {
+    for (auto& s : samples)
+      if (s.t >= outage_from && s.t < outage_from + 60.0) s.speed = gearpulse::kMissing;
+  }
+  const std::string path = dir.file("drive" + std::to_string(seed) + ".csv");
+  std::ofstream out(path, std::ios::binary);
+  gearpulse::write_samples(out, samples);
+  return path;
+}
+
+}  // namespace
+
+TEST_CASE("cli: fit prints the model JSON of INTERFACES.md and writes --out and --plot") {
+  TempDir dir;
+  const std::string log = simulated_log(dir, 21);
+  const Result r =
+      run(dir, "fit --out " + dir.file("model.json") + " --plot " + dir.file("fit.svg") + " " + log);
+  REQUIRE(r.status == 0);
+  const auto json = nlohmann::json::parse(r.out);
+  CHECK(json["version"] == 1);
+  REQUIRE(json["gears"].is_array());
+  CHECK(json["gears"].size() >= 4);
+  double previous = 0.0;
+  for (const auto& g : json["gears"]) {
+    CHECK(g["theta"].get<double>() > previous);
+    previous = g["theta"].get<double>();
+    CHECK(g.contains("weight"));
+    CHECK(g.contains("stderr"));
+  }
+  for (const char* key : {"sigma_speed", "sigma_freq", "samples", "log_likelihood"})
+    CHECK(json.contains(key));
+  CHECK(json["samples"].get<long>() > 500);
+  CHECK(slurp(dir.file("model.json")) == r.out);
+  const std::string svg = slurp(dir.file("fit.svg"));
+  CHECK(svg.rfind("<svg", 0) == 0);
+  CHECK(svg.find("</svg>") != std::string::npos);
+  CHECK(svg.find("<polyline") != std::string::npos);  // the fitted density
+  CHECK(svg.find("<rect x=") != std::string::npos);   // histogram bars
+}
+
+TEST_CASE("cli: empty file and missing header are one-line errors with exit 2") {
+  TempDir dir;
+  write(dir.file("empty.csv"), "");
+  Result r = run(dir, "fit " + dir.file("empty.csv"));
+  CHECK(r.status == 2);
+  CHECK(r.err == "gearpulse: " + dir.file("empty.csv") + ": empty file\n");
+  CHECK(r.out.empty());
+
+  write(dir.file("noheader.csv"), "0,1.5,40\n1,1.6,41\n");
+  r = run(dir, "fit " + dir.file("noheader.csv"));
+  CHECK(r.status == 2);
+  CHECK(r.err.find(dir.file("noheader.csv") + ":1: unrecognised header") != std::string::npos);
+  CHECK(lines(r.err) == 1);
+
+  r = run(dir, "fit " + dir.file("missing.csv"));
+  CHECK(r.status == 2);
+  CHECK(r.err.find("missing.csv: cannot open") != std::string::npos);
+  CHECK(lines(r.err) == 1);
+
+  r = run(dir, "replay --model " + dir.file("missing.json") + " " + dir.file("noheader.csv"));
+  CHECK(r.status == 2);
+  CHECK(lines(r.err) == 1);
+}
+
+TEST_CASE("cli: NaN negative and garbage rows are reported with file and line and skipped") {
+  TempDir dir;
+  std::string text = slurp(simulated_log(dir, 22));
+  // Insert bad rows after the header (lines 2..4 of the file).
+  const std::size_t header_end = text.find('\n') + 1;
+  text.insert(header_end, "0,nan,40\n0,-2,40\n0,abc,40\n");
+  write(dir.file("bad.csv"), text);
+  const Result r = run(dir, "fit " + dir.file("bad.csv"));
+  CHECK(r.status == 0);
+  CHECK(r.err.find(dir.file("bad.csv") + ":2: non-finite value") != std::string::npos);
+  CHECK(r.err.find(dir.file("bad.csv") + ":3: negative value") != std::string::npos);
+  CHECK(r.err.find(dir.file("bad.csv") + ":4: not a number") != std::string::npos);
+  CHECK(r.err.find("skipped 3 bad rows") != std::string::npos);
+  CHECK(nlohmann::json::parse(r.out)["gears"].size() >= 4);
+
+  // Many bad rows: the listing is capped, the count is complete.
+  std::string many = "t,speed,freq\n";
+  for (int i = 0; i < 100; ++i)
+    many += "x,1,2\n";
+  many += text.substr(header_end);
+  write(dir.file("many.csv"), many);
+  const Result m = run(dir, "fit " + dir.file("many.csv"));
+  CHECK(m.status == 0);
+  CHECK(m.err.find("skipped 103 bad rows") != std::string::npos);  // and the three above
+  CHECK(lines(m.err) < 20);
+}
+
+TEST_CASE("cli: a log with only zero speed or nothing usable is an error") {
+  TempDir dir;
+  std::string zero = "t,speed,freq\n";
+  for (int i = 0; i < 100; ++i)
+    zero += std::to_string(i) + ",0," + std::to_string(13.0 + 0.01 * i) + "\n";
+  write(dir.file("zero.csv"), zero);
+  Result r = run(dir, "fit " + dir.file("zero.csv"));
+  CHECK(r.status == 2);
+  CHECK(r.err.find("zero.csv: nothing to fit") != std::string::npos);
+  CHECK(lines(r.err) == 1);
+
+  write(dir.file("garbage.csv"), "t,speed,freq\nfoo,bar,baz\n\x01\x02\x03\n");
+  r = run(dir, "fit " + dir.file("garbage.csv"));
+  CHECK(r.status == 2);
+  CHECK(r.err.find("no usable samples") != std::string::npos);
+}
+
+TEST_CASE("cli: a one-gear log gives a valid model and never a made-up ladder") {
+  TempDir dir;
+  std::string text = "t,speed,freq\n";
+  for (int i = 0; i < 600; ++i) {
+    const double f = 30.0 + 10.0 * std::sin(i / 40.0) + 0.1 * ((i * 7919) % 13 - 6);
+    text += std::to_string(i) + "," + std::to_string(0.35 * f) + "," + std::to_string(f) + "\n";
+  }
+  write(dir.file("one.csv"), text);
+  const Result r = run(dir, "fit " + dir.file("one.csv"));
+  CHECK(r.status == 0);
+  const auto json = nlohmann::json::parse(r.out);
+  REQUIRE(json["gears"].is_array());
+  CHECK(json["gears"].size() <= 1);
+  if (json["gears"].empty()) {
+    CHECK(r.err.find("no gear ladder") != std::string::npos);
+  } else {
+    CHECK(json["gears"][0]["theta"].get<double>() == Approx(0.35).epsilon(0.01));
+  }
+}
+
+TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
+  TempDir dir;
+  const std::string log = dir.file("x.csv");
+  write(log, "t,speed,freq\n0,1,10\n");
+  for (const std::string& args :
+       {"fit --bogus " + log, "fit --gears x " + log, "fit --gears 99 " + log, "fit --ratios 1.2,abc " + log,
+        "fit --ratios 0.9 " + log, "fit --speed radar " + log, std::string("fit"), "replay " + log,
+        "replay --model " + log + " --frobnicate " + log}) {
+    INFO(args);
+    const Result r = run(dir, args);
+    CHECK(r.status == 2);
+    CHECK(lines(r.err) == 1);
+    CHECK(r.err.rfind("gearpulse: ", 0) == 0);
+  }
+}
+
+TEST_CASE("cli: replay prints t speed gear source for every row") {
+  TempDir dir;
+  const std::string train = simulated_log(dir, 23);
+  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  const std::string test = simulated_log(dir, 24, 300.0);
+  const gearpulse::SampleLog input = [&] {
+    std::ifstream in(test, std::ios::binary);
+    return gearpulse::read_samples(in, test);
+  }();
+  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + test);
+  REQUIRE(r.status == 0);
+  std::istringstream out(r.out);
+  std::string line;
+  std::getline(out, line);
+  CHECK(line == "t,speed,gear,source");
+  std::size_t rows = 0, outage_rows = 0, engine_rows = 0;
+  while (std::getline(out, line)) {
+    const auto& s = input.samples.at(rows);
+    std::vector<std::string> cells;
+    std::stringstream ls(line);
+    for (std::string cell; std::getline(ls, cell, ',');)
+      cells.push_back(cell);
+    REQUIRE(cells.size() == 4);
+    CHECK(std::stod(cells[0]) == Approx(s.t));
+    CHECK(std::stod(cells[1]) >= 0.0);
+    CHECK(std::stoi(cells[2]) >= 0);
+    const std::string& source = cells[3];
+    CHECK((source == "gps" || source == "engine" || source == "coast" || source == "none"));
+    if (!s.has_speed()) {
+      ++outage_rows;
+      CHECK(source != "gps");
+      engine_rows += source == "engine";
+    } else {
+      CHECK(source == "gps");
+      CHECK(std::stod(cells[1]) == Approx(s.speed).margin(1e-3));
+    }
+    ++rows;
+  }
+  CHECK(rows == input.samples.size());
+  CHECK(outage_rows >= 50);
+  CHECK(engine_rows > 0);
+}

@@ -1,0 +1,46 @@
+#include "tools/gearpulse/sample_files.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+
+#include "tools/gearpulse/commands.hpp"
+
+namespace gearpulse::cli {
+namespace {
+
+constexpr std::size_t kMaxPrintedSkips = 10;  // per file; the rest are only counted
+
+}  // namespace
+
+TorqueSpeed parse_torque_speed(const std::string& text) {
+  if (text == "auto") return TorqueSpeed::kAuto;
+  if (text == "gps") return TorqueSpeed::kGps;
+  if (text == "obd") return TorqueSpeed::kObd;
+  throw UsageError("--speed must be auto, gps or obd, not '" + text + "'");
+}
+
+std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, const ReadOptions& options) {
+  std::vector<SampleLog> logs;
+  for (const std::string& path : paths) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw UsageError(path + ": cannot open: " + std::strerror(errno));
+    try {
+      logs.push_back(read_samples(in, path, options));
+    } catch (const SampleFileError& e) {
+      throw UsageError(e.what());
+    }
+    const SampleLog& log = logs.back();
+    for (std::size_t i = 0; i < log.skipped.size() && i < kMaxPrintedSkips; ++i)
+      std::fprintf(stderr, "%s\n", log.skipped[i].c_str());
+    if (log.skipped_count > 0) {
+      std::fprintf(stderr, "gearpulse: %s: skipped %zu bad row%s (%zu shown)\n", path.c_str(),
+                   log.skipped_count, log.skipped_count == 1 ? "" : "s",
+                   std::min(log.skipped_count, kMaxPrintedSkips));
+    }
+  }
+  return logs;
+}
+
+}  // namespace gearpulse::cli
