@@ -1,24 +1,384 @@
 #include "daemon/pipeline.hpp"
 
+#include <time.h>
+
+#include <algorithm>
+#include <array>
 #include <chrono>
-#include <condition_variable>
+#include <cmath>
 #include <mutex>
+#include <optional>
 #include <thread>
 
+#include <alsa/asoundlib.h>
 #include <spdlog/spdlog.h>
 
-namespace gearpulse::daemon {
+#include "core/pulse_scheduler.hpp"
+#include "core/sliding_dft_tracker.hpp"
+#include "core/spsc_ring.hpp"
+#include "daemon/log_limiter.hpp"
+#include "daemon/synthesis.hpp"
+#include "drivers/alsa_capture.hpp"
+#include "drivers/clock.hpp"
+#include "drivers/gpio_output.hpp"
+#include "drivers/gpsd_client.hpp"
+#include "drivers/pty_output.hpp"
+#include "drivers/pulse_output.hpp"
+#include "drivers/pulse_thread.hpp"
 
-// Until the device drivers and the synthesis are wired, the pipeline only keeps its heartbeat and
-// reports which links are missing.
+namespace gearpulse::daemon {
+namespace {
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+// A thread that has not beaten for this long is hung; the watchdog is then withheld.
+constexpr std::int64_t kStallNs = 5'000'000'000;
+// The tracker thread wakes at least this often, with or without audio.
+constexpr auto kTrackerPoll = std::chrono::milliseconds(10);
+// GPS fixes wait this long for the audio window centred on them before they are given up.
+constexpr double kPairWait = 3.0;
+
+// libasound prints its own multi-line diagnostics to stderr on every failed open; the daemon logs one
+// rate-limited line naming the device instead.
+void quiet_alsa_errors(const char*, int, const char*, int, const char*, ...) {}
+
+double wall_now() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
+}
+
+SampleFormat format_of(const std::string& name) {
+  if (name == "S32_LE") return SampleFormat::kS32;
+  if (name == "FLOAT_LE") return SampleFormat::kFloat;
+  return SampleFormat::kS16;
+}
+
+// A GPS fix waiting for the engine frequency of the audio window centred on it.
+struct PendingFix {
+  double t = 0.0;      // CLOCK_MONOTONIC s of the fix (receive time - latency)
+  double wall = 0.0;   // the same instant on the wall clock, for the training store
+  double speed = 0.0;  // m/s
+};
+
+}  // namespace
+
 struct Pipeline::Impl {
   Impl(const Config& c, ModelHolder& m, TrainingStore& s) : config(c), model(m), store(s) {}
-  Config config;
+
+  const Config config;
   ModelHolder& model;
   TrainingStore& store;
+  LogLimiter limiter;
+
   std::atomic<double> gps_latency{0.0};
-  std::atomic<double> min_snr_db{6.0};
+  std::atomic<double> min_snr_db{0.0};
+
+  // Devices.
+  std::unique_ptr<PulseOutput> output;
+  std::unique_ptr<PulseThread> pulses;
+  std::unique_ptr<GpsdClient> gps;
+  std::string output_error;
+
+  // Audio: owned by the tracker thread once started; stats read under audio_mutex.
+  mutable std::mutex audio_mutex;
+  std::unique_ptr<SpscRing<float>> ring;
+  std::unique_ptr<AlsaCapture> capture;
+  std::string audio_error;
+  std::uint64_t audio_opens = 0;
+
+  std::thread tracker_thread;
+  std::atomic<bool> stop{false};
+
+  // Published by the tracker thread.
+  std::atomic<std::int64_t> tracker_beat{0};
+  std::atomic<double> speed{0.0};
+  std::atomic<int> gear{0};
+  std::atomic<Source> source{Source::kNone};
+  std::atomic<double> track_freq{kNan};
+  std::atomic<double> track_snr{kNan};
+  std::atomic<bool> track_confident{false};
+  std::atomic<std::uint64_t> pairs_added{0};
+  std::atomic<std::uint64_t> ring_drops{0};
+
+  void open_output();
+  bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
+  void close_audio();
+  void tracker_loop() noexcept;
+  void report(const std::string& key, spdlog::level::level_enum level, const std::string& text);
+  void clear_fault(const std::string& key, const std::string& text);
 };
+
+void Pipeline::Impl::report(const std::string& key, spdlog::level::level_enum level,
+                            const std::string& text) {
+  std::uint64_t suppressed = 0;
+  if (!limiter.allow(key, suppressed)) return;
+  if (suppressed)
+    spdlog::log(level, "{} (repeated {} times since the last report)", text, suppressed);
+  else
+    spdlog::log(level, "{}", text);
+}
+
+void Pipeline::Impl::clear_fault(const std::string& key, const std::string& text) {
+  limiter.reset(key);
+  spdlog::info("{}", text);
+}
+
+void Pipeline::Impl::open_output() {
+  const OutputConfig& o = config.output;
+  try {
+    switch (o.kind) {
+      case OutputKind::kPty:
+        output = std::make_unique<PtyOutput>(o.path);
+        break;
+      case OutputKind::kGpio:
+        output = std::make_unique<GpioOutput>(o.chip, o.line);
+        break;
+      case OutputKind::kNone:
+        output = std::make_unique<NullPulseOutput>();
+        break;
+    }
+  } catch (const std::exception& e) {
+    // Keep counting pulses without a device so status and the pulse count stay meaningful.
+    output_error = e.what();
+    spdlog::error("output: {}; pulses are counted but not emitted until a restart", e.what());
+    output = std::make_unique<NullPulseOutput>();
+  }
+  PulseThreadConfig pc;
+  pc.pulse.pulses_per_km = o.pulses_per_km;
+  pc.pulse.pulse_width_s = o.duty > 0.0 ? 0.0 : o.pulse_width;
+  pc.pulse.duty = o.duty > 0.0 ? o.duty : 0.5;
+  pc.pulse.min_freq_hz = o.min_frequency;
+  pc.pulse.max_freq_hz = o.max_frequency;
+  pc.realtime = config.audio.realtime;
+  pc.rt_priority = std::min(99, config.audio.rt_priority + 10);
+  pc.lock_memory = config.audio.realtime;
+  pulses = std::make_unique<PulseThread>(*output, pc);
+  pulses->set_speed(0.0);
+  pulses->start();
+  spdlog::info("output: {} at {} pulses/km", output->describe(), o.pulses_per_km);
+}
+
+bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
+  const AudioConfig& a = config.audio;
+  AlsaCaptureConfig ac;
+  ac.device = a.device;
+  ac.rate = a.rate;
+  ac.channels = a.channels;
+  ac.format = format_of(a.format);
+  ac.channel = a.channel;
+  ac.period_frames = a.period_frames;
+  ac.realtime = a.realtime;
+  ac.rt_priority = a.rt_priority;
+  ac.lock_memory = a.realtime;
+  auto new_ring =
+      std::make_unique<SpscRing<float>>(static_cast<std::size_t>(std::max(1.0, a.ring_seconds * a.rate)));
+  std::unique_ptr<AlsaCapture> new_capture;
+  try {
+    new_capture = std::make_unique<AlsaCapture>(ac, *new_ring);
+  } catch (const std::exception& e) {
+    std::lock_guard lock(audio_mutex);
+    audio_error = e.what();
+    return false;
+  }
+  gearpulse::TrackerConfig tc;
+  tc.sample_rate_hz = new_capture->rate();
+  tc.window_s = config.tracker.window;
+  tc.hop_s = config.tracker.hop;
+  tc.band_lo_hz = config.tracker.band_low;
+  tc.band_hi_hz = config.tracker.band_high;
+  // at() serves GPS fixes up to a few seconds old, with the configured latency on top.
+  tc.history_s = std::max(2.0, config.gps.latency + 2.0);
+  std::string error;
+  tracker = SlidingDftTracker::create(tc, error);
+  if (!tracker) {
+    std::lock_guard lock(audio_mutex);
+    audio_error = "tracker cannot run on " + new_capture->describe() + ": " + error;
+    return false;
+  }
+  new_capture->start();
+  std::lock_guard lock(audio_mutex);
+  ring = std::move(new_ring);
+  capture = std::move(new_capture);
+  audio_error.clear();
+  ++audio_opens;
+  return true;
+}
+
+void Pipeline::Impl::close_audio() {
+  std::unique_ptr<AlsaCapture> old_capture;
+  std::unique_ptr<SpscRing<float>> old_ring;
+  {
+    std::lock_guard lock(audio_mutex);
+    old_capture = std::move(capture);
+    old_ring = std::move(ring);
+  }
+  if (old_capture) old_capture->stop();
+}
+
+void Pipeline::Impl::tracker_loop() noexcept {
+  Synthesis synth;
+  std::shared_ptr<const GearModel> current_model = model.get();
+  synth.set_model(current_model);
+  std::unique_ptr<SlidingDftTracker> tracker;
+  std::vector<float> block;
+  std::array<PendingFix, 64> pending{};
+  std::size_t pending_count = 0;
+  std::int64_t last_rx = 0;
+  double last_step_t = 0.0;
+  std::uint64_t read_frames = 0;  // ring frame index of the next frame to read
+  double next_frame_t = 0.0;      // expected CLOCK_MONOTONIC s of that frame
+  bool stream_started = false;
+  auto next_audio_try = std::chrono::steady_clock::now();
+  auto backoff = std::chrono::milliseconds(500);
+  bool audio_was_up = false;
+
+  const auto step = [&](double t, double freq, double snr, bool tracked) {
+    // A fix is fresh while no older than the GPS timeout (measured at the fix time, not the receive time).
+    double gps_speed = kNan;
+    if (gps) {
+      if (const auto r = gps->latest(); r && r->usable()) {
+        const double fix_t = r->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
+        if (monotonic_ns() - r->rx_ns <= static_cast<std::int64_t>(config.gps.timeout * 1e9) &&
+            t - fix_t <= config.gps.timeout)
+          gps_speed = r->speed;
+      }
+    }
+    const bool confident =
+        tracked && std::isfinite(freq) && snr >= min_snr_db.load(std::memory_order_relaxed);
+    track_freq.store(tracked ? freq : kNan, std::memory_order_relaxed);
+    track_snr.store(snr, std::memory_order_relaxed);
+    track_confident.store(confident, std::memory_order_relaxed);
+    t = std::max(t, last_step_t);
+    last_step_t = t;
+    const SynthStep out = synth.step(t, gps_speed, confident ? freq : kNan);
+    if (pulses) pulses->set_speed(out.speed);
+    speed.store(out.speed, std::memory_order_relaxed);
+    gear.store(out.gear, std::memory_order_relaxed);
+    source.store(out.source, std::memory_order_relaxed);
+  };
+
+  while (!stop.load(std::memory_order_relaxed)) {
+    const std::int64_t now_ns = monotonic_ns();
+    tracker_beat.store(now_ns, std::memory_order_relaxed);
+    const double now = now_ns * 1e-9;
+
+    // A retrained model takes over between two steps.
+    if (auto m = model.get(); m != current_model) {
+      current_model = std::move(m);
+      synth.set_model(current_model);
+    }
+
+    // Audio: open with backoff while it fails; the daemon runs on GPS alone meanwhile.
+    if (!tracker && std::chrono::steady_clock::now() >= next_audio_try) {
+      if (open_audio(tracker)) {
+        std::string describe;
+        {
+          std::lock_guard lock(audio_mutex);
+          describe = capture->describe();
+        }
+        clear_fault("audio", "audio: capturing from " + describe);
+        backoff = std::chrono::milliseconds(500);
+        read_frames = 0;
+        stream_started = false;
+        audio_was_up = true;
+        block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
+      } else {
+        std::string error;
+        {
+          std::lock_guard lock(audio_mutex);
+          error = audio_error;
+        }
+        report("audio", spdlog::level::err,
+               "audio: " + error + "; retrying every " +
+                   std::to_string(backoff.count() / 1000.0).substr(0, 4) + " s, speed follows GPS meanwhile");
+        next_audio_try = std::chrono::steady_clock::now() + backoff;
+        backoff = std::min(backoff * 2, std::chrono::milliseconds(10'000));
+      }
+    }
+
+    bool got_points = false;
+    if (tracker) {
+      SpscRing<float>& r = *ring;
+      for (int burst = 0; burst < 64; ++burst) {
+        const std::size_t n = r.read_bulk(std::span<float>(block));
+        if (n == 0) break;
+        std::int64_t t_ns = 0;
+        const double rate = capture->rate();
+        if (capture->frame_time(read_frames, t_ns)) {
+          const double t0 = t_ns * 1e-9;
+          if (!stream_started) {
+            tracker->start(t0);
+            stream_started = true;
+          } else {
+            // Frames lost before the ring show as a forward jump of the sample clock: mark the hole so
+            // no window spans it, then re-anchor (small differences are drift corrections).
+            const double gap_frames = (t0 - next_frame_t) * rate;
+            if (gap_frames > std::max(64.0, config.audio.period_frames / 2.0)) {
+              tracker->skip(static_cast<std::uint64_t>(std::llround(gap_frames)));
+              report("audio-hole", spdlog::level::warn,
+                     "audio: " + std::to_string(std::llround(gap_frames)) +
+                         " frames lost before the ring (overrun or device restart); tracking resumes after "
+                         "the hole");
+            }
+            tracker->retime(t0);
+          }
+          next_frame_t = t0;
+        }
+        next_frame_t += n / rate;
+        tracker->push(std::span<const float>(block.data(), n));
+        read_frames += n;
+        if (n < block.size()) break;
+      }
+      ring_drops.store(r.dropped(), std::memory_order_relaxed);
+      TrackPoint p;
+      while (tracker->pop(p)) {
+        got_points = true;
+        step(p.t, p.freq, p.snr_db, p.tracked);
+      }
+    }
+    // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
+    if (!got_points && now - last_step_t > 2.0 * config.tracker.hop + config.tracker.window) {
+      step(now - config.tracker.window / 2.0, kNan, kNan, false);
+    }
+
+    // Training pairs: each new GPS fix waits for the window centred on its time.
+    if (gps) {
+      if (const auto rep = gps->latest(); rep && rep->rx_ns != last_rx) {
+        last_rx = rep->rx_ns;
+        if (rep->usable() && pending_count < pending.size()) {
+          const double t_fix = rep->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
+          pending[pending_count++] = {t_fix, wall_now() - (now - t_fix), rep->speed};
+        }
+      }
+    }
+    if (pending_count > 0) {
+      const double served = tracker ? tracker->latest_time() : kNan;
+      std::size_t keep = 0;
+      for (std::size_t i = 0; i < pending_count; ++i) {
+        const PendingFix f = pending[i];
+        if (tracker && std::isfinite(served) && f.t <= served) {
+          const TrackPoint p = tracker->at(f.t);
+          if (p.tracked && std::isfinite(p.freq) && p.snr_db >= min_snr_db.load(std::memory_order_relaxed)) {
+            if (store.add({f.wall, f.speed, p.freq})) pairs_added.fetch_add(1, std::memory_order_relaxed);
+          }
+        } else if (now - f.t < kPairWait) {
+          pending[keep++] = f;
+        }
+      }
+      pending_count = keep;
+    }
+
+    if (audio_was_up && tracker) {
+      const AlsaCaptureStats s = capture->stats();
+      if (s.last_error != 0 && !s.running)
+        report("audio-run", spdlog::level::warn,
+               "audio: capture from " + config.audio.device + " interrupted (ALSA error " +
+                   std::to_string(s.last_error) + "); the driver reopens it");
+    }
+    if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
+  }
+  close_audio();
+}
 
 Pipeline::Pipeline(const Config& config, ModelHolder& model, TrainingStore& store)
     : impl_(std::make_unique<Impl>(config, model, store)) {
@@ -30,12 +390,30 @@ Pipeline::~Pipeline() {
 }
 
 void Pipeline::start() {
-  spdlog::warn(
-      "pipeline: audio capture, tracker, gpsd client, synthesis and pulse output are not built in; "
-      "serving status only");
+  Impl& d = *impl_;
+  if (d.config.log.level != "trace") snd_lib_error_set_handler(&quiet_alsa_errors);
+  d.open_output();
+  GpsdConfig gc;
+  gc.host = d.config.gps.host;
+  gc.port = std::to_string(d.config.gps.port);
+  gc.no_fix_timeout = std::chrono::milliseconds(static_cast<long>(d.config.gps.timeout * 1000));
+  d.gps = std::make_unique<GpsdClient>(gc);
+  d.gps->start();
+  d.stop.store(false);
+  d.tracker_beat.store(monotonic_ns());
+  d.tracker_thread = std::thread([&d] { d.tracker_loop(); });
 }
 
-void Pipeline::stop() noexcept {}
+void Pipeline::stop() noexcept {
+  Impl& d = *impl_;
+  d.stop.store(true);
+  if (d.tracker_thread.joinable()) d.tracker_thread.join();
+  if (d.gps) d.gps->stop();
+  if (d.pulses) {
+    d.pulses->set_speed(0.0);
+    d.pulses->stop();  // leaves the output low
+  }
+}
 
 void Pipeline::set_tunables(const PipelineTunables& tunables) noexcept {
   impl_->gps_latency.store(tunables.gps_latency);
@@ -43,12 +421,67 @@ void Pipeline::set_tunables(const PipelineTunables& tunables) noexcept {
 }
 
 PipelineSnapshot Pipeline::snapshot() const {
+  const Impl& d = *impl_;
   PipelineSnapshot s;
-  s.output_state = impl_->config.output.kind == OutputKind::kNone ? "off" : "error";
-  if (impl_->config.output.kind != OutputKind::kNone) s.output_error = "pulse output not built in";
-  s.audio_error = "audio capture not built in";
-  s.gps_error = "gpsd client not built in";
-  s.missing = {"audio", "tracker", "gps", "synthesis", "output"};
+  s.speed = d.speed.load(std::memory_order_relaxed);
+  s.source = to_string(d.source.load(std::memory_order_relaxed));
+  s.gear = d.gear.load(std::memory_order_relaxed);
+  const std::int64_t now = monotonic_ns();
+  if (d.pulses) {
+    const PulseThreadStatus ps = d.pulses->status();
+    s.pulses = ps.pulses;
+    s.pulse_frequency = d.pulses->target_speed() * d.config.output.pulses_per_km / 1000.0;
+    if (s.pulse_frequency < d.config.output.min_frequency) s.pulse_frequency = 0.0;
+    s.pulse_frequency = std::min(s.pulse_frequency, d.config.output.max_frequency);
+    if (!ps.running) s.stalled.push_back("pulse");
+  }
+  if (d.output) {
+    s.output_error = d.output_error;
+    if (!d.output_error.empty())
+      s.output_state = "error";
+    else if (d.output->errors() > 0)
+      s.output_state = "write-errors";
+    else
+      s.output_state = d.config.output.kind == OutputKind::kNone ? "off" : "ok";
+  }
+  if (d.gps) {
+    const GpsdStatus g = d.gps->status();
+    s.gps_reconnects = g.connects > 0 ? g.connects - 1 : 0;
+    s.gps_error = g.last_error;
+    const auto r = d.gps->latest();
+    if (g.state != GpsdState::kConnected)
+      s.gps_state = "disconnected";
+    else
+      s.gps_state = d.gps->has_gps(now) ? "fix" : "no-fix";
+    if (r) {
+      s.gps_mode = r->mode;
+      if (r->usable()) {
+        s.gps_speed = r->speed;
+        s.gps_age = (now - r->rx_ns) * 1e-9;
+      }
+    }
+    if (s.gps_state == "fix") s.gps_error.clear();
+  }
+  {
+    std::lock_guard lock(d.audio_mutex);
+    if (d.capture) {
+      const AlsaCaptureStats a = d.capture->stats();
+      s.audio_state = a.running ? "running" : "recovering";
+      s.xruns = a.xruns;
+      s.audio_error = a.last_error != 0 && !a.running ? "ALSA error " + std::to_string(a.last_error) : "";
+    } else {
+      s.audio_state = "retrying";
+      s.audio_error = d.audio_error;
+    }
+  }
+  s.ring_drops = d.ring_drops.load(std::memory_order_relaxed);
+  const double f = d.track_freq.load(std::memory_order_relaxed);
+  s.tracker_freq = std::isfinite(f) ? f : -1.0;
+  s.tracker_snr_db = d.track_snr.load(std::memory_order_relaxed);
+  s.tracker_confident = d.track_confident.load(std::memory_order_relaxed);
+  s.pairs_added = d.pairs_added.load(std::memory_order_relaxed);
+  if (d.tracker_thread.joinable() && now - d.tracker_beat.load(std::memory_order_relaxed) > kStallNs)
+    s.stalled.push_back("tracker");
   return s;
 }
 

@@ -48,7 +48,7 @@ struct PipelineSnapshot {
 // Settings that may change on SIGHUP without restarting the threads.
 struct PipelineTunables {
   double gps_latency = 0.0;
-  double min_snr_db = 6.0;
+  double min_snr_db = 0.0;
 };
 
 class Pipeline {
