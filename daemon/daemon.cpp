@@ -48,7 +48,7 @@ nlohmann::json gears_json(const ModelPtr& model) {
 }
 
 Retrainer::Settings retrain_settings(const ModelConfig& m) {
-  return {std::chrono::duration<double>(m.retrain_interval), m.min_new_samples};
+  return {std::chrono::duration<double>(m.retrain_interval), m.min_new_samples, m.replace_min_samples};
 }
 
 }  // namespace
@@ -157,6 +157,7 @@ void Daemon::Impl::reload() {
   config.log = next.log;
   config.model.retrain_interval = next.model.retrain_interval;
   config.model.min_new_samples = next.model.min_new_samples;
+  config.model.replace_min_samples = next.model.replace_min_samples;
   config.model.store_hours = next.model.store_hours;
   config.model.max_samples = next.model.max_samples;
   config.model.save_interval = next.model.save_interval;

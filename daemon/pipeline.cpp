@@ -98,6 +98,8 @@ struct Pipeline::Impl {
   std::atomic<double> track_snr{kNan};
   std::atomic<bool> track_confident{false};
   std::atomic<std::uint64_t> pairs_added{0};
+  std::atomic<double> last_fix_speed{kNan};  // m/s of the last usable fix
+  std::atomic<std::int64_t> last_fix_ns{0};  // its receive time, 0 = none yet
   std::atomic<std::uint64_t> ring_drops{0};
 
   void open_output();
@@ -233,15 +235,12 @@ void Pipeline::Impl::tracker_loop() noexcept {
   bool audio_was_up = false;
 
   const auto step = [&](double t, double freq, double snr, bool tracked) {
-    // A fix is fresh while no older than the GPS timeout (measured at the fix time, not the receive time).
+    // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
+    // disagreement between the sound card's clock and the GPS cannot hide a good fix).
     double gps_speed = kNan;
     if (gps) {
-      if (const auto r = gps->latest(); r && r->usable()) {
-        const double fix_t = r->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
-        if (monotonic_ns() - r->rx_ns <= static_cast<std::int64_t>(config.gps.timeout * 1e9) &&
-            t - fix_t <= config.gps.timeout)
-          gps_speed = r->speed;
-      }
+      if (const auto r = gps->latest(); r && r->usable() && gps->has_gps(monotonic_ns()))
+        gps_speed = r->speed;
     }
     const bool confident =
         tracked && std::isfinite(freq) && snr >= min_snr_db.load(std::memory_order_relaxed);
@@ -265,7 +264,10 @@ void Pipeline::Impl::tracker_loop() noexcept {
     // A retrained model takes over between two steps.
     if (auto m = model.get(); m != current_model) {
       current_model = std::move(m);
-      synth.set_model(current_model);
+      if (!synth.set_model(current_model))
+        report("model", spdlog::level::err,
+               "synthesis: cannot use the new model (" + std::to_string(current_model->gears.size()) +
+                   " gears is more than it supports); keeping the previous one");
     }
 
     // Audio: open with backoff while it fails; the daemon runs on GPS alone meanwhile.
@@ -345,6 +347,10 @@ void Pipeline::Impl::tracker_loop() noexcept {
     if (gps) {
       if (const auto rep = gps->latest(); rep && rep->rx_ns != last_rx) {
         last_rx = rep->rx_ns;
+        if (rep->usable()) {
+          last_fix_speed.store(rep->speed, std::memory_order_relaxed);
+          last_fix_ns.store(rep->rx_ns, std::memory_order_relaxed);
+        }
         if (rep->usable() && pending_count < pending.size()) {
           const double t_fix = rep->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
           pending[pending_count++] = {t_fix, wall_now() - (now - t_fix), rep->speed};
@@ -453,12 +459,11 @@ PipelineSnapshot Pipeline::snapshot() const {
       s.gps_state = "disconnected";
     else
       s.gps_state = d.gps->has_gps(now) ? "fix" : "no-fix";
-    if (r) {
-      s.gps_mode = r->mode;
-      if (r->usable()) {
-        s.gps_speed = r->speed;
-        s.gps_age = (now - r->rx_ns) * 1e-9;
-      }
+    if (r) s.gps_mode = r->mode;
+    // Age and speed of the last usable fix, also through an outage (how long GPS has been gone).
+    if (const std::int64_t fix_ns = d.last_fix_ns.load(std::memory_order_relaxed); fix_ns > 0) {
+      s.gps_speed = d.last_fix_speed.load(std::memory_order_relaxed);
+      s.gps_age = (now - fix_ns) * 1e-9;
     }
     if (s.gps_state == "fix") s.gps_error.clear();
   }

@@ -77,6 +77,11 @@ void Retrainer::set_settings(Settings settings) noexcept {
   wake_.notify_all();
 }
 
+Retrainer::Settings Retrainer::settings() const {
+  std::lock_guard lock(mutex_);
+  return settings_;
+}
+
 Retrainer::Status Retrainer::status() const {
   std::lock_guard lock(mutex_);
   return status_;
@@ -104,6 +109,14 @@ bool Retrainer::retrain_now() {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
                              fitted.reason.empty() ? "no reason given" : fitted.reason);
         spdlog::warn("retrain: {}", result);
+      } else if (const ModelPtr current = model_.get();
+                 current && !current->empty() &&
+                 fitted.samples < std::min(current->samples, settings().replace_min_samples)) {
+        result = fmt::format(
+            "fit on {} samples found {} gears; current model (fitted on {} samples) kept until a fit uses {}",
+            fitted.samples, fitted.gears.size(), current->samples,
+            std::min(current->samples, settings().replace_min_samples));
+        spdlog::info("retrain: {}", result);
       } else {
         const std::size_t gears = fitted.gears.size();
         auto next = std::make_shared<const GearModel>(std::move(fitted));

@@ -27,6 +27,9 @@ class Retrainer {
   struct Settings {
     std::chrono::duration<double> interval{600.0};
     std::size_t min_new_samples = 600;
+    // A fit on fewer samples than this (and than the current model's) does not replace a trained model:
+    // ten minutes in town must not overwrite a ladder learned over days.
+    std::size_t replace_min_samples = 3600;
   };
 
   struct Status {
@@ -49,6 +52,7 @@ class Retrainer {
   void request() noexcept;
   void set_settings(Settings settings) noexcept;
   [[nodiscard]] Status status() const;
+  [[nodiscard]] Settings settings() const;
   // Runs one fit now on the calling thread (what the thread does); returns true if the model changed.
   bool retrain_now();
 

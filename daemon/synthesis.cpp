@@ -1,6 +1,8 @@
 #include "daemon/synthesis.hpp"
 
-#include <cmath>
+// core/speed_synth.hpp names its source enum gearpulse::SpeedSource, as drivers/speed_source.hpp names
+// its GPS interface class: this file includes only the former, the pipeline only the latter.
+#include "core/speed_synth.hpp"
 
 namespace gearpulse::daemon {
 
@@ -18,35 +20,39 @@ const char* to_string(Source source) noexcept {
   return "none";
 }
 
-// Until the gear-tracking synthesizer is built in: GPS speed while fresh; without GPS, the nearest gear's
-// theta x frequency if a model exists, else none.
+namespace {
+
+Source from_core(gearpulse::SpeedSource source) noexcept {
+  switch (source) {
+    case gearpulse::SpeedSource::kGps:
+      return Source::kGps;
+    case gearpulse::SpeedSource::kEngine:
+      return Source::kEngine;
+    case gearpulse::SpeedSource::kCoast:
+      return Source::kCoast;
+    case gearpulse::SpeedSource::kNone:
+      break;
+  }
+  return Source::kNone;
+}
+
+}  // namespace
+
+// The same SpeedSynthesizer `gearpulse replay` runs, stepped live.
 struct Synthesis::Impl {
-  std::shared_ptr<const GearModel> model;
-  double last_speed = 0.0;
+  SpeedSynthesizer synth;
 };
 
 Synthesis::Synthesis() : impl_(std::make_unique<Impl>()) {}
 Synthesis::~Synthesis() = default;
 
-void Synthesis::set_model(std::shared_ptr<const GearModel> model) noexcept {
-  impl_->model = std::move(model);
+bool Synthesis::set_model(std::shared_ptr<const GearModel> model) noexcept {
+  return impl_->synth.set_model(std::move(model));
 }
 
-SynthStep Synthesis::step(double, double gps_speed, double freq) noexcept {
-  if (std::isfinite(gps_speed)) {
-    impl_->last_speed = gps_speed;
-    return {gps_speed, 0, Source::kGps};
-  }
-  const GearModel* m = impl_->model.get();
-  if (m && !m->empty() && std::isfinite(freq) && freq > 0) {
-    double best = m->gears.front().theta * freq;
-    for (const Gear& g : m->gears)
-      if (std::abs(g.theta * freq - impl_->last_speed) < std::abs(best - impl_->last_speed))
-        best = g.theta * freq;
-    impl_->last_speed = best;
-    return {best, 0, Source::kEngine};
-  }
-  return {0.0, 0, Source::kNone};
+SynthStep Synthesis::step(double t, double gps_speed, double freq) noexcept {
+  const SynthOutput out = impl_->synth.step(t, gps_speed, freq);
+  return {out.speed, out.gear, from_core(out.source)};
 }
 
 }  // namespace gearpulse::daemon

@@ -26,7 +26,8 @@ class Synthesis {
   Synthesis& operator=(const Synthesis&) = delete;
 
   // Between two steps; no allocation; output stays continuous.
-  void set_model(std::shared_ptr<const GearModel> model) noexcept;
+  // False (and the previous model kept) if the synthesizer cannot use it.
+  bool set_model(std::shared_ptr<const GearModel> model) noexcept;
   // t: seconds (CLOCK_MONOTONIC), non-decreasing. gps_speed: m/s or NaN without a fresh fix;
   // freq: Hz or NaN when the engine component is not tracked with confidence.
   SynthStep step(double t, double gps_speed, double freq) noexcept;

@@ -267,3 +267,33 @@ TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
   CHECK(fits.load() == 1);
   CHECK(model.trained());
 }
+
+TEST_CASE("daemon: a fit on few samples does not replace a model learned on many") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  store.add({1.0, 10.0, 100.0});
+  ModelHolder model;
+  GearModel big = three_gears();
+  big.samples = 50'000;
+  const auto good = std::make_shared<const GearModel>(big);
+  model.set(good);
+  std::size_t fitted_samples = 100;
+  Retrainer retrainer(
+      store, model, dir / "model.json",
+      [&](std::span<const Sample>) {
+        GearModel m = three_gears();
+        m.samples = fitted_samples;
+        return m;
+      },
+      {std::chrono::duration<double>(600.0), 1, 3600});
+  CHECK_FALSE(retrainer.retrain_now());
+  CHECK(model.get() == good);
+  fitted_samples = 3600;
+  CHECK(retrainer.retrain_now());
+  CHECK(model.get()->samples == 3600);
+  // Without a model any ladder is better than none.
+  model.set(nullptr);
+  fitted_samples = 10;
+  CHECK(retrainer.retrain_now());
+  CHECK(model.get()->samples == 10);
+}
