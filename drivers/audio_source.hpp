@@ -13,8 +13,9 @@ class AudioSource {
   virtual void start() = 0;
   virtual void stop() = 0;
   [[nodiscard]] virtual unsigned rate() const noexcept = 0;  // frames per second after negotiation
-  // CLOCK_MONOTONIC ns at which ring frame `index` was captured. False (and t_ns untouched) if no clock
-  // is known for it yet (the frame has not been pushed, or its anchor was overwritten long ago).
+  // CLOCK_MONOTONIC ns at which ring frame `index` was captured. False (and t_ns untouched) if no anchor
+  // covers it: nothing captured yet, or the frame is so old that its anchor left the history. Frames
+  // not pushed yet are extrapolated from the newest anchor.
   [[nodiscard]] virtual bool frame_time(std::uint64_t index, std::int64_t& t_ns) const noexcept = 0;
 };
 
