@@ -385,7 +385,7 @@ void AlsaCapture::run() noexcept {
       republish = true;
     } else if (c - corrected_at >= rate_ / 4) {
       const double err = measured - clock_at(c);
-      const double max_err = std::max(20e6, 4 * period_ns);
+      const double max_err = std::max(100e6, 4 * period_ns);  // beyond: frames were lost, not late
       if (err > max_err) {  // frames went missing without an xrun report: jump forward
         t0 = measured;
         c0 = c;
