@@ -22,7 +22,7 @@ void sleep_until(std::int64_t t_ns) noexcept {
 
 }  // namespace
 
-PulseThread::PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<std::int64_t> rise_log)
+PulseThread::PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<RiseRecord> rise_log)
     : output_(output), config_(std::move(config)), rise_log_(rise_log) {}
 
 PulseThread::~PulseThread() {
@@ -76,7 +76,7 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
         pulses_.fetch_add(1, std::memory_order_relaxed);
         const std::size_t n = logged_.load(std::memory_order_relaxed);
         if (n < rise_log_.size()) {
-          rise_log_[n] = e.t_ns;
+          rise_log_[n] = {e.t_ns, monotonic_ns()};
           logged_.store(n + 1, std::memory_order_release);
         }
       } else {

@@ -22,6 +22,12 @@ struct PulseThreadConfig {
   bool lock_memory = false;  // mlockall(MCL_CURRENT | MCL_FUTURE) (failure reported)
 };
 
+// One rising edge as planned and as done, for benches and tests.
+struct RiseRecord {
+  std::int64_t scheduled_ns = 0;  // the scheduler's edge time
+  std::int64_t written_ns = 0;    // CLOCK_MONOTONIC when output.rise() returned
+};
+
 struct PulseThreadStatus {
   std::uint64_t pulses = 0;      // rising edges emitted
   std::uint64_t late_edges = 0;  // edges emitted more than 1 ms after their scheduled time
@@ -33,9 +39,9 @@ struct PulseThreadStatus {
 
 class PulseThread {
  public:
-  // `output` is borrowed and must outlive the thread. `rise_log` (optional, borrowed) receives the
-  // scheduled time of each rising edge, in order, until it is full: for benches and tests.
-  PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<std::int64_t> rise_log = {});
+  // `output` is borrowed and must outlive the thread. `rise_log` (optional, borrowed) receives every
+  // rising edge, in order, until it is full: for benches and tests.
+  PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<RiseRecord> rise_log = {});
   ~PulseThread();  // stop()
   PulseThread(const PulseThread&) = delete;
   PulseThread& operator=(const PulseThread&) = delete;
@@ -55,7 +61,7 @@ class PulseThread {
 
   PulseOutput& output_;
   const PulseThreadConfig config_;
-  std::span<std::int64_t> rise_log_;
+  std::span<RiseRecord> rise_log_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> running_{false};
