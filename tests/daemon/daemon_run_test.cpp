@@ -7,7 +7,12 @@
 #include <string>
 #include <thread>
 
+#include <ctime>
+
+#include "daemon/model_store.hpp"
+#include "daemon/training_store.hpp"
 #include "tests/daemon/test_util.hpp"
+#include "tools/sim/vehicle_sim.hpp"
 
 using gearpulse::test::LineClient;
 using gearpulse::test::Process;
@@ -162,4 +167,73 @@ TEST_CASE("daemon: a corrupt model and training store are logged and ignored") {
   const std::string log = read_text(dir / "log.txt");
   CHECK(log.find("model: ignoring") != std::string::npos);
   CHECK(log.find("training: discarding") != std::string::npos);
+}
+
+TEST_CASE("daemon: learns a model from a restored training store and saves it") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  const auto vehicle = gearpulse::sim::vehicle_preset("bmw-520i");
+  const auto obs =
+      gearpulse::sim::simulate_observations(vehicle, gearpulse::sim::DrivingStyle::kMixed, 2400.0, 1, 21);
+  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
+  const double now = static_cast<double>(std::time(nullptr));
+  for (const auto& s : gearpulse::sim::to_samples(obs))
+    store.add({now - 2400.0 + s.t, s.speed, s.freq});
+  REQUIRE(store.size() > 1000);
+  store.save(dir / "state/training.bin");
+  // config_for already has a [model] table: the retrain keys go into it.
+  std::string text = config_for(dir);
+  text.replace(text.find("[model]\n"), 8, "[model]\nmin_new_samples = 1000\nretrain_interval = 3600\n");
+  write_text(dir / "gearpulse.toml", text);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  json status;
+  for (int i = 0; i < 600; ++i) {
+    status = wait_for_status(dir, daemon);
+    if (!status.is_object() || status["model"]["state"] == "trained") break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  REQUIRE(status["model"]["state"] == "trained");
+  REQUIRE(status["gears"].size() == vehicle.theta.size());
+  for (std::size_t i = 0; i < vehicle.theta.size(); ++i)
+    CHECK(status["gears"][i]["theta"].get<double>() == Approx(vehicle.theta[i]).epsilon(0.02));
+  CHECK(status["training_samples"].get<std::size_t>() == store.size());
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  // Written atomically in the format of `gearpulse fit --out`, and loaded again.
+  const auto loaded = gearpulse::daemon::load_model_file(dir / "state/model.json");
+  REQUIRE(loaded.model);
+  CHECK(loaded.model->gears.size() == vehicle.theta.size());
+}
+
+TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
+  TempDir dir;
+  const std::string notify_path = (dir / "notify").string();
+  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, notify_path.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt",
+                 {"NOTIFY_SOCKET=" + notify_path, "WATCHDOG_USEC=600000"});
+  std::string all;
+  const auto receive_until = [&](const std::string& what) {
+    for (int i = 0; i < 200 && all.find(what) == std::string::npos; ++i) {
+      pollfd pfd{sock, POLLIN, 0};
+      if (::poll(&pfd, 1, 100) <= 0) continue;
+      char buf[4096];
+      const ssize_t n = ::recv(sock, buf, sizeof buf, 0);
+      if (n > 0) all.append(buf, static_cast<std::size_t>(n)).append("\n");
+    }
+    return all.find(what) != std::string::npos;
+  };
+  CHECK(receive_until("READY=1"));
+  CHECK(all.find("STATUS=") != std::string::npos);
+  CHECK(receive_until("WATCHDOG=1"));
+  daemon.signal(SIGTERM);
+  CHECK(receive_until("STOPPING=1"));
+  CHECK(daemon.wait() == 0);
+  ::close(sock);
 }

@@ -278,14 +278,13 @@ TEST_CASE("daemon: a fit on few samples does not replace a model learned on many
   const auto good = std::make_shared<const GearModel>(big);
   model.set(good);
   std::size_t fitted_samples = 100;
-  Retrainer retrainer(
-      store, model, dir / "model.json",
-      [&](std::span<const Sample>) {
-        GearModel m = three_gears();
-        m.samples = fitted_samples;
-        return m;
-      },
-      {std::chrono::duration<double>(600.0), 1, 3600});
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) {
+                        GearModel m = three_gears();
+                        m.samples = fitted_samples;
+                        return m;
+                      },
+                      {std::chrono::duration<double>(600.0), 1, 3600});
   CHECK_FALSE(retrainer.retrain_now());
   CHECK(model.get() == good);
   fitted_samples = 3600;

@@ -125,9 +125,13 @@ class LineClient {
 // A child process with stderr captured to a file.
 class Process {
  public:
-  Process(const std::vector<std::string>& argv, const std::filesystem::path& log) {
+  // `env`: extra "NAME=value" entries for the child.
+  Process(const std::vector<std::string>& argv, const std::filesystem::path& log,
+          const std::vector<std::string>& env = {}) {
     pid_ = ::fork();
     if (pid_ == 0) {
+      for (const auto& e : env)
+        ::putenv(const_cast<char*>(e.c_str()));
       const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       if (fd >= 0) {
         ::dup2(fd, 1);
