@@ -186,6 +186,7 @@ nlohmann::json Daemon::Impl::status_json() {
   };
   reply["output"] = {
       {"kind", to_string(config.output.kind)}, {"state", p.output_state}, {"error", p.output_error}};
+  reply["output"]["pulses_per_km"] = config.output.pulses_per_km;
   if (config.output.kind == OutputKind::kPty) reply["output"]["path"] = config.output.path;
   if (config.output.kind == OutputKind::kGpio)
     reply["output"]["path"] = fmt::format("{}:{}", config.output.chip, config.output.line);

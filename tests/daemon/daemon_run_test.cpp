@@ -237,3 +237,45 @@ TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
   CHECK(daemon.wait() == 0);
   ::close(sock);
 }
+
+TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly without a daemon") {
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  {
+    Process absent({ctl, "--socket", sock, "status"}, dir / "absent.txt");
+    const auto rc = absent.wait();
+    REQUIRE(rc.has_value());
+    CHECK(*rc != 0);
+    CHECK(read_text(dir / "absent.txt").find("gearpulsed is not running") != std::string::npos);
+  }
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+
+  Process table({ctl, "--socket", sock, "status"}, dir / "table.txt");
+  CHECK(table.wait() == 0);
+  const std::string text = read_text(dir / "table.txt");
+  CHECK(text.find("source") != std::string::npos);
+  CHECK(text.find("model        learning") != std::string::npos);
+
+  Process raw({ctl, "--socket", sock, "status", "--json"}, dir / "raw.txt");
+  CHECK(raw.wait() == 0);
+  const json parsed = json::parse(read_text(dir / "raw.txt"));
+  CHECK(parsed["ok"] == true);
+  CHECK(parsed.contains("pulses"));
+
+  Process refuse({ctl, "--socket", sock, "reset-model"}, dir / "refuse.txt");
+  CHECK(refuse.wait() == 2);
+  CHECK(read_text(dir / "refuse.txt").find("--confirm") != std::string::npos);
+  Process reset({ctl, "--socket", sock, "reset-model", "--confirm"}, dir / "reset.txt");
+  CHECK(reset.wait() == 0);
+  Process gears({ctl, "--socket", sock, "gears"}, dir / "gears.txt");
+  CHECK(gears.wait() == 0);
+  Process retrain({ctl, "--socket", sock, "retrain", "--json"}, dir / "retrain.txt");
+  CHECK(retrain.wait() == 0);
+  CHECK(json::parse(read_text(dir / "retrain.txt"))["queued"] == true);
+
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
