@@ -31,16 +31,21 @@ constexpr double kMemory = 0.7;
 constexpr double kJumpPenalty = 2.0;
 // Detection thresholds on the per-bin SNR of the fundamental (noise-only bins are Exp(1) distributed):
 // acquisition must beat the maximum of ~20 noise bins, keeping a line already followed need not.
-constexpr double kAcquireSnr = 4.0;  // on the accumulated SNR (see kLadderMemory)
+constexpr double kAcquireSnr = 5.0;  // on the mean SNR of a run of consistent estimates
 constexpr double kKeepSnr = 3.0;     // accumulated
 constexpr double kKeepSnrNow = 1.5;  // this hop alone
 // Ladder evidence: summed per-bin SNR of the other orders minus its noise-only expectation, averaged
 // exponentially along a run of consistent estimates (noise-only: mean 0, standard deviation ~0.7).
 constexpr double kAcquireLadder = 2.5;
-constexpr double kKeepLadder = 0.5;
+constexpr double kReacquireLadder = 1.0;  // for a run that inherited an engine's evidence
+constexpr double kKeepLadder = 0.0;
 constexpr double kLadderMemory = 0.7;
 // A line lost for longer than this is re-acquired, not kept.
 constexpr double kCoastS = 0.5;
+// Engine evidence younger than this carries over (scaled) to a new line: shifts and leaving idle.
+constexpr double kCarryS = 1.0;
+constexpr double kCarry = 0.8;
+constexpr double kIdleExitHz = 25.0;
 // Anti-alias filter: decimated rate at least this multiple of the highest scored harmonic.
 constexpr double kDecimationMargin = 2.4;
 constexpr double kStopbandDb = 70.0;
@@ -148,10 +153,18 @@ struct SlidingDftTracker::Impl {
   double cand_freq = kNaN;  // latest estimate, tracked or not
   double cand_t = kNaN;
   int cand_hops = 0;
+  bool carried = false;    // the current run inherited an engine's evidence
+  double engine_t = kNaN;  // last time a line with an engine's ladder was seen (tracked or at idle)
+  double engine_ladder = 0.0;
+  double engine_freq = kNaN;
 
   // Largest plausible change of the engine frequency over dt seconds.
   [[nodiscard]] double slew_gate(double dt) const noexcept {
     return cfg.max_slew_hz_per_s * dt + 2.0 * df + 1.0;
+  }
+  // Largest change at a gear shift, followed only while the line stays strong.
+  [[nodiscard]] double shift_gate(double dt) const noexcept {
+    return std::max(cfg.max_slew_hz_per_s, cfg.shift_slew_hz_per_s) * dt + 2.0 * df + 1.0;
   }
 
   // Output queue and hop history (fixed rings).
@@ -605,7 +618,15 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // zero: one lucky hop of noise cannot acquire, a fixed tone never builds a ladder.
   const bool consistent = gap <= kCoastS + 1e-9 && std::abs(ev.freq - cand_freq) <= slew_gate(gap);
   if (!consistent) {
-    ladder_acc = snr_acc = half_acc = 0.0;
+    // Right after an engine was seen (a gear shift moves its line faster than the slew gate; an engine
+    // rising from idle leaves the octave check), its ladder evidence carries over to the new line.
+    // Only downwards (an up-shift) or into the bottom of the band (leaving idle): a fan elsewhere must
+    // not inherit the engine's evidence when the engine stops.
+    const bool engine_recent = std::isfinite(engine_t) && out.t - engine_t <= kCarryS + 1e-9 &&
+                               (ev.freq < engine_freq || ev.freq < cfg.band_lo_hz + kIdleExitHz);
+    ladder_acc = engine_recent ? std::max(ladder_acc, engine_ladder) * kCarry : 0.0;
+    carried = engine_recent;
+    snr_acc = half_acc = 0.0;
     cand_hops = 0;
   }
   half_acc = kLadderMemory * half_acc + (1.0 - kLadderMemory) * ev.snr[0];
@@ -618,12 +639,21 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // turning below the band (idle).
   const bool octave = ev.available[0] && half_acc > snr_acc;
   const bool ladder_keep = !cfg.require_harmonics || ladder_acc >= kKeepLadder;
-  const bool ladder_acquire = !cfg.require_harmonics || ladder_acc >= kAcquireLadder;
+  const bool ladder_acquire =
+      !cfg.require_harmonics || ladder_acc >= (carried ? kReacquireLadder : kAcquireLadder);
   const bool keep = tracking && since <= kCoastS + 1e-9 &&
-                    std::abs(ev.freq - last_freq) <= slew_gate(since) && snr_acc >= kKeepSnr &&
-                    ev.snr[1] >= kKeepSnrNow && ladder_keep && !octave;
+                    (std::abs(ev.freq - last_freq) <= slew_gate(since) ||
+                     (ev.snr[1] >= kAcquireSnr && std::abs(ev.freq - last_freq) <= shift_gate(since))) &&
+                    snr_acc >= kKeepSnr && ev.snr[1] >= kKeepSnrNow && ladder_keep && !octave;
+  // The run's mean SNR (the exponential average corrected for its start from zero).
+  const double snr_mean = snr_acc / (1.0 - std::pow(kLadderMemory, cand_hops));
   const bool acquire =
-      cand_hops >= 2 && snr_acc >= kAcquireSnr && ev.snr[1] >= kKeepSnr && ladder_acquire && !octave;
+      cand_hops >= 2 && snr_mean >= kAcquireSnr && ev.snr[1] >= kKeepSnr && ladder_acquire && !octave;
+  if (ladder_acc >= kAcquireLadder && snr_mean >= kAcquireSnr) {
+    engine_t = out.t;
+    engine_ladder = ladder_acc;
+    engine_freq = octave ? ev.freq / 2.0 : ev.freq;
+  }
 #ifdef GEARPULSE_TRACKER_DEBUG
   std::fprintf(stderr, "t %.2f f %.2f snr %.1f %.1f %.1f %.1f lad %.1f acc %.1f %.1f keep %d acq %d\n", out.t,
                ev.freq, ev.snr[0], ev.snr[1], ev.snr[2], ev.snr[3], ev.ladder_excess, ladder_acc, snr_acc,
@@ -683,6 +713,8 @@ std::string SlidingDftTracker::validate(const TrackerConfig& c) {
     return format("hop %g s is shorter than one frame at %g Hz", c.hop_s, c.sample_rate_hz);
   if (!finite(c.max_slew_hz_per_s) || c.max_slew_hz_per_s < 0)
     return format("max slew %g Hz/s is not a non-negative number", c.max_slew_hz_per_s);
+  if (!finite(c.shift_slew_hz_per_s) || c.shift_slew_hz_per_s < 0)
+    return format("shift slew %g Hz/s is not a non-negative number", c.shift_slew_hz_per_s);
   if (!finite(c.history_s) || c.history_s < 0 || c.history_s > 60)
     return format("history %g s is outside [0, 60] s", c.history_s);
   return {};
@@ -722,6 +754,9 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.ladder_acc = s.snr_acc = s.half_acc = 0.0;
   s.cand_freq = s.cand_t = kNaN;
   s.cand_hops = 0;
+  s.carried = false;
+  s.engine_t = kNaN;
+  s.engine_ladder = 0.0;
   s.q_head = s.q_size = 0;
   s.h_head = s.h_size = 0;
 }

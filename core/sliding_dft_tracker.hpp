@@ -27,8 +27,9 @@ struct TrackerConfig {
   double hop_s = 0.1;               // time between outputs
   double band_lo_hz = 50.0;         // search band of the fundamental (the paper's 50-200 Hz)
   double band_hi_hz = 200.0;
-  double max_slew_hz_per_s = 60.0;  // fastest engine-frequency change followed without a re-acquisition
-  double history_s = 2.0;           // input kept for at() (windows centred up to this far back)
+  double max_slew_hz_per_s = 60.0;     // fastest engine-frequency change followed without a re-acquisition
+  double shift_slew_hz_per_s = 250.0;  // fastest change at a gear shift, followed while the line is strong
+  double history_s = 2.0;              // input kept for at() (windows centred up to this far back)
   // Acquire only a line with a harmonic ladder (f/2, 2f or 3f present). A fan or pump tone has none;
   // set false for a signal whose engine component is a pure sinusoid.
   bool require_harmonics = true;
