@@ -33,7 +33,7 @@ constexpr double kJumpPenalty = 2.0;
 // acquisition must beat the maximum of ~20 noise bins, keeping a line already followed need not.
 constexpr double kAcquireSnr = 5.0;  // on the mean SNR of a run of consistent estimates
 constexpr double kKeepSnr = 3.0;     // accumulated
-constexpr double kKeepSnrNow = 1.5;  // this hop alone
+constexpr double kKeepSnrNow = 2.2;  // this hop alone
 // Ladder evidence: summed per-bin SNR of the other orders minus its noise-only expectation, averaged
 // exponentially along a run of consistent estimates (noise-only: mean 0, standard deviation ~0.7).
 constexpr double kAcquireLadder = 2.5;
