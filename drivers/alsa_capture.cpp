@@ -192,11 +192,13 @@ void AlsaCapture::publish_anchor(const Anchor& a) noexcept {
   if (n > 0 && anchors_[(n - 1) % kAnchors].frame.load(std::memory_order_relaxed) == a.frame) --n;
   AnchorSlot& slot = anchors_[n % kAnchors];
   const std::uint32_t seq = slot.seq.load(std::memory_order_relaxed);
+  // Seqlock with atomic fields only (no fences, so ThreadSanitizer understands it): the release stores
+  // of the fields keep the odd sequence number before them, the reader's acquire loads keep its second
+  // look at the sequence number after them.
   slot.seq.store(seq + 1, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_release);
-  slot.frame.store(a.frame, std::memory_order_relaxed);
-  slot.t_ns.store(a.t_ns, std::memory_order_relaxed);
-  slot.ns_per_frame.store(a.ns_per_frame, std::memory_order_relaxed);
+  slot.frame.store(a.frame, std::memory_order_release);
+  slot.t_ns.store(a.t_ns, std::memory_order_release);
+  slot.ns_per_frame.store(a.ns_per_frame, std::memory_order_release);
   slot.seq.store(seq + 2, std::memory_order_release);
   anchor_count_.store(n + 1, std::memory_order_release);
 }
@@ -209,10 +211,9 @@ bool AlsaCapture::frame_time(std::uint64_t index, std::int64_t& t_ns) const noex
     Anchor a;
     for (;;) {  // seqlock read: retry while the capture thread is rewriting this slot
       const std::uint32_t s1 = slot.seq.load(std::memory_order_acquire);
-      a.frame = slot.frame.load(std::memory_order_relaxed);
-      a.t_ns = slot.t_ns.load(std::memory_order_relaxed);
-      a.ns_per_frame = slot.ns_per_frame.load(std::memory_order_relaxed);
-      std::atomic_thread_fence(std::memory_order_acquire);
+      a.frame = slot.frame.load(std::memory_order_acquire);
+      a.t_ns = slot.t_ns.load(std::memory_order_acquire);
+      a.ns_per_frame = slot.ns_per_frame.load(std::memory_order_acquire);
       const std::uint32_t s2 = slot.seq.load(std::memory_order_relaxed);
       if (s1 == s2 && (s1 & 1u) == 0) break;
     }
