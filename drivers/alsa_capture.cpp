@@ -416,6 +416,11 @@ void AlsaCapture::run() noexcept {
     republish = pushed < frames;
     if (pushed < frames) dropped_.fetch_add(frames - pushed, std::memory_order_relaxed);
     c += frames;
+    // A source that delivers faster than real time (a file, or a FIFO whose writer has gone: the file
+    // plugin then returns silence at once) would spin this thread. A sound card never runs ahead of
+    // the clock, so holding the stream to at most a second ahead of real time only touches those.
+    const double ahead = clock_at(c) - static_cast<double>(monotonic_ns());
+    if (ahead > 1e9) pause(static_cast<std::int64_t>(ahead - 0.5e9));
   }
   if (pcm) ::snd_pcm_drop(pcm);
   pcm_ = pcm;

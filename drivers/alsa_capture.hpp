@@ -2,7 +2,8 @@
 // ALSA capture into the SPSC ring, with sample-clock timestamps.
 //
 // A capture thread reads periods (non-blocking PCM, snd_pcm_wait with a timeout so stop() is prompt and
-// the thread never spins), converts S16/S32/FLOAT interleaved frames to float mono (one chosen channel or
+// the thread never spins; a source faster than real time, such as a file, is held to at most a second
+// ahead of the clock), converts S16/S32/FLOAT interleaved frames to float mono (one chosen channel or
 // the mean of all) and pushes them with try_push_bulk. Recovery follows the PCM state as PipeWire does:
 // -EPIPE (XRUN) and -ESTRPIPE (SUSPENDED: resume, else prepare) are handled separately, then the stream
 // is prepared and restarted; -ENODEV and other fatal errors close the PCM and reopen it with backoff.

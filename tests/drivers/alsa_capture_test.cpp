@@ -329,3 +329,23 @@ TEST_CASE("alsa: an unknown PCM name is a clear error") {
   CHECK_THROWS_WITH(AlsaCapture(cfg, ring),
                     Catch::Contains("no_such_pcm_gearpulse") && Catch::Contains("cannot open"));
 }
+
+TEST_CASE("alsa: a source faster than real time is held to the clock instead of spinning") {
+  TempDir dir;
+  std::vector<std::int16_t> src(48000 * 10, 0);  // 10 s of audio, read unpaced by the file plugin
+  write_raw(dir / "in.raw", src);
+  use_alsa_config(dir, "replay", dir / "in.raw");
+  SpscRing<float> ring(1 << 20);
+  AlsaCaptureConfig cfg;
+  cfg.device = "replay";
+  AlsaCapture cap(cfg, ring);
+  const std::int64_t start = gearpulse::monotonic_ns();
+  cap.start();
+  REQUIRE(wait_for([&] { return cap.stats().frames >= 48000; }, 10s));
+  std::this_thread::sleep_for(300ms);
+  const auto frames = cap.stats().frames;
+  const double elapsed_s = static_cast<double>(gearpulse::monotonic_ns() - start) / 1e9;
+  cap.stop();
+  // At most one second ahead of real time (plus a period); unthrottled it would be all 10 s at once.
+  CHECK(static_cast<double>(frames) <= (elapsed_s + 1.0) * 48000 + cap.period_frames());
+}
