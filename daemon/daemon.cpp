@@ -17,6 +17,7 @@
 
 #include "daemon/atomic_file.hpp"
 #include "daemon/control_server.hpp"
+#include "daemon/log_limiter.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/systemd_notify.hpp"
@@ -89,7 +90,48 @@ struct Daemon::Impl {
   nlohmann::json handle(const nlohmann::json& request);
   nlohmann::json status_json();
   std::string status_line();
+  void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
+  LogLimiter limiter;
 };
+
+// The journal gets one line per change of state (GPS lost or back, source switch, output errors), and
+// repeated faults at most once a minute, so a log read at 2 a.m. tells what happened and when.
+void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now) {
+  const std::string server = fmt::format("{}:{}", config.gps.host, config.gps.port);
+  if (now.gps_state != before.gps_state) {
+    if (now.gps_state == "fix")
+      spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
+    else if (now.gps_state == "no-fix")
+      spdlog::warn("gps: no usable fix from gpsd at {} for {:.1f} s; speed now from {}", server,
+                   config.gps.timeout, now.source);
+    else
+      limiter.reset("gps");
+  }
+  if (now.gps_state == "disconnected" && !now.gps_error.empty()) {
+    std::uint64_t suppressed = 0;
+    if (limiter.allow("gps", suppressed))
+      spdlog::warn("gps: {}; reconnecting with backoff{}", now.gps_error,
+                   suppressed ? fmt::format(" ({} more failures since the last report)", suppressed) : "");
+  }
+  if (now.source != before.source)
+    spdlog::info("synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,
+                 now.speed * 3.6, now.gear);
+  if (now.output_state != before.output_state && now.output_state == "write-errors")
+    spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
+                 config.output.path);
+  if (now.xruns > before.xruns) {
+    std::uint64_t suppressed = 0;
+    if (limiter.allow("xrun", suppressed))
+      spdlog::warn("audio: {} overrun(s) on {} (total {}); the capture recovered", now.xruns - before.xruns,
+                   config.audio.device, now.xruns);
+  }
+  if (now.ring_drops > before.ring_drops) {
+    std::uint64_t suppressed = 0;
+    if (limiter.allow("ring", suppressed))
+      spdlog::warn("audio: the tracker fell behind, {} frames dropped at the ring (total {})",
+                   now.ring_drops - before.ring_drops, now.ring_drops);
+  }
+}
 
 void Daemon::Impl::load_state() {
   std::error_code ec;
@@ -119,8 +161,10 @@ void Daemon::Impl::load_state() {
     if (!problem.empty())
       spdlog::error("training: discarding {}: {}; starting with an empty training store", store_path.string(),
                     problem);
-    else
+    else if (std::filesystem::exists(store_path))
       spdlog::info("training: {} stored pairs restored from {}", store.size(), store_path.string());
+    else
+      spdlog::info("training: no stored pairs yet ({} will hold them)", store_path.string());
   } catch (const std::exception& e) {
     spdlog::error("training: cannot read {}: {}; starting with an empty training store", store_path.string(),
                   e.what());
@@ -312,6 +356,7 @@ int Daemon::run() {
   auto last_status = Clock::now();
   std::string last_line;
   std::vector<std::string> last_stalled;
+  PipelineSnapshot previous = d.pipeline->snapshot();
   bool running = true;
   while (running) {
     pollfd pfd{sfd, POLLIN, 0};
@@ -338,6 +383,8 @@ int Daemon::run() {
                     fmt::join(snap.stalled, ", "));
     }
     last_stalled = snap.stalled;
+    d.log_changes(previous, snap);
+    previous = snap;
     if (now - last_status >= std::chrono::seconds(2)) {
       last_status = now;
       std::string line = d.status_line();
