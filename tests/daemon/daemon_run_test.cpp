@@ -279,3 +279,34 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
+
+TEST_CASE("daemon: SIGHUP applies what it can and names what needs a restart") {
+  TempDir dir;
+  const std::string base = config_for(dir);
+  write_text(dir / "gearpulse.toml", base);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+  const auto wait_log = [&](const std::string& what) {
+    for (int i = 0; i < 200; ++i) {
+      if (read_text(dir / "log.txt").find(what) != std::string::npos) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    }
+    return false;
+  };
+  // A broken file on reload is refused; the daemon keeps its running configuration.
+  write_text(dir / "gearpulse.toml", base + "[bogus]\n");
+  daemon.signal(SIGHUP);
+  CHECK(wait_log("keeping the running configuration"));
+  CHECK(wait_for_status(dir, daemon)["ok"] == true);
+
+  std::string changed = base;
+  changed.replace(changed.find("gearpulse_test_no_such_pcm"), 26, "gearpulse_test_other_pcm__");
+  changed.replace(changed.find("[model]\n"), 8, "[model]\nmin_new_samples = 7\n");
+  write_text(dir / "gearpulse.toml", changed);
+  daemon.signal(SIGHUP);
+  CHECK(wait_log("reload: [audio] changed; this takes effect only after a restart"));
+  CHECK(wait_log("reload: applied"));
+  CHECK(wait_for_status(dir, daemon)["ok"] == true);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
