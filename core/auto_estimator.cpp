@@ -10,8 +10,10 @@
 namespace gearpulse::detail {
 namespace {
 
-constexpr int kMaxGears = 8;
-constexpr std::size_t kWorkingSamples = 60000;  // model selection runs on a subsample of this size
+constexpr int kMaxCandidates = 10;              // gear scales tried at first (more than any gearbox has)
+constexpr std::size_t kWorkingSamples = 16000;  // model selection runs on a subsample of this size
+constexpr int kEmIterations = 120;
+constexpr int kFullDataIterations = 4;
 constexpr std::size_t kClutchBins = 24;
 constexpr double kMovingSpeed = 1.0;  // m/s: only these samples seed the gear scales
 
@@ -68,7 +70,9 @@ MixtureData subsample(const MixtureData& all, std::size_t target) {
   return out;
 }
 
-double run_em(const MixtureData& data, MixtureParams& p, int max_iter, double tol) {
+// Generalised EM until the log-likelihood gain per sample falls below tol. Returns the log-likelihood of
+// the final parameters if final_value, else that of the last E-step (saves a pass on large data).
+double run_em(const MixtureData& data, MixtureParams& p, int max_iter, double tol, bool final_value = true) {
   double previous = -INFINITY;
   double ll = -INFINITY;
   for (int it = 0; it < max_iter; ++it) {
@@ -91,7 +95,7 @@ double run_em(const MixtureData& data, MixtureParams& p, int max_iter, double to
     if (std::abs(ll - previous) < tol * static_cast<double>(data.size())) break;
     previous = ll;
   }
-  return log_likelihood(data, p);
+  return final_value ? log_likelihood(data, p) : ll;
 }
 
 MixtureParams initial_params(const MixtureData& data, const std::vector<double>& log_ratios, double vmax) {
@@ -129,35 +133,139 @@ struct Candidate {
   MixtureParams params;
   double log_likelihood = -INFINITY;
   double bic = INFINITY;
-  bool valid = false;
+};
+
+// What the physics of a gearbox asks of a fitted ladder, beyond the likelihood.
+struct LadderCheck {
+  int offender = -1;  // component to drop first, -1 if the ladder is plausible
   std::string reason;
 };
 
-// Physical checks of a fitted ladder (beyond what the likelihood sees).
-bool plausible_ladder(const MixtureData& data, const MixtureParams& p, std::string& reason) {
-  const int m = p.gears();
-  if (m < 2) {
-    reason = "only one gear-like cluster (one gear used, or an automatic/CVT)";
-    return false;
-  }
-  double gear_total = 0.0;
-  for (double a : p.alpha)
-    gear_total += a;
-  for (int i = 0; i < m; ++i) {
-    const double share = p.alpha[i] / gear_total;
-    if (share < 0.01 || p.alpha[i] * static_cast<double>(data.size()) < 10.0) {
-      reason = "a gear cluster carries too few samples";
-      return false;
+class LadderJudge {
+ public:
+  LadderJudge(const MixtureData& work, std::size_t total_samples) : work_(work), total_(total_samples) {
+    std::vector<double> idle;
+    for (std::size_t k = 0; k < work.size(); ++k) {
+      if (work.v[k] > kMovingSpeed) log_ratios_.push_back(std::log(work.v[k] / work.s[k]));
+      if (work.v[k] < 0.3) idle.push_back(work.s[k]);
+    }
+    std::sort(log_ratios_.begin(), log_ratios_.end());
+    // The idle frequency, from standstill samples, if the log has enough of them.
+    if (idle.size() >= 20) {
+      std::nth_element(idle.begin(), idle.begin() + static_cast<std::ptrdiff_t>(idle.size() / 2), idle.end());
+      idle_freq_ = idle[idle.size() / 2];
     }
   }
-  for (int i = 0; i + 1 < m; ++i) {
-    const double step = p.theta[i + 1] / p.theta[i];
-    if (step < 1.06 || step > 2.6) {
-      reason = "implausible spacing between gear clusters";
-      return false;
+
+  LadderCheck check(const MixtureParams& p) const {
+    const int m = p.gears();
+    double gear_total = 0.0;
+    for (double a : p.alpha)
+      gear_total += a;
+    // Every gear carries a real share of the driving.
+    int weakest = -1;
+    for (int i = 0; i < m; ++i) {
+      const double share = p.alpha[i] / gear_total;
+      const double expected = p.alpha[i] * static_cast<double>(total_);
+      if (share < 0.004 || expected < 8.0) {
+        if (weakest < 0 || p.alpha[i] < p.alpha[weakest]) weakest = i;
+      }
     }
+    if (weakest >= 0) return {weakest, "a gear cluster carries too few samples"};
+    // Adjacent gears are distinct (eq. (10)) and separated by a valley of the log(v/s) density: a smear
+    // (clutch slip, CVT) fitted by several narrow components has no valleys.
+    for (int i = 0; i + 1 < m; ++i) {
+      const double step = p.theta[i + 1] / p.theta[i];
+      const int smaller = p.alpha[i] < p.alpha[i + 1] ? i : i + 1;
+      if (step < 1.06) return {smaller, "gear clusters closer than any gearbox step"};
+      if (!valley_between(std::log(p.theta[i]), std::log(p.theta[i + 1])))
+        return {smaller, "no valley between gear clusters (a continuum, as from a CVT or clutch slip)"};
+    }
+    // A gear drives the engine above idle over a range of engine speeds. A cluster whose samples sit at
+    // idle, or within a narrow band just above it, is a slipping clutch (crawling in a jam).
+    if (idle_freq_ > 0.0) {
+      for (int i = 0; i < m; ++i) {
+        const FreqSpread f = freq_spread(p, i);
+        if (f.median < 1.15 * idle_freq_ || (f.median < 1.5 * idle_freq_ && f.p90 < 1.12 * f.p10))
+          return {i, "a cluster at idle frequency (clutch slip)"};
+      }
+    }
+    return {};
   }
-  return true;
+
+ private:
+  std::size_t count_in(double lo, double hi) const {
+    return static_cast<std::size_t>(std::upper_bound(log_ratios_.begin(), log_ratios_.end(), hi) -
+                                    std::lower_bound(log_ratios_.begin(), log_ratios_.end(), lo));
+  }
+
+  bool valley_between(double a, double b) const {
+    const double w = (b - a) / 6.0;
+    const double peak = static_cast<double>(std::min(count_in(a - w, a + w), count_in(b - w, b + w)));
+    const double mid = 0.5 * (a + b);
+    const double valley = static_cast<double>(count_in(mid - w, mid + w));
+    return peak >= 6.0 && valley < 0.5 * peak;
+  }
+
+  struct FreqSpread {
+    double p10 = 0.0;
+    double median = 0.0;
+    double p90 = 0.0;
+  };
+
+  FreqSpread freq_spread(const MixtureParams& p, int gear) const {
+    // Samples close to the gear line (within 3 of its standard deviations) stand for the component.
+    std::vector<double> freqs;
+    const double var = p.theta[gear] * p.theta[gear] * p.sigma_s * p.sigma_s + p.sigma_v * p.sigma_v;
+    const double limit = 3.0 * std::sqrt(var);
+    for (std::size_t k = 0; k < work_.size(); ++k) {
+      if (work_.v[k] > 0.3 && std::abs(work_.v[k] - p.theta[gear] * work_.s[k]) < limit)
+        freqs.push_back(work_.s[k]);
+    }
+    if (freqs.empty()) return {};
+    std::sort(freqs.begin(), freqs.end());
+    const std::size_t n = freqs.size() - 1;
+    return {freqs[n / 10], freqs[n / 2], freqs[n - n / 10]};
+  }
+
+  const MixtureData& work_;
+  std::size_t total_;
+  std::vector<double> log_ratios_;
+  double idle_freq_ = 0.0;
+};
+
+double bic_of(double log_likelihood, int gears, std::size_t n) {
+  // Free parameters: theta and alpha per gear, two sigmas, standstill weight and width, clutch weight and
+  // its bins; only the 2 per gear differ between candidates.
+  const double n_params = 2.0 * gears + 2.0 + 2.0 + 1.0 + static_cast<double>(kClutchBins - 1);
+  return -2.0 * log_likelihood + n_params * std::log(static_cast<double>(n));
+}
+
+MixtureParams without(const MixtureParams& p, int drop) {
+  MixtureParams q = p;
+  q.theta.erase(q.theta.begin() + drop);
+  q.beta_clutch += q.alpha[static_cast<std::size_t>(drop)];
+  q.alpha.erase(q.alpha.begin() + drop);
+  return q;
+}
+
+// Candidate gear scales: modes of log(v/s) at three smoothing widths, merged, highest first.
+std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std::size_t limit) {
+  std::vector<Peak> all;
+  for (double bw : {0.006, 0.015, 0.03}) {
+    const auto peaks = density_modes(log_ratios, bw);
+    all.insert(all.end(), peaks.begin(), peaks.end());
+  }
+  std::sort(all.begin(), all.end(), [](const Peak& a, const Peak& b) { return a.height > b.height; });
+  std::vector<double> out;
+  for (const Peak& pk : all) {
+    bool close = false;
+    for (double x : out)
+      close = close || std::abs(x - pk.log_ratio) < 0.05;
+    if (!close) out.push_back(pk.log_ratio);
+    if (out.size() == limit) break;
+  }
+  return out;
 }
 
 }  // namespace
@@ -178,40 +286,48 @@ GearModel fit_auto(const MixtureData& all, int gears) {
     return model;
   }
   const MixtureData work = subsample(all, kWorkingSamples);
-  std::vector<std::vector<Peak>> peak_sets = {
-      density_modes(log_ratios, 0.006), density_modes(log_ratios, 0.015), density_modes(log_ratios, 0.03)};
-  const int m_lo = gears > 0 ? gears : 1;
-  const int m_hi = gears > 0 ? gears : kMaxGears;
-  Candidate best;
-  Candidate best_any;
-  for (int m = m_lo; m <= m_hi; ++m) {
-    for (const auto& peaks : peak_sets) {
-      if (static_cast<int>(peaks.size()) < m) continue;
-      std::vector<double> init;
-      for (const Peak& pk : peaks) {
-        bool close = false;
-        for (double x : init)
-          close = close || std::abs(x - pk.log_ratio) < 0.04;
-        if (!close) init.push_back(pk.log_ratio);
-        if (static_cast<int>(init.size()) == m) break;
-      }
-      if (static_cast<int>(init.size()) < m) continue;
-      Candidate c;
-      c.params = initial_params(work, init, vmax);
-      c.log_likelihood = run_em(work, c.params, 300, 1e-7);
-      const double n_params = 2.0 * m + 2.0 + 2.0 + 1.0 + (kClutchBins - 1);
-      c.bic = -2.0 * c.log_likelihood + n_params * std::log(static_cast<double>(work.size()));
-      c.valid = plausible_ladder(work, c.params, c.reason);
-      if (c.bic < best_any.bic) best_any = c;
-      if (c.valid && c.bic < best.bic) best = c;
-    }
+  const LadderJudge judge(work, all.size());
+  std::vector<double> init =
+      candidate_scales(log_ratios, static_cast<std::size_t>(std::max(kMaxCandidates, gears)));
+  // A forced count larger than the modes found: fill the widest gaps geometrically.
+  while (static_cast<int>(init.size()) < gears) {
+    std::sort(init.begin(), init.end());
+    std::size_t widest = 0;
+    for (std::size_t i = 1; i + 1 < init.size(); ++i)
+      if (init[i + 1] - init[i] > init[widest + 1] - init[widest]) widest = i;
+    init.push_back(init.size() < 2 ? init[0] + 0.3 : 0.5 * (init[widest] + init[widest + 1]));
   }
-  if (!best.valid || (gears == 0 && best_any.params.gears() < 2)) {
-    model.reason = best_any.reason.empty() ? "no discrete gear ladder in the data" : best_any.reason;
+  // Backward elimination: fit all candidates, then drop one component at a time (an implausible one
+  // first, else the lightest), refitting each time; keep the plausible ladder of best BIC.
+  MixtureParams p = initial_params(work, init, vmax);
+  Candidate best;
+  std::string last_reason = "no discrete gear ladder in the data";
+  while (true) {
+    const double ll = run_em(work, p, kEmIterations, 1e-6);
+    const LadderCheck verdict = judge.check(p);
+    const int m = p.gears();
+    if (gears > 0 && m == gears) {
+      best = {p, ll, bic_of(ll, m, work.size())};
+      break;
+    }
+    if (verdict.offender < 0 && m >= 2) {
+      const double bic = bic_of(ll, m, work.size());
+      if (bic < best.bic) best = {p, ll, bic};
+    } else if (!verdict.reason.empty()) {
+      last_reason = verdict.reason;
+    }
+    if (m <= std::max(gears, 1)) break;
+    int drop = verdict.offender;
+    if (drop < 0) drop = static_cast<int>(std::min_element(p.alpha.begin(), p.alpha.end()) - p.alpha.begin());
+    p = without(p, drop);
+  }
+  if (best.params.gears() == 0) {
+    model.reason = last_reason;
     return model;
   }
-  MixtureParams p = best.params;
-  if (work.size() < all.size()) (void)run_em(all, p, 30, 1e-9);
+  p = best.params;
+  // The subsample chose the ladder; the full data sets the final values.
+  if (work.size() < all.size()) (void)run_em(all, p, kFullDataIterations, 1e-9, false);
   return finish_model(all, p, "auto", GradientLayout{p.gears(), true, p.beta_stand > 0.0});
 }
 

@@ -8,6 +8,48 @@
 
 namespace gearpulse {
 namespace detail {
+namespace {
+
+// Variances of theta_1..theta_M from the inverse observed information. A noise level estimated at its
+// boundary (sigma -> 0) leaves the information singular in that direction; it is then held fixed (its
+// rows dropped) rather than letting it poison the theta block.
+Eigen::VectorXd theta_variances(const Eigen::MatrixXd& info, int gears) {
+  const auto n = static_cast<int>(info.rows());
+  std::vector<std::vector<int>> subsets;
+  std::vector<int> all(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i)
+    all[static_cast<std::size_t>(i)] = i;
+  subsets.push_back(all);
+  for (int drop : {gears, gears + 1}) {  // without sigma_s, then without sigma_v
+    std::vector<int> sub;
+    for (int i : all)
+      if (i != drop) sub.push_back(i);
+    subsets.push_back(sub);
+  }
+  std::vector<int> theta_only;
+  for (int i = 0; i < n; ++i)
+    if (i < gears || i >= gears + 2) theta_only.push_back(i);
+  subsets.push_back(theta_only);
+  for (const auto& sub : subsets) {
+    const auto k = static_cast<int>(sub.size());
+    Eigen::MatrixXd block(k, k);
+    for (int a = 0; a < k; ++a)
+      for (int b = 0; b < k; ++b)
+        block(a, b) = info(sub[static_cast<std::size_t>(a)], sub[static_cast<std::size_t>(b)]);
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(block);
+    if (eig.info() != Eigen::Success || eig.eigenvalues().minCoeff() <= 1e-12 * eig.eigenvalues().maxCoeff())
+      continue;
+    const Eigen::MatrixXd cov =
+        eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+    Eigen::VectorXd out = Eigen::VectorXd::Constant(gears, NAN);
+    for (int a = 0; a < k; ++a)
+      if (sub[static_cast<std::size_t>(a)] < gears) out[sub[static_cast<std::size_t>(a)]] = cov(a, a);
+    return out;
+  }
+  return Eigen::VectorXd::Constant(gears, NAN);
+}
+
+}  // namespace
 
 GearModel finish_model(const MixtureData& data, const MixtureParams& p, const std::string& method,
                        const GradientLayout& layout) {
@@ -19,12 +61,7 @@ GearModel finish_model(const MixtureData& data, const MixtureParams& p, const st
   model.outlier_weight = p.beta_clutch;
   model.log_likelihood = log_likelihood(data, p);
   const Eigen::MatrixXd info = observed_information(data, p, layout);
-  Eigen::VectorXd variance = Eigen::VectorXd::Constant(layout.size(), NAN);
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(info);
-  if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
-    const Eigen::MatrixXd cov = ldlt.solve(Eigen::MatrixXd::Identity(layout.size(), layout.size()));
-    variance = cov.diagonal();
-  }
+  const Eigen::VectorXd variance = theta_variances(info, p.gears());
   for (int i = 0; i < p.gears(); ++i) {
     Gear g;
     g.theta = p.theta[static_cast<std::size_t>(i)];

@@ -206,8 +206,8 @@ MixtureParams with_vector(const MixtureParams& p, const GradientLayout& layout, 
   return q;
 }
 
-Eigen::MatrixXd observed_information(const MixtureData& data, const MixtureParams& p,
-                                     const GradientLayout& layout) {
+Eigen::MatrixXd observed_information_numeric(const MixtureData& data, const MixtureParams& p,
+                                             const GradientLayout& layout) {
   const int n_par = layout.size();
   const Eigen::VectorXd x0 = to_vector(p, layout);
   Eigen::MatrixXd h(n_par, n_par);
@@ -223,6 +223,112 @@ Eigen::MatrixXd observed_information(const MixtureData& data, const MixtureParam
     (void)log_likelihood_gradient(data, with_vector(p, layout, xm), layout, gm);
     h.col(j) = (gp - gm) / (2.0 * step);
   }
+  return -0.5 * (h + h.transpose());
+}
+
+// Analytic Hessian in one pass. For log p = log sum_j exp(l_j), with l_j = log alpha_j + log phi_j,
+//   d2 log p = sum_j r_j (d2 l_j + dl_j dl_j^T) - dlogp dlogp^T.
+// Each gear's log phi depends on (theta_j, sigma_s, sigma_v) only; log alpha_j on the logits eta, with
+// d log alpha_j / d eta = e_j - alpha (e_j = 0 for the reference clutch component) and a constant
+// second derivative -(diag(alpha) - alpha alpha^T) that sums to itself over r.
+Eigen::MatrixXd observed_information(const MixtureData& data, const MixtureParams& p,
+                                     const GradientLayout& layout) {
+  const Precomputed c = precompute(p);
+  const int m = p.gears();
+  const int n_par = layout.size();
+  const int eta0 = m + 2;
+  const int n_eta = layout.with_weights ? n_par - eta0 : 0;
+  const double a = p.sigma_s * p.sigma_s;
+  const double ss = p.sigma_s;
+  const double sv = p.sigma_v;
+  Eigen::VectorXd alpha_eta(n_eta);
+  for (int i = 0; i < n_eta; ++i)
+    alpha_eta[i] = i < m ? p.alpha[i] : p.beta_stand;
+  auto [x, y] =
+      split_two<Eigen::MatrixXd>(data.size(), [&](std::size_t begin, std::size_t end, Eigen::MatrixXd& out) {
+        out = Eigen::MatrixXd::Zero(n_par, n_par);
+        std::vector<double> r(static_cast<std::size_t>(m) + 2);
+        Eigen::VectorXd gbar(n_par);
+        Eigen::VectorXd gsum = Eigen::VectorXd::Zero(n_par);
+        int bin = 0;
+        for (std::size_t k = begin; k < end; ++k) {
+          const double v = data.v[k];
+          const double s = data.s[k];
+          (void)sample_terms(p, c, v, s, r.data(), bin);
+          gbar.setZero();
+          for (int j = 0; j < m; ++j) {
+            const double rj = r[j];
+            if (rj < 1e-14) continue;
+            const double th = p.theta[j];
+            const double q = 1.0 / c.inv_var[j];
+            const double e = v - th * s;
+            const double cq = -0.5 / q + 0.5 * e * e / (q * q);      // d logphi / dq
+            const double cqq = 0.5 / (q * q) - e * e / (q * q * q);  // d cq / dq
+            const double cqt = -e * s / (q * q);                     // d cq / dtheta at fixed q
+            const double qt = 2.0 * th * a;                          // dq / dtheta
+            // First derivatives in (theta, a = sigma_s^2, b = sigma_v^2).
+            const double d_t = e * s / q + cq * qt;
+            const double d_a = cq * th * th;
+            const double d_b = cq;
+            const double dcq_t = cqt + cqq * qt;  // total d cq / dtheta
+            const double h_tt = -s * s / q - e * s / (q * q) * qt + 2.0 * a * cq + qt * dcq_t;
+            const double h_ta = 2.0 * th * cq + th * th * dcq_t;
+            const double h_tb = dcq_t;
+            const double h_aa = th * th * th * th * cqq;
+            const double h_ab = th * th * cqq;
+            const double h_bb = cqq;
+            // To (theta, sigma_s, sigma_v).
+            const double g_t = d_t;
+            const double g_s = 2.0 * ss * d_a;
+            const double g_v = 2.0 * sv * d_b;
+            const double hh_tt = h_tt;
+            const double hh_ts = 2.0 * ss * h_ta;
+            const double hh_tv = 2.0 * sv * h_tb;
+            const double hh_ss = 4.0 * ss * ss * h_aa + 2.0 * d_a;
+            const double hh_sv = 4.0 * ss * sv * h_ab;
+            const double hh_vv = 4.0 * sv * sv * h_bb + 2.0 * d_b;
+            const int idx[3] = {j, m, m + 1};
+            const double g3[3] = {g_t, g_s, g_v};
+            const double h3[3][3] = {{hh_tt, hh_ts, hh_tv}, {hh_ts, hh_ss, hh_sv}, {hh_tv, hh_sv, hh_vv}};
+            for (int u = 0; u < 3; ++u) {
+              gbar[idx[u]] += rj * g3[u];
+              for (int w = 0; w < 3; ++w)
+                out(idx[u], idx[w]) += rj * (h3[u][w] + g3[u] * g3[w]);
+            }
+            if (n_eta > 0) {
+              // Cross terms r_j (a_j e_j^T + e_j a_j^T); the -alpha parts are covered below via gbar.
+              for (int u = 0; u < 3; ++u) {
+                out(idx[u], eta0 + j) += rj * g3[u];
+                out(eta0 + j, idx[u]) += rj * g3[u];
+              }
+            }
+          }
+          if (n_eta > 0) {
+            for (int i = 0; i < n_eta; ++i) {
+              const double ri = i < m ? r[i] : r[m];
+              out(eta0 + i, eta0 + i) += ri;
+              gbar[eta0 + i] = ri - alpha_eta[i];
+            }
+            gsum += gbar;
+          }
+          out.noalias() -= gbar * gbar.transpose();
+        }
+        if (n_eta > 0) {
+          // sum_j r_j dl_j dl_j^T with dl_j = a_j + e_j - alpha (eta part) expands to
+          // sum_j r_j (a_j + e_j)(a_j + e_j)^T - alpha G^T - G alpha^T + alpha alpha^T, where
+          // G = sum_j r_j (a_j + e_j) = gbar + alpha; log alpha adds -(diag(alpha) - alpha alpha^T). The
+          // terms linear in alpha are applied once for all samples of the slice.
+          const auto count = static_cast<double>(end - begin);
+          Eigen::VectorXd g_total = gsum;
+          g_total.segment(eta0, n_eta) += count * alpha_eta;
+          out.middleCols(eta0, n_eta) -= g_total * alpha_eta.transpose();
+          out.middleRows(eta0, n_eta) -= alpha_eta * g_total.transpose();
+          out.block(eta0, eta0, n_eta, n_eta) += 2.0 * count * alpha_eta * alpha_eta.transpose();
+          out.block(eta0, eta0, n_eta, n_eta) -= count * Eigen::MatrixXd(alpha_eta.asDiagonal());
+        }
+      });
+  Eigen::MatrixXd h = x;
+  if (y.size() == h.size()) h += y;
   return -0.5 * (h + h.transpose());
 }
 

@@ -52,9 +52,12 @@ struct GradientLayout {
 double log_likelihood_gradient(const MixtureData& data, const MixtureParams& p, const GradientLayout& layout,
                                Eigen::VectorXd& gradient);
 
-// Observed information: minus the Hessian of (7) by central differences of the analytic gradient.
+// Observed information: minus the Hessian of (7), analytic, one pass over the data.
 [[nodiscard]] Eigen::MatrixXd observed_information(const MixtureData& data, const MixtureParams& p,
                                                    const GradientLayout& layout);
+// The same by central differences of the analytic gradient (2P passes): a cross-check for tests.
+[[nodiscard]] Eigen::MatrixXd observed_information_numeric(const MixtureData& data, const MixtureParams& p,
+                                                           const GradientLayout& layout);
 
 // Applies a parameter vector (layout above) onto a copy of p.
 [[nodiscard]] MixtureParams with_vector(const MixtureParams& p, const GradientLayout& layout,

@@ -68,8 +68,8 @@ class RouteGenerator {
       case DrivingStyle::kUrban:
         return Terrain::kUrban;
       case DrivingStyle::kHighway:
-        // A highway trip still starts and ends in town (a few minutes each way).
-        return (t < 240.0 || t > duration_ - 240.0) ? Terrain::kUrban : Terrain::kHighway;
+        // A highway trip still starts and ends in town (six minutes each way).
+        return (t < 360.0 || t > duration_ - 360.0) ? Terrain::kUrban : Terrain::kHighway;
       case DrivingStyle::kTrafficJam: {
         // A commute: mostly stop-and-go, broken by releases into town traffic and a free-flowing stretch.
         const double u = uniform(0, 1);
@@ -185,7 +185,11 @@ class DriveSimulator {
         s.gear = 1;
         s.clutch = Clutch::kSlipping;
         const double theta = veh_.theta[0];
-        const double f_hold = std::max(idle, launch_freq_ * (target < idle * theta ? 0.8 : 1.0));
+        // Crawling below first gear's idle speed: the engine sits just above idle on a slipping clutch.
+        // Aiming just above it, the clutch comes in as soon as the car nears the target speed.
+        const double f_hold = target < idle * theta
+                                  ? idle * crawl_factor_
+                                  : std::max(idle, std::min(launch_freq_, 0.95 * target / theta));
         s.f += (std::max(f_hold, idle) - s.f) * std::min(1.0, h / 0.3);
         double a = std::min(desired_accel(target, theta), 0.8 * aggressiveness_ * veh_.max_accel);
         if (stopping_) a = -brake_;
@@ -312,6 +316,7 @@ class DriveSimulator {
   void start_launch() {
     phase_ = Phase::kLaunch;
     launch_freq_ = veh_.idle_freq * uniform(1.3, 2.1);
+    crawl_factor_ = uniform(1.0, 1.25);
     state_.gear = 1;
     state_.clutch = Clutch::kSlipping;
   }
@@ -350,6 +355,7 @@ class DriveSimulator {
   double coast_speed_ = 3.0;
   double aggressiveness_ = 1.0;
   double launch_freq_ = 20.0;
+  double crawl_factor_ = 1.1;
   double idle_wobble_ = 0.0;
   double jitter_ = 0.0;
   int shift_to_ = 1;

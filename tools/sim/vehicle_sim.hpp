@@ -3,10 +3,11 @@
 // speed and engine frequency at any time step, and noisy observations of them (GPS-like or OBD-like).
 //
 // Typical use:
-//   auto vehicle = sim::vehicle_preset("bmw-520i");
-//   auto drive = sim::simulate_drive(vehicle, {.style = sim::DrivingStyle::kMixed, .duration = 2400, .seed =
-//   7}); auto obs = sim::observe(drive, {.seed = 8});          // 1 Hz, sigma_v = 0.1 m/s, sigma_s = 0.3 Hz
-//   std::vector<Sample> samples = sim::to_samples(obs);    // input of fit_gear_model / replay
+//   sim::Vehicle car = sim::vehicle_preset("bmw-520i");
+//   sim::DriveOptions drive_options;  // style, duration (s), dt (s), seed
+//   sim::Drive drive = sim::simulate_drive(car, drive_options);
+//   auto observed = sim::observe(drive, {});  // 1 Hz, sigma_v = 0.05 m/s, sigma_s = 0.2 Hz
+//   std::vector<Sample> samples = sim::to_samples(observed);  // input of fit_gear_model / replay
 // Audio synthesis uses drive.truth directly (DriveOptions::dt = 0.01 gives 100 Hz), or truth_at(drive, t).
 #include <cstdint>
 #include <string>
@@ -76,8 +77,8 @@ struct Drive {
 
 struct ObservationOptions {
   double period = 1.0;        // s between observed rows
-  double sigma_speed = 0.1;   // m/s, GPS Doppler noise (eq. (2)); result clamped at 0
-  double sigma_freq = 0.3;    // Hz, tracker noise (eq. (1))
+  double sigma_speed = 0.05;  // m/s, GPS Doppler noise (eq. (2)), a u-blox class receiver; clamped at 0
+  double sigma_freq = 0.2;    // Hz, tracker noise (eq. (1))
   double freq_floor = 0.0;    // Hz; observed freq is NaN where the true freq is below (0 = off)
   double freq_ceiling = 0.0;  // Hz; NaN above (0 = off)
   // OBD-like logging: integer km/h speed, integer rpm (freq = rpm / 60 Hz is assumed), each value polled
