@@ -192,6 +192,14 @@ class DriveSimulator {
                                   : std::max(idle, std::min(launch_freq_, 0.95 * target / theta));
         s.f += (std::max(f_hold, idle) - s.f) * std::min(1.0, h / 0.3);
         double a = std::min(desired_accel(target, theta), 0.8 * aggressiveness_ * veh_.max_accel);
+        const bool crawling = target < idle * theta;
+        if (!crawling) {
+          // A driver lets the clutch in within a second or two: the car reaches the engine's speed by then.
+          slip_left_ -= h;
+          a = std::max(a, (theta * f_hold - s.v) / std::max(slip_left_, h));
+        } else {
+          slip_left_ = uniform(0.8, 2.5);
+        }
         if (stopping_) a = -brake_;
         s.v = std::max(0.0, s.v + a * h);
         if (stopping_ && s.v < coast_speed_) {
@@ -218,6 +226,7 @@ class DriveSimulator {
         if (s.f < idle * 1.05) {
           if (g == 1) {
             phase_ = Phase::kLaunch;  // riding the clutch in first
+            slip_left_ = uniform(0.8, 2.5);
           } else {
             start_shift(lowest_comfortable_gear(idle));
           }
@@ -251,7 +260,10 @@ class DriveSimulator {
         if (shift_left_ <= 0.0) {
           if (f_next < idle * 1.02) {
             phase_ = shift_to_ == 1 ? Phase::kLaunch : Phase::kCoastToStop;
-            if (phase_ == Phase::kLaunch) launch_freq_ = idle * uniform(1.2, 1.6);
+            if (phase_ == Phase::kLaunch) {
+              launch_freq_ = idle * uniform(1.2, 1.6);
+              slip_left_ = uniform(0.8, 2.5);
+            }
           } else {
             phase_ = Phase::kDrive;
             s.gear = shift_to_;
@@ -317,6 +329,7 @@ class DriveSimulator {
     phase_ = Phase::kLaunch;
     launch_freq_ = veh_.idle_freq * uniform(1.3, 2.1);
     crawl_factor_ = uniform(1.0, 1.25);
+    slip_left_ = uniform(0.8, 2.5);
     state_.gear = 1;
     state_.clutch = Clutch::kSlipping;
   }
@@ -356,6 +369,7 @@ class DriveSimulator {
   double aggressiveness_ = 1.0;
   double launch_freq_ = 20.0;
   double crawl_factor_ = 1.1;
+  double slip_left_ = 1.5;
   double idle_wobble_ = 0.0;
   double jitter_ = 0.0;
   int shift_to_ = 1;
