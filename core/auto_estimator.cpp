@@ -143,10 +143,10 @@ struct LadderCheck {
 
 class LadderJudge {
  public:
-  LadderJudge(const MixtureData& work, std::size_t total_samples) : work_(work), total_(total_samples) {
+  LadderJudge(const MixtureData& work, std::size_t total_samples, std::vector<double> steady_log_ratios)
+      : work_(work), total_(total_samples), log_ratios_(std::move(steady_log_ratios)) {
     std::vector<double> idle;
     for (std::size_t k = 0; k < work.size(); ++k) {
-      if (work.v[k] > kMovingSpeed) log_ratios_.push_back(std::log(work.v[k] / work.s[k]));
       if (work.v[k] < 0.3) idle.push_back(work.s[k]);
     }
     std::sort(log_ratios_.begin(), log_ratios_.end());
@@ -167,7 +167,7 @@ class LadderJudge {
     for (int i = 0; i < m; ++i) {
       const double share = p.alpha[i] / gear_total;
       const double expected = p.alpha[i] * static_cast<double>(total_);
-      if (share < 0.004 || expected < 8.0) {
+      if (share < 0.002 || expected < 8.0) {
         if (weakest < 0 || p.alpha[i] < p.alpha[weakest]) weakest = i;
       }
     }
@@ -176,8 +176,12 @@ class LadderJudge {
     // (clutch slip, CVT) fitted by several narrow components has no valleys.
     for (int i = 0; i + 1 < m; ++i) {
       const double step = p.theta[i + 1] / p.theta[i];
-      const int smaller = p.alpha[i] < p.alpha[i + 1] ? i : i + 1;
+      // Of two clusters too close or without a valley, the one with less steady support goes.
+      const double w = 0.2 * std::log(step);
+      const int smaller =
+          steady_support(std::log(p.theta[i]), w) < steady_support(std::log(p.theta[i + 1]), w) ? i : i + 1;
       if (step < 1.06) return {smaller, "gear clusters closer than any gearbox step"};
+      if (step > 2.6) return {smaller, "gear clusters further apart than any gearbox step"};
       if (!valley_between(std::log(p.theta[i]), std::log(p.theta[i + 1])))
         return {smaller, "no valley between gear clusters (a continuum, as from a CVT or clutch slip)"};
     }
@@ -197,6 +201,10 @@ class LadderJudge {
   std::size_t count_in(double lo, double hi) const {
     return static_cast<std::size_t>(std::upper_bound(log_ratios_.begin(), log_ratios_.end(), hi) -
                                     std::lower_bound(log_ratios_.begin(), log_ratios_.end(), lo));
+  }
+
+  double steady_support(double centre, double half_width) const {
+    return static_cast<double>(count_in(centre - half_width, centre + half_width));
   }
 
   bool valley_between(double a, double b) const {
@@ -249,6 +257,40 @@ MixtureParams without(const MixtureParams& p, int drop) {
   return q;
 }
 
+// log(v/s) of the moving samples that agree with a time neighbour: a sample in gear shares its ratio with
+// the sample before or after it, while shifts, clutch slip and an OBD logger's skewed polls give isolated
+// ratios. The tolerance widens at low speed where a few tenths of m/s of speed error (GPS noise, integer
+// km/h) move the ratio. Without usable time stamps every moving sample counts.
+std::vector<double> steady_log_ratios(const MixtureData& all) {
+  std::vector<double> out;
+  const std::size_t n = all.size();
+  auto moving = [&](std::size_t k) { return all.v[k] > kMovingSpeed; };
+  std::vector<double> gaps;
+  if (all.t.size() == n) {
+    for (std::size_t k = 1; k < n; ++k) {
+      const double dt = all.t[k] - all.t[k - 1];
+      if (dt > 0.0) gaps.push_back(dt);
+    }
+  }
+  if (gaps.size() < n / 2) {
+    for (std::size_t k = 0; k < n; ++k)
+      if (moving(k)) out.push_back(std::log(all.v[k] / all.s[k]));
+    return out;
+  }
+  std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
+  const double max_gap = 3.0 * gaps[gaps.size() / 2];
+  auto agree = [&](std::size_t k, std::size_t j, double r) {
+    if (!moving(j) || std::abs(all.t[j] - all.t[k]) > max_gap) return false;
+    return std::abs(std::log(all.v[j] / all.s[j]) - r) < 0.03 + 0.3 / all.v[k];
+  };
+  for (std::size_t k = 0; k < n; ++k) {
+    if (!moving(k)) continue;
+    const double r = std::log(all.v[k] / all.s[k]);
+    if ((k > 0 && agree(k, k - 1, r)) || (k + 1 < n && agree(k, k + 1, r))) out.push_back(r);
+  }
+  return out;
+}
+
 // Candidate gear scales: modes of log(v/s) at three smoothing widths, merged, highest first.
 std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std::size_t limit) {
   std::vector<Peak> all;
@@ -285,10 +327,12 @@ GearModel fit_auto(const MixtureData& all, int gears) {
         all.size() == 0 ? "no samples with both speed and frequency" : "too few samples while moving";
     return model;
   }
+  std::vector<double> steady = steady_log_ratios(all);
+  if (steady.size() < 30) steady = log_ratios;
   const MixtureData work = subsample(all, kWorkingSamples);
-  const LadderJudge judge(work, all.size());
+  const LadderJudge judge(work, all.size(), steady);
   std::vector<double> init =
-      candidate_scales(log_ratios, static_cast<std::size_t>(std::max(kMaxCandidates, gears)));
+      candidate_scales(steady, static_cast<std::size_t>(std::max(kMaxCandidates, gears)));
   // A forced count larger than the modes found: fill the widest gaps geometrically.
   while (static_cast<int>(init.size()) < gears) {
     std::sort(init.begin(), init.end());
@@ -305,6 +349,13 @@ GearModel fit_auto(const MixtureData& all, int gears) {
   while (true) {
     const double ll = run_em(work, p, kEmIterations, 1e-6);
     const LadderCheck verdict = judge.check(p);
+#ifdef GP_TRACE
+    fprintf(stderr, "M=%d ll=%.1f bic=%.1f drop=%d %s:", p.gears(), ll, bic_of(ll, p.gears(), work.size()),
+            verdict.offender, verdict.reason.c_str());
+    for (int i = 0; i < p.gears(); ++i)
+      fprintf(stderr, " %.4f(%.4f)", p.theta[i], p.alpha[i]);
+    fprintf(stderr, "\n");
+#endif
     const int m = p.gears();
     if (gears > 0 && m == gears) {
       best = {p, ll, bic_of(ll, m, work.size())};

@@ -95,10 +95,12 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   detail::MixtureData data;
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());
+  data.t.reserve(samples.size());
   for (const Sample& s : samples) {
     if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0) continue;
     data.v.push_back(s.speed);
     data.s.push_back(s.freq);
+    data.t.push_back(s.t);
   }
   FitResult result;
   if (!options.ratios.empty()) {

@@ -15,6 +15,7 @@ namespace gearpulse::detail {
 struct MixtureData {
   std::vector<double> v;  // m/s
   std::vector<double> s;  // Hz
+  std::vector<double> t;  // s, in sample order; may be empty (then no temporal information is used)
   [[nodiscard]] std::size_t size() const noexcept { return v.size(); }
 };
 
