@@ -349,13 +349,6 @@ GearModel fit_auto(const MixtureData& all, int gears) {
   while (true) {
     const double ll = run_em(work, p, kEmIterations, 1e-6);
     const LadderCheck verdict = judge.check(p);
-#ifdef GP_TRACE
-    fprintf(stderr, "M=%d ll=%.1f bic=%.1f drop=%d %s:", p.gears(), ll, bic_of(ll, p.gears(), work.size()),
-            verdict.offender, verdict.reason.c_str());
-    for (int i = 0; i < p.gears(); ++i)
-      fprintf(stderr, " %.4f(%.4f)", p.theta[i], p.alpha[i]);
-    fprintf(stderr, "\n");
-#endif
     const int m = p.gears();
     if (gears > 0 && m == gears) {
       best = {p, ll, bic_of(ll, m, work.size())};
