@@ -169,6 +169,53 @@ double SpeedSynthesizer::shift_urge(double freq) const noexcept {
   return std::exp(std::clamp((freq - drive_mean_) / sd, -3.0, 3.0));
 }
 
+namespace {
+
+// Running mean and variance with a bounded memory (in samples).
+void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
+  count = std::min(count + 1.0, memory);
+  const double k = 1.0 / count;
+  const double d = x - mean;
+  mean += k * d;
+  var += k * (d * d * (1.0 - k) - var);
+}
+
+constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift points are trusted
+
+}  // namespace
+
+// Hazard multipliers of shifting up or down at this frequency, from the frequencies at which this driver
+// was seen shifting (drivers shift up as revs reach their habit, down as revs sag to theirs). Before any
+// shift was seen, the frequency usually run in gear stands in for both.
+double SpeedSynthesizer::upshift_factor(double freq) const noexcept {
+  if (!std::isfinite(freq)) return 1.0;
+  if (up_count_ < kMinShifts) return shift_urge(freq);
+  const double sd = std::max(std::sqrt(up_var_), 0.08 * up_mean_);
+  return std::exp(std::clamp((freq - up_mean_) / sd, -1.5, 3.0));
+}
+
+double SpeedSynthesizer::downshift_factor(double freq) const noexcept {
+  if (!std::isfinite(freq)) return 1.0;
+  if (down_count_ < kMinShifts) return 1.0 / shift_urge(freq);
+  const double sd = std::max(std::sqrt(down_var_), 0.08 * down_mean_);
+  return std::exp(std::clamp(-(freq - down_mean_) / sd, -1.5, 3.0));
+}
+
+// Called under GPS after each step: notes the frequency at which a confidently held gear was left for
+// its neighbour.
+void SpeedSynthesizer::learn_shift(double freq) noexcept {
+  constexpr double kSure = 0.8;
+  constexpr double kShiftMemory = 50.0;  // shifts
+  if (mode_ == 0 || prob_[mode_] < kSure || !std::isfinite(freq)) return;
+  if (sure_gear_ > 0 && mode_ == sure_gear_ + 1) {
+    accumulate(sure_gear_freq_, up_mean_, up_var_, up_count_, kShiftMemory);
+  } else if (sure_gear_ > 0 && mode_ == sure_gear_ - 1) {
+    accumulate(sure_gear_freq_, down_mean_, down_var_, down_count_, kShiftMemory);
+  }
+  sure_gear_ = mode_;
+  sure_gear_freq_ = freq;
+}
+
 void SpeedSynthesizer::normalise() noexcept {
   double total = 0.0;
   for (int j = 0; j <= gears_; ++j)
@@ -191,50 +238,27 @@ int SpeedSynthesizer::map_mode() const noexcept {
 
 // Mode transitions over dt: a gear is left for the clutch or for a neighbouring gear (a quick shift between
 // two samples, up more likely at high revs, down at low revs); the clutch is left for any gear, in
-// proportion to how much each is used. Then each mode's track starts from the mix of the tracks of the
-// modes it may have come from (moment matching), with the spread between them as extra variance.
-void SpeedSynthesizer::predict_modes(double dt, double freq) noexcept {
-  if (dt <= 0.0) return;
+// proportion to how much each is used.
+void SpeedSynthesizer::compute_transitions(double dt, double freq) noexcept {
   constexpr double kToClutch = 0.6, kToNeighbour = 0.2;
-  const double urge = shift_urge(freq);
+  for (auto& row : trans_)
+    row.fill(0.0);
+  dt = std::max(dt, 0.0);
+  const double up_factor = upshift_factor(freq), down_factor = downshift_factor(freq);
   const double leave_clutch = 1.0 - std::exp(-tuning_.clutch_leave_rate * dt);
-  // flow(i, j): probability mass moving from mode i to mode j over dt.
-  const auto flow = [&](int i, int j) noexcept {
-    if (i == 0)
-      return prob_[0] * (j == 0 ? 1.0 - leave_clutch : leave_clutch * weight_[j] / (1.0 - weight_[0]));
-    const double up = i < gears_ ? kToNeighbour * urge : 0.0;
-    const double down = i > 1 ? kToNeighbour / urge : 0.0;
+  trans_[0][0] = 1.0 - leave_clutch;
+  for (int j = 1; j <= gears_; ++j)
+    trans_[0][j] = leave_clutch * weight_[j] / (1.0 - weight_[0]);
+  for (int i = 1; i <= gears_; ++i) {
+    const double up = i < gears_ ? kToNeighbour * up_factor : 0.0;
+    const double down = i > 1 ? kToNeighbour * down_factor : 0.0;
     const double total = kToClutch + up + down;
     const double leave = 1.0 - std::exp(-leave_rate_[i] * total * dt);
-    if (j == i) return prob_[i] * (1.0 - leave);
-    if (j == 0) return prob_[i] * leave * kToClutch / total;
-    if (j == i + 1) return prob_[i] * leave * up / total;
-    if (j == i - 1) return prob_[i] * leave * down / total;
-    return 0.0;
-  };
-  for (int j = 0; j <= gears_; ++j) {
-    double mass = 0.0, v = 0.0;
-    for (int i = 0; i <= gears_; ++i) {
-      const double w = flow(i, j);
-      mass += w;
-      v += w * speed_[i];
-    }
-    v = mass > 0.0 ? v / mass : speed_[j];
-    double var = 0.0;
-    for (int i = 0; i <= gears_; ++i) {
-      const double d = speed_[i] - v;
-      // Engaging a gear after clutch-out: the clutch slips until the engine matches the wheels, so the
-      // speed the engine will show is uncertain by about what a launch gains in a second.
-      const double engage = i == 0 && j > 0 ? tuning_.launch_accel * tuning_.launch_accel : 0.0;
-      var += flow(i, j) * (var_[i] + d * d + engage);
-    }
-    next_p_[j] = mass;
-    next_v_[j] = v;
-    next_var_[j] = mass > 0.0 ? var / mass : var_[j];
+    trans_[i][i] = 1.0 - leave;
+    trans_[i][0] = leave * kToClutch / total;
+    if (i < gears_) trans_[i][i + 1] = leave * up / total;
+    if (i > 1) trans_[i][i - 1] = leave * down / total;
   }
-  prob_ = next_p_;
-  speed_ = next_v_;
-  var_ = next_var_;
 }
 
 void SpeedSynthesizer::update_accel(double dt, double speed) noexcept {
@@ -268,20 +292,32 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
 }
 
 SynthOutput SpeedSynthesizer::gps_step(double dt, double gps, double freq) noexcept {
-  predict_modes(dt, freq);
-  if (std::isfinite(freq) && gears_ > 0) {
-    const double sf = freq_sigma(freq);
-    prob_[0] *= clutch_likelihood(freq);
-    for (int j = 1; j <= gears_; ++j) {
-      const double s = sigma_v_ * sigma_v_ + theta_[j] * theta_[j] * sf * sf;
-      prob_[j] *= gaussian(gps - theta_[j] * freq, s) * lugging(j, freq);
+  compute_transitions(dt, freq);
+  const bool have_freq = std::isfinite(freq);
+  const double sf = have_freq ? freq_sigma(freq) : 0.0;
+  for (int j = 0; j <= gears_; ++j) {
+    double best = 0.0;
+    for (int i = 0; i <= gears_; ++i)
+      best = std::max(best, prob_[i] * trans_[i][j]);
+    double evidence = 1.0;
+    if (have_freq && gears_ > 0) {
+      if (j == 0) {
+        evidence = clutch_likelihood(freq);
+      } else {
+        const double s = sigma_v_ * sigma_v_ + theta_[j] * theta_[j] * sf * sf;
+        evidence = gaussian(gps - theta_[j] * freq, s) * lugging(j, freq);
+      }
     }
-    normalise();
+    next_p_[j] = best * evidence;
   }
+  for (int j = 0; j <= gears_; ++j)
+    prob_[j] = next_p_[j];
+  normalise();
   speed_.fill(gps);
   var_.fill(sigma_v_ * sigma_v_);
   mode_ = map_mode();
   learn(dt, gps, freq);
+  learn_shift(freq);
   update_accel(dt, gps);
   return {gps, gps >= tuning_.stationary_speed ? mode_ : 0, SpeedSource::kGps};
 }
@@ -289,34 +325,58 @@ SynthOutput SpeedSynthesizer::gps_step(double dt, double gps, double freq) noexc
 SynthOutput SpeedSynthesizer::engine_step(double dt, double freq) noexcept {
   const bool have_freq = std::isfinite(freq);
   if (have_freq) freq_max_ = std::max(freq_max_, freq);
-  predict_modes(dt, freq);
+  compute_transitions(dt, freq);
   // Declutched at (or without) idle the driver is braking to a stop: keep the recent deceleration,
   // within ordinary bounds. Declutched above idle is a shift: the car rolls on, slowing gently.
   const bool at_idle = !have_freq || (idle_count_ > 0.0 && freq < idle_mean_ + 3.0 * idle_sd());
   const double decel = at_idle ? std::clamp(-accel_, tuning_.stop_decel_min, tuning_.stop_decel_max)
                                : tuning_.shift_coast_decel;
-  // In gear the acceleration trend is as likely to go on as to stop (a driver releases the brake or the
-  // throttle at any moment): predict half of it, and count the other half as uncertainty.
-  const double trend = 0.5 * accel_ * dt;
+  // In gear a driver who accelerates keeps accelerating (through shifts too), but braking may stop at any
+  // moment: predict a share of the trend, with as much again as uncertainty.
+  const double trend = (accel_ > 0.0 ? tuning_.trend_up : tuning_.trend_keep) * accel_ * dt;
   const double q = tuning_.accel_sigma * dt * tuning_.accel_sigma * dt;
+  const double engage = tuning_.launch_accel * tuning_.launch_accel;
+  const double sf = have_freq ? freq_sigma(freq) : 0.0;
   for (int j = 0; j <= gears_; ++j) {
-    var_[j] = std::min(var_[j] + q + (j == 0 ? 0.0 : trend * trend), kMaxSpeedVar);
-    speed_[j] = std::max(0.0, speed_[j] + (j == 0 ? -decel * dt : trend));
-  }
-  if (have_freq) {
-    const double sf = freq_sigma(freq);
-    prob_[0] *= clutch_likelihood(freq);
-    for (int j = 1; j <= gears_; ++j) {
-      const double z = theta_[j] * freq;
-      const double s = var_[j] + theta_[j] * theta_[j] * sf * sf + 1e-6;
-      prob_[j] *= gaussian(z - speed_[j], s) * lugging(j, freq);
-      const double k = var_[j] / s;
-      speed_[j] += k * (z - speed_[j]);
-      var_[j] *= 1.0 - k;
+    const double z = have_freq ? theta_[j] * freq : 0.0;
+    const double r = theta_[j] * theta_[j] * sf * sf + 1e-6;
+    const double lug = j > 0 && have_freq ? lugging(j, freq) : 1.0;
+    double best = 0.0, best_v = speed_[j], best_var = var_[j];
+    for (int i = 0; i <= gears_; ++i) {
+      if (trans_[i][j] <= 0.0) continue;
+      double v = 0.0, var = var_[i] + q;
+      double evidence = 1.0;
+      if (j == 0) {
+        v = std::max(0.0, speed_[i] - decel * dt);
+        evidence = have_freq ? clutch_likelihood(freq) : 1.0;
+      } else {
+        v = std::max(0.0, speed_[i] + trend);
+        var += trend * trend;
+        // Engaging a gear after clutch-out: the clutch slips until the engine matches the wheels, so the
+        // speed the engine will show is uncertain by about what a launch gains in a second.
+        if (i == 0) var += engage;
+        evidence = have_freq ? gaussian(z - v, var + r) * lug : kLostGearLikelihood;
+      }
+      const double score = prob_[i] * trans_[i][j] * evidence;
+      if (score > best) {
+        best = score;
+        best_v = v;
+        best_var = std::min(var, kMaxSpeedVar);
+      }
     }
-  } else {
-    for (int j = 1; j <= gears_; ++j)
-      prob_[j] *= kLostGearLikelihood;
+    next_p_[j] = best;
+    if (j > 0 && have_freq) {
+      const double k = best_var / (best_var + r);
+      best_v += k * (z - best_v);
+      best_var *= 1.0 - k;
+    }
+    next_v_[j] = best_v;
+    next_var_[j] = best_var;
+  }
+  for (int j = 0; j <= gears_; ++j) {
+    prob_[j] = next_p_[j];
+    speed_[j] = next_v_[j];
+    var_[j] = next_var_[j];
   }
   normalise();
   const int previous_mode = mode_;

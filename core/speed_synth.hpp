@@ -4,10 +4,11 @@
 // gear; through a GPS outage it outputs theta_gear x frequency, following shifts (a jump of frequency
 // while speed stays continuous), coasting through clutch-out moments and coming to zero at a stop.
 //
-// The gear is tracked by a forward filter over the modes {clutch out, gear 1..M}, each with its own speed
-// track, mixed at every step (an interacting-multiple-model filter, so competing gear hypotheses survive
-// until a later shift or stop tells them apart): evidence for a gear is how well theta_i x freq continues
-// the speed with a plausible acceleration (with GPS: how well it matches the GPS speed);
+// The gear is tracked over the modes {clutch out, gear 1..M} by a causal max-product (Viterbi) recursion
+// in which every mode keeps the best history that ends in it, with that history's own speed track (so
+// competing gear hypotheses survive until a later shift or stop tells them apart, and a hypothesis pays
+// for the speed jump it implies when it is entered, once): evidence for a gear is how well theta_i x freq
+// continues the speed with a plausible acceleration (with GPS: how well it matches the GPS speed);
 // evidence for clutch-out is the density of the engine frequency when declutched, a spike at the idle
 // frequency (learned while GPS says the car stands still) over a flat floor. The output follows the most
 // probable mode. No look-ahead: every output depends only on past input.
@@ -37,12 +38,14 @@ struct SynthOutput {
 // Driving-physics constants (not from the paper): plausible accelerations of a road car and how often a
 // driver shifts. They are deliberately generic, not fitted to any one log.
 struct SynthTuning {
-  double accel_sigma = 1.0;        // m/s^2: how far a driver's acceleration strays from its trend in 1 s
-  double max_accel = 3.5;          // m/s^2: bound on the acceleration trend
-  double launch_accel = 2.5;       // m/s^2: the output rises no faster (clutch slip when moving off)
-  double accel_time = 2.0;         // s: time constant of the acceleration trend
+  double accel_sigma = 0.7;   // m/s^2: how far a driver's acceleration strays from its trend in 1 s
+  double max_accel = 3.5;     // m/s^2: bound on the acceleration trend
+  double launch_accel = 2.5;  // m/s^2: the output rises no faster (clutch slip when moving off)
+  double accel_time = 2.0;    // s: time constant of the acceleration trend
+  double trend_keep = 0.5;    // share of the acceleration trend expected to go on over a step
+  double trend_up = 1.0;
   double shift_coast_decel = 0.3;  // m/s^2: rolling resistance + drag while declutched during a shift
-  double stop_decel_min = 0.8;     // m/s^2: at least this while declutched at idle (braking to a stop)
+  double stop_decel_min = 0.4;     // m/s^2: at least this while declutched at idle (braking to a stop)
   double stop_decel_max = 2.5;     // m/s^2: at most this (a firm but ordinary stop)
   double gear_leave_rate = 0.15;   // 1/s: rate of leaving a gear (shift or clutch-in) at ordinary rpm
   double clutch_leave_rate = 0.6;  // 1/s: rate of engaging a gear after clutch-out
@@ -87,7 +90,7 @@ class SpeedSynthesizer {
   using ModeArray = std::array<double, kModes>;
 
   void load_model(const GearModel* model) noexcept;
-  void predict_modes(double dt, double freq) noexcept;
+  void compute_transitions(double dt, double freq) noexcept;
   SynthOutput gps_step(double dt, double gps, double freq) noexcept;
   SynthOutput engine_step(double dt, double freq) noexcept;
   [[nodiscard]] double clutch_likelihood(double freq) const noexcept;
@@ -95,6 +98,9 @@ class SpeedSynthesizer {
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
+  [[nodiscard]] double upshift_factor(double freq) const noexcept;
+  [[nodiscard]] double downshift_factor(double freq) const noexcept;
+  void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   void learn(double dt, double gps, double freq) noexcept;
   void update_accel(double dt, double speed) noexcept;
@@ -112,6 +118,7 @@ class SpeedSynthesizer {
   ModeArray prob_{};           // forward probabilities of the modes
   ModeArray speed_{}, var_{};  // per-mode speed track (m/s) and its variance ((m/s)^2)
   ModeArray next_p_{}, next_v_{}, next_var_{};
+  std::array<ModeArray, kModes> trans_{};  // trans_[i][j]: probability of mode i -> mode j over this step
 
   bool started_ = false;
   double t_ = 0.0;
@@ -120,7 +127,12 @@ class SpeedSynthesizer {
   int mode_ = 0;        // current MAP mode
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
-  double freq_max_ = 0.0;  // highest frequency seen (flat part of the declutched density)
+  // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
+  double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
+  double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
+  int sure_gear_ = 0;            // last gear held with confidence under GPS
+  double sure_gear_freq_ = 0.0;  // its last frequency
+  double freq_max_ = 0.0;        // highest frequency seen (flat part of the declutched density)
   SynthOutput last_{};
 };
 
