@@ -175,7 +175,7 @@ hs_start_reader() {
     hs_alive gearpulsed || hs_die "gearpulsed exited: $(tail -n 5 "$HS_WORK/gearpulsed.log")"
     sleep 0.1
   done
-  [ -e "$HS_PTY" ] || hs_die "no PTY at $HS_PTY after 10 s"
+  [ -e "$HS_PTY" ] || hs_die "no PTY at $HS_PTY after 10 s: $(tail -n 3 "$HS_WORK/gearpulsed.log")"
   stty -F "$HS_PTY" raw -echo 2>/dev/null || true
   touch "$HS_WORK/pulses.bin"
   hs_spawn reader sh -c "exec cat \"$HS_PTY\" >>\"$HS_WORK/pulses.bin\""
@@ -271,12 +271,21 @@ if [[ "${BASH_SOURCE[0]}" == "$0" ]]; then
       shift 3
       hs_prepare "$@"
       ;;
-    start) hs_init "$2" && hs_start ;;
+    start)
+      hs_init "$2"
+      # A half-started chain is stopped, not left running.
+      trap 'rc=$?; if [ $rc -ne 0 ]; then hs_stop; fi; exit $rc' EXIT
+      hs_start
+      ;;
     status) hs_init "$2" && hs_status ;;
     pulses) hs_init "$2" && hs_pulses ;;
     resources) hs_init "$2" && hs_resources ;;
     kill-daemon) hs_init "$2" && hs_kill_daemon ;;
-    restart) hs_init "$2" && hs_restart ;;
+    restart)
+      hs_init "$2"
+      trap 'rc=$?; if [ $rc -ne 0 ]; then hs_stop; fi; exit $rc' EXIT
+      hs_restart
+      ;;
     stop) hs_init "$2" && hs_stop ;;
     *) hs_die "unknown command '$cmd'" ;;
   esac
