@@ -151,11 +151,32 @@ hs_start_feeder() {
     "$HS_WORK/drive/drive.raw" "$HS_WORK/audio.fifo"
 }
 
-# gpsfake waits for its first client (gearpulsed) before it plays the log, so GPS and audio start together.
+# gpsfake plays the log at once (-n); the log starts some seconds before the drive's t = 0, which is
+# the epoch stamped 12:00:00 UTC (see gearpulse simulate --gps-lead).
 hs_start_gpsfake() {
   HS_PORT=$(hs_free_port)
   hs_save_env
-  hs_spawn gpsfake env PATH="/usr/bin:$PATH" gpsfake -q -1 -P "$HS_PORT" -c 0.5 "$HS_WORK/drive/drive.nmea"
+  hs_spawn gpsfake env PATH="/usr/bin:$PATH" gpsfake -q -n -1 -P "$HS_PORT" -c 0.5 "$HS_WORK/drive/drive.nmea"
+}
+
+# Blocks until gpsd reports the fix of 11:59:59, one epoch before the drive's t = 0, then waits out the
+# rest of that second: gearpulsed started now opens the audio at t = 0 and its next fix is t = 0's, so
+# audio and GPS are aligned as in a car (to within the daemon's start-up time).
+hs_wait_gps_t0() {
+  local t0 deadline
+  t0=$(date +%s)
+  deadline=$((t0 + 30))
+  # gpsd may not listen yet: try again until the deadline. gpspipe ends by SIGPIPE once grep has its
+  # line, so only grep's status counts.
+  until { timeout 10 env PATH="/usr/bin:$PATH" gpspipe -w "127.0.0.1:$HS_PORT" 2>/dev/null || true; } |
+    grep -q -m1 '"class":"TPV".*"time":"[0-9-]*T11:59:59'; do
+    [ "$(date +%s)" -lt "$deadline" ] ||
+      hs_die "gpsd did not report the drive's first fixes within 30 s: $(tail -n 3 "$HS_WORK/gpsfake.log")"
+    hs_alive gpsfake || hs_die "gpsfake exited: $(tail -n 3 "$HS_WORK/gpsfake.log")"
+    sleep 0.2
+  done
+  sleep "${HS_GPS_ALIGN:-0.9}"
+  echo "harness: GPS at the drive's start after $(($(date +%s) - t0)) s" >>"$HS_WORK/harness.log"
 }
 
 hs_start_daemon() {
@@ -196,6 +217,7 @@ hs_start() {
   hs_write_asound
   hs_start_feeder
   hs_start_gpsfake
+  hs_wait_gps_t0
   hs_start_daemon
   hs_start_reader
   hs_wait_socket

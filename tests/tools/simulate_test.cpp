@@ -133,19 +133,26 @@ TEST_CASE("simulate: writes a drive whose files agree with each other", "[simula
     CHECK(!samples[i][2].empty());
   }
 
-  // NMEA: two sentences per second; void fixes exactly inside the outage.
+  // NMEA: two sentences per second from 8 s (the default GPS lead) before t = 0, which is 12:00:00 UTC;
+  // void fixes exactly inside the outage.
   std::ifstream nmea(dir.path / "drive.nmea");
   std::string line;
   int gga = 0, rmc = 0, void_rmc = 0;
+  std::string first_rmc;
+  bool has_t0 = false;
   while (std::getline(nmea, line)) {
     if (line.rfind("$GPGGA", 0) == 0) ++gga;
     if (line.rfind("$GPRMC", 0) == 0) {
       ++rmc;
+      if (first_rmc.empty()) first_rmc = line;
       if (line.find(",V,") != std::string::npos) ++void_rmc;
+      has_t0 = has_t0 || line.rfind("$GPRMC,120000.00,A,", 0) == 0;
     }
   }
   CHECK(gga == rmc);
-  CHECK(rmc == static_cast<int>(samples.size()) - 1);
+  CHECK(rmc == static_cast<int>(samples.size()) - 1 + 8);
+  CHECK(first_rmc.rfind("$GPRMC,115952.00,A,", 0) == 0);
+  CHECK(has_t0);
   CHECK(void_rmc == 15);
 
   // drive.env agrees with the truth.

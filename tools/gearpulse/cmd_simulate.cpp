@@ -37,10 +37,12 @@ struct SimulateOptions {
   bool no_audio = false;
   double idle_start = 8.0;
   double tone_hz = 0.0;
+  int gps_lead = 8;
 };
 
-constexpr double kTruthStep = 0.1;    // s between truth.csv rows
-constexpr double kSignalStep = 0.01;  // s between the truth points the audio follows
+constexpr double kDriveStartUtc = 12 * 3600.0;  // UTC time of day of the drive's t = 0 in drive.nmea
+constexpr double kTruthStep = 0.1;              // s between truth.csv rows
+constexpr double kSignalStep = 0.01;            // s between the truth points the audio follows
 
 // The lighter voltage of the drive: the engine component follows the true frequency, with its
 // harmonics, half order, ignition spikes and noise from the project's signal generator.
@@ -157,15 +159,20 @@ int run_simulate(const SimulateOptions& o) {
     sim::write_wav_s16(dir / "drive.wav", pcm, o.rate);
   }
 
-  // GPS: Doppler speed with the receiver's noise (paper eq. (2)), no fix inside the outage.
+  // GPS: Doppler speed with the receiver's noise (paper eq. (2)), no fix inside the outage. The log
+  // starts gps_lead seconds before the drive (at rest) so a replaying gpsd has a fix before t = 0,
+  // and t = 0 is always 12:00:00 UTC: a player can start the audio when that epoch comes out.
   std::mt19937_64 rng(o.seed + 202);
   std::normal_distribution<double> gps_noise(0.0, 0.05);
-  std::vector<double> gps_speeds;
-  for (double t = 0.0; t <= length + 1e-9; t += 1.0) {
-    const double v = sim::truth_at(drive, t).speed;
-    gps_speeds.push_back(outage.contains(t) ? kMissing : std::max(0.0, v + gps_noise(rng)));
+  std::vector<sim::NmeaEpoch> epochs;
+  for (int k = -o.gps_lead; k <= static_cast<int>(length); ++k) {
+    const double t = k;
+    const double v = t < 0.0 ? 0.0 : sim::truth_at(drive, t).speed;
+    epochs.push_back({t, outage.contains(t) ? kMissing : std::max(0.0, v + gps_noise(rng))});
   }
-  sim::write_nmea_log(dir / "drive.nmea", sim::epochs_at_1hz(gps_speeds));
+  sim::NmeaTrack track;
+  track.utc_seconds_of_day = kDriveStartUtc;
+  sim::write_nmea_log(dir / "drive.nmea", epochs, track);
 
   // Generic samples at 1 Hz for `gearpulse fit` / `replay`: speed blanked in the outage, as the daemon
   // would see it.
@@ -188,6 +195,8 @@ int run_simulate(const SimulateOptions& o) {
       "outage_start_s=" + std::to_string(outage.start),
       "outage_length_s=" + std::to_string(outage.length),
       "shifts_in_outage=" + std::to_string(shifts),
+      "gps_lead_s=" + std::to_string(o.gps_lead),
+      "gps_t0_utc=12:00:00",
   };
   sim::write_lines(dir / "drive.env", summary);
   std::printf(
@@ -220,6 +229,9 @@ void add_simulate(CLI::App& app, int& status) {
       ->capture_default_str();
   cmd->add_option("--idle-start", opts->idle_start, "Seconds at rest, engine idling, before driving off")
       ->capture_default_str();
+  cmd->add_option("--gps-lead", opts->gps_lead, "Seconds of GPS fixes at rest before the drive's t = 0")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 600));
   cmd->add_flag("--no-audio", opts->no_audio, "Only the CSVs and NMEA (a training drive for fit)");
   cmd->callback([opts, &status] { status = run_simulate(*opts); });
 }
