@@ -1,0 +1,194 @@
+// Accuracy of the estimator on simulated drives: vehicles x driving styles (40 min at 1 Hz) in auto mode
+// and in the paper's mode, then a Monte-Carlo run comparing the spread of theta with the Cramer-Rao bound.
+#include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "core/estimator.hpp"
+#include "core/mixture_likelihood.hpp"
+#include "tools/sim/vehicle_sim.hpp"
+
+using namespace gearpulse;
+
+namespace {
+
+const sim::DrivingStyle kStyles[] = {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
+                                     sim::DrivingStyle::kHighway, sim::DrivingStyle::kTrafficJam};
+
+struct Score {
+  std::size_t found = 0;
+  double max_error = 0.0;  // %, when the count is right
+  bool ok = false;
+};
+
+Score score(const sim::Vehicle& car, const GearModel& model) {
+  Score s;
+  s.found = model.gears.size();
+  if (s.found != car.theta.size()) return s;
+  for (std::size_t i = 0; i < s.found; ++i)
+    s.max_error = std::max(s.max_error, 100.0 * std::abs(model.gears[i].theta / car.theta[i] - 1.0));
+  s.ok = s.max_error <= 0.5;
+  return s;
+}
+
+// The paper's priors for a vehicle: Table 2 for the 5-speed BMW, else its true steps rounded to 0.05
+// (what a gearbox data sheet gives), top gear down.
+std::vector<double> paper_ratios(const sim::Vehicle& car) {
+  if (car.name == "bmw-520i") return {1.25, 1.35, 1.50, 1.7};
+  std::vector<double> c;
+  for (std::size_t i = car.theta.size() - 1; i > 0; --i)
+    c.push_back(std::round(car.theta[i] / car.theta[i - 1] * 20.0) / 20.0);
+  return c;
+}
+
+void accuracy_table(int seeds) {
+  std::printf("\n== accuracy: 40 min at 1 Hz, sigma_v 0.05 m/s, sigma_s 0.2 Hz, seeds 1..%d\n", seeds);
+  std::printf("%-10s %-8s %5s | %-28s | %-28s\n", "vehicle", "style", "gears", "auto: found / max err % (ok)",
+              "paper: max err % (ok)");
+  int auto_ok = 0;
+  int paper_ok = 0;
+  int total = 0;
+  int cvt_clean = 0;
+  int cvt_total = 0;
+  for (const sim::Vehicle& car : sim::vehicle_presets()) {
+    for (sim::DrivingStyle style : kStyles) {
+      std::string auto_cell;
+      std::string paper_cell;
+      for (int seed = 1; seed <= seeds; ++seed) {
+        const auto samples = sim::to_samples(sim::simulate_observations(car, style, 2400.0, 1, seed));
+        const FitResult fit = fit_gear_model(samples, {});
+        char cell[64];
+        if (car.is_cvt()) {
+          ++cvt_total;
+          cvt_clean += fit.model.gears.empty() ? 1 : 0;
+          std::snprintf(cell, sizeof cell, "%zu ", fit.model.gears.size());
+          auto_cell += cell;
+          continue;
+        }
+        const Score a = score(car, fit.model);
+        ++total;
+        auto_ok += a.ok ? 1 : 0;
+        std::snprintf(cell, sizeof cell, "%zu/%.2f%s ", a.found, a.max_error, a.ok ? "" : "*");
+        auto_cell += cell;
+        FitOptions paper;
+        paper.ratios = paper_ratios(car);
+        const Score p = score(car, fit_gear_model(samples, paper).model);
+        paper_ok += p.ok ? 1 : 0;
+        std::snprintf(cell, sizeof cell, "%.2f%s ", p.max_error, p.ok ? "" : "*");
+        paper_cell += cell;
+      }
+      std::printf("%-10s %-8s %5d | %-28s | %-28s\n", car.name.c_str(),
+                  std::string(sim::style_name(style)).c_str(), car.gears(), auto_cell.c_str(),
+                  paper_cell.c_str());
+    }
+  }
+  std::printf("auto mode: right count and every theta within 0.5 %%: %d / %d runs\n", auto_ok, total);
+  std::printf(
+      "paper mode (true count and data-sheet priors given): every theta within 0.5 %%: %d / %d runs\n",
+      paper_ok, total);
+  std::printf("CVT: no ladder in %d / %d runs\n", cvt_clean, cvt_total);
+  std::printf("(* = wrong count or an error above 0.5 %%)\n");
+}
+
+// Per-sample Fisher information at the truth: thetas and sigmas at their true values, the nuisance
+// weights and clutch-out density fitted with the thetas held, on a long drive; averaged per sample.
+Eigen::MatrixXd fisher_per_sample(const sim::Vehicle& car, sim::DrivingStyle style, std::uint64_t seed,
+                                  const sim::ObservationOptions& obs, const GearModel& reference) {
+  detail::MixtureData data;
+  for (const auto& o : sim::simulate_observations(car, style, 2400.0, 40, seed, obs)) {
+    if (!(o.freq > 0.0)) continue;
+    data.v.push_back(o.speed);
+    data.s.push_back(o.freq);
+  }
+  detail::MixtureParams p;
+  p.theta = car.theta;
+  for (const Gear& g : reference.gears)
+    p.alpha.push_back(g.weight);
+  p.sigma_s = obs.sigma_freq;
+  p.sigma_v = obs.sigma_speed;
+  p.beta_stand = reference.extra["standstill"]["weight"].get<double>();
+  p.stand_sigma = reference.extra["standstill"]["sigma"].get<double>();
+  p.beta_clutch = reference.extra["clutch_out"]["weight"].get<double>();
+  p.g_lo = reference.extra["clutch_out"]["lo"].get<double>();
+  p.g_hi = reference.extra["clutch_out"]["hi"].get<double>();
+  p.g_density = reference.extra["clutch_out"]["density"].get<std::vector<double>>();
+  for (int it = 0; it < 30; ++it) {
+    const detail::EStepStats st = detail::e_step(data, p);
+    detail::m_step(st, p, false, false);
+    p.theta = car.theta;  // held at the truth
+    p.sigma_s = obs.sigma_freq;
+    p.sigma_v = obs.sigma_speed;
+  }
+  const detail::GradientLayout layout{car.gears(), true, true};
+  // The expected information: mean of score outer products at the truth (equals minus the expected
+  // Hessian when the model holds).
+  Eigen::MatrixXd info = Eigen::MatrixXd::Zero(layout.size(), layout.size());
+  const std::size_t chunk = 1;
+  for (std::size_t k = 0; k < data.size(); k += chunk) {
+    detail::MixtureData one;
+    one.v = {data.v[k]};
+    one.s = {data.s[k]};
+    Eigen::VectorXd g;
+    (void)detail::log_likelihood_gradient(one, p, layout, g);
+    info += g * g.transpose();
+  }
+  return info / static_cast<double>(data.size());
+}
+
+void monte_carlo(int runs) {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const sim::DrivingStyle style = sim::DrivingStyle::kUrban;
+  const sim::ObservationOptions obs;
+  std::printf("\n== Monte-Carlo: %s, %s, 40 min at 1 Hz, %d seeds (1000..%d)\n", car.name.c_str(),
+              std::string(sim::style_name(style)).c_str(), runs, 1000 + runs - 1);
+  const int m = car.gears();
+  std::vector<std::vector<double>> theta(static_cast<std::size_t>(m));
+  std::vector<double> se(static_cast<std::size_t>(m), 0.0);
+  GearModel reference;
+  double samples = 0.0;
+  int complete = 0;
+  for (int r = 0; r < runs; ++r) {
+    const auto data = sim::to_samples(sim::simulate_observations(car, style, 2400.0, 1, 1000 + r, obs));
+    const FitResult fit = fit_gear_model(data, {});
+    if (static_cast<int>(fit.model.gears.size()) != m) continue;
+    ++complete;
+    samples += static_cast<double>(fit.model.samples);
+    for (int i = 0; i < m; ++i) {
+      theta[static_cast<std::size_t>(i)].push_back(fit.model.gears[static_cast<std::size_t>(i)].theta);
+      se[static_cast<std::size_t>(i)] += fit.model.gears[static_cast<std::size_t>(i)].std_error;
+    }
+    if (reference.gears.empty()) reference = fit.model;
+  }
+  std::printf("runs with the right gear count: %d / %d\n", complete, runs);
+  if (complete < 3) return;
+  samples /= complete;
+  const Eigen::MatrixXd fisher = fisher_per_sample(car, style, 7000, obs, reference);
+  const Eigen::MatrixXd crb = (samples * fisher).inverse();
+  std::printf("%-5s %10s %12s %12s %12s %10s %10s\n", "gear", "theta", "std (MC)", "mean stderr", "CRB",
+              "std/CRB", "stderr/CRB");
+  for (int i = 0; i < m; ++i) {
+    const auto& t = theta[static_cast<std::size_t>(i)];
+    double mean = 0.0;
+    for (double x : t)
+      mean += x / complete;
+    double var = 0.0;
+    for (double x : t)
+      var += (x - mean) * (x - mean) / (complete - 1);
+    const double bound = std::sqrt(crb(i, i));
+    const double mean_se = se[static_cast<std::size_t>(i)] / complete;
+    std::printf("%-5d %10.5f %12.3e %12.3e %12.3e %10.2f %10.2f\n", i + 1,
+                car.theta[static_cast<std::size_t>(i)], std::sqrt(var), mean_se, bound,
+                std::sqrt(var) / bound, mean_se / bound);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int seeds = argc > 1 ? std::atoi(argv[1]) : 2;
+  const int runs = argc > 2 ? std::atoi(argv[2]) : 50;
+  std::printf("bench_fit_sim [seeds per cell = %d] [Monte-Carlo runs = %d]\n", seeds, runs);
+  accuracy_table(seeds);
+  monte_carlo(runs);
+  return 0;
+}
