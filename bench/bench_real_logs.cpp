@@ -6,7 +6,7 @@
 //   (b) the paper's method (Table 2 ratios 1.25,1.35,1.50,1.7) with the gear at the outage start kept;
 //   (c) the gear chosen with hindsight (theta x freq closest to the truth), auto model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
-// Usage: bench_real_logs [DATA_DIR]   (default /work/shared/data/real)
+// Usage: bench_real_logs [DATA_DIR]   (default: the shared/data/real beside the source tree)
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -164,7 +164,7 @@ void run_fold(const char* label, const std::vector<Log>& train, const std::vecto
 }  // namespace
 
 int main(int argc, char** argv) {
-  const fs::path root = argc > 1 ? fs::path(argv[1]) : fs::path("/work/shared/data/real");
+  const fs::path root = argc > 1 ? fs::path(argv[1]) : fs::path(GEARPULSE_REAL_DATA_DIR);
   const auto start = std::chrono::steady_clock::now();
 
   const fs::path etios = root / "carloop-etios";

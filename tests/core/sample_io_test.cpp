@@ -30,7 +30,7 @@ std::string error_of(const std::string& text) {
   return "(no error)";
 }
 
-const std::filesystem::path kReal = "/work/shared/data/real";
+const std::filesystem::path kReal = GEARPULSE_REAL_DATA_DIR;
 
 }  // namespace
 

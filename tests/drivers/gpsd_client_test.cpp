@@ -214,7 +214,7 @@ std::map<long, double> rmc_speeds(const std::filesystem::path& path) {
 TEST_CASE("gpsd: real receiver logs deliver their RMC speeds") {
   const char* root = std::getenv("GEARPULSE_REAL_DATA");  // default: the shared copy of data/real
   const std::filesystem::path base =
-      std::filesystem::path(root ? root : "/work/shared/data/real") / "gpsd-nmea";
+      std::filesystem::path(root ? root : GEARPULSE_REAL_DATA_DIR) / "gpsd-nmea";
   if (!std::filesystem::exists(base / "nl2008u.log")) {
     WARN("GEARPULSE_SKIP skipped: real gpsd logs not found at " << base);
     return;
