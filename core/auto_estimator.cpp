@@ -186,11 +186,13 @@ class LadderJudge {
         return {smaller, "no valley between gear clusters (a continuum, as from a CVT or clutch slip)"};
     }
     // A gear drives the engine above idle over a range of engine speeds. A cluster whose samples sit at
-    // idle, or within a narrow band just above it, is a slipping clutch (crawling in a jam).
+    // idle, or within a narrow band just above it, is a slipping clutch (crawling in a jam); one centred
+    // near idle whose upper tenth reaches well above it is a low gear also used at a crawl.
     if (idle_freq_ > 0.0) {
       for (int i = 0; i < m; ++i) {
         const FreqSpread f = freq_spread(p, i);
-        if (f.median < 1.15 * idle_freq_ || (f.median < 1.5 * idle_freq_ && f.p90 < 1.12 * f.p10))
+        if ((f.median < 1.15 * idle_freq_ && f.p90 < 1.5 * idle_freq_) ||
+            (f.median < 1.5 * idle_freq_ && f.p90 < 1.12 * f.p10))
           return {i, "a cluster at idle frequency (clutch slip)"};
       }
     }
@@ -310,9 +312,81 @@ std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std:
   return out;
 }
 
+// Speed read at a time offset from engine speed: v interpolated linearly to t + delta between the
+// neighbouring samples (no change at the ends or across a gap).
+double shifted_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
+  const std::size_t j = delta > 0.0 ? k + 1 : k - 1;
+  if ((delta > 0.0 && k + 1 >= d.size()) || (delta < 0.0 && k == 0) || delta == 0.0) return d.v[k];
+  const double dt = d.t[j] - d.t[k];
+  if (dt * delta <= 0.0 || std::abs(dt) > max_gap) return d.v[k];  // a gap, or time restarting
+  return std::max(0.0, d.v[k] + (d.v[j] - d.v[k]) * delta / dt);
+}
+
+// Sharpness of the log(v/s) density (sum of squared bin shares, a collision probability): gear lines
+// give narrow peaks, a misaligned speed channel smears them in proportion to the acceleration.
+double ratio_sharpness(const MixtureData& d, double delta, double max_gap) {
+  constexpr double kBin = 0.015;  // log units, the middle smoothing width of candidate_scales
+  std::vector<double> keys;
+  for (std::size_t k = 0; k < d.size(); ++k) {
+    const double v = shifted_speed(d, k, delta, max_gap);
+    if (v > kMovingSpeed && d.s[k] > 0.0) keys.push_back(std::floor(std::log(v / d.s[k]) / kBin));
+  }
+  if (keys.empty()) return 0.0;
+  std::sort(keys.begin(), keys.end());
+  double sum = 0.0;
+  std::size_t run = 1;
+  for (std::size_t i = 1; i <= keys.size(); ++i) {
+    if (i < keys.size() && keys[i] == keys[i - 1]) {
+      ++run;
+      continue;
+    }
+    sum += static_cast<double>(run) * static_cast<double>(run);
+    run = 1;
+  }
+  const double n = static_cast<double>(keys.size());
+  return sum / (n * n);
+}
+
+// A logger that reads speed and engine speed at different instants (OBD-II polls its PIDs in turn and
+// the ECU's speed may lag; a GPS fix is reported after the audio it belongs to) pairs them with a time
+// offset; at acceleration a the speed is then off by a * offset, in first gear as much as the step
+// between gears. The offset, searched within one sampling interval either way, is the one that makes the
+// gear lines sharpest; the speeds are moved to it. Without time stamps nothing changes.
+MixtureData aligned_channels(const MixtureData& all) {
+  const std::size_t n = all.size();
+  if (all.t.size() != n || n < 30) return all;
+  std::vector<double> gaps;
+  for (std::size_t k = 1; k < n; ++k) {
+    const double dt = all.t[k] - all.t[k - 1];
+    if (dt > 0.0) gaps.push_back(dt);
+  }
+  if (gaps.size() < n / 2) return all;
+  std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
+  const double gap = gaps[gaps.size() / 2];
+  const double max_gap = 3.0 * gap;
+  const double unshifted = ratio_sharpness(all, 0.0, max_gap);
+  double best_delta = 0.0;
+  double best = unshifted;
+  for (int step = -8; step <= 8; ++step) {
+    const double delta = gap * step / 8.0;
+    const double sharp = ratio_sharpness(all, delta, max_gap);
+    if (sharp > best) {
+      best = sharp;
+      best_delta = delta;
+    }
+  }
+  // A few percent of sharpness is what sampling noise alone gives.
+  if (best < 1.05 * unshifted) return all;
+  MixtureData out = all;
+  for (std::size_t k = 0; k < n; ++k)
+    out.v[k] = shifted_speed(all, k, best_delta, max_gap);
+  return out;
+}
+
 }  // namespace
 
-GearModel fit_auto(const MixtureData& all, int gears) {
+GearModel fit_auto(const MixtureData& input, int gears) {
+  const MixtureData all = aligned_channels(input);
   GearModel model;
   model.method = "auto";
   model.samples = all.size();

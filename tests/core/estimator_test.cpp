@@ -185,19 +185,29 @@ TEST_CASE("estimator: real manual logs give ascending ladders and the automatic 
     WARN("real logs not found under /work/shared/data/real: skipped");
     return;
   }
+  // The Etios logs pair speed and rpm read about 0.7-1 s apart; only with the channels aligned does first
+  // gear (pulling away, where that skew matters most) form a line of its own.
   const FitResult e = fit_gear_model(etios, {});
-  REQUIRE(e.model.gears.size() >= 4);
+  REQUIRE(e.model.gears.size() == 5);
   check_ordered(e.model);
   // A 1.5 L hatch: top gear 30-40 km/h per 1000 rpm, i.e. theta 0.50-0.67 (m/s)/Hz of crank rotation.
   CHECK(e.model.gears.back().theta > 0.50);
   CHECK(e.model.gears.back().theta < 0.67);
+  // First gear: 6-9 km/h per 1000 rpm, theta 0.10-0.15.
+  CHECK(e.model.gears.front().theta > 0.10);
+  CHECK(e.model.gears.front().theta < 0.15);
   for (std::size_t i = 1; i < e.model.gears.size(); ++i) {
     const double step = e.model.gears[i].theta / e.model.gears[i - 1].theta;
+    INFO("step " << i);
     CHECK(step > 1.1);
-    CHECK(step < 2.0);
+    // The first step is the widest of a gearbox; the fit of first gear is pulled down a little by clutch
+    // slip while pulling away, which sits just below its line.
+    CHECK(step < (i == 1 ? 2.2 : 1.7));
+    // Steps shrink towards the top gear.
+    if (i > 1) CHECK(step < e.model.gears[i - 1].theta / e.model.gears[i - 2].theta);
   }
   const FitResult l = fit_gear_model(louisville, {});
-  REQUIRE(l.model.gears.size() >= 2);
+  REQUIRE(l.model.gears.size() >= 4);
   check_ordered(l.model);
   const FitResult a = fit_gear_model(automatic, {});
   CHECK(a.model.gears.empty());
