@@ -32,7 +32,7 @@ void check_ordered(const GearModel& model) {
 }
 
 std::vector<Sample> read_real(const std::string& relative) {
-  const std::string path = std::string("/work/shared/data/real/") + relative;
+  const std::string path = std::string(GEARPULSE_REAL_DATA_DIR "/") + relative;
   std::ifstream in(path);
   if (!in) return {};
   return read_samples(in, path).samples;
@@ -182,7 +182,7 @@ TEST_CASE("estimator: real manual logs give ascending ladders and the automatic 
   const auto louisville = read_real("torque-louisville/rpms_chart_from_obd.csv");
   const auto automatic = read_real("torque-automatic/trackLog.csv");
   if (etios.empty() || louisville.empty() || automatic.empty()) {
-    WARN("real logs not found under /work/shared/data/real: skipped");
+    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
     return;
   }
   // The Etios logs pair speed and rpm read about 0.7-1 s apart; only with the channels aligned does first
