@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/speed_synth.hpp"
+#include "tests/alloc_counter.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 using gearpulse::GearModel;
@@ -17,53 +18,7 @@ using gearpulse::SpeedSource;
 using gearpulse::SpeedSynthesizer;
 using gearpulse::SynthOutput;
 
-// Counting global allocator: lets a test prove that step() never allocates. GCC cannot see that the
-// replacement new and delete below pair malloc with free, hence the pragma.
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-// Every unaligned form is replaced, so that no pairing mixes these with a sanitizer's own allocator.
-namespace {
-void* counted_malloc(std::size_t size) noexcept {
-  g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(size ? size : 1);
-}
-}  // namespace
-
-void* operator new(std::size_t size) {
-  if (void* p = counted_malloc(size)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t size) {
-  if (void* p = counted_malloc(size)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t size, const std::nothrow_t&) noexcept {
-  return counted_malloc(size);
-}
-void* operator new[](std::size_t size, const std::nothrow_t&) noexcept {
-  return counted_malloc(size);
-}
-void operator delete(void* p) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p) noexcept {
-  std::free(p);
-}
-void operator delete(void* p, std::size_t) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p, std::size_t) noexcept {
-  std::free(p);
-}
-void operator delete(void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
+using gearpulse::test::g_allocations;
 
 namespace {
 

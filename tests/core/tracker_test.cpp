@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/sliding_dft_tracker.hpp"
+#include "tests/alloc_counter.hpp"
 #include "tools/sim/lighter_signal.hpp"
 
 using gearpulse::SlidingDftTracker;
@@ -21,52 +22,8 @@ using gearpulse::TrackerConfig;
 using gearpulse::TrackPoint;
 namespace sim = gearpulse::sim;
 
-// Counting global allocator: the tracker must not allocate once built.
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-// Every unaligned form is replaced, so that no pairing mixes these with a sanitizer's own allocator.
-namespace {
-void* counted_malloc(std::size_t n) noexcept {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-}  // namespace
-
-void* operator new(std::size_t n) {
-  if (void* p = counted_malloc(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  if (void* p = counted_malloc(n)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  return counted_malloc(n);
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  return counted_malloc(n);
-}
-void operator delete(void* p) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p) noexcept {
-  std::free(p);
-}
-void operator delete(void* p, std::size_t) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p, std::size_t) noexcept {
-  std::free(p);
-}
-void operator delete(void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
-void operator delete[](void* p, const std::nothrow_t&) noexcept {
-  std::free(p);
-}
+using gearpulse::test::g_allocations;
+using gearpulse::test::g_counting;
 
 namespace {
 
