@@ -15,9 +15,9 @@
 
 #include "core/pulse_scheduler.hpp"
 #include "core/sliding_dft_tracker.hpp"
+#include "core/speed_synth.hpp"
 #include "core/spsc_ring.hpp"
 #include "daemon/log_limiter.hpp"
-#include "daemon/synthesis.hpp"
 #include "drivers/alsa_capture.hpp"
 #include "drivers/clock.hpp"
 #include "drivers/gpio_output.hpp"
@@ -93,7 +93,7 @@ struct Pipeline::Impl {
   std::atomic<std::int64_t> tracker_beat{0};
   std::atomic<double> speed{0.0};
   std::atomic<int> gear{0};
-  std::atomic<Source> source{Source::kNone};
+  std::atomic<SpeedSource> source{SpeedSource::kNone};
   std::atomic<double> track_freq{kNan};
   std::atomic<double> track_snr{kNan};
   std::atomic<bool> track_confident{false};
@@ -218,7 +218,8 @@ void Pipeline::Impl::close_audio() {
 }
 
 void Pipeline::Impl::tracker_loop() noexcept {
-  Synthesis synth;
+  // The same SpeedSynthesizer `gearpulse replay` runs, stepped live.
+  SpeedSynthesizer synth;
   std::shared_ptr<const GearModel> current_model = model.get();
   synth.set_model(current_model);
   std::unique_ptr<SlidingDftTracker> tracker;
@@ -267,7 +268,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     synth_started = true;
     last_synth_t = t;
     last_had_gps = have_gps;
-    const SynthStep out = synth.step(t, gps_speed, confident ? freq : kNan);
+    const SynthOutput out = synth.step(t, gps_speed, confident ? freq : kNan);
     if (pulses) pulses->set_speed(out.speed);
     speed.store(out.speed, std::memory_order_relaxed);
     gear.store(out.gear, std::memory_order_relaxed);
@@ -448,7 +449,7 @@ PipelineSnapshot Pipeline::snapshot() const {
   const Impl& d = *impl_;
   PipelineSnapshot s;
   s.speed = d.speed.load(std::memory_order_relaxed);
-  s.source = to_string(d.source.load(std::memory_order_relaxed));
+  s.source = std::string(source_name(d.source.load(std::memory_order_relaxed)));
   s.gear = d.gear.load(std::memory_order_relaxed);
   const std::int64_t now = monotonic_ns();
   if (d.pulses) {

@@ -12,7 +12,7 @@
 #include <string>
 #include <thread>
 
-#include "drivers/speed_source.hpp"
+#include "drivers/gps_source.hpp"
 
 namespace gearpulse {
 
@@ -38,7 +38,7 @@ struct GpsdStatus {
 
 [[nodiscard]] const char* to_string(GpsdState state) noexcept;
 
-class GpsdClient final : public SpeedSource {
+class GpsdClient final : public GpsSource {
  public:
   // `on_report` (optional) runs on the client thread for every published report; keep it short.
   explicit GpsdClient(GpsdConfig config, Callback on_report = {});

@@ -1,5 +1,6 @@
 #pragma once
-// Where GPS speed comes from: gpsd in the daemon, a scripted source in tests.
+// Where GPS speed comes from: gpsd in the daemon, a scripted source in tests. (Not to be confused with
+// core's SpeedSource, which says where a synthesized speed came from.)
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -20,10 +21,10 @@ struct GpsReport {
   [[nodiscard]] bool usable() const noexcept { return mode >= 2 && speed == speed; }
 };
 
-class SpeedSource {
+class GpsSource {
  public:
   using Callback = std::function<void(const GpsReport&)>;
-  virtual ~SpeedSource() = default;
+  virtual ~GpsSource() = default;
   // The newest report, if any arrived yet.
   [[nodiscard]] virtual std::optional<GpsReport> latest() const = 0;
   // True if the newest report is usable and was received no longer ago than the no-fix timeout.
