@@ -7,7 +7,8 @@
 // Methods compared:
 //   (a) hold the last GPS speed;
 //   (c) the gear chosen with hindsight (theta x freq closest to the true speed), fitted model: a floor;
-//   (d) gearpulse's SpeedSynthesizer with the fitted model, causal, as the daemon runs it.
+//   (d) gearpulse's SpeedSynthesizer with the fitted model, causal, stepped at every observed row (the
+//       daemon may step it less often; this bench shows what the filter itself does at each rate).
 // Each drive is observed three ways: an OBD logger (integer km/h and rpm, a 1.8 s polling round, skewed
 // polls, rows every 0.5 s as the Etios logs), GPS at 1 Hz and GPS at 10 Hz. The same drives are used for
 // all three, so a synthesis that does not depend on the sample rate gives about the same 1 Hz and 10 Hz
@@ -184,7 +185,7 @@ int main(int argc, char** argv) {
     } else {
       char* end = nullptr;
       const unsigned long long v = std::strtoull(argv[i], &end, 10);
-      if (end == argv[i] || *end != '\0') {
+      if (argv[i][0] == '-' || end == argv[i] || *end != '\0') {
         std::fprintf(stderr, "usage: bench_synth_sim [SEED] [--quick]\n");
         return 2;
       }
