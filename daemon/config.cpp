@@ -230,28 +230,19 @@ Config from_table(const toml::table& root, const std::string& file) {
     if (!node.is_table())
       throw ConfigError(where(file, region) + ": " + std::string(key.str()) + ": expected a [section]");
   }
-  const auto table = [&](std::string_view name) { return root.get_as<toml::table>(name); };
-  Section audio(table("audio"), "audio", file);
-  read_audio(audio, config.audio);
-  audio.reject_unknown();
-  Section tracker(table("tracker"), "tracker", file);
-  read_tracker(tracker, config.tracker);
-  tracker.reject_unknown();
-  Section gps(table("gps"), "gps", file);
-  read_gps(gps, config.gps);
-  gps.reject_unknown();
-  Section output(table("output"), "output", file);
-  read_output(output, config.output);
-  output.reject_unknown();
-  Section model(table("model"), "model", file);
-  read_model(model, config.model);
-  model.reject_unknown();
-  Section control(table("control"), "control", file);
-  read_control(control, config.control);
-  control.reject_unknown();
-  Section log(table("log"), "log", file);
-  read_log(log, config.log);
-  log.reject_unknown();
+  // Every section is read the same way: its keys, then a refusal of any key it does not know.
+  const auto section = [&](const char* name, auto read, auto& into) {
+    Section s(root.get_as<toml::table>(name), name, file);
+    read(s, into);
+    s.reject_unknown();
+  };
+  section("audio", read_audio, config.audio);
+  section("tracker", read_tracker, config.tracker);
+  section("gps", read_gps, config.gps);
+  section("output", read_output, config.output);
+  section("model", read_model, config.model);
+  section("control", read_control, config.control);
+  section("log", read_log, config.log);
   check_relations(config, root, file);
   return config;
 }

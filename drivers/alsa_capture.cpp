@@ -1,9 +1,6 @@
 #include "drivers/alsa_capture.hpp"
 
 #include <alsa/asoundlib.h>
-#include <pthread.h>
-#include <sched.h>
-#include <sys/mman.h>
 
 #include <algorithm>
 #include <cmath>
@@ -11,6 +8,7 @@
 #include <stdexcept>
 
 #include "drivers/clock.hpp"
+#include "drivers/realtime.hpp"
 
 namespace gearpulse {
 namespace {
@@ -227,12 +225,9 @@ bool AlsaCapture::frame_time(std::uint64_t index, std::int64_t& t_ns) const noex
 }
 
 void AlsaCapture::run() noexcept {
-  if (config_.realtime) {
-    sched_param sp{};
-    sp.sched_priority = config_.rt_priority;
-    realtime_ok_.store(::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp) == 0);
-  }
-  if (config_.lock_memory) memory_locked_.store(::mlockall(MCL_CURRENT | MCL_FUTURE) == 0);
+  const RealtimeResult rt = make_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
+  realtime_ok_.store(rt.fifo);
+  memory_locked_.store(rt.memory_locked);
   snd_pcm_status_t* status = nullptr;
   if (::snd_pcm_status_malloc(&status) < 0) {
     last_error_.store(-ENOMEM);

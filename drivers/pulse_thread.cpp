@@ -1,13 +1,10 @@
 #include "drivers/pulse_thread.hpp"
 
-#include <pthread.h>
-#include <sched.h>
-#include <sys/mman.h>
-
 #include <algorithm>
 #include <cerrno>
 
 #include "drivers/clock.hpp"
+#include "drivers/realtime.hpp"
 
 namespace gearpulse {
 namespace {
@@ -54,12 +51,9 @@ PulseThreadStatus PulseThread::status() const noexcept {
 }
 
 void PulseThread::run(std::int64_t t0_ns) noexcept {
-  if (config_.realtime) {
-    sched_param sp{};
-    sp.sched_priority = config_.rt_priority;
-    realtime_ok_.store(::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp) == 0);
-  }
-  if (config_.lock_memory) memory_locked_.store(::mlockall(MCL_CURRENT | MCL_FUTURE) == 0);
+  const RealtimeResult rt = make_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
+  realtime_ok_.store(rt.fifo);
+  memory_locked_.store(rt.memory_locked);
   running_.store(true);
 
   PulseScheduler sched(config_.pulse, t0_ns);  // validated in start(): cannot throw here

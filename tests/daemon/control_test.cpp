@@ -8,8 +8,10 @@
 #include <thread>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "daemon/control_server.hpp"
-#include "tests/daemon/test_util.hpp"
+#include "tests/test_util.hpp"
 
 using gearpulse::daemon::ControlError;
 using gearpulse::daemon::ControlLimits;

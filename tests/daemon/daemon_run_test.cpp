@@ -9,9 +9,11 @@
 
 #include <ctime>
 
+#include <nlohmann/json.hpp>
+
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
-#include "tests/daemon/test_util.hpp"
+#include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 using gearpulse::test::LineClient;
@@ -217,7 +219,7 @@ TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
   REQUIRE(::bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
   write_text(dir / "gearpulse.toml", config_for(dir));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt",
-                 {"NOTIFY_SOCKET=" + notify_path, "WATCHDOG_USEC=600000"});
+                 {.env = {"NOTIFY_SOCKET=" + notify_path, "WATCHDOG_USEC=600000"}});
   std::string all;
   const auto receive_until = [&](const std::string& what) {
     for (int i = 0; i < 200 && all.find(what) == std::string::npos; ++i) {

@@ -10,11 +10,13 @@
 #include <string>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "daemon/atomic_file.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/retrainer.hpp"
 #include "daemon/training_store.hpp"
-#include "tests/daemon/test_util.hpp"
+#include "tests/test_util.hpp"
 
 using namespace gearpulse;
 using namespace gearpulse::daemon;

@@ -16,7 +16,7 @@
 #include "core/spsc_ring.hpp"
 #include "drivers/alsa_capture.hpp"
 #include "drivers/clock.hpp"
-#include "tests/drivers/test_util.hpp"
+#include "tests/test_util.hpp"
 
 using namespace std::chrono_literals;
 using gearpulse::AlsaCapture;

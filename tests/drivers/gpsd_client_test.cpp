@@ -15,7 +15,8 @@
 
 #include "drivers/clock.hpp"
 #include "drivers/gpsd_client.hpp"
-#include "tests/drivers/test_util.hpp"
+#include "tests/drivers/gpsfake.hpp"
+#include "tests/test_util.hpp"
 #include "tools/sim/nmea.hpp"
 
 using namespace std::chrono_literals;

@@ -14,7 +14,7 @@
 
 #include "drivers/pty_output.hpp"
 #include "drivers/pulse_thread.hpp"
-#include "tests/drivers/test_util.hpp"
+#include "tests/test_util.hpp"
 
 using gearpulse::PtyOutput;
 using gearpulse::test::TempDir;

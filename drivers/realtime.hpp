@@ -1,0 +1,21 @@
+#pragma once
+// Real-time set-up for the calling thread, shared by the capture and pulse threads: SCHED_FIFO at a
+// priority, and all memory locked so a page fault never delays a sample or an edge. Both usually need
+// root or CAP_SYS_NICE / CAP_IPC_LOCK; failures are reported, never fatal.
+namespace gearpulse {
+
+struct RealtimeRequest {
+  bool fifo = false;         // SCHED_FIFO for the calling thread
+  int priority = 70;         // 1..99
+  bool lock_memory = false;  // mlockall(MCL_CURRENT | MCL_FUTURE), process-wide
+};
+
+struct RealtimeResult {
+  bool fifo = false;           // SCHED_FIFO granted
+  bool memory_locked = false;  // mlockall succeeded
+};
+
+// Applies what `request` asks for; what was not asked for reads false.
+RealtimeResult make_realtime(const RealtimeRequest& request) noexcept;
+
+}  // namespace gearpulse
