@@ -388,66 +388,76 @@ EStepStats e_step(const MixtureData& data, const MixtureParams& p) {
 namespace {
 
 // Minimises F(a, b) = sum_i R_i log(theta_i^2 a + b) + S_i / (theta_i^2 a + b) over a = sigma_s^2,
-// b = sigma_v^2 (the sigma part of the expected negative log-likelihood) by damped Newton in log space.
+// b = sigma_v^2 >= 0 (the sigma part of the expected negative log-likelihood). Written as a = w u / t,
+// b = w (1 - u) with t the responsibility-weighted mean theta^2, the scale w has a closed-form minimiser
+// for each share u in [0, 1]; F is then searched over u on a grid and refined by golden section. A local
+// search in log(a), log(b) stalls where one noise level is near zero (the gradient vanishes with it),
+// which left sigma_s pinned at zero and every gear line as wide as the top gear's.
 void minimise_sigmas(const std::vector<double>& theta, const std::vector<double>& r_sum,
                      const std::vector<double>& sq, double& a, double& b) {
-  const double floor_a = 1e-12;
-  const double floor_b = 1e-12;
-  auto objective = [&](double la, double lb) {
-    const double aa = std::exp(la);
-    const double bb = std::exp(lb);
+  constexpr double kFloor = 1e-12;
+  double r_total = 0.0;
+  double t_mean = 0.0;
+  for (std::size_t i = 0; i < theta.size(); ++i) {
+    r_total += r_sum[i];
+    t_mean += r_sum[i] * theta[i] * theta[i];
+  }
+  if (!(r_total > 0.0) || !(t_mean > 0.0)) return;
+  t_mean /= r_total;
+  // Profile of F over the share u: returns F and the scale w at its minimum.
+  auto profile = [&](double u, double& w) {
+    double weighted = 0.0;
+    for (std::size_t i = 0; i < theta.size(); ++i) {
+      const double c = theta[i] * theta[i] / t_mean * u + (1.0 - u);
+      weighted += sq[i] / c;
+    }
+    w = std::max(weighted / r_total, kFloor);
     double f = 0.0;
     for (std::size_t i = 0; i < theta.size(); ++i) {
-      const double var = theta[i] * theta[i] * aa + bb;
+      const double var = w * (theta[i] * theta[i] / t_mean * u + (1.0 - u));
       f += r_sum[i] * std::log(var) + sq[i] / var;
     }
     return f;
   };
-  double la = std::log(std::max(a, floor_a));
-  double lb = std::log(std::max(b, floor_b));
-  for (int iter = 0; iter < 40; ++iter) {
-    // Gradient and Hessian in (la, lb) by finite differences: tiny 2-D problem, cost negligible.
-    const double h = 1e-4;
-    const double f0 = objective(la, lb);
-    const double fa = objective(la + h, lb);
-    const double fa_ = objective(la - h, lb);
-    const double fb = objective(la, lb + h);
-    const double fb_ = objective(la, lb - h);
-    const double fab = objective(la + h, lb + h);
-    const double ga = (fa - fa_) / (2 * h);
-    const double gb = (fb - fb_) / (2 * h);
-    const double haa = (fa - 2 * f0 + fa_) / (h * h);
-    const double hbb = (fb - 2 * f0 + fb_) / (h * h);
-    const double hab = (fab - fa - fb + f0) / (h * h);
-    double da = -ga;
-    double db = -gb;
-    const double det = haa * hbb - hab * hab;
-    if (haa > 0 && hbb > 0 && det > 0) {
-      da = -(hbb * ga - hab * gb) / det;
-      db = -(haa * gb - hab * ga) / det;
+  constexpr int kGrid = 40;
+  double w = 0.0;
+  int best = 0;
+  double best_f = INFINITY;
+  for (int g = 0; g <= kGrid; ++g) {
+    const double f = profile(static_cast<double>(g) / kGrid, w);
+    if (f < best_f) {
+      best_f = f;
+      best = g;
     }
-    const double norm = std::hypot(da, db);
-    if (norm > 1.0) {
-      da /= norm;
-      db /= norm;
-    }
-    double step = 1.0;
-    bool improved = false;
-    for (int ls = 0; ls < 30; ++ls) {
-      const double nla = std::max(la + step * da, std::log(floor_a));
-      const double nlb = std::max(lb + step * db, std::log(floor_b));
-      if (objective(nla, nlb) < f0) {
-        la = nla;
-        lb = nlb;
-        improved = true;
-        break;
-      }
-      step *= 0.5;
-    }
-    if (!improved || std::abs(step * norm) < 1e-9) break;
   }
-  a = std::exp(la);
-  b = std::exp(lb);
+  // Golden section on the bracket around the best grid point.
+  double lo = std::max(0.0, (best - 1.0) / kGrid);
+  double hi = std::min(1.0, (best + 1.0) / kGrid);
+  constexpr double kGolden = 0.6180339887498949;
+  double x1 = hi - kGolden * (hi - lo);
+  double x2 = lo + kGolden * (hi - lo);
+  double f1 = profile(x1, w);
+  double f2 = profile(x2, w);
+  for (int it = 0; it < 40; ++it) {
+    if (f1 < f2) {
+      hi = x2;
+      x2 = x1;
+      f2 = f1;
+      x1 = hi - kGolden * (hi - lo);
+      f1 = profile(x1, w);
+    } else {
+      lo = x1;
+      x1 = x2;
+      f1 = f2;
+      x2 = lo + kGolden * (hi - lo);
+      f2 = profile(x2, w);
+    }
+  }
+  double u = 0.5 * (lo + hi);
+  if (profile(u, w) > best_f) u = static_cast<double>(best) / kGrid;
+  (void)profile(u, w);
+  a = std::max(w * u / t_mean, kFloor);
+  b = std::max(w * (1.0 - u), kFloor);
 }
 
 }  // namespace
