@@ -136,7 +136,8 @@ void accuracy(double fs, double snr_db, double duration_s, std::uint64_t seed, d
     tracker.push(std::span<const float>(x).subspan(at, std::min(block, x.size() - at)));
     while (tracker.pop(p)) {
       const double truth = trajectory(p.t);
-      if (dump) std::printf("%.2f %.2f %.2f %.1f\n", p.t, truth, p.freq, p.snr_db);
+      if (dump)
+        std::printf("%.2f %.2f %.2f %.1f %d %.3f\n", p.t, truth, p.freq, p.snr_db, p.tracked, p.confidence);
       if (in_band(truth)) {
         ours.add_in_band(p.tracked, p.freq, truth);
         plain.add_in_band(true, fft.estimate(x, p.t), truth);

@@ -1,5 +1,7 @@
 #include "core/sliding_dft_tracker.hpp"
 
+#include "core/sliding_dft_tracker_evidence.hpp"
+
 #include <fftw3.h>
 
 #include <algorithm>
@@ -20,32 +22,36 @@ constexpr double kPi = std::numbers::pi;
 // Orders of the engine component scored and refined: half-order, fundamental, 2nd and 3rd harmonic.
 constexpr int kOrders = 4;
 constexpr double kOrder[kOrders] = {0.5, 1.0, 2.0, 3.0};
-// Weight of each order in the candidate score: the fundamental dominates so that the sub-octave (whose
-// "2nd harmonic" is our fundamental) and the octave (whose "half order" is our fundamental) lose.
-constexpr double kScoreWeight[kOrders] = {0.5, 1.0, 0.7, 0.5};
-// Per-bin SNR above which one line cannot add to a candidate's score: a loud fixed tone without a
-// ladder must not outweigh a quieter line with harmonics.
-constexpr double kScoreCap = 30.0;
-// Forward dynamic program: memory of past evidence and the cost of jumping beyond the slew gate.
-constexpr double kMemory = 0.7;
-constexpr double kJumpPenalty = 2.0;
-// Detection thresholds on the per-bin SNR of the fundamental (noise-only bins are Exp(1) distributed):
-// acquisition must beat the maximum of ~20 noise bins, keeping a line already followed need not.
-constexpr double kAcquireSnr = 5.0;  // on the mean SNR of a run of consistent estimates
-constexpr double kKeepSnr = 3.0;     // accumulated
-constexpr double kKeepSnrNow = 2.2;  // this hop alone
-// Ladder evidence: summed per-bin SNR of the other orders minus its noise-only expectation, averaged
-// exponentially along a run of consistent estimates (noise-only: mean 0, standard deviation ~0.7).
-constexpr double kAcquireLadder = 2.5;
-constexpr double kReacquireLadder = 1.0;  // for a run that inherited an engine's evidence
-constexpr double kKeepLadder = 0.0;
-constexpr double kLadderMemory = 0.7;
-// A line lost for longer than this is re-acquired, not kept.
+// Track model: a hidden Markov chain over candidate fundamentals (fine bins from half the band's lower
+// edge, so that an idling engine is followed below the band and its 2nd harmonic is not taken for it)
+// plus an "absent" state. Per second: the engine stops, starts, or its line is lost and found elsewhere.
+constexpr double kStopRate = 0.05;
+constexpr double kStartRate = 0.5;
+constexpr double kJumpRate = 0.02;
+// A continuing line moves within one of three gates per hop: steady (cruise: a few Hz/s), the slew of
+// an accelerating engine, or a gear shift; shares of each.
+constexpr double kSteadyHzPerS = 5.0;
+constexpr double kSteadyShare = 0.5, kSlewShare = 0.4;  // the rest: shift
+// Per-bin SNR of the fundamental assumed before a track gives its level (-5 dB in 50-200 Hz with a
+// 100 ms Hann window), and the memory of the track's level (per hop).
+constexpr double kDefaultRho = 3.0;
+constexpr double kRhoMemory = 0.7;
+// Memory (per hop) of the track's drift, which moves the steady and slew gates.
+constexpr double kDriftMemory = 0.7;
+// Time over which a fixed tone is learned (s): far longer than any steady stretch of a moving engine
+// the track does not cover.
+constexpr double kToneMemoryS = 20.0;
+// Mean normalised power from which a learned tone is fitted along with the engine's orders.
+constexpr double kToneFitLevel = 4.0;
+// Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
+// 0.1 s hop), the prior of the sub-bin estimate.
+constexpr double kPredictionHz = 2.0;
+// A hop is "tracked" when its estimate is more likely right (within 5 % of the engine's fundamental)
+// than wrong; the probability itself is reported as the confidence.
+constexpr double kTrackedConfidence = 0.8;
+constexpr double kRightFraction = 0.05;
+// at() keeps to the nearest hop output within this time.
 constexpr double kCoastS = 0.5;
-// Engine evidence younger than this carries over (scaled) to a new line: shifts and leaving idle.
-constexpr double kCarryS = 1.0;
-constexpr double kCarry = 0.8;
-constexpr double kIdleExitHz = 25.0;
 // Anti-alias filter: decimated rate at least this multiple of the highest scored harmonic.
 constexpr double kDecimationMargin = 2.4;
 constexpr double kStopbandDb = 70.0;
@@ -138,34 +144,28 @@ struct SlidingDftTracker::Impl {
   std::vector<double> power;
   std::vector<double> noise;  // per fine bin
   std::vector<double> block_scratch;
-  int k_lo = 0, k_hi = 0;          // candidate fine bins (band)
+  std::unique_ptr<double, FftwFree> resid_in;  // residual of the harmonic fit (for the noise level)
+  std::unique_ptr<fftw_complex, FftwFree> resid_out;
+  int k_lo = 0, k_hi = 0;          // band, fine bins
+  int s_lo = 0;                    // lowest state, fine bin (half the band's lower edge)
   int noise_lo = 1, noise_hi = 1;  // fine bins used for the noise floor
-  std::vector<double> alpha, alpha_next;
-  bool alpha_valid = false;
+  const HarmonicEvidence& evidence = HarmonicEvidence::shared();
+  double temper = 1.0;  // overlapping windows are not independent evidence
+  int lobe = 1;         // fine bins per resolution bin (1 / window)
 
-  // Track state.
-  bool tracking = false;
-  double last_freq = kNaN;
-  double last_tracked_t = kNaN;
-  double ladder_acc = 0.0;
-  double snr_acc = 0.0;
-  double half_acc = 0.0;
-  double cand_freq = kNaN;  // latest estimate, tracked or not
-  double cand_t = kNaN;
-  int cand_hops = 0;
-  bool carried = false;    // the current run inherited an engine's evidence
-  double engine_t = kNaN;  // last time a line with an engine's ladder was seen (tracked or at idle)
-  double engine_ladder = 0.0;
-  double engine_freq = kNaN;
-
-  // Largest plausible change of the engine frequency over dt seconds.
-  [[nodiscard]] double slew_gate(double dt) const noexcept {
-    return cfg.max_slew_hz_per_s * dt + 2.0 * df + 1.0;
-  }
-  // Largest change at a gear shift, followed only while the line stays strong.
-  [[nodiscard]] double shift_gate(double dt) const noexcept {
-    return std::max(cfg.max_slew_hz_per_s, cfg.shift_slew_hz_per_s) * dt + 2.0 * df + 1.0;
-  }
+  // Track state: posterior over the states s_lo..k_hi and "absent", after the latest hop.
+  std::vector<double> post, loglik, cumsum;
+  double post_absent = 0.5;
+  double rho_track = kDefaultRho;
+  // Mean normalised power per fine bin over the last tens of seconds (1 on noise): a fan or pump line
+  // that stays put while the engine moves. Bins near a confident track are not learned, so a cruising
+  // engine does not become a "tone".
+  std::vector<double> tone;
+  double tone_keep = 1.0;                              // per hop
+  double drift_hz_per_s = 0.0;                         // recent rate of change of the tracked line
+  double last_freq = kNaN;                             // previous hop's estimate while confident, else NaN
+  int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
+  double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
 
   // Output queue and hop history (fixed rings).
   std::vector<TrackPoint> queue;
@@ -180,6 +180,7 @@ struct SlidingDftTracker::Impl {
     bool available[kOrders] = {false, false, false, false};
     double ladder_excess = 0.0;
     double snr_db = kNaN;
+    double log_likelihood = -INFINITY;  // of the refined frequency, with the track's prior if any
   };
 
   explicit Impl(const TrackerConfig& c);
@@ -195,13 +196,35 @@ struct SlidingDftTracker::Impl {
   }
   bool analyse(std::uint64_t centre) noexcept;
   [[nodiscard]] double noise_at(double fine_bin) const noexcept;
-  [[nodiscard]] double power_near(double fine_bin, int tol) const noexcept;
-  void score_candidates(std::vector<double>& score) const noexcept;
+  // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
+  // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot).
+  [[nodiscard]] double z_at(std::size_t k) const noexcept {
+    return power[k] / (noise[k] * std::max(1.0, tone[k] - 1.0));
+  }
+  void learn_tones(double freq, bool on_track) noexcept;
+  void candidate_likelihoods(std::vector<double>& out) const noexcept;
+  void reset_track() noexcept;
+  void predict() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
-  [[nodiscard]] Evidence refine(double f0) const noexcept;
+  [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
+  [[nodiscard]] Evidence refine(double f0, double predicted = kNaN) noexcept;
   void dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
             std::complex<double>& ddx) const noexcept;
-  [[nodiscard]] double harmonic_fit(double f, const bool* use, double* fundamental_amp2) const noexcept;
+  // Least-squares model of a window: level, slope, a sinusoid per order and one for a learned fixed tone
+  // next to the fundamental (slot kOrders), which would otherwise pull the fit.
+  static constexpr int kSlots = kOrders + 1;
+  struct Fit {
+    static constexpr int kMaxCols = 2 + 2 * kSlots;
+    double coef[kMaxCols] = {};
+    int order_col[kSlots] = {-1, -1, -1, -1, -1};
+    int cols = 0;
+  };
+  double nuisance_hz = kNaN;  // the learned tone fitted along, for the current refine()
+  [[nodiscard]] double slot_hz(int o, double f) const noexcept {
+    return o < kOrders ? kOrder[o] * f : nuisance_hz;
+  }
+  [[nodiscard]] double harmonic_fit(double f, const bool* use, Fit* fit) const noexcept;
+  [[nodiscard]] double residual_noise_level(double f, const Fit& fit) noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
   void emit(const TrackPoint& p) noexcept;
 };
@@ -260,23 +283,42 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   const auto bins = static_cast<std::size_t>(nfft / 2 + 1);
   fft_in.reset(static_cast<double*>(fftw_malloc(sizeof(double) * static_cast<std::size_t>(nfft))));
   fft_out.reset(static_cast<fftw_complex*>(fftw_malloc(sizeof(fftw_complex) * bins)));
-  if (!fft_in || !fft_out) throw std::bad_alloc();
+  resid_in.reset(static_cast<double*>(fftw_malloc(sizeof(double) * static_cast<std::size_t>(nfft))));
+  resid_out.reset(static_cast<fftw_complex*>(fftw_malloc(sizeof(fftw_complex) * bins)));
+  if (!fft_in || !fft_out || !resid_in || !resid_out) throw std::bad_alloc();
   {
     const std::lock_guard lock(planner_mutex());
     plan = fftw_plan_dft_r2c_1d(nfft, fft_in.get(), fft_out.get(), FFTW_ESTIMATE);
   }
   if (!plan) throw std::runtime_error("SlidingDftTracker: FFTW could not make a plan");
   std::fill(fft_in.get(), fft_in.get() + nfft, 0.0);
+  std::fill(resid_in.get(), resid_in.get() + nfft, 0.0);
   power.assign(bins, 0.0);
   noise.assign(bins, 0.0);
+  tone.assign(bins, 1.0);
+  tone_keep = std::exp(-cfg.hop_s / kToneMemoryS);
   block_scratch.assign(bins, 0.0);
 
   k_lo = static_cast<int>(std::ceil(cfg.band_lo_hz / df));
   k_hi = static_cast<int>(std::floor(cfg.band_hi_hz / df));
   noise_lo = std::max(1, static_cast<int>(std::floor(0.5 * cfg.band_lo_hz / df)));
   noise_hi = std::min(static_cast<int>(bins) - 2, static_cast<int>(std::ceil(harmonic_limit_hz / df)));
-  alpha.assign(static_cast<std::size_t>(k_hi - k_lo + 1), 0.0);
-  alpha_next.assign(alpha.size(), 0.0);
+  s_lo = std::max(noise_lo, static_cast<int>(std::ceil(0.5 * cfg.band_lo_hz / df)));
+  const auto states = static_cast<std::size_t>(k_hi - s_lo + 1);
+  post.assign(states, 0.0);
+  loglik.assign(states, 0.0);
+  cumsum.assign(states + 1, 0.0);
+  temper = std::min(1.0, cfg.hop_s / cfg.window_s);
+  lobe = std::max(1, nfft / n_win);
+  const double dt = cfg.hop_s;
+  gate_steady = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df)) + 1;
+  gate_slew = static_cast<int>(std::ceil((cfg.max_slew_hz_per_s * dt) / df)) + 2;
+  gate_shift =
+      static_cast<int>(std::ceil((std::max(cfg.max_slew_hz_per_s, cfg.shift_slew_hz_per_s) * dt) / df)) + 2;
+  p_stop = 1.0 - std::exp(-kStopRate * dt);
+  p_start = 1.0 - std::exp(-kStartRate * dt);
+  p_jump = 1.0 - std::exp(-kJumpRate * dt);
+  reset_track();
 
   queue.resize(256);
   history.resize(std::max<std::size_t>(
@@ -369,30 +411,6 @@ double SlidingDftTracker::Impl::noise_at(double fine_bin) const noexcept {
   return noise[k];
 }
 
-double SlidingDftTracker::Impl::power_near(double fine_bin, int tol) const noexcept {
-  const long c = std::lround(fine_bin);
-  double best = 0.0;
-  for (long k = std::max<long>(0, c - tol); k <= std::min<long>(nfft / 2, c + tol); ++k)
-    best = std::max(best, power[static_cast<std::size_t>(k)]);
-  return best;
-}
-
-void SlidingDftTracker::Impl::score_candidates(std::vector<double>& score) const noexcept {
-  for (int k = k_lo; k <= k_hi; ++k) {
-    double s = 0.0;
-    for (int o = 0; o < kOrders; ++o) {
-      const double pos = kOrder[o] * k;
-      if (pos * df > harmonic_limit_hz || pos < noise_lo) {
-        s += kScoreWeight[o] * std::log1p(1.0);  // neutral: what noise would give
-        continue;
-      }
-      const double snr = power_near(pos, kOrder[o] >= 2.0 ? 1 : 0) / noise_at(pos);
-      s += kScoreWeight[o] * std::log1p(std::min(snr, kScoreCap));
-    }
-    score[static_cast<std::size_t>(k - k_lo)] = s;
-  }
-}
-
 // Fine bin of the largest power within `reach` bins of k.
 double SlidingDftTracker::Impl::peak_near(int k, int reach) const noexcept {
   int best = k;
@@ -407,6 +425,32 @@ double SlidingDftTracker::Impl::peak_near(int k, int reach) const noexcept {
   double delta = den < 0.0 ? 0.5 * (a - c) / den : 0.0;
   delta = std::clamp(delta, -0.5, 0.5);
   return best + delta;
+}
+
+// Fine bin (fractional) of the largest harmonic sum (normalised power at f/2, f, 2f, 3f: the higher
+// orders pin the fundamental more finely) within `reach` fine bins of k.
+double SlidingDftTracker::Impl::harmonic_peak_near(int k, int reach) const noexcept {
+  const auto sum_at = [this](int b) {
+    double sum = 0.0;
+    for (int o = 0; o < kOrders; ++o) {
+      const double pos = kOrder[o] * b;
+      if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
+      const auto i = static_cast<std::size_t>(std::lround(pos));
+      sum += z_at(i);
+    }
+    return sum;
+  };
+  int best = k;
+  double best_sum = -1.0;
+  for (int b = std::max(1, k - reach); b <= std::min(nfft / 2 - 1, k + reach); ++b)
+    if (const double v = sum_at(b); v > best_sum) {
+      best_sum = v;
+      best = b;
+    }
+  if (best <= 1 || best >= nfft / 2 - 1) return best;
+  const double a = sum_at(best - 1), c = sum_at(best + 1);
+  const double den = a - 2.0 * best_sum + c;
+  return best + (den < 0.0 ? std::clamp(0.5 * (a - c) / den, -0.5, 0.5) : 0.0);
 }
 
 // DTFT of the tapered window and its first two derivatives in omega (radians per decimated sample),
@@ -431,19 +475,27 @@ void SlidingDftTracker::Impl::dtft(double omega, std::complex<double>& x, std::c
 // every order the decimated signal holds, fitted jointly by least squares (so the orders do not leak
 // into each other as they would through a window). Its maximum over f is the ML estimate of f for a
 // harmonic signal in white noise. Optionally returns the fitted fundamental's squared amplitude.
-double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use,
-                                             double* fundamental_amp2) const noexcept {
-  constexpr int kMaxCols = 2 + 2 * kOrders;
+double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit) const noexcept {
+  constexpr int kMaxCols = Fit::kMaxCols;
   double gram[kMaxCols][kMaxCols] = {};
   double rhs[kMaxCols] = {};
-  std::complex<double> rot[kOrders], phasor[kOrders];
-  int order_col[kOrders];
+  std::complex<double> rot[kSlots], phasor[kSlots];
+  int order_col[kSlots];
   int cols = 2;
   const int mid = (n_win - 1) / 2;
-  for (int o = 0; o < kOrders; ++o) {
+  const double resolution = fd / n_win;
+  for (int o = 0; o < kSlots; ++o) {
     order_col[o] = -1;
-    const double fo = kOrder[o] * f;
-    if (!use[o] || fo > harmonic_limit_hz || fo / df < noise_lo) continue;
+    const double fo = slot_hz(o, f);
+    if (o == kOrders) {
+      // Two sinusoids closer than half a resolution bin cannot be told apart in one window.
+      if (!std::isfinite(fo) || std::abs(fo - f) < 0.5 * resolution ||
+          std::abs(fo - 2.0 * f) < 0.5 * resolution)
+        continue;
+    } else if (!use[o]) {
+      continue;
+    }
+    if (fo > harmonic_limit_hz || fo / df < noise_lo) continue;
     order_col[o] = cols;
     cols += 2;
     const double w = 2.0 * kPi * fo / fd;
@@ -454,7 +506,7 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use,
   for (int j = 0; j < n_win; ++j) {
     v[0] = 1.0;
     v[1] = static_cast<double>(j - mid) / std::max(1, mid);
-    for (int o = 0; o < kOrders; ++o) {
+    for (int o = 0; o < kSlots; ++o) {
       if (order_col[o] < 0) continue;
       v[order_col[o]] = phasor[o].real();
       v[order_col[o] + 1] = phasor[o].imag();
@@ -492,23 +544,75 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use,
   double explained = 0.0;
   for (int a = 0; a < cols; ++a)
     explained += z[a] * z[a];
-  if (fundamental_amp2) {
+  if (fit) {
     for (int a = cols - 1; a >= 0; --a) {
       double sum = z[a];
       for (int k = a + 1; k < cols; ++k)
         sum -= l[k][a] * x[k];
       x[a] = sum / l[a][a];
     }
-    const int c = order_col[1];
-    *fundamental_amp2 = c >= 0 ? x[c] * x[c] + x[c + 1] * x[c + 1] : 0.0;
+    fit->cols = cols;
+    std::copy(x, x + cols, fit->coef);
+    std::copy(order_col, order_col + kSlots, fit->order_col);
   }
   return explained;
 }
 
+// Noise variance per decimated sample inside the band: the fitted harmonic model is subtracted from the
+// window, the rest tapered and transformed, and the median of its band bins (robust to lines the model
+// does not hold, such as a fan) taken as an exponential variable's (median = mean x ln 2).
+double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) noexcept {
+  if (fit.cols == 0) return noise_at(f / df) / sum_w2;
+  const int mid = (n_win - 1) / 2;
+  std::complex<double> rot[kSlots], phasor[kSlots];
+  for (int o = 0; o < kSlots; ++o) {
+    if (fit.order_col[o] < 0) continue;
+    const double w = 2.0 * kPi * slot_hz(o, f) / fd;
+    rot[o] = std::polar(1.0, w);
+    phasor[o] = std::polar(1.0, -w * mid);
+  }
+  double* in = resid_in.get();
+  for (int j = 0; j < n_win; ++j) {
+    double model = fit.coef[0] + fit.coef[1] * static_cast<double>(j - mid) / std::max(1, mid);
+    for (int o = 0; o < kSlots; ++o) {
+      const int col = fit.order_col[o];
+      if (col < 0) continue;
+      model += fit.coef[col] * phasor[o].real() + fit.coef[col + 1] * phasor[o].imag();
+      phasor[o] *= rot[o];
+    }
+    const auto i = static_cast<std::size_t>(j);
+    in[i] = (raw[i] - model) * window[i];
+  }
+  fftw_execute_dft_r2c(plan, in, resid_out.get());
+  // The band's fine bins; the median by selection in the (now free) scratch of the noise floor.
+  const int lo = std::max(noise_lo, k_lo), hi = std::max(lo, k_hi);
+  double* scratch = block_scratch.data();
+  std::size_t n = 0;
+  for (int k = lo; k <= hi; ++k) {
+    const fftw_complex& v = resid_out.get()[static_cast<std::size_t>(k)];
+    scratch[n++] = v[0] * v[0] + v[1] * v[1];
+  }
+  std::nth_element(scratch, scratch + n / 2, scratch + n);
+  // The fit removed `cols` of n_win degrees of freedom from the window.
+  const double dof = static_cast<double>(n_win) / std::max(1, n_win - fit.cols);
+  return scratch[n / 2] / std::log(2.0) / sum_w2 * dof;
+}
+
 // Sub-bin estimate around f0 (Hz): grid then golden-section search of the harmonic least-squares fit
 // (see harmonic_fit), then the evidence of every order at the refined frequency.
-SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0) const noexcept {
+SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, double predicted) noexcept {
   Evidence ev;
+  // The strongest learned tone within two resolution bins of the fundamental is fitted along.
+  nuisance_hz = kNaN;
+  {
+    double strongest = kToneFitLevel;
+    const auto c = static_cast<int>(std::lround(f0 / df));
+    for (int k = std::max(noise_lo, c - 2 * lobe); k <= std::min(noise_hi, c + 2 * lobe); ++k)
+      if (tone[static_cast<std::size_t>(k)] > strongest) {
+        strongest = tone[static_cast<std::size_t>(k)];
+        nuisance_hz = k * df;
+      }
+  }
   std::complex<double> x, dx, ddx;
   // An order whose neighbourhood is dominated by a line elsewhere (a fan next to the 2nd harmonic) would
   // pull the fit; leave it out. The fundamental always stays.
@@ -525,40 +629,53 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0) con
     const bool strong = power[static_cast<std::size_t>(best)] > 4.0 * noise_at(best);
     use[o] = !(strong && std::abs(best - centre) * df > 0.4 * bin);
   }
+  // Log likelihood of f: the explained energy over twice the noise variance per sample, plus (on a
+  // continuing track) a Gaussian prior around the track's prediction, which holds a hop whose line is
+  // drowned in noise near where the engine must be instead of on a noise peak.
+  const double inv_2s2 = sum_w2 / (2.0 * noise_at(f0 / df));
+  const bool with_prior = std::isfinite(predicted) && std::abs(predicted - f0) <= 2.5 * kPredictionHz;
+  const auto objective = [&](double f) {
+    const double dp = with_prior ? (f - predicted) / kPredictionHz : 0.0;
+    return harmonic_fit(f, use, nullptr) * inv_2s2 - 0.5 * dp * dp;
+  };
   // The coarse estimate is within a fraction of the window's resolution (1 / T); search +-0.3 / T.
   const double reach = 0.3 * fd / n_win;
-  constexpr int kGrid = 6;
-  double best_f = f0, best_j = -1.0;
+  const double from = (with_prior ? std::min(f0, predicted) : f0) - reach;
+  const double to = (with_prior ? std::max(f0, predicted) : f0) + reach;
+  constexpr int kGrid = 8;
+  const double step = (to - from) / kGrid;
+  double best_f = f0, best_j = -INFINITY;
   for (int i = 0; i <= kGrid; ++i) {
-    const double f = f0 - reach + 2.0 * reach * i / kGrid;
-    const double j = harmonic_fit(f, use, nullptr);
+    const double f = from + step * i;
+    const double j = objective(f);
     if (j > best_j) {
       best_j = j;
       best_f = f;
     }
   }
-  double a = best_f - 2.0 * reach / kGrid, b = best_f + 2.0 * reach / kGrid;
+  double a = best_f - step, b = best_f + step;
   constexpr double kGolden = 0.6180339887498949;
   double c = b - kGolden * (b - a), d = a + kGolden * (b - a);
-  double jc = harmonic_fit(c, use, nullptr), jd = harmonic_fit(d, use, nullptr);
-  for (int iter = 0; iter < 14; ++iter) {
+  double jc = objective(c), jd = objective(d);
+  for (int iter = 0; iter < 10; ++iter) {  // brackets the maximum to ~1 % of a grid step
     if (jc > jd) {
       b = d;
       d = c;
       jd = jc;
       c = b - kGolden * (b - a);
-      jc = harmonic_fit(c, use, nullptr);
+      jc = objective(c);
     } else {
       a = c;
       c = d;
       jc = jd;
       d = a + kGolden * (b - a);
-      jd = harmonic_fit(d, use, nullptr);
+      jd = objective(d);
     }
   }
   const double f = 0.5 * (a + b);
-  double amp2 = 0.0;
-  (void)harmonic_fit(f, use, &amp2);
+  ev.log_likelihood = objective(f);
+  Fit fit;
+  (void)harmonic_fit(f, use, &fit);
   ev.freq = f;
   int n_ladder = 0;
   double ladder = 0.0;
@@ -574,102 +691,165 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0) con
     }
   }
   ev.ladder_excess = ladder - n_ladder;
-  // Fundamental power over in-band noise power, in the generator's definition: amplitude from the
-  // fit, noise variance from the per-bin floor of the tapered spectrum.
-  const double signal_power = std::max(amp2 / 2.0, 1e-300);
-  const double noise_power = noise_at(f / df) / sum_w2 * 2.0 * (cfg.band_hi_hz - cfg.band_lo_hz) / fd;
-  ev.snr_db = 10.0 * std::log10(signal_power / noise_power);
+  // Fundamental power over in-band noise power, in the generator's definition. The noise level comes
+  // from the residual of the harmonic fit (the engine's own lines and their leakage removed), the
+  // fitted power is corrected for the noise it holds (least squares over n samples: 2 sigma^2 / n).
+  const double sigma2 = residual_noise_level(f, fit);
+  const int col = fit.order_col[1];
+  const double amp2 =
+      col >= 0 && fit.cols > 0 ? fit.coef[col] * fit.coef[col] + fit.coef[col + 1] * fit.coef[col + 1] : 0.0;
+  const double noise_power = sigma2 * 2.0 * (cfg.band_hi_hz - cfg.band_lo_hz) / fd;
+  const double signal_power = std::max(amp2 / 2.0 - 2.0 * sigma2 / n_win, 1e-3 * noise_power);
+  ev.snr_db = noise_power > 0.0 ? 10.0 * std::log10(signal_power / noise_power) : kNaN;
   return ev;
+}
+
+void SlidingDftTracker::Impl::reset_track() noexcept {
+  post_absent = 0.5;
+  std::fill(post.begin(), post.end(), 0.5 / static_cast<double>(post.size()));
+  rho_track = kDefaultRho;
+  drift_hz_per_s = 0.0;
+  last_freq = kNaN;
+}
+
+// Prior of this hop from the previous posterior: a continuing line moves within a steady, a slew or a
+// shift gate (box kernels by prefix sums); the engine may stop, start, or be found anywhere.
+void SlidingDftTracker::Impl::predict() noexcept {
+  const auto n = static_cast<int>(post.size());
+  cumsum[0] = 0.0;
+  for (int i = 0; i < n; ++i)
+    cumsum[static_cast<std::size_t>(i) + 1] =
+        cumsum[static_cast<std::size_t>(i)] + post[static_cast<std::size_t>(i)];
+  const double present = cumsum[static_cast<std::size_t>(n)];
+  const auto box = [&](int i, int g) {
+    const int lo = std::max(0, i - g), hi = std::min(n - 1, i + g);
+    if (lo > hi) return 0.0;
+    return (cumsum[static_cast<std::size_t>(hi) + 1] - cumsum[static_cast<std::size_t>(lo)]) /
+           (2.0 * g + 1.0);
+  };
+  // The steady and slew gates move with the track's recent drift (a ramping engine stays in its gate).
+  const auto shift = static_cast<int>(std::lround(drift_hz_per_s * cfg.hop_s / df));
+  const double stay = 1.0 - p_stop - p_jump;
+  const double anywhere = (p_jump * present + p_start * post_absent) / n;
+  // loglik is free here: write the prior into it, then into post.
+  for (int i = 0; i < n; ++i)
+    loglik[static_cast<std::size_t>(i)] =
+        stay * (kSteadyShare * box(i - shift, gate_steady) + kSlewShare * box(i - shift, gate_slew) +
+                (1.0 - kSteadyShare - kSlewShare) * box(i, gate_shift)) +
+        anywhere;
+  post_absent = p_stop * present + (1.0 - p_start) * post_absent;
+  std::copy(loglik.begin(), loglik.end(), post.begin());
+}
+
+// Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
+// normalised power at each of its orders.
+void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
+  for (int k = s_lo; k <= k_hi; ++k) {
+    const double z1 = z_at(static_cast<std::size_t>(k));
+    // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one
+    // resolution bin (a learned tone's too) is penalised by the amplitude mismatch (sqrt z has
+    // unit-order noise).
+    double peak = z1;
+    for (int j = std::max(0, k - lobe); j <= std::min(nfft / 2, k + lobe); ++j)
+      peak = std::max(peak, power[static_cast<std::size_t>(j)] / noise[static_cast<std::size_t>(j)]);
+    const double mismatch = std::sqrt(peak) - std::sqrt(z1);
+    // A bin holding a learned tone says nothing either way: the engine may or may not be under it.
+    const bool on_tone = tone[static_cast<std::size_t>(k)] >= kToneFitLevel;
+    double l = on_tone ? 0.0 : evidence.fundamental(z1, rho_track) - mismatch * mismatch;
+    if (cfg.require_harmonics) {
+      const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
+      for (int o = 0; o < kOrders; ++o) {
+        if (o == 1) continue;
+        const double pos = kOrder[o] * k;
+        if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
+        const auto b = static_cast<std::size_t>(std::lround(pos));
+        if (tone[b] < kToneFitLevel) l += evidence.order(z_at(b), rho, o == 0);
+      }
+    }
+    out[static_cast<std::size_t>(k - s_lo)] = temper * l;
+  }
 }
 
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   TrackPoint out;
   out.t = time_of(static_cast<double>(centre));
   if (centre < valid_from + static_cast<std::uint64_t>(half_span) || !analyse(centre)) {
-    alpha_valid = false;
-    tracking = false;
+    reset_track();
     return out;
   }
-  score_candidates(alpha_next);
-  const std::size_t n = alpha.size();
-  if (alpha_valid) {
-    const double gate_hz = cfg.max_slew_hz_per_s * cfg.hop_s;
-    const int g = static_cast<int>(std::ceil(gate_hz / df)) + 1;
-    const double global = *std::max_element(alpha.begin(), alpha.end()) - kJumpPenalty;
-    // Sliding maximum over the slew gate (n is a few hundred, g a few tens).
-    for (std::size_t k = 0; k < n; ++k) {
-      const std::size_t lo = k >= static_cast<std::size_t>(g) ? k - static_cast<std::size_t>(g) : 0;
-      const std::size_t hi = std::min(n - 1, k + static_cast<std::size_t>(g));
-      const double local = *std::max_element(alpha.begin() + static_cast<std::ptrdiff_t>(lo),
-                                             alpha.begin() + static_cast<std::ptrdiff_t>(hi) + 1);
-      alpha_next[k] += kMemory * std::max(local, global);
-    }
+  predict();
+  candidate_likelihoods(loglik);
+  const double top = std::max(0.0, *std::max_element(loglik.begin(), loglik.end()));
+  double total = post_absent * std::exp(-top);
+  for (std::size_t i = 0; i < post.size(); ++i) {
+    post[i] *= std::exp(loglik[i] - top);
+    total += post[i];
   }
-  alpha.swap(alpha_next);
-  alpha_valid = true;
-  const auto best = static_cast<int>(std::max_element(alpha.begin(), alpha.end()) - alpha.begin());
-  const double f0 = peak_near(best + k_lo, 3) * df;
-  const Evidence ev = refine(f0);
+  if (!(total > 0.0) || !std::isfinite(total)) {
+    reset_track();
+    return out;
+  }
+  post_absent *= std::exp(-top) / total;
+  for (double& p : post)
+    p /= total;
+  const auto best = static_cast<int>(std::max_element(post.begin(), post.end()) - post.begin()) + s_lo;
+  // The line's sub-bin position: near the track's prediction when that lies on the posterior's line (a
+  // hop whose line is drowned must not jump to a noise peak within the lobe), else near the mode.
+  const double predicted = std::isfinite(last_freq) ? last_freq + drift_hz_per_s * cfg.hop_s : kNaN;
+  const bool on_line = std::isfinite(predicted) && std::abs(predicted - best * df) <= lobe * df;
+  const double f_mode = harmonic_peak_near(best, lobe) * df;
+  Evidence ev = refine(f_mode, predicted);
+  if (on_line) {
+    const double f_pred = harmonic_peak_near(static_cast<int>(std::lround(predicted / df)), lobe / 2) * df;
+    if (std::abs(f_pred - ev.freq) > df)
+      if (Evidence alt = refine(f_pred, predicted); alt.log_likelihood > ev.log_likelihood) ev = alt;
+  }
   out.snr_db = ev.snr_db;
-
-  const double since = std::isfinite(last_tracked_t) ? out.t - last_tracked_t : 1e9;
-  const double gap = std::isfinite(cand_t) ? out.t - cand_t : 1e9;
-  // Evidence accumulates along a run of mutually consistent estimates (tracked or not), starting from
-  // zero: one lucky hop of noise cannot acquire, a fixed tone never builds a ladder.
-  const bool consistent = gap <= kCoastS + 1e-9 && std::abs(ev.freq - cand_freq) <= slew_gate(gap);
-  if (!consistent) {
-    // Right after an engine was seen (a gear shift moves its line faster than the slew gate; an engine
-    // rising from idle leaves the octave check), its ladder evidence carries over to the new line.
-    // Only downwards (an up-shift) or into the bottom of the band (leaving idle): a fan elsewhere must
-    // not inherit the engine's evidence when the engine stops.
-    const bool engine_recent = std::isfinite(engine_t) && out.t - engine_t <= kCarryS + 1e-9 &&
-                               (ev.freq < engine_freq || ev.freq < cfg.band_lo_hz + kIdleExitHz);
-    ladder_acc = engine_recent ? std::max(ladder_acc, engine_ladder) * kCarry : 0.0;
-    carried = engine_recent;
-    snr_acc = half_acc = 0.0;
-    cand_hops = 0;
-  }
-  half_acc = kLadderMemory * half_acc + (1.0 - kLadderMemory) * ev.snr[0];
-  ladder_acc = kLadderMemory * ladder_acc + (1.0 - kLadderMemory) * ev.ladder_excess;
-  snr_acc = kLadderMemory * snr_acc + (1.0 - kLadderMemory) * ev.snr[1];
-  ++cand_hops;
-  cand_freq = ev.freq;
-  cand_t = out.t;
-  // A half order stronger than the "fundamental" means the line is the 2nd harmonic of an engine
-  // turning below the band (idle).
-  const bool octave = ev.available[0] && half_acc > snr_acc;
-  const bool ladder_keep = !cfg.require_harmonics || ladder_acc >= kKeepLadder;
-  const bool ladder_acquire =
-      !cfg.require_harmonics || ladder_acc >= (carried ? kReacquireLadder : kAcquireLadder);
-  const bool keep = tracking && since <= kCoastS + 1e-9 &&
-                    (std::abs(ev.freq - last_freq) <= slew_gate(since) ||
-                     (ev.snr[1] >= kAcquireSnr && std::abs(ev.freq - last_freq) <= shift_gate(since))) &&
-                    snr_acc >= kKeepSnr && ev.snr[1] >= kKeepSnrNow && ladder_keep && !octave;
-  // The run's mean SNR (the exponential average corrected for its start from zero).
-  const double snr_mean = snr_acc / (1.0 - std::pow(kLadderMemory, cand_hops));
-  const bool acquire =
-      cand_hops >= 2 && snr_mean >= kAcquireSnr && ev.snr[1] >= kKeepSnr && ladder_acquire && !octave;
-  if (ladder_acc >= kAcquireLadder && snr_mean >= kAcquireSnr) {
-    engine_t = out.t;
-    engine_ladder = ladder_acc;
-    engine_freq = octave ? ev.freq / 2.0 : ev.freq;
-  }
-#ifdef GEARPULSE_TRACKER_DEBUG
-  std::fprintf(stderr, "t %.2f f %.2f snr %.1f %.1f %.1f %.1f lad %.1f acc %.1f %.1f keep %d acq %d\n", out.t,
-               ev.freq, ev.snr[0], ev.snr[1], ev.snr[2], ev.snr[3], ev.ladder_excess, ladder_acc, snr_acc,
-               keep, acquire);
-#endif
+  // Probability that the engine's fundamental is on the estimated line: within one resolution bin of the
+  // estimate (the posterior of a line spreads over its main lobe, the refined estimate does not), or 5 %
+  // where that is wider.
+  double right = 0.0;
+  const double reach = std::max(kRightFraction * ev.freq, lobe * df);
+  const int lo = std::max(s_lo, static_cast<int>(std::ceil((ev.freq - reach) / df)));
+  const int hi = std::min(k_hi, static_cast<int>(std::floor((ev.freq + reach) / df)));
+  for (int k = lo; k <= hi; ++k)
+    right += post[static_cast<std::size_t>(k - s_lo)];
+  right = std::clamp(right, 0.0, 1.0);
   const bool in_band = ev.freq >= cfg.band_lo_hz - df && ev.freq <= cfg.band_hi_hz + df;
-  if ((keep || acquire) && in_band) {
+  if (in_band) {
     out.freq = ev.freq;
-    out.tracked = true;
-    tracking = true;
-    last_freq = ev.freq;
-    last_tracked_t = out.t;
-  } else if (since > kCoastS) {
-    tracking = false;
+    out.confidence = right;
+    out.tracked = right >= kTrackedConfidence;
   }
+  // The track's drift, from consecutive confident estimates that continue each other.
+  const bool confident = right >= kTrackedConfidence;
+  if (confident && std::isfinite(last_freq) &&
+      std::abs(ev.freq - last_freq) <= cfg.max_slew_hz_per_s * cfg.hop_s + 2.0 * df)
+    drift_hz_per_s = kDriftMemory * drift_hz_per_s + (1.0 - kDriftMemory) * (ev.freq - last_freq) / cfg.hop_s;
+  else
+    drift_hz_per_s *= kDriftMemory;
+  last_freq = confident ? ev.freq : kNaN;
+  // The track's fundamental level, for the matched test of the next hops.
+  if (right >= kTrackedConfidence)
+    rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * std::max(ev.snr[1] - 1.0, 1.0);
+  else
+    rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * kDefaultRho;
+  learn_tones(ev.freq, right >= 0.5);
   return out;
+}
+
+void SlidingDftTracker::Impl::learn_tones(double freq, bool on_track) noexcept {
+  for (int k = noise_lo; k <= noise_hi; ++k) {
+    if (on_track) {
+      bool near = false;
+      for (int o = 0; o < kOrders && !near; ++o)
+        near = std::abs(k * df - kOrder[o] * freq) <= 2.0 * lobe * df;
+      if (near) continue;
+    }
+    const auto i = static_cast<std::size_t>(k);
+    const double z = power[i] / noise[i];
+    tone[i] = std::max(1.0, tone_keep * tone[i] + (1.0 - tone_keep) * std::min(z, 1e3));
+  }
 }
 
 void SlidingDftTracker::Impl::emit(const TrackPoint& p) noexcept {
@@ -747,16 +927,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.valid_from = 0;
   const auto first_hop = (s.half_span + s.hop_frames - 1) / s.hop_frames;
   s.next_centre = static_cast<std::uint64_t>(first_hop * s.hop_frames);
-  s.alpha_valid = false;
-  s.tracking = false;
-  s.last_freq = kNaN;
-  s.last_tracked_t = kNaN;
-  s.ladder_acc = s.snr_acc = s.half_acc = 0.0;
-  s.cand_freq = s.cand_t = kNaN;
-  s.cand_hops = 0;
-  s.carried = false;
-  s.engine_t = kNaN;
-  s.engine_ladder = 0.0;
+  s.reset_track();
   s.q_head = s.q_size = 0;
   s.h_head = s.h_size = 0;
 }
@@ -770,8 +941,7 @@ void SlidingDftTracker::skip(std::uint64_t frames) noexcept {
   if (frames == 0) return;
   s.n_in += frames;
   s.valid_from = s.n_in;
-  s.alpha_valid = false;
-  s.tracking = false;
+  s.reset_track();
   // Hops whose windows overlap the hole give no output; resume on the hop grid after it.
   const auto h = static_cast<std::uint64_t>(s.hop_frames);
   const std::uint64_t min_centre = s.valid_from + static_cast<std::uint64_t>(s.half_span);
@@ -814,32 +984,34 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   if (c - hs < oldest || c + hs >= static_cast<double>(s.n_in)) return out;
   const auto centre = static_cast<std::uint64_t>(c);
   out.t = s.time_of(c);
-  // Prior: the nearest tracked hop within the coast time.
-  double prior = kNaN, prior_dt = 1e9;
+  // Prior: the nearest hop output with an estimate, within the coast time; this window's estimate is
+  // the best candidate within the slew gate around it, and inherits its confidence.
+  TrackPoint prior;
+  double prior_dt = 1e9;
   for (std::size_t k = 0; k < s.h_size; ++k) {
     const TrackPoint& h = s.history[(s.h_head + k) % s.history.size()];
-    if (h.tracked && std::abs(h.t - out.t) < prior_dt) {
+    if (std::isfinite(h.freq) && std::abs(h.t - out.t) < prior_dt) {
       prior_dt = std::abs(h.t - out.t);
-      prior = h.freq;
+      prior = h;
     }
   }
-  if (!std::isfinite(prior) || prior_dt > kCoastS || !s.analyse(centre)) return out;
+  if (!std::isfinite(prior.freq) || prior_dt > kCoastS || !s.analyse(centre)) return out;
   const double gate = s.cfg.max_slew_hz_per_s * prior_dt + 2.0 * s.df + 1.0;
-  // Best harmonic score inside the gate around the prior.
-  const int lo = std::max(s.k_lo, static_cast<int>(std::floor((prior - gate) / s.df)));
-  const int hi = std::min(s.k_hi, static_cast<int>(std::ceil((prior + gate) / s.df)));
+  const int lo = std::max(s.s_lo, static_cast<int>(std::floor((prior.freq - gate) / s.df)));
+  const int hi = std::min(s.k_hi, static_cast<int>(std::ceil((prior.freq + gate) / s.df)));
   if (lo > hi) return out;
-  s.score_candidates(s.alpha_next);
+  s.candidate_likelihoods(s.cumsum);  // scratch: the track state stays as the hops left it
   int best = lo;
   for (int k = lo; k <= hi; ++k)
-    if (s.alpha_next[static_cast<std::size_t>(k - s.k_lo)] >
-        s.alpha_next[static_cast<std::size_t>(best - s.k_lo)])
+    if (s.cumsum[static_cast<std::size_t>(k - s.s_lo)] > s.cumsum[static_cast<std::size_t>(best - s.s_lo)])
       best = k;
-  const Impl::Evidence ev = s.refine(s.peak_near(best, 3) * s.df);
+  const Impl::Evidence ev = s.refine(s.harmonic_peak_near(best, s.lobe) * s.df);
   out.snr_db = ev.snr_db;
-  if (ev.snr[1] >= kKeepSnr && std::abs(ev.freq - prior) <= gate) {
+  if (std::abs(ev.freq - prior.freq) <= gate && ev.freq >= s.cfg.band_lo_hz - s.df &&
+      ev.freq <= s.cfg.band_hi_hz + s.df) {
     out.freq = ev.freq;
-    out.tracked = true;
+    out.confidence = prior.confidence;
+    out.tracked = prior.tracked;
   }
   return out;
 }

@@ -4,10 +4,13 @@
 //
 // Per hop: the input is low-pass filtered and decimated (polyphase FIR, computed only for the samples a
 // window needs), detrended (a 12-14 V line shows ripple, not the level), Hann-windowed, zero-padded and
-// transformed with FFTW. The engine component is told apart from fixed tones by its harmonic ladder
-// (f/2, f, 2f, 3f) and by continuity (a forward dynamic program with a slew gate and a jump penalty), then
-// refined below the bin width by Gaussian interpolation and a Newton search of the maximum-likelihood
-// harmonic periodogram. Every output carries an SNR; "not tracked" when the component is absent.
+// transformed with FFTW. Every candidate fundamental is weighed by the likelihood ratio of its harmonic
+// ladder (f/2, f, 2f, 3f; see sliding_dft_tracker_evidence.hpp), and a hidden Markov chain over the
+// candidates plus an "engine absent" state carries the evidence from hop to hop (a line moves within a
+// steady, slew or shift gate that follows the track's drift). Fixed tones of other equipment are learned
+// over tens of seconds and discounted. The estimate is refined below the bin width by a joint
+// least-squares fit of all orders (with the track's prediction as prior), and every output carries the
+// posterior probability that it is the engine (its confidence) and an SNR.
 //
 // Real-time contract: all memory and FFT plans are made at construction; push(), pop(), at() and
 // nearest() never allocate, never lock and never throw.
@@ -38,10 +41,18 @@ struct TrackerConfig {
 // One tracker output. `t` is the centre of the analysis window in the caller's time base.
 struct TrackPoint {
   double t = 0.0;
-  double freq = std::numeric_limits<double>::quiet_NaN();    // Hz, NaN when not tracked
-  double snr_db = std::numeric_limits<double>::quiet_NaN();  // fundamental power over in-band noise power;
-                                                             // NaN on silence or missing input
+  // Hz: the most probable engine fundamental whenever it lies in the band, even at low confidence; NaN
+  // when there is none (silence, missing input, an engine idling below the band).
+  double freq = std::numeric_limits<double>::quiet_NaN();
+  // Fundamental power over the noise power inside the band (the band's noise level estimated from the
+  // window's residual after the harmonic fit); NaN on silence or missing input.
+  double snr_db = std::numeric_limits<double>::quiet_NaN();
+  // freq is trusted: confidence >= 0.5. Users of the frequency take only tracked points (or weigh them
+  // by confidence).
   bool tracked = false;
+  // Probability, under the tracker's model, that freq is within 5 % of the engine's fundamental (0 when
+  // freq is NaN).
+  double confidence = 0.0;
 };
 
 // Picks one channel (channel >= 0) or the mean of all channels (channel < 0) out of interleaved frames.

@@ -1,0 +1,120 @@
+#include "core/sliding_dft_tracker_evidence.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace gearpulse {
+namespace {
+
+// Table axes: log10 of the per-bin SNR rho, and sqrt(z) (fine steps where z is small).
+constexpr double kLogRhoLo = -1.0, kLogRhoHi = 4.0;
+constexpr int kRhoSteps = 50;
+constexpr double kUMax = 45.0;  // z up to ~2000; beyond, the ratios are flat (bounded by the tone prior)
+constexpr int kUSteps = 450;
+// Broad prior of an engine line's per-bin SNR: log-uniform over 1 .. 1e4 (about -10 to +30 dB in the
+// 50-200 Hz band with a 100 ms window).
+constexpr double kBroadLo = 1.0, kBroadHi = 1e4;
+constexpr int kBroadSteps = 80;
+// Weight of the matched (track-level) SNR against the broad prior for the fundamental.
+constexpr double kMatched = 0.5;
+// Order-to-fundamental SNR ratio r: log-uniform over 0.02 .. 2 (-17 to +3 dB) for the harmonics, up to
+// 0.5 for the half order (a "half order" stronger than the fundamental means the candidate is the
+// engine's 2nd harmonic), or the order absent altogether.
+constexpr double kRatioLo = 0.02, kRatioHi = 2.0, kHalfRatioHi = 0.5;
+constexpr int kRatioSteps = 20;
+constexpr double kOrderAbsent = 0.03;
+
+double log_i0(double x) {
+  if (x < 20.0) {
+    double sum = 1.0, term = 1.0;
+    for (int k = 1; k < 80; ++k) {
+      term *= (x / (2.0 * k)) * (x / (2.0 * k));
+      sum += term;
+      if (term < 1e-17 * sum) break;
+    }
+    return std::log(sum);
+  }
+  return x - 0.5 * std::log(2.0 * std::numbers::pi * x) + std::log1p(1.0 / (8.0 * x) + 9.0 / (128.0 * x * x));
+}
+
+double log_rice(double z, double rho) {
+  return -(z + rho) + log_i0(2.0 * std::sqrt(rho * z));
+}
+
+double log_add(double a, double b) {
+  const double m = std::max(a, b);
+  return m + std::log(std::exp(a - m) + std::exp(b - m));
+}
+
+// log of the mean of exp(f(rho)) over rho log-uniform in [lo, hi].
+template <class F>
+double log_mean_over(double lo, double hi, int steps, F f) {
+  double acc = -INFINITY;
+  for (int i = 0; i <= steps; ++i) {
+    const double rho = lo * std::pow(hi / lo, static_cast<double>(i) / steps);
+    acc = log_add(acc, f(rho));
+  }
+  return acc - std::log(steps + 1.0);
+}
+
+double rho_of(int i) {
+  return std::pow(10.0, kLogRhoLo + (kLogRhoHi - kLogRhoLo) * i / kRhoSteps);
+}
+
+}  // namespace
+
+const HarmonicEvidence& HarmonicEvidence::shared() {
+  static const HarmonicEvidence instance(0.05);
+  return instance;
+}
+
+HarmonicEvidence::HarmonicEvidence(double tone_prior) {
+  const double log_tone = std::log(tone_prior), log_no_tone = std::log1p(-tone_prior);
+  const auto cols = static_cast<std::size_t>(kUSteps + 1);
+  fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
+  ladder_.assign(fund_.size(), 0.0);
+  half_.assign(fund_.size(), 0.0);
+  for (int j = 0; j <= kUSteps; ++j) {
+    const double u = kUMax * j / kUSteps, z = u * u;
+    const double log_broad =
+        log_mean_over(kBroadLo, kBroadHi, kBroadSteps, [z](double r) { return log_rice(z, r); });
+    const double log_background = log_add(log_no_tone - z, log_tone + log_broad);
+    for (int i = 0; i <= kRhoSteps; ++i) {
+      const double rho = rho_of(i);
+      const std::size_t at = static_cast<std::size_t>(i) * cols + static_cast<std::size_t>(j);
+      fund_[at] =
+          log_add(std::log(kMatched) + log_rice(z, rho), std::log1p(-kMatched) + log_broad) - log_background;
+      const auto ratio = [&](double hi) {
+        const double log_ratio =
+            log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
+        const double engine = log_add(std::log1p(-kOrderAbsent) + log_ratio, std::log(kOrderAbsent) - z);
+        return log_add(log_no_tone + engine, log_tone + log_broad) - log_background;
+      };
+      ladder_[at] = ratio(kRatioHi);
+      half_[at] = ratio(kHalfRatioHi);
+    }
+  }
+}
+
+double HarmonicEvidence::lookup(const std::vector<double>& table, double z, double rho) const noexcept {
+  const double u = std::clamp(std::sqrt(std::max(z, 0.0)) / kUMax * kUSteps, 0.0, kUSteps - 1e-9);
+  const double lr = std::isfinite(rho) && rho > 0.0 ? std::log10(rho) : kLogRhoLo;
+  const double r = std::clamp((lr - kLogRhoLo) / (kLogRhoHi - kLogRhoLo) * kRhoSteps, 0.0, kRhoSteps - 1e-9);
+  const auto j = static_cast<std::size_t>(u), i = static_cast<std::size_t>(r);
+  const double a = u - static_cast<double>(j), b = r - static_cast<double>(i);
+  const auto cols = static_cast<std::size_t>(kUSteps + 1);
+  const double* row0 = table.data() + i * cols;
+  const double* row1 = row0 + cols;
+  return (1.0 - b) * ((1.0 - a) * row0[j] + a * row0[j + 1]) + b * ((1.0 - a) * row1[j] + a * row1[j + 1]);
+}
+
+double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept {
+  return lookup(fund_, z, rho_track);
+}
+
+double HarmonicEvidence::order(double z, double rho_fundamental, bool half) const noexcept {
+  return lookup(half ? half_ : ladder_, z, rho_fundamental);
+}
+
+}  // namespace gearpulse

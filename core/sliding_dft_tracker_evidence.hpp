@@ -1,0 +1,41 @@
+#pragma once
+// Likelihood ratios of the engine's harmonic ladder in one windowed spectrum, used by SlidingDftTracker
+// to weigh every candidate fundamental frequency.
+//
+// The observation at one spectral bin is z = |X|^2 / (noise floor): exponential with mean 1 on noise
+// alone, non-central (Rice) with per-bin SNR rho when a line is there:
+//   p(z | rho) = exp(-(z + rho)) I0(2 sqrt(rho z)).
+// A bin the engine does not explain is noise or, with probability `tone_prior`, a line of other equipment
+// (fan, pump) of unknown strength; under the engine hypothesis such a line may still sit on any bin. So
+// the ratio of one bin is bounded by about 1 / tone_prior: a loud line proves no more than that
+// something is there. The fundamental's SNR is expected near the track's recent level (a matched test,
+// the longer integration a steady engine allows) or anywhere over a broad range (acquisition, level
+// changes). The other orders (f/2, 2f, 3f) are expected at a fraction r of the fundamental's SNR, r
+// unknown over two decades, or absent: a loud line whose harmonics are all missing is unlikely to be
+// the engine; a weak one whose harmonics drown in the noise is not penalised.
+//
+// Everything is tabulated at construction; lookups are noexcept and allocation-free.
+#include <vector>
+
+namespace gearpulse {
+
+class HarmonicEvidence {
+ public:
+  // The tables for the default tone prior, built once (thread-safe) and shared by every tracker.
+  static const HarmonicEvidence& shared();
+  explicit HarmonicEvidence(double tone_prior);
+  // Log likelihood ratio (engine fundamental over noise-or-tone) of a bin with normalised power z, when
+  // the track's recent fundamental SNR is rho_track (per bin, linear).
+  [[nodiscard]] double fundamental(double z, double rho_track) const noexcept;
+  // Log likelihood ratio of another order's bin (the half order or a harmonic), given the per-bin SNR of
+  // the candidate's fundamental.
+  [[nodiscard]] double order(double z, double rho_fundamental, bool half) const noexcept;
+
+ private:
+  [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
+  std::vector<double> fund_;    // over (log10 rho, sqrt z)
+  std::vector<double> ladder_;  // over (log10 rho, sqrt z)
+  std::vector<double> half_;    // over (log10 rho, sqrt z)
+};
+
+}  // namespace gearpulse
