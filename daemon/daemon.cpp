@@ -22,6 +22,7 @@
 #include "daemon/pipeline.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "daemon/training_store.hpp"
+#include "daemon/watchdog.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -355,7 +356,9 @@ int Daemon::run() {
   auto last_save = Clock::now();
   auto last_status = Clock::now();
   std::string last_line;
-  std::vector<std::string> last_stalled;
+  WatchdogGate gate([watchdog] {
+    if (watchdog.count() > 0) systemd::watchdog();
+  });
   PipelineSnapshot previous = d.pipeline->snapshot();
   bool running = true;
   while (running) {
@@ -376,13 +379,9 @@ int Daemon::run() {
     const PipelineSnapshot snap = d.pipeline->snapshot();
     // The watchdog is fed only while every pipeline thread shows a recent heartbeat: a hung thread
     // lets systemd restart the daemon.
-    if (snap.stalled.empty()) {
-      if (watchdog.count() > 0) systemd::watchdog();
-    } else if (snap.stalled != last_stalled) {
+    if (gate.tick(snap.stalled))
       spdlog::error("pipeline: thread(s) not responding: {}; withholding the watchdog so systemd restarts us",
                     fmt::join(snap.stalled, ", "));
-    }
-    last_stalled = snap.stalled;
     d.log_changes(previous, snap);
     previous = snap;
     if (now - last_status >= std::chrono::seconds(2)) {

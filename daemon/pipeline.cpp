@@ -18,6 +18,7 @@
 #include "core/speed_synth.hpp"
 #include "core/spsc_ring.hpp"
 #include "daemon/log_limiter.hpp"
+#include "daemon/watchdog.hpp"
 #include "drivers/alsa_capture.hpp"
 #include "drivers/clock.hpp"
 #include "drivers/gpio_output.hpp"
@@ -30,8 +31,6 @@ namespace gearpulse::daemon {
 namespace {
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
-// A thread that has not beaten for this long is hung; the watchdog is then withheld.
-constexpr std::int64_t kStallNs = 5'000'000'000;
 // The tracker thread wakes at least this often, with or without audio.
 constexpr auto kTrackerPoll = std::chrono::milliseconds(10);
 // GPS fixes wait this long for the audio window centred on them before they are given up.
@@ -446,19 +445,24 @@ void Pipeline::set_tunables(const PipelineTunables& tunables) noexcept {
 }
 
 PipelineSnapshot Pipeline::snapshot() const {
+  return snapshot(monotonic_ns());
+}
+
+PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   const Impl& d = *impl_;
   PipelineSnapshot s;
   s.speed = d.speed.load(std::memory_order_relaxed);
   s.source = std::string(source_name(d.source.load(std::memory_order_relaxed)));
   s.gear = d.gear.load(std::memory_order_relaxed);
-  const std::int64_t now = monotonic_ns();
+  // Heartbeats of the threads that should be running, for the watchdog.
+  std::vector<ThreadBeat> beats;
   if (d.pulses) {
     const PulseThreadStatus ps = d.pulses->status();
+    beats.push_back({"pulse", ps.heartbeat_ns, !ps.running});
     s.pulses = ps.pulses;
     s.pulse_frequency = d.pulses->target_speed() * d.config.output.pulses_per_km / 1000.0;
     if (s.pulse_frequency < d.config.output.min_frequency) s.pulse_frequency = 0.0;
     s.pulse_frequency = std::min(s.pulse_frequency, d.config.output.max_frequency);
-    if (!ps.running) s.stalled.push_back("pulse");
   }
   if (d.output) {
     s.output_error = d.output_error;
@@ -470,6 +474,7 @@ PipelineSnapshot Pipeline::snapshot() const {
       s.output_state = d.config.output.kind == OutputKind::kNone ? "off" : "ok";
   }
   if (d.gps) {
+    beats.push_back({"gps", d.gps->heartbeat_ns()});
     const GpsdStatus g = d.gps->status();
     s.gps_reconnects = g.connects > 0 ? g.connects - 1 : 0;
     s.gps_error = g.last_error;
@@ -504,8 +509,9 @@ PipelineSnapshot Pipeline::snapshot() const {
   s.tracker_snr_db = d.track_snr.load(std::memory_order_relaxed);
   s.tracker_confident = d.track_confident.load(std::memory_order_relaxed);
   s.pairs_added = d.pairs_added.load(std::memory_order_relaxed);
-  if (d.tracker_thread.joinable() && now - d.tracker_beat.load(std::memory_order_relaxed) > kStallNs)
-    s.stalled.push_back("tracker");
+  if (d.tracker_thread.joinable())
+    beats.push_back({"tracker", d.tracker_beat.load(std::memory_order_relaxed)});
+  s.stalled = stalled_threads(beats, now);
   return s;
 }
 

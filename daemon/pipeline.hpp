@@ -63,6 +63,9 @@ class Pipeline {
   void stop() noexcept;
   void set_tunables(const PipelineTunables& tunables) noexcept;
   [[nodiscard]] PipelineSnapshot snapshot() const;
+  // The same as seen at CLOCK_MONOTONIC `now_ns` (ages and heartbeats are judged against it), so a
+  // test can look at the pipeline as it will be seconds later.
+  [[nodiscard]] PipelineSnapshot snapshot(std::int64_t now_ns) const;
 
  private:
   struct Impl;

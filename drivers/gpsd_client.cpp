@@ -2,6 +2,7 @@
 
 #include <gps.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -75,6 +76,7 @@ void GpsdClient::start() {
   if (thread_.joinable()) return;
   stop_requested_ = false;
   status_.state = GpsdState::kConnecting;
+  beat();
   thread_ = std::thread([this] { run(); });
 }
 
@@ -106,9 +108,24 @@ GpsdStatus GpsdClient::status() const {
   return status_;
 }
 
+std::int64_t GpsdClient::heartbeat_ns() const noexcept {
+  if (connecting_.load(std::memory_order_relaxed)) return monotonic_ns();
+  return beat_ns_.load(std::memory_order_relaxed);
+}
+
+void GpsdClient::beat() noexcept {
+  beat_ns_.store(monotonic_ns(), std::memory_order_relaxed);
+}
+
 bool GpsdClient::wait_backoff(std::chrono::milliseconds delay) {
+  const auto end = std::chrono::steady_clock::now() + delay;
   std::unique_lock lock(mutex_);
-  return !wake_.wait_for(lock, delay, [this] { return stop_requested_; });
+  for (;;) {
+    beat();
+    const auto slice = std::min(end, std::chrono::steady_clock::now() + std::chrono::nanoseconds(kBeatNs));
+    if (wake_.wait_until(lock, slice, [this] { return stop_requested_; })) return false;
+    if (slice >= end) return true;
+  }
 }
 
 void GpsdClient::set_error(std::string message, bool connection_lost) {
@@ -125,7 +142,10 @@ void GpsdClient::run() {
     return stop_requested_;
   };
   while (!stopping()) {
+    connecting_.store(true, std::memory_order_relaxed);
     GpsConnection conn(config_.host, config_.port);
+    beat();
+    connecting_.store(false, std::memory_order_relaxed);
     if (!conn.ok()) {
       set_error(conn.error(), true);
       if (!wait_backoff(backoff)) break;
@@ -140,6 +160,7 @@ void GpsdClient::run() {
     bool got_data = false;
     char message[4096];
     while (!stopping()) {
+      beat();
       errno = 0;
       if (!::gps_waiting(&conn.data(), kPollUs)) {
         if (errno != 0 && errno != EINTR && errno != EAGAIN) {
@@ -154,6 +175,7 @@ void GpsdClient::run() {
       std::uint64_t bad = 0;
       bool lost = false;
       do {
+        beat();  // a flood of reports keeps the thread here: it is busy, not hung
         message[0] = '\0';
         errno = 0;
         const int n = ::gps_read(&conn.data(), message, sizeof message);

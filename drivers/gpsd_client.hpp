@@ -52,11 +52,19 @@ class GpsdClient final : public GpsSource {
   [[nodiscard]] std::optional<GpsReport> latest() const override;
   [[nodiscard]] bool has_gps(std::int64_t now_ns) const override;
   [[nodiscard]] GpsdStatus status() const;
+  // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
+  // turn of its loop, at least every 100 ms while connected and every kBeatNs while backing off, so an
+  // absent gpsd is not a hung thread. Inside gps_open() it counts as alive: a connect to a host that
+  // does not answer blocks for as long as the kernel retries (about two minutes), a bounded wait.
+  // 0 before start().
+  [[nodiscard]] std::int64_t heartbeat_ns() const noexcept;
+  static constexpr std::int64_t kBeatNs = 500'000'000;
   [[nodiscard]] const GpsdConfig& config() const noexcept { return config_; }
 
  private:
   void run();
-  bool wait_backoff(std::chrono::milliseconds delay);  // false if stop was requested
+  bool wait_backoff(std::chrono::milliseconds delay);  // false if stop was requested; beats meanwhile
+  void beat() noexcept;
   void set_error(std::string message, bool connection_lost);
 
   const GpsdConfig config_;
@@ -65,6 +73,8 @@ class GpsdClient final : public GpsSource {
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   bool stop_requested_ = false;
+  std::atomic<std::int64_t> beat_ns_{0};
+  std::atomic<bool> connecting_{false};
   std::optional<GpsReport> latest_;
   GpsdStatus status_;
 };

@@ -31,6 +31,7 @@ void PulseThread::start() {
   validate(config_.pulse);  // fail here, not on the real-time thread
   stop_.store(false);
   const std::int64_t t0 = monotonic_ns();
+  heartbeat_ns_.store(t0, std::memory_order_relaxed);
   thread_ = std::thread([this, t0] { run(t0); });
 }
 
@@ -47,6 +48,7 @@ PulseThreadStatus PulseThread::status() const noexcept {
   s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
   s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
   s.running = running_.load(std::memory_order_relaxed);
+  s.heartbeat_ns = heartbeat_ns_.load(std::memory_order_relaxed);
   return s;
 }
 
@@ -88,6 +90,7 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
 
   while (!stop_.load(std::memory_order_relaxed)) {
     std::int64_t now = monotonic_ns();
+    heartbeat_ns_.store(now, std::memory_order_relaxed);
     // Edges due under the old speed first: a change is only known from the moment it is seen.
     emit_due(now);
     double target = target_.load(std::memory_order_relaxed);

@@ -35,6 +35,8 @@ struct PulseThreadStatus {
   bool realtime_ok = false;      // SCHED_FIFO granted
   bool memory_locked = false;    // mlockall succeeded
   bool running = false;
+  std::int64_t heartbeat_ns =
+      0;  // CLOCK_MONOTONIC of the last turn of its loop (one per speed_poll at least)
 };
 
 class PulseThread {
@@ -65,6 +67,7 @@ class PulseThread {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> running_{false};
+  std::atomic<std::int64_t> heartbeat_ns_{0};
   std::atomic<double> target_{0.0};
   std::atomic<std::uint64_t> pulses_{0};
   std::atomic<std::uint64_t> late_edges_{0};

@@ -6,12 +6,14 @@
 
 #include <atomic>
 #include <cmath>
+#include <condition_variable>
 #include <cstdlib>
 #include <ctime>
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <sstream>
+#include <thread>
 
 #include "drivers/clock.hpp"
 #include "drivers/gpsd_client.hpp"
@@ -292,4 +294,50 @@ TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") 
   CHECK(st.connects >= 1);
   INFO("bad reads " << st.bad_reads << ", failures " << st.failures << ", last error " << st.last_error);
   CHECK(st.bad_reads + st.failures >= 1);
+}
+
+TEST_CASE("gpsd: the heartbeat goes on through a reconnect backoff while gpsd is absent") {
+  GpsdConfig cfg = config_for(gearpulse::test::free_port());
+  cfg.backoff_min = cfg.backoff_max = 5000ms;  // one long wait after the first failed attempt
+  GpsdClient client(cfg);
+  CHECK(client.heartbeat_ns() == 0);  // not started
+  client.start();
+  REQUIRE(wait_for([&] { return client.status().failures >= 1; }, 10s));
+  const std::int64_t h0 = client.heartbeat_ns();
+  // It beats while it waits, well before the next attempt: waiting for gpsd is alive, not hung.
+  REQUIRE(wait_for([&] { return client.heartbeat_ns() > h0; }, 10s));
+  CHECK(client.status().failures == 1);
+  CHECK(client.status().state == GpsdState::kConnecting);
+  client.stop();  // wakes the backoff at once
+  CHECK(client.status().state == GpsdState::kStopped);
+}
+
+TEST_CASE("gpsd: a client thread held up stops beating and beats again once it is free") {
+  TempDir dir;
+  const auto log = write_log(dir, std::vector<double>(40, 9.0));
+  const int port = gearpulse::test::free_port();
+  GpsFake fake(log, port, 0.05, false);
+  REQUIRE(GpsFake::wait_listening(port, 10s));
+  // The report callback runs on the client thread: holding it there is a hung client.
+  std::mutex mutex;
+  std::condition_variable cv;
+  bool release = false;
+  std::atomic<bool> held{false};
+  GpsdClient client(config_for(port), [&](const GpsReport&) {
+    std::unique_lock lock(mutex);
+    held = true;
+    cv.wait(lock, [&] { return release; });
+  });
+  client.start();
+  REQUIRE(wait_for([&] { return held.load(); }, 20s));
+  const std::int64_t h1 = client.heartbeat_ns();
+  std::this_thread::sleep_for(300ms);  // a connected client beats every 100 ms at least
+  CHECK(client.heartbeat_ns() == h1);
+  {
+    std::lock_guard lock(mutex);
+    release = true;
+  }
+  cv.notify_all();
+  REQUIRE(wait_for([&] { return client.heartbeat_ns() > h1; }, 10s));
+  client.stop();
 }
