@@ -110,6 +110,34 @@ int open_pcm(const AlsaCaptureConfig& c, snd_pcm_t** out, Negotiated& got, std::
 
 }  // namespace
 
+AlsaRecovery recovery_for(int alsa_error) noexcept {
+  switch (alsa_error) {
+    case -EINTR:
+    case -EAGAIN:
+      return AlsaRecovery::kRetry;
+    case -EPIPE:
+      return AlsaRecovery::kRestart;
+    case -ESTRPIPE:
+      return AlsaRecovery::kResume;
+    default:
+      return AlsaRecovery::kReopen;
+  }
+}
+
+const char* to_string(AlsaRecovery recovery) noexcept {
+  switch (recovery) {
+    case AlsaRecovery::kRetry:
+      return "retry";
+    case AlsaRecovery::kRestart:
+      return "restart";
+    case AlsaRecovery::kResume:
+      return "resume";
+    case AlsaRecovery::kReopen:
+      return "reopen";
+  }
+  return "?";
+}
+
 const char* to_string(SampleFormat format) noexcept {
   switch (format) {
     case SampleFormat::kS16:
@@ -277,15 +305,16 @@ void AlsaCapture::run() noexcept {
     if (err == 0) err = ::snd_pcm_start(pcm);
     return err;
   };
-  // Recovery by state, as PipeWire's alsa_recover: overrun and suspend are told apart; anything else
-  // means the device is gone or broken and is closed for a reopen with backoff.
+  // Recovery as recovery_for() decides; a failed restart or resume falls through to a reopen.
   auto recover = [&](int err) noexcept {
+    const AlsaRecovery action = recovery_for(err);
+    if (action == AlsaRecovery::kRetry) return;  // a signal woke the wait: no frame was lost
     last_error_.store(err, std::memory_order_relaxed);
     discontinuity = true;
-    if (err == -EPIPE) {
+    if (action == AlsaRecovery::kRestart) {
       xruns_.fetch_add(1, std::memory_order_relaxed);
       if (restart() == 0) return;
-    } else if (err == -ESTRPIPE) {
+    } else if (action == AlsaRecovery::kResume) {
       suspends_.fetch_add(1, std::memory_order_relaxed);
       int e;
       while ((e = ::snd_pcm_resume(pcm)) == -EAGAIN && !stopping())

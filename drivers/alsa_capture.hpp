@@ -31,6 +31,19 @@ enum class SampleFormat : std::uint8_t { kS16, kS32, kFloat };
 
 [[nodiscard]] const char* to_string(SampleFormat format) noexcept;
 
+// What the capture does about a negative ALSA return code. By the error, as PipeWire's alsa_recover
+// does: an overrun and a suspend are told apart, a signal is no fault at all, and anything else means
+// the device is gone or broken.
+enum class AlsaRecovery : std::uint8_t {
+  kRetry,    // -EINTR, -EAGAIN: nothing is wrong with the stream; wait again
+  kRestart,  // -EPIPE (XRUN): frames were lost; prepare and start again
+  kResume,   // -ESTRPIPE (SUSPENDED): resume, or prepare and start if the device cannot
+  kReopen,   // -ENODEV and anything else: close the PCM and reopen it with backoff
+};
+
+[[nodiscard]] AlsaRecovery recovery_for(int alsa_error) noexcept;
+[[nodiscard]] const char* to_string(AlsaRecovery recovery) noexcept;
+
 struct AlsaCaptureConfig {
   std::string device = "default";
   unsigned rate = 48000;                     // requested; the nearest the device offers is used

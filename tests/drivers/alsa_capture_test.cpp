@@ -6,6 +6,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -77,15 +79,25 @@ bool timestamps_increase(const AlsaCapture& cap, std::uint64_t first, std::uint6
   return true;
 }
 
+// What a FIFO writer does once, after `at_period` periods: nothing, stall (stop writing for a while,
+// then go on at the period rate from where it stopped), or go away (close its end for a while, then
+// open the FIFO again and go on).
+struct WriterBreak {
+  enum Kind { kNone, kStall, kClose } kind = kNone;
+  std::size_t at_period = 0;
+  std::chrono::milliseconds length{0};
+};
+
 // Feeds a FIFO exactly one period per write at the period rate (other write sizes leave holes). After
 // the samples it keeps feeding silence until destroyed, so the capture (whose file plugin blocks in
 // read() on the FIFO) can always be stopped first.
 class FifoFeeder {
  public:
-  FifoFeeder(std::filesystem::path fifo, std::vector<std::int16_t> samples, unsigned period, unsigned rate)
+  FifoFeeder(std::filesystem::path fifo, std::vector<std::int16_t> samples, unsigned period, unsigned rate,
+             WriterBreak pause = {})
       : thread_([=, this] {
-          ::signal(SIGPIPE, SIG_IGN);  // the capture closing its end must not kill the test
-          const int fd = ::open(fifo.c_str(), O_WRONLY);  // blocks until ALSA opens the infile
+          ::signal(SIGPIPE, SIG_IGN);               // the capture closing its end must not kill the test
+          int fd = ::open(fifo.c_str(), O_WRONLY);  // blocks until ALSA opens the infile
           if (fd < 0) return;
           // The pipe would buffer the first ~0.7 s unpaced if writing began before the capture reads.
           while (!go_ && !stop_)
@@ -93,7 +105,14 @@ class FifoFeeder {
           const std::int64_t period_ns = static_cast<std::int64_t>(period) * 1'000'000'000 / rate;
           const std::vector<std::int16_t> silence(period, 0);
           std::int64_t next = gearpulse::monotonic_ns();
-          for (std::size_t off = 0; !stop_; off += period) {
+          for (std::size_t off = 0, n = 0; !stop_; off += period, ++n) {
+            if (pause.kind != WriterBreak::kNone && n == pause.at_period) {
+              if (pause.kind == WriterBreak::kClose) ::close(fd);
+              std::this_thread::sleep_for(pause.length);
+              // The reader (ALSA) keeps its end open, so this open does not block.
+              if (pause.kind == WriterBreak::kClose && (fd = ::open(fifo.c_str(), O_WRONLY)) < 0) return;
+              next = gearpulse::monotonic_ns();  // go on at the rate, no catching up
+            }
             const timespec ts = gearpulse::to_timespec(next);
             ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
             const bool data = off + period <= samples.size();
@@ -117,6 +136,33 @@ class FifoFeeder {
   std::atomic<bool> done_{false};
   std::thread thread_;
 };
+
+// A PCM named "paced" whose file plugin reads a fresh FIFO in `dir`; returns the FIFO.
+std::filesystem::path make_paced_pcm(const TempDir& dir) {
+  const auto fifo = dir / "in.fifo";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  use_alsa_config(dir, "paced", fifo);
+  return fifo;
+}
+
+AlsaCaptureConfig paced_config(unsigned period) {
+  AlsaCaptureConfig cfg;
+  cfg.device = "paced";
+  cfg.period_frames = period;
+  return cfg;
+}
+
+// `periods` periods of distinct S16 values starting at `first` (where a frame came from is known).
+std::vector<std::int16_t> numbered(unsigned period, std::size_t periods, int first = -32768) {
+  std::vector<std::int16_t> src(period * periods);
+  for (std::size_t i = 0; i < src.size(); ++i)
+    src[i] = static_cast<std::int16_t>(first + static_cast<int>(i));
+  return src;
+}
+
+float as_float(std::int16_t s) {
+  return static_cast<float>(s) / 32768.0f;
+}
 
 }  // namespace
 
@@ -143,7 +189,7 @@ TEST_CASE("alsa: unpaced S16 mono frames arrive bit-exact with increasing timest
   REQUIRE(got.size() == src.size());
   std::size_t mismatches = 0;
   for (std::size_t i = 0; i < src.size(); ++i)
-    mismatches += got[i] != static_cast<float>(src[i]) / 32768.0f;
+    mismatches += got[i] != as_float(src[i]);
   CHECK(mismatches == 0);
   CHECK(timestamps_increase(cap, 0, src.size() - 1));
   cap.stop();
@@ -207,19 +253,12 @@ TEST_CASE("alsa: S32 and FLOAT stereo are converted per channel or mixed") {
 
 TEST_CASE("alsa: FIFO-paced capture is bit-exact and its sample clock runs at the rate") {
   TempDir dir;
-  const auto fifo = dir / "in.fifo";
-  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const auto fifo = make_paced_pcm(dir);
   constexpr unsigned kPeriod = 480, kRate = 48000;  // 10 ms periods
-  std::vector<std::int16_t> src(kPeriod * 60);      // 0.6 s
-  for (std::size_t i = 0; i < src.size(); ++i)
-    src[i] = static_cast<std::int16_t>(static_cast<int>(i % 65536) - 32768);
-  use_alsa_config(dir, "paced", fifo);
+  const auto src = numbered(kPeriod, 60);           // 0.6 s
   FifoFeeder feeder(fifo, src, kPeriod, kRate);
   SpscRing<float> ring(1 << 16);
-  AlsaCaptureConfig cfg;
-  cfg.device = "paced";
-  cfg.period_frames = kPeriod;
-  AlsaCapture cap(cfg, ring);
+  AlsaCapture cap(paced_config(kPeriod), ring);
   REQUIRE(cap.period_frames() == kPeriod);
   cap.start();
   feeder.go();
@@ -227,7 +266,7 @@ TEST_CASE("alsa: FIFO-paced capture is bit-exact and its sample clock runs at th
   REQUIRE(got.size() == src.size());
   std::size_t bad = 0;
   for (std::size_t i = 0; i < src.size(); ++i)
-    bad += got[i] != static_cast<float>(src[i]) / 32768.0f;
+    bad += got[i] != as_float(src[i]);
   CHECK(bad == 0);
   CHECK(timestamps_increase(cap, 0, src.size() - 1));
   // The sample clock follows the frames' arrival only within its correction bounds: rate within 500 ppm,
@@ -248,19 +287,12 @@ TEST_CASE("alsa: FIFO-paced capture is bit-exact and its sample clock runs at th
 
 TEST_CASE("alsa: a stalled consumer overruns the ring and the stream recovers with a time jump") {
   TempDir dir;
-  const auto fifo = dir / "in.fifo";
-  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const auto fifo = make_paced_pcm(dir);
   constexpr unsigned kPeriod = 480, kRate = 48000;
-  std::vector<std::int16_t> src(kPeriod * 50);  // unique values: where a frame came from is known
-  for (std::size_t i = 0; i < src.size(); ++i)
-    src[i] = static_cast<std::int16_t>(static_cast<int>(i) - 32768);
-  use_alsa_config(dir, "paced", fifo);
+  const auto src = numbered(kPeriod, 50);  // unique values: where a frame came from is known
   FifoFeeder feeder(fifo, src, kPeriod, kRate);
   SpscRing<float> ring(2048);  // ~43 ms
-  AlsaCaptureConfig cfg;
-  cfg.device = "paced";
-  cfg.period_frames = kPeriod;
-  AlsaCapture cap(cfg, ring);
+  AlsaCapture cap(paced_config(kPeriod), ring);
   cap.start();
   feeder.go();
   // The consumer stalls until the capture had to drop a few periods.
@@ -269,7 +301,7 @@ TEST_CASE("alsa: a stalled consumer overruns the ring and the stream recovers wi
   const auto dropped_in_stall = cap.stats().dropped;
   // It catches up and reads to the end of the source.
   std::vector<float> got;
-  const float last = static_cast<float>(src.back()) / 32768.0f;
+  const float last = as_float(src.back());
   const auto deadline = std::chrono::steady_clock::now() + 10s;
   while (std::find(got.begin(), got.end(), last) == got.end() &&
          std::chrono::steady_clock::now() < deadline) {
@@ -348,4 +380,115 @@ TEST_CASE("alsa: a source faster than real time is held to the clock instead of 
   cap.stop();
   // At most one second ahead of real time (plus a period); unthrottled it would be all 10 s at once.
   CHECK(static_cast<double>(frames) <= (elapsed_s + 1.0) * 48000 + cap.period_frames());
+}
+
+TEST_CASE("alsa: recovery is chosen by the error: overrun restarts, suspend resumes, a lost device reopens") {
+  using gearpulse::AlsaRecovery;
+  using gearpulse::recovery_for;
+  CHECK(recovery_for(-EPIPE) == AlsaRecovery::kRestart);
+  CHECK(recovery_for(-ESTRPIPE) == AlsaRecovery::kResume);
+  CHECK(recovery_for(-ENODEV) == AlsaRecovery::kReopen);
+  CHECK(recovery_for(-EBADFD) == AlsaRecovery::kReopen);  // the PCM is in no state to read
+  CHECK(recovery_for(-EIO) == AlsaRecovery::kReopen);
+  CHECK(recovery_for(-1) == AlsaRecovery::kReopen);  // the file plugin passes a failed read() on as -1
+  // A signal that interrupts the wait is no fault: nothing was lost and the device stays open.
+  CHECK(recovery_for(-EINTR) == AlsaRecovery::kRetry);
+  CHECK(recovery_for(-EAGAIN) == AlsaRecovery::kRetry);
+  CHECK(std::string(gearpulse::to_string(recovery_for(-EPIPE))) == "restart");
+}
+
+// The file plugin's own answer to a writer that stalls: its read() on the FIFO blocks, so the capture
+// is held up with the data; the null slave reports no XRUN. Frames arrive late, none is lost, and the
+// sample clock, finding them a stall's length behind ALSA's timestamps, re-anchors forward.
+TEST_CASE(
+    "alsa: a stalled FIFO writer holds the capture up without loss and the clock re-anchors across it") {
+  TempDir dir;
+  const auto fifo = make_paced_pcm(dir);
+  constexpr unsigned kPeriod = 480, kRate = 48000;
+  const auto src = numbered(kPeriod, 100);  // 1 s
+  constexpr auto kStall = 800ms;            // far beyond the 100 ms the clock takes as lateness
+  FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kStall, 40, kStall});
+  SpscRing<float> ring(1 << 16);
+  AlsaCapture cap(paced_config(kPeriod), ring);
+  cap.start();
+  feeder.go();
+  const auto got = read_frames(ring, src.size());
+  REQUIRE(got.size() == src.size());
+  std::size_t bad = 0;
+  for (std::size_t i = 0; i < src.size(); ++i)
+    bad += got[i] != as_float(src[i]);
+  CHECK(bad == 0);
+  const auto st = cap.stats();
+  CHECK(st.dropped == 0);
+  CHECK(st.xruns == 0);  // the null slave never overruns: a stall is not an XRUN here
+  CHECK(st.running);
+  CHECK(st.clock_resets >= 1);
+  CHECK(timestamps_increase(cap, 0, src.size() - 1));
+  // The stall shows in the timestamps: the span exceeds the frames' duration by most of it (a slower
+  // machine only adds to it).
+  std::int64_t t0 = 0, t1 = 0;
+  REQUIRE(cap.frame_time(0, t0));
+  REQUIRE(cap.frame_time(src.size() - 1, t1));
+  const double excess = static_cast<double>(t1 - t0) - (src.size() - 1) * 1e9 / kRate;
+  CHECK(excess >= 0.5 * std::chrono::duration<double, std::nano>(kStall).count());
+  cap.stop();
+}
+
+// The file plugin's answer to a writer that goes away: read() returns end of file and the plugin
+// returns the period anyway, without touching the buffer, at once and without end. The capture must
+// not spin on that (it holds such a source to the clock), must keep the device open, and must carry
+// the writer's frames again, bit-exact, once a writer is back.
+TEST_CASE(
+    "alsa: a FIFO writer that goes away and comes back: no spin meanwhile and its frames come through "
+    "again") {
+  TempDir dir;
+  const auto fifo = make_paced_pcm(dir);
+  constexpr unsigned kPeriod = 480, kRate = 48000;
+  constexpr std::size_t kBefore = 30, kAfter = 30;
+  auto src = numbered(kPeriod, kBefore + kAfter);  // values after the gap differ from all before it
+  FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kClose, kBefore, 1500ms});
+  SpscRing<float> ring(1 << 18);  // room for the second of stale periods the gap produces
+  AlsaCapture cap(paced_config(kPeriod), ring);
+  const std::int64_t start = gearpulse::monotonic_ns();
+  cap.start();
+  feeder.go();
+  std::vector<float> got;
+  const float last = as_float(src.back());
+  std::uint64_t most_ahead = 0;  // frames captured beyond real time, worst seen
+  REQUIRE(wait_for(
+      [&] {
+        float buf[8192];
+        for (std::size_t n; (n = ring.read_bulk(buf)) > 0;)
+          got.insert(got.end(), buf, buf + n);
+        const double elapsed_s = static_cast<double>(gearpulse::monotonic_ns() - start) / 1e9;
+        const double ahead = static_cast<double>(cap.stats().frames) - elapsed_s * kRate;
+        most_ahead = std::max(most_ahead, static_cast<std::uint64_t>(std::max(0.0, ahead)));
+        return !got.empty() && std::find(got.begin(), got.end(), last) != got.end();
+      },
+      30s));
+  const auto st = cap.stats();
+  cap.stop();
+  // Before the gap: the writer's frames in order.
+  REQUIRE(got.size() >= src.size());
+  std::size_t bad = 0;
+  for (std::size_t i = 0; i < kBefore * kPeriod; ++i)
+    bad += got[i] != as_float(src[i]);
+  CHECK(bad == 0);
+  // After it: all of the new writer's frames, contiguous and bit-exact.
+  const float first_after = as_float(src[kBefore * kPeriod]);
+  const auto resumed = std::find(got.begin() + kBefore * kPeriod, got.end(), first_after);
+  REQUIRE(resumed != got.end());
+  REQUIRE(static_cast<std::size_t>(got.end() - resumed) >= kAfter * kPeriod);
+  bad = 0;
+  for (std::size_t i = 0; i < kAfter * kPeriod; ++i)
+    bad += resumed[static_cast<long>(i)] != as_float(src[kBefore * kPeriod + i]);
+  CHECK(bad == 0);
+  // In between, stale periods, but held to about a second ahead of real time (the bound allows for
+  // where the clock was anchored); a spinning capture would be millions of frames ahead.
+  CHECK(most_ahead <= 3 * kRate / 2);
+  CHECK(st.reopens == 0);
+  CHECK(st.xruns == 0);
+  CHECK(st.dropped == 0);
+  CHECK(st.running);
+  CHECK(timestamps_increase(cap, 0, got.size() - 1));
 }
