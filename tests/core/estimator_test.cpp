@@ -79,6 +79,43 @@ TEST_CASE("estimator: auto mode finds gear count and every theta within 0.5 perc
   }
 }
 
+TEST_CASE("estimator: both noise levels are estimated and neither sticks at zero") {
+  // The simulator's truth: sigma_v 0.05 m/s (GPS Doppler), sigma_s 0.2 Hz (tracker). A fit that lets one
+  // noise level collapse makes every gear line as wide as the top gear's.
+  for (const char* name : {"hatch-5", "van-6"}) {
+    const sim::Vehicle car = sim::vehicle_preset(name);
+    const FitResult fit = fit_gear_model(simulate(car, sim::DrivingStyle::kMixed, 2400.0, 1, 1), {});
+    INFO(name << ": sigma_freq " << fit.model.sigma_freq << " sigma_speed " << fit.model.sigma_speed);
+    REQUIRE(fit.model.gears.size() == car.theta.size());
+    CHECK(fit.model.sigma_freq == Approx(0.2).epsilon(0.25));
+    CHECK(fit.model.sigma_speed == Approx(0.05).epsilon(0.35));
+  }
+}
+
+TEST_CASE("estimator: a first gear seen on a few launches of a highway drive is found") {
+  // 40 min mostly at highway speed: first gear is engaged for a second or two on each of a few launches
+  // in town, a dozen samples at 1 Hz, well under one percent of the moving samples.
+  for (const char* name : {"wide-4", "compact-4", "hatch-5"}) {
+    const sim::Vehicle car = sim::vehicle_preset(name);
+    for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+      const auto observed = sim::simulate_observations(car, sim::DrivingStyle::kHighway, 2400.0, 1, seed);
+      int first = 0;
+      for (const auto& o : observed)
+        first += o.truth.clutch == sim::Clutch::kEngaged && o.truth.gear == 1 ? 1 : 0;
+      INFO(name << " seed " << seed << ": first gear engaged in " << first << " samples");
+      REQUIRE(first <= 25);
+      if (first < 8) continue;
+      const FitResult fit = fit_gear_model(sim::to_samples(observed), {});
+      REQUIRE(fit.model.gears.size() == car.theta.size());
+      // A dozen samples pin theta_1 to about half a percent (its standard error); the others are tight.
+      CHECK(std::abs(fit.model.gears[0].theta - car.theta[0]) < 3.0 * fit.model.gears[0].std_error);
+      CHECK(fit.model.gears[0].theta == Approx(car.theta[0]).epsilon(0.015));
+      for (std::size_t i = 1; i < car.theta.size(); ++i)
+        CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.005));
+    }
+  }
+}
+
 TEST_CASE("estimator: a CVT has no gear ladder") {
   const sim::Vehicle cvt = sim::vehicle_preset("cvt");
   for (auto style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kTrafficJam}) {

@@ -94,3 +94,36 @@ TEST_CASE("sim: CVT and presets are valid and unknown names are rejected") {
   CHECK_THROWS_AS(sim::vehicle_preset("no-such-car"), std::invalid_argument);
   CHECK_THROWS_AS(sim::parse_style("rally"), std::invalid_argument);
 }
+
+TEST_CASE("sim: the driver does not hunt between two gears") {
+  // An upshift followed within a few seconds by a downshift back into the gear just left, at about the
+  // same speed, is hunting: the driver shifted up into a gear too low on revs. Braking for a stop after an
+  // upshift (a real speed drop) is not counted.
+  for (const char* name : {"van-6", "hatch-5", "wide-4"}) {
+    const sim::Vehicle car = sim::vehicle_preset(name);
+    for (auto style : {sim::DrivingStyle::kUrban, sim::DrivingStyle::kTrafficJam}) {
+      const sim::Drive drive = sim::simulate_drive(car, {style, 2400.0, 0.05, 3});
+      int upshifts = 0;
+      int hunts = 0;
+      int engaged = 0;
+      int left = 0;
+      double up_time = -1e9;
+      double up_speed = 0.0;
+      for (const sim::TruthSample& t : drive.truth) {
+        if (t.clutch != sim::Clutch::kEngaged || t.gear == engaged) continue;
+        if (t.gear > engaged && engaged > 0) {
+          ++upshifts;
+          left = engaged;
+          up_time = t.t;
+          up_speed = t.speed;
+        } else if (t.gear == left && t.t - up_time < 4.0 && t.speed > 0.97 * up_speed) {
+          ++hunts;
+        }
+        engaged = t.gear;
+      }
+      INFO(name << " " << sim::style_name(style) << ": " << hunts << " hunts in " << upshifts << " upshifts");
+      CHECK(upshifts > 20);
+      CHECK(hunts * 20 <= upshifts);
+    }
+  }
+}

@@ -239,9 +239,9 @@ class DriveSimulator {
           const bool over_point = s.f > upshift_point_ * (accelerating ? 1.0 : 0.8);
           const bool cruising = std::abs(a) < 0.25 && next_f > veh_.downshift_freq * cruise_margin_;
           // Never into a gear the driver would at once shift down from: without this the driver hunted
-          // between two gears every second at low speed (up on the rev point, down below the downshift
-          // point), a habit no driver has, and it cut the time spent in first gear to a second a launch.
-          const bool lugging = next_f < veh_.downshift_freq;
+          // between two gears at low speed (up on the rev point, down below the downshift point a second
+          // later), a habit no driver has. The margin covers the speed lost while the clutch is out.
+          const bool lugging = next_f < 1.1 * veh_.downshift_freq;
           if ((over_point || cruising) && next_f > idle * 1.2 && !lugging) {
             start_shift(g + 1);
             break;
