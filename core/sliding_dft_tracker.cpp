@@ -43,6 +43,8 @@ constexpr double kDriftMemory = 0.7;
 constexpr double kToneMemoryS = 20.0;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
 constexpr double kToneFitLevel = 4.0;
+// Memory (per hop) of the band's noise level behind the reported SNR.
+constexpr double kNoiseMemory = 0.9;
 // Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
 // 0.1 s hop), the prior of the sub-bin estimate.
 constexpr double kPredictionHz = 2.0;
@@ -181,6 +183,8 @@ struct SlidingDftTracker::Impl {
     double ladder_excess = 0.0;
     double snr_db = kNaN;
     double log_likelihood = -INFINITY;  // of the refined frequency, with the track's prior if any
+    double noise_level = kNaN;          // noise variance per decimated sample in the band, this window
+    double fundamental_amp2 = 0.0;      // squared amplitude of the fitted fundamental
   };
 
   explicit Impl(const TrackerConfig& c);
@@ -208,6 +212,9 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
   [[nodiscard]] Evidence refine(double f0, double predicted = kNaN) noexcept;
+  // Fundamental power over the band's noise power (the generator's definition), in dB. `learn`: the
+  // window is the next hop's, whose noise level joins the average.
+  [[nodiscard]] double snr_db(const Evidence& ev, bool learn) noexcept;
   void dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
             std::complex<double>& ddx) const noexcept;
   // Least-squares model of a window: level, slope, a sinusoid per order and one for a learned fixed tone
@@ -220,6 +227,7 @@ struct SlidingDftTracker::Impl {
     int cols = 0;
   };
   double nuisance_hz = kNaN;  // the learned tone fitted along, for the current refine()
+  double log_noise = kNaN;    // log of the band's noise variance per sample, averaged over hops
   [[nodiscard]] double slot_hz(int o, double f) const noexcept {
     return o < kOrders ? kOrder[o] * f : nuisance_hz;
   }
@@ -589,13 +597,34 @@ double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) n
   double* scratch = block_scratch.data();
   std::size_t n = 0;
   for (int k = lo; k <= hi; ++k) {
+    // The fit notches the residual around every fitted frequency; those bins are not noise.
+    bool notched = false;
+    for (int o = 0; o < kSlots && !notched; ++o)
+      notched = fit.order_col[o] >= 0 && std::abs(k * df - slot_hz(o, f)) <= lobe * df;
+    if (notched) continue;
     const fftw_complex& v = resid_out.get()[static_cast<std::size_t>(k)];
     scratch[n++] = v[0] * v[0] + v[1] * v[1];
   }
+  if (n < 8) return noise_at(f / df) / sum_w2;
   std::nth_element(scratch, scratch + n / 2, scratch + n);
   // The fit removed `cols` of n_win degrees of freedom from the window.
   const double dof = static_cast<double>(n_win) / std::max(1, n_win - fit.cols);
   return scratch[n / 2] / std::log(2.0) / sum_w2 * dof;
+}
+
+// The band's noise level changes slowly: averaged geometrically over about a second (robust to one odd
+// window) it no longer adds the scatter of one window's ~15 resolution bins to every SNR. The fitted
+// power is corrected for the noise it holds (least squares over n samples: 2 sigma^2 / n).
+double SlidingDftTracker::Impl::snr_db(const Evidence& ev, bool learn) noexcept {
+  if (!(ev.noise_level > 0.0) || !std::isfinite(ev.noise_level)) return kNaN;
+  const double now = std::log(ev.noise_level);
+  const double smoothed =
+      std::isfinite(log_noise) ? kNoiseMemory * log_noise + (1.0 - kNoiseMemory) * now : now;
+  if (learn) log_noise = smoothed;
+  const double sigma2 = std::exp(smoothed);
+  const double noise_power = sigma2 * 2.0 * (cfg.band_hi_hz - cfg.band_lo_hz) / fd;
+  const double signal_power = std::max(ev.fundamental_amp2 / 2.0 - 2.0 * sigma2 / n_win, 1e-3 * noise_power);
+  return 10.0 * std::log10(signal_power / noise_power);
 }
 
 // Sub-bin estimate around f0 (Hz): grid then golden-section search of the harmonic least-squares fit
@@ -691,16 +720,13 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     }
   }
   ev.ladder_excess = ladder - n_ladder;
-  // Fundamental power over in-band noise power, in the generator's definition. The noise level comes
-  // from the residual of the harmonic fit (the engine's own lines and their leakage removed), the
-  // fitted power is corrected for the noise it holds (least squares over n samples: 2 sigma^2 / n).
-  const double sigma2 = residual_noise_level(f, fit);
+  // The window's noise level, from the residual of the harmonic fit (the engine's own lines and their
+  // leakage removed), and the fitted fundamental's power, for the SNR (see snr_db()).
+  ev.noise_level = residual_noise_level(f, fit);
   const int col = fit.order_col[1];
-  const double amp2 =
+  ev.fundamental_amp2 =
       col >= 0 && fit.cols > 0 ? fit.coef[col] * fit.coef[col] + fit.coef[col + 1] * fit.coef[col + 1] : 0.0;
-  const double noise_power = sigma2 * 2.0 * (cfg.band_hi_hz - cfg.band_lo_hz) / fd;
-  const double signal_power = std::max(amp2 / 2.0 - 2.0 * sigma2 / n_win, 1e-3 * noise_power);
-  ev.snr_db = noise_power > 0.0 ? 10.0 * std::log10(signal_power / noise_power) : kNaN;
+  ev.snr_db = snr_db(ev, false);
   return ev;
 }
 
@@ -804,6 +830,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     if (std::abs(f_pred - ev.freq) > df)
       if (Evidence alt = refine(f_pred, predicted); alt.log_likelihood > ev.log_likelihood) ev = alt;
   }
+  ev.snr_db = snr_db(ev, true);
   out.snr_db = ev.snr_db;
   // Probability that the engine's fundamental is on the estimated line: within one resolution bin of the
   // estimate (the posterior of a line spreads over its main lobe, the refined estimate does not), or 5 %
@@ -928,6 +955,8 @@ void SlidingDftTracker::start(double t0) noexcept {
   const auto first_hop = (s.half_span + s.hop_frames - 1) / s.hop_frames;
   s.next_centre = static_cast<std::uint64_t>(first_hop * s.hop_frames);
   s.reset_track();
+  std::fill(s.tone.begin(), s.tone.end(), 1.0);
+  s.log_noise = kNaN;
   s.q_head = s.q_size = 0;
   s.h_head = s.h_size = 0;
 }

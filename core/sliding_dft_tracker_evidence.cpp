@@ -21,7 +21,7 @@ constexpr double kMatched = 0.5;
 // Order-to-fundamental SNR ratio r: log-uniform over 0.02 .. 2 (-17 to +3 dB) for the harmonics, up to
 // 0.5 for the half order (a "half order" stronger than the fundamental means the candidate is the
 // engine's 2nd harmonic), or the order absent altogether.
-constexpr double kRatioLo = 0.02, kRatioHi = 2.0, kHalfRatioHi = 0.5;
+constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 constexpr int kRatioSteps = 20;
 constexpr double kOrderAbsent = 0.03;
 
