@@ -1,4 +1,5 @@
-// gearpulse track: engine-frequency track of a lighter-voltage recording, as CSV t,freq,snr_db.
+// gearpulse track: engine-frequency track of a lighter-voltage recording, as CSV t,freq,snr_db (with
+// --confidence, a fourth column and the estimate of every hop, trusted or not).
 #include <sndfile.h>
 
 #include <cmath>
@@ -22,6 +23,7 @@ struct TrackOptions {
   int channel = -1;  // -1: mix all channels
   double max_slew = 60.0;
   bool any_line = false;
+  bool confidence = false;
   std::string file;
 };
 
@@ -76,11 +78,17 @@ bool truncated(SNDFILE* file, long long& declared, long long& actual) {
   return false;
 }
 
-void print_point(const TrackPoint& p) {
+// Without `with_confidence`, freq is empty unless the hop is tracked (the contract of `track`); with it,
+// every estimate is printed and the confidence column says how far to trust it.
+void print_point(const TrackPoint& p, bool with_confidence) {
   char freq[32] = "", snr[32] = "";
-  if (p.tracked && std::isfinite(p.freq)) std::snprintf(freq, sizeof freq, "%.3f", p.freq);
+  if ((p.tracked || with_confidence) && std::isfinite(p.freq))
+    std::snprintf(freq, sizeof freq, "%.3f", p.freq);
   if (std::isfinite(p.snr_db)) std::snprintf(snr, sizeof snr, "%.1f", p.snr_db);
-  std::printf("%.4f,%s,%s\n", p.t, freq, snr);
+  if (with_confidence)
+    std::printf("%.4f,%s,%s,%.3f\n", p.t, freq, snr, p.confidence);
+  else
+    std::printf("%.4f,%s,%s\n", p.t, freq, snr);
 }
 
 int run_track(const TrackOptions& o) {
@@ -113,7 +121,7 @@ int run_track(const TrackOptions& o) {
   const auto channels = static_cast<std::size_t>(info.channels);
   std::vector<float> interleaved(static_cast<std::size_t>(kBlock) * channels);
   std::vector<float> mono(static_cast<std::size_t>(kBlock));
-  std::printf("t,freq,snr_db\n");
+  std::printf(o.confidence ? "t,freq,snr_db,confidence\n" : "t,freq,snr_db\n");
   sf_count_t total = 0;
   for (;;) {
     const sf_count_t got = sf_readf_float(file.get(), interleaved.data(), kBlock);
@@ -125,7 +133,7 @@ int run_track(const TrackOptions& o) {
     tracker->push(std::span<const float>(mono.data(), frames));
     TrackPoint p;
     while (tracker->pop(p))
-      print_point(p);
+      print_point(p, o.confidence);
   }
   if (sf_error(file.get()) != SF_ERR_NO_ERROR)
     throw UsageError(o.file + ": read error after " + std::to_string(total) +
@@ -151,6 +159,8 @@ void add_track(CLI::App& app, int& status) {
   cmd->add_option("--max-slew", options->max_slew, "fastest followed frequency change (Hz/s)")
       ->capture_default_str();
   cmd->add_flag("--any-line", options->any_line, "also acquire lines without harmonics (pure-sine ripple)");
+  cmd->add_flag("--confidence", options->confidence,
+                "add a confidence column (probability the estimate is the engine) and print every estimate");
   cmd->add_option("FILE", options->file, "WAV recording (any rate, mono or multi-channel)")->required();
   cmd->callback([options, &status] { status = run_track(*options); });
 }
