@@ -26,9 +26,19 @@ Eigen::VectorXd theta_variances(const Eigen::MatrixXd& info, int gears) {
       if (i != drop) sub.push_back(i);
     subsets.push_back(sub);
   }
-  std::vector<int> theta_only;
+  std::vector<int> without_sigmas;
   for (int i = 0; i < n; ++i)
-    if (i < gears || i >= gears + 2) theta_only.push_back(i);
+    if (i < gears || i >= gears + 2) without_sigmas.push_back(i);
+  subsets.push_back(without_sigmas);
+  // A weight at its bound (no clutch-out or no standstill sample in the log, e.g. a log of moving samples
+  // only) makes the logits' block singular: hold the weights, then also the sigmas.
+  std::vector<int> without_weights;
+  for (int i = 0; i < gears + 2 && i < n; ++i)
+    without_weights.push_back(i);
+  subsets.push_back(without_weights);
+  std::vector<int> theta_only;
+  for (int i = 0; i < gears; ++i)
+    theta_only.push_back(i);
   subsets.push_back(theta_only);
   for (const auto& sub : subsets) {
     const auto k = static_cast<int>(sub.size());

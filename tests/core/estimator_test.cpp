@@ -116,6 +116,29 @@ TEST_CASE("estimator: a first gear seen on a few launches of a highway drive is 
   }
 }
 
+TEST_CASE("estimator: a log without stops or clutch-out samples still gets standard errors") {
+  // Moving samples on three gear lines only: the standstill and clutch-out weights go to their bound,
+  // which must not take the standard errors of theta with them.
+  const double theta[3] = {0.13, 0.24, 0.35};
+  std::mt19937_64 rng(21);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  std::uniform_real_distribution<double> freq(20.0, 45.0);
+  std::vector<Sample> samples;
+  for (int k = 0; k < 2400; ++k) {
+    const double f = freq(rng);
+    samples.push_back({static_cast<double>(k), theta[k % 3] * f + 0.05 * noise(rng), f + 0.2 * noise(rng)});
+  }
+  const FitResult fit = fit_gear_model(samples, {});
+  REQUIRE(fit.model.gears.size() == 3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const Gear& g = fit.model.gears[i];
+    // About 800 samples a gear: theta to roughly 1e-4 (sqrt(0.35^2 0.2^2 + 0.05^2) / (sqrt(800) 33 Hz)).
+    CHECK(g.std_error > 2e-5);
+    CHECK(g.std_error < 2e-4);
+    CHECK(std::abs(g.theta - theta[i]) < 4.0 * g.std_error);
+  }
+}
+
 TEST_CASE("estimator: a CVT has no gear ladder") {
   const sim::Vehicle cvt = sim::vehicle_preset("cvt");
   for (auto style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kTrafficJam}) {
