@@ -382,8 +382,11 @@ MixtureData aligned_channels(const MixtureData& all) {
       best_delta = delta;
     }
   }
-  // A few percent of sharpness is what sampling noise alone gives.
-  if (best < 1.05 * unshifted) return all;
+  // A few percent of sharpness is what sampling noise alone gives. Interpolating between two samples
+  // also averages their noise, which sharpens the lines by itself (at 10 Hz more than a lag does): that
+  // gain is the same for the opposite shift, a lag's is not, so the shift must beat its mirror too.
+  const double mirror = best_delta != 0.0 ? ratio_sharpness(all, -best_delta, max_gap) : unshifted;
+  if (best < 1.05 * std::max(unshifted, mirror)) return all;
   MixtureData out = all;
   for (std::size_t k = 0; k < n; ++k)
     out.v[k] = shifted_speed(all, k, best_delta, max_gap);
