@@ -319,22 +319,44 @@ std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std:
   return out;
 }
 
-// Speed read at a time offset from engine speed: v interpolated linearly to t + delta between the
-// neighbouring samples (no change at the ends or across a gap).
+// Speed read at a time offset from engine speed: v interpolated linearly to t + delta between the two
+// samples around it (no change at the ends or across a gap).
 double shifted_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
-  const std::size_t j = delta > 0.0 ? k + 1 : k - 1;
-  if ((delta > 0.0 && k + 1 >= d.size()) || (delta < 0.0 && k == 0) || delta == 0.0) return d.v[k];
-  const double dt = d.t[j] - d.t[k];
-  if (dt * delta <= 0.0 || std::abs(dt) > max_gap) return d.v[k];  // a gap, or time restarting
-  return std::max(0.0, d.v[k] + (d.v[j] - d.v[k]) * delta / dt);
+  if (delta == 0.0) return d.v[k];
+  const double target = d.t[k] + delta;
+  const std::size_t n = d.size();
+  std::size_t a = k;  // the sample at or before target (delta > 0) or at or after it (delta < 0)
+  std::size_t b = k;
+  if (delta > 0.0) {
+    while (a + 1 < n && d.t[a + 1] < target) {
+      if (!(d.t[a + 1] - d.t[a] > 0.0) || d.t[a + 1] - d.t[a] > max_gap) return d.v[k];
+      ++a;
+    }
+    if (a + 1 >= n) return d.v[k];
+    b = a + 1;
+  } else {
+    while (a > 0 && d.t[a - 1] > target) {
+      if (!(d.t[a] - d.t[a - 1] > 0.0) || d.t[a] - d.t[a - 1] > max_gap) return d.v[k];
+      --a;
+    }
+    if (a == 0) return d.v[k];
+    b = a;
+    a = b - 1;
+  }
+  const double dt = d.t[b] - d.t[a];
+  if (!(dt > 0.0) || dt > max_gap) return d.v[k];  // a gap, or time restarting
+  return std::max(0.0, d.v[a] + (d.v[b] - d.v[a]) * (target - d.t[a]) / dt);
 }
 
-// Sharpness of the log(v/s) density (sum of squared bin shares, a collision probability): gear lines
-// give narrow peaks, a misaligned speed channel smears them in proportion to the acceleration.
-double ratio_sharpness(const MixtureData& d, double delta, double max_gap) {
+// Sharpness of the log(v/s) density (sum of squared bin shares, a collision probability) over the
+// samples [begin, end): gear lines give narrow peaks, a misaligned speed channel smears them in
+// proportion to the acceleration.
+double ratio_sharpness(const MixtureData& d, std::size_t begin, std::size_t end, double delta,
+                       double max_gap) {
   constexpr double kBin = 0.015;  // log units, the middle smoothing width of candidate_scales
   std::vector<double> keys;
-  for (std::size_t k = 0; k < d.size(); ++k) {
+  keys.reserve(end - begin);
+  for (std::size_t k = begin; k < end; ++k) {
     const double v = shifted_speed(d, k, delta, max_gap);
     if (v > kMovingSpeed && d.s[k] > 0.0) keys.push_back(std::floor(std::log(v / d.s[k]) / kBin));
   }
@@ -355,11 +377,15 @@ double ratio_sharpness(const MixtureData& d, double delta, double max_gap) {
 }
 
 // A logger that reads speed and engine speed at different instants (OBD-II polls its PIDs in turn and
-// the ECU's speed may lag; a GPS fix is reported after the audio it belongs to) pairs them with a time
-// offset; at acceleration a the speed is then off by a * offset, in first gear as much as the step
-// between gears. The offset, searched within one sampling interval either way, is the one that makes the
-// gear lines sharpest; the speeds are moved to it. Without time stamps nothing changes.
+// the ECU's speed may lag; a GPS fix is reported after the audio it belongs to, by up to a second or
+// so whatever the fix rate) pairs them with a time offset; at acceleration a the speed is then off by
+// a * offset, in first gear as much as the step between gears. The offset, searched over +-2 s (or one
+// sampling interval if longer), coarse then fine, is the one that makes the gear lines sharpest; the
+// speeds are moved to it. The search looks at a contiguous stretch of at most kAlignSamples samples
+// (enough to see the lag, and it keeps a week-long log fast). Without time stamps nothing changes.
 MixtureData aligned_channels(const MixtureData& all) {
+  constexpr double kMaxLag = 2.0;                // s
+  constexpr std::size_t kAlignSamples = 200000;  // samples the search looks at
   const std::size_t n = all.size();
   if (all.t.size() != n || n < 30) return all;
   std::vector<double> gaps;
@@ -371,21 +397,40 @@ MixtureData aligned_channels(const MixtureData& all) {
   std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
   const double gap = gaps[gaps.size() / 2];
   const double max_gap = 3.0 * gap;
-  const double unshifted = ratio_sharpness(all, 0.0, max_gap);
+  const std::size_t begin = n > kAlignSamples ? (n - kAlignSamples) / 2 : 0;
+  const std::size_t end = std::min(n, begin + kAlignSamples);
+  auto sharpness = [&](double delta) { return ratio_sharpness(all, begin, end, delta, max_gap); };
+  const double unshifted = sharpness(0.0);
+  const double range = std::max(kMaxLag, gap);
+  const double coarse = range / 8.0;
   double best_delta = 0.0;
   double best = unshifted;
   for (int step = -8; step <= 8; ++step) {
-    const double delta = gap * step / 8.0;
-    const double sharp = ratio_sharpness(all, delta, max_gap);
+    const double delta = coarse * step;
+    const double sharp = step == 0 ? unshifted : sharpness(delta);
     if (sharp > best) {
       best = sharp;
       best_delta = delta;
     }
   }
+  // Refine around the optimum in finer steps, down to an eighth of a sampling interval.
+  for (double step = coarse / 8.0, width = coarse; width > gap / 8.0 + 1e-12; width = step, step /= 8.0) {
+    step = std::max(step, gap / 8.0);
+    const double centre = best_delta;
+    for (int i = -7; i <= 7; ++i) {
+      const double delta = centre + i * step;
+      if (i == 0 || std::abs(delta - centre) >= width || std::abs(delta) > range + 1e-9) continue;
+      const double sharp = sharpness(delta);
+      if (sharp > best) {
+        best = sharp;
+        best_delta = delta;
+      }
+    }
+  }
   // A few percent of sharpness is what sampling noise alone gives. Interpolating between two samples
   // also averages their noise, which sharpens the lines by itself (at 10 Hz more than a lag does): that
   // gain is the same for the opposite shift, a lag's is not, so the shift must beat its mirror too.
-  const double mirror = best_delta != 0.0 ? ratio_sharpness(all, -best_delta, max_gap) : unshifted;
+  const double mirror = best_delta != 0.0 ? sharpness(-best_delta) : unshifted;
   if (best < 1.05 * std::max(unshifted, mirror)) return all;
   MixtureData out = all;
   for (std::size_t k = 0; k < n; ++k)

@@ -160,6 +160,33 @@ TEST_CASE("estimator: a 10 Hz drive without lag is not shifted in time") {
   }
 }
 
+TEST_CASE("estimator: a speed channel lagging engine speed by up to 2 s is realigned") {
+  // A GPS fix reported after the audio it belongs to: speed paired with engine frequency lag seconds
+  // later. At 1 Hz a lag of 1.5 s, at 10 Hz one of 0.5 s (five samples); unaligned, first gear is off
+  // by 8-40 % or lost.
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  sim::ObservationOptions ten_hz;
+  ten_hz.period = 0.1;
+  const auto observed = sim::simulate_observations(car, sim::DrivingStyle::kUrban, 2400.0, 1, 7, ten_hz);
+  struct Case {
+    double lag;         // s
+    std::size_t every;  // keep every n-th row of the 10 Hz observations
+    double first_gear_tolerance;
+  };
+  for (const Case& c : {Case{1.5, 10, 0.015}, Case{0.5, 1, 0.025}}) {
+    const auto lag_rows = static_cast<std::size_t>(std::lround(c.lag / 0.1));
+    std::vector<Sample> samples;
+    for (std::size_t k = lag_rows; k < observed.size(); k += c.every)
+      samples.push_back({observed[k].truth.t, observed[k - lag_rows].speed, observed[k].freq});
+    const FitResult fit = fit_gear_model(samples, {});
+    INFO("lag " << c.lag << " s, " << 10 / c.every << " Hz");
+    REQUIRE(fit.model.gears.size() == 5);
+    CHECK(fit.model.gears[0].theta == Approx(car.theta[0]).epsilon(c.first_gear_tolerance));
+    for (std::size_t i = 1; i < 5; ++i)
+      CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.003));
+  }
+}
+
 TEST_CASE("estimator: a CVT has no gear ladder") {
   const sim::Vehicle cvt = sim::vehicle_preset("cvt");
   for (auto style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kTrafficJam}) {
