@@ -12,6 +12,7 @@
 #include <cstring>
 #include <fstream>
 #include <random>
+#include <span>
 #include <thread>
 #include <vector>
 
@@ -164,6 +165,14 @@ float as_float(std::int16_t s) {
   return static_cast<float>(s) / 32768.0f;
 }
 
+// Frames of `got` (from `at` on) that differ from the S16 source they should be, converted.
+std::size_t mismatches(const std::vector<float>& got, std::span<const std::int16_t> src, std::size_t at = 0) {
+  std::size_t bad = 0;
+  for (std::size_t i = 0; i < src.size(); ++i)
+    bad += at + i >= got.size() || got[at + i] != as_float(src[i]);
+  return bad;
+}
+
 }  // namespace
 
 TEST_CASE("alsa: unpaced S16 mono frames arrive bit-exact with increasing timestamps") {
@@ -187,10 +196,7 @@ TEST_CASE("alsa: unpaced S16 mono frames arrive bit-exact with increasing timest
   cap.start();
   const auto got = read_frames(ring, src.size());
   REQUIRE(got.size() == src.size());
-  std::size_t mismatches = 0;
-  for (std::size_t i = 0; i < src.size(); ++i)
-    mismatches += got[i] != as_float(src[i]);
-  CHECK(mismatches == 0);
+  CHECK(mismatches(got, src) == 0);
   CHECK(timestamps_increase(cap, 0, src.size() - 1));
   cap.stop();
   const auto st = cap.stats();
@@ -264,10 +270,7 @@ TEST_CASE("alsa: FIFO-paced capture is bit-exact and its sample clock runs at th
   feeder.go();
   const auto got = read_frames(ring, src.size());
   REQUIRE(got.size() == src.size());
-  std::size_t bad = 0;
-  for (std::size_t i = 0; i < src.size(); ++i)
-    bad += got[i] != as_float(src[i]);
-  CHECK(bad == 0);
+  CHECK(mismatches(got, src) == 0);
   CHECK(timestamps_increase(cap, 0, src.size() - 1));
   // The sample clock follows the frames' arrival only within its correction bounds: rate within 500 ppm,
   // offset steps of at most period / 8 per quarter second. Over 0.6 s that is under 0.5 % of the span,
@@ -414,10 +417,7 @@ TEST_CASE(
   feeder.go();
   const auto got = read_frames(ring, src.size());
   REQUIRE(got.size() == src.size());
-  std::size_t bad = 0;
-  for (std::size_t i = 0; i < src.size(); ++i)
-    bad += got[i] != as_float(src[i]);
-  CHECK(bad == 0);
+  CHECK(mismatches(got, src) == 0);
   const auto st = cap.stats();
   CHECK(st.dropped == 0);
   CHECK(st.xruns == 0);  // the null slave never overruns: a stall is not an XRUN here
@@ -445,7 +445,7 @@ TEST_CASE(
   const auto fifo = make_paced_pcm(dir);
   constexpr unsigned kPeriod = 480, kRate = 48000;
   constexpr std::size_t kBefore = 30, kAfter = 30;
-  auto src = numbered(kPeriod, kBefore + kAfter);  // values after the gap differ from all before it
+  const auto src = numbered(kPeriod, kBefore + kAfter);  // values after the gap differ from all before it
   FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kClose, kBefore, 1500ms});
   SpscRing<float> ring(1 << 18);  // room for the second of stale periods the gap produces
   AlsaCapture cap(paced_config(kPeriod), ring);
@@ -470,19 +470,14 @@ TEST_CASE(
   cap.stop();
   // Before the gap: the writer's frames in order.
   REQUIRE(got.size() >= src.size());
-  std::size_t bad = 0;
-  for (std::size_t i = 0; i < kBefore * kPeriod; ++i)
-    bad += got[i] != as_float(src[i]);
-  CHECK(bad == 0);
+  const std::span<const std::int16_t> before(src.data(), kBefore * kPeriod),
+      after(src.data() + before.size(), kAfter * kPeriod);
+  CHECK(mismatches(got, before) == 0);
   // After it: all of the new writer's frames, contiguous and bit-exact.
-  const float first_after = as_float(src[kBefore * kPeriod]);
-  const auto resumed = std::find(got.begin() + kBefore * kPeriod, got.end(), first_after);
+  const auto resumed =
+      std::find(got.begin() + static_cast<long>(before.size()), got.end(), as_float(after[0]));
   REQUIRE(resumed != got.end());
-  REQUIRE(static_cast<std::size_t>(got.end() - resumed) >= kAfter * kPeriod);
-  bad = 0;
-  for (std::size_t i = 0; i < kAfter * kPeriod; ++i)
-    bad += resumed[static_cast<long>(i)] != as_float(src[kBefore * kPeriod + i]);
-  CHECK(bad == 0);
+  CHECK(mismatches(got, after, static_cast<std::size_t>(resumed - got.begin())) == 0);
   // In between, stale periods, but held to about a second ahead of real time (the bound allows for
   // where the clock was anchored); a spinning capture would be millions of frames ahead.
   CHECK(most_ahead <= 3 * kRate / 2);
