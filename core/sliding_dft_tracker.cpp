@@ -163,9 +163,10 @@ struct SlidingDftTracker::Impl {
   // that stays put while the engine moves. Bins near a confident track are not learned, so a cruising
   // engine does not become a "tone".
   std::vector<double> tone;
-  double tone_keep = 1.0;                              // per hop
-  double drift_hz_per_s = 0.0;                         // recent rate of change of the tracked line
-  double last_freq = kNaN;                             // previous hop's estimate while confident, else NaN
+  std::vector<char> near_tone;  // within one resolution bin of a learned tone (per fine bin, this hop)
+  double tone_keep = 1.0;       // per hop
+  double drift_hz_per_s = 0.0;  // recent rate of change of the tracked line
+  double last_freq = kNaN;      // previous hop's estimate while confident, else NaN
   int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
   double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
 
@@ -207,6 +208,7 @@ struct SlidingDftTracker::Impl {
   }
   void learn_tones(double freq, bool on_track) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
+  void mark_tones() noexcept;
   void reset_track() noexcept;
   void predict() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
@@ -304,6 +306,7 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   power.assign(bins, 0.0);
   noise.assign(bins, 0.0);
   tone.assign(bins, 1.0);
+  near_tone.assign(bins, 0);
   tone_keep = std::exp(-cfg.hop_s / kToneMemoryS);
   block_scratch.assign(bins, 0.0);
 
@@ -769,18 +772,27 @@ void SlidingDftTracker::Impl::predict() noexcept {
 
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
 // normalised power at each of its orders.
+void SlidingDftTracker::Impl::mark_tones() noexcept {
+  std::fill(near_tone.begin(), near_tone.end(), 0);
+  const auto n = static_cast<int>(near_tone.size());
+  for (int k = noise_lo; k <= noise_hi; ++k)
+    if (tone[static_cast<std::size_t>(k)] >= kToneFitLevel)
+      for (int j = std::max(0, k - lobe); j <= std::min(n - 1, k + lobe); ++j)
+        near_tone[static_cast<std::size_t>(j)] = 1;
+}
+
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
   for (int k = s_lo; k <= k_hi; ++k) {
     const double z1 = z_at(static_cast<std::size_t>(k));
     // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one
-    // resolution bin (a learned tone's too) is penalised by the amplitude mismatch (sqrt z has
-    // unit-order noise).
+    // resolution bin is penalised by the amplitude mismatch (sqrt z has unit-order noise).
     double peak = z1;
     for (int j = std::max(0, k - lobe); j <= std::min(nfft / 2, k + lobe); ++j)
-      peak = std::max(peak, power[static_cast<std::size_t>(j)] / noise[static_cast<std::size_t>(j)]);
+      if (!near_tone[static_cast<std::size_t>(j)]) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
     const double mismatch = std::sqrt(peak) - std::sqrt(z1);
-    // A bin holding a learned tone says nothing either way: the engine may or may not be under it.
-    const bool on_tone = tone[static_cast<std::size_t>(k)] >= kToneFitLevel;
+    // A bin within a resolution bin of a learned tone says nothing either way: the engine may or may
+    // not be under the tone or its shoulders.
+    const bool on_tone = near_tone[static_cast<std::size_t>(k)];
     double l = on_tone ? 0.0 : evidence.fundamental(z1, rho_track) - mismatch * mismatch;
     if (cfg.require_harmonics) {
       const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
@@ -789,7 +801,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
         const double pos = kOrder[o] * k;
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
-        if (tone[b] < kToneFitLevel) l += evidence.order(z_at(b), rho, o == 0);
+        if (!near_tone[b]) l += evidence.order(z_at(b), rho, o == 0);
       }
     }
     out[static_cast<std::size_t>(k - s_lo)] = temper * l;
@@ -804,6 +816,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     return out;
   }
   predict();
+  mark_tones();
   candidate_likelihoods(loglik);
   const double top = std::max(0.0, *std::max_element(loglik.begin(), loglik.end()));
   double total = post_absent * std::exp(-top);
