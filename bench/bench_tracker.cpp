@@ -94,9 +94,11 @@ struct Score {
     valued_gross += !right(p.freq, truth);
     calibration.add(p.confidence, right(p.freq, truth));
   }
-  void add_out_band(bool tracked) {
+  // A hop whose true frequency is outside the band (engine off, idling, just below the band's edge):
+  // false when it is tracked with a frequency that is not the engine's.
+  void add_out_band(bool tracked, double est, double truth) {
     ++out_band;
-    if (tracked) ++false_tracks;
+    if (tracked && !right(est, truth)) ++false_tracks;
   }
   void merge(const Score& o) {
     sq += o.sq;
@@ -241,7 +243,7 @@ Result accuracy(const Case& c) {
         r.ours.add_in_band(p, truth);
         r.plain.add_in_band(true, fft.estimate(x, p.t), truth);
       } else {
-        r.ours.add_out_band(p.tracked);
+        r.ours.add_out_band(p.tracked, p.freq, truth);
       }
     }
   }
