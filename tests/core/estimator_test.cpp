@@ -336,3 +336,18 @@ TEST_CASE("estimator: unusable options are rejected") {
   bad_ratio.ratios = {1.3, std::nan("")};
   CHECK_THROWS_AS(fit_gear_model(none, bad_ratio), std::invalid_argument);
 }
+
+TEST_CASE("estimator: a fit records the engine's idle from the samples standing still") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const auto samples =
+      sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kUrban, 1200.0, 1, 3));
+  const FitResult r = fit_gear_model(samples, {});
+  REQUIRE(r.model.extra.contains("idle"));
+  CHECK(r.model.extra["idle"]["freq"].get<double>() == Approx(car.idle_freq).epsilon(0.05));
+  CHECK(r.model.extra["idle"]["sd"].get<double>() < 0.1 * car.idle_freq);
+  // Without a single sample at rest there is no idle to record, and none is made up.
+  std::vector<Sample> moving;
+  for (const Sample& s : samples)
+    if (s.speed > 1.0) moving.push_back(s);
+  CHECK_FALSE(fit_gear_model(moving, {}).model.extra.contains("idle"));
+}
