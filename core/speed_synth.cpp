@@ -8,17 +8,27 @@
 namespace gearpulse {
 namespace {
 
-constexpr double kMinProb = 1e-9;             // keeps every mode recoverable
-constexpr double kInitialSpeedVar = 1.0;      // (m/s)^2: a cold start is most likely near standstill
-constexpr double kMaxSpeedVar = 16.0;         // (m/s)^2: a coasting guess is never "anything at all"
-constexpr double kLostGearLikelihood = 0.05;  // relative evidence for a gear when the frequency is lost
+constexpr double kMinProb = 1e-9;         // keeps every mode recoverable
+constexpr double kNegligible = 1e-2;      // belief, relative to the leading mode, worth a history of its own
+constexpr double kInitialSpeedVar = 1.0;  // (m/s)^2: a cold start is most likely near standstill
+constexpr double kMaxSpeedVar = 25.0;     // (m/s)^2: a coasting guess is never "anything at all"
+constexpr double kLostGearLogEvidence = -3.0;  // a gear when the frequency is lost (about e^-3 per second)
 constexpr double kDefaultClutchShare =
-    0.15;                               // clutch-out share when the model gives none (cf. beta, eq. (6))
-constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its training weight
+    0.15;                                // declutched share when the model gives none (cf. beta, eq. (6))
+constexpr double kMinGearShare = 0.02;   // no gear is ever ruled out by its training weight
+constexpr double kStandingVar = 0.01;    // (m/s)^2: a car at rest is at rest
+constexpr double kMovingOffSpeed = 2.0;  // m/s: below this a declutched car may be moving off
 
-double gaussian(double x, double var) noexcept {
-  return std::exp(-0.5 * x * x / var) / std::sqrt(2.0 * std::numbers::pi * var);
+// Running mean and variance with a bounded memory (in samples).
+void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
+  count = std::min(count + 1.0, memory);
+  const double k = 1.0 / count;
+  const double d = x - mean;
+  mean += k * d;
+  var += k * (d * d * (1.0 - k) - var);
 }
+
+constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift points are trusted
 
 }  // namespace
 
@@ -65,39 +75,57 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     constexpr double kMaxRateFactor = 5.0;
     const double typical = (1.0 - clutch) / gears_;
     leave_rate_[j] =
-        tuning_.gear_leave_rate * std::clamp(typical / weight_[j], 1.0 / kMaxRateFactor, kMaxRateFactor);
+        std::clamp(typical / weight_[j], 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
+  // The idle the fit saw, as a prior until GPS shows this car standing (a start on the move).
+  if (model && idle_count_ <= 0.0) {
+    const auto idle = model->extra.find("idle");
+    if (idle != model->extra.end() && idle->is_object()) {
+      const auto freq = idle->find("freq"), sd = idle->find("sd");
+      if (freq != idle->end() && sd != idle->end() && freq->is_number() && sd->is_number()) {
+        const double f = freq->get<double>(), s = sd->get<double>();
+        if (std::isfinite(f) && f > 0.0 && std::isfinite(s) && s >= 0.0) {
+          constexpr double kPriorSamples = 5.0;  // GPS standing overrules the prior within seconds
+          idle_mean_ = f;
+          idle_var_ = s * s;
+          idle_count_ = kPriorSamples;
+        }
+      }
+    }
+  }
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
 }
 
 void SpeedSynthesizer::reset() noexcept {
-  for (int j = 0; j < kModes; ++j)
-    prob_[j] = j <= gears_ ? weight_[j] : 0.0;
-  speed_.fill(0.0);
-  var_.fill(kInitialSpeedVar);
+  prob_.fill(0.0);
+  for (int j = 0; j <= gears_; ++j)
+    prob_[j] = weight_[j];
+  track_.fill(Track{0.0, 0.0, kInitialSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma});
   started_ = false;
   t_ = 0.0;
-  out_speed_ = 0.0;
-  accel_ = 0.0;
   mode_ = 0;
+  last_gps_ = -1.0;
+  prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   last_ = {};
 }
 
 bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
   const int old_gears = gears_;
-  const ModeArray old_theta = theta_, old_prob = prob_, old_speed = speed_, old_var = var_;
+  const ModeArray old_theta = theta_, old_prob = prob_;
+  const TrackArray old_track = track_;
   model_ = std::move(model);
   load_model(model_.get());
   // Carry the belief over: each old gear hands its probability to the new gear with the nearest theta
-  // (in ratio) with its speed track, so a retrained model of the same car continues where it was.
+  // (in ratio) with its track, so a retrained model of the same car continues where it was.
   prob_.fill(0.0);
   prob_[0] = old_prob[0];
-  for (int j = 1; j <= gears_; ++j) {
-    speed_[j] = out_speed_;
-    var_[j] = old_var[0];
-  }
+  track_[0] = old_track[0];
+  for (int j = 1; j <= gears_; ++j)
+    track_[j] = old_track[0];
+  track_[launch_mode()] = old_track[old_gears + 1];
+  prob_[launch_mode()] = gears_ > 0 ? old_prob[old_gears + 1] : 0.0;
   next_p_.fill(0.0);  // strongest old gear handed to each new gear so far
   for (int i = 1; i <= old_gears && gears_ > 0; ++i) {
     int best = 1;
@@ -108,11 +136,11 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
     prob_[best] += old_prob[i];
     if (old_prob[i] > next_p_[best]) {
       next_p_[best] = old_prob[i];
-      speed_[best] = old_speed[i];
-      var_[best] = old_var[i];
+      track_[best] = old_track[i];
     }
   }
   if (gears_ == 0) {
+    prob_.fill(0.0);
     prob_[0] = 1.0;
   } else if (old_gears == 0) {
     for (int j = 0; j <= gears_; ++j)
@@ -121,6 +149,11 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   normalise();
   mode_ = map_mode();
   return true;
+}
+
+double SpeedSynthesizer::mode_probability(int mode) const noexcept {
+  if (mode == 0) return prob_[0] + (gears_ > 0 ? prob_[static_cast<std::size_t>(launch_mode())] : 0.0);
+  return mode >= 1 && mode <= gears_ ? prob_[static_cast<std::size_t>(mode)] : 0.0;
 }
 
 double SpeedSynthesizer::idle_freq() const noexcept {
@@ -137,17 +170,39 @@ double SpeedSynthesizer::idle_sd() const noexcept {
   return std::clamp(std::sqrt(idle_var_), 0.03 * idle_mean_, 0.1 * idle_mean_);
 }
 
-// Likelihood of clutch-out, in the speed units of the gear likelihoods: the density of the engine
-// frequency while declutched, mapped to speed by the top gear's scale. The engine falls to idle (a spike,
-// as the paper's g() has one at standstill, section 3.1) or runs free anywhere in its range (flat).
-double SpeedSynthesizer::clutch_likelihood(double freq) const noexcept {
-  const double flat = 1.0 / std::max({freq_max_, freq, 1.0});
-  double density = flat;
-  if (idle_count_ > 0.0) {
-    const double sd = idle_sd();
-    density = tuning_.idle_weight * gaussian(freq - idle_mean_, sd * sd) + (1.0 - tuning_.idle_weight) * flat;
-  }
-  return density / theta_[gears_];
+// The modes are scored by how well each explains the frequency in units of its own spread (a gear: the
+// standardised innovation of its track), not by a density: a density of the frequency favours whichever
+// gear turns a given uncertainty of speed into the narrowest spread of revs, and self-consistent histories
+// in other gears would gain on the true one with every steady sample. A frequency that no gear explains
+// within kFreeRevs sigmas is as well explained by an engine running free.
+constexpr double kFreeRevs = 3.0;
+constexpr double kLaunchRevs = 2.5;  // moving off: likelier than free revs with the car at rest
+constexpr double kDeadZone = 2.0;    // sigmas of a gear's reading that are ordinary jitter
+
+// Score of the frequency declutched at `speed`: the engine falls to idle (a spike, as the paper's g() has one
+// at standstill, section 3.1) or runs free anywhere in its range.
+double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcept {
+  const double free = -0.5 * kFreeRevs * kFreeRevs;
+  if (idle_count_ <= 0.0) return free;
+  // Revs running free are a shift in progress; with the car at rest they are rare (a blip), and revs held
+  // above idle there mean moving off.
+  constexpr double kStandingFree = 0.05;
+  const double free_share = speed > kMovingOffSpeed ? 1.0 - tuning_.idle_weight : kStandingFree;
+  const double z = (freq - idle_mean_) / idle_sd();
+  return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
+}
+
+// Score of the frequency while the clutch slips moving off at `speed`: revs held above idle. Slipping is
+// how a car moves off, not how it drives: as the car gains speed the score falls below that of a shift
+// in progress, so a moving car's free revs are not taken for a launch.
+double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
+  const double slow = -0.5 * kLaunchRevs * kLaunchRevs;
+  const double fast = -0.5 * kFreeRevs * kFreeRevs + std::log(1.0 - tuning_.idle_weight) - 1.0;
+  const double share = std::clamp((speed - kMovingOffSpeed) / (3.0 * kMovingOffSpeed), 0.0, 1.0);
+  const double base = slow + share * (fast - slow);
+  if (idle_count_ <= 0.0) return base;
+  const double above = 1.0 / (1.0 + std::exp(-(freq - idle_mean_ - 2.0 * idle_sd()) / idle_sd()));
+  return base + std::log(std::max(above, 0.05));
 }
 
 // Relative chance of driving in `gear` with the engine at `freq`: near idle a driver declutches rather than
@@ -168,21 +223,6 @@ double SpeedSynthesizer::shift_urge(double freq) const noexcept {
   const double sd = std::max(std::sqrt(drive_var_), 0.05 * drive_mean_);
   return std::exp(std::clamp((freq - drive_mean_) / sd, -3.0, 3.0));
 }
-
-namespace {
-
-// Running mean and variance with a bounded memory (in samples).
-void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
-  count = std::min(count + 1.0, memory);
-  const double k = 1.0 / count;
-  const double d = x - mean;
-  mean += k * d;
-  var += k * (d * d * (1.0 - k) - var);
-}
-
-constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift points are trusted
-
-}  // namespace
 
 // Hazard multipliers of shifting up or down at this frequency, from the frequencies at which this driver
 // was seen shifting (drivers shift up as revs reach their habit, down as revs sag to theirs). Before any
@@ -206,7 +246,7 @@ double SpeedSynthesizer::downshift_factor(double freq) const noexcept {
 void SpeedSynthesizer::learn_shift(double freq) noexcept {
   constexpr double kSure = 0.8;
   constexpr double kShiftMemory = 50.0;  // shifts
-  if (mode_ == 0 || prob_[mode_] < kSure || !std::isfinite(freq)) return;
+  if (!is_gear(mode_) || prob_[mode_] < kSure || !std::isfinite(freq)) return;
   if (sure_gear_ > 0 && mode_ == sure_gear_ + 1) {
     accumulate(sure_gear_freq_, up_mean_, up_var_, up_count_, kShiftMemory);
   } else if (sure_gear_ > 0 && mode_ == sure_gear_ - 1) {
@@ -217,183 +257,291 @@ void SpeedSynthesizer::learn_shift(double freq) noexcept {
 }
 
 void SpeedSynthesizer::normalise() noexcept {
+  const int modes = gears_ > 0 ? gears_ + 2 : 1;
   double total = 0.0;
-  for (int j = 0; j <= gears_; ++j)
+  for (int j = 0; j < modes; ++j)
     total += prob_[j];
   if (!(total > 0.0) || !std::isfinite(total)) {
-    for (int j = 0; j <= gears_; ++j)
+    for (int j = 0; j < modes; ++j)
       prob_[j] = weight_[j];
     total = 1.0;
   }
-  for (int j = 0; j <= gears_; ++j)
+  for (int j = 0; j < modes; ++j)
     prob_[j] = std::max(prob_[j] / total, kMinProb);
 }
 
 int SpeedSynthesizer::map_mode() const noexcept {
   int best = 0;
-  for (int j = 1; j <= gears_; ++j)
+  for (int j = 1; j <= gears_ + (gears_ > 0 ? 1 : 0); ++j)
     if (prob_[j] > prob_[best]) best = j;
   return best;
 }
 
-// Mode transitions over dt: a gear is left for the clutch or for a neighbouring gear (a quick shift between
-// two samples, up more likely at high revs, down at low revs); the clutch is left for any gear, in
-// proportion to how much each is used.
-void SpeedSynthesizer::compute_transitions(double dt, double freq) noexcept {
-  constexpr double kToClutch = 0.6, kToNeighbour = 0.2;
-  for (auto& row : trans_)
-    row.fill(0.0);
-  dt = std::max(dt, 0.0);
-  const double up_factor = upshift_factor(freq), down_factor = downshift_factor(freq);
-  const double leave_clutch = 1.0 - std::exp(-tuning_.clutch_leave_rate * dt);
-  trans_[0][0] = 1.0 - leave_clutch;
-  for (int j = 1; j <= gears_; ++j)
-    trans_[0][j] = leave_clutch * weight_[j] / (1.0 - weight_[0]);
-  for (int i = 1; i <= gears_; ++i) {
-    const double up = i < gears_ ? kToNeighbour * up_factor : 0.0;
-    const double down = i > 1 ? kToNeighbour * down_factor : 0.0;
-    const double total = kToClutch + up + down;
-    const double leave = 1.0 - std::exp(-leave_rate_[i] * total * dt);
-    trans_[i][i] = 1.0 - leave;
-    trans_[i][0] = leave * kToClutch / total;
-    if (i < gears_) trans_[i][i + 1] = leave * up / total;
-    if (i > 1) trans_[i][i - 1] = leave * down / total;
+// Mode changes over dt out of mode `from`, as rates per second: a gear is left for the clutch or for a
+// neighbouring gear (a quick shift between two samples; up more likely at high revs, down at low revs);
+// the clutch is left for any gear in proportion to its use, or, standing, for moving off; moving off ends
+// when the clutch bites in first (or second) gear.
+void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double speed,
+                                        ModeArray& row) const noexcept {
+  row.fill(0.0);
+  const int launch = launch_mode();
+  const auto spread = [&](double total_rate, int to, double rate) {
+    const double leave = total_rate > 0.0 ? 1.0 - std::exp(-total_rate * dt) : 0.0;
+    row[to] += total_rate > 0.0 ? leave * rate / total_rate : 0.0;
+  };
+  if (is_gear(from)) {
+    constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
+    const double up = from < gears_ ? kToNeighbour * upshift_factor(freq) : 0.0;
+    const double down = from > 1 ? kToNeighbour * downshift_factor(freq) : 0.0;
+    const double base = leave_rate_[from];
+    const double total = base * (kToClutch + up + down);
+    row[from] = std::exp(-total * dt);
+    spread(total, 0, base * kToClutch);
+    const double skip = tuning_.skip_share;
+    if (from < gears_) {
+      const bool can_skip = from + 2 <= gears_;
+      spread(total, from + 1, base * up * (can_skip ? 1.0 - skip : 1.0));
+      if (can_skip) spread(total, from + 2, base * up * skip);
+    }
+    if (from > 1) {
+      const bool can_skip = from - 2 >= 1;
+      spread(total, from - 1, base * down * (can_skip ? 1.0 - skip : 1.0));
+      if (can_skip) spread(total, from - 2, base * down * skip);
+    }
+  } else if (from == 0) {
+    // Standing, the clutch is let in by moving off; rolling, a gear is engaged; in between, either.
+    const double rolling = std::clamp((speed - tuning_.stationary_speed) / kMovingOffSpeed, 0.0, 1.0);
+    const double engage = tuning_.engage_rate * rolling;
+    const double launch_rate = speed < kMovingOffSpeed ? tuning_.launch_rate : 0.0;
+    const double total = engage + launch_rate;
+    row[0] = std::exp(-total * dt);
+    spread(total, launch, launch_rate);
+    for (int j = 1; j <= gears_; ++j)
+      spread(total, j, engage * weight_[j] / (1.0 - weight_[0]));
+    // Moving off and biting within the same step (a step may be longer than a launch): of the launches
+    // begun at a uniform time inside dt, the share whose clutch has bitten by its end.
+    const double bite = tuning_.bite_rate * dt;
+    const double bitten = bite > 1e-6 ? 1.0 - (1.0 - std::exp(-bite)) / bite : 0.5 * bite;
+    const double launched = row[launch];
+    const double second = gears_ > 1 ? tuning_.launch_second : 0.0;
+    row[launch] = launched * (1.0 - bitten);
+    row[1] += launched * bitten * (1.0 - second);
+    if (gears_ > 1) row[2] += launched * bitten * second;
+  } else {  // moving off
+    // Ends when the clutch bites. A driver who gives up is seen at rest again by the declutched mode's own
+    // history (kept at rest meanwhile); a move-off handing its guessed speed to a declutched car would
+    // not be.
+    const double total = tuning_.bite_rate;
+    row[launch] = std::exp(-total * dt);
+    const double second = gears_ > 1 ? tuning_.launch_second : 0.0;
+    spread(total, 1, tuning_.bite_rate * (1.0 - second));
+    if (gears_ > 1) spread(total, 2, tuning_.bite_rate * second);
   }
 }
 
-void SpeedSynthesizer::update_accel(double dt, double speed) noexcept {
-  if (dt <= 0.0) return;
-  const double a = std::clamp((speed - out_speed_) / dt, -tuning_.max_accel, tuning_.max_accel);
-  const double k = 1.0 - std::exp(-dt / tuning_.accel_time);
-  accel_ += k * (a - accel_);
+// Propagates a track over dt under the motion of mode `to`: the acceleration is an Ornstein-Uhlenbeck
+// process around a mode's mean (0 in gear, the learned coasting deceleration declutched, a launch while
+// moving off), the speed its integral; the covariance grows by the exact integrals of that process, so
+// many short steps give the same uncertainty as one long one.
+void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
+  double mean = 0.0, sigma = tuning_.accel_sigma;
+  if (to == 0) {
+    mean = coast_count_ > 0.0 ? coast_mean_ : tuning_.coast_accel;
+    // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
+    const double stopping = std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0);
+    mean = std::min(mean, mean + stopping * (tuning_.stop_accel - mean));
+    sigma = tuning_.coast_sigma;
+  } else if (to == launch_mode()) {
+    mean = tuning_.launch_accel;
+    sigma = tuning_.launch_sigma;
+  }
+  const double tau = to == 0 ? tuning_.coast_time : tuning_.accel_time;
+  const double u = dt / tau;
+  const double phi = std::exp(-u);
+  const double g = tau * (1.0 - phi);  // speed gained per unit of acceleration departure
+  // Exact covariance of the integrated OU process; its small-u series where the closed form cancels.
+  const double s2 = sigma * sigma;
+  const double qvv = u < 1e-3 ? s2 * tau * tau * (2.0 / 3.0) * u * u * u
+                              : s2 * tau * tau * (2.0 * u - 3.0 + 4.0 * phi - phi * phi);
+  const double qva = s2 * tau * (1.0 - phi) * (1.0 - phi);
+  const double qaa = s2 * (1.0 - phi * phi);
+  const double v = x.v + mean * dt + (x.a - mean) * g;
+  const double a = mean + (x.a - mean) * phi;
+  const double pvv = x.pvv + 2.0 * g * x.pva + g * g * x.paa + qvv;
+  const double pva = phi * (x.pva + g * x.paa) + qva;
+  const double paa = phi * phi * x.paa + qaa;
+  x = {v, a, std::min(pvv, kMaxSpeedVar), pva, paa};
+  if (x.v <= 0.0 && to != launch_mode()) {
+    // Rolled to a stop: at rest, not going backwards.
+    x = {0.0, 0.0, kStandingVar, 0.0, x.paa};
+  }
 }
 
-// What GPS teaches about this engine and driver: the idle frequency (standing) and the frequencies run at
-// in gear (moving). Running means with a bounded memory, so they follow a warming engine.
+// Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
+double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight) const noexcept {
+  if (!std::isfinite(freq)) return is_gear(mode) ? weight * kLostGearLogEvidence : 0.0;
+  // Declutched, moving off and lugging are states: their scores count per second of being in them.
+  if (mode == 0) return weight * log_declutched(freq, x.v);
+  if (mode == launch_mode()) {
+    // The clutch slips: the engine turns faster than the wheels in first gear, so the car is no faster
+    // than theta_1 x freq. A track beyond that is pulled back to it, for the squared excess (an event).
+    const double ceiling = theta_[1] * freq;
+    double excess = 0.0;
+    if (x.v > ceiling) {
+      const double sd = std::sqrt(x.pvv) + theta_[1] * freq_sigma(freq);
+      const double z = (x.v - ceiling) / sd;
+      excess = std::max(z * z - kDeadZone * kDeadZone, 0.0);
+      x.v = ceiling;
+      x.a = std::min(x.a, 0.0);
+    }
+    return weight * log_launch(freq, x.v) - 0.5 * excess;
+  }
+  // In gear: freq = v / theta (eq. (3)); a Kalman update on h = 1 / theta.
+  const double h = 1.0 / theta_[mode];
+  const double sf = freq_sigma(freq);
+  const double r = sf * sf;
+  const double s = h * h * x.pvv + r;
+  const double innovation = freq - h * x.v;
+  const double kv = x.pvv * h / s, ka = x.pva * h / s;
+  x.v += kv * innovation;
+  x.a += ka * innovation;
+  const double pvv = x.pvv - kv * h * x.pvv, pva = x.pva - kv * h * x.pva, paa = x.paa - ka * h * x.pva;
+  x.pvv = pvv;
+  x.pva = pva;
+  x.paa = paa;
+  // A reading its gear explains within the dead zone costs nothing, however often it comes; a jump the
+  // track cannot follow costs its squared excess once (the track then follows): an event, counted once
+  // at any sample rate.
+  const double z2 = innovation * innovation / s;
+  const double dead = kDeadZone * kDeadZone;
+  return -0.5 * (std::max(z2 - dead, 0.0) + weight * std::min(z2, dead)) +
+         weight * std::log(lugging(mode, freq));
+}
+
+// What GPS teaches about this engine and driver: the idle frequency (standing), the frequencies run at in
+// gear and the deceleration declutched (moving). Running means with a bounded memory, so they follow a
+// warming engine and a change of road.
 void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
+  const bool was_moving = last_gps_ > 5.0 * tuning_.stationary_speed;
+  if (dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8) {
+    constexpr double kCoastMemory = 100.0;  // samples
+    const double a = std::clamp((gps - last_gps_) / dt, -4.0, 1.0);
+    coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
+    coast_mean_ += (a - coast_mean_) / coast_count_;
+  }
+  last_gps_ = gps;
   if (!std::isfinite(freq)) return;
   freq_max_ = std::max(freq_max_, freq);
   if (freq <= 0.0) return;
-  const auto accumulate = [&](double& mean, double& var, double& count, double memory) {
-    count = std::min(count + 1.0, memory / std::max(dt, 0.1));
-    const double k = 1.0 / count;
-    const double d = freq - mean;
-    mean += k * d;
-    var += k * (d * d * (1.0 - k) - var);
+  const auto add = [&](double& mean, double& var, double& count, double memory) {
+    accumulate(freq, mean, var, count, memory / std::max(dt, 0.1));
   };
   constexpr double kIdleMemory = 60.0;    // s
   constexpr double kDriveMemory = 600.0;  // s
   constexpr double kSureGear = 0.8;
   if (gps < tuning_.stationary_speed) {
-    accumulate(idle_mean_, idle_var_, idle_count_, kIdleMemory);
-  } else if (mode_ > 0 && prob_[mode_] > kSureGear && gps > 10.0 * tuning_.stationary_speed) {
-    accumulate(drive_mean_, drive_var_, drive_count_, kDriveMemory);
+    add(idle_mean_, idle_var_, idle_count_, kIdleMemory);
+  } else if (is_gear(mode_) && prob_[mode_] > kSureGear && gps > 10.0 * tuning_.stationary_speed) {
+    add(drive_mean_, drive_var_, drive_count_, kDriveMemory);
   }
 }
 
-SynthOutput SpeedSynthesizer::gps_step(double dt, double gps, double freq) noexcept {
-  compute_transitions(dt, freq);
-  const bool have_freq = std::isfinite(freq);
-  const double sf = have_freq ? freq_sigma(freq) : 0.0;
-  for (int j = 0; j <= gears_; ++j) {
-    double best = 0.0;
-    for (int i = 0; i <= gears_; ++i)
-      best = std::max(best, prob_[i] * trans_[i][j]);
-    double evidence = 1.0;
-    if (have_freq && gears_ > 0) {
-      if (j == 0) {
-        evidence = clutch_likelihood(freq);
-      } else {
-        const double s = sigma_v_ * sigma_v_ + theta_[j] * theta_[j] * sf * sf;
-        evidence = gaussian(gps - theta_[j] * freq, s) * lugging(j, freq);
+// One step of the filter: every mode sums over its predecessors, each one's track predicted over dt under
+// the mode's motion and corrected by GPS and the frequency, and keeps the moments of that mixture.
+SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) noexcept {
+  const bool have_gps = std::isfinite(gps);
+  const int modes = gears_ + 2;
+  // Share of a second of evidence this step carries (states are scored per second, see log_evidence).
+  const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
+  const double gps_var = sigma_v_ * sigma_v_;
+  // A shift is decided by the revs before it, not by the revs it leads to.
+  const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
+  for (int i = 0; i < modes; ++i) {
+    transitions_from(i, dt, shift_freq, track_[i].v, row_);
+    const double log_pi = std::log(prob_[i]);
+    for (int j = 0; j < modes; ++j) {
+      pair_score_[i][j] = -std::numeric_limits<double>::infinity();
+      if (row_[j] <= 0.0) continue;
+      Track x = track_[i];
+      // Moving off (into the launch mode, or through it into a gear within this step): the clutch slips
+      // and the car gains speed at a launch acceleration.
+      const bool moving_off = i == 0 && (j == launch_mode() || (is_gear(j) && x.v < kMovingOffSpeed));
+      if (moving_off)
+        x = {x.v, tuning_.launch_accel, x.pvv, 0.0, tuning_.launch_sigma * tuning_.launch_sigma};
+      // Declutching ends the engine's drive: the car no longer gains speed.
+      if (j == 0 && i != 0) x.a = std::min(x.a, 0.0);
+      predict(x, moving_off ? launch_mode() : j, dt);
+      if (have_gps) {
+        // GPS pins the speed; the mode is told by the frequency alone.
+        const double k = x.pvv / (x.pvv + gps_var);
+        const double innovation = gps - x.v;
+        x.v += k * innovation;
+        x.a += x.pva / (x.pvv + gps_var) * innovation;
+        x.paa -= x.pva * x.pva / (x.pvv + gps_var);
+        x.pva *= 1.0 - k;
+        x.pvv *= 1.0 - k;
       }
+      pair_score_[i][j] = log_pi + std::log(row_[j]) + log_evidence(x, j, freq, weight);
+      pair_track_[i][j] = x;
     }
-    next_p_[j] = best * evidence;
   }
-  for (int j = 0; j <= gears_; ++j)
-    prob_[j] = next_p_[j];
-  normalise();
-  speed_.fill(gps);
-  var_.fill(sigma_v_ * sigma_v_);
-  mode_ = map_mode();
-  learn(dt, gps, freq);
-  learn_shift(freq);
-  update_accel(dt, gps);
-  return {gps, gps >= tuning_.stationary_speed ? mode_ : 0, SpeedSource::kGps};
-}
-
-SynthOutput SpeedSynthesizer::engine_step(double dt, double freq) noexcept {
-  const bool have_freq = std::isfinite(freq);
-  if (have_freq) freq_max_ = std::max(freq_max_, freq);
-  compute_transitions(dt, freq);
-  // Declutched at (or without) idle the driver is braking to a stop: keep the recent deceleration,
-  // within ordinary bounds. Declutched above idle is a shift: the car rolls on, slowing gently.
-  const bool at_idle = !have_freq || (idle_count_ > 0.0 && freq < idle_mean_ + 3.0 * idle_sd());
-  const double decel = at_idle ? std::clamp(-accel_, tuning_.stop_decel_min, tuning_.stop_decel_max)
-                               : tuning_.shift_coast_decel;
-  // In gear a driver who accelerates keeps accelerating (through shifts too), but braking may stop at any
-  // moment: predict a share of the trend, with as much again as uncertainty.
-  const double trend = (accel_ > 0.0 ? tuning_.trend_up : tuning_.trend_keep) * accel_ * dt;
-  const double q = tuning_.accel_sigma * dt * tuning_.accel_sigma * dt;
-  const double engage = tuning_.launch_accel * tuning_.launch_accel;
-  const double sf = have_freq ? freq_sigma(freq) : 0.0;
-  for (int j = 0; j <= gears_; ++j) {
-    const double z = have_freq ? theta_[j] * freq : 0.0;
-    const double r = theta_[j] * theta_[j] * sf * sf + 1e-6;
-    const double lug = j > 0 && have_freq ? lugging(j, freq) : 1.0;
-    double best = 0.0, best_v = speed_[j], best_var = var_[j];
-    for (int i = 0; i <= gears_; ++i) {
-      if (trans_[i][j] <= 0.0) continue;
-      double v = 0.0, var = var_[i] + q;
-      double evidence = 1.0;
-      if (j == 0) {
-        v = std::max(0.0, speed_[i] - decel * dt);
-        evidence = have_freq ? clutch_likelihood(freq) : 1.0;
-      } else {
-        v = std::max(0.0, speed_[i] + trend);
-        var += trend * trend;
-        // Engaging a gear after clutch-out: the clutch slips until the engine matches the wheels, so the
-        // speed the engine will show is uncertain by about what a launch gains in a second.
-        if (i == 0) var += engage;
-        evidence = have_freq ? gaussian(z - v, var + r) * lug : kLostGearLikelihood;
-      }
-      const double score = prob_[i] * trans_[i][j] * evidence;
-      if (score > best) {
-        best = score;
-        best_v = v;
-        best_var = std::min(var, kMaxSpeedVar);
-      }
+  ModeArray log_p{};
+  for (int j = 0; j < modes; ++j) {
+    double top = -std::numeric_limits<double>::infinity();
+    int arg = -1;
+    for (int i = 0; i < modes; ++i)
+      if (pair_score_[i][j] > top) top = pair_score_[i][j], arg = i;
+    log_p[j] = top;
+    if (arg < 0) continue;
+    // Sum over the predecessors, the track matched to the mixture's first two moments.
+    double w_sum = 0.0, v = 0.0, a = 0.0;
+    for (int i = 0; i < modes; ++i) {
+      if (!std::isfinite(pair_score_[i][j])) continue;
+      const double w = std::exp(pair_score_[i][j] - top);
+      w_sum += w;
+      v += w * pair_track_[i][j].v;
+      a += w * pair_track_[i][j].a;
     }
-    next_p_[j] = best;
-    if (j > 0 && have_freq) {
-      const double k = best_var / (best_var + r);
-      best_v += k * (z - best_v);
-      best_var *= 1.0 - k;
+    v /= w_sum;
+    a /= w_sum;
+    double pvv = 0.0, pva = 0.0, paa = 0.0;
+    for (int i = 0; i < modes; ++i) {
+      if (!std::isfinite(pair_score_[i][j])) continue;
+      const double w = std::exp(pair_score_[i][j] - top) / w_sum;
+      const Track& x = pair_track_[i][j];
+      pvv += w * (x.pvv + (x.v - v) * (x.v - v));
+      pva += w * (x.pva + (x.v - v) * (x.a - a));
+      paa += w * (x.paa + (x.a - a) * (x.a - a));
     }
-    next_v_[j] = best_v;
-    next_var_[j] = best_var;
+    track_[j] = {v, a, std::min(pvv, kMaxSpeedVar), pva, paa};
+    log_p[j] = top + std::log(w_sum);
   }
-  for (int j = 0; j <= gears_; ++j) {
-    prob_[j] = next_p_[j];
-    speed_[j] = next_v_[j];
-    var_[j] = next_var_[j];
+  double top = -std::numeric_limits<double>::infinity();
+  for (int j = 0; j < modes; ++j)
+    top = std::max(top, log_p[j]);
+  for (int j = 0; j < modes; ++j) {
+    prob_[j] = std::isfinite(log_p[j]) ? std::exp(log_p[j] - top) : 0.0;
+    track_[j].v = std::max(track_[j].v, 0.0);
   }
   normalise();
-  const int previous_mode = mode_;
   mode_ = map_mode();
-  if (mode_ == 0) {
-    // Standing still is certain enough: do not let the guess drift while the car waits at a light.
-    if (speed_[0] <= 0.0) var_[0] = std::min(var_[0], kInitialSpeedVar);
-    // Braking to a stop goes on as it was; the trend of a shift (declutched above idle) fades.
-    if (!at_idle) accel_ *= std::exp(-dt / tuning_.accel_time);
-    return {speed_[0], 0, SpeedSource::kCoast};
+  prev_freq_ = freq;
+  // A hypothesis grown negligible keeps no history of its own: if the car later shows it, it is entered
+  // from the belief of the moment, not from a speed drifted apart while nothing supported it. Nor does a
+  // move-off once a gear has bitten: its guessed speed is superseded by the gear's.
+  for (int j = 0; j < modes; ++j)
+    if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_))))
+      track_[j] = track_[mode_];
+  if (have_gps) {
+    learn(dt, gps, freq);
+    learn_shift(freq);
+    return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }
-  // Moving off, the clutch slips: the car gains speed no faster than a brisk launch even though the engine
-  // already turns at theta x freq.
-  const double speed = std::min(speed_[mode_], out_speed_ + tuning_.launch_accel * dt);
-  // A change of gear hypothesis moves the output by a step that is no acceleration of the car.
-  if (mode_ == previous_mode && last_.source == SpeedSource::kEngine) update_accel(dt, speed);
-  return {speed, mode_, SpeedSource::kEngine};
+  const double speed = std::max(track_[mode_].v, 0.0);
+  if (is_gear(mode_)) return {speed, mode_, SpeedSource::kEngine};
+  // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
+  // trickle pulses.
+  return {speed < tuning_.stationary_speed ? 0.0 : speed, 0, SpeedSource::kCoast};
 }
 
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noexcept {
@@ -403,24 +551,22 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noex
   if (!started_ || t > t_) t_ = t;
   started_ = true;
   if (dt > tuning_.max_gap) {
-    for (int j = 0; j <= gears_; ++j)
+    for (int j = 0; j < kModes; ++j)
       prob_[j] = weight_[j];
-    var_.fill(kMaxSpeedVar);
-    accel_ = 0.0;
+    for (Track& x : track_)
+      x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
+    last_gps_ = -1.0;
     dt = 0.0;
   }
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
 
   SynthOutput out;
-  if (have_gps) {
-    out = gps_step(dt, gps_speed, freq);
-  } else if (gears_ == 0) {
-    out = {0.0, 0, SpeedSource::kNone};
+  if (gears_ == 0) {
+    out = have_gps ? SynthOutput{gps_speed, 0, SpeedSource::kGps} : SynthOutput{0.0, 0, SpeedSource::kNone};
   } else {
-    out = engine_step(dt, freq);
+    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq);
   }
-  out_speed_ = out.speed;
   last_ = out;
   return out;
 }

@@ -4,14 +4,19 @@
 // gear; through a GPS outage it outputs theta_gear x frequency, following shifts (a jump of frequency
 // while speed stays continuous), coasting through clutch-out moments and coming to zero at a stop.
 //
-// The gear is tracked over the modes {clutch out, gear 1..M} by a causal max-product (Viterbi) recursion
-// in which every mode keeps the best history that ends in it, with that history's own speed track (so
-// competing gear hypotheses survive until a later shift or stop tells them apart, and a hypothesis pays
-// for the speed jump it implies when it is entered, once): evidence for a gear is how well theta_i x freq
-// continues the speed with a plausible acceleration (with GPS: how well it matches the GPS speed);
-// evidence for clutch-out is the density of the engine frequency when declutched, a spike at the idle
-// frequency (learned while GPS says the car stands still) over a flat floor. The output follows the most
-// probable mode. No look-ahead: every output depends only on past input.
+// The engaged mode is tracked over {declutched, gear 1..M, moving off} by a switching Kalman filter: every
+// mode carries an estimate of the car's speed and acceleration (an Ornstein-Uhlenbeck acceleration, its
+// covariance grown by the exact integrals, so many short steps equal one long one) and a belief; each step
+// sums over the predecessors of every mode, predicted under that mode's motion and corrected by GPS and
+// the frequency, and matches the mixture's first two moments (generalised pseudo-Bayes of order 2).
+// In gear i the engine frequency is speed / theta_i (eq. (3)); declutched the car rolls and brakes and
+// the engine falls to idle (learned while GPS says the car stands, or taken from the fit) or runs free;
+// moving off, the clutch slips and the car gains speed at a launch acceleration until first gear bites.
+// Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
+// shifts down). A gear is scored by its innovation in its own units: within a dead zone of ordinary
+// jitter it costs per second of time, beyond it the jump costs once, however often step() is called;
+// being declutched or moving off is scored per second. The result does not depend on the step rate.
+// The output follows the most probable mode. No look-ahead: every output depends only on past input.
 //
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
@@ -35,27 +40,33 @@ struct SynthOutput {
   SpeedSource source = SpeedSource::kNone;
 };
 
-// Driving-physics constants (not from the paper): plausible accelerations of a road car and how often a
-// driver shifts. They are deliberately generic, not fitted to any one log.
+// Driving-physics constants (not from the paper): how road cars accelerate, how drivers shift and move
+// off. They are deliberately generic, not fitted to any one log; what differs between cars and drivers
+// (idle, shift points, how hard the car slows declutched) is learned online while GPS is present.
 struct SynthTuning {
-  double accel_sigma = 0.7;   // m/s^2: how far a driver's acceleration strays from its trend in 1 s
-  double max_accel = 3.5;     // m/s^2: bound on the acceleration trend
-  double launch_accel = 2.5;  // m/s^2: the output rises no faster (clutch slip when moving off)
-  double accel_time = 2.0;    // s: time constant of the acceleration trend
-  double trend_keep = 0.5;    // share of the acceleration trend expected to go on over a step
-  double trend_up = 1.0;
-  double shift_coast_decel = 0.3;  // m/s^2: rolling resistance + drag while declutched during a shift
-  double stop_decel_min = 0.4;     // m/s^2: at least this while declutched at idle (braking to a stop)
-  double stop_decel_max = 2.5;     // m/s^2: at most this (a firm but ordinary stop)
-  double gear_leave_rate = 0.15;   // 1/s: rate of leaving a gear (shift or clutch-in) at ordinary rpm
-  double clutch_leave_rate = 0.6;  // 1/s: rate of engaging a gear after clutch-out
-  double idle_weight = 0.6;        // share of the declutched frequency density in the idle spike
-  double lugging_first = 0.2;      // relative chance of first gear with the engine at idle (creeping)
-  double lugging_other = 0.05;     // same for higher gears: drivers do not lug an engine at idle
-  double min_speed_sigma = 0.15;   // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
-  double min_freq_rel = 0.01;      // floor on sigma_s as a fraction of the frequency (tracking jitter)
-  double stationary_speed = 0.3;   // m/s: GPS speed below this is "standing" (idle is learned there)
-  double max_gap = 30.0;           // s: a longer gap between steps forgets the speed track
+  double accel_sigma = 0.8;       // m/s^2: spread of a driver's acceleration in gear
+  double accel_time = 3.0;        // s: how long an acceleration persists
+  double coast_accel = -0.6;      // m/s^2: declutched and moving (rolling, braking), until learned
+  double coast_sigma = 0.8;       // m/s^2
+  double coast_time = 8.0;        // s: declutched, a braking or rolling deceleration persists
+  double stop_speed = 4.0;        // m/s: declutched below this, the car is being braked to a stop
+  double stop_accel = -1.5;       // m/s^2: ... at an ordinary firm deceleration
+  double launch_accel = 1.8;      // m/s^2: moving off while the clutch slips
+  double launch_sigma = 1.0;      // m/s^2
+  double gear_dwell = 8.0;        // s: mean time in a gear of average use before it is left
+  double engage_rate = 1.0;       // 1/s: declutched -> a gear while moving (a shift takes about a second)
+  double launch_rate = 0.2;       // 1/s: standing -> moving off (the frequency tells when)
+  double bite_rate = 0.7;         // 1/s: moving off -> the clutch has bitten
+  double launch_second = 0.1;     // share of drivers' launches made in second gear
+  double skip_share = 0.1;        // share of shifts that skip a gear
+  double evidence_time = 1.0;     // s: correlation time of the frequency's departures from the model
+  double idle_weight = 0.6;       // share of the declutched frequency density in the idle spike
+  double lugging_first = 0.2;     // relative chance of first gear with the engine at idle (creeping)
+  double lugging_other = 0.05;    // same for higher gears: drivers do not lug an engine at idle
+  double min_speed_sigma = 0.15;  // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
+  double min_freq_rel = 0.01;     // floor on sigma_s as a fraction of the frequency (tracking jitter)
+  double stationary_speed = 0.3;  // m/s: GPS speed below this is "standing" (idle is learned there)
+  double max_gap = 30.0;          // s: a longer gap between steps forgets the speed track
 };
 
 class SpeedSynthesizer {
@@ -78,22 +89,32 @@ class SpeedSynthesizer {
   void reset() noexcept;
 
   [[nodiscard]] const SynthOutput& last() const noexcept { return last_; }
-  // Current belief in a mode: 0 = clutch out, 1..gears = that gear (0 for gears the model lacks).
-  [[nodiscard]] double mode_probability(int mode) const noexcept {
-    return mode >= 0 && mode <= gears_ ? prob_[static_cast<std::size_t>(mode)] : 0.0;
-  }
+  // Current belief in a mode: 0 = no gear engaged (declutched or moving off), 1..gears = that gear (0 for
+  // gears the model lacks).
+  [[nodiscard]] double mode_probability(int mode) const noexcept;
   // Learned idle frequency (Hz), NaN until GPS has seen the car standing with the engine tracked.
   [[nodiscard]] double idle_freq() const noexcept;
 
  private:
-  static constexpr int kModes = kMaxGears + 1;  // mode 0 = clutch out
+  static constexpr int kModes = kMaxGears + 2;  // 0 = declutched, 1..gears, gears + 1 = moving off
   using ModeArray = std::array<double, kModes>;
 
+  // Speed (m/s) and acceleration (m/s^2) with their covariance.
+  struct Track {
+    double v = 0.0, a = 0.0;
+    double pvv = 1.0, pva = 0.0, paa = 1.0;
+  };
+  using TrackArray = std::array<Track, kModes>;
+
   void load_model(const GearModel* model) noexcept;
-  void compute_transitions(double dt, double freq) noexcept;
-  SynthOutput gps_step(double dt, double gps, double freq) noexcept;
-  SynthOutput engine_step(double dt, double freq) noexcept;
-  [[nodiscard]] double clutch_likelihood(double freq) const noexcept;
+  [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
+  [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
+  void transitions_from(int from, double dt, double freq, double speed, ModeArray& row) const noexcept;
+  void predict(Track& x, int to, double dt) const noexcept;
+  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight) const noexcept;
+  SynthOutput filter_step(double dt, double gps, double freq) noexcept;
+  [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
+  [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
@@ -103,36 +124,39 @@ class SpeedSynthesizer {
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   void learn(double dt, double gps, double freq) noexcept;
-  void update_accel(double dt, double speed) noexcept;
   void normalise() noexcept;
 
   SynthTuning tuning_;
   std::shared_ptr<const GearModel> model_;
   int gears_ = 0;
   ModeArray theta_{};
-  ModeArray weight_{};      // stationary share of each mode (mode 0 = clutch out)
+  ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
   double sigma_v_ = 0.0;
   double sigma_s_ = 0.0;
 
-  ModeArray prob_{};           // forward probabilities of the modes
-  ModeArray speed_{}, var_{};  // per-mode speed track (m/s) and its variance ((m/s)^2)
-  ModeArray next_p_{}, next_v_{}, next_var_{};
-  std::array<ModeArray, kModes> trans_{};  // trans_[i][j]: probability of mode i -> mode j over this step
+  ModeArray prob_{};  // max-product probabilities of the modes
+  TrackArray track_{};
+  ModeArray next_p_{};
+  TrackArray next_track_{};
+  ModeArray row_{};                             // transition probabilities out of one mode over this step
+  std::array<ModeArray, kModes> pair_score_{};  // log score of predecessor i -> mode j
+  std::array<std::array<Track, kModes>, kModes> pair_track_{};  // the track it leads to
 
   bool started_ = false;
   double t_ = 0.0;
-  double out_speed_ = 0.0;
-  double accel_ = 0.0;  // acceleration trend, m/s^2
-  int mode_ = 0;        // current MAP mode
+  int mode_ = 0;  // current MAP mode
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
+  double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
+  double last_gps_ = -1.0;
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
   double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
   double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
   int sure_gear_ = 0;            // last gear held with confidence under GPS
   double sure_gear_freq_ = 0.0;  // its last frequency
   double freq_max_ = 0.0;        // highest frequency seen (flat part of the declutched density)
+  double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
   SynthOutput last_{};
 };
 
