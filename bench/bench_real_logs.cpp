@@ -6,7 +6,8 @@
 //   (b) the paper's method (Table 2 ratios 1.25,1.35,1.50,1.7) with the gear at the outage start kept;
 //   (c) the gear chosen with hindsight (theta x freq closest to the truth), auto model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
-// Usage: bench_real_logs [DATA_DIR]   (default: the shared/data/real beside the source tree)
+// Usage: bench_real_logs [DATA_DIR] [--trace FILE]   (default: the shared/data/real beside the source tree;
+// --trace writes every outage sample with the truth, the hindsight gear and the synthesis as CSV)
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -71,6 +72,8 @@ struct Errors {
   std::vector<double> a, b, c, d;
 };
 
+std::FILE* g_trace = nullptr;  // --trace FILE: one row per outage sample
+
 // Replays one log with outages; appends |error| in km/h of every sample inside an outage.
 void replay(const std::vector<Sample>& samples, const GearModel& paper, const GearModel& model, Errors& err) {
   if (samples.empty()) return;
@@ -105,6 +108,10 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
     err.b.push_back(std::abs(hold_b - s.speed) * kMsToKmh);
     err.c.push_back(std::abs(hold_c - s.speed) * kMsToKmh);
     err.d.push_back(std::abs(o.speed - s.speed) * kMsToKmh);
+    if (g_trace != nullptr)
+      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%d,%.2f,%.2f\n", s.t, s.speed * kMsToKmh, s.freq,
+                   s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0,
+                   o.gear, o.speed * kMsToKmh, hold_c * kMsToKmh);
   }
 }
 
@@ -157,14 +164,31 @@ void run_fold(const char* label, const std::vector<Log>& train, const std::vecto
   const Fold f = fit_both(pool(train));
   std::printf("  fold %-28s paper theta %s\n", label, thetas(f.paper).c_str());
   std::printf("  %-33s auto  theta %s\n", "", thetas(f.model).c_str());
-  for (const Log& l : test)
+  for (const Log& l : test) {
+    if (g_trace != nullptr) std::fprintf(g_trace, "# %s\n", l.name.c_str());
     replay(l.samples, f.paper, f.model, e);
+  }
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const fs::path root = argc > 1 ? fs::path(argv[1]) : fs::path(GEARPULSE_REAL_DATA_DIR);
+  fs::path root = GEARPULSE_REAL_DATA_DIR;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--trace" && i + 1 < argc) {
+      trace.reset(std::fopen(argv[++i], "w"));
+      if (!trace) {
+        std::fprintf(stderr, "bench_real_logs: cannot write %s\n", argv[i]);
+        return 1;
+      }
+      g_trace = trace.get();
+      std::fprintf(g_trace, "t,speed_kmh,freq_hz,best_gear,synth_gear,synth_kmh,hindsight_kmh\n");
+    } else {
+      root = arg;
+    }
+  }
   const auto start = std::chrono::steady_clock::now();
 
   const fs::path etios = root / "carloop-etios";

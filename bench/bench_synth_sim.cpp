@@ -14,7 +14,8 @@
 // all three, so a synthesis that does not depend on the sample rate gives about the same 1 Hz and 10 Hz
 // figures. "gear off" is the share of outage samples with the clutch engaged in which the synthesizer's
 // gear (mapped to the true gear of nearest theta) differs from the true gear or is none.
-// Usage: bench_synth_sim [SEED] [--quick]
+// Usage: bench_synth_sim [SEED] [--quick] [--trace FILE]   (--trace: every outage row as CSV, with the true
+// gear and clutch state beside the synthesis; the synthesizer's gear is mapped to the true gear)
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -76,6 +77,9 @@ struct Errors {
   }
 };
 
+std::FILE* g_trace = nullptr;  // --trace FILE
+const char* g_label = "";      // vehicle/observation/style of the drive being replayed
+
 bool in_outage(double t_rel) {
   if (t_rel < kOutageStart) return false;
   return std::fmod(t_rel - kOutageStart, kOutagePeriod) < kOutageLength;
@@ -113,7 +117,12 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
   const double t0 = rows.front().truth.t;
   double last_gps = 0.0, hold_c = 0.0;
   bool was_out = false;
+  double last_speed = -1.0, last_freq = -1.0;
   for (const sim::Observation& r : rows) {
+    // As gearpulse's readers do with OBD logs: a row repeating both held values carries nothing new.
+    if (r.speed == last_speed && r.freq == last_freq) continue;
+    last_speed = r.speed;
+    last_freq = r.freq;
     const double t = r.truth.t;
     const bool out = in_outage(t - t0);
     const gearpulse::SynthOutput o = synth.step(t, out ? gearpulse::kMissing : r.speed, r.freq);
@@ -128,6 +137,13 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
     if (std::isfinite(r.freq) && !model.gears.empty()) {
       const int g = nearest_gear(model, truth, r.freq);
       hold_c = model.gears[static_cast<std::size_t>(g)].theta * r.freq;
+    }
+    if (std::FILE* tr = g_trace) {
+      const int sg = o.gear > 0 && static_cast<std::size_t>(o.gear) < true_gear.size()
+                         ? true_gear[static_cast<std::size_t>(o.gear)]
+                         : 0;
+      std::fprintf(tr, "%s,%.1f,%.2f,%d,%d,%.2f,%.2f,%d,%.2f\n", g_label, t, truth * kMsToKmh, r.truth.gear,
+                   static_cast<int>(r.truth.clutch), r.freq, o.speed * kMsToKmh, sg, hold_c * kMsToKmh);
     }
     err.a.push_back(std::abs(last_gps - truth) * kMsToKmh);
     err.c.push_back(std::abs(hold_c - truth) * kMsToKmh);
@@ -178,15 +194,24 @@ void print_line(const char* vehicle, const char* kind, const std::string& gears,
 int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   bool quick = false;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
     if (arg == "--quick") {
       quick = true;
+    } else if (arg == "--trace" && i + 1 < argc) {
+      trace.reset(std::fopen(argv[++i], "w"));
+      if (!trace) {
+        std::fprintf(stderr, "bench_synth_sim: cannot write %s\n", argv[i]);
+        return 1;
+      }
+      g_trace = trace.get();
+      std::fprintf(g_trace, "run,t,speed_kmh,gear,clutch,freq_hz,synth_kmh,synth_gear,hindsight_kmh\n");
     } else {
       char* end = nullptr;
       const unsigned long long v = std::strtoull(argv[i], &end, 10);
       if (argv[i][0] == '-' || end == argv[i] || *end != '\0') {
-        std::fprintf(stderr, "usage: bench_synth_sim [SEED] [--quick]\n");
+        std::fprintf(stderr, "usage: bench_synth_sim [SEED] [--quick] [--trace FILE]\n");
         return 2;
       }
       seed = v;
@@ -257,6 +282,9 @@ int main(int argc, char** argv) {
         for (std::size_t i = 0; i < tests.size(); ++i) {
           obs.seed = base * 7919 + 2 + i;
           Errors one;
+          const std::string label =
+              name + "/" + kinds[k].name + "/" + std::string(sim::style_name(replays[i].style));
+          g_label = label.c_str();
           replay(sim::observe(tests[i], obs), model, true_gear, one);
           by_style[k][i].append(one);
           per_kind[k].append(one);
