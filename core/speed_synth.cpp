@@ -290,23 +290,27 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     row[to] += total_rate > 0.0 ? leave * rate / total_rate : 0.0;
   };
   if (is_gear(from)) {
+    // A gear is left about as often as its share of use suggests (a first gear is left soon), for the
+    // clutch or for a neighbour: up as the revs pass this driver's upshift point, down as they sag.
     constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
-    const double up = from < gears_ ? kToNeighbour * upshift_factor(freq) : 0.0;
-    const double down = from > 1 ? kToNeighbour * downshift_factor(freq) : 0.0;
     const double base = leave_rate_[from];
-    const double total = base * (kToClutch + up + down);
+    const double shift_base = base * kToNeighbour;
+    const double up = from < gears_ ? shift_base * upshift_factor(freq) : 0.0;
+    const double down = from > 1 ? shift_base * downshift_factor(freq) : 0.0;
+    const double clutch = base * kToClutch;
+    const double total = clutch + up + down;
     row[from] = std::exp(-total * dt);
-    spread(total, 0, base * kToClutch);
+    spread(total, 0, clutch);
     const double skip = tuning_.skip_share;
     if (from < gears_) {
       const bool can_skip = from + 2 <= gears_;
-      spread(total, from + 1, base * up * (can_skip ? 1.0 - skip : 1.0));
-      if (can_skip) spread(total, from + 2, base * up * skip);
+      spread(total, from + 1, up * (can_skip ? 1.0 - skip : 1.0));
+      if (can_skip) spread(total, from + 2, up * skip);
     }
     if (from > 1) {
       const bool can_skip = from - 2 >= 1;
-      spread(total, from - 1, base * down * (can_skip ? 1.0 - skip : 1.0));
-      if (can_skip) spread(total, from - 2, base * down * skip);
+      spread(total, from - 1, down * (can_skip ? 1.0 - skip : 1.0));
+      if (can_skip) spread(total, from - 2, down * skip);
     }
   } else if (from == 0) {
     // Standing, the clutch is let in by moving off; rolling, a gear is engaged; in between, either.
