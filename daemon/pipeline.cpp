@@ -227,11 +227,6 @@ void Pipeline::Impl::tracker_loop() noexcept {
   std::size_t pending_count = 0;
   std::int64_t last_rx = 0;
   double last_step_t = 0.0;
-  constexpr double kSynthesisInterval = 1.0;  // s
-  constexpr double kConfidentWait = 0.5;      // s: longest wait past the interval for a confident hop
-  double last_synth_t = 0.0;
-  bool last_had_gps = false;
-  bool synth_started = false;
   std::uint64_t read_frames = 0;  // ring frame index of the next frame to read
   double next_frame_t = 0.0;      // expected CLOCK_MONOTONIC s of that frame
   bool stream_started = false;
@@ -254,19 +249,8 @@ void Pipeline::Impl::tracker_loop() noexcept {
     track_confident.store(confident, std::memory_order_relaxed);
     t = std::max(t, last_step_t);
     last_step_t = t;
-    // The synthesis filter is validated at one step per second (the rate of GPS and of the logs it is
-    // benchmarked on); stepped at every hop its per-step evidence compounds and low-gear hypotheses win
-    // inside an outage. So it steps once per interval, on the first hop with a confident frequency (a
-    // missing one reads as clutch-out), and at once when GPS comes or goes so the switch to engine speed
-    // is not delayed. Pulses keep the last speed in between.
-    const bool have_gps = std::isfinite(gps_speed);
-    const double since = t - last_synth_t;
-    const bool due =
-        since >= kSynthesisInterval && (confident || since >= kSynthesisInterval + kConfidentWait);
-    if (synth_started && !due && have_gps == last_had_gps) return;
-    synth_started = true;
-    last_synth_t = t;
-    last_had_gps = have_gps;
+    // The synthesis steps at every hop: its motion, mode changes and evidence are per second, so the hop
+    // rate only makes its output fresher. A hop below the SNR gate reads as no frequency.
     const SynthOutput out = synth.step(t, gps_speed, confident ? freq : kNan);
     if (pulses) pulses->set_speed(out.speed);
     speed.store(out.speed, std::memory_order_relaxed);
