@@ -21,11 +21,11 @@ struct AudioConfig {
 };
 
 struct TrackerConfig {
-  double band_low = 50.0;    // Hz
-  double band_high = 200.0;  // Hz
-  double window = 0.1;       // s, as the paper's 100 ms frames
-  double hop = 0.1;          // s
-  double min_snr_db = 0.0;   // below this a track is not trusted for training or synthesis
+  double band_low = 50.0;     // Hz
+  double band_high = 200.0;   // Hz
+  double window = 0.1;        // s, as the paper's 100 ms frames
+  double hop = 0.1;           // s
+  double min_snr_db = -10.0;  // below this a tracked hop is not trusted for training or synthesis
 };
 
 struct GpsConfig {

@@ -70,7 +70,7 @@ struct Pipeline::Impl {
   LogLimiter limiter;
 
   std::atomic<double> gps_latency{0.0};
-  std::atomic<double> min_snr_db{0.0};
+  std::atomic<double> min_snr_db{-10.0};
 
   // Devices.
   std::unique_ptr<PulseOutput> output;
