@@ -117,6 +117,12 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   const TrackArray old_track = track_;
   model_ = std::move(model);
   load_model(model_.get());
+  if (gears_ != old_gears) {
+    // Shift revs learned per gear belong to the old ladder.
+    for (ModeArray* a : {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_,
+                         &gear_down_count_})
+      a->fill(0.0);
+  }
   // Carry the belief over: each old gear hands its probability to the new gear with the nearest theta
   // (in ratio) with its track, so a retrained model of the same car continues where it was.
   prob_.fill(0.0);
@@ -227,18 +233,24 @@ double SpeedSynthesizer::shift_urge(double freq) const noexcept {
 // Hazard multipliers of shifting up or down at this frequency, from the frequencies at which this driver
 // was seen shifting (drivers shift up as revs reach their habit, down as revs sag to theirs). Before any
 // shift was seen, the frequency usually run in gear stands in for both.
-double SpeedSynthesizer::upshift_factor(double freq) const noexcept {
+double SpeedSynthesizer::upshift_factor(int gear, double freq) const noexcept {
   if (!std::isfinite(freq)) return 1.0;
-  if (up_count_ < kMinShifts) return shift_urge(freq);
-  const double sd = std::max(std::sqrt(up_var_), 0.08 * up_mean_);
-  return std::exp(std::clamp((freq - up_mean_) / sd, -1.5, 3.0));
+  // This gear's own upshift revs once seen a few times (a driver shifts out of first lower than out of
+  // fourth), else those of all gears.
+  const bool own = gear_up_count_[gear] >= kMinShifts;
+  const double mean = own ? gear_up_mean_[gear] : up_mean_, var = own ? gear_up_var_[gear] : up_var_;
+  if (!own && up_count_ < kMinShifts) return shift_urge(freq);
+  const double sd = std::max(std::sqrt(var), 0.08 * mean);
+  return std::exp(std::clamp((freq - mean) / sd, -1.5, 3.0));
 }
 
-double SpeedSynthesizer::downshift_factor(double freq) const noexcept {
+double SpeedSynthesizer::downshift_factor(int gear, double freq) const noexcept {
   if (!std::isfinite(freq)) return 1.0;
-  if (down_count_ < kMinShifts) return 1.0 / shift_urge(freq);
-  const double sd = std::max(std::sqrt(down_var_), 0.08 * down_mean_);
-  return std::exp(std::clamp(-(freq - down_mean_) / sd, -1.5, 3.0));
+  const bool own = gear_down_count_[gear] >= kMinShifts;
+  const double mean = own ? gear_down_mean_[gear] : down_mean_, var = own ? gear_down_var_[gear] : down_var_;
+  if (!own && down_count_ < kMinShifts) return 1.0 / shift_urge(freq);
+  const double sd = std::max(std::sqrt(var), 0.08 * mean);
+  return std::exp(std::clamp(-(freq - mean) / sd, -1.5, 3.0));
 }
 
 // Called under GPS after each step: notes the frequency at which a confidently held gear was left for
@@ -249,8 +261,12 @@ void SpeedSynthesizer::learn_shift(double freq) noexcept {
   if (!is_gear(mode_) || prob_[mode_] < kSure || !std::isfinite(freq)) return;
   if (sure_gear_ > 0 && mode_ == sure_gear_ + 1) {
     accumulate(sure_gear_freq_, up_mean_, up_var_, up_count_, kShiftMemory);
+    accumulate(sure_gear_freq_, gear_up_mean_[sure_gear_], gear_up_var_[sure_gear_],
+               gear_up_count_[sure_gear_], kShiftMemory);
   } else if (sure_gear_ > 0 && mode_ == sure_gear_ - 1) {
     accumulate(sure_gear_freq_, down_mean_, down_var_, down_count_, kShiftMemory);
+    accumulate(sure_gear_freq_, gear_down_mean_[sure_gear_], gear_down_var_[sure_gear_],
+               gear_down_count_[sure_gear_], kShiftMemory);
   }
   sure_gear_ = mode_;
   sure_gear_freq_ = freq;
@@ -295,8 +311,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
     const double base = leave_rate_[from];
     const double shift_base = base * kToNeighbour;
-    const double up = from < gears_ ? shift_base * upshift_factor(freq) : 0.0;
-    const double down = from > 1 ? shift_base * downshift_factor(freq) : 0.0;
+    const double up = from < gears_ ? shift_base * upshift_factor(from, freq) : 0.0;
+    const double down = from > 1 ? shift_base * downshift_factor(from, freq) : 0.0;
     const double clutch = base * kToClutch;
     const double total = clutch + up + down;
     row[from] = std::exp(-total * dt);

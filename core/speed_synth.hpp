@@ -119,8 +119,8 @@ class SpeedSynthesizer {
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
-  [[nodiscard]] double upshift_factor(double freq) const noexcept;
-  [[nodiscard]] double downshift_factor(double freq) const noexcept;
+  [[nodiscard]] double upshift_factor(int gear, double freq) const noexcept;
+  [[nodiscard]] double downshift_factor(int gear, double freq) const noexcept;
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   void learn(double dt, double gps, double freq) noexcept;
@@ -153,6 +153,8 @@ class SpeedSynthesizer {
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
   double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
   double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
+  ModeArray gear_up_mean_{}, gear_up_var_{}, gear_up_count_{};  // the same, per gear left
+  ModeArray gear_down_mean_{}, gear_down_var_{}, gear_down_count_{};
   int sure_gear_ = 0;            // last gear held with confidence under GPS
   double sure_gear_freq_ = 0.0;  // its last frequency
   double freq_max_ = 0.0;        // highest frequency seen (flat part of the declutched density)
