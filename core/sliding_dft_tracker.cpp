@@ -48,8 +48,9 @@ constexpr double kNoiseMemory = 0.9;
 // Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
 // 0.1 s hop), the prior of the sub-bin estimate.
 constexpr double kPredictionHz = 2.0;
-// A hop is "tracked" when its estimate is more likely right (within 5 % of the engine's fundamental)
-// than wrong; the probability itself is reported as the confidence.
+// A hop is "tracked" when its estimate is right (within 5 % of the engine's fundamental) with probability
+// 0.8 or more: the engine speed and the training pairs are built on it, so it must be right nearly every
+// time; the probability itself is reported as the confidence.
 constexpr double kTrackedConfidence = 0.8;
 constexpr double kRightFraction = 0.05;
 // at() keeps to the nearest hop output within this time.

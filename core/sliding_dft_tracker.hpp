@@ -47,7 +47,7 @@ struct TrackPoint {
   // Fundamental power over the noise power inside the band (the band's noise level estimated from the
   // window's residual after the harmonic fit); NaN on silence or missing input.
   double snr_db = std::numeric_limits<double>::quiet_NaN();
-  // freq is trusted: confidence >= 0.5. Users of the frequency take only tracked points (or weigh them
+  // freq is trusted: confidence >= 0.8. Users of the frequency take only tracked points (or weigh them
   // by confidence).
   bool tracked = false;
   // Probability, under the tracker's model, that freq is within 5 % of the engine's fundamental (0 when
