@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/outage_protocol.hpp"
 #include "core/estimator.hpp"
 #include "core/sample_io.hpp"
 #include "core/speed_synth.hpp"
@@ -26,12 +27,9 @@ namespace fs = std::filesystem;
 using gearpulse::GearModel;
 using gearpulse::Sample;
 
-namespace {
+using namespace gearpulse::bench;  // the shared outage protocol
 
-constexpr double kOutageStart = 120.0;   // s after the log starts
-constexpr double kOutagePeriod = 180.0;  // s between outage starts
-constexpr double kOutageLength = 60.0;   // s
-constexpr double kMsToKmh = 3.6;
+namespace {
 
 struct Log {
   std::string name;
@@ -51,21 +49,6 @@ std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
     logs.push_back({p.filename().string(), gearpulse::read_samples(in, p.string()).samples});
   }
   return logs;
-}
-
-bool in_outage(double t_rel) {
-  if (t_rel < kOutageStart) return false;
-  return std::fmod(t_rel - kOutageStart, kOutagePeriod) < kOutageLength;
-}
-
-int nearest_gear(const GearModel& m, double speed, double freq) {
-  int best = -1;
-  double err = 0.0;
-  for (std::size_t i = 0; i < m.gears.size(); ++i) {
-    const double e = std::abs(m.gears[i].theta * freq - speed);
-    if (best < 0 || e < err) best = static_cast<int>(i), err = e;
-  }
-  return best;
 }
 
 struct Errors {
@@ -113,15 +96,6 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
                    s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0,
                    o.gear, o.speed * kMsToKmh, hold_c * kMsToKmh);
   }
-}
-
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const double pos = q * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<std::size_t>(pos);
-  const std::size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
 }
 
 std::vector<Sample> pool(const std::vector<Log>& logs) {

@@ -27,6 +27,7 @@
 #include <string_view>
 #include <vector>
 
+#include "bench/outage_protocol.hpp"
 #include "core/estimator.hpp"
 #include "core/speed_synth.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -34,12 +35,9 @@
 using gearpulse::GearModel;
 namespace sim = gearpulse::sim;
 
-namespace {
+using namespace gearpulse::bench;  // the shared outage protocol
 
-constexpr double kOutageStart = 120.0;   // s after the drive starts
-constexpr double kOutagePeriod = 180.0;  // s between outage starts
-constexpr double kOutageLength = 60.0;   // s
-constexpr double kMsToKmh = 3.6;
+namespace {
 
 struct ObservationKind {
   const char* name;
@@ -79,21 +77,6 @@ struct Errors {
 
 std::FILE* g_trace = nullptr;  // --trace FILE
 const char* g_label = "";      // vehicle/observation/style of the drive being replayed
-
-bool in_outage(double t_rel) {
-  if (t_rel < kOutageStart) return false;
-  return std::fmod(t_rel - kOutageStart, kOutagePeriod) < kOutageLength;
-}
-
-int nearest_gear(const GearModel& m, double speed, double freq) {
-  int best = -1;
-  double err = 0.0;
-  for (std::size_t i = 0; i < m.gears.size(); ++i) {
-    const double e = std::abs(m.gears[i].theta * freq - speed);
-    if (best < 0 || e < err) best = static_cast<int>(i), err = e;
-  }
-  return best;
-}
 
 // The vehicle's gear (1..M) whose true theta is nearest each model gear's, index 0 = no gear: a fit with
 // a spurious or a missing gear still has its other gears compared with the right true gears.
@@ -154,15 +137,6 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
       if (!known || true_gear[static_cast<std::size_t>(o.gear)] != r.truth.gear) ++err.gear_off;
     }
   }
-}
-
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return std::nan("");
-  std::sort(v.begin(), v.end());
-  const double pos = q * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<std::size_t>(pos);
-  const std::size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
 }
 
 // Largest relative theta error in %, or a negative number when the gear count is wrong.
