@@ -6,14 +6,15 @@
 # distance, and the time from GPS loss to engine-derived speed.
 #
 #   bash scripts/demo.sh [--duration SEC] [--outage START:LEN] [--seed N] [--fast] [--keep] [--no-setup]
-# Defaults are the real demo: a 3.3-minute drive (seed 4), GPS lost from 90 s to 150 s, 48 kHz capture.
+# Defaults are the real demo: a 5-minute drive (seed 1), GPS lost from 90 s to 150 s with a stop, moving
+# off and five shifts inside, 48 kHz capture.
 # The drive is generated deterministically at demo time (fixed seed): that is the bundled demo drive.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 duration=190
 outage=90:60
-seed=4
+seed=1
 keep=0
 setup=1
 while [ $# -gt 0 ]; do

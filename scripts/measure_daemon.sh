@@ -3,13 +3,13 @@
 # peak and current resident memory, CPU of the whole daemon (utime + stime of all threads over its
 # wall time), time from GPS loss to engine-derived speed, and the pulse-count error over the drive.
 #   bash scripts/measure_daemon.sh [BUILD_DIR] [gearpulse simulate options for the drive]
-# Defaults: build/ and the demo drive (seed 4, 190 s, GPS outage 90:60). Prints the figures only.
+# Defaults: build/ and the demo drive (seed 1, 190 s, GPS outage 90:60). Prints the figures only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=${1:-build}
 shift || true
 drive=("$@")
-[ ${#drive[@]} -gt 0 ] || drive=(--seed 4 --duration 190 --outage 90:60)
+[ ${#drive[@]} -gt 0 ] || drive=(--seed 1 --duration 190 --outage 90:60)
 outage=90:60
 for ((i = 0; i < ${#drive[@]}; i++)); do
   [ "${drive[$i]}" = --outage ] && outage=${drive[$((i + 1))]}
