@@ -235,6 +235,7 @@ struct SlidingDftTracker::Impl {
     return o < kOrders ? kOrder[o] * f : nuisance_hz;
   }
   [[nodiscard]] double harmonic_fit(double f, const bool* use, Fit* fit) const noexcept;
+  [[nodiscard]] double sweep_mismatch(double f) const noexcept;
   [[nodiscard]] double residual_noise_level(double f, const Fit& fit) noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
   void emit(const TrackPoint& p) noexcept;
@@ -809,6 +810,20 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
   }
 }
 
+// Squared mismatch (sqrt of normalised power) between the strongest fundamental peak one to two
+// resolution bins from f (learned tones left out) and the power at f; 0 when f holds its neighbourhood.
+double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
+  const int kc = static_cast<int>(std::lround(f / df));
+  if (kc < s_lo || kc > nfft / 2 - 1) return 0.0;
+  const double z_est = z_at(static_cast<std::size_t>(kc));
+  double z_peak = z_est;
+  for (int k = std::max(s_lo, kc - 2 * lobe); k <= std::min(nfft / 2 - 1, kc + 2 * lobe); ++k)
+    if (std::abs(k - kc) > lobe && !near_tone[static_cast<std::size_t>(k)])
+      z_peak = std::max(z_peak, z_at(static_cast<std::size_t>(k)));
+  const double m = std::sqrt(z_peak) - std::sqrt(z_est);
+  return m * m;
+}
+
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   TrackPoint out;
   out.t = time_of(static_cast<double>(centre));
@@ -856,11 +871,22 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   for (int k = lo; k <= hi; ++k)
     right += post[static_cast<std::size_t>(k - s_lo)];
   right = std::clamp(right, 0.0, 1.0);
+  // A line sweeping through the window (mid gear-shift) smears its power over two resolution bins, and
+  // the track may hold on to where the line was, on the smear's shoulder. A stronger fundamental peak
+  // between one and two resolution bins away says so (sqrt z has unit-order noise, as for the shoulder
+  // check of the candidates within one bin): the odds of this hop's estimate are weighed by that
+  // mismatch. Only the report: the track's own state follows its posterior, so the next hops, whose
+  // windows show where the line went, re-acquire it as before.
+  double reported = right;
+  if (const double m = sweep_mismatch(ev.freq); m > 0.0) {
+    const double odds = right / std::max(1e-12, 1.0 - right) * std::exp(-m);
+    reported = odds / (1.0 + odds);
+  }
   const bool in_band = ev.freq >= cfg.band_lo_hz - df && ev.freq <= cfg.band_hi_hz + df;
   if (in_band) {
     out.freq = ev.freq;
-    out.confidence = right;
-    out.tracked = right >= kTrackedConfidence;
+    out.confidence = reported;
+    out.tracked = reported >= kTrackedConfidence;
   }
   // The track's drift, from consecutive confident estimates that continue each other.
   const bool confident = right >= kTrackedConfidence;
