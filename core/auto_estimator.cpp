@@ -149,16 +149,10 @@ class LadderJudge {
  public:
   LadderJudge(const MixtureData& work, std::size_t total_samples, std::vector<double> steady_log_ratios)
       : work_(work), total_(total_samples), log_ratios_(std::move(steady_log_ratios)) {
-    std::vector<double> idle;
-    for (std::size_t k = 0; k < work.size(); ++k) {
-      if (work.v[k] < 0.3) idle.push_back(work.s[k]);
-    }
     std::sort(log_ratios_.begin(), log_ratios_.end());
     // The idle frequency, from standstill samples, if the log has enough of them.
-    if (idle.size() >= 20) {
-      std::nth_element(idle.begin(), idle.begin() + static_cast<std::ptrdiff_t>(idle.size() / 2), idle.end());
-      idle_freq_ = idle[idle.size() / 2];
-    }
+    constexpr std::size_t kMinIdleSamples = 20;
+    if (const auto idle = estimate_idle(work, kMinIdleSamples)) idle_freq_ = idle->freq;
   }
 
   LadderCheck check(const MixtureParams& p) const {

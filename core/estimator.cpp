@@ -3,18 +3,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
 #include "core/estimator_internal.hpp"
 
 namespace gearpulse {
-namespace {
-
-constexpr double kStandingSpeed = 0.3;  // m/s: GPS speed below this is a car at rest
-
-}  // namespace
-
 namespace detail {
 namespace {
 
@@ -68,6 +63,28 @@ Eigen::VectorXd theta_variances(const Eigen::MatrixXd& info, int gears) {
 }
 
 }  // namespace
+
+std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t min_samples) {
+  std::vector<double> idle;
+  for (std::size_t i = 0; i < data.size(); ++i)
+    if (data.v[i] < kStandingSpeed) idle.push_back(data.s[i]);
+  if (idle.empty() || idle.size() < min_samples) return std::nullopt;
+  const auto median = [](std::vector<double> x) {
+    const auto mid = x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2);
+    std::nth_element(x.begin(), mid, x.end());
+    return *mid;
+  };
+  IdleEstimate out;
+  out.freq = median(idle);
+  std::vector<double> deviation;
+  deviation.reserve(idle.size());
+  for (double f : idle)
+    deviation.push_back(std::abs(f - out.freq));
+  constexpr double kMadToSd = 1.4826;  // normal consistency factor of the median absolute deviation
+  out.sd = kMadToSd * median(std::move(deviation));
+  out.samples = idle.size();
+  return out;
+}
 
 GearModel finish_model(const MixtureData& data, const MixtureParams& p, const std::string& method,
                        const GradientLayout& layout) {
@@ -130,24 +147,9 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   if (result.model.samples == 0) result.model.samples = data.size();
   // The engine's idle, from the samples standing still: the speed synthesis needs it to tell a car at a
   // light from one rolling in a high gear before GPS has shown it standing.
-  std::vector<double> idle;
-  for (std::size_t i = 0; i < data.size(); ++i)
-    if (data.v[i] < kStandingSpeed) idle.push_back(data.s[i]);
   constexpr std::size_t kMinIdleSamples = 10;
-  if (idle.size() >= kMinIdleSamples) {
-    const auto median = [](std::vector<double> x) {
-      const auto mid = x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2);
-      std::nth_element(x.begin(), mid, x.end());
-      return *mid;
-    };
-    const double centre = median(idle);
-    std::vector<double> deviation;
-    for (double f : idle)
-      deviation.push_back(std::abs(f - centre));
-    constexpr double kMadToSd = 1.4826;  // normal consistency factor of the median absolute deviation
-    result.model.extra["idle"] = {
-        {"freq", centre}, {"sd", kMadToSd * median(deviation)}, {"samples", idle.size()}};
-  }
+  if (const auto idle = detail::estimate_idle(data, kMinIdleSamples))
+    result.model.extra["idle"] = {{"freq", idle->freq}, {"sd", idle->sd}, {"samples", idle->samples}};
   return result;
 }
 

@@ -1,5 +1,7 @@
 #pragma once
 // Pieces shared by the estimator's translation units (not part of the public API).
+#include <cstddef>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -7,6 +9,17 @@
 #include "core/mixture_likelihood.hpp"
 
 namespace gearpulse::detail {
+
+inline constexpr double kStandingSpeed = 0.3;  // m/s: GPS speed below this is a car at rest
+
+struct IdleEstimate {
+  double freq = 0.0;  // Hz, median of the engine frequency at rest
+  double sd = 0.0;    // Hz, from the median absolute deviation
+  std::size_t samples = 0;
+};
+
+// The engine's idle from the samples at rest, or nothing when fewer than min_samples of them.
+[[nodiscard]] std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t min_samples);
 
 // Paper mode: M = ratios.size() + 1, ratios top gear down (Table 2's c_i).
 [[nodiscard]] GearModel fit_paper(const MixtureData& data, const std::vector<double>& ratios);

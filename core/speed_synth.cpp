@@ -508,30 +508,30 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   ModeArray log_p{};
   for (int j = 0; j < modes; ++j) {
     double top = -std::numeric_limits<double>::infinity();
-    int arg = -1;
     for (int i = 0; i < modes; ++i)
-      if (pair_score_[i][j] > top) top = pair_score_[i][j], arg = i;
+      top = std::max(top, pair_score_[i][j]);
     log_p[j] = top;
-    if (arg < 0) continue;
+    if (!std::isfinite(top)) continue;  // no way into mode j this step
     // Sum over the predecessors, the track matched to the mixture's first two moments.
+    ModeArray w{};
     double w_sum = 0.0, v = 0.0, a = 0.0;
     for (int i = 0; i < modes; ++i) {
       if (!std::isfinite(pair_score_[i][j])) continue;
-      const double w = std::exp(pair_score_[i][j] - top);
-      w_sum += w;
-      v += w * pair_track_[i][j].v;
-      a += w * pair_track_[i][j].a;
+      w[i] = std::exp(pair_score_[i][j] - top);
+      w_sum += w[i];
+      v += w[i] * pair_track_[i][j].v;
+      a += w[i] * pair_track_[i][j].a;
     }
     v /= w_sum;
     a /= w_sum;
     double pvv = 0.0, pva = 0.0, paa = 0.0;
     for (int i = 0; i < modes; ++i) {
-      if (!std::isfinite(pair_score_[i][j])) continue;
-      const double w = std::exp(pair_score_[i][j] - top) / w_sum;
+      if (w[i] <= 0.0) continue;
       const Track& x = pair_track_[i][j];
-      pvv += w * (x.pvv + (x.v - v) * (x.v - v));
-      pva += w * (x.pva + (x.v - v) * (x.a - a));
-      paa += w * (x.paa + (x.a - a) * (x.a - a));
+      const double share = w[i] / w_sum;
+      pvv += share * (x.pvv + (x.v - v) * (x.v - v));
+      pva += share * (x.pva + (x.v - v) * (x.a - a));
+      paa += share * (x.paa + (x.a - a) * (x.a - a));
     }
     track_[j] = {v, a, std::min(pvv, kMaxSpeedVar), pva, paa};
     log_p[j] = top + std::log(w_sum);
