@@ -1,5 +1,5 @@
 #pragma once
-// Helpers shared by the driver and daemon tests: unique temp dirs, small text files, free TCP ports,
+// Helpers shared by the tests: unique temp dirs, shell commands, small text files, free TCP ports,
 // polling for a condition, child processes, and a line-oriented Unix socket client. Everything that
 // names a path or a port is unique per call, so test executables can run in parallel.
 #include <arpa/inet.h>
@@ -15,6 +15,7 @@
 
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -49,6 +50,26 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+// A shell command's exit status (-1 if it did not exit normally) and its standard output.
+struct ShellResult {
+  int status = -1;
+  std::string out;
+};
+
+// Runs `command` with /bin/sh; stdout is captured, stderr goes wherever the command sends it.
+inline ShellResult run_shell(const std::string& command) {
+  ShellResult r;
+  std::FILE* p = ::popen(command.c_str(), "r");
+  if (p == nullptr) return r;
+  char buf[4096];
+  std::size_t n = 0;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0)
+    r.out.append(buf, n);
+  const int rc = ::pclose(p);
+  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  return r;
+}
 
 inline void write_text(const std::filesystem::path& p, const std::string& text) {
   std::ofstream out(p, std::ios::binary);

@@ -19,6 +19,8 @@
 #include <catch2/catch.hpp>
 #include <nlohmann/json.hpp>
 
+#include "tests/test_util.hpp"
+
 namespace fs = std::filesystem;
 using nlohmann::json;
 
@@ -28,23 +30,11 @@ const std::string kHarness = GEARPULSE_SOURCE_DIR "/scripts/lib/harness.sh";
 const std::string kBuild = GEARPULSE_BINARY_DIR;
 constexpr double kPulsesPerKm = 2485.0;
 
-struct Result {
-  int status = -1;
-  std::string out;
-};
+using Result = gearpulse::test::ShellResult;
 
 // Runs a shell command, stdout captured (stderr passes through to the test log).
 Result run(const std::string& command) {
-  Result r;
-  std::FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0)
-    r.out.append(buf, n);
-  const int rc = ::pclose(p);
-  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-  return r;
+  return gearpulse::test::run_shell(command);
 }
 
 std::string quote(const std::string& s) {

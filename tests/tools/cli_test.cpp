@@ -11,7 +11,9 @@
 #include <vector>
 
 #include <catch2/catch.hpp>
+
 #include <nlohmann/json.hpp>
+#include "tests/test_util.hpp"
 
 #include "core/sample_io.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -56,18 +58,9 @@ struct Result {
 
 // Runs the CLI with `args` (already quoted as needed); stdout and stderr captured apart.
 Result run(const TempDir& dir, const std::string& args) {
-  Result r;
   const std::string err_path = dir.file("stderr.txt");
-  std::FILE* p = ::popen((kCli + " " + args + " 2>" + err_path).c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0)
-    r.out.append(buf, n);
-  const int rc = ::pclose(p);
-  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-  r.err = slurp(err_path);
-  return r;
+  const gearpulse::test::ShellResult s = gearpulse::test::run_shell(kCli + " " + args + " 2>" + err_path);
+  return {s.status, s.out, slurp(err_path)};
 }
 
 std::size_t lines(const std::string& text) {

@@ -17,28 +17,19 @@
 
 #include <catch2/catch.hpp>
 
+#include "tests/test_util.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
 
 const std::string kCli = GEARPULSE_BINARY_DIR "/tools/gearpulse";
 
-struct Result {
-  int status = -1;
-  std::string out;
-};
+using Result = gearpulse::test::ShellResult;
 
+// Runs a shell command, stdout and stderr captured together.
 Result run(const std::string& command) {
-  Result r;
-  std::FILE* p = ::popen((command + " 2>&1").c_str(), "r");
-  if (p == nullptr) return r;
-  char buf[4096];
-  std::size_t n = 0;
-  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0)
-    r.out.append(buf, n);
-  const int rc = ::pclose(p);
-  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-  return r;
+  return gearpulse::test::run_shell(command + " 2>&1");
 }
 
 struct TempDir {
