@@ -450,9 +450,7 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
     coast_mean_ += (a - coast_mean_) / coast_count_;
   }
   last_gps_ = gps;
-  if (!std::isfinite(freq)) return;
-  freq_max_ = std::max(freq_max_, freq);
-  if (freq <= 0.0) return;
+  if (!std::isfinite(freq) || freq <= 0.0) return;
   const auto add = [&](double& mean, double& var, double& count, double memory) {
     accumulate(freq, mean, var, count, memory / std::max(dt, 0.1));
   };

@@ -138,7 +138,6 @@ class SpeedSynthesizer {
   ModeArray prob_{};  // max-product probabilities of the modes
   TrackArray track_{};
   ModeArray next_p_{};
-  TrackArray next_track_{};
   ModeArray row_{};                             // transition probabilities out of one mode over this step
   std::array<ModeArray, kModes> pair_score_{};  // log score of predecessor i -> mode j
   std::array<std::array<Track, kModes>, kModes> pair_track_{};  // the track it leads to
@@ -157,7 +156,6 @@ class SpeedSynthesizer {
   ModeArray gear_down_mean_{}, gear_down_var_{}, gear_down_count_{};
   int sure_gear_ = 0;            // last gear held with confidence under GPS
   double sure_gear_freq_ = 0.0;  // its last frequency
-  double freq_max_ = 0.0;        // highest frequency seen (flat part of the declutched density)
   double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
   SynthOutput last_{};
 };
