@@ -489,17 +489,23 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       // Declutching ends the engine's drive: the car no longer gains speed.
       if (j == 0 && i != 0) x.a = std::min(x.a, 0.0);
       predict(x, moving_off ? launch_mode() : j, dt);
+      double gps_score = 0.0;
       if (have_gps) {
-        // GPS pins the speed; the mode is told by the frequency alone.
+        // GPS pins the speed and the frequency tells the mode; but a history GPS contradicts beyond
+        // ordinary jitter (a car at rest while GPS has it moving) pays for that jump once.
         const double k = x.pvv / (x.pvv + gps_var);
         const double innovation = gps - x.v;
+        const double z2 = innovation * innovation / (x.pvv + gps_var);
+        const double dead = kDeadZone * kDeadZone;
+        gps_score = -0.5 * std::max(z2 - dead, 0.0);
+        // The speed follows a jump; the acceleration learns from no more of it than ordinary jitter.
         x.v += k * innovation;
-        x.a += x.pva / (x.pvv + gps_var) * innovation;
+        x.a += x.pva / (x.pvv + gps_var) * innovation * (z2 > dead ? std::sqrt(dead / z2) : 1.0);
         x.paa -= x.pva * x.pva / (x.pvv + gps_var);
         x.pva *= 1.0 - k;
         x.pvv *= 1.0 - k;
       }
-      pair_score_[i][j] = log_pi + std::log(row_[j]) + log_evidence(x, j, freq, weight);
+      pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight);
       pair_track_[i][j] = x;
     }
   }

@@ -334,3 +334,26 @@ TEST_CASE("synth: moving off inside an outage follows first gear") {
   }
   CHECK(out.back().gear == 2);
 }
+
+TEST_CASE("synth: a quick move-off straight into second gear is seen under GPS and carried into the outage") {
+  // An OBD logger polls every 2 s: GPS shows the car standing, slipping the clutch at 4 km/h, then already
+  // at 13 km/h in second gear; GPS is lost as the car keeps accelerating in second.
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double theta2 = kHatch[1];
+  std::vector<Row> rows;
+  const double idle[] = {13.0, 12.6, 12.1, 11.6, 11.4, 13.1, 13.6, 14.3, 11.8, 12.8};  // a real idle wanders
+  for (int k = 0; k < 10; ++k)
+    rows.push_back({2.0 * k, 0.0, idle[k], 0});
+  rows.push_back({20.0, 4.0 * kKmh, 20.6, 0});
+  for (double v_kmh : {13.0, 20.0, 25.0, 29.0, 32.0})
+    rows.push_back({rows.back().t + 2.0, v_kmh * kKmh, v_kmh * kKmh / theta2, 2});
+  const auto out = replay(synth, rows, 23.0);
+  CHECK(out[11].source == SpeedSource::kGps);
+  CHECK(out[11].gear == 2);
+  for (std::size_t i = 12; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t);
+    CHECK(out[i].source == SpeedSource::kEngine);
+    CHECK(out[i].gear == 2);
+    CHECK(out[i].speed == Approx(rows[i].speed).margin(1.0 * kKmh));
+  }
+}
