@@ -131,8 +131,15 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());
   data.t.reserve(samples.size());
+  // A row repeating both values of the one before carries nothing new: loggers that poll slower than they
+  // write (OBD) repeat held values, and counting each copy would make the fit as sure of them as of
+  // fresh readings.
+  double last_speed = -1.0, last_freq = -1.0;
   for (const Sample& s : samples) {
     if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0) continue;
+    if (s.speed == last_speed && s.freq == last_freq) continue;
+    last_speed = s.speed;
+    last_freq = s.freq;
     data.v.push_back(s.speed);
     data.s.push_back(s.freq);
     data.t.push_back(s.t);

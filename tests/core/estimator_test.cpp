@@ -351,3 +351,23 @@ TEST_CASE("estimator: a fit records the engine's idle from the samples standing 
     if (s.speed > 1.0) moving.push_back(s);
   CHECK_FALSE(fit_gear_model(moving, {}).model.extra.contains("idle"));
 }
+
+TEST_CASE("estimator: rows repeating the values held by a slow logger count once") {
+  // An OBD logger writes rows faster than it polls: each reading repeats until the next poll. The fit of the
+  // log with its repeats must be the fit of the readings alone, counted and weighted once each.
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const std::vector<Sample> readings = simulate(car, sim::DrivingStyle::kMixed, 1200.0, 1, 3);
+  std::vector<Sample> repeated;
+  for (const Sample& s : readings)
+    for (int k = 0; k < 4; ++k)
+      repeated.push_back({s.t + 0.25 * k, s.speed, s.freq});
+  const FitResult once = fit_gear_model(readings, {});
+  const FitResult rows = fit_gear_model(repeated, {});
+  REQUIRE(once.model.gears.size() == car.theta.size());
+  REQUIRE(rows.model.gears.size() == once.model.gears.size());
+  CHECK(rows.model.samples == once.model.samples);
+  for (std::size_t i = 0; i < once.model.gears.size(); ++i) {
+    CHECK(rows.model.gears[i].theta == Approx(once.model.gears[i].theta).epsilon(1e-9));
+    CHECK(rows.model.gears[i].std_error == Approx(once.model.gears[i].std_error).epsilon(1e-9));
+  }
+}
