@@ -293,6 +293,24 @@ int SpeedSynthesizer::map_mode() const noexcept {
   return best;
 }
 
+// The mode whose speed is the median of the belief (each mode's speed weighted by its probability): the
+// most probable mode while it holds half the belief, else the one between the contenders. The error the
+// output makes is then the smallest in the mean absolute sense, however the belief is split.
+int SpeedSynthesizer::median_mode() const noexcept {
+  if (prob_[mode_] >= 0.5) return mode_;
+  const int modes = gears_ + 2;
+  std::array<int, kModes> order{};
+  for (int j = 0; j < modes; ++j)
+    order[j] = j;
+  std::sort(order.begin(), order.begin() + modes, [&](int a, int b) { return track_[a].v < track_[b].v; });
+  double below = 0.0;
+  for (int k = 0; k < modes; ++k) {
+    below += prob_[order[k]];
+    if (below >= 0.5) return order[k];
+  }
+  return mode_;
+}
+
 // Mode changes over dt out of mode `from`, as rates per second: a gear is left for the clutch or for a
 // neighbouring gear (a quick shift between two samples; up more likely at high revs, down at low revs);
 // the clutch is left for any gear in proportion to its use, or, standing, for moving off; moving off ends
@@ -561,8 +579,9 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
     learn_shift(freq);
     return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }
-  const double speed = std::max(track_[mode_].v, 0.0);
-  if (is_gear(mode_)) return {speed, mode_, SpeedSource::kEngine};
+  const int out = median_mode();
+  const double speed = std::max(track_[out].v, 0.0);
+  if (is_gear(out)) return {speed, out, SpeedSource::kEngine};
   // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
   // trickle pulses.
   return {speed < tuning_.stationary_speed ? 0.0 : speed, 0, SpeedSource::kCoast};

@@ -16,7 +16,8 @@
 // shifts down). A gear is scored by its innovation in its own units: within a dead zone of ordinary
 // jitter it costs per second of time, beyond it the jump costs once, however often step() is called;
 // being declutched or moving off is scored per second. The result does not depend on the step rate.
-// The output follows the most probable mode. No look-ahead: every output depends only on past input.
+// The output follows the mode at the median of the belief (the most probable one while it holds half of
+// it). No look-ahead: every output depends only on past input.
 //
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
@@ -123,6 +124,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double downshift_factor(int gear, double freq) const noexcept;
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
+  [[nodiscard]] int median_mode() const noexcept;
   void learn(double dt, double gps, double freq) noexcept;
   void normalise() noexcept;
 
