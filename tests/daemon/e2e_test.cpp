@@ -173,6 +173,8 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   const double expected = distance / 1000.0 * kPulsesPerKm;
   const auto counted = static_cast<double>(fs::file_size(work.dir / "pulses.bin"));
   INFO("distance " << distance << " m, pulses expected " << expected << ", counted " << counted);
+  std::printf("e2e drive: %.0f m, %.0f pulses expected, %.0f counted (%+.2f %%)\n", distance, expected,
+              counted, expected > 0.0 ? 100.0 * (counted / expected - 1.0) : 0.0);
   INFO("daemon log:\n" << slurp(work.dir / "gearpulsed.log").substr(0, 4000));
   REQUIRE(distance > 500.0);
   CHECK(std::abs(counted - expected) <= 0.03 * expected);
