@@ -6,6 +6,8 @@
 //   (b) the paper's method (Table 2 ratios 1.25,1.35,1.50,1.7) with the gear at the outage start kept;
 //   (c) the gear chosen with hindsight (theta x freq closest to the truth), auto model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
+// Then (c) and (d) over the samples where the car moves, and the share of (d) off by more than 8 km/h by
+// time since GPS was lost.
 // Usage: bench_real_logs [DATA_DIR] [--trace FILE]   (default: the shared/data/real beside the source tree;
 // --trace writes every outage sample with the truth, the hindsight gear and the synthesis as CSV)
 #include <algorithm>
@@ -53,6 +55,8 @@ std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
 
 struct Errors {
   std::vector<double> a, b, c, d;
+  std::vector<bool> moving;   // per sample: the logged speed is above zero
+  std::vector<double> since;  // per sample: s since GPS was lost
 };
 
 std::FILE* g_trace = nullptr;  // --trace FILE: one row per outage sample
@@ -91,6 +95,8 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
     err.b.push_back(std::abs(hold_b - s.speed) * kMsToKmh);
     err.c.push_back(std::abs(hold_c - s.speed) * kMsToKmh);
     err.d.push_back(std::abs(o.speed - s.speed) * kMsToKmh);
+    err.moving.push_back(s.speed > 0.0);
+    err.since.push_back(std::fmod(s.t - t0 - kOutageStart, kOutagePeriod));
     if (g_trace != nullptr)
       std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%d,%.2f,%.2f\n", s.t, s.speed * kMsToKmh, s.freq,
                    s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0,
@@ -131,6 +137,31 @@ void report(const char* title, const Errors& e) {
   std::printf("  (b) paper thetas, gear kept    %6.2f / %6.2f\n", quantile(e.b, 0.5), quantile(e.b, 0.95));
   std::printf("  (c) auto thetas, hindsight gear%6.2f / %6.2f\n", quantile(e.c, 0.5), quantile(e.c, 0.95));
   std::printf("  (d) gearpulse synthesis        %6.2f / %6.2f\n", quantile(e.d, 0.5), quantile(e.d, 0.95));
+  // The same over the samples where the car moves (a car at rest has no gear to choose with hindsight).
+  std::vector<double> c_moving, d_moving;
+  for (std::size_t k = 0; k < e.d.size(); ++k) {
+    if (!e.moving[k]) continue;
+    c_moving.push_back(e.c[k]);
+    d_moving.push_back(e.d[k]);
+  }
+  std::printf("  moving samples only (%zu): (c) %.2f / %.2f, (d) %.2f / %.2f\n", d_moving.size(),
+              quantile(c_moving, 0.5), quantile(c_moving, 0.95), quantile(d_moving, 0.5),
+              quantile(d_moving, 0.95));
+  // How the synthesis fares with the time since GPS was lost: share of samples off by more than 8 km/h.
+  constexpr double kBin = 10.0;  // s
+  constexpr double kBad = 8.0;   // km/h
+  std::printf("  (d) share off by more than %.0f km/h, by s since GPS was lost:", kBad);
+  for (double from = 0.0; from < kOutageLength; from += kBin) {
+    std::size_t n = 0, bad = 0;
+    for (std::size_t k = 0; k < e.d.size(); ++k) {
+      if (e.since[k] < from || e.since[k] >= from + kBin) continue;
+      ++n;
+      bad += e.d[k] > kBad;
+    }
+    std::printf(" %.0f-%.0f %.0f %%", from, from + kBin,
+                n ? 100.0 * static_cast<double>(bad) / static_cast<double>(n) : 0.0);
+  }
+  std::printf("\n");
 }
 
 // Fit on `train`, replay every log of `test`.

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numbers>
 
 namespace gearpulse {
 namespace {
@@ -184,6 +183,11 @@ double SpeedSynthesizer::idle_sd() const noexcept {
 constexpr double kFreeRevs = 3.0;
 constexpr double kLaunchRevs = 2.5;  // moving off: likelier than free revs with the car at rest
 constexpr double kDeadZone = 2.0;    // sigmas of a gear's reading that are ordinary jitter
+
+// Log-cost of a departure of z2 squared sigmas as an event: what lies beyond the dead zone, paid once.
+constexpr double jump_cost(double z2) noexcept {
+  return 0.5 * std::max(z2 - kDeadZone * kDeadZone, 0.0);
+}
 
 // Score of the frequency declutched at `speed`: the engine falls to idle (a spike, as the paper's g() has one
 // at standstill, section 3.1) or runs free anywhere in its range.
@@ -424,15 +428,15 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
     // The clutch slips: the engine turns faster than the wheels in first gear, so the car is no faster
     // than theta_1 x freq. A track beyond that is pulled back to it, for the squared excess (an event).
     const double ceiling = theta_[1] * freq;
-    double excess = 0.0;
+    double cost = 0.0;
     if (x.v > ceiling) {
       const double sd = std::sqrt(x.pvv) + theta_[1] * freq_sigma(freq);
       const double z = (x.v - ceiling) / sd;
-      excess = std::max(z * z - kDeadZone * kDeadZone, 0.0);
+      cost = jump_cost(z * z);
       x.v = ceiling;
       x.a = std::min(x.a, 0.0);
     }
-    return weight * log_launch(freq, x.v) - 0.5 * excess;
+    return weight * log_launch(freq, x.v) - cost;
   }
   // In gear: freq = v / theta (eq. (3)); a Kalman update on h = 1 / theta.
   const double h = 1.0 / theta_[mode];
@@ -447,12 +451,11 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   x.pvv = pvv;
   x.pva = pva;
   x.paa = paa;
-  // A reading its gear explains within the dead zone costs nothing, however often it comes; a jump the
-  // track cannot follow costs its squared excess once (the track then follows): an event, counted once
-  // at any sample rate.
+  // A reading its gear explains within the dead zone costs in proportion to the time it covers (weight),
+  // however often it comes; a jump the track cannot follow costs its squared excess once (the track then
+  // follows): an event, counted once at any sample rate.
   const double z2 = innovation * innovation / s;
-  const double dead = kDeadZone * kDeadZone;
-  return -0.5 * (std::max(z2 - dead, 0.0) + weight * std::min(z2, dead)) +
+  return -jump_cost(z2) - 0.5 * weight * std::min(z2, kDeadZone * kDeadZone) +
          weight * std::log(lugging(mode, freq));
 }
 
@@ -514,9 +517,9 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
         const double k = x.pvv / (x.pvv + gps_var);
         const double innovation = gps - x.v;
         const double z2 = innovation * innovation / (x.pvv + gps_var);
-        const double dead = kDeadZone * kDeadZone;
-        gps_score = -0.5 * std::max(z2 - dead, 0.0);
+        gps_score = -jump_cost(z2);
         // The speed follows a jump; the acceleration learns from no more of it than ordinary jitter.
+        const double dead = kDeadZone * kDeadZone;
         x.v += k * innovation;
         x.a += x.pva / (x.pvv + gps_var) * innovation * (z2 > dead ? std::sqrt(dead / z2) : 1.0);
         x.paa -= x.pva * x.pva / (x.pvv + gps_var);

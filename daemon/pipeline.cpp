@@ -69,8 +69,8 @@ struct Pipeline::Impl {
   TrainingStore& store;
   LogLimiter limiter;
 
-  std::atomic<double> gps_latency{0.0};
-  std::atomic<double> min_snr_db{-10.0};
+  std::atomic<double> gps_latency{PipelineTunables{}.gps_latency};
+  std::atomic<double> min_snr_db{PipelineTunables{}.min_snr_db};
 
   // Devices.
   std::unique_ptr<PulseOutput> output;

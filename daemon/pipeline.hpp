@@ -47,8 +47,8 @@ struct PipelineSnapshot {
 
 // Settings that may change on SIGHUP without restarting the threads.
 struct PipelineTunables {
-  double gps_latency = 0.0;
-  double min_snr_db = 0.0;
+  double gps_latency = GpsConfig{}.latency;
+  double min_snr_db = TrackerConfig{}.min_snr_db;
 };
 
 class Pipeline {

@@ -8,6 +8,7 @@
 #include <new>
 #include <vector>
 
+#include "bench/outage_protocol.hpp"
 #include "core/speed_synth.hpp"
 #include "tests/alloc_counter.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -248,7 +249,7 @@ TEST_CASE("synth: bad input never produces a bad output") {
 namespace {
 
 // |error| km/h of every outage sample of a simulated drive observed every `period` s (outages of 60 s
-// from 120 s in, then every 180 s, as bench_real_logs).
+// from 120 s in, then every 180 s: the benches' protocol, bench/outage_protocol.hpp).
 std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double period, std::uint64_t seed) {
   gearpulse::sim::ObservationOptions obs;
   obs.period = period;
@@ -257,17 +258,14 @@ std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double per
   std::vector<double> errors;
   for (const auto& r : gearpulse::sim::observe(drive, obs)) {
     const double t = r.truth.t;
-    const bool out = t >= 120.0 && std::fmod(t - 120.0, 180.0) < 60.0;
+    const bool out = gearpulse::bench::in_outage(t);
     const SynthOutput o = synth.step(t, out ? kMissing : r.speed, r.freq);
     if (out) errors.push_back(std::abs(o.speed - r.truth.speed) / kKmh);
   }
   return errors;
 }
 
-double quantile(std::vector<double> v, double q) {
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
-}
+using gearpulse::bench::quantile;
 
 }  // namespace
 
