@@ -97,11 +97,16 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
 }
 
 void SpeedSynthesizer::reset() noexcept {
+  // A cold start is most likely a car at rest, out of gear: until the first evidence the belief says so,
+  // rather than "in the most used gear at zero speed".
+  constexpr double kColdStartRest = 0.5;
   prob_.fill(0.0);
   for (int j = 0; j <= gears_; ++j)
-    prob_[j] = weight_[j];
+    prob_[j] = j == 0 ? std::max(weight_[0], kColdStartRest) : weight_[j] * (1.0 - kColdStartRest);
+  normalise();
   track_.fill(Track{0.0, 0.0, kInitialSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma});
   started_ = false;
+  informed_ = false;
   t_ = 0.0;
   mode_ = 0;
   last_gps_ = -1.0;
@@ -607,8 +612,12 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noex
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
 
+  // Before the first fix or frequency reading nothing is known: no speed, not a guess.
+  informed_ = informed_ || have_gps || std::isfinite(freq);
   SynthOutput out;
-  if (gears_ == 0) {
+  if (!informed_) {
+    out = {0.0, 0, SpeedSource::kNone};
+  } else if (gears_ == 0) {
     out = have_gps ? SynthOutput{gps_speed, 0, SpeedSource::kGps} : SynthOutput{0.0, 0, SpeedSource::kNone};
   } else {
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq);

@@ -145,6 +145,7 @@ class SpeedSynthesizer {
   std::array<std::array<Track, kModes>, kModes> pair_track_{};  // the track it leads to
 
   bool started_ = false;
+  bool informed_ = false;  // a GPS fix or a frequency reading has been seen since reset()
   double t_ = 0.0;
   int mode_ = 0;  // current MAP mode
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;

@@ -314,6 +314,26 @@ TEST_CASE("synth: knows the idle from the model before GPS has shown the car sta
   }
 }
 
+TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
+  // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
+  auto model = std::make_shared<GearModel>(*model_of(kHatch));
+  model->extra["idle"] = {{"freq", kIdle}, {"sd", 0.3}, {"samples", 500}};
+  SpeedSynthesizer synth(model);
+  for (int k = 0; k < 5; ++k) {
+    const SynthOutput out = synth.step(0.1 * k, kMissing, kMissing);
+    CHECK(out.source == SpeedSource::kNone);
+    CHECK(out.speed == 0.0);
+    CHECK(out.gear == 0);
+  }
+  // Then the engine idles: a car at rest, not the most used gear at idle revs.
+  for (int k = 5; k < 50; ++k) {
+    const SynthOutput out = synth.step(0.1 * k, kMissing, kIdle);
+    INFO("t = " << 0.1 * k);
+    CHECK(out.speed == 0.0);
+    CHECK(out.gear == 0);
+  }
+}
+
 TEST_CASE("synth: moving off inside an outage follows first gear") {
   SpeedSynthesizer synth(model_of(kHatch));
   // Stand at the light (GPS learns the idle), lose GPS, then move off: revs rise with the clutch slipping,
