@@ -167,7 +167,7 @@ void read_output(Section& s, OutputConfig& o) {
   s.number("pulses_per_km", o.pulses_per_km, 1.0, 1.0e6);
   s.number("pulse_width", o.pulse_width, 1.0e-6, 1.0);
   s.number("duty", o.duty, 0.0, 0.9);
-  s.number("min_frequency", o.min_frequency, 0.0, 1000.0);
+  s.number("min_frequency", o.min_frequency, 0.001, 1000.0);
   s.number("max_frequency", o.max_frequency, 1.0, 100000.0);
 }
 
@@ -214,6 +214,12 @@ void check_relations(const Config& c, const toml::table& root, const std::string
   if (c.output.duty == 0.0 && c.output.pulse_width * c.output.max_frequency >= 1.0)
     throw ConfigError(at("output", "pulse_width") +
                       ": output.pulse_width: not shorter than the period at output.max_frequency");
+  // Whatever the pulse scheduler would refuse at start is refused here, where --check-config sees it.
+  try {
+    validate(pulse_config_of(c.output));
+  } catch (const std::invalid_argument& e) {
+    throw ConfigError(at("output", "min_frequency") + ": [output]: " + e.what());
+  }
 }
 
 Config from_table(const toml::table& root, const std::string& file) {
@@ -248,6 +254,16 @@ Config from_table(const toml::table& root, const std::string& file) {
 }
 
 }  // namespace
+
+PulseConfig pulse_config_of(const OutputConfig& o) noexcept {
+  PulseConfig p;
+  p.pulses_per_km = o.pulses_per_km;
+  p.pulse_width_s = o.duty > 0.0 ? 0.0 : o.pulse_width;
+  p.duty = o.duty > 0.0 ? o.duty : 0.5;
+  p.min_freq_hz = o.min_frequency;
+  p.max_freq_hz = o.max_frequency;
+  return p;
+}
 
 const char* to_string(OutputKind kind) noexcept {
   switch (kind) {

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "core/pulse_scheduler.hpp"
+
 namespace gearpulse::daemon {
 
 struct AudioConfig {
@@ -48,6 +50,9 @@ struct OutputConfig {
   double min_frequency = 0.5;   // Hz; below it the train stops (standstill)
   double max_frequency = 1000;  // Hz; above it the train clamps
 };
+
+// The pulse train's settings as the scheduler takes them (fixed width when duty is 0).
+[[nodiscard]] PulseConfig pulse_config_of(const OutputConfig& o) noexcept;
 
 struct ModelConfig {
   std::string state_dir = "/var/lib/gearpulse";

@@ -145,11 +145,7 @@ void Pipeline::Impl::open_output() {
     output = std::make_unique<NullPulseOutput>();
   }
   PulseThreadConfig pc;
-  pc.pulse.pulses_per_km = o.pulses_per_km;
-  pc.pulse.pulse_width_s = o.duty > 0.0 ? 0.0 : o.pulse_width;
-  pc.pulse.duty = o.duty > 0.0 ? o.duty : 0.5;
-  pc.pulse.min_freq_hz = o.min_frequency;
-  pc.pulse.max_freq_hz = o.max_frequency;
+  pc.pulse = pulse_config_of(o);
   pc.realtime = config.audio.realtime;
   pc.rt_priority = std::min(99, config.audio.rt_priority + 10);
   pc.lock_memory = config.audio.realtime;

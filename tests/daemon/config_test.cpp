@@ -122,6 +122,19 @@ TEST_CASE("config: relations between keys are checked") {
             .starts_with("test.toml:2: output.pulse_width:"));
   CHECK(error_of("[output]\nmin_frequency = 5\nmax_frequency = 2\n")
             .starts_with("test.toml:3: output.max_frequency:"));
+  // A train that never stops at standstill is one the pulse scheduler refuses at start: refused here, so
+  // --check-config (ExecStartPre) catches it instead of a daemon that exits at every restart.
+  CHECK(error_of("[output]\nmin_frequency = 0\n").starts_with("test.toml:2: output.min_frequency:"));
+}
+
+TEST_CASE("config: every accepted output section is one the pulse scheduler takes") {
+  for (const char* text :
+       {"", "[output]\nduty = 0.5\n", "[output]\nmin_frequency = 0.001\nmax_frequency = 1.5\n",
+        "[output]\npulse_width = 0.0009\nmax_frequency = 1000\n"}) {
+    INFO(text);
+    const Config c = parse_config(text, "a");
+    CHECK_NOTHROW(gearpulse::validate(gearpulse::daemon::pulse_config_of(c.output)));
+  }
 }
 
 TEST_CASE("config: channel takes an index or mix") {
