@@ -229,6 +229,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
   auto next_audio_try = std::chrono::steady_clock::now();
   auto backoff = std::chrono::milliseconds(500);
   bool audio_was_up = false;
+  bool audio_interrupted = false;  // the open capture lost its device and is being reopened
 
   const auto step = [&](double t, double freq, double snr, bool tracked) {
     // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
@@ -373,11 +374,21 @@ void Pipeline::Impl::tracker_loop() noexcept {
     }
 
     if (audio_was_up && tracker) {
+      // A lost device (a USB card unplugged) is reopened by the capture thread; say so, at most once a
+      // minute while it lasts, and say when it is back.
       const AlsaCaptureStats s = capture->stats();
-      if (s.last_error != 0 && !s.running)
-        report("audio-run", spdlog::level::warn,
-               "audio: capture from " + config.audio.device + " interrupted (ALSA error " +
-                   std::to_string(s.last_error) + "); the driver reopens it");
+      if (!s.streaming && s.running) {
+        audio_interrupted = true;
+        std::uint64_t suppressed = 0;
+        if (limiter.allow("audio-run", suppressed))
+          spdlog::warn(
+              "audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it",
+              config.audio.device, s.last_error, ::snd_strerror(s.last_error));
+      } else if (audio_interrupted && s.streaming) {
+        audio_interrupted = false;
+        clear_fault("audio-run", "audio: capture from " + config.audio.device + " resumed (" +
+                                     std::to_string(s.reopens) + " reopen(s) so far)");
+      }
     }
     if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
   }
@@ -475,9 +486,9 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     std::lock_guard lock(d.audio_mutex);
     if (d.capture) {
       const AlsaCaptureStats a = d.capture->stats();
-      s.audio_state = a.running ? "running" : "recovering";
+      s.audio_state = a.streaming ? "running" : "recovering";
       s.xruns = a.xruns;
-      s.audio_error = a.last_error != 0 && !a.running ? "ALSA error " + std::to_string(a.last_error) : "";
+      s.audio_error = a.last_error != 0 && !a.streaming ? "ALSA error " + std::to_string(a.last_error) : "";
     } else {
       s.audio_state = "retrying";
       s.audio_error = d.audio_error;

@@ -208,6 +208,7 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
   s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
   s.running = running_.load(std::memory_order_relaxed);
+  s.streaming = streaming_.load(std::memory_order_relaxed);
   return s;
 }
 
@@ -323,8 +324,10 @@ void AlsaCapture::run() noexcept {
     }
     ::snd_pcm_close(pcm);
     pcm = nullptr;
+    streaming_.store(false, std::memory_order_relaxed);
   };
 
+  streaming_.store(pcm != nullptr, std::memory_order_relaxed);
   if (pcm) {
     if (const int err = restart(); err < 0) recover(err);
   }
@@ -350,6 +353,7 @@ void AlsaCapture::run() noexcept {
         continue;
       }
       pcm = fresh;
+      streaming_.store(true, std::memory_order_relaxed);
       reopens_.fetch_add(1, std::memory_order_relaxed);
       backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
       if (const int e = ::snd_pcm_start(pcm); e < 0) recover(e);
@@ -449,6 +453,7 @@ void AlsaCapture::run() noexcept {
   if (pcm) ::snd_pcm_drop(pcm);
   pcm_ = pcm;
   ::snd_pcm_status_free(status);
+  streaming_.store(false);
   running_.store(false);
 }
 

@@ -71,7 +71,8 @@ struct AlsaCaptureStats {
   int last_error = 0;              // last negative ALSA error code seen, 0 if none
   bool realtime_ok = false;
   bool memory_locked = false;
-  bool running = false;
+  bool running = false;    // the capture thread runs
+  bool streaming = false;  // ... and the device is open and capturing (false while it is lost and reopened)
 };
 
 class AlsaCapture final : public AudioSource {
@@ -125,6 +126,7 @@ class AlsaCapture final : public AudioSource {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> running_{false};
+  std::atomic<bool> streaming_{false};
   AnchorSlot anchors_[kAnchors];
   std::atomic<std::uint64_t> anchor_count_{0};
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},

@@ -198,10 +198,12 @@ TEST_CASE("alsa: unpaced S16 mono frames arrive bit-exact with increasing timest
   REQUIRE(got.size() == src.size());
   CHECK(mismatches(got, src) == 0);
   CHECK(timestamps_increase(cap, 0, src.size() - 1));
+  CHECK(cap.stats().streaming);
   cap.stop();
   const auto st = cap.stats();
   CHECK(st.frames >= src.size());
   CHECK_FALSE(st.running);
+  CHECK_FALSE(st.streaming);
 }
 
 TEST_CASE("alsa: S32 and FLOAT stereo are converted per channel or mixed") {
@@ -422,6 +424,7 @@ TEST_CASE(
   CHECK(st.dropped == 0);
   CHECK(st.xruns == 0);  // the null slave never overruns: a stall is not an XRUN here
   CHECK(st.running);
+  CHECK(st.streaming);
   CHECK(st.clock_resets >= 1);
   CHECK(timestamps_increase(cap, 0, src.size() - 1));
   // The stall shows in the timestamps: the span exceeds the frames' duration by most of it (a slower
@@ -485,5 +488,6 @@ TEST_CASE(
   CHECK(st.xruns == 0);
   CHECK(st.dropped == 0);
   CHECK(st.running);
+  CHECK(st.streaming);  // the device stayed open throughout
   CHECK(timestamps_increase(cap, 0, got.size() - 1));
 }
