@@ -40,6 +40,11 @@ class Fd {
   int fd_;
 };
 
+void sync_directory(const std::filesystem::path& dir) {
+  Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+  if (dfd.get() < 0 || ::fsync(dfd.get()) != 0) throw_errno("cannot fsync directory", dir);
+}
+
 }  // namespace
 
 void write_file_atomic(const std::filesystem::path& path, std::string_view data) {
@@ -69,8 +74,15 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
     throw;
   }
   // The rename is durable only once the directory entry is on disk.
-  Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-  if (dfd.get() < 0 || ::fsync(dfd.get()) != 0) throw_errno("cannot fsync directory", dir);
+  sync_directory(dir);
+}
+
+void remove_file_durable(const std::filesystem::path& path) {
+  if (::unlink(path.c_str()) != 0) {
+    if (errno == ENOENT) return;
+    throw_errno("cannot remove", path);
+  }
+  sync_directory(path.has_parent_path() ? path.parent_path() : std::filesystem::path("."));
 }
 
 std::optional<std::string> read_file(const std::filesystem::path& path) {

@@ -12,6 +12,10 @@ namespace gearpulse::daemon {
 // directory. Throws std::system_error naming the path on failure (the old file is then untouched).
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);
 
+// Removes `path` (nothing to do if it is absent) and fsyncs its directory, so the removal survives a power
+// cut. Throws std::system_error naming the path on failure.
+void remove_file_durable(const std::filesystem::path& path);
+
 // Whole file, or nullopt if it does not exist. Throws std::system_error on other read errors.
 [[nodiscard]] std::optional<std::string> read_file(const std::filesystem::path& path);
 

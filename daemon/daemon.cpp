@@ -282,10 +282,16 @@ nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
     if (it == request.end() || !it->is_boolean() || !it->get<bool>())
       throw ControlError("reset-model forgets the learned gears; send \"confirm\": true to do it");
     const bool keep = request.value("keep_samples", false);
-    model.set(nullptr);
-    std::error_code ec;
-    std::filesystem::remove(model_path, ec);
-    if (ec) throw ControlError("cannot remove " + model_path.string() + ": " + ec.message());
+    {
+      // A fit running now finds the generation changed and discards its result.
+      const auto lock = model.lock_writes();
+      model.set(nullptr);
+      try {
+        remove_file_durable(model_path);
+      } catch (const std::exception& e) {
+        throw ControlError(e.what());
+      }
+    }
     if (!keep) {
       store.clear();
       save_store("reset-model");

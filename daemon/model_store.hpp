@@ -2,8 +2,10 @@
 // The current gear model: immutable, swapped whole and atomically, persisted as state_dir/model.json in
 // the format of `gearpulse fit --out`.
 #include <atomic>
+#include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "core/gear_model.hpp"
@@ -15,7 +17,19 @@ using ModelPtr = std::shared_ptr<const GearModel>;
 class ModelHolder {
  public:
   [[nodiscard]] ModelPtr get() const noexcept { return model_.load(std::memory_order_acquire); }
-  void set(ModelPtr model) noexcept { model_.store(std::move(model), std::memory_order_release); }
+  // Every set() starts a new generation. A writer that read the generation before long work (a fit)
+  // installs its result only if it is unchanged, so a fit begun before a reset-model cannot bring the
+  // forgotten model back.
+  void set(ModelPtr model) noexcept {
+    model_.store(std::move(model), std::memory_order_release);
+    generation_.fetch_add(1, std::memory_order_acq_rel);
+  }
+  [[nodiscard]] std::uint64_t generation() const noexcept {
+    return generation_.load(std::memory_order_acquire);
+  }
+  // Writers (a retrain, a reset) hold this while they check the generation, change the model and its
+  // file, so that a save and a removal of model.json never interleave.
+  [[nodiscard]] std::unique_lock<std::mutex> lock_writes() { return std::unique_lock(write_mutex_); }
   [[nodiscard]] bool trained() const noexcept {
     const ModelPtr m = get();
     return m && !m->empty();
@@ -23,6 +37,8 @@ class ModelHolder {
 
  private:
   std::atomic<ModelPtr> model_;
+  std::atomic<std::uint64_t> generation_{0};
+  std::mutex write_mutex_;
 };
 
 struct ModelLoad {

@@ -88,6 +88,7 @@ Retrainer::Status Retrainer::status() const {
 }
 
 bool Retrainer::retrain_now() {
+  const std::uint64_t generation = model_.generation();
   const std::size_t fresh = store_.new_samples();
   const std::vector<Sample> samples = store_.snapshot();
   {
@@ -116,6 +117,10 @@ bool Retrainer::retrain_now() {
             "fit on {} samples found {} gears; current model (fitted on {} samples) kept until a fit uses {}",
             fitted.samples, fitted.gears.size(), current->samples,
             std::min(current->samples, settings().replace_min_samples));
+        spdlog::info("retrain: {}", result);
+      } else if (auto lock = model_.lock_writes(); model_.generation() != generation) {
+        result = fmt::format("fit on {} samples discarded: the model was replaced or reset during the fit",
+                             samples.size());
         spdlog::info("retrain: {}", result);
       } else {
         const std::size_t gears = fitted.gears.size();

@@ -248,6 +248,44 @@ TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
   CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
 }
 
+TEST_CASE("daemon: a fit begun before a model reset is discarded, not installed over the reset") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  store.add({1.0, 10.0, 100.0});
+  ModelHolder model;
+  model.set(std::make_shared<const GearModel>(three_gears()));
+  int fits = 0;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) {
+                        if (++fits == 1) {
+                          // reset-model arrives while the first fit runs (as the control thread does it)
+                          const auto lock = model.lock_writes();
+                          model.set(nullptr);
+                        }
+                        return three_gears();
+                      },
+                      {});
+  CHECK_FALSE(retrainer.retrain_now());
+  CHECK(model.get() == nullptr);
+  CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
+  CHECK(retrainer.status().last_result.find("discarded") != std::string::npos);
+  // The next fit, begun after the reset, is installed.
+  CHECK(retrainer.retrain_now());
+  CHECK(model.trained());
+}
+
+TEST_CASE("daemon: a removed file stays removed (durable remove), and removing an absent one is no error") {
+  TempDir dir;
+  const auto path = dir / "model.json";
+  gearpulse::daemon::write_file_atomic(path, "{}");
+  REQUIRE(std::filesystem::exists(path));
+  gearpulse::daemon::remove_file_durable(path);
+  CHECK_FALSE(std::filesystem::exists(path));
+  CHECK_NOTHROW(gearpulse::daemon::remove_file_durable(path));
+  std::filesystem::create_directory(dir / "sub");
+  CHECK_THROWS_AS(gearpulse::daemon::remove_file_durable(dir / "sub"), std::system_error);  // not a file
+}
+
 TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
   TempDir dir;
   TrainingStore store(1e9, 10000);
