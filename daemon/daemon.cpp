@@ -100,13 +100,17 @@ struct Daemon::Impl {
 void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now) {
   const std::string server = fmt::format("{}:{}", config.gps.host, config.gps.port);
   if (now.gps_state != before.gps_state) {
-    if (now.gps_state == "fix")
-      spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
-    else if (now.gps_state == "no-fix")
-      spdlog::warn("gps: no usable fix from gpsd at {} for {:.1f} s; speed now from {}", server,
-                   config.gps.timeout, now.source);
-    else
+    std::uint64_t suppressed = 0;
+    if (now.gps_state == "fix") {
+      // The fault is over: the next one is reported at once.
       limiter.reset("gps");
+      limiter.reset("gps-no-fix");
+      spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
+    } else if (now.gps_state == "no-fix" && limiter.allow("gps-no-fix", suppressed)) {
+      spdlog::warn("gps: no usable fix from gpsd at {} for {:.1f} s; speed now from {}{}", server,
+                   config.gps.timeout, now.source,
+                   suppressed ? fmt::format(" ({} more times since the last report)", suppressed) : "");
+    }
   }
   if (now.gps_state == "disconnected" && !now.gps_error.empty()) {
     std::uint64_t suppressed = 0;

@@ -157,7 +157,6 @@ void GpsdClient::run() {
       status_.state = GpsdState::kConnected;
       ++status_.connects;
     }
-    bool got_data = false;
     char message[4096];
     while (!stopping()) {
       beat();
@@ -184,7 +183,6 @@ void GpsdClient::run() {
           break;
         }
         if (n == 0) break;
-        got_data = true;
         if (std::strstr(message, "\"class\":\"TPV\"") == nullptr) {
           if (message[0] != '{') ++bad;  // not JSON at all: counted, skipped
           continue;
@@ -222,9 +220,9 @@ void GpsdClient::run() {
       }
     }
     if (stopping()) break;
-    // Lost the connection: back off before reconnecting so a crashing gpsd is not hammered; a
-    // connection that delivered data resets the delay.
-    if (got_data) backoff = config_.backoff_min;
+    // Lost the connection: back off before reconnecting so a crashing gpsd is not hammered. Only a
+    // position report resets the delay (above): a gpsd that greets and hangs up, or sends nothing but
+    // its banner, is not a working one.
     if (!wait_backoff(backoff)) break;
     backoff = std::min(backoff * 2, config_.backoff_max);
   }

@@ -296,6 +296,44 @@ TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") 
   CHECK(st.bad_reads + st.failures >= 1);
 }
 
+TEST_CASE("gpsd: a gpsd that greets and hangs up is retried with a growing delay, not hammered") {
+  // A broken gpsd (or something else on its port): every connection gets gpsd's banner and is closed.
+  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  REQUIRE(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len) == 0);
+  REQUIRE(::listen(listener, 4) == 0);
+  std::atomic<int> accepted{0};
+  std::thread server([&] {
+    for (int c; (c = ::accept(listener, nullptr, nullptr)) >= 0;) {
+      ++accepted;
+      const std::string banner =
+          "{\"class\":\"VERSION\",\"release\":\"3.22\",\"rev\":\"3.22\",\"proto_major\":3,\"proto_minor\":14}"
+          "\n";
+      (void)!::write(c, banner.data(), banner.size());
+      std::this_thread::sleep_for(20ms);
+      ::close(c);
+    }
+  });
+  GpsdConfig cfg = config_for(ntohs(a.sin_port));  // backoff 50 ms doubling to 400 ms
+  GpsdClient client(cfg);
+  client.start();
+  std::this_thread::sleep_for(3s);
+  client.stop();
+  ::shutdown(listener, SHUT_RDWR);
+  ::close(listener);
+  server.join();
+  // With the delay reset by the banner the client would reconnect every 50 ms plus the 20 ms the server
+  // holds the line (about 40 times in 3 s); growing to 400 ms it connects about 10 times.
+  INFO("connections accepted: " << accepted.load());
+  CHECK(accepted.load() >= 3);
+  CHECK(accepted.load() <= 16);
+}
+
 TEST_CASE("gpsd: the heartbeat goes on through a reconnect backoff while gpsd is absent") {
   GpsdConfig cfg = config_for(gearpulse::test::free_port());
   cfg.backoff_min = cfg.backoff_max = 5000ms;  // one long wait after the first failed attempt
