@@ -154,7 +154,7 @@ void read_tracker(Section& s, TrackerConfig& t) {
 void read_gps(Section& s, GpsConfig& g) {
   s.string("host", g.host);
   s.integer("port", g.port, 1, 65535);
-  s.number("latency", g.latency, 0.0, 5.0);
+  s.number("latency", g.latency, 0.0, kMaxGpsLatency);
   s.number("timeout", g.timeout, 0.1, 60.0);
 }
 

@@ -30,10 +30,12 @@ struct TrackerConfig {
   double min_snr_db = -10.0;  // below this a tracked hop is not trusted for training or synthesis
 };
 
+inline constexpr double kMaxGpsLatency = 5.0;  // s: the largest gps.latency accepted
+
 struct GpsConfig {
   std::string host = "127.0.0.1";
   unsigned port = 2947;
-  double latency = 0.0;  // s between the fix's true instant and its receive time
+  double latency = 0.0;  // s between the fix's true instant and its receive time (<= kMaxGpsLatency)
   double timeout = 1.5;  // s without a usable fix before GPS counts as lost
 };
 

@@ -183,8 +183,9 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
   tc.hop_s = config.tracker.hop;
   tc.band_lo_hz = config.tracker.band_low;
   tc.band_hi_hz = config.tracker.band_high;
-  // at() serves GPS fixes up to a few seconds old, with the configured latency on top.
-  tc.history_s = std::max(2.0, config.gps.latency + 2.0);
+  // at() serves GPS fixes up to a few seconds old, with the latency on top: the largest the config
+  // accepts, since a reload may raise it while this tracker runs (a few dozen points more).
+  tc.history_s = kMaxGpsLatency + 2.0;
   std::string error;
   tracker = SlidingDftTracker::create(tc, error);
   if (!tracker) {
