@@ -412,16 +412,23 @@ int Daemon::run() {
 
   systemd::stopping();
   d.control->stop();
-  d.pipeline->stop();  // output left low
-  d.retrainer.stop();
+  // What is learned is saved first, as soon as no more training pairs come: joining a fit in progress
+  // (an idle-priority thread) or a GPS client inside a connection attempt may outlast systemd's stop
+  // timeout, and its SIGKILL must not cost the pairs since the last periodic save.
+  d.pipeline->halt();  // output left low
   d.save_store("shutdown");
-  if (const ModelPtr m = d.model.get(); m && !m->empty()) {
-    try {
-      save_model_file(d.model_path, *m);
-    } catch (const std::exception& e) {
-      spdlog::error("model: cannot save {} at shutdown: {}", d.model_path.string(), e.what());
+  {
+    const auto lock = d.model.lock_writes();
+    if (const ModelPtr m = d.model.get(); m && !m->empty()) {
+      try {
+        save_model_file(d.model_path, *m);
+      } catch (const std::exception& e) {
+        spdlog::error("model: cannot save {} at shutdown: {}", d.model_path.string(), e.what());
+      }
     }
   }
+  d.retrainer.stop();
+  d.pipeline->stop();
   d.control.reset();
   ::close(sfd);
   spdlog::info("gearpulsed stopped");

@@ -420,15 +420,19 @@ void Pipeline::start() {
   d.tracker_thread = std::thread([&d] { d.tracker_loop(); });
 }
 
-void Pipeline::stop() noexcept {
+void Pipeline::halt() noexcept {
   Impl& d = *impl_;
   d.stop.store(true);
   if (d.tracker_thread.joinable()) d.tracker_thread.join();
-  if (d.gps) d.gps->stop();
   if (d.pulses) {
     d.pulses->set_speed(0.0);
     d.pulses->stop();  // leaves the output low
   }
+}
+
+void Pipeline::stop() noexcept {
+  halt();
+  if (impl_->gps) impl_->gps->stop();
 }
 
 void Pipeline::set_tunables(const PipelineTunables& tunables) noexcept {

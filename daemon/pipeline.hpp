@@ -59,6 +59,9 @@ class Pipeline {
   Pipeline& operator=(const Pipeline&) = delete;
 
   void start();
+  // Stops the tracker (no more training pairs) and the pulse train (the output is left low) at once;
+  // the GPS client, whose stop may wait for a connection attempt, runs on until stop().
+  void halt() noexcept;
   // Stops every thread; the output is left low.
   void stop() noexcept;
   void set_tunables(const PipelineTunables& tunables) noexcept;
