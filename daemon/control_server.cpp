@@ -19,6 +19,7 @@
 #include <spdlog/spdlog.h>
 
 #include "daemon/control_protocol.hpp"
+#include "daemon/log_limiter.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -210,20 +211,39 @@ void ControlServer::run() noexcept {
     return;
   }
   epoll_event events[32];
+  // Out of file descriptors (or memory), accept() fails while the listening socket stays readable: it
+  // leaves the epoll set for a second instead of waking it at once, forever.
+  bool accept_paused = false;
+  auto accept_resume = std::chrono::steady_clock::now();
+  LogLimiter accept_limiter;
   while (running_.load()) {
-    const int n = ::epoll_wait(epoll_fd_, events, 32, 1000);
+    const int n = ::epoll_wait(epoll_fd_, events, 32, accept_paused ? 100 : 1000);
     if (n < 0 && errno != EINTR) {
       spdlog::error("control: epoll_wait failed: {}", std::strerror(errno));
       break;
     }
     const auto now = std::chrono::steady_clock::now();
+    if (accept_paused && now >= accept_resume && add_fd(listen_fd_, EPOLLIN)) accept_paused = false;
     for (int i = 0; i < n; ++i) {
       const int fd = events[i].data.fd;
       if (fd == wake_fd_) continue;
       if (fd == listen_fd_) {
         for (;;) {
           const int cfd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-          if (cfd < 0) break;
+          if (cfd < 0) {
+            const int err = errno;
+            if (err == EAGAIN || err == EWOULDBLOCK || err == EINTR || err == ECONNABORTED) break;
+            if (err == EMFILE || err == ENFILE || err == ENOBUFS || err == ENOMEM) {
+              ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, listen_fd_, nullptr);
+              accept_paused = true;
+              accept_resume = now + std::chrono::seconds(1);
+              std::uint64_t suppressed = 0;
+              if (accept_limiter.allow("accept", suppressed))
+                spdlog::warn("control: cannot accept a connection: {}; new connections wait a second",
+                             std::strerror(err));
+            }
+            break;
+          }
           if (clients.size() >= limits_.max_clients) {
             static constexpr char kBusy[] = "{\"ok\":false,\"error\":\"too many clients\",\"v\":1}\n";
             [[maybe_unused]] const ssize_t w =

@@ -1,8 +1,14 @@
 #include <catch2/catch.hpp>
 
+#include <sys/resource.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
 
 #include <atomic>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <thread>
@@ -156,6 +162,55 @@ TEST_CASE("control: clients beyond the limit are refused with an error") {
   REQUIRE(line.has_value());
   CHECK(json::parse(*line)["error"] == "too many clients");
   CHECK(c.closed_by_peer());
+}
+
+TEST_CASE("control: out of file descriptors the server waits instead of spinning, then serves again") {
+  TempDir dir;
+  const std::string path = (dir / "ctl.sock").string();
+  ControlServer server(path, EchoHandler{});
+  server.start();
+  const int s = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  REQUIRE(s >= 0);
+  // Use up this process's descriptors (the server runs in it), under a lowered limit.
+  rlimit old{};
+  REQUIRE(::getrlimit(RLIMIT_NOFILE, &old) == 0);
+  rlimit low = old;
+  low.rlim_cur = std::min<rlim_t>(old.rlim_cur, 512);
+  REQUIRE(::setrlimit(RLIMIT_NOFILE, &low) == 0);
+  std::vector<int> hogs;
+  for (int fd; (fd = ::dup(s)) >= 0;)
+    hogs.push_back(fd);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::connect(s, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);  // queued: not accepted
+  // accept() now fails with EMFILE while the listening socket stays readable: a server that kept it in
+  // its epoll set would spin a core meanwhile.
+  const auto cpu = [] {
+    timespec ts{};
+    ::clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+  };
+  const double cpu0 = cpu();
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  const double busy = cpu() - cpu0;
+  for (int fd : hogs)
+    ::close(fd);
+  REQUIRE(::setrlimit(RLIMIT_NOFILE, &old) == 0);
+  INFO("CPU seconds used over one second without descriptors: " << busy);
+  CHECK(busy < 0.3);
+  // Descriptors back: the waiting connection is accepted and served.
+  const std::string request = "{\"cmd\":\"after\"}\n";
+  REQUIRE(::send(s, request.data(), request.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(request.size()));
+  timeval tv{5, 0};
+  ::setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  std::string reply;
+  char buf[256];
+  for (ssize_t n; reply.find('\n') == std::string::npos && (n = ::recv(s, buf, sizeof buf, 0)) > 0;)
+    reply.append(buf, static_cast<std::size_t>(n));
+  ::close(s);
+  REQUIRE(reply.find('\n') != std::string::npos);
+  CHECK(json::parse(reply.substr(0, reply.find('\n')))["echo"] == "after");
 }
 
 TEST_CASE("control: a stuck client never blocks the others") {
