@@ -231,6 +231,10 @@ void Pipeline::Impl::tracker_loop() noexcept {
   auto backoff = std::chrono::milliseconds(500);
   bool audio_was_up = false;
   bool audio_interrupted = false;  // the open capture lost its device and is being reopened
+  // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
+  // the tracker has been silent for longer than audio ever pauses.
+  const double no_audio_step_s = 2.0 * config.tracker.hop + config.tracker.window;
+  double audio_stall_s = no_audio_step_s;
 
   const auto step = [&](double t, double freq, double snr, bool tracked) {
     // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
@@ -284,6 +288,9 @@ void Pipeline::Impl::tracker_loop() noexcept {
         stream_started = false;
         audio_was_up = true;
         block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
+        // Audio arrives a period at a time: only a wait longer than two of them is a stall.
+        audio_stall_s = 2.0 * config.tracker.hop + config.tracker.window +
+                        2.0 * capture->period_frames() / static_cast<double>(capture->rate());
       } else {
         std::string error;
         {
@@ -339,7 +346,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
       }
     }
     // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
-    if (!got_points && now - last_step_t > 2.0 * config.tracker.hop + config.tracker.window) {
+    if (!got_points && now - last_step_t > (tracker ? audio_stall_s : no_audio_step_s)) {
       step(now - config.tracker.window / 2.0, kNan, kNan, false);
     }
 
