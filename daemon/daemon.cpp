@@ -136,6 +136,12 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
       spdlog::warn("audio: the tracker fell behind, {} frames dropped at the ring (total {})",
                    now.ring_drops - before.ring_drops, now.ring_drops);
   }
+  if (now.pairs_lost > before.pairs_lost) {
+    std::uint64_t suppressed = 0;
+    if (limiter.allow("pairs", suppressed))
+      spdlog::warn("training: {} pair(s) lost waiting for the main thread (total {})",
+                   now.pairs_lost - before.pairs_lost, now.pairs_lost);
+  }
 }
 
 void Daemon::Impl::load_state() {
@@ -386,6 +392,7 @@ int Daemon::run() {
       }
     }
     const auto now = Clock::now();
+    d.pipeline->drain_pairs();
     const PipelineSnapshot snap = d.pipeline->snapshot();
     // The watchdog is fed only while every pipeline thread shows a recent heartbeat: a hung thread
     // lets systemd restart the daemon.
@@ -416,6 +423,7 @@ int Daemon::run() {
   // (an idle-priority thread) or a GPS client inside a connection attempt may outlast systemd's stop
   // timeout, and its SIGKILL must not cost the pairs since the last periodic save.
   d.pipeline->halt();  // output left low
+  d.pipeline->drain_pairs();
   d.save_store("shutdown");
   {
     const auto lock = d.model.lock_writes();

@@ -97,6 +97,11 @@ struct Pipeline::Impl {
   std::atomic<double> track_snr{kNan};
   std::atomic<bool> track_confident{false};
   std::atomic<std::uint64_t> pairs_added{0};
+  std::atomic<std::uint64_t> pairs_lost{0};  // the main thread did not drain them in time
+  // Training pairs from the tracker thread to the main thread, which adds them to the store: the
+  // tracker never waits for the store's lock (held by the idle-priority retrainer while it copies, or
+  // by a save), so no other process's load can stall it through a priority inversion.
+  SpscRing<Sample> pairs{1024};
   std::atomic<double> last_fix_speed{kNan};  // m/s of the last usable fix
   std::atomic<std::int64_t> last_fix_ns{0};  // its receive time, 0 = none yet
   std::atomic<std::uint64_t> ring_drops{0};
@@ -372,7 +377,8 @@ void Pipeline::Impl::tracker_loop() noexcept {
         if (tracker && std::isfinite(served) && f.t <= served) {
           const TrackPoint p = tracker->at(f.t);
           if (p.tracked && std::isfinite(p.freq) && p.snr_db >= min_snr_db.load(std::memory_order_relaxed)) {
-            if (store.add({f.wall, f.speed, p.freq})) pairs_added.fetch_add(1, std::memory_order_relaxed);
+            if (!pairs.try_push(Sample{f.wall, f.speed, p.freq}))
+              pairs_lost.fetch_add(1, std::memory_order_relaxed);
           }
         } else if (now - f.t < kPairWait) {
           pending[keep++] = f;
@@ -425,6 +431,17 @@ void Pipeline::start() {
   d.stop.store(false);
   d.tracker_beat.store(monotonic_ns());
   d.tracker_thread = std::thread([&d] { d.tracker_loop(); });
+}
+
+std::size_t Pipeline::drain_pairs() {
+  Impl& d = *impl_;
+  std::size_t added = 0;
+  while (Sample* p = d.pairs.front()) {
+    if (d.store.add(*p)) ++added;
+    d.pairs.pop();
+  }
+  d.pairs_added.fetch_add(added, std::memory_order_relaxed);
+  return added;
 }
 
 void Pipeline::halt() noexcept {
@@ -512,6 +529,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   s.tracker_snr_db = d.track_snr.load(std::memory_order_relaxed);
   s.tracker_confident = d.track_confident.load(std::memory_order_relaxed);
   s.pairs_added = d.pairs_added.load(std::memory_order_relaxed);
+  s.pairs_lost = d.pairs_lost.load(std::memory_order_relaxed);
   if (d.tracker_thread.joinable())
     beats.push_back({"tracker", d.tracker_beat.load(std::memory_order_relaxed)});
   s.stalled = stalled_threads(beats, now);

@@ -40,6 +40,7 @@ struct PipelineSnapshot {
   bool tracker_confident = false;
   // Training.
   std::uint64_t pairs_added = 0;
+  std::uint64_t pairs_lost = 0;  // made while the main thread did not take them (it was held up)
   // Threads whose heartbeat is stale (empty = all alive).
   std::vector<std::string> stalled;
   std::vector<std::string> missing;  // components not built into this daemon
@@ -59,6 +60,10 @@ class Pipeline {
   Pipeline& operator=(const Pipeline&) = delete;
 
   void start();
+  // Moves the training pairs the tracker has made since the last call into the store (the main
+  // thread's job, at least every few seconds: the hand-over holds about 100 s of 10 Hz fixes).
+  // Returns how many the store took.
+  std::size_t drain_pairs();
   // Stops the tracker (no more training pairs) and the pulse train (the output is left low) at once;
   // the GPS client, whose stop may wait for a connection attempt, runs on until stop().
   void halt() noexcept;
