@@ -202,6 +202,9 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   REQUIRE(before.is_object());
   const std::vector<double> thetas_before = thetas(before);
   REQUIRE(!thetas_before.empty());
+  // Live learning: fixes paired with the tracked engine frequency reached the training store (1 Hz GPS
+  // over minutes of driving with a fix).
+  CHECK(before.value("training_samples", 0) >= 30);
   REQUIRE(work.harness("kill-daemon " + wd).status == 0);
   const Result restarted = work.harness("restart " + wd);
   INFO(restarted.out);
