@@ -657,6 +657,12 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     if (o == 1) continue;
     const double centre = kOrder[o] * f0 / df;
     const int reach = static_cast<int>(std::ceil(1.5 * bin / df));
+    // An order at or above the decimated signal's Nyquist frequency is not in the spectrum (a low input
+    // rate): it cannot pull the fit, nor be looked up.
+    if (centre + reach > nfft / 2 - 1) {
+      use[o] = false;
+      continue;
+    }
     int best = static_cast<int>(std::lround(centre));
     for (int k = std::max(1, best - reach); k <= std::min(nfft / 2 - 1, best + reach); ++k)
       if (power[static_cast<std::size_t>(k)] > power[static_cast<std::size_t>(best)]) best = k;
@@ -958,10 +964,13 @@ std::string SlidingDftTracker::validate(const TrackerConfig& c) {
     return format("hop %g s is outside (0, 60] s", c.hop_s);
   if (c.hop_s * c.sample_rate_hz < 1.0)
     return format("hop %g s is shorter than one frame at %g Hz", c.hop_s, c.sample_rate_hz);
-  if (!finite(c.max_slew_hz_per_s) || c.max_slew_hz_per_s < 0)
-    return format("max slew %g Hz/s is not a non-negative number", c.max_slew_hz_per_s);
-  if (!finite(c.shift_slew_hz_per_s) || c.shift_slew_hz_per_s < 0)
-    return format("shift slew %g Hz/s is not a non-negative number", c.shift_slew_hz_per_s);
+  // No engine's frequency changes by more than some hundreds of Hz per second; the bound keeps the gates
+  // (in bins) far from integer overflow.
+  constexpr double kMaxSlew = 1e5;  // Hz/s
+  if (!finite(c.max_slew_hz_per_s) || c.max_slew_hz_per_s < 0 || c.max_slew_hz_per_s > kMaxSlew)
+    return format("max slew %g Hz/s is outside [0, %g] Hz/s", c.max_slew_hz_per_s, kMaxSlew);
+  if (!finite(c.shift_slew_hz_per_s) || c.shift_slew_hz_per_s < 0 || c.shift_slew_hz_per_s > kMaxSlew)
+    return format("shift slew %g Hz/s is outside [0, %g] Hz/s", c.shift_slew_hz_per_s, kMaxSlew);
   if (!finite(c.history_s) || c.history_s < 0 || c.history_s > 60)
     return format("history %g s is outside [0, 60] s", c.history_s);
   return {};

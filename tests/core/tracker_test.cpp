@@ -239,6 +239,12 @@ TEST_CASE("tracker: invalid configurations are rejected with a reason") {
   rejected(c, "band");
   c = config_at(NAN);
   rejected(c, "sample rate");
+  c = config_at(48000.0);
+  c.max_slew_hz_per_s = 1e12;  // its gate in bins would overflow an int
+  rejected(c, "max slew");
+  c = config_at(48000.0);
+  c.shift_slew_hz_per_s = 1e12;
+  rejected(c, "shift slew");
   std::string error;
   CHECK(SlidingDftTracker::create(config_at(5100.0), error) != nullptr);
   CHECK(error.empty());

@@ -211,6 +211,16 @@ TEST_CASE("track: silence and clipping give rows and no crash") {
   CHECK(hit_rate(rows(c), truth, 0.5, 1.0) >= 0.9);
 }
 
+TEST_CASE("track: a WAV sampled barely above the band is tracked without reading past the spectrum") {
+  // At 520 Hz the engine's 2nd and 3rd harmonics lie above Nyquist: they are left out of the fit.
+  TempDir dir;
+  const sim::FrequencyTrajectory truth = [](double) { return 80.0; };
+  const auto wav = make_wav(dir, "slow.wav", engine(520.0, 3.0, truth, 3), 1, 520);
+  const Result r = run(dir, "'" + wav + "'");
+  REQUIRE(r.status == 0);
+  CHECK(rows(r).size() > 20);
+}
+
 TEST_CASE("track: bad input gives a one-line error and exit status 2") {
   TempDir dir;
   const sim::FrequencyTrajectory truth = [](double) { return 100.0; };

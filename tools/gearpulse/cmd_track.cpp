@@ -109,6 +109,7 @@ int run_track(const TrackOptions& o) {
     throw UsageError(o.file + ": truncated: the data chunk declares " + std::to_string(declared) +
                      " bytes, the file holds " + std::to_string(actual));
   if (info.frames <= 0 || info.channels <= 0) throw UsageError(o.file + ": no audio frames");
+  if (o.channel < -1) throw UsageError("--channel must be 0 or more (leave it out to mix all channels)");
   if (o.channel >= info.channels)
     throw UsageError(o.file + ": --channel " + std::to_string(o.channel) + " but the file has " +
                      std::to_string(info.channels) + " channel(s)");
