@@ -1,7 +1,9 @@
 #include "core/gear_model.hpp"
 
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
+#include <string>
 
 namespace gearpulse {
 namespace {
@@ -43,11 +45,13 @@ nlohmann::json model_to_json(const GearModel& model) {
 GearModel model_from_json(const nlohmann::json& json) {
   if (!json.is_object()) throw std::invalid_argument("model: not a JSON object");
   if (!json.contains("version") || !json["version"].is_number_integer() ||
-      json["version"].get<int>() != GearModel::kVersion) {
+      json["version"].get<std::int64_t>() != GearModel::kVersion) {
     throw std::invalid_argument("model: unsupported or missing version (expected 1)");
   }
   if (!json.contains("gears") || !json["gears"].is_array())
     throw std::invalid_argument("model: 'gears' is not a list");
+  if (json["gears"].size() > GearModel::kMaxGears)
+    throw std::invalid_argument("model: more than " + std::to_string(GearModel::kMaxGears) + " gears");
   GearModel model;
   double previous = 0.0;
   for (const auto& g : json["gears"]) {
@@ -56,6 +60,9 @@ GearModel model_from_json(const nlohmann::json& json) {
     gear.theta = finite_number(g, "theta", true);
     gear.weight = finite_number(g, "weight", false);
     gear.std_error = finite_number(g, "stderr", false);
+    if (gear.weight < 0.0 || gear.weight > 1.0)
+      throw std::invalid_argument("model: a gear's weight is outside [0, 1]");
+    if (gear.std_error < 0.0) throw std::invalid_argument("model: a gear's stderr is negative");
     if (gear.theta <= previous)
       throw std::invalid_argument("model: theta must be positive and ascending (eq. 5)");
     previous = gear.theta;
@@ -63,11 +70,15 @@ GearModel model_from_json(const nlohmann::json& json) {
   }
   model.sigma_speed = finite_number(json, "sigma_speed", false);
   model.sigma_freq = finite_number(json, "sigma_freq", false);
+  if (model.sigma_speed < 0.0 || model.sigma_freq < 0.0)
+    throw std::invalid_argument("model: 'sigma_speed' and 'sigma_freq' must not be negative");
   const double samples = finite_number(json, "samples", false);
-  if (samples < 0) throw std::invalid_argument("model: 'samples' is negative");
+  if (samples < 0 || samples > 1e15) throw std::invalid_argument("model: 'samples' is outside [0, 1e15]");
   model.samples = static_cast<std::size_t>(samples);
   model.log_likelihood = finite_number(json, "log_likelihood", false);
   model.outlier_weight = finite_number(json, "outlier_weight", false);
+  if (model.outlier_weight < 0.0 || model.outlier_weight > 1.0)
+    throw std::invalid_argument("model: 'outlier_weight' is outside [0, 1]");
   if (auto it = json.find("method"); it != json.end() && it->is_string())
     model.method = it->get<std::string>();
   if (auto it = json.find("reason"); it != json.end() && it->is_string())

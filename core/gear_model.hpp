@@ -18,10 +18,11 @@ struct Gear {
 
 struct GearModel {
   static constexpr int kVersion = 1;
-  std::vector<Gear> gears;   // ascending theta, constraint (5)
-  double sigma_speed = 0.0;  // sigma_v, m/s
-  double sigma_freq = 0.0;   // sigma_s, Hz
-  std::size_t samples = 0;   // samples used by the fit
+  static constexpr std::size_t kMaxGears = 12;  // the most the estimator fits and the synthesis carries
+  std::vector<Gear> gears;                      // ascending theta, constraint (5)
+  double sigma_speed = 0.0;                     // sigma_v, m/s
+  double sigma_freq = 0.0;                      // sigma_s, Hz
+  std::size_t samples = 0;                      // samples used by the fit
   double log_likelihood = 0.0;
   // Fields beyond the contract's minimum; readers ignore what they do not know.
   double outlier_weight = 0.0;                      // beta of eq. (6)

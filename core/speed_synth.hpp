@@ -72,7 +72,7 @@ struct SynthTuning {
 
 class SpeedSynthesizer {
  public:
-  static constexpr int kMaxGears = 12;
+  static constexpr int kMaxGears = static_cast<int>(GearModel::kMaxGears);
 
   explicit SpeedSynthesizer(std::shared_ptr<const GearModel> model = nullptr, const SynthTuning& tuning = {});
 

@@ -1,5 +1,7 @@
 #include <catch2/catch.hpp>
 
+#include <string>
+
 #include "core/gear_model.hpp"
 
 using gearpulse::GearModel;
@@ -26,4 +28,28 @@ TEST_CASE("model: rejects unordered, non-positive and versionless models") {
   CHECK_THROWS_AS(gearpulse::parse_model(R"({"gears":[]})"), std::invalid_argument);
   CHECK_THROWS_AS(gearpulse::parse_model("not json"), std::invalid_argument);
   CHECK(gearpulse::parse_model(R"({"version":1,"gears":[]})").empty());
+}
+
+TEST_CASE("model: rejects what no fit writes: a wrapped version, too many gears, negative noise or weights") {
+  const auto rejected = [](const std::string& text) {
+    INFO(text);
+    CHECK_THROWS_AS(gearpulse::parse_model(text), std::invalid_argument);
+  };
+  rejected(R"({"version":4294967297,"gears":[]})");  // 2^32 + 1 is not 1
+  std::string many = R"({"version":1,"gears":[)";
+  for (int i = 1; i <= 13; ++i)
+    many += std::string(i > 1 ? "," : "") + R"({"theta":)" + std::to_string(0.05 * i) + "}";
+  rejected(many + "]}");
+  rejected(R"({"version":1,"gears":[{"theta":0.1}],"sigma_speed":-1})");
+  rejected(R"({"version":1,"gears":[{"theta":0.1}],"sigma_freq":-0.5})");
+  rejected(R"({"version":1,"gears":[{"theta":0.1,"weight":-0.2}]})");
+  rejected(R"({"version":1,"gears":[{"theta":0.1,"weight":1.5}]})");
+  rejected(R"({"version":1,"gears":[{"theta":0.1,"stderr":-1}]})");
+  rejected(R"({"version":1,"gears":[{"theta":0.1}],"outlier_weight":5})");
+  rejected(R"({"version":1,"gears":[{"theta":0.1}],"samples":1e300})");
+  // Twelve gears, the most a fit gives, are fine.
+  std::string twelve = R"({"version":1,"gears":[)";
+  for (int i = 1; i <= 12; ++i)
+    twelve += std::string(i > 1 ? "," : "") + R"({"theta":)" + std::to_string(0.05 * i) + "}";
+  CHECK(gearpulse::parse_model(twelve + "]}").gears.size() == 12);
 }
