@@ -393,7 +393,9 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
 void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
   double mean = 0.0, sigma = tuning_.accel_sigma;
   if (to == 0) {
-    mean = coast_count_ > 0.0 ? coast_mean_ : tuning_.coast_accel;
+    // Declutched, nothing drives the car: whatever GPS taught (a gear mistaken for the clutch while
+    // accelerating), it does not gain speed on its own.
+    mean = coast_count_ > 0.0 ? std::min(coast_mean_, 0.0) : tuning_.coast_accel;
     // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
     const double stopping = std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0);
     mean = std::min(mean, mean + stopping * (tuning_.stop_accel - mean));

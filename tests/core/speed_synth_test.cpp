@@ -334,6 +334,22 @@ TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then
   }
 }
 
+TEST_CASE("synth: coasting never gains speed, whatever GPS taught while no gear explained the revs") {
+  // GPS ramps up at 1 m/s^2 while the engine frequency stays put (a slipping clutch, or a tracker stuck
+  // on a fixed tone): no gear explains it, the filter reads declutched and GPS shows it gaining speed.
+  SpeedSynthesizer synth(model_of(kHatch));
+  double top = 0.0;
+  for (int k = 0; k < 20; ++k)
+    synth.step(k, 5.0 + k, 50.0);
+  const double last_gps = 24.0;
+  for (int k = 20; k < 90; ++k) {
+    const SynthOutput out = synth.step(k, kMissing, 50.0);
+    top = std::max(top, out.speed);
+  }
+  INFO("highest outage speed " << top << " m/s after GPS's last " << last_gps);
+  CHECK(top <= last_gps + 3.0);
+}
+
 TEST_CASE("synth: moving off inside an outage follows first gear") {
   SpeedSynthesizer synth(model_of(kHatch));
   // Stand at the light (GPS learns the idle), lose GPS, then move off: revs rise with the clutch slipping,
