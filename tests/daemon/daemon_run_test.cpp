@@ -2,10 +2,15 @@
 #include <catch2/catch.hpp>
 
 #include <signal.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
 
 #include <chrono>
+#include <cstring>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <ctime>
 
@@ -280,6 +285,43 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
 
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
+}
+
+TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of aborting") {
+  // Something else on the socket (or a broken daemon) answers valid JSON that is not a status.
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, sock.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
+  REQUIRE(::listen(listener, 4) == 0);
+  const std::vector<std::string> replies = {R"([1,2])", R"({"ok":"yes"})", R"({"ok":false,"error":5})",
+                                            R"({"ok":true,"gears":[1]})"};
+  std::thread server([&] {
+    for (const std::string& reply : replies) {
+      const int c = ::accept(listener, nullptr, nullptr);
+      if (c < 0) return;
+      char buf[512];
+      (void)!::read(c, buf, sizeof buf);
+      const std::string line = reply + "\n";
+      (void)!::write(c, line.data(), line.size());
+      ::close(c);
+    }
+  });
+  for (const std::string& reply : replies) {
+    INFO(reply);
+    Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
+    const auto rc = p.wait();
+    REQUIRE(rc.has_value());
+    CHECK(*rc == 1);
+    CHECK(read_text(dir / "out.txt").rfind("gearpulsectl: ", 0) == 0);
+  }
+  server.join();
+  ::close(listener);
 }
 
 TEST_CASE("daemon: SIGHUP applies what it can and names what needs a restart") {

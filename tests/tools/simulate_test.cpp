@@ -173,8 +173,10 @@ TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
   TempDir dir;
   REQUIRE(!dir.path.empty());
   const std::string out = " --out " + (dir.path / "x").string();
-  for (const std::string args : {" --outage 20", " --outage a:5", " --outage 10:-3", " --vehicle nosuchcar",
-                                 " --style racing", " --duration 2", " --rate 10"}) {
+  for (const std::string args :
+       {" --outage 20", " --outage a:5", " --outage 10:-3", " --outage 10:1e308", " --vehicle nosuchcar",
+        " --style racing", " --duration 2", " --duration 1e308", " --rate 10", " --snr nan", " --tone 1e9",
+        " --tone nan", " --pulses-per-km -5"}) {
     const Result r = run(kCli + " simulate" + out + args);
     INFO(args << ": " << r.out);
     CHECK(r.status == 2);
@@ -235,4 +237,10 @@ TEST_CASE("feed: a missing input or a bad format is an error", "[feed]") {
   CHECK(r.out.find("odd.raw") != std::string::npos);
   r = run(kCli + " feed --format s24 " + (dir.path / "odd.raw").string() + " x");
   CHECK(r.status == 2);
+  // Sizes that overflow a frame's byte count are refused, not divided by.
+  for (const char* size : {" --channels 1073741824", " --channels 536870912", " --period 2147483647"}) {
+    r = run(kCli + " feed --format s32" + size + " " + (dir.path / "odd.raw").string() + " x");
+    INFO(size << ": " << r.out);
+    CHECK(r.status == 2);
+  }
 }

@@ -109,16 +109,27 @@ int count_shifts(const std::vector<sim::TruthRow>& rows, const sim::Outage& outa
 
 int run_simulate(const SimulateOptions& o) {
   if (o.out.empty()) throw UsageError("simulate: --out DIR is required");
-  if (!(o.duration >= 10.0)) throw UsageError("simulate: --duration must be at least 10 s");
+  constexpr double kMaxDuration = 7.0 * 86400.0;  // a week of driving, far beyond any test's need
+  if (!(o.duration >= 10.0 && o.duration <= kMaxDuration))
+    throw UsageError("simulate: --duration must be 10 s to a week (604800 s)");
+  if (!std::isfinite(o.snr_db) || o.snr_db < -60.0 || o.snr_db > 120.0)
+    throw UsageError("simulate: --snr must be -60..120 dB");
+  if (!std::isfinite(o.pulses_per_km) || o.pulses_per_km <= 0.0)
+    throw UsageError("simulate: --pulses-per-km must be positive");
   if (!(o.idle_start >= 0.0 && o.idle_start < o.duration)) {
     throw UsageError("simulate: --idle-start must be 0 or more and below --duration");
   }
   if (o.rate < 4000 || o.rate > 192000) throw UsageError("simulate: --rate must be 4000..192000 Hz");
+  if (!std::isfinite(o.tone_hz) || o.tone_hz < 0.0 || o.tone_hz >= 0.5 * o.rate)
+    throw UsageError("simulate: --tone must be 0 (none) or a frequency below half of --rate");
   sim::Outage outage;
   sim::Vehicle vehicle;
   sim::DrivingStyle style{};
   try {
     if (!o.outage.empty()) outage = sim::parse_outage(o.outage);
+    if (!(outage.start >= 0.0 && outage.length >= 0.0 && outage.start + outage.length <= kMaxDuration))
+      throw std::invalid_argument("outage '" + o.outage +
+                                  "': START and LEN must be 0 or more, within a week");
     vehicle = sim::vehicle_preset(o.vehicle);
     style = sim::parse_style(o.style);
   } catch (const std::invalid_argument& e) {

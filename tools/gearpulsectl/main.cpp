@@ -203,5 +203,9 @@ int main(int argc, char** argv) {
   } catch (const Failure& f) {
     std::cerr << "gearpulsectl: " << f.message << "\n";
     return f.status;
+  } catch (const nlohmann::json::exception& e) {
+    // Valid JSON of another shape: not a gearpulsed of this protocol (or a broken one).
+    std::cerr << "gearpulsectl: unexpected reply from " << socket << " (" << e.what() << ")\n";
+    return 1;
   }
 }
