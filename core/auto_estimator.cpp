@@ -264,8 +264,9 @@ MixtureParams without(const MixtureParams& p, int drop) {
 // the sample before or after it, while shifts, clutch slip and an OBD logger's skewed polls give isolated
 // ratios. The tolerance widens at low speed where a few tenths of m/s of speed error (GPS noise, integer
 // km/h) move the ratio. Without usable time stamps every moving sample counts.
-std::vector<double> steady_log_ratios(const MixtureData& all) {
+std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
   std::vector<double> out;
+  timed = false;
   const std::size_t n = all.size();
   auto moving = [&](std::size_t k) { return all.v[k] > kMovingSpeed; };
   std::vector<double> gaps;
@@ -280,6 +281,7 @@ std::vector<double> steady_log_ratios(const MixtureData& all) {
       if (moving(k)) out.push_back(std::log(all.v[k] / all.s[k]));
     return out;
   }
+  timed = true;
   std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
   const double max_gap = 3.0 * gaps[gaps.size() / 2];
   auto agree = [&](std::size_t k, std::size_t j, double r) {
@@ -450,7 +452,18 @@ GearModel fit_auto(const MixtureData& input, int gears) {
         all.size() == 0 ? "no samples with both speed and frequency" : "too few samples while moving";
     return model;
   }
-  std::vector<double> steady = steady_log_ratios(all);
+  bool timed = false;
+  std::vector<double> steady = steady_log_ratios(all, timed);
+  // In gear the ratio holds from one sample to the next. A timed log in which hardly any sample agrees
+  // with a neighbour has no engaged gear to learn from: noise, or two channels that do not belong
+  // together (real drives: most moving samples agree; shifts and clutch make the rest).
+  constexpr double kMinSteadyShare = 0.1;
+  if (timed &&
+      static_cast<double>(steady.size()) < kMinSteadyShare * static_cast<double>(log_ratios.size())) {
+    model.reason =
+        "the speed/frequency ratio hardly ever holds from one sample to the next (no gear engaged)";
+    return model;
+  }
   if (steady.size() < 30) steady = log_ratios;
   const MixtureData work = subsample(all, kWorkingSamples);
   const LadderJudge judge(work, all.size(), steady);

@@ -115,12 +115,43 @@ GearModel finish_model(const MixtureData& data, const MixtureParams& p, const st
 
 }  // namespace detail
 
+// Logs no gear ladder can be read from: every sample at one instant, or a speed or an engine frequency
+// that hardly changes while the car moves (a ladder is read from the two changing together; a frequency
+// that changes at one speed is no more than one gear told from its neighbour). Real drives spread both
+// widely (the Etios logs: engine frequency 1.7-2.7x from the 10th to the 90th percentile). Returns the
+// reason, empty if the log is usable.
+std::string detail::degenerate_log(const detail::MixtureData& data) {
+  if (data.t.size() == data.size() && data.size() >= 2 &&
+      std::all_of(data.t.begin(), data.t.end(), [&](double t) { return t == data.t.front(); }))
+    return "every sample has the same time stamp";
+  std::vector<double> moving_freq, moving_speed;
+  for (std::size_t k = 0; k < data.size(); ++k) {
+    if (data.v[k] > 1.0) {
+      moving_freq.push_back(data.s[k]);
+      moving_speed.push_back(data.v[k]);
+    }
+  }
+  if (moving_freq.size() < 30) return {};  // too little to judge: the fit says so itself
+  constexpr double kMinSpread = 1.15;
+  const auto narrow = [](std::vector<double>& x) {
+    std::sort(x.begin(), x.end());
+    return x[x.size() - 1 - x.size() / 10] < kMinSpread * x[x.size() / 10];
+  };
+  if (narrow(moving_freq))
+    return "the engine frequency hardly changes while the car moves (10th-90th percentile within 15 %): no "
+           "gear ladder can be read from it";
+  if (narrow(moving_speed))
+    return "the speed hardly changes (10th-90th percentile within 15 %): no gear ladder can be read from it";
+  return {};
+}
+
 FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& options) {
   if (!options.ratios.empty()) {
     if (options.ratios.size() > 11) throw std::invalid_argument("fit: at most 11 ratios (12 gears)");
+    // Adjacent gears of a road vehicle differ by some percent up to about twice (Table 1: 1.22-1.68).
     for (double c : options.ratios) {
-      if (!std::isfinite(c) || c <= 1.0)
-        throw std::invalid_argument("fit: every ratio must be finite and > 1");
+      if (!std::isfinite(c) || c < 1.05 || c > 4.0)
+        throw std::invalid_argument("fit: every ratio must lie in [1.05, 4]");
     }
     if (options.gears != 0 && options.gears != static_cast<int>(options.ratios.size()) + 1)
       throw std::invalid_argument("fit: --gears must equal the number of ratios + 1");
@@ -136,7 +167,8 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   // fresh readings.
   double last_speed = -1.0, last_freq = -1.0;
   for (const Sample& s : samples) {
-    if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0) continue;
+    if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0 || !std::isfinite(s.speed / s.freq))
+      continue;
     if (s.speed == last_speed && s.freq == last_freq) continue;
     last_speed = s.speed;
     last_freq = s.freq;
@@ -145,12 +177,28 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     data.t.push_back(s.t);
   }
   FitResult result;
+  if (const std::string problem = detail::degenerate_log(data); !problem.empty()) {
+    result.model.method = options.ratios.empty() ? "auto" : "paper";
+    result.model.samples = data.size();
+    result.model.reason = problem;
+    return result;
+  }
   if (!options.ratios.empty()) {
     result.model = detail::fit_paper(data, options.ratios);
   } else {
     result.model = detail::fit_auto(data, options.gears);
   }
   if (result.model.method.empty()) result.model.method = options.ratios.empty() ? "auto" : "paper";
+  // A ladder is only handed out if it is one (eq. (5)): positive, finite, strictly ascending thetas. An
+  // optimiser driven to a bound by absurd data or priors gives no model rather than a broken one.
+  for (std::size_t i = 0; i < result.model.gears.size(); ++i) {
+    const double theta = result.model.gears[i].theta;
+    if (!std::isfinite(theta) || theta <= 0.0 || (i > 0 && theta <= result.model.gears[i - 1].theta)) {
+      result.model.gears.clear();
+      result.model.reason = "the fit did not reach a valid gear ladder (thetas not positive and ascending)";
+      break;
+    }
+  }
   if (result.model.samples == 0) result.model.samples = data.size();
   // The engine's idle, from the samples standing still: the speed synthesis needs it to tell a car at a
   // light from one rolling in a high gear before GPS has shown it standing.

@@ -21,6 +21,9 @@ struct IdleEstimate {
 // The engine's idle from the samples at rest, or nothing when fewer than min_samples of them.
 [[nodiscard]] std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t min_samples);
 
+// Why a log cannot hold a gear ladder (empty if it may): see estimator.cpp.
+[[nodiscard]] std::string degenerate_log(const MixtureData& data);
+
 // Paper mode: M = ratios.size() + 1, ratios top gear down (Table 2's c_i).
 [[nodiscard]] GearModel fit_paper(const MixtureData& data, const std::vector<double>& ratios);
 

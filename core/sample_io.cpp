@@ -142,10 +142,25 @@ class LogBuilder {
     if (log_.skipped.size() < options_.max_messages)
       log_.skipped.push_back(log_.name + ":" + std::to_string(line) + ": " + std::string(reason));
   }
-  // Returns false (and reports) when t runs backwards.
+  // Returns false (and reports) when t runs backwards or a value is beyond any road vehicle.
   bool add(std::size_t line, Sample s) {
+    // A road vehicle's speed, and an engine-related frequency (crank speed up to a redline of 30,000 rpm
+    // and its harmonics, or a tracked ripple): anything beyond is a unit mix-up or a corrupt cell.
+    constexpr double kMaxSpeed = 150.0;   // m/s (540 km/h)
+    constexpr double kMaxFreq = 20000.0;  // Hz
+    constexpr double kMinFreq = 1e-3;     // Hz: below it (but above 0, an engine at rest) nothing turns
+    char buf[96];
+    if (s.has_speed() && s.speed > kMaxSpeed) {
+      std::snprintf(buf, sizeof buf, "speed %.6g m/s is beyond any road vehicle", s.speed);
+      skip(line, buf);
+      return false;
+    }
+    if (s.has_freq() && (s.freq > kMaxFreq || (s.freq > 0.0 && s.freq < kMinFreq))) {
+      std::snprintf(buf, sizeof buf, "frequency %.6g Hz is outside any engine's", s.freq);
+      skip(line, buf);
+      return false;
+    }
     if (!log_.samples.empty() && s.t < log_.samples.back().t) {
-      char buf[96];
       std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", s.t, log_.samples.back().t);
       skip(line, buf);
       return false;

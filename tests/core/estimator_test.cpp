@@ -126,7 +126,8 @@ TEST_CASE("estimator: a log without stops or clutch-out samples still gets stand
   std::vector<Sample> samples;
   for (int k = 0; k < 2400; ++k) {
     const double f = freq(rng);
-    samples.push_back({static_cast<double>(k), theta[k % 3] * f + 0.05 * noise(rng), f + 0.2 * noise(rng)});
+    const int gear = (k / 20) % 3;  // 20 s in each gear
+    samples.push_back({static_cast<double>(k), theta[gear] * f + 0.05 * noise(rng), f + 0.2 * noise(rng)});
   }
   const FitResult fit = fit_gear_model(samples, {});
   REQUIRE(fit.model.gears.size() == 3);

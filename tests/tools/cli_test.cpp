@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -204,13 +205,70 @@ TEST_CASE("cli: a one-gear log gives a valid model and never a made-up ladder") 
   }
 }
 
+TEST_CASE("cli: logs no gearbox made give no ladder, with the reason") {
+  TempDir dir;
+  struct Case {
+    const char* name;
+    const char* reason;
+    std::function<std::string(int)> row;  // t,speed,freq of row i
+  };
+  const std::vector<Case> cases = {
+      // the engine held at one speed while the road speed cycles
+      {"const_freq", "engine frequency hardly changes",
+       [](int i) { return std::to_string(i) + "," + std::to_string(5 + (i / 5) % 10) + ",30"; }},
+      // one road speed while the engine frequency cycles
+      {"const_speed", "speed hardly changes",
+       [](int i) { return std::to_string(i) + ",12," + std::to_string(20 + (i / 5) % 10); }},
+      // every row at one instant
+      {"const_t", "same time stamp",
+       [](int i) { return "0," + std::to_string(5 + i % 10) + "," + std::to_string(20 + (i * 7) % 23); }},
+      // speed and frequency that do not belong together: the ratio never holds between rows
+      {"unrelated", "hardly ever holds",
+       [](int i) {
+         return std::to_string(i) + "," + std::to_string(2 + (i * 7919) % 30) + "," +
+                std::to_string(15 + (i * 104729) % 40);
+       }},
+  };
+  for (const Case& c : cases) {
+    INFO(c.name);
+    std::string text = "t,speed,freq\n";
+    for (int i = 0; i < 600; ++i)
+      text += c.row(i) + "\n";
+    write(dir.file(std::string(c.name) + ".csv"), text);
+    const Result r = run(dir, "fit " + dir.file(std::string(c.name) + ".csv"));
+    CHECK(r.status == 0);
+    const auto json = nlohmann::json::parse(r.out);
+    CHECK(json["gears"].empty());
+    CHECK(json.value("reason", "").find(c.reason) != std::string::npos);
+  }
+}
+
+TEST_CASE("cli: values beyond any vehicle are bad rows, and replay of extreme values stays well formed") {
+  TempDir dir;
+  write(dir.file("x.csv"), "t,speed,freq\n0,1e300,50\n1,10,1e300\n2,10,5e-324\n3,10,40\n");
+  const Result fit = run(dir, "fit " + dir.file("x.csv"));
+  CHECK(fit.err.find(dir.file("x.csv") + ":2: speed") != std::string::npos);
+  CHECK(fit.err.find(dir.file("x.csv") + ":3: frequency") != std::string::npos);
+  CHECK(fit.err.find(dir.file("x.csv") + ":4: frequency") != std::string::npos);
+  // The largest speed a row may carry, through replay's formatting.
+  const std::string model =
+      R"({"version":1,"gears":[{"theta":0.2,"weight":0.5},{"theta":0.4,"weight":0.5}],"sigma_speed":0.1,)"
+      R"("sigma_freq":0.2,"samples":100,"log_likelihood":0})";
+  write(dir.file("m.json"), model);
+  write(dir.file("y.csv"), "t,speed,freq\n0,150,50\n1,,50\n");
+  const Result replay = run(dir, "replay --model " + dir.file("m.json") + " " + dir.file("y.csv"));
+  CHECK(replay.status == 0);
+  CHECK(lines(replay.out) == 3);
+}
+
 TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
   TempDir dir;
   const std::string log = dir.file("x.csv");
   write(log, "t,speed,freq\n0,1,10\n");
   for (const std::string& args :
        {"fit --bogus " + log, "fit --gears x " + log, "fit --gears 99 " + log, "fit --ratios 1.2,abc " + log,
-        "fit --ratios 0.9 " + log, "fit --speed radar " + log, std::string("fit"), "replay " + log,
+        "fit --ratios 0.9 " + log, "fit --ratios 1e308,1e308 " + log, "fit --ratios 1.0000001 " + log,
+        "fit --speed radar " + log, std::string("fit"), "replay " + log,
         "replay --model " + log + " --frobnicate " + log}) {
     INFO(args);
     const Result r = run(dir, args);

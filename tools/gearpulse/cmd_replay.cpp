@@ -1,5 +1,6 @@
 // `gearpulse replay`: runs the daemon's speed synthesis over a sample log as if live and prints
 // t,speed,gear,source for every row (INTERFACES.md). Rows with an empty speed are GPS outages.
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -45,13 +46,13 @@ int run_replay(const ReplayCommand& cmd) {
 
   SpeedSynthesizer synth(model);
   std::string out = "t,speed,gear,source\n";
-  char row[128];
+  char row[512];  // room for any double in %.4f (at most 309 digits before the point)
   for (const Sample& s : log.samples) {
     const SynthOutput o = synth.step(s.t, s.speed, s.freq);
     const std::string_view source = source_name(o.source);
     const int n = std::snprintf(row, sizeof row, "%.10g,%.4f,%d,%.*s\n", s.t, o.speed, o.gear,
                                 static_cast<int>(source.size()), source.data());
-    out.append(row, static_cast<std::size_t>(n));
+    out.append(row, std::min(static_cast<std::size_t>(std::max(n, 0)), sizeof row - 1));
     if (out.size() > (1u << 16)) {
       std::fwrite(out.data(), 1, out.size(), stdout);
       out.clear();
