@@ -14,6 +14,7 @@
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <utility>
 
 #include "drivers/clock.hpp"
 #include "drivers/gpsd_client.hpp"
@@ -54,6 +55,20 @@ struct Recorder {
         std::count_if(reports.begin(), reports.end(), [](const GpsReport& r) { return r.usable(); }));
   }
 };
+
+// A listening TCP socket on 127.0.0.1 at a free port, for a fake gpsd that misbehaves.
+std::pair<int, int> loopback_listener() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  REQUIRE(fd >= 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  REQUIRE(::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0);
+  REQUIRE(::listen(fd, 4) == 0);
+  return {fd, ntohs(a.sin_port)};
+}
 
 GpsdConfig config_for(int port) {
   GpsdConfig c;
@@ -250,16 +265,7 @@ TEST_CASE("gpsd: real receiver logs deliver their RMC speeds") {
 
 TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") {
   // A fake gpsd: answers every connection with junk, a malformed TPV, binary noise, then one good TPV.
-  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
-  REQUIRE(listener >= 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
-  REQUIRE(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len) == 0);
-  REQUIRE(::listen(listener, 4) == 0);
-  const int port = ntohs(a.sin_port);
+  const auto [listener, port] = loopback_listener();
   std::atomic<bool> done{false};
   std::thread server([&] {
     while (!done) {
@@ -298,15 +304,7 @@ TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") 
 
 TEST_CASE("gpsd: a gpsd that greets and hangs up is retried with a growing delay, not hammered") {
   // A broken gpsd (or something else on its port): every connection gets gpsd's banner and is closed.
-  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
-  REQUIRE(listener >= 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
-  REQUIRE(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len) == 0);
-  REQUIRE(::listen(listener, 4) == 0);
+  const auto [listener, port] = loopback_listener();
   std::atomic<int> accepted{0};
   std::thread server([&] {
     for (int c; (c = ::accept(listener, nullptr, nullptr)) >= 0;) {
@@ -319,7 +317,7 @@ TEST_CASE("gpsd: a gpsd that greets and hangs up is retried with a growing delay
       ::close(c);
     }
   });
-  GpsdConfig cfg = config_for(ntohs(a.sin_port));  // backoff 50 ms doubling to 400 ms
+  GpsdConfig cfg = config_for(port);  // backoff 50 ms doubling to 400 ms
   GpsdClient client(cfg);
   client.start();
   std::this_thread::sleep_for(3s);
