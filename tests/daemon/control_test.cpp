@@ -165,6 +165,12 @@ TEST_CASE("control: clients beyond the limit are refused with an error") {
 }
 
 TEST_CASE("control: out of file descriptors the server waits instead of spinning, then serves again") {
+#if defined(__SANITIZE_ADDRESS__)
+  // The server logs while no descriptor is free, and the sanitizers' runtime checks the logger's types by
+  // probing memory through a pipe: without descriptors it reports every such check as a bad object.
+  WARN("skipped under the sanitizers: their runtime needs the file descriptors this test takes away");
+  return;
+#endif
   TempDir dir;
   const std::string path = (dir / "ctl.sock").string();
   ControlServer server(path, EchoHandler{});
