@@ -58,7 +58,7 @@ struct Result {
 
 Result run(const TempDir& dir, const std::string& args) {
   const std::string out = dir.file("stdout"), err = dir.file("stderr");
-  const std::string cmd = "'" + kTool + "' track " + args + " >'" + out + "' 2>'" + err + "'";
+  const std::string cmd = std::string("'") + kTool + "' track " + args + " >'" + out + "' 2>'" + err + "'";
   const int raw = std::system(cmd.c_str());
   Result r;
   r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
@@ -133,7 +133,7 @@ TEST_CASE("track: prints t freq snr_db rows for a mono WAV") {
   TempDir dir;
   const sim::FrequencyTrajectory truth = [](double t) { return 100.0 + 8.0 * t; };
   const auto wav = make_wav(dir, "mono.wav", engine(8000.0, 3.0, truth, 1), 1, 8000);
-  const Result r = run(dir, "'" + wav + "'");
+  const Result r = run(dir, std::string("'") + wav + "'");
   REQUIRE(r.status == 0);
   const auto lines = r.lines();
   REQUIRE_FALSE(lines.empty());
@@ -164,7 +164,7 @@ TEST_CASE("track: stereo WAV takes the chosen channel or the mix") {
   const Result r1 = run(dir, "--channel 1 '" + wav + "'");
   REQUIRE(r1.status == 0);
   CHECK(hit_rate(rows(r1), right, 0.5, 1.0) >= 0.9);
-  const Result mix = run(dir, "'" + wav + "'");
+  const Result mix = run(dir, std::string("'") + wav + "'");
   REQUIRE(mix.status == 0);
   CHECK(rows(mix).size() >= 28);
   check_one_line_error(run(dir, "--channel 2 '" + wav + "'"));
@@ -192,7 +192,7 @@ TEST_CASE("track: hop window and band options are honoured") {
 TEST_CASE("track: silence and clipping give rows and no crash") {
   TempDir dir;
   const auto silent = make_wav(dir, "silent.wav", std::vector<float>(5100 * 2, 0.0f), 1, 5100);
-  const Result r = run(dir, "'" + silent + "'");
+  const Result r = run(dir, std::string("'") + silent + "'");
   REQUIRE(r.status == 0);
   const auto v = rows(r);
   CHECK(v.size() >= 18);
@@ -206,7 +206,7 @@ TEST_CASE("track: silence and clipping give rows and no crash") {
   g.snr_db = 20.0;
   g.seed = 5;
   const auto clipped = make_wav(dir, "clipped.wav", sim::make_lighter_signal(g, truth, 3.0), 1, 8000);
-  const Result c = run(dir, "'" + clipped + "'");
+  const Result c = run(dir, std::string("'") + clipped + "'");
   REQUIRE(c.status == 0);
   CHECK(hit_rate(rows(c), truth, 0.5, 1.0) >= 0.9);
 }
@@ -216,7 +216,7 @@ TEST_CASE("track: a WAV sampled barely above the band is tracked without reading
   TempDir dir;
   const sim::FrequencyTrajectory truth = [](double) { return 80.0; };
   const auto wav = make_wav(dir, "slow.wav", engine(520.0, 3.0, truth, 3), 1, 520);
-  const Result r = run(dir, "'" + wav + "'");
+  const Result r = run(dir, std::string("'") + wav + "'");
   REQUIRE(r.status == 0);
   CHECK(rows(r).size() > 20);
 }
@@ -226,36 +226,36 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
   const sim::FrequencyTrajectory truth = [](double) { return 100.0; };
   const auto good = make_wav(dir, "good.wav", engine(8000.0, 2.0, truth, 6), 1, 8000);
   SECTION("missing file") {
-    check_one_line_error(run(dir, "'" + dir.file("absent.wav") + "'"));
+    check_one_line_error(run(dir, std::string("'") + dir.file("absent.wav") + "'"));
   }
   SECTION("empty file") {
     std::ofstream(dir.file("empty.wav")).close();
-    check_one_line_error(run(dir, "'" + dir.file("empty.wav") + "'"));
+    check_one_line_error(run(dir, std::string("'") + dir.file("empty.wav") + "'"));
   }
   SECTION("not audio at all") {
     std::ofstream(dir.file("text.wav")) << "t,speed,freq\n1,2,3\n";
-    check_one_line_error(run(dir, "'" + dir.file("text.wav") + "'"));
+    check_one_line_error(run(dir, std::string("'") + dir.file("text.wav") + "'"));
   }
   SECTION("truncated WAV") {
     const std::string bytes = slurp(good);
     std::ofstream(dir.file("cut.wav"), std::ios::binary) << bytes.substr(0, bytes.size() / 3);
-    const Result r = run(dir, "'" + dir.file("cut.wav") + "'");
+    const Result r = run(dir, std::string("'") + dir.file("cut.wav") + "'");
     check_one_line_error(r);
     CHECK(r.err.find("truncated") != std::string::npos);
   }
   SECTION("WAV with zero frames") {
     const auto wav = make_wav(dir, "zero.wav", {}, 1, 8000);
-    check_one_line_error(run(dir, "'" + wav + "'"));
+    check_one_line_error(run(dir, std::string("'") + wav + "'"));
   }
   SECTION("non-PCM WAV") {
     std::string bytes = slurp(good);
     bytes[20] = static_cast<char>(0x50);  // format tag 0x0050: MPEG, not PCM
     std::ofstream(dir.file("mpeg.wav"), std::ios::binary) << bytes;
-    check_one_line_error(run(dir, "'" + dir.file("mpeg.wav") + "'"));
+    check_one_line_error(run(dir, std::string("'") + dir.file("mpeg.wav") + "'"));
   }
   SECTION("rate too low for the band") {
     const auto wav = make_wav(dir, "low.wav", std::vector<float>(400 * 3, 0.1f), 1, 400);
-    const Result r = run(dir, "'" + wav + "'");
+    const Result r = run(dir, std::string("'") + wav + "'");
     check_one_line_error(r);
     CHECK(r.err.find("low.wav") != std::string::npos);
   }

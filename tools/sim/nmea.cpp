@@ -50,7 +50,12 @@ std::string nmea_sentence(std::string_view body) {
   unsigned sum = 0;
   for (const char c : body)
     sum ^= static_cast<unsigned char>(c);
-  return "$" + std::string(body) + format("*%02X\r\n", sum & 0xFFu);
+  std::string sentence;
+  sentence.reserve(body.size() + 6);
+  sentence += '$';
+  sentence += body;
+  sentence += format("*%02X\r\n", sum & 0xFFu);
+  return sentence;
 }
 
 std::vector<std::string> make_nmea_log(std::span<const NmeaEpoch> epochs, const NmeaTrack& track) {
