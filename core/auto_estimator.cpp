@@ -15,7 +15,6 @@ constexpr std::size_t kWorkingSamples = 16000;  // model selection runs on a sub
 constexpr int kEmIterations = 120;
 constexpr int kFullDataIterations = 4;
 constexpr std::size_t kClutchBins = 24;
-constexpr double kMovingSpeed = 1.0;  // m/s: only these samples seed the gear scales
 
 struct Peak {
   double log_ratio = 0.0;

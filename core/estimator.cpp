@@ -126,7 +126,7 @@ std::string detail::degenerate_log(const detail::MixtureData& data) {
     return "every sample has the same time stamp";
   std::vector<double> moving_freq, moving_speed;
   for (std::size_t k = 0; k < data.size(); ++k) {
-    if (data.v[k] > 1.0) {
+    if (data.v[k] > detail::kMovingSpeed) {
       moving_freq.push_back(data.s[k]);
       moving_speed.push_back(data.v[k]);
     }
@@ -147,7 +147,9 @@ std::string detail::degenerate_log(const detail::MixtureData& data) {
 
 FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& options) {
   if (!options.ratios.empty()) {
-    if (options.ratios.size() > 11) throw std::invalid_argument("fit: at most 11 ratios (12 gears)");
+    if (options.ratios.size() + 1 > GearModel::kMaxGears)
+      throw std::invalid_argument("fit: at most " + std::to_string(GearModel::kMaxGears - 1) + " ratios (" +
+                                  std::to_string(GearModel::kMaxGears) + " gears)");
     // Adjacent gears of a road vehicle differ by some percent up to about twice (Table 1: 1.22-1.68).
     for (double c : options.ratios) {
       if (!std::isfinite(c) || c < 1.05 || c > 4.0)
@@ -156,8 +158,9 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     if (options.gears != 0 && options.gears != static_cast<int>(options.ratios.size()) + 1)
       throw std::invalid_argument("fit: --gears must equal the number of ratios + 1");
   }
-  if (options.gears != 0 && (options.gears < 2 || options.gears > 12))
-    throw std::invalid_argument("fit: gears must be 2..12 (or 0 = from the data)");
+  if (options.gears != 0 && (options.gears < 2 || options.gears > static_cast<int>(GearModel::kMaxGears)))
+    throw std::invalid_argument("fit: gears must be 2.." + std::to_string(GearModel::kMaxGears) +
+                                " (or 0 = from the data)");
   detail::MixtureData data;
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());

@@ -11,6 +11,7 @@
 namespace gearpulse::detail {
 
 inline constexpr double kStandingSpeed = 0.3;  // m/s: GPS speed below this is a car at rest
+inline constexpr double kMovingSpeed = 1.0;    // m/s: samples above this tell a gear's ratio
 
 struct IdleEstimate {
   double freq = 0.0;  // Hz, median of the engine frequency at rest

@@ -294,8 +294,8 @@ void Pipeline::Impl::tracker_loop() noexcept {
         audio_was_up = true;
         block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
         // Audio arrives a period at a time: only a wait longer than two of them is a stall.
-        audio_stall_s = 2.0 * config.tracker.hop + config.tracker.window +
-                        2.0 * capture->period_frames() / static_cast<double>(capture->rate());
+        audio_stall_s =
+            no_audio_step_s + 2.0 * capture->period_frames() / static_cast<double>(capture->rate());
       } else {
         std::string error;
         {

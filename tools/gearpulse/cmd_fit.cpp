@@ -20,7 +20,7 @@
 namespace gearpulse::cli {
 namespace {
 
-constexpr int kMaxGears = 12;
+constexpr int kMaxGears = static_cast<int>(GearModel::kMaxGears);
 
 struct FitCommand {
   std::string gears = "auto";
