@@ -152,11 +152,13 @@ hs_start_feeder() {
 }
 
 # gpsfake plays the log at once (-n); the log starts some seconds before the drive's t = 0, which is
-# the epoch stamped 12:00:00 UTC (see gearpulse simulate --gps-lead).
+# the epoch stamped 12:00:00 UTC (see gearpulse simulate --gps-lead). gpsfake finds gpsd's control
+# socket by its own PID in $TMPDIR and takes a stale file of a killed run with the same PID for it (then
+# gpsd gets no device): it keeps that socket in the run's directory.
 hs_start_gpsfake() {
   HS_PORT=$(hs_free_port)
   hs_save_env
-  hs_spawn gpsfake env PATH="/usr/bin:$PATH" gpsfake -q -n -1 -P "$HS_PORT" -c 0.5 "$HS_WORK/drive/drive.nmea"
+  hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$HS_WORK" gpsfake -q -n -1 -P "$HS_PORT" -c 0.5 "$HS_WORK/drive/drive.nmea"
 }
 
 # Blocks until gpsd reports the fix of 11:59:59, one epoch before the drive's t = 0, then waits out the

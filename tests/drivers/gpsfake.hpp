@@ -1,6 +1,8 @@
 #pragma once
 // A real gpsd started by gpsfake on a port of the test's own, fed from an NMEA log.
 #include <netinet/in.h>
+#include <sys/ipc.h>
+#include <sys/shm.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -14,12 +16,23 @@
 namespace gearpulse::test {
 
 // gpsfake (and the gpsd it runs) in a session of its own, killed as a group.
+//
+// gpsfake hands its log to gpsd through a control socket named after its own PID in $TMPDIR, and takes
+// any file already at that path for gpsd's: a socket left behind by a killed gpsd whose PID is reused
+// makes gpsfake add no device, and gpsd then serves no fixes at all. Each instance therefore gets a
+// directory of its own. A killed gpsd also leaves the shared-memory segment it keys on the port; it is
+// removed with the instance.
 class GpsFake {
  public:
   GpsFake(const std::filesystem::path& log, int port, double cycle_s, bool once)
-      : process_(args(log, port, cycle_s, once), "/dev/null",
-                 // gpsfake is a Python program for Debian's /usr/bin/python3; another may come first.
-                 {.env = {"PATH=/usr/bin:/usr/sbin:/bin"}, .own_group = true}) {}
+      : port_(port),
+        process_(
+            args(log, port, cycle_s, once), "/dev/null",
+            // gpsfake is a Python program for Debian's /usr/bin/python3; another may come first.
+            {.env = {"PATH=/usr/bin:/usr/sbin:/bin", "TMPDIR=" + tmp_.path().string()}, .own_group = true}) {}
+  ~GpsFake() { kill(); }
+  GpsFake(const GpsFake&) = delete;
+  GpsFake& operator=(const GpsFake&) = delete;
 
   // True once gpsd accepts connections on `port` (gpsfake takes about a second to start it).
   static bool wait_listening(int port, std::chrono::milliseconds timeout) {
@@ -38,7 +51,12 @@ class GpsFake {
   }
 
   // SIGKILL to the whole group: gpsd dies without saying goodbye, as in a crash.
-  void kill() { process_.kill(); }
+  void kill() {
+    process_.kill();
+    // gpsfake's key for the port (GPSD_SHM_KEY = 0x4770 followed by the port in four hex digits).
+    const int id = ::shmget(static_cast<key_t>(0x47700000 + port_), 0, 0);
+    if (id >= 0) ::shmctl(id, IPC_RMID, nullptr);
+  }
 
  private:
   static std::vector<std::string> args(const std::filesystem::path& log, int port, double cycle_s,
@@ -50,6 +68,8 @@ class GpsFake {
     return a;
   }
 
+  TempDir tmp_;
+  int port_;
   Process process_;
 };
 
