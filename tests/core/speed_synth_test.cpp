@@ -314,6 +314,43 @@ TEST_CASE("synth: knows the idle from the model before GPS has shown the car sta
   }
 }
 
+TEST_CASE("synth: a warming engine's idle is followed down while the car coasts, with no stop to show it") {
+  // A cold start idles high while the car stands; the drive then never stops, but the driver coasts
+  // declutched at the warm idle under GPS. Then GPS is lost and the car coasts again: the engine at warm
+  // idle is a car rolling out of gear, not a high gear lugging at walking pace.
+  constexpr double kColdIdle = 20.0;
+  std::vector<Row> rows;
+  for (int k = 0; k < 30; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kColdIdle, 0});
+  const auto drive = script(0.0,
+                            {{1, 1.8, 3},
+                             {2, 1.2, 8},
+                             {3, 0.5, 15},
+                             {4, 0.2, 20},
+                             {0, -0.3, 25},
+                             {3, 0.3, 20},
+                             {4, 0.1, 20},
+                             {0, -0.3, 25},
+                             {4, 0.3, 20},
+                             {0, -0.3, 20}},
+                            kHatch);
+  for (Row r : drive) {
+    r.t += 30.0;
+    rows.push_back(r);
+  }
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double outage_from = rows[rows.size() - 25].t;
+  const auto out = replay(synth, rows, outage_from);
+  CHECK(synth.idle_freq() < 0.5 * (kColdIdle + kIdle));
+  // The last 20 s coast declutched inside the outage: no gear, and the speed of a car rolling out of gear
+  // (4th gear at idle revs would be 6 m/s).
+  for (std::size_t i = rows.size() - 15; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t << ", truth " << rows[i].speed << " m/s, synthesized " << out[i].speed);
+    CHECK(out[i].gear == 0);
+    CHECK(std::abs(out[i].speed - rows[i].speed) < 4.0);
+  }
+}
+
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
   // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
