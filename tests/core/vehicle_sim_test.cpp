@@ -127,3 +127,26 @@ TEST_CASE("sim: the driver does not hunt between two gears") {
     }
   }
 }
+
+TEST_CASE("sim: a cold engine idles high at the start and settles to its warm idle") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  sim::DriveOptions options{sim::DrivingStyle::kUrban, 1800.0, 1.0, 5};
+  options.cold_start = 0.5;
+  const sim::Drive cold = sim::simulate_drive(car, options);
+  // The car stands a few seconds before it moves off: the idle then is the cold one.
+  REQUIRE(cold.truth[1].speed == 0.0);
+  CHECK(cold.truth[1].freq == Approx(1.5 * car.idle_freq).epsilon(0.05));
+  // Standing after ten minutes: the warm idle.
+  int late_standing = 0;
+  for (const sim::TruthSample& t : cold.truth) {
+    if (t.t < 600.0 || t.speed > 0.0) continue;
+    ++late_standing;
+    CHECK(t.freq == Approx(car.idle_freq).epsilon(0.05));
+  }
+  CHECK(late_standing > 10);
+  options.cold_start = -0.1;
+  CHECK_THROWS_AS(sim::simulate_drive(car, options), std::invalid_argument);
+  options.cold_start = 0.5;
+  options.warm_up = 0.0;
+  CHECK_THROWS_AS(sim::simulate_drive(car, options), std::invalid_argument);
+}

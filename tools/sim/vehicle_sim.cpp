@@ -112,9 +112,14 @@ struct State {
 class DriveSimulator {
  public:
   DriveSimulator(const Vehicle& vehicle, const DriveOptions& options)
-      : veh_(vehicle), rng_(options.seed), route_(options.style, rng_, options.duration) {
+      : veh_(vehicle),
+        rng_(options.seed),
+        route_(options.style, rng_, options.duration),
+        cold_start_(options.cold_start),
+        warm_up_(options.warm_up) {
     aggressiveness_ = uniform(0.4, 0.8);  // ordinary drivers, not launches at full throttle
-    state_.f = veh_.idle_freq;
+    idle_ = veh_.idle_freq * (1.0 + cold_start_);
+    state_.f = idle_;
     stand_left_ = uniform(3.0, 10.0);
     leg_ = route_.next(0.0);
   }
@@ -125,7 +130,9 @@ class DriveSimulator {
     const double h = kStep;
     update_route(h);
     idle_wobble_ += (-idle_wobble_ / 2.0) * h + 0.004 * std::sqrt(h) * normal();
-    const double idle = veh_.idle_freq * (1.0 + idle_wobble_);
+    const double warming = cold_start_ > 0.0 ? cold_start_ * std::exp(-state_.t / warm_up_) : 0.0;
+    idle_ = veh_.idle_freq * (1.0 + warming) * (1.0 + idle_wobble_);
+    const double idle = idle_;
     jitter_ += (-jitter_ / 8.0) * h + 0.02 * std::sqrt(h) * normal();
     const double target = stopping_ ? 0.0 : leg_.target * (1.0 + jitter_);
     if (veh_.is_cvt()) {
@@ -331,7 +338,7 @@ class DriveSimulator {
 
   void start_launch() {
     phase_ = Phase::kLaunch;
-    launch_freq_ = veh_.idle_freq * uniform(1.3, 2.1);
+    launch_freq_ = idle_ * uniform(1.3, 2.1);
     crawl_factor_ = uniform(1.0, 1.25);
     slip_left_ = uniform(0.8, 2.5);
     state_.gear = 1;
@@ -374,6 +381,9 @@ class DriveSimulator {
   double launch_freq_ = 20.0;
   double crawl_factor_ = 1.1;
   double slip_left_ = 1.5;
+  double cold_start_ = 0.0;
+  double warm_up_ = 150.0;
+  double idle_ = 0.0;  // the idle of the moment (warming, wobbling)
   double idle_wobble_ = 0.0;
   double jitter_ = 0.0;
   int shift_to_ = 1;
@@ -418,6 +428,8 @@ Drive simulate_drive(const Vehicle& vehicle, const DriveOptions& options) {
   check_vehicle(vehicle);
   if (!(options.dt > 0.0) || !(options.duration >= 0.0) || options.duration / options.dt > 1e9)
     throw std::invalid_argument("simulate_drive: need dt > 0 and duration >= 0");
+  if (!(options.cold_start >= 0.0 && options.cold_start <= 2.0) || !(options.warm_up > 0.0))
+    throw std::invalid_argument("simulate_drive: need 0 <= cold_start <= 2 and warm_up > 0");
   Drive drive{vehicle, options, {}};
   const auto count = static_cast<std::size_t>(std::floor(options.duration / options.dt + 1e-9)) + 1;
   drive.truth.reserve(count);

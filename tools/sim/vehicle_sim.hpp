@@ -61,6 +61,10 @@ struct DriveOptions {
   double duration = 2400.0;  // s
   double dt = 1.0;           // s between truth samples (the dynamics always run at 50 ms)
   std::uint64_t seed = 1;
+  // A cold engine idles high and settles as it warms: the idle starts at (1 + cold_start) x idle_freq and
+  // falls back with time constant warm_up (s). 0 = the engine is warm from the start.
+  double cold_start = 0.0;
+  double warm_up = 150.0;
 };
 
 struct Drive {
