@@ -427,7 +427,8 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 }
 
 // Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
-double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight) const noexcept {
+double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
+                                      bool entering) const noexcept {
   if (!std::isfinite(freq)) return is_gear(mode) ? weight * kLostGearLogEvidence : 0.0;
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) return weight * log_declutched(freq, x.v);
@@ -460,9 +461,12 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   x.paa = paa;
   // A reading its gear explains within the dead zone costs in proportion to the time it covers (weight),
   // however often it comes; a jump the track cannot follow costs its squared excess once (the track then
-  // follows): an event, counted once at any sample rate.
+  // follows): an event, counted once at any sample rate. Entering the gear is an event too: how well the
+  // speed it was entered at matches the history is counted whole, once, at any rate (weighted by a tenth
+  // of a second, a first gear entered 5 km/h below a declutched car's speed cost next to nothing, since
+  // its revs turn that into a spread no wider than the second gear's at the right speed).
   const double z2 = innovation * innovation / s;
-  return -jump_cost(z2) - 0.5 * weight * std::min(z2, kDeadZone * kDeadZone) +
+  return -jump_cost(z2) - 0.5 * (entering ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
          weight * std::log(lugging(mode, freq));
 }
 
@@ -541,7 +545,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
         x.pva *= 1.0 - k;
         x.pvv *= 1.0 - k;
       }
-      pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight);
+      pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight, i != j);
       pair_track_[i][j] = x;
     }
   }

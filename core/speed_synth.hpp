@@ -112,7 +112,8 @@ class SpeedSynthesizer {
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
-  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight) const noexcept;
+  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
+                                    bool entering) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
