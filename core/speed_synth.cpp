@@ -473,7 +473,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
 // What GPS teaches about this engine and driver: the idle frequency (standing), the frequencies run at in
 // gear and the deceleration declutched (moving). Running means with a bounded memory, so they follow a
 // warming engine and a change of road.
-void SpeedSynthesizer::learn(double dt, double gps, double freq, double before) noexcept {
+void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
   const bool was_moving = last_gps_ > 5.0 * tuning_.stationary_speed;
   if (dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8) {
     constexpr double kCoastMemory = 100.0;  // samples
@@ -489,14 +489,11 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq, double before) 
   constexpr double kIdleMemory = 60.0;    // s
   constexpr double kDriveMemory = 600.0;  // s
   constexpr double kSureGear = 0.8;
-  constexpr double kIdleBand = 1.0;     // idle sd above the learned idle
-  constexpr double kSteadyIdle = 0.05;  // relative change from the previous reading
-  // Declutched on the move the engine idles too; a steady reading there at or below the idle learned so
-  // far follows a warming engine down when the car no longer stops (a cold start's high idle otherwise
-  // stays, and a car coasting at warm idle looks in gear).
-  const bool idling_moving = was_moving && mode_ == 0 && prob_[0] > kSureGear && idle_count_ > 0.0 &&
-                             freq < idle_mean_ + kIdleBand * idle_sd() && std::isfinite(before) &&
-                             std::abs(freq - before) < kSteadyIdle * freq;
+  // Declutched on the move the engine idles too; a reading there at or below the idle learned so far
+  // follows a warming engine down when the car no longer stops (a cold start's high idle otherwise stays,
+  // and a car coasting at warm idle looks in gear).
+  const bool idling_moving =
+      was_moving && mode_ == 0 && prob_[0] > kSureGear && idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
   if (gps < tuning_.stationary_speed || idling_moving) {
     add(idle_mean_, idle_var_, idle_count_, kIdleMemory);
   } else if (is_gear(mode_) && prob_[mode_] > kSureGear && gps > 10.0 * tuning_.stationary_speed) {
@@ -589,7 +586,6 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   }
   normalise();
   mode_ = map_mode();
-  const double before = prev_freq_;
   prev_freq_ = freq;
   // A hypothesis grown negligible keeps no history of its own: if the car later shows it, it is entered
   // from the belief of the moment, not from a speed drifted apart while nothing supported it. Nor does a
@@ -598,7 +594,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
     if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_))))
       track_[j] = track_[mode_];
   if (have_gps) {
-    learn(dt, gps, freq, before);
+    learn(dt, gps, freq);
     learn_shift(freq);
     return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }

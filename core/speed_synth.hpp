@@ -126,7 +126,7 @@ class SpeedSynthesizer {
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   [[nodiscard]] int median_mode() const noexcept;
-  void learn(double dt, double gps, double freq, double before) noexcept;
+  void learn(double dt, double gps, double freq) noexcept;
   void normalise() noexcept;
 
   SynthTuning tuning_;
