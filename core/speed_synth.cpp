@@ -495,7 +495,9 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
   const bool idling_moving =
       was_moving && mode_ == 0 && prob_[0] > kSureGear && idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
   if (gps < tuning_.stationary_speed || idling_moving) {
-    add(idle_mean_, idle_var_, idle_count_, kIdleMemory);
+    // A warming engine's idle only falls: a reading below the idle learned so far is followed sooner.
+    constexpr double kIdleFallMemory = 15.0;  // s
+    add(idle_mean_, idle_var_, idle_count_, freq < idle_mean_ ? kIdleFallMemory : kIdleMemory);
   } else if (is_gear(mode_) && prob_[mode_] > kSureGear && gps > 10.0 * tuning_.stationary_speed) {
     add(drive_mean_, drive_var_, drive_count_, kDriveMemory);
   }

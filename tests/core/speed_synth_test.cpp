@@ -318,6 +318,23 @@ TEST_CASE("synth: knows the idle from the model before GPS has shown the car sta
   }
 }
 
+TEST_CASE("synth: the idle follows a warming engine down sooner than a blip up") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  double t = 0.0;
+  for (; t < 60.0; t += 1.0)  // a cold engine idles high at the light
+    synth.step(t, 0.0, 20.0);
+  REQUIRE(synth.idle_freq() == Approx(20.0));
+  for (; t < 90.0; t += 1.0)  // warm now, at the next light
+    synth.step(t, 0.0, kIdle);
+  CHECK(synth.idle_freq() < kIdle + 1.0);
+  for (; t < 300.0; t += 1.0)
+    synth.step(t, 0.0, kIdle);
+  const double settled = synth.idle_freq();
+  for (; t < 330.0; t += 1.0)  // the air conditioning kicks in for half a minute
+    synth.step(t, 0.0, kIdle + 2.0);
+  CHECK(synth.idle_freq() - settled < 1.5);
+}
+
 TEST_CASE("synth: a warming engine's idle is followed down while the car coasts, with no stop to show it") {
   // A cold start idles high while the car stands; the drive then never stops, but the driver coasts
   // declutched at the warm idle under GPS. Then GPS is lost and the car coasts again: the engine at warm
