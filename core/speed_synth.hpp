@@ -15,7 +15,8 @@
 // Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
 // shifts down). A gear is scored by its innovation in its own units: within a dead zone of ordinary
 // jitter it costs per second of time, beyond it the jump costs once, however often step() is called;
-// being declutched or moving off is scored per second. The result does not depend on the step rate.
+// entering a gear is an event whose innovation counts whole; being declutched or moving off is scored per
+// second. The result does not depend on the step rate.
 // The output follows the mode at the median of the belief (the most probable one while it holds half of
 // it). No look-ahead: every output depends only on past input.
 //
