@@ -278,10 +278,14 @@ hs_kill_daemon() {
 }
 
 # Daemon first (SIGTERM: it saves the model and leaves the output low), then the sources and the reader.
+# gpsd leaves behind the shared-memory segment it exports, keyed on its port as gpsfake sets it.
 hs_stop() {
   hs_stop_one gearpulsed TERM
   hs_stop_one feeder
   hs_stop_one gpsfake
+  if [ -n "${HS_PORT:-}" ]; then
+    ipcrm -M "$(printf '0x4770%04X' "$HS_PORT")" 2>/dev/null || true
+  fi
   hs_stop_one reader
 }
 
