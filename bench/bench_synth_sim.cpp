@@ -168,6 +168,9 @@ void print_line(const char* vehicle, const char* kind, const std::string& gears,
 // A cold engine's idle at the start, above the warm idle (sim::DriveOptions::cold_start): the fit drive and
 // every other replay drive start cold.
 constexpr double kColdStart = 0.5;
+constexpr bool starts_cold(std::size_t replay) {
+  return replay % 2 == 0;
+}
 
 int main(int argc, char** argv) {
   std::uint64_t seed = 1;
@@ -222,8 +225,8 @@ int main(int argc, char** argv) {
   std::printf(
       "\ncold engine (idle +%.0f %%, settling in %.0f s) at the start of the fit drive and of replays",
       100.0 * kColdStart, sim::DriveOptions{}.warm_up);
-  for (std::size_t i = 0; i < replays.size(); i += 2)
-    std::printf(" %zu", i + 1);
+  for (std::size_t i = 0; i < replays.size(); ++i)
+    if (starts_cold(i)) std::printf(" %zu", i + 1);
   std::printf("\noutages 60 s from 120 s, every 180 s; |error| against the true speed, km/h median / p95\n");
   std::printf(
       "%d round(s): round r adds 1000 r to every seed; vehicle (true gear count), gears found by each\n"
@@ -255,7 +258,7 @@ int main(int argc, char** argv) {
         opt.duration = replays[i].duration;
         opt.dt = 0.1;
         opt.seed = base + 101 + i;
-        opt.cold_start = i % 2 == 0 ? kColdStart : 0.0;  // every other drive starts with a cold engine
+        opt.cold_start = starts_cold(i) ? kColdStart : 0.0;
         tests.push_back(sim::simulate_drive(car, opt));
       }
       for (std::size_t k = 0; k < kinds.size(); ++k) {

@@ -118,7 +118,7 @@ class DriveSimulator {
         cold_start_(options.cold_start),
         warm_up_(options.warm_up) {
     aggressiveness_ = uniform(0.4, 0.8);  // ordinary drivers, not launches at full throttle
-    warm_idle_ = veh_.idle_freq * (1.0 + cold_start_);
+    warm_idle_ = warm_idle_at(0.0);
     state_.f = warm_idle_;
     stand_left_ = uniform(3.0, 10.0);
     leg_ = route_.next(0.0);
@@ -130,8 +130,7 @@ class DriveSimulator {
     const double h = kStep;
     update_route(h);
     idle_wobble_ += (-idle_wobble_ / 2.0) * h + 0.004 * std::sqrt(h) * normal();
-    const double warming = cold_start_ > 0.0 ? cold_start_ * std::exp(-state_.t / warm_up_) : 0.0;
-    warm_idle_ = veh_.idle_freq * (1.0 + warming);
+    warm_idle_ = warm_idle_at(state_.t);
     const double idle = warm_idle_ * (1.0 + idle_wobble_);
     jitter_ += (-jitter_ / 8.0) * h + 0.02 * std::sqrt(h) * normal();
     const double target = stopping_ ? 0.0 : leg_.target * (1.0 + jitter_);
@@ -336,6 +335,12 @@ class DriveSimulator {
     }
   }
 
+  // The idle a cold engine settles towards at time t: (1 + cold_start) x idle_freq at the start, falling
+  // back to idle_freq with time constant warm_up.
+  [[nodiscard]] double warm_idle_at(double t) const {
+    return veh_.idle_freq * (1.0 + (cold_start_ > 0.0 ? cold_start_ * std::exp(-t / warm_up_) : 0.0));
+  }
+
   void start_launch() {
     phase_ = Phase::kLaunch;
     launch_freq_ = warm_idle_ * uniform(1.3, 2.1);
@@ -382,7 +387,7 @@ class DriveSimulator {
   double crawl_factor_ = 1.1;
   double slip_left_ = 1.5;
   double cold_start_ = 0.0;
-  double warm_up_ = 150.0;
+  double warm_up_ = 1.0;    // set from DriveOptions
   double warm_idle_ = 0.0;  // the idle the engine settles at for now: high while it is cold
   double idle_wobble_ = 0.0;
   double jitter_ = 0.0;
