@@ -19,6 +19,7 @@
 #include "core/spsc_ring.hpp"
 #include "drivers/alsa_capture.hpp"
 #include "drivers/clock.hpp"
+#include "tests/drivers/alsa_fifo.hpp"
 #include "tests/test_util.hpp"
 
 using namespace std::chrono_literals;
@@ -26,29 +27,15 @@ using gearpulse::AlsaCapture;
 using gearpulse::AlsaCaptureConfig;
 using gearpulse::SampleFormat;
 using gearpulse::SpscRing;
+using gearpulse::test::FifoFeeder;
+using gearpulse::test::make_paced_pcm;
 using gearpulse::test::TempDir;
+using gearpulse::test::use_alsa_config;
 using gearpulse::test::wait_for;
+using gearpulse::test::write_raw;
+using gearpulse::test::WriterBreak;
 
-// No sound card here: the ALSA `file` plugin over a `null` slave returns the bytes of `infile` as the
-// captured frames (the null slave accepts whatever rate, format and channels are asked for). A regular
-// file is read as fast as the capture asks (unpaced); a FIFO fed one period per period time paces it.
 namespace {
-
-void use_alsa_config(const TempDir& dir, const std::string& pcm_name, const std::filesystem::path& infile) {
-  const auto conf = dir / "asound.conf";
-  std::ofstream f(conf, std::ios::app);
-  f << "pcm." << pcm_name << " { type file slave.pcm null file \"/dev/null\" infile \"" << infile.string()
-    << "\" format raw }\n";
-  f.close();
-  ::setenv("ALSA_CONFIG_PATH", ("/usr/share/alsa/alsa.conf:" + conf.string()).c_str(), 1);
-}
-
-template <typename T>
-void write_raw(const std::filesystem::path& path, const std::vector<T>& samples) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(reinterpret_cast<const char*>(samples.data()),
-          static_cast<std::streamsize>(samples.size() * sizeof(T)));
-}
 
 // Reads `n` frames from the ring (waiting for them), as the tracker thread would.
 std::vector<float> read_frames(SpscRing<float>& ring, std::size_t n) {
@@ -78,72 +65,6 @@ bool timestamps_increase(const AlsaCapture& cap, std::uint64_t first, std::uint6
     prev = t;
   }
   return true;
-}
-
-// What a FIFO writer does once, after `at_period` periods: nothing, stall (stop writing for a while,
-// then go on at the period rate from where it stopped), or go away (close its end for a while, then
-// open the FIFO again and go on).
-struct WriterBreak {
-  enum Kind { kNone, kStall, kClose } kind = kNone;
-  std::size_t at_period = 0;
-  std::chrono::milliseconds length{0};
-};
-
-// Feeds a FIFO exactly one period per write at the period rate (other write sizes leave holes). After
-// the samples it keeps feeding silence until destroyed, so the capture (whose file plugin blocks in
-// read() on the FIFO) can always be stopped first.
-class FifoFeeder {
- public:
-  FifoFeeder(std::filesystem::path fifo, std::vector<std::int16_t> samples, unsigned period, unsigned rate,
-             WriterBreak pause = {})
-      : thread_([=, this] {
-          ::signal(SIGPIPE, SIG_IGN);               // the capture closing its end must not kill the test
-          int fd = ::open(fifo.c_str(), O_WRONLY);  // blocks until ALSA opens the infile
-          if (fd < 0) return;
-          // The pipe would buffer the first ~0.7 s unpaced if writing began before the capture reads.
-          while (!go_ && !stop_)
-            std::this_thread::sleep_for(1ms);
-          const std::int64_t period_ns = static_cast<std::int64_t>(period) * 1'000'000'000 / rate;
-          const std::vector<std::int16_t> silence(period, 0);
-          std::int64_t next = gearpulse::monotonic_ns();
-          for (std::size_t off = 0, n = 0; !stop_; off += period, ++n) {
-            if (pause.kind != WriterBreak::kNone && n == pause.at_period) {
-              if (pause.kind == WriterBreak::kClose) ::close(fd);
-              std::this_thread::sleep_for(pause.length);
-              // The reader (ALSA) keeps its end open, so this open does not block.
-              if (pause.kind == WriterBreak::kClose && (fd = ::open(fifo.c_str(), O_WRONLY)) < 0) return;
-              next = gearpulse::monotonic_ns();  // go on at the rate, no catching up
-            }
-            const timespec ts = gearpulse::to_timespec(next);
-            ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
-            const bool data = off + period <= samples.size();
-            if (!data) done_ = true;
-            if (::write(fd, data ? samples.data() + off : silence.data(), period * sizeof(std::int16_t)) < 0)
-              break;
-            next += period_ns;
-          }
-          ::close(fd);
-        }) {}
-  ~FifoFeeder() {
-    stop_ = true;
-    thread_.join();
-  }
-  [[nodiscard]] bool done() const { return done_; }
-  void go() { go_ = true; }
-
- private:
-  std::atomic<bool> go_{false};
-  std::atomic<bool> stop_{false};
-  std::atomic<bool> done_{false};
-  std::thread thread_;
-};
-
-// A PCM named "paced" whose file plugin reads a fresh FIFO in `dir`; returns the FIFO.
-std::filesystem::path make_paced_pcm(const TempDir& dir) {
-  const auto fifo = dir / "in.fifo";
-  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
-  use_alsa_config(dir, "paced", fifo);
-  return fifo;
 }
 
 AlsaCaptureConfig paced_config(unsigned period) {
