@@ -207,14 +207,19 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
   return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
 }
 
-// Score of the frequency while the clutch slips moving off at `speed`: revs held above idle. Slipping is
-// how a car moves off, not how it drives: as the car gains speed the score falls below that of a shift
-// in progress, so a moving car's free revs are not taken for a launch.
-double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
+// Slipping the clutch is how a car moves off, not how it drives: the score of moving off at `speed`
+// (revs set aside) falls as the car gains speed, below that of a shift in progress, so a moving car's
+// free revs are not taken for a launch. 0 at walking pace.
+double SpeedSynthesizer::launch_plausibility(double speed) const noexcept {
   const double slow = -0.5 * kLaunchRevs * kLaunchRevs;
   const double fast = -0.5 * kFreeRevs * kFreeRevs + std::log(1.0 - tuning_.idle_weight) - 1.0;
   const double share = std::clamp((speed - kMovingOffSpeed) / (3.0 * kMovingOffSpeed), 0.0, 1.0);
-  const double base = slow + share * (fast - slow);
+  return share * (fast - slow);
+}
+
+// Score of the frequency while the clutch slips moving off at `speed`: revs held above idle.
+double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
+  const double base = -0.5 * kLaunchRevs * kLaunchRevs + launch_plausibility(speed);
   if (idle_count_ <= 0.0) return base;
   const double above = 1.0 / (1.0 + std::exp(-(freq - idle_mean_ - 2.0 * idle_sd()) / idle_sd()));
   return base + std::log(std::max(above, 0.05));
@@ -429,7 +434,12 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 // Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
 double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
                                       bool entering) const noexcept {
-  if (!std::isfinite(freq)) return is_gear(mode) ? weight * kLostGearLogEvidence : 0.0;
+  if (!std::isfinite(freq)) {
+    if (is_gear(mode)) return weight * kLostGearLogEvidence;
+    // Without the engine a car at speed is still not moving off: a launch's acceleration must not carry
+    // the speed away while the frequency is lost.
+    return mode == launch_mode() ? weight * launch_plausibility(x.v) : 0.0;
+  }
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) return weight * log_declutched(freq, x.v);
   if (mode == launch_mode()) {

@@ -117,6 +117,7 @@ class SpeedSynthesizer {
                                     bool entering) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
+  [[nodiscard]] double launch_plausibility(double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept;

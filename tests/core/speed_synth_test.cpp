@@ -443,6 +443,26 @@ TEST_CASE("synth: coasting never gains speed, whatever GPS taught while no gear 
   CHECK(top <= last_gps + 3.0);
 }
 
+TEST_CASE("synth: with the frequency lost from the start the speed coasts down, it never takes off") {
+  // The tracker never locks (no ripple, a card unplugged): GPS alone from a cold start at rest, then
+  // GPS goes too. Moving off is how a car leaves standstill, not a state it drives in: with nothing to
+  // tell the engine's revs, its launch acceleration must not carry the speed away.
+  const double rate = GENERATE(1.0, 10.0);
+  INFO("steps per second " << rate);
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double gps = 16.0;
+  for (int k = 0; k < static_cast<int>(10 * rate); ++k)
+    synth.step(k / rate, k < static_cast<int>(2 * rate) ? kMissing : gps, kMissing);
+  double top = 0.0;
+  for (int k = static_cast<int>(10 * rate); k < static_cast<int>(40 * rate); ++k) {
+    const SynthOutput out = synth.step(k / rate, kMissing, kMissing);
+    top = std::max(top, out.speed);
+    CHECK(out.source == gearpulse::SpeedSource::kCoast);
+  }
+  INFO("highest outage speed " << top << " m/s after GPS's " << gps);
+  CHECK(top <= gps + 0.5);
+}
+
 TEST_CASE("synth: moving off inside an outage follows first gear") {
   SpeedSynthesizer synth(model_of(kHatch));
   // Stand at the light (GPS learns the idle), lose GPS, then move off: revs rise with the clutch slipping,
