@@ -237,9 +237,12 @@ void Pipeline::Impl::tracker_loop() noexcept {
   bool audio_was_up = false;
   bool audio_interrupted = false;  // the open capture lost its device and is being reopened
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
-  // the tracker has been silent for longer than audio ever pauses.
+  // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
+  // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
+  // period and more), and a step stamped "now" would run ahead of every point still to come.
   const double no_audio_step_s = 2.0 * config.tracker.hop + config.tracker.window;
   double audio_stall_s = no_audio_step_s;
+  double last_points_at = 0.0;  // CLOCK_MONOTONIC s when the tracker last gave points
 
   const auto step = [&](double t, double freq, double snr, bool tracked) {
     // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
@@ -296,6 +299,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
         // Audio arrives a period at a time: only a wait longer than two of them is a stall.
         audio_stall_s =
             no_audio_step_s + 2.0 * capture->period_frames() / static_cast<double>(capture->rate());
+        last_points_at = now;
       } else {
         std::string error;
         {
@@ -347,11 +351,13 @@ void Pipeline::Impl::tracker_loop() noexcept {
       TrackPoint p;
       while (tracker->pop(p)) {
         got_points = true;
+        last_points_at = now;
         step(p.t, p.freq, p.snr_db, p.tracked);
       }
     }
     // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
-    if (!got_points && now - last_step_t > (tracker ? audio_stall_s : no_audio_step_s)) {
+    const bool audio_silent = !tracker || now - last_points_at > audio_stall_s;
+    if (!got_points && audio_silent && now - last_step_t > no_audio_step_s) {
       step(now - config.tracker.window / 2.0, kNan, kNan, false);
     }
 

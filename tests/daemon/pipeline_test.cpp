@@ -1,0 +1,171 @@
+// The live chain in-process through real components: ALSA capture from the file plugin fed by a paced
+// FIFO, gpsd started by gpsfake, the tracker and the synthesis stepped by the pipeline's own thread.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <catch2/catch.hpp>
+
+#include "daemon/pipeline.hpp"
+#include "tests/drivers/alsa_fifo.hpp"
+#include "tests/drivers/gpsfake.hpp"
+#include "tests/test_util.hpp"
+#include "tools/sim/lighter_signal.hpp"
+#include "tools/sim/nmea.hpp"
+
+using namespace std::chrono_literals;
+using gearpulse::test::FifoFeeder;
+using gearpulse::test::GpsFake;
+using gearpulse::test::TempDir;
+using gearpulse::test::wait_for;
+
+namespace {
+
+constexpr unsigned kRate = 8000;
+constexpr double kTone = 80.0;   // Hz: the ripple, inside the tracker's default band
+constexpr double kWander = 1.5;  // Hz: revs wander (a line fixed to the hertz is other equipment's)
+constexpr double kTheta = 0.2;   // (m/s)/Hz of the one gear
+constexpr double kSpeed = 16.0;  // m/s: the speed GPS reports, kTheta x kTone
+constexpr double kSpeedTol = kTheta * kWander + 0.05 * kSpeed;
+
+// `seconds` of the lighter's ripple around kTone, as the simulator makes it, in S16.
+std::vector<std::int16_t> ripple(double seconds) {
+  gearpulse::sim::LighterSignalConfig g;
+  g.sample_rate_hz = kRate;
+  g.amplitude = 0.2;
+  g.snr_db = 20.0;
+  g.seed = 5;
+  const auto x = gearpulse::sim::make_lighter_signal(
+      g, [](double t) { return kTone + kWander * std::sin(2.0 * M_PI * t / 6.0); }, seconds);
+  std::vector<std::int16_t> out(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i)
+    out[i] = static_cast<std::int16_t>(std::lround(std::clamp(x[i], -1.0f, 1.0f) * 32767.0f));
+  return out;
+}
+
+// A model of one gear that turns kTone into kSpeed.
+std::shared_ptr<const gearpulse::GearModel> one_gear() {
+  auto m = std::make_shared<gearpulse::GearModel>();
+  m->gears = {{kTheta, 1.0, 0.0}};
+  m->sigma_speed = 0.3;
+  m->sigma_freq = 0.5;
+  m->outlier_weight = 0.1;
+  m->method = "auto";
+  return m;
+}
+
+// GPS at kSpeed for `epochs` 1 Hz epochs, played at `cycle` s each, then gone (gpsfake ends with its log).
+struct Gps {
+  TempDir dir;
+  int port = gearpulse::test::free_port();
+  std::unique_ptr<GpsFake> fake;
+  Gps(std::size_t epochs, double cycle) {
+    const std::vector<double> speeds(epochs, kSpeed);
+    const auto log = dir / "drive.nmea";
+    gearpulse::sim::write_nmea_log(log, gearpulse::sim::epochs_at_1hz(speeds));
+    fake = std::make_unique<GpsFake>(log, port, cycle, true);
+  }
+};
+
+gearpulse::daemon::Config config_for(const TempDir& dir, unsigned period_frames, int gps_port) {
+  gearpulse::daemon::Config c;
+  c.audio.device = "paced";
+  c.audio.rate = kRate;
+  c.audio.format = "S16_LE";
+  c.audio.period_frames = period_frames;
+  c.gps.port = static_cast<unsigned>(gps_port);
+  c.output.kind = gearpulse::daemon::OutputKind::kNone;
+  c.model.state_dir = dir.path().string();
+  c.log.level = "off";
+  return c;
+}
+
+bool near(double x, double want, double tol) {
+  return std::abs(x - want) <= tol;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "pipeline: with capture periods of half a second the synthesis runs on the engine through an outage") {
+  TempDir dir;
+  const auto fifo = gearpulse::test::make_paced_pcm(dir);
+  // 4096 frames at 8 kHz: the tracker gets its points in batches about 0.5 s apart, far longer than a
+  // hop and a window. Between two batches the synthesis must wait for audio, not step without it.
+  constexpr unsigned kPeriod = 4096;
+  FifoFeeder feeder(fifo, ripple(60.0), kPeriod, kRate);
+  Gps gps(48, 0.25);  // about 12 s of GPS
+  REQUIRE(GpsFake::wait_listening(gps.port, 10s));
+  gearpulse::daemon::ModelHolder model;
+  model.set(one_gear());
+  gearpulse::daemon::TrainingStore store(3600.0, 100000);
+  gearpulse::daemon::Pipeline pipeline(config_for(dir, kPeriod, gps.port), model, store);
+  pipeline.start();
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 10s));
+  feeder.go();
+  // GPS and the engine agree on the one gear.
+  REQUIRE(wait_for(
+      [&] {
+        const auto s = pipeline.snapshot();
+        return s.source == "gps" && s.gear == 1 && near(s.tracker_freq, kTone, kWander + 0.5);
+      },
+      20s));
+  // gpsfake ends with its log: GPS is lost, the ripple goes on.
+  REQUIRE(wait_for([&] { return pipeline.snapshot().source != "gps"; }, 30s));
+  // Every look at the outage's first 5 s finds the engine carrying the speed in gear.
+  int looks = 0, on_engine = 0, right_speed = 0;
+  const auto end = std::chrono::steady_clock::now() + 5s;
+  while (std::chrono::steady_clock::now() < end) {
+    const auto s = pipeline.snapshot();
+    ++looks;
+    on_engine += s.source == "engine" && s.gear == 1;
+    right_speed += near(s.speed, kSpeed, kSpeedTol);
+    std::this_thread::sleep_for(20ms);
+  }
+  INFO("looks " << looks);
+  CHECK(on_engine == looks);
+  CHECK(right_speed == looks);
+  pipeline.stop();
+}
+
+TEST_CASE("pipeline: raising gps.latency at run time keeps training pairs coming") {
+  TempDir dir;
+  const auto fifo = gearpulse::test::make_paced_pcm(dir);
+  constexpr unsigned kPeriod = 512;
+  FifoFeeder feeder(fifo, ripple(60.0), kPeriod, kRate);
+  Gps gps(80, 0.5);  // about 40 s of GPS
+  REQUIRE(GpsFake::wait_listening(gps.port, 10s));
+  gearpulse::daemon::ModelHolder model;
+  gearpulse::daemon::TrainingStore store(3600.0, 100000);
+  auto config = config_for(dir, kPeriod, gps.port);
+  config.gps.latency = 0.0;
+  gearpulse::daemon::Pipeline pipeline(config, model, store);
+  pipeline.start();
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 10s));
+  feeder.go();
+  REQUIRE(wait_for([&] { return pipeline.drain_pairs() > 0; }, 20s));
+  // A reload raises the latency close to the most the config accepts: each fix is now matched with the
+  // tracker's reading from that long before it was received.
+  const double latency = gearpulse::daemon::kMaxGpsLatency - 0.5;
+  pipeline.set_tunables({latency, config.tracker.min_snr_db});
+  std::this_thread::sleep_for(1s);
+  pipeline.drain_pairs();
+  const std::size_t before = store.size();
+  std::size_t added = 0;
+  wait_for(
+      [&] {
+        added += pipeline.drain_pairs();
+        return added >= 5;
+      },
+      10s);
+  CHECK(added >= 5);
+  const auto pairs = store.snapshot();
+  REQUIRE(pairs.size() >= before + added);
+  for (std::size_t i = before; i < pairs.size(); ++i) {
+    CHECK(near(pairs[i].speed, kSpeed, 0.01));
+    CHECK(near(pairs[i].freq, kTone, kWander + 0.5));
+  }
+  pipeline.stop();
+}
