@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <vector>
 
@@ -69,18 +70,45 @@ struct Gps {
   }
 };
 
-gearpulse::daemon::Config config_for(const TempDir& dir, unsigned period_frames, int gps_port) {
-  gearpulse::daemon::Config c;
-  c.audio.device = "paced";
-  c.audio.rate = kRate;
-  c.audio.format = "S16_LE";
-  c.audio.period_frames = period_frames;
-  c.gps.port = static_cast<unsigned>(gps_port);
-  c.output.kind = gearpulse::daemon::OutputKind::kNone;
-  c.model.state_dir = dir.path().string();
-  c.log.level = "off";
-  return c;
-}
+// The chain under test: ripple fed at `period` frames per write, GPS at kSpeed for `epochs` epochs, and
+// the pipeline over them. Stopped before its feeder, so the capture's blocking read always returns.
+struct LiveChain {
+  TempDir dir;
+  std::filesystem::path fifo = gearpulse::test::make_paced_pcm(dir);
+  FifoFeeder feeder;
+  Gps gps;
+  gearpulse::daemon::ModelHolder model;
+  gearpulse::daemon::TrainingStore store{3600.0, 100000};
+  gearpulse::daemon::Config config;
+  std::unique_ptr<gearpulse::daemon::Pipeline> pipeline;
+
+  LiveChain(unsigned period, std::size_t epochs, double cycle)
+      : feeder(fifo, ripple(60.0), period, kRate), gps(epochs, cycle) {
+    REQUIRE(GpsFake::wait_listening(gps.port, 10s));
+    config.audio.device = "paced";
+    config.audio.rate = kRate;
+    config.audio.format = "S16_LE";
+    config.audio.period_frames = period;
+    config.gps.port = static_cast<unsigned>(gps.port);
+    config.output.kind = gearpulse::daemon::OutputKind::kNone;
+    config.model.state_dir = dir.path().string();
+    config.log.level = "off";
+  }
+  ~LiveChain() {
+    if (pipeline) pipeline->stop();
+  }
+  LiveChain(const LiveChain&) = delete;
+  LiveChain& operator=(const LiveChain&) = delete;
+
+  // Starts the pipeline and, once its capture runs, the feeder.
+  gearpulse::daemon::Pipeline& start() {
+    pipeline = std::make_unique<gearpulse::daemon::Pipeline>(config, model, store);
+    pipeline->start();
+    REQUIRE(wait_for([&] { return pipeline->snapshot().audio_state == "running"; }, 10s));
+    feeder.go();
+    return *pipeline;
+  }
+};
 
 bool near(double x, double want, double tol) {
   return std::abs(x - want) <= tol;
@@ -90,21 +118,11 @@ bool near(double x, double want, double tol) {
 
 TEST_CASE(
     "pipeline: with capture periods of half a second the synthesis runs on the engine through an outage") {
-  TempDir dir;
-  const auto fifo = gearpulse::test::make_paced_pcm(dir);
   // 4096 frames at 8 kHz: the tracker gets its points in batches about 0.5 s apart, far longer than a
   // hop and a window. Between two batches the synthesis must wait for audio, not step without it.
-  constexpr unsigned kPeriod = 4096;
-  FifoFeeder feeder(fifo, ripple(60.0), kPeriod, kRate);
-  Gps gps(48, 0.25);  // about 12 s of GPS
-  REQUIRE(GpsFake::wait_listening(gps.port, 10s));
-  gearpulse::daemon::ModelHolder model;
-  model.set(one_gear());
-  gearpulse::daemon::TrainingStore store(3600.0, 100000);
-  gearpulse::daemon::Pipeline pipeline(config_for(dir, kPeriod, gps.port), model, store);
-  pipeline.start();
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 10s));
-  feeder.go();
+  LiveChain chain(4096, 48, 0.25);  // about 12 s of GPS
+  chain.model.set(one_gear());
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
   // GPS and the engine agree on the one gear.
   REQUIRE(wait_for(
       [&] {
@@ -127,29 +145,18 @@ TEST_CASE(
   INFO("looks " << looks);
   CHECK(on_engine == looks);
   CHECK(right_speed == looks);
-  pipeline.stop();
 }
 
 TEST_CASE("pipeline: raising gps.latency at run time keeps training pairs coming") {
-  TempDir dir;
-  const auto fifo = gearpulse::test::make_paced_pcm(dir);
-  constexpr unsigned kPeriod = 512;
-  FifoFeeder feeder(fifo, ripple(60.0), kPeriod, kRate);
-  Gps gps(80, 0.5);  // about 40 s of GPS
-  REQUIRE(GpsFake::wait_listening(gps.port, 10s));
-  gearpulse::daemon::ModelHolder model;
-  gearpulse::daemon::TrainingStore store(3600.0, 100000);
-  auto config = config_for(dir, kPeriod, gps.port);
-  config.gps.latency = 0.0;
-  gearpulse::daemon::Pipeline pipeline(config, model, store);
-  pipeline.start();
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 10s));
-  feeder.go();
+  LiveChain chain(512, 80, 0.5);  // about 40 s of GPS
+  chain.config.gps.latency = 0.0;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  gearpulse::daemon::TrainingStore& store = chain.store;
   REQUIRE(wait_for([&] { return pipeline.drain_pairs() > 0; }, 20s));
   // A reload raises the latency close to the most the config accepts: each fix is now matched with the
   // tracker's reading from that long before it was received.
   const double latency = gearpulse::daemon::kMaxGpsLatency - 0.5;
-  pipeline.set_tunables({latency, config.tracker.min_snr_db});
+  pipeline.set_tunables({latency, chain.config.tracker.min_snr_db});
   std::this_thread::sleep_for(1s);
   pipeline.drain_pairs();
   const std::size_t before = store.size();
@@ -167,5 +174,4 @@ TEST_CASE("pipeline: raising gps.latency at run time keeps training pairs coming
     CHECK(near(pairs[i].speed, kSpeed, 0.01));
     CHECK(near(pairs[i].freq, kTone, kWander + 0.5));
   }
-  pipeline.stop();
 }
