@@ -45,6 +45,22 @@ std::string_view source_name(SpeedSource source) noexcept {
   return "none";
 }
 
+// Keeps a track's covariance a covariance. The speed variance is capped at kMaxSpeedVar by scaling the
+// speed axis (its covariance with the acceleration shrinks with it, as conditioning would), and rounding
+// in the updates may never leave a negative variance or a correlation beyond 1: from such a matrix the
+// next Kalman gain exceeds 1 and the track runs off to any speed.
+void SpeedSynthesizer::keep_covariance(Track& x) noexcept {
+  constexpr double kMinVar = 1e-9;
+  if (x.pvv > kMaxSpeedVar) {
+    x.pva *= std::sqrt(kMaxSpeedVar / x.pvv);
+    x.pvv = kMaxSpeedVar;
+  }
+  x.pvv = std::max(x.pvv, kMinVar);
+  x.paa = std::max(x.paa, kMinVar);
+  const double bound = 0.999 * std::sqrt(x.pvv * x.paa);
+  x.pva = std::clamp(x.pva, -bound, bound);
+}
+
 SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const SynthTuning& tuning)
     : tuning_(tuning) {
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
@@ -424,7 +440,8 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
   const double pvv = x.pvv + 2.0 * g * x.pva + g * g * x.paa + qvv;
   const double pva = phi * (x.pva + g * x.paa) + qva;
   const double paa = phi * phi * x.paa + qaa;
-  x = {v, a, std::min(pvv, kMaxSpeedVar), pva, paa};
+  x = {v, a, pvv, pva, paa};
+  keep_covariance(x);
   if (x.v <= 0.0 && to != launch_mode()) {
     // Rolled to a stop: at rest, not going backwards.
     x = {0.0, 0.0, kStandingVar, 0.0, x.paa};
@@ -436,9 +453,9 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
                                       bool entering) const noexcept {
   if (!std::isfinite(freq)) {
     if (is_gear(mode)) return weight * kLostGearLogEvidence;
-    // Without the engine a car at speed is still not moving off: a launch's acceleration must not carry
-    // the speed away while the frequency is lost.
-    return mode == launch_mode() ? weight * launch_plausibility(x.v) : 0.0;
+    // Moving off is told by the revs: without them it is as unsupported as a gear, and at speed not a
+    // launch at all, so its acceleration cannot carry the speed away while the frequency is lost.
+    return mode == launch_mode() ? weight * (kLostGearLogEvidence + launch_plausibility(x.v)) : 0.0;
   }
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) return weight * log_declutched(freq, x.v);
@@ -469,6 +486,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   x.pvv = pvv;
   x.pva = pva;
   x.paa = paa;
+  keep_covariance(x);
   // A reading its gear explains within the dead zone costs in proportion to the time it covers (weight),
   // however often it comes; a jump the track cannot follow costs its squared excess once (the track then
   // follows): an event, counted once at any sample rate. Entering the gear is an event too: how well the
@@ -535,8 +553,9 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       const bool moving_off = i == 0 && (j == launch_mode() || (is_gear(j) && x.v < kMovingOffSpeed));
       if (moving_off)
         x = {x.v, tuning_.launch_accel, x.pvv, 0.0, tuning_.launch_sigma * tuning_.launch_sigma};
-      // Declutching ends the engine's drive: the car no longer gains speed.
-      if (j == 0 && i != 0) x.a = std::min(x.a, 0.0);
+      // Declutching ends the engine's drive: the car no longer gains speed. Nor does a car declutched
+      // all along once GPS is lost, whatever gain GPS showed it (a slipping clutch, revs no gear explains).
+      if (j == 0 && (i != 0 || !have_gps)) x.a = std::min(x.a, 0.0);
       predict(x, moving_off ? launch_mode() : j, dt);
       double gps_score = 0.0;
       if (have_gps) {
@@ -553,6 +572,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
         x.paa -= x.pva * x.pva / (x.pvv + gps_var);
         x.pva *= 1.0 - k;
         x.pvv *= 1.0 - k;
+        keep_covariance(x);
       }
       pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight, i != j);
       pair_track_[i][j] = x;
@@ -586,7 +606,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       pva += share * (x.pva + (x.v - v) * (x.a - a));
       paa += share * (x.paa + (x.a - a) * (x.a - a));
     }
-    track_[j] = {v, a, std::min(pvv, kMaxSpeedVar), pva, paa};
+    track_[j] = {v, a, pvv, pva, paa};
+    keep_covariance(track_[j]);
     log_p[j] = top + std::log(w_sum);
   }
   double top = -std::numeric_limits<double>::infinity();

@@ -108,6 +108,7 @@ class SpeedSynthesizer {
   };
   using TrackArray = std::array<Track, kModes>;
 
+  static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <memory>
 #include <new>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -248,6 +249,60 @@ TEST_CASE("synth: bad input never produces a bad output") {
     CHECK(o.gear >= 0);
     CHECK(o.gear <= 5);
   }
+}
+
+TEST_CASE("synth: whatever the input, an outage never outruns what GPS or the engine last showed") {
+  // Random segments of GPS present or lost, and of a frequency that fits a gear, idles, jumps about
+  // anywhere in the band or is lost, at 1 and 10 steps per second. Through an outage the output can
+  // come only from the last GPS speed (coasting never gains) or from a gear's theta x a frequency seen
+  // since: it must never exceed the larger of the two by more than a car gains in a few seconds.
+  const double rate = GENERATE(1.0, 10.0);
+  INFO("steps per second " << rate);
+  const auto model = model_of(kHatch);
+  const double theta_top = kHatch.back();
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int violations = 0;
+  double worst = 0.0;
+  for (int drive = 0; drive < 40; ++drive) {
+    SpeedSynthesizer synth(model);
+    double t = 0.0, v = 0.0, last_gps = 0.0, top_freq = 0.0;
+    bool gps_lost = false;
+    for (int segment = 0; segment < 20; ++segment) {
+      const bool gps = u(rng) < 0.5;
+      const int kind = static_cast<int>(u(rng) * 4.0);  // 0 in gear, 1 idle, 2 anywhere, 3 lost
+      const int gear = static_cast<int>(u(rng) * static_cast<double>(kHatch.size()));
+      const double accel = (u(rng) - 0.5) * 3.0;
+      const int steps = static_cast<int>((1.0 + u(rng) * 19.0) * rate);
+      for (int k = 0; k < steps; ++k) {
+        t += 1.0 / rate;
+        v = std::clamp(v + accel / rate, 0.0, 40.0);
+        double freq = kMissing;
+        if (kind == 0) freq = v / kHatch[static_cast<std::size_t>(gear)];
+        if (kind == 1) freq = kIdle * (0.95 + 0.1 * u(rng));
+        if (kind == 2) freq = 10.0 + 90.0 * u(rng);
+        const SynthOutput o = synth.step(t, gps ? v : kMissing, freq);
+        REQUIRE(std::isfinite(o.speed));
+        REQUIRE(o.speed >= 0.0);
+        if (gps) {
+          last_gps = v;
+          top_freq = 0.0;
+          gps_lost = false;
+          continue;
+        }
+        gps_lost = true;
+        if (std::isfinite(freq)) top_freq = std::max(top_freq, freq);
+        const double bound = std::max(last_gps, theta_top * top_freq) + 3.0;
+        if (o.speed > bound) {
+          ++violations;
+          worst = std::max(worst, o.speed - bound);
+        }
+      }
+    }
+    CHECK((gps_lost || synth.last().source == gearpulse::SpeedSource::kGps));
+  }
+  INFO("outage outputs beyond the bound: " << violations << ", worst by " << worst << " m/s");
+  CHECK(violations == 0);
 }
 
 namespace {
