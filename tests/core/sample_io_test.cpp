@@ -4,7 +4,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "core/sample_io.hpp"
 
@@ -208,4 +211,80 @@ TEST_CASE("io: every real log reads with sensible values") {
                          [](const Sample& a, const Sample& b) { return a.t < b.t; }));
   }
   CHECK(files >= 28);
+}
+
+TEST_CASE("io: mangled logs of every format give samples or a one-line error, nothing else") {
+  // The head of each real log, generic CSV beside them, then each mangled at random: bytes replaced,
+  // dropped or inserted (commas, quotes, digits, signs, NaN and infinity spelled out, NUL), lines
+  // repeated, cut or swapped. Whatever comes out is either samples with sane values in time order or a
+  // SampleFileError naming the file on one line: no other exception, no crash (the sanitizer builds run
+  // this too).
+  std::vector<std::string> heads;
+  if (std::filesystem::exists(kReal)) {
+    for (const auto& entry : std::filesystem::recursive_directory_iterator(kReal)) {
+      const std::string name = entry.path().filename().string();
+      if (entry.path().extension() != ".csv" || (name != "drive1.csv" && name.rfind("drive", 0) == 0) ||
+          name.rfind("long", 0) == 0)
+        continue;
+      std::ifstream in(entry.path(), std::ios::binary);
+      std::string head, line;
+      for (int i = 0; i < 60 && std::getline(in, line); ++i)
+        head += line + "\n";
+      heads.push_back(head);
+    }
+  }
+  heads.push_back("t,speed,freq\n0,0,12.5\n1,1.5,20\n2,3.1,31.2\n3,,40\n4,5.5,\n5,7.2,44.1\n");
+  const std::vector<std::string> pieces = {
+      ",",   "\"",  "\n",   "-",     "+",  "e",    "9", ".",
+      "nan", "inf", "-inf", "1e308", "  ", "#N/A", "-", std::string(1, '\0'),
+      "\r"};
+  std::mt19937 rng(23);
+  std::size_t read = 0, refused = 0;
+  for (const std::string& head : heads) {
+    for (int trial = 0; trial < 150; ++trial) {
+      std::string text = head;
+      const int edits = 1 + static_cast<int>(rng() % 12);
+      for (int e = 0; e < edits && !text.empty(); ++e) {
+        const std::size_t at = rng() % text.size();
+        switch (rng() % 5) {
+          case 0:
+            text[at] = static_cast<char>(rng() % 256);
+            break;
+          case 1:
+            text.erase(at, 1 + rng() % 8);
+            break;
+          case 2:
+            text.insert(at, pieces[rng() % pieces.size()]);
+            break;
+          case 3: {  // repeat a stretch (a line, part of one, or several)
+            const std::size_t len = std::min<std::size_t>(1 + rng() % 80, text.size() - at);
+            text.insert(at, text.substr(at, len));
+            break;
+          }
+          default:
+            text.resize(at);  // cut short, as a log whose writer died
+        }
+      }
+      INFO("input:\n" << text);
+      try {
+        const SampleLog log = read_text(text);
+        ++read;
+        for (const Sample& s : log.samples) {
+          REQUIRE(std::isfinite(s.t));
+          if (s.has_speed()) REQUIRE(s.speed >= 0.0);
+          if (s.has_freq()) REQUIRE(s.freq >= 0.0);
+        }
+        REQUIRE(std::is_sorted(log.samples.begin(), log.samples.end(),
+                               [](const Sample& a, const Sample& b) { return a.t < b.t; }));
+      } catch (const SampleFileError& e) {
+        ++refused;
+        const std::string what = e.what();
+        REQUIRE(what.rfind("log.csv", 0) == 0);
+        REQUIRE(what.find('\n') == std::string::npos);
+      }
+    }
+  }
+  INFO("read " << read << ", refused " << refused);
+  CHECK(read > 0);
+  CHECK(refused > 0);
 }
