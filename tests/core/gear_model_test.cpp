@@ -1,6 +1,10 @@
 #include <catch2/catch.hpp>
 
+#include <cmath>
+#include <random>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "core/gear_model.hpp"
 
@@ -52,4 +56,82 @@ TEST_CASE("model: rejects what no fit writes: a wrapped version, too many gears,
   for (int i = 1; i <= 12; ++i)
     twelve += std::string(i > 1 ? "," : "") + R"({"theta":)" + std::to_string(0.05 * i) + "}";
   CHECK(gearpulse::parse_model(twelve + "]}").gears.size() == 12);
+}
+
+TEST_CASE("model: a mangled model file is a model that holds or std::invalid_argument, nothing else") {
+  // A model as `fit --out` writes it (with the estimator's extras), mangled at random: characters
+  // replaced, dropped or inserted (quotes, brackets, signs, exponents, keys' names), cut short. The daemon
+  // reads model.json at every start: whatever is in it must be refused with a reason or hold the
+  // invariants the synthesis relies on.
+  GearModel m;
+  m.gears = {{0.043, 0.05, 0.0002}, {0.072, 0.1, 0.0003}, {0.106, 0.2, 0.0003}, {0.146, 0.3, 0.0004}};
+  m.sigma_speed = 0.3;
+  m.sigma_freq = 1.5;
+  m.samples = 2400;
+  m.outlier_weight = 0.12;
+  m.method = "auto";
+  m.extra["idle"] = {{"freq", 13.1}, {"sd", 0.4}};
+  const std::string text = gearpulse::serialize_model(m);
+  const std::vector<std::string> pieces = {"\"",
+                                           "{",
+                                           "}",
+                                           "[",
+                                           "]",
+                                           ",",
+                                           ":",
+                                           "-",
+                                           "1e999",
+                                           "null",
+                                           "true",
+                                           "\"theta\"",
+                                           "\"version\"",
+                                           "0",
+                                           ".",
+                                           "e",
+                                           std::string(1, '\0')};
+  std::mt19937 rng(29);
+  int parsed = 0, refused = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::string s = text;
+    const int edits = 1 + static_cast<int>(rng() % 6);
+    for (int e = 0; e < edits && !s.empty(); ++e) {
+      const std::size_t at = rng() % s.size();
+      switch (rng() % 4) {
+        case 0:
+          s[at] = static_cast<char>(rng() % 256);
+          break;
+        case 1:
+          s.erase(at, 1 + rng() % 6);
+          break;
+        case 2:
+          s.insert(at, pieces[rng() % pieces.size()]);
+          break;
+        default:
+          s.resize(at);
+      }
+    }
+    INFO(s);
+    try {
+      const GearModel g = gearpulse::parse_model(s);
+      ++parsed;
+      REQUIRE(g.gears.size() <= GearModel::kMaxGears);
+      double previous = 0.0;
+      for (const auto& gear : g.gears) {
+        REQUIRE(std::isfinite(gear.theta));
+        REQUIRE(gear.theta > previous);
+        REQUIRE(gear.weight >= 0.0);
+        REQUIRE(gear.weight <= 1.0);
+        previous = gear.theta;
+      }
+      REQUIRE(std::isfinite(g.sigma_speed));
+      REQUIRE(g.sigma_speed >= 0.0);
+      REQUIRE(std::isfinite(g.sigma_freq));
+      REQUIRE(g.sigma_freq >= 0.0);
+    } catch (const std::invalid_argument&) {
+      ++refused;
+    }
+  }
+  INFO("parsed " << parsed << ", refused " << refused);
+  CHECK(parsed > 0);
+  CHECK(refused > 0);
 }
