@@ -1,6 +1,7 @@
 #pragma once
 // Helpers shared by the tests: unique temp dirs, shell commands, small text files, free TCP ports,
-// polling for a condition, child processes, and a line-oriented Unix socket client. Everything that
+// polling for a condition, child processes, a line-oriented Unix socket client, and random corruption
+// of a file's text. Everything that
 // names a path or a port is unique per call, so test executables can run in parallel.
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -21,6 +22,7 @@
 #include <fstream>
 #include <functional>
 #include <optional>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -256,5 +258,32 @@ class LineClient {
   int fd_ = -1;
   std::string buffer_;
 };
+
+// `text` after `edits` random edits of the kind a damaged file shows: a byte replaced, a few dropped,
+// one of `pieces` inserted, a stretch repeated (a line written twice), or the rest cut off (a writer
+// that died).
+inline std::string mangle(std::string text, int edits, const std::vector<std::string>& pieces,
+                          std::mt19937& rng) {
+  for (int e = 0; e < edits && !text.empty(); ++e) {
+    const std::size_t at = rng() % text.size();
+    switch (rng() % 5) {
+      case 0:
+        text[at] = static_cast<char>(rng() % 256);
+        break;
+      case 1:
+        text.erase(at, 1 + rng() % 8);
+        break;
+      case 2:
+        if (!pieces.empty()) text.insert(at, pieces[rng() % pieces.size()]);
+        break;
+      case 3:
+        text.insert(at, text.substr(at, std::min<std::size_t>(1 + rng() % 80, text.size() - at)));
+        break;
+      default:
+        text.resize(at);
+    }
+  }
+  return text;
+}
 
 }  // namespace gearpulse::test

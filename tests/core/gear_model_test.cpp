@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/gear_model.hpp"
+#include "tests/test_util.hpp"
 
 using gearpulse::GearModel;
 
@@ -92,24 +93,7 @@ TEST_CASE("model: a mangled model file is a model that holds or std::invalid_arg
   std::mt19937 rng(29);
   int parsed = 0, refused = 0;
   for (int trial = 0; trial < 3000; ++trial) {
-    std::string s = text;
-    const int edits = 1 + static_cast<int>(rng() % 6);
-    for (int e = 0; e < edits && !s.empty(); ++e) {
-      const std::size_t at = rng() % s.size();
-      switch (rng() % 4) {
-        case 0:
-          s[at] = static_cast<char>(rng() % 256);
-          break;
-        case 1:
-          s.erase(at, 1 + rng() % 6);
-          break;
-        case 2:
-          s.insert(at, pieces[rng() % pieces.size()]);
-          break;
-        default:
-          s.resize(at);
-      }
-    }
+    const std::string s = gearpulse::test::mangle(text, 1 + static_cast<int>(rng() % 6), pieces, rng);
     INFO(s);
     try {
       const GearModel g = gearpulse::parse_model(s);

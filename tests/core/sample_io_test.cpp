@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/sample_io.hpp"
+#include "tests/test_util.hpp"
 
 using gearpulse::read_samples;
 using gearpulse::Sample;
@@ -242,29 +243,7 @@ TEST_CASE("io: mangled logs of every format give samples or a one-line error, no
   std::size_t read = 0, refused = 0;
   for (const std::string& head : heads) {
     for (int trial = 0; trial < 150; ++trial) {
-      std::string text = head;
-      const int edits = 1 + static_cast<int>(rng() % 12);
-      for (int e = 0; e < edits && !text.empty(); ++e) {
-        const std::size_t at = rng() % text.size();
-        switch (rng() % 5) {
-          case 0:
-            text[at] = static_cast<char>(rng() % 256);
-            break;
-          case 1:
-            text.erase(at, 1 + rng() % 8);
-            break;
-          case 2:
-            text.insert(at, pieces[rng() % pieces.size()]);
-            break;
-          case 3: {  // repeat a stretch (a line, part of one, or several)
-            const std::size_t len = std::min<std::size_t>(1 + rng() % 80, text.size() - at);
-            text.insert(at, text.substr(at, len));
-            break;
-          }
-          default:
-            text.resize(at);  // cut short, as a log whose writer died
-        }
-      }
+      const std::string text = gearpulse::test::mangle(head, 1 + static_cast<int>(rng() % 12), pieces, rng);
       INFO("input:\n" << text);
       try {
         const SampleLog log = read_text(text);
