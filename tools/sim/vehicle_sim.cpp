@@ -118,8 +118,7 @@ class DriveSimulator {
         cold_start_(options.cold_start),
         warm_up_(options.warm_up) {
     aggressiveness_ = uniform(0.4, 0.8);  // ordinary drivers, not launches at full throttle
-    warm_idle_ = warm_idle_at(0.0);
-    state_.f = warm_idle_;
+    state_.f = warm_idle_at(0.0);
     stand_left_ = uniform(3.0, 10.0);
     leg_ = route_.next(0.0);
   }
@@ -130,8 +129,7 @@ class DriveSimulator {
     const double h = kStep;
     update_route(h);
     idle_wobble_ += (-idle_wobble_ / 2.0) * h + 0.004 * std::sqrt(h) * normal();
-    warm_idle_ = warm_idle_at(state_.t);
-    const double idle = warm_idle_ * (1.0 + idle_wobble_);
+    const double idle = warm_idle_at(state_.t) * (1.0 + idle_wobble_);
     jitter_ += (-jitter_ / 8.0) * h + 0.02 * std::sqrt(h) * normal();
     const double target = stopping_ ? 0.0 : leg_.target * (1.0 + jitter_);
     if (veh_.is_cvt()) {
@@ -343,7 +341,7 @@ class DriveSimulator {
 
   void start_launch() {
     phase_ = Phase::kLaunch;
-    launch_freq_ = warm_idle_ * uniform(1.3, 2.1);
+    launch_freq_ = warm_idle_at(state_.t) * uniform(1.3, 2.1);
     crawl_factor_ = uniform(1.0, 1.25);
     slip_left_ = uniform(0.8, 2.5);
     state_.gear = 1;
@@ -387,8 +385,7 @@ class DriveSimulator {
   double crawl_factor_ = 1.1;
   double slip_left_ = 1.5;
   double cold_start_ = 0.0;
-  double warm_up_ = 1.0;    // set from DriveOptions
-  double warm_idle_ = 0.0;  // the idle the engine settles at for now: high while it is cold
+  double warm_up_ = 1.0;  // set from DriveOptions
   double idle_wobble_ = 0.0;
   double jitter_ = 0.0;
   int shift_to_ = 1;
