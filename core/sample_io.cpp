@@ -166,9 +166,16 @@ class LogBuilder {
       return false;
     }
     log_.samples.push_back(s);
+    if (options_.keep_rows) log_.rows.push_back({s.t, log_.samples.size() - 1});
     return true;
   }
+  // A row repeating the values of the sample added last (OBD logs between refreshes), at time t.
+  void add_repeat(double t) {
+    if (options_.keep_rows && !log_.samples.empty())
+      log_.rows.push_back({std::max(t, log_.rows.empty() ? t : log_.rows.back().t), log_.samples.size() - 1});
+  }
   SampleLog& log() noexcept { return log_; }
+  [[nodiscard]] bool keeps_rows() const noexcept { return options_.keep_rows; }
 
   SampleLog finish() {
     const bool usable = std::any_of(log_.samples.begin(), log_.samples.end(),
@@ -302,6 +309,12 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
   std::vector<std::size_t> lines;
   std::vector<double> rows, refresh_row, refresh_t;
   std::vector<Sample> kept;
+  // Rows repeating held values (kept for SampleLog::rows only): row counter, own time, the kept row.
+  struct Repeat {
+    double row, t;
+    std::size_t of;
+  };
+  std::vector<Repeat> repeats;
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double counter = static_cast<double>(row++);
@@ -339,6 +352,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
     if (have_last && same(rpm.value, last_rpm) && same(speed.value, last_speed)) {
       ++out.log().repeated_rows;
+      if (out.keeps_rows()) repeats.push_back({counter, t.value, kept.size() - 1});
       continue;
     }
     last_rpm = rpm.value;
@@ -349,18 +363,34 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     kept.push_back(Sample{t.value, speed.value * kKmhToMs, rpm.value / kSecondsPerMinute});
   }
   if (format == SampleFormat::kCarloop && it && refresh_row.size() >= 2) {
-    const std::vector<double> times = smooth_row_times(rows, refresh_row, refresh_t);
     // The counter on a row is the whole second at its last refresh, at most one polling round old: the
     // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
     constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
-    double previous = -std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < kept.size(); ++i) {
-      kept[i].t = std::max(previous, std::clamp(times[i], kept[i].t, kept[i].t + kMaxCounterAge));
-      previous = kept[i].t;
+    const auto estimate = [&](const std::vector<double>& at, auto&& own_t, auto&& set_t) {
+      const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
+      double previous = -std::numeric_limits<double>::infinity();
+      for (std::size_t i = 0; i < at.size(); ++i) {
+        previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
+        set_t(i, previous);
+      }
+    };
+    estimate(
+        rows, [&](std::size_t i) { return kept[i].t; }, [&](std::size_t i, double t) { kept[i].t = t; });
+    if (!repeats.empty()) {
+      std::vector<double> repeat_rows(repeats.size());
+      for (std::size_t i = 0; i < repeats.size(); ++i)
+        repeat_rows[i] = repeats[i].row;
+      estimate(
+          repeat_rows, [&](std::size_t i) { return repeats[i].t; },
+          [&](std::size_t i, double t) { repeats[i].t = t; });
     }
   }
-  for (std::size_t i = 0; i < kept.size(); ++i)
-    out.add(lines[i], kept[i]);
+  std::size_t r = 0;
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    const bool added = out.add(lines[i], kept[i]);
+    for (; r < repeats.size() && repeats[r].of == i; ++r)
+      if (added) out.add_repeat(repeats[r].t);
+  }
 }
 
 struct SpeedColumn {
@@ -486,12 +516,13 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   std::vector<std::string> header(views.begin(), views.end());
   const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
 
-  if (has("Engine RPM(rpm)")) {
+  // The generic header first: its further columns are ignored, whatever their names.
+  if (has("t") && has("speed") && has("freq")) {
+    read_generic(reader, header, out);
+  } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);
   } else if (has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()")) {
     read_obd(reader, header, out, SampleFormat::kCarloop);
-  } else if (has("t") && has("speed") && has("freq")) {
-    read_generic(reader, header, out);
   } else if (header.size() >= 2 && has("speed") && has("rpm")) {
     read_obd(reader, header, out, SampleFormat::kSpeedRpm);
   } else {

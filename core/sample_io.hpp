@@ -30,6 +30,14 @@ enum class TorqueSpeed { kAuto, kGps, kObd };
 struct ReadOptions {
   TorqueSpeed torque_speed = TorqueSpeed::kAuto;
   std::size_t max_messages = 1000;  // skip messages kept (all are counted)
+  bool keep_rows = false;           // fill SampleLog::rows (`gearpulse replay` answers every row)
+};
+
+// One data row the reader accepted: its time and the sample that carries its values. An OBD row that
+// only repeats held values has no sample of its own and shares the one it repeats.
+struct InputRow {
+  double t = 0.0;
+  std::size_t sample = 0;
 };
 
 struct SampleLog {
@@ -40,6 +48,7 @@ struct SampleLog {
   std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages
   std::size_t skipped_count = 0;     // every skipped bad row
   std::size_t repeated_rows = 0;     // OBD rows dropped because nothing was refreshed (not errors)
+  std::vector<InputRow> rows;        // with ReadOptions::keep_rows: every accepted row, in file order
 };
 
 // Thrown when nothing usable can be read (empty stream, unknown header, no valid row). what() is one

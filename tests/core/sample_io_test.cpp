@@ -48,6 +48,12 @@ TEST_CASE("io: generic CSV with empty cells and extra columns") {
   CHECK(log.samples[1].freq == Approx(51));
   CHECK_FALSE(log.samples[2].has_freq());
   CHECK(log.skipped_count == 0);
+  // Further columns are ignored whatever their names, even those another format is told by.
+  const SampleLog named =
+      read_text("t,speed,freq,Engine RPM(rpm),ENGINE_RPM (),VEHICLE_SPEED ()\n0,1.5,50,,,\n");
+  CHECK(named.format == SampleFormat::kGeneric);
+  REQUIRE(named.samples.size() == 1);
+  CHECK(named.samples[0].freq == Approx(50));
 }
 
 TEST_CASE("io: bad rows are skipped and reported with file and line") {

@@ -320,3 +320,72 @@ TEST_CASE("cli: replay prints t speed gear source for every row") {
   CHECK(outage_rows >= 50);
   CHECK(engine_rows > 0);
 }
+
+TEST_CASE(
+    "cli: replay answers every row of an OBD log, a repeated row with the output of the row it repeats") {
+  TempDir dir;
+  const std::string train = simulated_log(dir, 23);
+  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  // A Carloop log: the run-time counter in whole seconds, rpm and speed held between polls, so most rows
+  // repeat the row before; one bad row, which is reported and skipped.
+  std::string log = "ENGINE_RUN_TINE (), ENGINE_RPM (), VEHICLE_SPEED (), THROTTLE (),\n";
+  std::size_t data_rows = 0;
+  for (int i = 0; i < 400; ++i) {
+    const int refresh = i / 4;  // values change every fourth row
+    char row[96];
+    std::snprintf(row, sizeof row, "%d.000000, %.6f, %d.000000, 17.6,\n", i / 2,
+                  1500.0 + 10.0 * (refresh % 7), 20 + refresh % 5);
+    log += row;
+    ++data_rows;
+    if (i == 200) log += "101.000000, garbage, 3.000000, 17.6,\n";
+  }
+  write(dir.file("carloop.csv"), log);
+  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + dir.file("carloop.csv"));
+  REQUIRE(r.status == 0);
+  CHECK(r.err.find("carloop.csv:203:") != std::string::npos);
+  std::istringstream out(r.out);
+  std::string line;
+  std::getline(out, line);
+  REQUIRE(line == "t,speed,gear,source");
+  std::vector<std::vector<std::string>> rows;
+  while (std::getline(out, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ls(line);
+    for (std::string cell; std::getline(ls, cell, ',');)
+      cells.push_back(cell);
+    REQUIRE(cells.size() == 4);
+    rows.push_back(cells);
+  }
+  REQUIRE(rows.size() == data_rows);
+  for (std::size_t i = 1; i < rows.size(); ++i) {
+    CHECK(std::stod(rows[i][0]) >= std::stod(rows[i - 1][0]));
+    // Rows 4k+1 .. 4k+3 repeat row 4k: the same answer.
+    if (i % 4 != 0) CHECK(rows[i][1] == rows[i - 1][1]);
+    if (i % 4 != 0) CHECK(rows[i][3] == rows[i - 1][3]);
+  }
+}
+
+TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds keep their fractions)") {
+  TempDir dir;
+  const std::string train = simulated_log(dir, 23);
+  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  std::string log = "t,speed,freq\n";
+  for (int i = 0; i < 50; ++i) {
+    char row[96];
+    std::snprintf(row, sizeof row, "%.1f,10.0,40.0\n", 1700000000.0 + 0.1 * i);
+    log += row;
+  }
+  write(dir.file("epoch.csv"), log);
+  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + dir.file("epoch.csv"));
+  REQUIRE(r.status == 0);
+  std::istringstream in(log), out(r.out);
+  std::string want, got;
+  std::getline(in, want);
+  std::getline(out, got);
+  std::size_t rows = 0;
+  while (std::getline(in, want) && std::getline(out, got)) {
+    CHECK(std::stod(got.substr(0, got.find(','))) == std::stod(want.substr(0, want.find(','))));
+    ++rows;
+  }
+  CHECK(rows == 50);
+}

@@ -1,7 +1,9 @@
 // `gearpulse replay`: runs the daemon's speed synthesis over a sample log as if live and prints
-// t,speed,gear,source for every row (INTERFACES.md). Rows with an empty speed are GPS outages.
+// t,speed,gear,source for every row the reader accepts (INTERFACES.md). Rows with an empty speed are GPS
+// outages.
 #include <algorithm>
 #include <cerrno>
+#include <charconv>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -42,17 +44,28 @@ int run_replay(const ReplayCommand& cmd) {
   const auto model = load_model(cmd.model);
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
+  read.keep_rows = true;
   const SampleLog log = std::move(read_sample_files({cmd.file}, read).front());
 
+  // One output row per accepted input row: a sample steps the synthesis once, at its first row; an OBD
+  // row repeating held values answers with the output of the sample it repeats.
   SpeedSynthesizer synth(model);
   std::string out = "t,speed,gear,source\n";
-  char row[512];  // room for any double in %.4f (at most 309 digits before the point)
-  for (const Sample& s : log.samples) {
-    const SynthOutput o = synth.step(s.t, s.speed, s.freq);
+  SynthOutput o;
+  std::size_t stepped = 0;  // samples stepped so far
+  char row[512];            // room for any double (at most 309 digits before the point)
+  for (const InputRow& r : log.rows) {
+    for (; stepped <= r.sample; ++stepped) {
+      const Sample& s = log.samples[stepped];
+      o = synth.step(s.t, s.speed, s.freq);
+    }
+    // t as the shortest text that reads back to the same double (epoch seconds keep their fractions).
+    const auto t = std::to_chars(row, row + 64, r.t);
     const std::string_view source = source_name(o.source);
-    const int n = std::snprintf(row, sizeof row, "%.10g,%.4f,%d,%.*s\n", s.t, o.speed, o.gear,
+    const int n = std::snprintf(t.ptr, sizeof row - 64, ",%.4f,%d,%.*s\n", o.speed, o.gear,
                                 static_cast<int>(source.size()), source.data());
-    out.append(row, std::min(static_cast<std::size_t>(std::max(n, 0)), sizeof row - 1));
+    out.append(row, static_cast<std::size_t>(t.ptr - row) +
+                        std::min(static_cast<std::size_t>(std::max(n, 0)), sizeof row - 65));
     if (out.size() > (1u << 16)) {
       std::fwrite(out.data(), 1, out.size(), stdout);
       out.clear();
