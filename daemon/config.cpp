@@ -204,6 +204,12 @@ void check_relations(const Config& c, const toml::table& root, const std::string
   if (c.tracker.hop > c.tracker.window * 4.0)
     throw ConfigError(at("tracker", "hop") +
                       ": tracker.hop: more than 4 windows; audio between windows would be ignored");
+  // Whatever else the tracker would refuse at the configured rate (the window must hold 4 periods of
+  // band_low, ...), refused here, before any device is opened.
+  if (const std::string problem = SlidingDftTracker::validate(tracker_config_of(c.tracker, c.audio.rate));
+      !problem.empty())
+    throw ConfigError(at("tracker", root.at_path("tracker.window") ? "window" : "band_low") +
+                      ": tracker: " + problem);
   // sun_path holds 108 bytes including the terminator.
   if (c.control.socket.size() > 107)
     throw ConfigError(at("control", "socket") + ": control.socket: path longer than 107 bytes");
@@ -263,6 +269,19 @@ PulseConfig pulse_config_of(const OutputConfig& o) noexcept {
   p.min_freq_hz = o.min_frequency;
   p.max_freq_hz = o.max_frequency;
   return p;
+}
+
+gearpulse::TrackerConfig tracker_config_of(const TrackerConfig& t, double sample_rate_hz) noexcept {
+  gearpulse::TrackerConfig tc;
+  tc.sample_rate_hz = sample_rate_hz;
+  tc.window_s = t.window;
+  tc.hop_s = t.hop;
+  tc.band_lo_hz = t.band_low;
+  tc.band_hi_hz = t.band_high;
+  // at() serves GPS fixes up to a few seconds old, with the latency on top: the largest the config
+  // accepts, since a reload may raise it while this tracker runs (a few dozen points more).
+  tc.history_s = kMaxGpsLatency + 2.0;
+  return tc;
 }
 
 const char* to_string(OutputKind kind) noexcept {

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/pulse_scheduler.hpp"
+#include "core/sliding_dft_tracker.hpp"
 
 namespace gearpulse::daemon {
 
@@ -55,6 +56,9 @@ struct OutputConfig {
 
 // The pulse train's settings as the scheduler takes them (fixed width when duty is 0).
 [[nodiscard]] PulseConfig pulse_config_of(const OutputConfig& o) noexcept;
+// The tracker's settings for capture at `sample_rate_hz` (the rate the device gave).
+[[nodiscard]] gearpulse::TrackerConfig tracker_config_of(const TrackerConfig& t,
+                                                         double sample_rate_hz) noexcept;
 
 struct ModelConfig {
   std::string state_dir = "/var/lib/gearpulse";

@@ -182,15 +182,7 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
     audio_error = e.what();
     return false;
   }
-  gearpulse::TrackerConfig tc;
-  tc.sample_rate_hz = new_capture->rate();
-  tc.window_s = config.tracker.window;
-  tc.hop_s = config.tracker.hop;
-  tc.band_lo_hz = config.tracker.band_low;
-  tc.band_hi_hz = config.tracker.band_high;
-  // at() serves GPS fixes up to a few seconds old, with the latency on top: the largest the config
-  // accepts, since a reload may raise it while this tracker runs (a few dozen points more).
-  tc.history_s = kMaxGpsLatency + 2.0;
+  const gearpulse::TrackerConfig tc = tracker_config_of(config.tracker, new_capture->rate());
   std::string error;
   tracker = SlidingDftTracker::create(tc, error);
   if (!tracker) {

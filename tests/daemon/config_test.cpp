@@ -137,6 +137,36 @@ TEST_CASE("config: every accepted output section is one the pulse scheduler take
   }
 }
 
+TEST_CASE("config: every accepted tracker section is one the tracker takes at the configured rate") {
+  // What the tracker would refuse when the daemon opens the audio is refused by the config (so by
+  // --check-config), with the line of the key to change.
+  CHECK(error_of("[tracker]\nband_low = 30.0\n")
+            .starts_with("test.toml:2: tracker: window 0.1 s is too short"));
+  CHECK(error_of("[tracker]\nband_low = 30.0\nwindow = 0.1\n").starts_with("test.toml:3: tracker: window"));
+  CHECK(error_of("[tracker]\nwindow = 0.05\n").starts_with("test.toml:2: tracker: window 0.05 s"));
+  CHECK(error_of("[tracker]\nband_low = 30.0\nwindow = 0.14\n").empty());
+  int accepted = 0;
+  for (const char* rate : {"8000", "48000"})
+    for (const char* low : {"10", "30", "50", "120"})
+      for (const char* high : {"200", "1000", "3500"})
+        for (const char* window : {"0.01", "0.05", "0.1", "0.5", "2.0"})
+          for (const char* hop : {"0.001", "0.1", "1.0"}) {
+            const std::string text = std::string("[audio]\nrate = ") + rate +
+                                     "\n[tracker]\nband_low = " + low + "\nband_high = " + high +
+                                     "\nwindow = " + window + "\nhop = " + hop + "\n";
+            INFO(text);
+            try {
+              const Config c = parse_config(text, "a");
+              ++accepted;
+              CHECK(gearpulse::SlidingDftTracker::validate(
+                        gearpulse::daemon::tracker_config_of(c.tracker, c.audio.rate))
+                        .empty());
+            } catch (const ConfigError&) {
+            }
+          }
+  CHECK(accepted > 20);
+}
+
 TEST_CASE("config: channel takes an index or mix") {
   CHECK(parse_config("[audio]\nchannels = 2\nchannel = 1\n", "a").audio.channel == 1);
   CHECK(parse_config("[audio]\nchannels = 2\nchannel = \"mix\"\n", "a").audio.channel == -1);
