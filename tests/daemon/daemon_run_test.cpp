@@ -255,6 +255,9 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
     REQUIRE(rc.has_value());
     CHECK(*rc != 0);
     CHECK(read_text(dir / "absent.txt").find("gearpulsed is not running") != std::string::npos);
+    Process unknown({ctl, "--socket", sock, "--json", "frobnicate"}, dir / "unknown.txt");
+    CHECK(unknown.wait() == 2);
+    CHECK(read_text(dir / "unknown.txt").find("unknown command 'frobnicate'") != std::string::npos);
   }
   write_text(dir / "gearpulse.toml", config_for(dir));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");

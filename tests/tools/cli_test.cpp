@@ -269,13 +269,35 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
        {"fit --bogus " + log, "fit --gears x " + log, "fit --gears 99 " + log, "fit --ratios 1.2,abc " + log,
         "fit --ratios 0.9 " + log, "fit --ratios 1e308,1e308 " + log, "fit --ratios 1.0000001 " + log,
         "fit --speed radar " + log, std::string("fit"), "replay " + log,
-        "replay --model " + log + " --frobnicate " + log}) {
+        "replay --model " + log + " --frobnicate " + log, "fit --ratios '' " + log, "fit --gears 1 " + log,
+        "frobnicate " + log, std::string("")}) {
     INFO(args);
     const Result r = run(dir, args);
     CHECK(r.status == 2);
     CHECK(lines(r.err) == 1);
     CHECK(r.err.rfind("gearpulse: ", 0) == 0);
   }
+  // Each names what is wrong: the command, and a gear count in the range the fit takes.
+  CHECK(run(dir, "frobnicate " + log).err.find("unknown command 'frobnicate'") != std::string::npos);
+  CHECK(run(dir, "fit --gears 1 " + log).err.find("from 2 to") != std::string::npos);
+}
+
+TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and names gears forced apart") {
+  TempDir dir;
+  const std::string log = simulated_log(dir, 21);
+  const Result bad = run(dir, "fit --out " + dir.file("missing/model.json") + " " + log);
+  CHECK(bad.status == 2);
+  CHECK(bad.out.empty());
+  CHECK(bad.err.find("missing/model.json") != std::string::npos);
+  // Asked for more gears than the car has, the fit splits one: a warning names the pair.
+  const auto fitted = nlohmann::json::parse(run(dir, "fit " + log).out);
+  const std::size_t gears = fitted["gears"].size();
+  REQUIRE(gears >= 4);
+  CHECK(run(dir, "fit " + log).err.empty());
+  const Result forced = run(dir, "fit --gears " + std::to_string(gears + 1) + " " + log);
+  CHECK(forced.status == 0);
+  CHECK(forced.err.find("warning: gears") != std::string::npos);
+  CHECK(run(dir, "fit --gears " + std::to_string(gears) + " " + log).err.empty());
 }
 
 TEST_CASE("cli: replay prints t speed gear source for every row") {

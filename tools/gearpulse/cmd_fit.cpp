@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -24,7 +25,7 @@ constexpr int kMaxGears = static_cast<int>(GearModel::kMaxGears);
 
 struct FitCommand {
   std::string gears = "auto";
-  std::string ratios;
+  std::optional<std::string> ratios;  // unset: no priors (an empty --ratios is an error, not "none")
   std::string out;
   std::string plot;
   std::string speed = "auto";
@@ -35,15 +36,16 @@ int parse_gears(const std::string& text) {
   if (text == "auto") return 0;
   int n = 0;
   const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), n);
-  if (ec != std::errc() || ptr != text.data() + text.size() || n < 1 || n > kMaxGears)
-    throw UsageError("--gears must be 'auto' or a gear count from 1 to " + std::to_string(kMaxGears) +
+  if (ec != std::errc() || ptr != text.data() + text.size() || n < 2 || n > kMaxGears)
+    throw UsageError("--gears must be 'auto' or a gear count from 2 to " + std::to_string(kMaxGears) +
                      ", not '" + text + "'");
   return n;
 }
 
-std::vector<double> parse_ratios(const std::string& text) {
+std::vector<double> parse_ratios(const std::optional<std::string>& given) {
   std::vector<double> ratios;
-  if (text.empty()) return ratios;
+  if (!given) return ratios;
+  const std::string& text = *given;
   std::size_t start = 0;
   while (start <= text.size()) {
     std::size_t comma = text.find(',', start);
@@ -81,6 +83,24 @@ void write_file_atomically(const std::string& path, const std::string& text) {
   }
 }
 
+// A gear count forced above the car's splits a gear in two: neighbours whose thetas are not told apart by
+// their standard errors (or lie within 1 %) are named, so the user does not take them for two gears.
+void warn_indistinct_gears(const GearModel& model, const std::string& gears) {
+  constexpr double kMinGap = 0.01;  // relative
+  constexpr double kStderrs = 3.0;
+  for (std::size_t i = 1; i < model.gears.size(); ++i) {
+    const Gear& a = model.gears[i - 1];
+    const Gear& b = model.gears[i];
+    const double gap = std::log(b.theta / a.theta);
+    const double se = std::hypot(a.std_error / a.theta, b.std_error / b.theta);
+    if (gap < std::max(kMinGap, kStderrs * se))
+      std::fprintf(stderr,
+                   "gearpulse: warning: gears %zu and %zu are one (theta %.5f and %.5f): the data has fewer "
+                   "gears than --gears %s\n",
+                   i, i + 1, a.theta, b.theta, gears.c_str());
+  }
+}
+
 int run_fit(const FitCommand& cmd) {
   FitOptions options;
   options.gears = parse_gears(cmd.gears);
@@ -113,6 +133,9 @@ int run_fit(const FitCommand& cmd) {
     throw UsageError(e.what());
   }
   const std::string json = serialize_model(result.model);
+  // Files first: a path that cannot be written is an error before anything is printed.
+  if (!cmd.out.empty()) write_file_atomically(cmd.out, json);
+  if (!cmd.plot.empty()) write_file_atomically(cmd.plot, ratio_histogram_svg(samples, result.model));
   std::fwrite(json.data(), 1, json.size(), stdout);
   std::fflush(stdout);
   if (result.model.gears.empty()) {
@@ -120,8 +143,7 @@ int run_fit(const FitCommand& cmd) {
         result.model.reason.empty() ? "no discrete gear ladder in the data" : result.model.reason;
     std::fprintf(stderr, "gearpulse: no gear ladder: %s\n", reason.c_str());
   }
-  if (!cmd.out.empty()) write_file_atomically(cmd.out, json);
-  if (!cmd.plot.empty()) write_file_atomically(cmd.plot, ratio_histogram_svg(samples, result.model));
+  if (options.gears != 0) warn_indistinct_gears(result.model, cmd.gears);
   return 0;
 }
 

@@ -1,6 +1,7 @@
 // gearpulse: the offline tool (fit, replay, track, simulate) over logs and recordings.
 #include <cstdio>
 #include <exception>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
@@ -23,6 +24,17 @@ int main(int argc, char** argv) {
     return app.exit(e);
   } catch (const CLI::Success& e) {
     return app.exit(e);
+  } catch (const CLI::RequiredError& e) {
+    // An unknown command reads to CLI11 as none at all: name it.
+    if (argc > 1 && argv[1][0] != '-') {
+      std::string known;
+      for (const CLI::App* sub : app.get_subcommands({}))
+        known += (known.empty() ? "" : ", ") + sub->get_name();
+      std::fprintf(stderr, "gearpulse: unknown command '%s' (commands: %s)\n", argv[1], known.c_str());
+    } else {
+      std::fprintf(stderr, "gearpulse: %s\n", e.what());
+    }
+    return 2;
   } catch (const CLI::ParseError& e) {
     std::fprintf(stderr, "gearpulse: %s\n", e.what());
     return 2;

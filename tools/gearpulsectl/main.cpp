@@ -9,6 +9,7 @@
 #include <cstring>
 #include <iostream>
 #include <string>
+#include <string_view>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -98,13 +99,14 @@ void print_gears(const nlohmann::json& gears) {
     std::cout << "  (no gears learned yet)\n";
     return;
   }
-  std::cout << "  gear  theta (m/s)/Hz   stderr       weight  km/h per 1000 rpm\n";
+  std::cout << "  gear  theta (m/s)/Hz   stderr       weight  km/h at 100 Hz\n";
   for (const auto& g : gears) {
     const double theta = g.value("theta", 0.0);
     char row[160];
-    // km/h at 1000 rpm assumes the tracked component is the crank rotation frequency (rpm / 60).
+    // Speed at 100 Hz of the tracked component (a ripple's frequency is some multiple of the crank's, which
+    // the daemon never needs to know, so no km/h per 1000 rpm).
     std::snprintf(row, sizeof row, "  %4d  %14.5f  %10.6f  %8.3f  %8.1f\n", g.value("gear", 0), theta,
-                  g.value("stderr", 0.0), g.value("weight", 0.0), theta * 1000.0 / 60.0 * 3.6);
+                  g.value("stderr", 0.0), g.value("weight", 0.0), theta * 100.0 * 3.6);
     std::cout << row;
   }
 }
@@ -167,6 +169,20 @@ int main(int argc, char** argv) {
   }
   try {
     app.parse(argc, argv);
+  } catch (const CLI::RequiredError& e) {
+    // An unknown command reads to CLI11 as none at all: name it (the first word that is neither an
+    // option nor the value of --socket).
+    for (int i = 1; i < argc; ++i) {
+      const std::string_view arg = argv[i];
+      if (arg == "--socket") {
+        ++i;
+      } else if (!arg.starts_with("-")) {
+        std::cerr << "gearpulsectl: unknown command '" << arg
+                  << "' (commands: status, gears, retrain, reset-model)\n";
+        return 2;
+      }
+    }
+    return app.exit(e) == 0 ? 0 : 2;
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
