@@ -6,6 +6,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <mutex>
 #include <optional>
 #include <thread>
@@ -133,9 +134,14 @@ void Pipeline::Impl::open_output() {
   const OutputConfig& o = config.output;
   try {
     switch (o.kind) {
-      case OutputKind::kPty:
+      case OutputKind::kPty: {
+        // As for the control socket and the state directory: a missing directory is made.
+        const std::filesystem::path dir = std::filesystem::path(o.path).parent_path();
+        std::error_code ec;
+        if (!dir.empty()) std::filesystem::create_directories(dir, ec);
         output = std::make_unique<PtyOutput>(o.path);
         break;
+      }
       case OutputKind::kGpio:
         output = std::make_unique<GpioOutput>(o.chip, o.line);
         break;

@@ -112,6 +112,23 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
 }
 
+TEST_CASE("daemon: a PTY output in a directory that does not exist yet is made there") {
+  TempDir dir;
+  const std::filesystem::path link = dir / "run" / "sub" / "pulse";
+  std::string text = config_for(dir);
+  const std::string none = "kind = \"none\"\n";
+  text.replace(text.find(none), none.size(), "kind = \"pty\"\npath = \"" + link.string() + "\"\n");
+  write_text(dir / "gearpulse.toml", text);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["output"]["error"] == "");
+  CHECK(std::filesystem::is_symlink(link));
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
 TEST_CASE("daemon: a malformed config is refused with file and line before anything opens") {
   TempDir dir;
   write_text(dir / "bad.toml",
