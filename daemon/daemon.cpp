@@ -392,6 +392,7 @@ int Daemon::run() {
       }
     }
     const auto now = Clock::now();
+    d.pipeline->service();
     d.pipeline->drain_pairs();
     const PipelineSnapshot snap = d.pipeline->snapshot();
     // The watchdog is fed only while every pipeline thread shows a recent heartbeat: a hung thread

@@ -53,6 +53,35 @@ SampleFormat format_of(const std::string& name) {
   return SampleFormat::kS16;
 }
 
+// Between tries to open an output device that would not open (a GPIO line still held by another
+// process, a USB GPIO adapter that enumerates after the daemon started).
+constexpr auto kOutputRetry = std::chrono::seconds(2);
+
+// What the pulse thread drives: the device once it is open; until then a stand-in that counts the pulses.
+// The device is attached once, by the main thread, while the pulse thread runs: the thread finds it
+// through an atomic pointer at its next edge, and it is freed only after the thread has stopped.
+class LateOutput final : public PulseOutput {
+ public:
+  void attach(std::unique_ptr<PulseOutput> device) noexcept {
+    device_ = std::move(device);
+    current_.store(device_.get(), std::memory_order_release);
+  }
+  [[nodiscard]] bool attached() const noexcept { return current_.load(std::memory_order_acquire) != &none_; }
+  void rise() noexcept override { current_.load(std::memory_order_acquire)->rise(); }
+  void fall() noexcept override { current_.load(std::memory_order_acquire)->fall(); }
+  [[nodiscard]] std::uint64_t errors() const noexcept override {
+    return current_.load(std::memory_order_acquire)->errors();
+  }
+  [[nodiscard]] std::string describe() const override {
+    return current_.load(std::memory_order_acquire)->describe();
+  }
+
+ private:
+  NullPulseOutput none_;
+  std::unique_ptr<PulseOutput> device_;
+  std::atomic<PulseOutput*> current_{&none_};
+};
+
 // A GPS fix waiting for the engine frequency of the audio window centred on it.
 struct PendingFix {
   double t = 0.0;      // CLOCK_MONOTONIC s of the fix (receive time - latency)
@@ -74,10 +103,12 @@ struct Pipeline::Impl {
   std::atomic<double> min_snr_db{PipelineTunables{}.min_snr_db};
 
   // Devices.
-  std::unique_ptr<PulseOutput> output;
+  LateOutput output;
   std::unique_ptr<PulseThread> pulses;
   std::unique_ptr<GpsdClient> gps;
+  mutable std::mutex output_mutex;  // output_error: set by the main thread, read by status queries
   std::string output_error;
+  std::chrono::steady_clock::time_point next_output_try;
 
   // Audio: owned by the tracker thread once started; stats read under audio_mutex.
   mutable std::mutex audio_mutex;
@@ -108,6 +139,7 @@ struct Pipeline::Impl {
   std::atomic<std::uint64_t> ring_drops{0};
 
   void open_output();
+  void open_output_device();
   bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
   void close_audio();
   void tracker_loop() noexcept;
@@ -132,6 +164,27 @@ void Pipeline::Impl::clear_fault(const std::string& key, const std::string& text
 
 void Pipeline::Impl::open_output() {
   const OutputConfig& o = config.output;
+  PulseThreadConfig pc;
+  pc.pulse = pulse_config_of(o);
+  pc.realtime = config.audio.realtime;
+  pc.rt_priority = std::min(99, config.audio.rt_priority + 10);
+  pc.lock_memory = config.audio.realtime;
+  pulses = std::make_unique<PulseThread>(output, pc);
+  pulses->set_speed(0.0);
+  pulses->start();
+  if (o.kind == OutputKind::kNone) {
+    spdlog::info("output: none (pulses are counted, not emitted) at {} pulses/km", o.pulses_per_km);
+    return;
+  }
+  open_output_device();
+}
+
+// Opens the configured device and hands it to the pulse thread; on failure the pulses go on being
+// counted and the main thread tries again every kOutputRetry (Pipeline::service()).
+void Pipeline::Impl::open_output_device() {
+  const OutputConfig& o = config.output;
+  next_output_try = std::chrono::steady_clock::now() + kOutputRetry;
+  std::unique_ptr<PulseOutput> device;
   try {
     switch (o.kind) {
       case OutputKind::kPty: {
@@ -139,31 +192,38 @@ void Pipeline::Impl::open_output() {
         const std::filesystem::path dir = std::filesystem::path(o.path).parent_path();
         std::error_code ec;
         if (!dir.empty()) std::filesystem::create_directories(dir, ec);
-        output = std::make_unique<PtyOutput>(o.path);
+        device = std::make_unique<PtyOutput>(o.path);
         break;
       }
       case OutputKind::kGpio:
-        output = std::make_unique<GpioOutput>(o.chip, o.line);
+        device = std::make_unique<GpioOutput>(o.chip, o.line);
         break;
       case OutputKind::kNone:
-        output = std::make_unique<NullPulseOutput>();
-        break;
+        return;
     }
   } catch (const std::exception& e) {
-    // Keep counting pulses without a device so status and the pulse count stay meaningful.
-    output_error = e.what();
-    spdlog::error("output: {}; pulses are counted but not emitted until a restart", e.what());
-    output = std::make_unique<NullPulseOutput>();
+    {
+      std::lock_guard lock(output_mutex);
+      output_error = e.what();
+    }
+    report("output", spdlog::level::err,
+           fmt::format("output: {}; pulses are counted but not emitted; retrying every {} s", e.what(),
+                       kOutputRetry.count()));
+    return;
   }
-  PulseThreadConfig pc;
-  pc.pulse = pulse_config_of(o);
-  pc.realtime = config.audio.realtime;
-  pc.rt_priority = std::min(99, config.audio.rt_priority + 10);
-  pc.lock_memory = config.audio.realtime;
-  pulses = std::make_unique<PulseThread>(*output, pc);
-  pulses->set_speed(0.0);
-  pulses->start();
-  spdlog::info("output: {} at {} pulses/km", output->describe(), o.pulses_per_km);
+  const std::string name = device->describe();
+  output.attach(std::move(device));
+  bool was_failing = false;
+  {
+    std::lock_guard lock(output_mutex);
+    was_failing = !output_error.empty();
+    output_error.clear();
+  }
+  const std::string text = fmt::format("output: {} at {} pulses/km", name, o.pulses_per_km);
+  if (was_failing)
+    clear_fault("output", text + " (opened on a retry)");
+  else
+    spdlog::info("{}", text);
 }
 
 bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
@@ -437,6 +497,13 @@ void Pipeline::start() {
   d.tracker_thread = std::thread([&d] { d.tracker_loop(); });
 }
 
+void Pipeline::service() {
+  Impl& d = *impl_;
+  if (d.pulses && d.config.output.kind != OutputKind::kNone && !d.output.attached() &&
+      std::chrono::steady_clock::now() >= d.next_output_try)
+    d.open_output_device();
+}
+
 std::size_t Pipeline::drain_pairs() {
   Impl& d = *impl_;
   std::size_t added = 0;
@@ -488,11 +555,14 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     if (s.pulse_frequency < d.config.output.min_frequency) s.pulse_frequency = 0.0;
     s.pulse_frequency = std::min(s.pulse_frequency, d.config.output.max_frequency);
   }
-  if (d.output) {
-    s.output_error = d.output_error;
-    if (!d.output_error.empty())
+  if (d.pulses) {
+    {
+      std::lock_guard lock(d.output_mutex);
+      s.output_error = d.output_error;
+    }
+    if (!s.output_error.empty())
       s.output_state = "error";
-    else if (d.output->errors() > 0)
+    else if (d.output.errors() > 0)
       s.output_state = "write-errors";
     else
       s.output_state = d.config.output.kind == OutputKind::kNone ? "off" : "ok";

@@ -60,6 +60,9 @@ class Pipeline {
   Pipeline& operator=(const Pipeline&) = delete;
 
   void start();
+  // The main thread's periodic chores that may block briefly: tries again to open an output device that
+  // would not open (every few seconds until it does).
+  void service();
   // Moves the training pairs the tracker has made since the last call into the store (the main
   // thread's job, at least every few seconds: the hand-over holds about 100 s of 10 Hz fixes).
   // Returns how many the store took.

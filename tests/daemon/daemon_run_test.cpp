@@ -129,6 +129,33 @@ TEST_CASE("daemon: a PTY output in a directory that does not exist yet is made t
   CHECK(daemon.wait() == 0);
 }
 
+TEST_CASE("daemon: an output that will not open is retried until it does, without a restart") {
+  TempDir dir;
+  const std::filesystem::path link = dir / "pulse";
+  write_text(link, "a file where the link should go\n");  // the PTY output refuses to replace it
+  std::string text = config_for(dir);
+  const std::string none = "kind = \"none\"\n";
+  text.replace(text.find(none), none.size(), "kind = \"pty\"\npath = \"" + link.string() + "\"\n");
+  write_text(dir / "gearpulse.toml", text);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json failing = wait_for_status(dir, daemon);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(failing.is_object());
+  CHECK(failing["output"]["state"] == "error");
+  CHECK(failing["output"]["error"].get<std::string>().find("not a symlink") != std::string::npos);
+  std::filesystem::remove(link);
+  json status;
+  for (int i = 0; i < 100 && !std::filesystem::is_symlink(link); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  CHECK(std::filesystem::is_symlink(link));
+  status = wait_for_status(dir, daemon);
+  CHECK(status["output"]["state"] == "ok");
+  CHECK(status["output"]["error"] == "");
+  CHECK(read_text(dir / "log.txt").find("opened on a retry") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
 TEST_CASE("daemon: a malformed config is refused with file and line before anything opens") {
   TempDir dir;
   write_text(dir / "bad.toml",
