@@ -420,10 +420,10 @@ int Daemon::run() {
 
   systemd::stopping();
   d.control->stop();
-  // What is learned is saved first, as soon as no more training pairs come: joining a fit in progress
-  // (an idle-priority thread) or a GPS client inside a connection attempt may outlast systemd's stop
-  // timeout, and its SIGKILL must not cost the pairs since the last periodic save.
-  d.pipeline->halt();  // output left low
+  // What is learned is saved first: joining a fit in progress (an idle-priority thread), the capture
+  // thread (a device that does not return from a read) or a GPS client inside a connection attempt may
+  // outlast systemd's stop timeout, and its SIGKILL must not cost the pairs since the last periodic save.
+  d.pipeline->halt();  // output left low, no more training pairs asked for
   d.pipeline->drain_pairs();
   d.save_store("shutdown");
   {
@@ -436,8 +436,10 @@ int Daemon::run() {
       }
     }
   }
-  d.retrainer.stop();
   d.pipeline->stop();
+  // Pairs the tracker made in its last turn, between halt() and its end.
+  if (d.pipeline->drain_pairs() > 0) d.save_store("shutdown");
+  d.retrainer.stop();
   d.control.reset();
   ::close(sfd);
   spdlog::info("gearpulsed stopped");

@@ -119,6 +119,7 @@ struct Pipeline::Impl {
 
   std::thread tracker_thread;
   std::atomic<bool> stop{false};
+  std::atomic<bool> tracker_done{false};  // tracker_loop() has returned (its capture closed)
 
   // Published by the tracker thread.
   std::atomic<std::int64_t> tracker_beat{0};
@@ -471,6 +472,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
   }
   close_audio();
+  tracker_done.store(true);
 }
 
 Pipeline::Pipeline(const Config& config, ModelHolder& model, TrainingStore& store)
@@ -493,6 +495,7 @@ void Pipeline::start() {
   d.gps = std::make_unique<GpsdClient>(gc);
   d.gps->start();
   d.stop.store(false);
+  d.tracker_done.store(false);
   d.tracker_beat.store(monotonic_ns());
   d.tracker_thread = std::thread([&d] { d.tracker_loop(); });
 }
@@ -517,17 +520,30 @@ std::size_t Pipeline::drain_pairs() {
 
 void Pipeline::halt() noexcept {
   Impl& d = *impl_;
-  d.stop.store(true);
-  if (d.tracker_thread.joinable()) d.tracker_thread.join();
+  // The pulse train first: the output goes low now, whatever the joins below wait for.
   if (d.pulses) {
     d.pulses->set_speed(0.0);
     d.pulses->stop();  // leaves the output low
   }
+  d.stop.store(true);
 }
 
 void Pipeline::stop() noexcept {
+  Impl& d = *impl_;
   halt();
-  if (impl_->gps) impl_->gps->stop();
+  if (d.tracker_thread.joinable()) {
+    // The tracker thread closes the capture, whose thread may sit in a read the device does not
+    // return from (a stalled USB card, a FIFO whose writer paused): say so rather than hang in silence.
+    constexpr auto kPatience = std::chrono::seconds(3);
+    const auto deadline = std::chrono::steady_clock::now() + kPatience;
+    while (!d.tracker_done.load() && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    if (!d.tracker_done.load())
+      spdlog::warn("stop: the audio capture has not returned from the device for {} s ({}); still waiting",
+                   kPatience.count(), d.config.audio.device);
+    d.tracker_thread.join();
+  }
+  if (d.gps) d.gps->stop();
 }
 
 void Pipeline::set_tunables(const PipelineTunables& tunables) noexcept {

@@ -67,10 +67,11 @@ class Pipeline {
   // thread's job, at least every few seconds: the hand-over holds about 100 s of 10 Hz fixes).
   // Returns how many the store took.
   std::size_t drain_pairs();
-  // Stops the tracker (no more training pairs) and the pulse train (the output is left low) at once;
-  // the GPS client, whose stop may wait for a connection attempt, runs on until stop().
+  // Stops the pulse train (the output is left low) and tells the tracker to stop making training pairs,
+  // without waiting for anything: what is learned can be saved before the joins of stop().
   void halt() noexcept;
-  // Stops every thread; the output is left low.
+  // Stops every thread (halt() first); the output is left low. Joining the tracker waits for the capture
+  // thread, which a device that never returns from a read can hold.
   void stop() noexcept;
   void set_tunables(const PipelineTunables& tunables) noexcept;
   [[nodiscard]] PipelineSnapshot snapshot() const;

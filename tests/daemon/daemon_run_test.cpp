@@ -1,6 +1,7 @@
 // Runs the built gearpulsed as a process: no gpsd, no sound card, output "none".
 #include <catch2/catch.hpp>
 
+#include <fcntl.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -18,6 +19,7 @@
 
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
+#include "tests/drivers/alsa_fifo.hpp"
 #include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
@@ -153,6 +155,36 @@ TEST_CASE("daemon: an output that will not open is retried until it does, withou
   CHECK(status["output"]["error"] == "");
   CHECK(read_text(dir / "log.txt").find("opened on a retry") != std::string::npos);
   daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
+TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture stuck in the device") {
+  TempDir dir;
+  // A capture whose read never returns: the file plugin reads a FIFO whose writer is there but silent.
+  const std::filesystem::path fifo = gearpulse::test::make_paced_pcm(dir, "stuck");
+  const int writer = ::open(fifo.c_str(), O_RDWR | O_CLOEXEC);
+  REQUIRE(writer >= 0);
+  std::string text = config_for(dir);
+  const std::string device = "gearpulse_test_no_such_pcm";
+  text.replace(text.find(device), device.size(), "stuck");
+  write_text(dir / "gearpulse.toml", text);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the capture thread is in its read
+  daemon.signal(SIGTERM);
+  // The store is saved while the daemon still waits for the capture thread.
+  bool saved = false;
+  for (int i = 0; i < 100 && !saved; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    saved = read_text(dir / "log.txt").find("(shutdown)") != std::string::npos;
+  }
+  INFO(read_text(dir / "log.txt"));
+  CHECK(saved);
+  CHECK(std::filesystem::exists(dir / "state/training.bin"));
+  std::this_thread::sleep_for(std::chrono::milliseconds(3500));
+  CHECK(daemon.running());
+  CHECK(read_text(dir / "log.txt").find("has not returned from the device") != std::string::npos);
+  ::close(writer);  // the read returns (end of file): the daemon can finish
   CHECK(daemon.wait() == 0);
 }
 
