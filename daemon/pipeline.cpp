@@ -295,6 +295,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
   auto backoff = std::chrono::milliseconds(500);
   bool audio_was_up = false;
   bool audio_interrupted = false;  // the open capture lost its device and is being reopened
+  bool audio_frozen = false;       // its periods repeat (AlsaCaptureStats::frozen)
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
   // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
   // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
@@ -468,6 +469,16 @@ void Pipeline::Impl::tracker_loop() noexcept {
         clear_fault("audio-run", "audio: capture from " + config.audio.device + " resumed (" +
                                      std::to_string(s.reopens) + " reopen(s) so far)");
       }
+      if (s.frozen && !audio_frozen) {
+        audio_frozen = true;
+        report("audio-frozen", spdlog::level::warn,
+               "audio: " + config.audio.device +
+                   " gives the same samples period after period (a source that has stopped, or digital "
+                   "silence); they are not used, and speed follows GPS, until they change");
+      } else if (!s.frozen && audio_frozen) {
+        audio_frozen = false;
+        clear_fault("audio-frozen", "audio: samples from " + config.audio.device + " change again");
+      }
     }
     if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
   }
@@ -605,7 +616,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     std::lock_guard lock(d.audio_mutex);
     if (d.capture) {
       const AlsaCaptureStats a = d.capture->stats();
-      s.audio_state = a.streaming ? "running" : "recovering";
+      s.audio_state = !a.streaming ? "recovering" : a.frozen ? "frozen" : "running";
       s.xruns = a.xruns;
       s.audio_error = a.last_error != 0 && !a.streaming ? "ALSA error " + std::to_string(a.last_error) : "";
     } else {

@@ -31,7 +31,7 @@ struct PipelineSnapshot {
   std::uint64_t gps_reconnects = 0;
   std::string gps_error;
   // Audio and tracker.
-  std::string audio_state = "stopped";  // running, retrying, stopped
+  std::string audio_state = "stopped";  // running, frozen (periods repeat), recovering, retrying, stopped
   std::string audio_error;
   std::uint64_t xruns = 0;
   std::uint64_t ring_drops = 0;

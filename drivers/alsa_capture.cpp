@@ -171,6 +171,7 @@ AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
                              std::to_string(channels_));
   }
   raw_.resize(static_cast<std::size_t>(period_frames_) * channels_ * bytes_per_sample(format_));
+  previous_.resize(raw_.size());
   mono_.resize(period_frames_);
 }
 
@@ -204,6 +205,8 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.suspends = suspends_.load(std::memory_order_relaxed);
   s.reopens = reopens_.load(std::memory_order_relaxed);
   s.clock_resets = clock_resets_.load(std::memory_order_relaxed);
+  s.repeated = repeated_.load(std::memory_order_relaxed);
+  s.frozen = frozen_.load(std::memory_order_relaxed);
   s.last_error = last_error_.load(std::memory_order_relaxed);
   s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
   s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
@@ -336,6 +339,14 @@ void AlsaCapture::run() noexcept {
       std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_max).count();
   const int wait_ms = static_cast<int>(std::max<std::int64_t>(1, config_.wait_timeout.count()));
   const std::size_t sample_bytes = bytes_per_sample(format_);
+  std::size_t previous_frames = 0;  // frames in previous_ (0: none yet)
+  // A source that delivers faster than real time (a file, or a FIFO whose writer has gone: the file
+  // plugin then hands back its last period at once) would spin this thread. A sound card never runs
+  // ahead of the clock, so holding the stream to at most a second ahead of real time only touches those.
+  auto hold_to_clock = [&]() noexcept {
+    const double ahead = clock_at(c) - static_cast<double>(monotonic_ns());
+    if (ahead > 1e9) pause(static_cast<std::int64_t>(ahead - 0.5e9));
+  };
 
   while (!stopping()) {
     if (!pcm) {
@@ -376,14 +387,33 @@ void AlsaCapture::run() noexcept {
     }
     const double measured = measure(pcm, n);
     frames_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_relaxed);
+    const std::size_t frames = static_cast<std::size_t>(n);
+
+    // A period identical to the one before is a stopped source or digital silence (AlsaCaptureStats::
+    // frozen): not pushed, so the tracker sees no audio rather than an engine frozen at one speed. The
+    // sample clock runs on; the next period pushed gets a fresh anchor.
+    const std::size_t bytes = frames * channels_ * sample_bytes;
+    const bool repeat = frames == previous_frames && std::memcmp(raw_.data(), previous_.data(), bytes) == 0;
+    // A copy, not a swap: the file plugin leaves the buffer untouched when its input has ended, so the
+    // stale period is whatever the buffer last held.
+    std::memcpy(previous_.data(), raw_.data(), bytes);
+    previous_frames = frames;
+    frozen_.store(repeat, std::memory_order_relaxed);
+    if (repeat) {
+      repeated_.fetch_add(frames, std::memory_order_relaxed);
+      discontinuity = true;
+      c += frames;
+      hold_to_clock();
+      continue;
+    }
+    const std::byte* const period = raw_.data();
 
     // Convert to float mono.
-    const std::size_t frames = static_cast<std::size_t>(n);
     for (std::size_t i = 0; i < frames; ++i) {
       float acc = 0.0f;
       for (unsigned ch = 0; ch < channels_; ++ch) {
         if (config_.channel >= 0 && static_cast<int>(ch) != config_.channel) continue;
-        const std::byte* p = raw_.data() + (i * channels_ + ch) * sample_bytes;
+        const std::byte* p = period + (i * channels_ + ch) * sample_bytes;
         float v;
         if (format_ == SampleFormat::kS16) {
           std::int16_t s;
@@ -444,11 +474,7 @@ void AlsaCapture::run() noexcept {
     republish = pushed < frames;
     if (pushed < frames) dropped_.fetch_add(frames - pushed, std::memory_order_relaxed);
     c += frames;
-    // A source that delivers faster than real time (a file, or a FIFO whose writer has gone: the file
-    // plugin then returns silence at once) would spin this thread. A sound card never runs ahead of
-    // the clock, so holding the stream to at most a second ahead of real time only touches those.
-    const double ahead = clock_at(c) - static_cast<double>(monotonic_ns());
-    if (ahead > 1e9) pause(static_cast<std::int64_t>(ahead - 0.5e9));
+    hold_to_clock();
   }
   if (pcm) ::snd_pcm_drop(pcm);
   pcm_ = pcm;

@@ -68,11 +68,16 @@ struct AlsaCaptureStats {
   std::uint64_t suspends = 0;      // -ESTRPIPE recoveries
   std::uint64_t reopens = 0;       // successful reopens after a lost device
   std::uint64_t clock_resets = 0;  // anchors placed after a discontinuity or a large clock error
+  std::uint64_t repeated = 0;      // frames of periods identical to the period before (not pushed)
   int last_error = 0;              // last negative ALSA error code seen, 0 if none
   bool realtime_ok = false;
   bool memory_locked = false;
   bool running = false;    // the capture thread runs
   bool streaming = false;  // ... and the device is open and capturing (false while it is lost and reopened)
+  // The last period repeated the one before, bit for bit: a source that has stopped (the file plugin
+  // hands back its buffer unchanged once its input ends) or digital silence. No sound card's input
+  // repeats a period exactly, so such periods carry nothing and are not pushed.
+  bool frozen = false;
 };
 
 class AlsaCapture final : public AudioSource {
@@ -121,8 +126,9 @@ class AlsaCapture final : public AudioSource {
   unsigned channels_ = 0;
   SampleFormat format_ = SampleFormat::kS16;
   unsigned period_frames_ = 0;
-  std::vector<std::byte> raw_;  // one period as read
-  std::vector<float> mono_;     // one period converted
+  std::vector<std::byte> raw_;       // one period as read
+  std::vector<std::byte> previous_;  // a copy of the period read before it
+  std::vector<float> mono_;          // one period converted
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> running_{false};
@@ -130,9 +136,9 @@ class AlsaCapture final : public AudioSource {
   AnchorSlot anchors_[kAnchors];
   std::atomic<std::uint64_t> anchor_count_{0};
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
-      clock_resets_{0};
+      clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
-  std::atomic<bool> realtime_ok_{false}, memory_locked_{false};
+  std::atomic<bool> realtime_ok_{false}, memory_locked_{false}, frozen_{false};
 };
 
 }  // namespace gearpulse

@@ -82,8 +82,8 @@ struct LiveChain {
   gearpulse::daemon::Config config;
   std::unique_ptr<gearpulse::daemon::Pipeline> pipeline;
 
-  LiveChain(unsigned period, std::size_t epochs, double cycle)
-      : feeder(fifo, ripple(60.0), period, kRate), gps(epochs, cycle) {
+  LiveChain(unsigned period, std::size_t epochs, double cycle, gearpulse::test::WriterBreak pause = {})
+      : feeder(fifo, ripple(60.0), period, kRate, pause), gps(epochs, cycle) {
     REQUIRE(GpsFake::wait_listening(gps.port, 10s));
     config.audio.device = "paced";
     config.audio.rate = kRate;
@@ -174,4 +174,32 @@ TEST_CASE("pipeline: raising gps.latency at run time keeps training pairs coming
     CHECK(near(pairs[i].speed, kSpeed, 0.01));
     CHECK(near(pairs[i].freq, kTone, kWander + 0.5));
   }
+}
+
+TEST_CASE(
+    "pipeline: audio that freezes (its source stopped) is not taken for an engine nor made into pairs") {
+  // The ripple's writer goes away after 6 s and comes back 14 s later: meanwhile the file plugin hands
+  // the capture its last period again and again, as a stalled source would.
+  constexpr unsigned kPeriod = 512;
+  const gearpulse::test::WriterBreak gone{gearpulse::test::WriterBreak::kClose, 6 * kRate / kPeriod, 14s};
+  LiveChain chain(kPeriod, 90, 0.5, gone);  // about 45 s of GPS
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  REQUIRE(wait_for([&] { return pipeline.drain_pairs() > 0; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "frozen"; }, 15s));
+  // Fixes already waiting for their window may still be paired; after that, none.
+  std::this_thread::sleep_for(3s);
+  pipeline.drain_pairs();
+  std::size_t while_frozen = 0;
+  for (int i = 0; i < 40; ++i) {
+    std::this_thread::sleep_for(100ms);
+    while_frozen += pipeline.drain_pairs();
+    const auto s = pipeline.snapshot();
+    CHECK(s.audio_state == "frozen");
+    CHECK(s.tracker_freq < 0.0);  // nothing tracked
+    CHECK(s.source == "gps");
+  }
+  CHECK(while_frozen == 0);
+  // The writer is back: the audio runs and pairs come again.
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 20s));
+  CHECK(wait_for([&] { return pipeline.drain_pairs() > 0; }, 10s));
 }

@@ -371,7 +371,7 @@ TEST_CASE(
   constexpr std::size_t kBefore = 30, kAfter = 30;
   const auto src = numbered(kPeriod, kBefore + kAfter);  // values after the gap differ from all before it
   FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kClose, kBefore, 1500ms});
-  SpscRing<float> ring(1 << 18);  // room for the second of stale periods the gap produces
+  SpscRing<float> ring(1 << 18);
   AlsaCapture cap(paced_config(kPeriod), ring);
   const std::int64_t start = gearpulse::monotonic_ns();
   cap.start();
@@ -402,13 +402,54 @@ TEST_CASE(
       std::find(got.begin() + static_cast<long>(before.size()), got.end(), as_float(after[0]));
   REQUIRE(resumed != got.end());
   CHECK(mismatches(got, after, static_cast<std::size_t>(resumed - got.begin())) == 0);
-  // In between, stale periods, but held to about a second ahead of real time (the bound allows for
-  // where the clock was anchored); a spinning capture would be millions of frames ahead.
+  // In between, stale periods, repeats of the last one, not pushed; held to about a second ahead of
+  // real time (the bound allows for where the clock was anchored): a spinning capture would be
+  // millions of frames ahead.
+  CHECK(resumed - got.begin() == static_cast<long>(before.size()));
+  CHECK(st.repeated > 0);
   CHECK(most_ahead <= 3 * kRate / 2);
   CHECK(st.reopens == 0);
   CHECK(st.xruns == 0);
   CHECK(st.dropped == 0);
   CHECK(st.running);
   CHECK(st.streaming);  // the device stayed open throughout
+  CHECK(timestamps_increase(cap, 0, got.size() - 1));
+}
+
+TEST_CASE("alsa: a period that repeats the one before is not pushed, and the capture says it is frozen") {
+  TempDir dir;
+  constexpr unsigned kPeriod = 480;
+  // Ten distinct periods, one period of digital silence repeated twenty times, ten distinct periods;
+  // then the file ends, and the file plugin hands back its last period for ever.
+  const auto first = numbered(kPeriod, 10);
+  const std::vector<std::int16_t> silence(kPeriod, 0);
+  const auto last = numbered(kPeriod, 10, 1000);
+  std::vector<std::int16_t> src(first);
+  for (int i = 0; i < 20; ++i)
+    src.insert(src.end(), silence.begin(), silence.end());
+  src.insert(src.end(), last.begin(), last.end());
+  write_raw(dir / "in.raw", src);
+  use_alsa_config(dir, "replay", dir / "in.raw");
+  SpscRing<float> ring(1 << 16);
+  AlsaCaptureConfig cfg;
+  cfg.device = "replay";
+  cfg.period_frames = kPeriod;
+  AlsaCapture cap(cfg, ring);
+  cap.start();
+  std::vector<float> got = read_frames(ring, first.size() + silence.size() + last.size());
+  // Once the file has ended, nothing more comes through, and the capture says why.
+  REQUIRE(wait_for([&] { return cap.stats().frozen; }, 10s));
+  std::this_thread::sleep_for(200ms);
+  float extra[4096];
+  const std::size_t more = ring.read_bulk(extra);
+  const auto st = cap.stats();
+  cap.stop();
+  CHECK(more == 0);
+  CHECK(mismatches(got, first) == 0);
+  CHECK(mismatches(got, silence, first.size()) == 0);  // the first silent period, once
+  CHECK(mismatches(got, last, first.size() + silence.size()) == 0);
+  CHECK(st.repeated >= 19 * kPeriod + kPeriod);  // the silence's repeats and the stale periods after the end
+  CHECK(st.frames >= src.size());
+  CHECK(st.dropped == 0);
   CHECK(timestamps_increase(cap, 0, got.size() - 1));
 }

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
@@ -79,9 +80,17 @@ class FifoFeeder {
           for (std::size_t off = 0, n = 0; !stop_; off += period, ++n) {
             if (pause.kind != WriterBreak::kNone && n == pause.at_period) {
               if (pause.kind == WriterBreak::kClose) ::close(fd);
-              std::this_thread::sleep_for(pause.length);
-              // The reader (ALSA) keeps its end open, so this open does not block.
-              if (pause.kind == WriterBreak::kClose && (fd = ::open(fifo.c_str(), O_WRONLY)) < 0) return;
+              const auto resume = std::chrono::steady_clock::now() + pause.length;
+              while (!stop_ && std::chrono::steady_clock::now() < resume)
+                std::this_thread::sleep_for(std::chrono::milliseconds(10));
+              if (pause.kind == WriterBreak::kClose) {
+                // Without blocking: a reader that has gone meanwhile (the test is over) would hold a
+                // blocking open for ever.
+                while ((fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK)) < 0 && errno == ENXIO && !stop_)
+                  std::this_thread::sleep_for(std::chrono::milliseconds(10));
+                if (fd < 0) return;
+                ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+              }
               next = gearpulse::monotonic_ns();  // go on at the rate, no catching up
             }
             const timespec ts = gearpulse::to_timespec(next);
