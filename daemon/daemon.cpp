@@ -1,5 +1,6 @@
 #include "daemon/daemon.hpp"
 
+#include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
 #include <sys/signalfd.h>
@@ -10,7 +11,9 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <mutex>
 #include <optional>
+#include <vector>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -85,6 +88,14 @@ struct Daemon::Impl {
   Clock::time_point started = Clock::now();
   std::uint64_t pairs_at_last_save = 0;
 
+  // Problems with the state directory that status reports: what was found at start (a file set aside
+  // as corrupt, a directory that cannot be written) and the last failed save, cleared when one works.
+  mutable std::mutex state_mutex;
+  std::vector<std::string> state_problems;
+  std::string save_error;
+  void note_state_problem(std::string text);
+  [[nodiscard]] std::string set_aside(const std::filesystem::path& path);
+
   void load_state();
   void save_store(const char* why) noexcept;
   void reload();
@@ -144,12 +155,43 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
   }
 }
 
+void Daemon::Impl::note_state_problem(std::string text) {
+  std::lock_guard lock(state_mutex);
+  state_problems.push_back(std::move(text));
+}
+
+// A file that will not load is moved aside to NAME.corrupt (replacing an older one), so the next save
+// does not overwrite what someone may want to look at or recover. Returns where it went ("" if it
+// could not be moved).
+std::string Daemon::Impl::set_aside(const std::filesystem::path& path) {
+  std::filesystem::path aside = path;
+  aside += ".corrupt";
+  std::error_code ec;
+  std::filesystem::rename(path, aside, ec);
+  return ec ? std::string() : aside.string();
+}
+
 void Daemon::Impl::load_state() {
   std::error_code ec;
   std::filesystem::create_directories(state_dir, ec);
-  if (ec)
+  if (ec) {
     spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
                   state_dir.string(), ec.message());
+    note_state_problem("cannot create " + state_dir.string() + ": " + ec.message());
+  } else {
+    // Said now, not at the first save minutes later (or at shutdown).
+    const std::filesystem::path probe = state_dir / ".gearpulse-write-test";
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0) {
+      const std::string why = std::strerror(errno);
+      spdlog::error("state: cannot write in {}: {}; the model and training pairs will not survive a restart",
+                    state_dir.string(), why);
+      note_state_problem("cannot write in " + state_dir.string() + ": " + why);
+    } else {
+      ::close(fd);
+      ::unlink(probe.c_str());
+    }
+  }
   // A crash between writing a temp file and renaming it leaves the temp file; the real file is intact.
   for (const auto& p : {model_path, store_path})
     if (const std::size_t n = remove_stale_temp_files(p))
@@ -161,18 +203,24 @@ void Daemon::Impl::load_state() {
     spdlog::info("model: loaded {} ({} gears, fitted on {} samples)", model_path.string(),
                  loaded.model->gears.size(), loaded.model->samples);
   } else if (!loaded.error.empty()) {
-    spdlog::error("model: ignoring {}: {}; learning from scratch (the file is left for inspection)",
-                  model_path.string(), loaded.error);
+    const std::string aside = set_aside(model_path);
+    const std::string where = aside.empty() ? "left where it is" : "kept as " + aside;
+    spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path.string(),
+                  loaded.error, where);
+    note_state_problem("model.json ignored: " + loaded.error + " (" + where + ")");
   } else {
     spdlog::info("model: no {} yet; pulses follow GPS while the model is learning", model_path.string());
   }
 
   try {
     const std::string problem = store.load(store_path);
-    if (!problem.empty())
-      spdlog::error("training: discarding {}: {}; starting with an empty training store", store_path.string(),
-                    problem);
-    else if (std::filesystem::exists(store_path))
+    if (!problem.empty()) {
+      const std::string aside = set_aside(store_path);
+      const std::string where = aside.empty() ? "left where it is" : "kept as " + aside;
+      spdlog::error("training: discarding {}: {}; starting with an empty training store (the file is {})",
+                    store_path.string(), problem, where);
+      note_state_problem("training.bin discarded: " + problem + " (" + where + ")");
+    } else if (std::filesystem::exists(store_path))
       spdlog::info("training: {} stored pairs restored from {}", store.size(), store_path.string());
     else
       spdlog::info("training: no stored pairs yet ({} will hold them)", store_path.string());
@@ -187,8 +235,15 @@ void Daemon::Impl::save_store(const char* why) noexcept {
   try {
     store.save(store_path);
     spdlog::debug("training: saved {} pairs to {} ({})", store.size(), store_path.string(), why);
+    std::lock_guard lock(state_mutex);
+    save_error.clear();
   } catch (const std::exception& e) {
     spdlog::error("training: cannot save {} ({}): {}", store_path.string(), why, e.what());
+    try {
+      std::lock_guard lock(state_mutex);
+      save_error = std::string("cannot save training.bin: ") + e.what();
+    } catch (...) {
+    }
   }
 }
 
@@ -267,6 +322,12 @@ nlohmann::json Daemon::Impl::status_json() {
                     {"last_retrain", number_or_null(r.last_run_wall, r.runs > 0)},
                     {"last_result", r.last_result}};
   if (m && !trained && !m->reason.empty()) reply["model"]["reason"] = m->reason;
+  {
+    std::lock_guard lock(state_mutex);
+    std::vector<std::string> problems = state_problems;
+    if (!save_error.empty()) problems.push_back(save_error);
+    reply["model"]["problems"] = problems;  // the state directory's: files set aside, failed saves
+  }
   reply["threads"] = {{"stalled", p.stalled}, {"missing", p.missing}};
   reply["clients"] = control ? control->clients() : 0;
   return reply;

@@ -234,10 +234,11 @@ TEST_CASE("daemon: model.json is loaded at start and survives kill -9") {
   CHECK(again.wait() == 0);
 }
 
-TEST_CASE("daemon: a corrupt model and training store are logged and ignored") {
+TEST_CASE("daemon: a corrupt model and training store are logged, set aside and shown in status") {
   TempDir dir;
   std::filesystem::create_directories(dir / "state");
-  write_text(dir / "state/model.json", std::string(kModel).substr(0, 60));
+  const std::string torn_model = std::string(kModel).substr(0, 60);
+  write_text(dir / "state/model.json", torn_model);
   write_text(dir / "state/training.bin", "GPTRAIN\ngarbage");
   write_text(dir / "gearpulse.toml", config_for(dir));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
@@ -245,11 +246,40 @@ TEST_CASE("daemon: a corrupt model and training store are logged and ignored") {
   REQUIRE(status.is_object());
   CHECK(status["model"]["state"] == "learning");
   CHECK(status["training_samples"] == 0);
+  // Status says what was thrown away, not only that the daemon is learning.
+  const json problems = status["model"]["problems"];
+  REQUIRE(problems.size() == 2);
+  CHECK(problems[0].get<std::string>().find("model.json ignored") != std::string::npos);
+  CHECK(problems[1].get<std::string>().find("training.bin discarded") != std::string::npos);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
   const std::string log = read_text(dir / "log.txt");
   CHECK(log.find("model: ignoring") != std::string::npos);
   CHECK(log.find("training: discarding") != std::string::npos);
+  // The files are kept as they were, beside what the daemon saved since.
+  CHECK(read_text(dir / "state/model.json.corrupt") == torn_model);
+  CHECK(read_text(dir / "state/training.bin.corrupt") == "GPTRAIN\ngarbage");
+  CHECK(std::filesystem::exists(dir / "state/training.bin"));
+}
+
+TEST_CASE("daemon: a state directory it cannot write in is said at start and in status") {
+  TempDir dir;
+  // A state_dir under a regular file: it cannot be made, so nothing can be saved there (a directory
+  // without write permission would do, but not for root, who runs these tests in CI).
+  write_text(dir / "blocker", "not a directory\n");
+  std::string text = config_for(dir);
+  const std::string state = (dir / "state").string();
+  text.replace(text.find(state), state.size(), (dir / "blocker" / "state").string());
+  write_text(dir / "gearpulse.toml", text);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  REQUIRE(status["model"]["problems"].size() >= 1);
+  CHECK(status["model"]["problems"][0].get<std::string>().find("cannot create") != std::string::npos);
+  CHECK(read_text(dir / "log.txt").find("will not survive a restart") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
 }
 
 TEST_CASE("daemon: learns a model from a restored training store and saves it") {
