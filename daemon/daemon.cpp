@@ -104,6 +104,7 @@ struct Daemon::Impl {
   std::string status_line();
   void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
   LogLimiter limiter;
+  std::uint64_t gps_failures_seen = 0;  // GPS connection failures log_changes() has looked at
 };
 
 // The journal gets one line per change of state (GPS lost or back, source switch, output errors), and
@@ -118,16 +119,20 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
       limiter.reset("gps-no-fix");
       spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
     } else if (now.gps_state == "no-fix" && limiter.allow("gps-no-fix", suppressed)) {
-      spdlog::warn("gps: no usable fix from gpsd at {} for {:.1f} s; speed now from {}{}", server,
-                   config.gps.timeout, now.source,
+      // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
+      const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
+      spdlog::warn("gps: no usable fix from gpsd at {} {}; speed now from {}{}", server, gone, now.source,
                    suppressed ? fmt::format(" ({} more times since the last report)", suppressed) : "");
     }
   }
-  if (now.gps_state == "disconnected" && !now.gps_error.empty()) {
+  // One count per failed attempt (the backoff spaces them), not per turn of this loop.
+  if (now.gps_state == "disconnected" && !now.gps_error.empty() && now.gps_failures != gps_failures_seen) {
+    gps_failures_seen = now.gps_failures;
     std::uint64_t suppressed = 0;
     if (limiter.allow("gps", suppressed))
-      spdlog::warn("gps: {}; reconnecting with backoff{}", now.gps_error,
-                   suppressed ? fmt::format(" ({} more failures since the last report)", suppressed) : "");
+      spdlog::warn(
+          "gps: {}; reconnecting with backoff{}", now.gps_error,
+          suppressed ? fmt::format(" ({} more failed attempts since the last report)", suppressed) : "");
   }
   if (now.source != before.source)
     spdlog::info("synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,

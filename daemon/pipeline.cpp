@@ -610,7 +610,9 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       s.gps_speed = d.last_fix_speed.load(std::memory_order_relaxed);
       s.gps_age = (now - fix_ns) * 1e-9;
     }
-    if (s.gps_state == "fix") s.gps_error.clear();
+    s.gps_failures = g.failures;
+    // Its errors are about the connection: once connected again they are history.
+    if (s.gps_state != "disconnected") s.gps_error.clear();
   }
   {
     std::lock_guard lock(d.audio_mutex);

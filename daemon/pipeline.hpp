@@ -29,6 +29,7 @@ struct PipelineSnapshot {
   int gps_mode = 0;
   double gps_age = -1.0;  // s since the last usable fix, < 0 never
   std::uint64_t gps_reconnects = 0;
+  std::uint64_t gps_failures = 0;  // failed connection attempts and lost connections
   std::string gps_error;
   // Audio and tracker.
   std::string audio_state = "stopped";  // running, frozen (periods repeat), recovering, retrying, stopped

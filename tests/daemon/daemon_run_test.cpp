@@ -110,6 +110,8 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(wait_for_status(dir, daemon)["ok"] == true);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
+  // The absent gpsd is said at once (later failures at most once a minute).
+  CHECK(read_text(dir / "log.txt").find("reconnecting with backoff") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(dir / "ctl.sock"));
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
 }
