@@ -93,6 +93,8 @@ struct Daemon::Impl {
   mutable std::mutex state_mutex;
   std::vector<std::string> state_problems;
   std::string save_error;
+  std::string reload_error;                  // the last SIGHUP's file was refused ("" = it was taken)
+  std::vector<std::string> restart_pending;  // changed by the last reload, waiting for a restart
   void note_state_problem(std::string text);
   [[nodiscard]] std::string set_aside(const std::filesystem::path& path);
 
@@ -258,7 +260,10 @@ void Daemon::Impl::reload() {
   try {
     next = load_config(config_path);
   } catch (const ConfigError& e) {
-    spdlog::error("reload: {}; keeping the running configuration", e.what());
+    spdlog::error("reload: {}; keeping the running configuration (a restart would refuse this file)",
+                  e.what());
+    std::lock_guard lock(state_mutex);
+    reload_error = e.what();
     return;
   }
   if (!apply_log_level(next.log.level)) spdlog::error("reload: unknown log level {}", next.log.level);
@@ -268,6 +273,11 @@ void Daemon::Impl::reload() {
   const auto restart = restart_required_changes(config, next);
   for (const auto& key : restart)
     spdlog::warn("reload: {} changed; this takes effect only after a restart", key);
+  {
+    std::lock_guard lock(state_mutex);
+    reload_error.clear();
+    restart_pending = restart;
+  }
   // What was applied now replaces the running values; the rest stays as the threads use it.
   config.log = next.log;
   config.model.retrain_interval = next.model.retrain_interval;
@@ -332,6 +342,8 @@ nlohmann::json Daemon::Impl::status_json() {
     std::vector<std::string> problems = state_problems;
     if (!save_error.empty()) problems.push_back(save_error);
     reply["model"]["problems"] = problems;  // the state directory's: files set aside, failed saves
+    reply["config"] = {
+        {"file", config_path}, {"reload_error", reload_error}, {"restart_pending", restart_pending}};
   }
   reply["threads"] = {{"stalled", p.stalled}, {"missing", p.missing}};
   reply["clients"] = control ? control->clients() : 0;

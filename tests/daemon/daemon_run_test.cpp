@@ -452,7 +452,14 @@ TEST_CASE("daemon: SIGHUP applies what it can and names what needs a restart") {
   write_text(dir / "gearpulse.toml", base + "[bogus]\n");
   daemon.signal(SIGHUP);
   CHECK(wait_log("keeping the running configuration"));
-  CHECK(wait_for_status(dir, daemon)["ok"] == true);
+  const json refused = wait_for_status(dir, daemon);
+  CHECK(refused["ok"] == true);
+  CHECK(refused["config"]["reload_error"].get<std::string>().find("bogus") != std::string::npos);
+  // A file that is not there: the reason is given.
+  std::filesystem::rename(dir / "gearpulse.toml", dir / "moved.toml");
+  daemon.signal(SIGHUP);
+  CHECK(wait_log("cannot open config file: No such file or directory"));
+  std::filesystem::rename(dir / "moved.toml", dir / "gearpulse.toml");
 
   std::string changed = base;
   changed.replace(changed.find("gearpulse_test_no_such_pcm"), 26, "gearpulse_test_other_pcm__");
@@ -461,7 +468,10 @@ TEST_CASE("daemon: SIGHUP applies what it can and names what needs a restart") {
   daemon.signal(SIGHUP);
   CHECK(wait_log("reload: [audio] changed; this takes effect only after a restart"));
   CHECK(wait_log("reload: applied"));
-  CHECK(wait_for_status(dir, daemon)["ok"] == true);
+  const json applied = wait_for_status(dir, daemon);
+  CHECK(applied["ok"] == true);
+  CHECK(applied["config"]["reload_error"] == "");
+  CHECK(applied["config"]["restart_pending"] == json::array({"[audio]"}));
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
