@@ -1,6 +1,7 @@
 #include "daemon/atomic_file.hpp"
 
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -118,6 +119,17 @@ std::size_t remove_stale_temp_files(const std::filesystem::path& path) noexcept 
     }
   }
   return removed;
+}
+
+DirectoryLock::DirectoryLock(const std::filesystem::path& dir) {
+  const std::filesystem::path path = dir / ".lock";
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+  if (fd_ < 0) throw_errno("cannot open lock file", path);
+  held_ = ::flock(fd_, LOCK_EX | LOCK_NB) == 0;
+}
+
+DirectoryLock::~DirectoryLock() {
+  if (fd_ >= 0) ::close(fd_);  // releases the lock
 }
 
 }  // namespace gearpulse::daemon

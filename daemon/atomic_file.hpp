@@ -23,4 +23,22 @@ void remove_file_durable(const std::filesystem::path& path);
 // Returns how many were removed.
 std::size_t remove_stale_temp_files(const std::filesystem::path& path) noexcept;
 
+// An exclusive lock on a directory (flock on DIR/.lock), held while the object lives: one daemon per
+// state directory, so a second one started by mistake cannot remove the first one's temp files in the
+// middle of a save, nor overwrite what it saves. Released when the process dies, however it dies.
+class DirectoryLock {
+ public:
+  // Throws std::system_error naming the lock file when it cannot be opened.
+  explicit DirectoryLock(const std::filesystem::path& dir);
+  ~DirectoryLock();
+  DirectoryLock(const DirectoryLock&) = delete;
+  DirectoryLock& operator=(const DirectoryLock&) = delete;
+  // False when another process holds the lock.
+  [[nodiscard]] bool held() const noexcept { return held_; }
+
+ private:
+  int fd_ = -1;
+  bool held_ = false;
+};
+
 }  // namespace gearpulse::daemon

@@ -98,7 +98,9 @@ struct Daemon::Impl {
   void note_state_problem(std::string text);
   [[nodiscard]] std::string set_aside(const std::filesystem::path& path);
 
-  void load_state();
+  std::optional<DirectoryLock> state_lock;
+  // False when another gearpulsed keeps its state in state_dir.
+  [[nodiscard]] bool load_state();
   void save_store(const char* why) noexcept;
   void reload();
   nlohmann::json handle(const nlohmann::json& request);
@@ -178,9 +180,20 @@ std::string Daemon::Impl::set_aside(const std::filesystem::path& path) {
   return ec ? std::string() : aside.string();
 }
 
-void Daemon::Impl::load_state() {
+bool Daemon::Impl::load_state() {
   std::error_code ec;
   std::filesystem::create_directories(state_dir, ec);
+  if (!ec) {
+    try {
+      state_lock.emplace(state_dir);
+      if (!state_lock->held()) {
+        spdlog::critical("state: another gearpulsed keeps its state in {}; exiting", state_dir.string());
+        return false;
+      }
+    } catch (const std::exception& e) {
+      spdlog::warn("state: {}; nothing stops a second daemon from sharing {}", e.what(), state_dir.string());
+    }
+  }
   if (ec) {
     spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
                   state_dir.string(), ec.message());
@@ -236,6 +249,7 @@ void Daemon::Impl::load_state() {
                   e.what());
   }
   store.prune(wall_now());
+  return true;
 }
 
 void Daemon::Impl::save_store(const char* why) noexcept {
@@ -423,7 +437,10 @@ int Daemon::run() {
   }
   ::signal(SIGPIPE, SIG_IGN);
 
-  d.load_state();
+  if (!d.load_state()) {
+    ::close(sfd);
+    return 1;
+  }
   try {
     d.control.emplace(
         d.config.control.socket, [&d](const nlohmann::json& req) { return d.handle(req); },

@@ -190,6 +190,29 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
   CHECK(daemon.wait() == 0);
 }
 
+TEST_CASE("daemon: a second gearpulsed on the same state directory exits before it touches it") {
+  TempDir dir;
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process first({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "first.txt");
+  REQUIRE(wait_for_status(dir, first).is_object());
+  // As if the first were in the middle of a save: its temp file must survive the second's start.
+  write_text(dir / "state/training.bin.tmp.AbC123", "half a save");
+  // The second has a socket of its own, so only the state directory is shared.
+  std::string text = config_for(dir);
+  const std::string sock = (dir / "ctl.sock").string();
+  text.replace(text.find(sock), sock.size(), (dir / "other.sock").string());
+  write_text(dir / "second.toml", text);
+  Process second({kDaemon, "--config", (dir / "second.toml").string()}, dir / "second.txt");
+  const auto rc = second.wait();
+  REQUIRE(rc.has_value());
+  CHECK(*rc == 1);
+  CHECK(read_text(dir / "second.txt").find("another gearpulsed keeps its state in") != std::string::npos);
+  CHECK(read_text(dir / "state/training.bin.tmp.AbC123") == "half a save");
+  CHECK(first.running());
+  first.signal(SIGTERM);
+  CHECK(first.wait() == 0);
+}
+
 TEST_CASE("daemon: a malformed config is refused with file and line before anything opens") {
   TempDir dir;
   write_text(dir / "bad.toml",
