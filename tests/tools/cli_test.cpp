@@ -411,3 +411,12 @@ TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds kee
   }
   CHECK(rows == 50);
 }
+
+TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothing") {
+  TempDir dir;
+  const std::string log = simulated_log(dir, 21);
+  const Result r = run(dir, "fit --speed gps " + log);
+  CHECK(r.status == 0);
+  CHECK(r.err.find("--speed applies to Torque Pro exports") != std::string::npos);
+  CHECK(run(dir, "fit " + log).err.empty());
+}

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <string>
 
 #include "tools/gearpulse/commands.hpp"
 
@@ -32,6 +33,11 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
       throw UsageError(e.what());
     }
     const SampleLog& log = logs.back();
+    if (options.torque_speed != TorqueSpeed::kAuto && log.format != SampleFormat::kTorque)
+      std::fprintf(
+          stderr,
+          "gearpulse: warning: %s: --speed applies to Torque Pro exports; this %s log has one speed\n",
+          path.c_str(), std::string(format_name(log.format)).c_str());
     for (std::size_t i = 0; i < log.skipped.size() && i < kMaxPrintedSkips; ++i)
       std::fprintf(stderr, "%s\n", log.skipped[i].c_str());
     if (log.skipped_count > 0) {
