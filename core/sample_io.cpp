@@ -166,7 +166,9 @@ class LogBuilder {
       return false;
     }
     log_.samples.push_back(s);
-    if (options_.keep_rows) log_.rows.push_back({s.t, log_.samples.size() - 1});
+    if (options_.keep_rows)
+      log_.rows.push_back(
+          {std::max(s.t, log_.rows.empty() ? s.t : log_.rows.back().t), log_.samples.size() - 1});
     return true;
   }
   // A row repeating the values of the sample added last (OBD logs between refreshes), at time t.
@@ -312,7 +314,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
   // Rows repeating held values (kept for SampleLog::rows only): row counter, own time, the kept row.
   struct Repeat {
     double row, t;
-    std::size_t of;
+    std::size_t of, line;
   };
   std::vector<Repeat> repeats;
   while (reader.next()) {
@@ -352,7 +354,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
     if (have_last && same(rpm.value, last_rpm) && same(speed.value, last_speed)) {
       ++out.log().repeated_rows;
-      if (out.keeps_rows()) repeats.push_back({counter, t.value, kept.size() - 1});
+      if (out.keeps_rows()) repeats.push_back({counter, t.value, kept.size() - 1, reader.number});
       continue;
     }
     last_rpm = rpm.value;
@@ -388,8 +390,12 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
   std::size_t r = 0;
   for (std::size_t i = 0; i < kept.size(); ++i) {
     const bool added = out.add(lines[i], kept[i]);
-    for (; r < repeats.size() && repeats[r].of == i; ++r)
-      if (added) out.add_repeat(repeats[r].t);
+    for (; r < repeats.size() && repeats[r].of == i; ++r) {
+      if (added)
+        out.add_repeat(repeats[r].t);
+      else
+        out.skip(repeats[r].line, "repeats the values of the bad row at line " + std::to_string(lines[i]));
+    }
   }
 }
 

@@ -125,7 +125,17 @@ DirectoryLock::DirectoryLock(const std::filesystem::path& dir) {
   const std::filesystem::path path = dir / ".lock";
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
   if (fd_ < 0) throw_errno("cannot open lock file", path);
-  held_ = ::flock(fd_, LOCK_EX | LOCK_NB) == 0;
+  if (::flock(fd_, LOCK_EX | LOCK_NB) == 0) {
+    held_ = true;
+  } else if (errno != EWOULDBLOCK) {
+    // No locks on this file system (some network or FUSE mounts): say so, rather than take it for a
+    // second daemon.
+    const int err = errno;
+    ::close(fd_);
+    fd_ = -1;
+    errno = err;
+    throw_errno("cannot lock", path);
+  }
 }
 
 DirectoryLock::~DirectoryLock() {

@@ -28,7 +28,8 @@ std::size_t remove_stale_temp_files(const std::filesystem::path& path) noexcept;
 // middle of a save, nor overwrite what it saves. Released when the process dies, however it dies.
 class DirectoryLock {
  public:
-  // Throws std::system_error naming the lock file when it cannot be opened.
+  // Throws std::system_error naming the lock file when it cannot be opened or the file system has no
+  // locks; held() is false only when another process holds the lock.
   explicit DirectoryLock(const std::filesystem::path& dir);
   ~DirectoryLock();
   DirectoryLock(const DirectoryLock&) = delete;

@@ -209,9 +209,15 @@ void check_relations(const Config& c, const toml::table& root, const std::string
   // Whatever else the tracker would refuse at the configured rate (the window must hold 4 periods of
   // band_low, ...), refused here, before any device is opened.
   if (const std::string problem = SlidingDftTracker::validate(tracker_config_of(c.tracker, c.audio.rate));
-      !problem.empty())
-    throw ConfigError(at("tracker", root.at_path("tracker.window") ? "window" : "band_low") +
-                      ": tracker: " + problem);
+      !problem.empty()) {
+    // Point at the key the problem is about: the window (or the band edge it must hold), the hop, else
+    // the band's upper edge against the rate.
+    const bool window = problem.starts_with("window");
+    const char* key = window                       ? (root.at_path("tracker.window") ? "window" : "band_low")
+                      : problem.starts_with("hop") ? "hop"
+                                                   : "band_high";
+    throw ConfigError(at("tracker", key) + ": tracker: " + problem);
+  }
   // sun_path holds 108 bytes including the terminator.
   if (c.control.socket.size() > 107)
     throw ConfigError(at("control", "socket") + ": control.socket: path longer than 107 bytes");

@@ -223,7 +223,8 @@ bool Daemon::Impl::load_state() {
     spdlog::info("model: loaded {} ({} gears, fitted on {} samples)", model_path.string(),
                  loaded.model->gears.size(), loaded.model->samples);
   } else if (!loaded.error.empty()) {
-    const std::string aside = set_aside(model_path);
+    // Set aside only for its content: a file that could not be read (permissions) may be fine.
+    const std::string aside = loaded.unreadable ? std::string() : set_aside(model_path);
     const std::string where = aside.empty() ? "left where it is" : "kept as " + aside;
     spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path.string(),
                   loaded.error, where);

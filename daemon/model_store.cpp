@@ -1,13 +1,20 @@
 #include "daemon/model_store.hpp"
 
+#include <optional>
+
 #include "daemon/atomic_file.hpp"
 
 namespace gearpulse::daemon {
 
 ModelLoad load_model_file(const std::filesystem::path& path) noexcept {
+  std::optional<std::string> text;
   try {
-    const auto text = read_file(path);
-    if (!text) return {};
+    text = read_file(path);
+  } catch (const std::exception& e) {
+    return {nullptr, e.what(), true};
+  }
+  if (!text) return {};
+  try {
     GearModel model = parse_model(*text);
     return {std::make_shared<const GearModel>(std::move(model)), {}};
   } catch (const std::exception& e) {

@@ -42,8 +42,9 @@ class ModelHolder {
 };
 
 struct ModelLoad {
-  ModelPtr model;     // null when absent or rejected
-  std::string error;  // why a present file was rejected (empty otherwise)
+  ModelPtr model;           // null when absent or rejected
+  std::string error;        // why a present file was rejected (empty otherwise)
+  bool unreadable = false;  // ... because it could not be read (permissions, I/O), not for its content
 };
 
 // Reads `path`; a missing file gives {null, ""}; a corrupt one gives {null, reason}. Never throws.

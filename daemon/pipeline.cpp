@@ -294,8 +294,9 @@ void Pipeline::Impl::tracker_loop() noexcept {
   auto next_audio_try = std::chrono::steady_clock::now();
   auto backoff = std::chrono::milliseconds(500);
   bool audio_was_up = false;
-  bool audio_interrupted = false;  // the open capture lost its device and is being reopened
-  bool audio_frozen = false;       // its periods repeat (AlsaCaptureStats::frozen)
+  bool audio_interrupted = false;   // the open capture lost its device and is being reopened
+  bool audio_frozen = false;        // its periods repeat (AlsaCaptureStats::frozen)
+  std::uint64_t repeated_seen = 0;  // AlsaCaptureStats::repeated when the last hole was looked at
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
   // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
   // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
@@ -393,10 +394,14 @@ void Pipeline::Impl::tracker_loop() noexcept {
             const double gap_frames = (t0 - next_frame_t) * rate;
             if (gap_frames > std::max(64.0, config.audio.period_frames / 2.0)) {
               tracker->skip(static_cast<std::uint64_t>(std::llround(gap_frames)));
-              report("audio-hole", spdlog::level::warn,
-                     "audio: " + std::to_string(std::llround(gap_frames)) +
-                         " frames lost before the ring (overrun or device restart); tracking resumes after "
-                         "the hole");
+              // Repeated periods left out by the capture make a hole too; that one is no loss.
+              const std::uint64_t repeated = capture->stats().repeated;
+              if (repeated == repeated_seen)
+                report("audio-hole", spdlog::level::warn,
+                       "audio: " + std::to_string(std::llround(gap_frames)) +
+                           " frames lost before the ring (overrun or device restart); tracking resumes after "
+                           "the hole");
+              repeated_seen = repeated;
             }
             tracker->retime(t0);
           }

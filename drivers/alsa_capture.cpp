@@ -340,6 +340,7 @@ void AlsaCapture::run() noexcept {
   const int wait_ms = static_cast<int>(std::max<std::int64_t>(1, config_.wait_timeout.count()));
   const std::size_t sample_bytes = bytes_per_sample(format_);
   std::size_t previous_frames = 0;  // frames in previous_ (0: none yet)
+  std::size_t repeat_run = 0;       // frames repeated in a row
   // A source that delivers faster than real time (a file, or a FIFO whose writer has gone: the file
   // plugin then hands back its last period at once) would spin this thread. A sound card never runs
   // ahead of the clock, so holding the stream to at most a second ahead of real time only touches those.
@@ -398,7 +399,9 @@ void AlsaCapture::run() noexcept {
     // stale period is whatever the buffer last held.
     std::memcpy(previous_.data(), raw_.data(), bytes);
     previous_frames = frames;
-    frozen_.store(repeat, std::memory_order_relaxed);
+    // Frozen once half a second has repeated (a gated input's odd pair of silent periods is not).
+    repeat_run = repeat ? repeat_run + frames : 0;
+    frozen_.store(repeat_run >= rate_ / 2, std::memory_order_relaxed);
     if (repeat) {
       repeated_.fetch_add(frames, std::memory_order_relaxed);
       discontinuity = true;

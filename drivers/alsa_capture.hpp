@@ -74,9 +74,10 @@ struct AlsaCaptureStats {
   bool memory_locked = false;
   bool running = false;    // the capture thread runs
   bool streaming = false;  // ... and the device is open and capturing (false while it is lost and reopened)
-  // The last period repeated the one before, bit for bit: a source that has stopped (the file plugin
-  // hands back its buffer unchanged once its input ends) or digital silence. No sound card's input
-  // repeats a period exactly, so such periods carry nothing and are not pushed.
+  // The last half second of periods each repeated the one before, bit for bit: a source that has
+  // stopped (the file plugin hands back its buffer unchanged once its input ends) or digital silence
+  // (a muted input). A live analogue input never repeats a period exactly, so a repeated period carries
+  // nothing and is not pushed (from the first one; `repeated` counts them).
   bool frozen = false;
 };
 

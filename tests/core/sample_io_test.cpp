@@ -122,6 +122,52 @@ TEST_CASE("io: Carloop rows that refresh nothing are dropped and rpm becomes Hz"
   CHECK(log.samples[1].speed == Approx(18 / 3.6));
 }
 
+TEST_CASE("io: with keep_rows every accepted row is kept in order, a repeat with the sample it repeats") {
+  // A Carloop log with uneven rows (the logger stalls for seconds now and then), values refreshed every
+  // few rows; one refreshed row is bad (a speed beyond any road vehicle) and so are the rows repeating it.
+  std::string text = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),THROTTLE (),\n";
+  std::uint64_t state = 7;
+  const auto next = [&] {
+    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return static_cast<int>((state >> 33) % 1000);
+  };
+  double counter = 0.0;
+  int refresh = 0;
+  std::size_t rows = 0, bad_rows = 0;
+  for (int i = 0; i < 2000; ++i) {
+    counter += next() < 30 ? 2.0 + next() % 8 : 0.5;  // mostly two rows a second, sometimes a stall
+    if (next() < 300) ++refresh;
+    const bool bad = refresh == 40;
+    char row[128];
+    std::snprintf(row, sizeof row, "%d.000000, %d.000000, %d.000000, 17.6,\n", static_cast<int>(counter),
+                  1000 + 10 * (refresh % 50), bad ? 900 : 20 + refresh % 30);
+    text += row;
+    bad ? ++bad_rows : ++rows;
+  }
+  gearpulse::ReadOptions keep;
+  keep.keep_rows = true;
+  const SampleLog log = read_text(text, keep);
+  REQUIRE(bad_rows > 0);
+  CHECK(log.rows.size() == rows);
+  CHECK(log.skipped_count == bad_rows);
+  CHECK(log.repeated_rows > 0);
+  bool ordered = true, repeats_share = true;
+  for (std::size_t i = 1; i < log.rows.size(); ++i) {
+    ordered = ordered && log.rows[i].t >= log.rows[i - 1].t;
+    repeats_share = repeats_share && (log.rows[i].sample == log.rows[i - 1].sample ||
+                                      log.rows[i].sample == log.rows[i - 1].sample + 1);
+  }
+  CHECK(ordered);
+  CHECK(repeats_share);
+  CHECK(log.rows.back().sample == log.samples.size() - 1);
+  // Without keep_rows, the same samples.
+  const SampleLog plain = read_text(text);
+  CHECK(plain.rows.empty());
+  REQUIRE(plain.samples.size() == log.samples.size());
+  for (std::size_t i = 0; i < plain.samples.size(); ++i)
+    CHECK(plain.samples[i].t == log.samples[i].t);
+}
+
 TEST_CASE("io: Carloop row times are recovered below the counter's one-second step") {
   // Rows every 0.49 s; the whole-second run-time counter is refreshed every fourth row, rpm changes on
   // every fourth row too but two rows later (a different PID in the round-robin).

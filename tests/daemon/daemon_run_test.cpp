@@ -164,15 +164,26 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
   TempDir dir;
   // A capture whose read never returns: the file plugin reads a FIFO whose writer is there but silent.
   const std::filesystem::path fifo = gearpulse::test::make_paced_pcm(dir, "stuck");
-  const int writer = ::open(fifo.c_str(), O_RDWR | O_CLOEXEC);
-  REQUIRE(writer >= 0);
+  struct Writer {  // closed however the test ends, so a failed check cannot leave the daemon stuck
+    int fd;
+    ~Writer() {
+      if (fd >= 0) ::close(fd);
+    }
+  } writer{::open(fifo.c_str(), O_RDWR | O_CLOEXEC)};
+  REQUIRE(writer.fd >= 0);
   std::string text = config_for(dir);
   const std::string device = "gearpulse_test_no_such_pcm";
   text.replace(text.find(device), device.size(), "stuck");
   write_text(dir / "gearpulse.toml", text);
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-  REQUIRE(wait_for_status(dir, daemon).is_object());
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the capture thread is in its read
+  // The capture is open (so its thread is in, or about to be in, its read).
+  json status;
+  for (int i = 0; i < 300 && !(status.is_object() && status["audio"]["state"] == "running"); ++i) {
+    status = wait_for_status(dir, daemon);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  REQUIRE(status["audio"]["state"] == "running");
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
   daemon.signal(SIGTERM);
   // The store is saved while the daemon still waits for the capture thread.
   bool saved = false;
@@ -183,10 +194,15 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
   INFO(read_text(dir / "log.txt"));
   CHECK(saved);
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
-  std::this_thread::sleep_for(std::chrono::milliseconds(3500));
+  bool said = false;
+  for (int i = 0; i < 300 && !said; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    said = read_text(dir / "log.txt").find("has not returned from the device") != std::string::npos;
+  }
+  CHECK(said);
   CHECK(daemon.running());
-  CHECK(read_text(dir / "log.txt").find("has not returned from the device") != std::string::npos);
-  ::close(writer);  // the read returns (end of file): the daemon can finish
+  ::close(writer.fd);  // the read returns (end of file): the daemon can finish
+  writer.fd = -1;
   CHECK(daemon.wait() == 0);
 }
 

@@ -280,6 +280,10 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
   // Each names what is wrong: the command, and a gear count in the range the fit takes.
   CHECK(run(dir, "frobnicate " + log).err.find("unknown command 'frobnicate'") != std::string::npos);
   CHECK(run(dir, "fit --gears 1 " + log).err.find("from 2 to") != std::string::npos);
+  // A known command missing what it needs is not "unknown".
+  const Result missing = run(dir, "replay " + log);
+  CHECK(missing.err.find("unknown command") == std::string::npos);
+  CHECK(missing.err.find("--model") != std::string::npos);
 }
 
 TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and names gears forced apart") {

@@ -25,11 +25,15 @@ int main(int argc, char** argv) {
   } catch (const CLI::Success& e) {
     return app.exit(e);
   } catch (const CLI::RequiredError& e) {
-    // An unknown command reads to CLI11 as none at all: name it.
-    if (argc > 1 && argv[1][0] != '-') {
-      std::string known;
-      for (const CLI::App* sub : app.get_subcommands({}))
-        known += (known.empty() ? "" : ", ") + sub->get_name();
+    // An unknown command reads to CLI11 as none at all: name it (a known one missing an option is
+    // reported as CLI11 words it).
+    std::string known;
+    bool is_known = false;
+    for (const CLI::App* sub : app.get_subcommands({})) {
+      known += (known.empty() ? "" : ", ") + sub->get_name();
+      is_known = is_known || (argc > 1 && sub->get_name() == argv[1]);
+    }
+    if (argc > 1 && argv[1][0] != '-' && !is_known) {
       std::fprintf(stderr, "gearpulse: unknown command '%s' (commands: %s)\n", argv[1], known.c_str());
     } else {
       std::fprintf(stderr, "gearpulse: %s\n", e.what());

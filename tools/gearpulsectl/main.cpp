@@ -176,7 +176,8 @@ int main(int argc, char** argv) {
       const std::string_view arg = argv[i];
       if (arg == "--socket") {
         ++i;
-      } else if (!arg.starts_with("-")) {
+      } else if (!arg.starts_with("-") && arg != "status" && arg != "gears" && arg != "retrain" &&
+                 arg != "reset-model") {
         std::cerr << "gearpulsectl: unknown command '" << arg
                   << "' (commands: status, gears, retrain, reset-model)\n";
         return 2;
