@@ -46,6 +46,18 @@ std::string config_for(const TempDir& dir, const std::string& extra_output = "")
          (dir / "ctl.sock").string() + "\"\n[log]\nlevel = \"debug\"\n";
 }
 
+// `text` with its first `from` replaced by `to` (a config_for() with one setting changed).
+std::string with(std::string text, const std::string& from, const std::string& to) {
+  const std::size_t at = text.find(from);
+  REQUIRE(at != std::string::npos);
+  return text.replace(at, from.size(), to);
+}
+
+// config_for() with its output on a PTY whose link is `link`.
+std::string pty_config_for(const TempDir& dir, const std::filesystem::path& link) {
+  return with(config_for(dir), "kind = \"none\"\n", "kind = \"pty\"\npath = \"" + link.string() + "\"\n");
+}
+
 // Status once the daemon answers, or null after the timeout.
 json wait_for_status(const TempDir& dir, Process& daemon, int timeout_ms = 15'000) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
@@ -119,10 +131,7 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
 TEST_CASE("daemon: a PTY output in a directory that does not exist yet is made there") {
   TempDir dir;
   const std::filesystem::path link = dir / "run" / "sub" / "pulse";
-  std::string text = config_for(dir);
-  const std::string none = "kind = \"none\"\n";
-  text.replace(text.find(none), none.size(), "kind = \"pty\"\npath = \"" + link.string() + "\"\n");
-  write_text(dir / "gearpulse.toml", text);
+  write_text(dir / "gearpulse.toml", pty_config_for(dir, link));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   const json status = wait_for_status(dir, daemon);
   INFO(read_text(dir / "log.txt"));
@@ -137,10 +146,7 @@ TEST_CASE("daemon: an output that will not open is retried until it does, withou
   TempDir dir;
   const std::filesystem::path link = dir / "pulse";
   write_text(link, "a file where the link should go\n");  // the PTY output refuses to replace it
-  std::string text = config_for(dir);
-  const std::string none = "kind = \"none\"\n";
-  text.replace(text.find(none), none.size(), "kind = \"pty\"\npath = \"" + link.string() + "\"\n");
-  write_text(dir / "gearpulse.toml", text);
+  write_text(dir / "gearpulse.toml", pty_config_for(dir, link));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   const json failing = wait_for_status(dir, daemon);
   INFO(read_text(dir / "log.txt"));
@@ -171,10 +177,7 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
     }
   } writer{::open(fifo.c_str(), O_RDWR | O_CLOEXEC)};
   REQUIRE(writer.fd >= 0);
-  std::string text = config_for(dir);
-  const std::string device = "gearpulse_test_no_such_pcm";
-  text.replace(text.find(device), device.size(), "stuck");
-  write_text(dir / "gearpulse.toml", text);
+  write_text(dir / "gearpulse.toml", with(config_for(dir), "gearpulse_test_no_such_pcm", "stuck"));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   // The capture is open (so its thread is in, or about to be in, its read).
   json status;
@@ -214,10 +217,8 @@ TEST_CASE("daemon: a second gearpulsed on the same state directory exits before 
   // As if the first were in the middle of a save: its temp file must survive the second's start.
   write_text(dir / "state/training.bin.tmp.AbC123", "half a save");
   // The second has a socket of its own, so only the state directory is shared.
-  std::string text = config_for(dir);
-  const std::string sock = (dir / "ctl.sock").string();
-  text.replace(text.find(sock), sock.size(), (dir / "other.sock").string());
-  write_text(dir / "second.toml", text);
+  write_text(dir / "second.toml",
+             with(config_for(dir), (dir / "ctl.sock").string(), (dir / "other.sock").string()));
   Process second({kDaemon, "--config", (dir / "second.toml").string()}, dir / "second.txt");
   const auto rc = second.wait();
   REQUIRE(rc.has_value());
@@ -308,10 +309,8 @@ TEST_CASE("daemon: a state directory it cannot write in is said at start and in 
   // A state_dir under a regular file: it cannot be made, so nothing can be saved there (a directory
   // without write permission would do, but not for root, who runs these tests in CI).
   write_text(dir / "blocker", "not a directory\n");
-  std::string text = config_for(dir);
-  const std::string state = (dir / "state").string();
-  text.replace(text.find(state), state.size(), (dir / "blocker" / "state").string());
-  write_text(dir / "gearpulse.toml", text);
+  write_text(dir / "gearpulse.toml",
+             with(config_for(dir), (dir / "state").string(), (dir / "blocker" / "state").string()));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   const json status = wait_for_status(dir, daemon);
   INFO(read_text(dir / "log.txt"));
