@@ -166,15 +166,14 @@ class LogBuilder {
       return false;
     }
     log_.samples.push_back(s);
-    if (options_.keep_rows)
-      log_.rows.push_back(
-          {std::max(s.t, log_.rows.empty() ? s.t : log_.rows.back().t), log_.samples.size() - 1});
+    add_repeat(s.t);
     return true;
   }
-  // A row repeating the values of the sample added last (OBD logs between refreshes), at time t.
+  // A row carried by the sample added last (its own, or one an OBD row repeats between refreshes), at
+  // time t, kept in time order.
   void add_repeat(double t) {
     if (options_.keep_rows && !log_.samples.empty())
-      log_.rows.push_back({std::max(t, log_.rows.empty() ? t : log_.rows.back().t), log_.samples.size() - 1});
+      log_.rows.push_back({log_.rows.empty() ? t : std::max(t, log_.rows.back().t), log_.samples.size() - 1});
   }
   SampleLog& log() noexcept { return log_; }
   [[nodiscard]] bool keeps_rows() const noexcept { return options_.keep_rows; }

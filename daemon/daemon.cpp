@@ -183,7 +183,11 @@ std::string Daemon::Impl::set_aside(const std::filesystem::path& path) {
 bool Daemon::Impl::load_state() {
   std::error_code ec;
   std::filesystem::create_directories(state_dir, ec);
-  if (!ec) {
+  if (ec) {
+    spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
+                  state_dir.string(), ec.message());
+    note_state_problem("cannot create " + state_dir.string() + ": " + ec.message());
+  } else {
     try {
       state_lock.emplace(state_dir);
       if (!state_lock->held()) {
@@ -193,12 +197,6 @@ bool Daemon::Impl::load_state() {
     } catch (const std::exception& e) {
       spdlog::warn("state: {}; nothing stops a second daemon from sharing {}", e.what(), state_dir.string());
     }
-  }
-  if (ec) {
-    spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
-                  state_dir.string(), ec.message());
-    note_state_problem("cannot create " + state_dir.string() + ": " + ec.message());
-  } else {
     // Said now, not at the first save minutes later (or at shutdown).
     const std::filesystem::path probe = state_dir / ".gearpulse-write-test";
     const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);

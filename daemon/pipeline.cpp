@@ -536,7 +536,7 @@ std::size_t Pipeline::drain_pairs() {
 
 void Pipeline::halt() noexcept {
   Impl& d = *impl_;
-  // The pulse train first: the output goes low now, whatever the joins below wait for.
+  // The pulse train first: the output goes low now, whatever stop()'s joins then wait for.
   if (d.pulses) {
     d.pulses->set_speed(0.0);
     d.pulses->stop();  // leaves the output low

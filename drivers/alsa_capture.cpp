@@ -409,14 +409,13 @@ void AlsaCapture::run() noexcept {
       hold_to_clock();
       continue;
     }
-    const std::byte* const period = raw_.data();
 
     // Convert to float mono.
     for (std::size_t i = 0; i < frames; ++i) {
       float acc = 0.0f;
       for (unsigned ch = 0; ch < channels_; ++ch) {
         if (config_.channel >= 0 && static_cast<int>(ch) != config_.channel) continue;
-        const std::byte* p = period + (i * channels_ + ch) * sample_bytes;
+        const std::byte* p = raw_.data() + (i * channels_ + ch) * sample_bytes;
         float v;
         if (format_ == SampleFormat::kS16) {
           std::int16_t s;

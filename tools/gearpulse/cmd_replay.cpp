@@ -53,19 +53,19 @@ int run_replay(const ReplayCommand& cmd) {
   std::string out = "t,speed,gear,source\n";
   SynthOutput o;
   std::size_t stepped = 0;  // samples stepped so far
-  char row[512];            // room for any double (at most 309 digits before the point)
+  char t[32];               // the shortest text of any double fits
+  char row[512];            // room for any double in %.4f (at most 309 digits before the point)
   for (const InputRow& r : log.rows) {
     for (; stepped <= r.sample; ++stepped) {
       const Sample& s = log.samples[stepped];
       o = synth.step(s.t, s.speed, s.freq);
     }
     // t as the shortest text that reads back to the same double (epoch seconds keep their fractions).
-    const auto t = std::to_chars(row, row + 64, r.t);
+    const int t_len = static_cast<int>(std::to_chars(t, t + sizeof t, r.t).ptr - t);
     const std::string_view source = source_name(o.source);
-    const int n = std::snprintf(t.ptr, sizeof row - 64, ",%.4f,%d,%.*s\n", o.speed, o.gear,
+    const int n = std::snprintf(row, sizeof row, "%.*s,%.4f,%d,%.*s\n", t_len, t, o.speed, o.gear,
                                 static_cast<int>(source.size()), source.data());
-    out.append(row, static_cast<std::size_t>(t.ptr - row) +
-                        std::min(static_cast<std::size_t>(std::max(n, 0)), sizeof row - 65));
+    out.append(row, std::min(static_cast<std::size_t>(std::max(n, 0)), sizeof row - 1));
     if (out.size() > (1u << 16)) {
       std::fwrite(out.data(), 1, out.size(), stdout);
       out.clear();

@@ -172,14 +172,16 @@ int main(int argc, char** argv) {
   } catch (const CLI::RequiredError& e) {
     // An unknown command reads to CLI11 as none at all: name it (the first word that is neither an
     // option nor the value of --socket).
+    std::string known;
+    for (const CLI::App* sub : app.get_subcommands({}))
+      known += (known.empty() ? "" : ", ") + sub->get_name();
     for (int i = 1; i < argc; ++i) {
       const std::string_view arg = argv[i];
       if (arg == "--socket") {
         ++i;
-      } else if (!arg.starts_with("-") && arg != "status" && arg != "gears" && arg != "retrain" &&
-                 arg != "reset-model") {
-        std::cerr << "gearpulsectl: unknown command '" << arg
-                  << "' (commands: status, gears, retrain, reset-model)\n";
+      } else if (!arg.starts_with("-") &&
+                 app.get_subcommands([&](const CLI::App* sub) { return sub->get_name() == arg; }).empty()) {
+        std::cerr << "gearpulsectl: unknown command '" << arg << "' (commands: " << known << ")\n";
         return 2;
       }
     }
