@@ -46,6 +46,18 @@ void sync_directory(const std::filesystem::path& dir) {
   if (dfd.get() < 0 || ::fsync(dfd.get()) != 0) throw_errno("cannot fsync directory", dir);
 }
 
+void write_all(int fd, std::string_view data, const std::filesystem::path& path) {
+  std::size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw_errno("cannot write", path);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+}
+
 }  // namespace
 
 void write_file_atomic(const std::filesystem::path& path, std::string_view data) {
@@ -58,15 +70,7 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
   const std::string tmp(name.data());
   try {
     if (::fchmod(fd.get(), 0644) != 0) throw_errno("cannot chmod", tmp);
-    std::size_t done = 0;
-    while (done < data.size()) {
-      const ssize_t n = ::write(fd.get(), data.data() + done, data.size() - done);
-      if (n < 0) {
-        if (errno == EINTR) continue;
-        throw_errno("cannot write", tmp);
-      }
-      done += static_cast<std::size_t>(n);
-    }
+    write_all(fd.get(), data, tmp);
     if (::fsync(fd.get()) != 0) throw_errno("cannot fsync", tmp);
     if (::close(fd.release()) != 0) throw_errno("cannot close", tmp);
     if (::rename(tmp.c_str(), path.c_str()) != 0) throw_errno("cannot rename into", path);
@@ -76,6 +80,14 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
   }
   // The rename is durable only once the directory entry is on disk.
   sync_directory(dir);
+}
+
+void append_file_durable(const std::filesystem::path& path, std::string_view data) {
+  Fd fd(::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC));
+  if (fd.get() < 0) throw_errno("cannot open", path);
+  write_all(fd.get(), data, path);
+  if (::fdatasync(fd.get()) != 0) throw_errno("cannot fsync", path);
+  if (::close(fd.release()) != 0) throw_errno("cannot close", path);
 }
 
 void remove_file_durable(const std::filesystem::path& path) {

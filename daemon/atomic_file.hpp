@@ -12,6 +12,11 @@ namespace gearpulse::daemon {
 // directory. Throws std::system_error naming the path on failure (the old file is then untouched).
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);
 
+// Appends `data` to the existing file `path` and fdatasyncs it: a journal's records are on disk when this
+// returns. A power cut during the call may leave part of `data` at the end (readers check each record).
+// Throws std::system_error naming the path on failure, including when the file does not exist.
+void append_file_durable(const std::filesystem::path& path, std::string_view data);
+
 // Removes `path` (nothing to do if it is absent) and fsyncs its directory, so the removal survives a power
 // cut. Throws std::system_error naming the path on failure.
 void remove_file_durable(const std::filesystem::path& path);

@@ -14,6 +14,9 @@ constexpr char kMagic[8] = {'G', 'P', 'T', 'R', 'A', 'I', 'N', '\n'};
 constexpr std::uint32_t kVersion = 1;
 constexpr std::uint32_t kRecordSize = 3 * sizeof(double);
 constexpr std::size_t kHeaderSize = sizeof kMagic + 2 * sizeof(std::uint32_t) + sizeof(std::uint64_t);
+constexpr char kJournalMagic[8] = {'G', 'P', 'J', 'O', 'U', 'R', 'N', '\n'};
+constexpr std::size_t kJournalHeaderSize = sizeof kJournalMagic + 2 * sizeof(std::uint32_t);
+constexpr std::size_t kJournalRecordSize = kRecordSize + sizeof(std::uint32_t);
 
 template <typename T>
 void put(std::string& out, T value) {
@@ -27,6 +30,18 @@ T get(std::string_view in, std::size_t offset) {
   T value;
   std::memcpy(&value, in.data() + offset, sizeof(T));
   return value;
+}
+
+// The checksum a saved store ends with (what a journal names as the file it extends); 0 for none.
+std::uint32_t trailing_crc(std::string_view blob) {
+  return blob.size() >= sizeof(std::uint32_t) ? get<std::uint32_t>(blob, blob.size() - sizeof(std::uint32_t))
+                                              : 0;
+}
+
+void put_record(std::string& out, const Sample& s) {
+  put(out, s.t);
+  put(out, s.speed);
+  put(out, s.freq);
 }
 
 bool plausible(const Sample& s) {
@@ -61,6 +76,8 @@ bool TrainingStore::add(const Sample& sample) {
   std::lock_guard lock(mutex_);
   samples_.push_back(sample);
   ++new_samples_;
+  ++since_save_;
+  ++unjournaled_;
   enforce_bounds_locked();
   return true;
 }
@@ -78,12 +95,15 @@ void TrainingStore::prune(double now_wall_s) {
   while (!samples_.empty() && samples_.front().t < oldest)
     samples_.pop_front();
   new_samples_ = std::min(new_samples_, samples_.size());
+  since_save_ = std::min(since_save_, samples_.size());
+  unjournaled_ = std::min(unjournaled_, samples_.size());
 }
 
 void TrainingStore::clear() {
   std::lock_guard lock(mutex_);
   samples_.clear();
   new_samples_ = 0;
+  since_save_ = unjournaled_ = 0;
 }
 
 std::vector<Sample> TrainingStore::snapshot() const {
@@ -116,21 +136,24 @@ void TrainingStore::enforce_bounds_locked() {
   while (samples_.size() > max_samples_)
     samples_.pop_front();
   new_samples_ = std::min(new_samples_, samples_.size());
+  since_save_ = std::min(since_save_, samples_.size());
+  unjournaled_ = std::min(unjournaled_, samples_.size());
 }
 
 std::string TrainingStore::serialize() const {
   std::lock_guard lock(mutex_);
+  return serialize_locked();
+}
+
+std::string TrainingStore::serialize_locked() const {
   std::string out;
   out.reserve(kHeaderSize + samples_.size() * kRecordSize + sizeof(std::uint32_t));
   out.append(kMagic, sizeof kMagic);
   put(out, kVersion);
   put(out, kRecordSize);
   put(out, static_cast<std::uint64_t>(samples_.size()));
-  for (const Sample& s : samples_) {
-    put(out, s.t);
-    put(out, s.speed);
-    put(out, s.freq);
-  }
+  for (const Sample& s : samples_)
+    put_record(out, s);
   put(out, crc32(out));
   return out;
 }
@@ -165,17 +188,135 @@ std::string TrainingStore::deserialize(std::string_view blob) {
   return {};
 }
 
-void TrainingStore::save(const std::filesystem::path& path) const {
-  write_file_atomic(path, serialize());
+void TrainingStore::save(const std::filesystem::path& path) {
+  std::string blob;
+  std::size_t saved = 0, unjournaled = 0;
+  {
+    // What the blob holds needs no journal; pairs added from here on do.
+    std::lock_guard lock(mutex_);
+    blob = serialize_locked();
+    saved = since_save_;
+    unjournaled = unjournaled_;
+    since_save_ = unjournaled_ = 0;
+  }
+  try {
+    write_file_atomic(path, blob);
+  } catch (...) {
+    // The previous file and its journal stand; the pairs are still to be saved (and journaled).
+    std::lock_guard lock(mutex_);
+    since_save_ = std::min(since_save_ + saved, samples_.size());
+    unjournaled_ = std::min(unjournaled_ + unjournaled, samples_.size());
+    throw;
+  }
+  {
+    std::lock_guard lock(mutex_);
+    saved_crc_ = trailing_crc(blob);
+    journal_current_ = false;
+    unjournaled_ = since_save_;
+  }
+  // The old journal names the old file and would be ignored; a fresh one is started now rather than at
+  // the next append. If this fails, the next append tries again.
+  try {
+    append_journal(path);
+  } catch (const std::exception&) {
+  }
 }
 
 std::string TrainingStore::load(const std::filesystem::path& path) {
   const auto blob = read_file(path);
+  {
+    std::lock_guard lock(mutex_);
+    saved_crc_ = blob ? trailing_crc(*blob) : 0;
+    journal_current_ = false;
+  }
   if (!blob) {
     clear();
     return {};
   }
   return deserialize(*blob);
+}
+
+std::filesystem::path TrainingStore::journal_path(const std::filesystem::path& path) {
+  std::filesystem::path journal = path;
+  journal += ".journal";
+  return journal;
+}
+
+std::size_t TrainingStore::append_journal(const std::filesystem::path& path) {
+  std::string out;
+  std::size_t count = 0;
+  bool rewrite = false;
+  {
+    std::lock_guard lock(mutex_);
+    rewrite = !journal_current_;
+    count = rewrite ? since_save_ : unjournaled_;
+    if (!rewrite && count == 0) return 0;
+    if (rewrite) {
+      out.append(kJournalMagic, sizeof kJournalMagic);
+      put(out, kVersion);
+      put(out, saved_crc_);
+    }
+    for (auto it = samples_.end() - static_cast<std::ptrdiff_t>(count); it != samples_.end(); ++it) {
+      std::string record;
+      put_record(record, *it);
+      put(record, crc32(record));
+      out += record;
+    }
+    unjournaled_ = 0;
+    journal_current_ = true;
+  }
+  try {
+    if (rewrite)
+      write_file_atomic(journal_path(path), out);
+    else
+      append_file_durable(journal_path(path), out);
+  } catch (...) {
+    // A failed append may have left part of a record: the journal is rewritten whole next time.
+    std::lock_guard lock(mutex_);
+    journal_current_ = false;
+    unjournaled_ = since_save_;
+    throw;
+  }
+  return count;
+}
+
+TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem::path& path) {
+  JournalReplay replay;
+  const auto blob = read_file(journal_path(path));
+  if (!blob) return replay;
+  if (blob->size() < kJournalHeaderSize ||
+      std::memcmp(blob->data(), kJournalMagic, sizeof kJournalMagic) != 0) {
+    replay.problem = "not a training journal (bad magic)";
+    return replay;
+  }
+  if (const auto version = get<std::uint32_t>(*blob, sizeof kJournalMagic); version != kVersion) {
+    replay.problem = "unsupported journal version " + std::to_string(version);
+    return replay;
+  }
+  std::lock_guard lock(mutex_);
+  if (get<std::uint32_t>(*blob, sizeof kJournalMagic + 4) != saved_crc_) {
+    replay.stale = true;
+    return replay;
+  }
+  std::size_t at = kJournalHeaderSize;
+  for (; at + kJournalRecordSize <= blob->size(); at += kJournalRecordSize) {
+    const std::string_view record = std::string_view(*blob).substr(at, kRecordSize);
+    if (get<std::uint32_t>(*blob, at + kRecordSize) != crc32(record)) break;
+    const Sample s{get<double>(*blob, at), get<double>(*blob, at + 8), get<double>(*blob, at + 16)};
+    if (!plausible(s)) break;
+    samples_.push_back(s);
+    ++replay.recovered;
+  }
+  if (at < blob->size())
+    replay.problem = std::to_string(blob->size() - at) + " bytes at the end are not a whole record (dropped)";
+  // The recovered pairs are in no saved file: they count as added since the save, and the journal is
+  // rewritten with them (past any torn end) at the next append.
+  new_samples_ += replay.recovered;
+  since_save_ += replay.recovered;
+  unjournaled_ = since_save_;
+  journal_current_ = false;
+  enforce_bounds_locked();
+  return replay;
 }
 
 }  // namespace gearpulse::daemon

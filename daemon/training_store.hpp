@@ -2,6 +2,8 @@
 // The bounded store of aligned (t, GPS speed, engine frequency) pairs the retrainer learns from.
 // It keeps the last `max_age` seconds (and at most `max_samples`), survives restarts through an
 // atomically written file with a header and a checksum, and detects a torn or corrupt file.
+// Between those (large, infrequent) saves, the pairs added since the last one go to a journal beside
+// the file, appended in small synced writes: a power cut loses at most the pairs since the last append.
 #include <cstddef>
 #include <cstdint>
 #include <deque>
@@ -38,20 +40,44 @@ class TrainingStore {
   [[nodiscard]] std::string serialize() const;
   // Replaces the content; on a bad blob leaves the store empty and returns the reason (else empty).
   std::string deserialize(std::string_view blob);
-  // Atomic save (temp + fsync + rename). Throws std::system_error.
-  void save(const std::filesystem::path& path) const;
+  // Atomic save (temp + fsync + rename), then a fresh journal that extends it. Throws
+  // std::system_error (when the save itself fails, the previous file and journal still hold the pairs).
+  void save(const std::filesystem::path& path);
   // Loads; returns the reason when the file is corrupt (the store is then empty), empty on success or
   // when the file does not exist. Throws std::system_error on I/O errors.
   std::string load(const std::filesystem::path& path);
 
+  // The journal of `path` (journal_path()): magic, version, the checksum of the saved file it extends,
+  // then records of one pair and its own CRC-32.
+  [[nodiscard]] static std::filesystem::path journal_path(const std::filesystem::path& path);
+  // Appends the pairs added since the last save or append to the journal and syncs it (rewriting the
+  // journal whole, atomically, when it is missing, stale or after a failed append). Returns how many
+  // pairs were written. Throws std::system_error; the pairs are then tried again at the next call.
+  std::size_t append_journal(const std::filesystem::path& path);
+  struct JournalReplay {
+    std::size_t recovered = 0;  // pairs added from the journal
+    std::string problem;        // a journal that is not one, or a torn record at its end (dropped)
+    bool stale = false;         // the journal extends an older save (its pairs are in the file already)
+  };
+  // After load(): adds the pairs of the journal if it extends the file just loaded (the pairs a power cut
+  // or a crash kept from the next save). Throws std::system_error on I/O errors.
+  JournalReplay replay_journal(const std::filesystem::path& path);
+
  private:
   void enforce_bounds_locked();
+  [[nodiscard]] std::string serialize_locked() const;
 
   mutable std::mutex mutex_;
   std::deque<Sample> samples_;
   double max_age_s_;
   std::size_t max_samples_;
   std::size_t new_samples_ = 0;
+  // Journal bookkeeping: pairs at the back of samples_ added since the last save (all in the journal
+  // when it is current), and how many of those are not yet in it.
+  std::size_t since_save_ = 0;
+  std::size_t unjournaled_ = 0;
+  std::uint32_t saved_crc_ = 0;   // checksum of the saved file the journal extends (0: no file)
+  bool journal_current_ = false;  // the journal on disk extends saved_crc_ and ends with a whole record
 };
 
 [[nodiscard]] std::uint32_t crc32(std::string_view data) noexcept;

@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <memory>
 #include <random>
 #include <string>
 #include <thread>
@@ -141,6 +142,114 @@ TEST_CASE("daemon: training store round-trips through its file") {
   TrainingStore none(1e9, 10);
   CHECK(none.load(dir / "absent.bin").empty());
   CHECK(none.size() == 0);
+}
+
+namespace {
+
+void add_pairs(TrainingStore& store, int from, int to) {
+  for (int i = from; i < to; ++i)
+    store.add({1.7e9 + i, 0.1 * i, 20.0 + i});
+}
+
+// What a restart after a power cut sees: the file and the journal as they are on disk.
+std::unique_ptr<TrainingStore> restarted(const std::filesystem::path& path,
+                                         TrainingStore::JournalReplay& replay) {
+  auto back = std::make_unique<TrainingStore>(1e9, 10000);
+  CHECK(back->load(path).empty());
+  replay = back->replay_journal(path);
+  return back;
+}
+
+}  // namespace
+
+TEST_CASE("daemon: pairs journaled after the last save survive a power cut") {
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  TrainingStore store(1e9, 10000);
+  add_pairs(store, 0, 50);
+  store.save(path);
+  add_pairs(store, 50, 80);
+  CHECK(store.append_journal(path) == 30);
+  add_pairs(store, 80, 85);
+  CHECK(store.append_journal(path) == 5);
+  CHECK(store.append_journal(path) == 0);  // nothing new: no write
+  add_pairs(store, 85, 90);                // never journaled: lost with the power
+
+  TrainingStore::JournalReplay replay;
+  const auto restored = restarted(path, replay);
+  TrainingStore& back = *restored;
+  CHECK(replay.recovered == 35);
+  CHECK(replay.problem.empty());
+  CHECK_FALSE(replay.stale);
+  const auto got = back.snapshot();
+  REQUIRE(got.size() == 85);
+  CHECK(got.back().t == 1.7e9 + 84);
+  CHECK(got.back().freq == 20.0 + 84);
+  CHECK(back.new_samples() == 35);  // not in any fit yet
+
+  SECTION("a save takes the journal's pairs and starts a fresh journal") {
+    back.save(path);
+    TrainingStore::JournalReplay again;
+    CHECK(restarted(path, again)->size() == 85);
+    CHECK(again.recovered == 0);
+  }
+  SECTION("a torn last record is dropped, and the journal is rewritten past it") {
+    std::string journal = read_text(TrainingStore::journal_path(path));
+    write_text(TrainingStore::journal_path(path), journal.substr(0, journal.size() - 9));
+    TrainingStore::JournalReplay torn;
+    const auto after_cut = restarted(path, torn);
+    TrainingStore& cut = *after_cut;
+    CHECK(torn.recovered == 34);
+    CHECK(torn.problem.find("not a whole record") != std::string::npos);
+    // Appending after the torn end would hide what follows it: the next write is a whole new journal.
+    add_pairs(cut, 100, 102);
+    CHECK(cut.append_journal(path) == 36);
+    TrainingStore::JournalReplay after;
+    CHECK(restarted(path, after)->size() == 50 + 36);
+    CHECK(after.problem.empty());
+  }
+  SECTION("a flipped byte ends the replay at that record") {
+    std::string journal = read_text(TrainingStore::journal_path(path));
+    journal[journal.size() - 3 * 28 + 5] ^= 0x40;  // third record from the end
+    write_text(TrainingStore::journal_path(path), journal);
+    TrainingStore::JournalReplay flipped;
+    CHECK(restarted(path, flipped)->size() == 50 + 32);
+    CHECK_FALSE(flipped.problem.empty());
+  }
+}
+
+TEST_CASE("daemon: a journal older than the saved file is not replayed twice") {
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  TrainingStore store(1e9, 10000);
+  add_pairs(store, 0, 20);
+  store.save(path);
+  add_pairs(store, 20, 30);
+  store.append_journal(path);
+  const std::string old_journal = read_text(TrainingStore::journal_path(path));
+  // Power lost between the save's rename and its fresh journal: the old journal names the old file.
+  store.save(path);
+  write_text(TrainingStore::journal_path(path), old_journal);
+  TrainingStore::JournalReplay replay;
+  CHECK(restarted(path, replay)->size() == 30);
+  CHECK(replay.stale);
+  CHECK(replay.recovered == 0);
+
+  SECTION("nor one that is not a journal") {
+    write_text(TrainingStore::journal_path(path), "garbage");
+    TrainingStore::JournalReplay bad;
+    CHECK(restarted(path, bad)->size() == 30);
+    CHECK(bad.problem == "not a training journal (bad magic)");
+  }
+  SECTION("a first run that never saved is recovered from its journal alone") {
+    TempDir fresh;
+    TrainingStore first(1e9, 10000);
+    add_pairs(first, 0, 12);
+    CHECK(first.append_journal(fresh / "training.bin") == 12);
+    TrainingStore::JournalReplay only;
+    CHECK(restarted(fresh / "training.bin", only)->size() == 12);
+    CHECK(only.recovered == 12);
+  }
 }
 
 TEST_CASE("daemon: training store rejects a torn or corrupt file") {
