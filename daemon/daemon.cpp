@@ -257,6 +257,15 @@ bool Daemon::Impl::load_state() {
   }
   recover_journal();
   store.prune(wall_now());
+  // Pairs stored after the model's last fit are new to it, whichever run gathered them.
+  if (const ModelPtr m = model.get()) {
+    const auto until = m->extra.find(kTrainedUntil);
+    if (until != m->extra.end() && until->is_number()) {
+      store.set_new_after(until->get<double>());
+      spdlog::info("training: {} of the {} stored pairs are newer than the model's last fit",
+                   store.new_samples(), store.size());
+    }
+  }
   return true;
 }
 

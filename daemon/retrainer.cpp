@@ -124,6 +124,11 @@ bool Retrainer::retrain_now() {
         spdlog::info("retrain: {}", result);
       } else {
         const std::size_t gears = fitted.gears.size();
+        // The newest pair it saw: pairs after it are new to the model at the next start too.
+        double newest = samples.front().t;
+        for (const Sample& s : samples)
+          newest = std::max(newest, s.t);
+        fitted.extra[std::string(kTrainedUntil)] = newest;
         auto next = std::make_shared<const GearModel>(std::move(fitted));
         model_.set(next);
         changed = true;
@@ -154,8 +159,10 @@ bool Retrainer::retrain_now() {
 void Retrainer::run() noexcept {
   lower_priority();
   std::unique_lock lock(mutex_);
-  // A store restored at start but no model yet: learn right away instead of after a full interval.
-  bool first = !model_.trained();
+  // At start, learn right away rather than after a full interval when there is something to learn from:
+  // a restored store and no model yet, or enough pairs the model has not seen (gathered on trips shorter
+  // than the interval, which would otherwise never reach it).
+  bool first = true;
   while (!stop_) {
     if (!first && !requested_) {
       wake_.wait_for(lock, settings_.interval, [this] { return stop_ || requested_; });
@@ -164,7 +171,7 @@ void Retrainer::run() noexcept {
     const bool forced = requested_;
     requested_ = false;
     const std::size_t needed = settings_.min_new_samples;
-    const bool enough = first ? store_.size() >= needed : store_.new_samples() >= needed;
+    const bool enough = first && !model_.trained() ? store_.size() >= needed : store_.new_samples() >= needed;
     first = false;
     if (!forced && !enough) continue;
     lock.unlock();

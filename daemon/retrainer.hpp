@@ -10,6 +10,7 @@
 #include <mutex>
 #include <span>
 #include <string>
+#include <string_view>
 #include <thread>
 
 #include "core/gear_model.hpp"
@@ -18,6 +19,10 @@
 #include "daemon/training_store.hpp"
 
 namespace gearpulse::daemon {
+
+// Key in a model's `extra` object the daemon's fits carry: the wall-clock time (UNIX s) of the newest
+// training pair the fit saw. Pairs after it count as new for the next retrain, across restarts.
+inline constexpr std::string_view kTrainedUntil = "trained_until";
 
 class Retrainer {
  public:

@@ -126,6 +126,12 @@ void TrainingStore::mark_trained(std::size_t consumed) {
   new_samples_ -= std::min(consumed, new_samples_);
 }
 
+void TrainingStore::set_new_after(double t) {
+  std::lock_guard lock(mutex_);
+  new_samples_ = static_cast<std::size_t>(
+      std::count_if(samples_.begin(), samples_.end(), [t](const Sample& s) { return s.t > t; }));
+}
+
 void TrainingStore::enforce_bounds_locked() {
   // Age is judged against the newest sample, so a wrong wall clock cannot wipe the store.
   if (!samples_.empty()) {

@@ -35,6 +35,9 @@ class TrainingStore {
   // Pairs added since the last mark_trained() (or since start).
   [[nodiscard]] std::size_t new_samples() const;
   void mark_trained(std::size_t consumed);
+  // Counts as new the pairs later than `t` (wall-clock s): those a fit ending at `t` has not seen, kept
+  // from earlier runs of the daemon.
+  void set_new_after(double t);
 
   // File format: magic, version, record count, records, CRC-32 of all that precedes it.
   [[nodiscard]] std::string serialize() const;

@@ -358,6 +358,29 @@ TEST_CASE("daemon: learns a model from a restored training store and saves it") 
   const auto loaded = gearpulse::daemon::load_model_file(dir / "state/model.json");
   REQUIRE(loaded.model);
   CHECK(loaded.model->gears.size() == vehicle.theta.size());
+
+  // Later trips, each shorter than the retrain interval, add pairs the model has not seen: the next start
+  // counts them as new and learns from them at once.
+  gearpulse::daemon::TrainingStore later(1e9, 1'000'000);
+  REQUIRE(later.load(dir / "state/training.bin").empty());
+  const std::size_t before = later.size();
+  for (int i = 0; i < 1200; ++i)
+    later.add({now + 10.0 + i, 10.0, 60.0});
+  later.save(dir / "state/training.bin");
+  Process again({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  json restarted;
+  for (int i = 0; i < 600; ++i) {
+    restarted = wait_for_status(dir, again);
+    if (!restarted.is_object() || restarted["model"]["retrain_runs"].get<int>() >= 1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(restarted.is_object());
+  CHECK(restarted["model"]["retrain_runs"].get<int>() >= 1);
+  CHECK(read_text(dir / "log.txt").find("1200 of the " + std::to_string(before + 1200) + " stored pairs") !=
+        std::string::npos);
+  again.signal(SIGTERM);
+  CHECK(again.wait() == 0);
 }
 
 TEST_CASE("daemon: pairs journaled before a power cut are restored at start and saved with the store") {

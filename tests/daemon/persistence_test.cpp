@@ -325,9 +325,53 @@ TEST_CASE("daemon: retrainer swaps in and saves a fitted model") {
   CHECK(seen == 20);
   REQUIRE(model.trained());
   CHECK(model.get()->gears.size() == 3);
-  CHECK(load_model_file(dir / "model.json").model != nullptr);
+  const ModelLoad saved = load_model_file(dir / "model.json");
+  REQUIRE(saved.model != nullptr);
   CHECK(store.new_samples() == 0);
   CHECK(retrainer.status().accepted == 1);
+  // The newest pair it saw is kept with the model: at the next start, pairs after it are new.
+  CHECK(saved.model->extra.value(std::string(kTrainedUntil), -1.0) == 19.0);
+  for (int i = 20; i < 26; ++i)
+    store.add({double(i), 10.0, 100.0});
+  TrainingStore next_start(1e9, 10000);
+  REQUIRE(next_start.deserialize(store.serialize()).empty());
+  CHECK(next_start.new_samples() == 0);
+  next_start.set_new_after(saved.model->extra.value(std::string(kTrainedUntil), -1.0));
+  CHECK(next_start.new_samples() == 6);
+}
+
+TEST_CASE("daemon: retrainer fits at start when the store holds enough pairs its model has not seen") {
+  // Trips shorter than the retrain interval: the pairs gathered over several of them are learned from at
+  // the next start, not never.
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 50; ++i)
+    store.add({double(i), 10.0, 100.0});
+  ModelHolder model;
+  model.set(std::make_shared<const GearModel>(three_gears()));
+  std::atomic<int> fits{0};
+  const auto fitter = [&](std::span<const Sample>) {
+    ++fits;
+    return three_gears();
+  };
+  const Retrainer::Settings settings{std::chrono::duration<double>(3600.0), 30};
+  SECTION("enough new pairs") {
+    store.set_new_after(10.0);  // 39 newer than the model's fit
+    Retrainer retrainer(store, model, dir / "model.json", fitter, settings);
+    retrainer.start();
+    for (int i = 0; i < 500 && fits.load() == 0; ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    retrainer.stop();
+    CHECK(fits.load() == 1);
+  }
+  SECTION("too few: it waits for the interval") {
+    store.set_new_after(25.0);  // 24 newer
+    Retrainer retrainer(store, model, dir / "model.json", fitter, settings);
+    retrainer.start();
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    retrainer.stop();
+    CHECK(fits.load() == 0);
+  }
 }
 
 TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
