@@ -146,9 +146,13 @@ TEST_CASE("daemon: training store round-trips through its file") {
 
 namespace {
 
+double pair_time(int i) {
+  return 1.7e9 + i;
+}
+
 void add_pairs(TrainingStore& store, int from, int to) {
   for (int i = from; i < to; ++i)
-    store.add({1.7e9 + i, 0.1 * i, 20.0 + i});
+    store.add({pair_time(i), 0.1 * i, 20.0 + i});
 }
 
 // What a restart after a power cut sees: the file and the journal as they are on disk.
@@ -331,8 +335,7 @@ TEST_CASE("daemon: retrainer swaps in and saves a fitted model") {
   CHECK(retrainer.status().accepted == 1);
   // The newest pair it saw is kept with the model: at the next start, pairs after it are new.
   CHECK(saved.model->extra.value(std::string(kTrainedUntil), -1.0) == 19.0);
-  for (int i = 20; i < 26; ++i)
-    store.add({double(i), 10.0, 100.0});
+  add_pairs(store, 20, 26);
   TrainingStore next_start(1e9, 10000);
   REQUIRE(next_start.deserialize(store.serialize()).empty());
   CHECK(next_start.new_samples() == 0);
@@ -345,8 +348,7 @@ TEST_CASE("daemon: retrainer fits at start when the store holds enough pairs its
   // the next start, not never.
   TempDir dir;
   TrainingStore store(1e9, 10000);
-  for (int i = 0; i < 50; ++i)
-    store.add({double(i), 10.0, 100.0});
+  add_pairs(store, 0, 50);
   ModelHolder model;
   model.set(std::make_shared<const GearModel>(three_gears()));
   std::atomic<int> fits{0};
@@ -356,7 +358,7 @@ TEST_CASE("daemon: retrainer fits at start when the store holds enough pairs its
   };
   const Retrainer::Settings settings{std::chrono::duration<double>(3600.0), 30};
   SECTION("enough new pairs") {
-    store.set_new_after(10.0);  // 39 newer than the model's fit
+    store.set_new_after(pair_time(10));  // 39 newer than the model's fit
     Retrainer retrainer(store, model, dir / "model.json", fitter, settings);
     retrainer.start();
     for (int i = 0; i < 500 && fits.load() == 0; ++i)
@@ -365,7 +367,7 @@ TEST_CASE("daemon: retrainer fits at start when the store holds enough pairs its
     CHECK(fits.load() == 1);
   }
   SECTION("too few: it waits for the interval") {
-    store.set_new_after(25.0);  // 24 newer
+    store.set_new_after(pair_time(25));  // 24 newer
     Retrainer retrainer(store, model, dir / "model.json", fitter, settings);
     retrainer.start();
     std::this_thread::sleep_for(std::chrono::milliseconds(200));
