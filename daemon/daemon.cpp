@@ -146,9 +146,14 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
           "gps: {}; reconnecting with backoff{}", now.gps_error,
           suppressed ? fmt::format(" ({} more failed attempts since the last report)", suppressed) : "");
   }
-  if (now.source != before.source)
-    spdlog::info("synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,
-                 now.speed * 3.6, now.gear);
+  if (now.source != before.source) {
+    // Into and out of GPS is news; engine <-> coast inside an outage is every declutch (two per shift).
+    const bool routine = (before.source == "engine" || before.source == "coast") &&
+                         (now.source == "engine" || now.source == "coast");
+    spdlog::log(routine ? spdlog::level::debug : spdlog::level::info,
+                "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,
+                now.speed * 3.6, now.gear);
+  }
   if (now.output_state != before.output_state && now.output_state == "write-errors")
     spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
                  config.output.path);

@@ -196,6 +196,12 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   CHECK(outage_sources["gps"] == 0);
   CHECK(moving_sources["engine"] >= 0.8 * moving);
   CHECK(gps_after_outage > 0);
+  // At info level the log says when GPS was lost and back, not every declutch inside the outage.
+  const std::string log = slurp(work.dir / "gearpulsed.log");
+  CHECK(log.find("speed source gps -> ") != std::string::npos);
+  CHECK(log.find(" -> gps at ") != std::string::npos);
+  CHECK(log.find("speed source engine -> coast") == std::string::npos);
+  CHECK(log.find("speed source coast -> engine") == std::string::npos);
 
   // Power cut: the model on disk must be the one the daemon had, loaded again at restart.
   const json before = work.status();
