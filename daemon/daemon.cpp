@@ -106,7 +106,7 @@ struct Daemon::Impl {
   std::optional<DirectoryLock> state_lock;
   // False when another gearpulsed keeps its state in state_dir.
   [[nodiscard]] bool load_state();
-  void save_store(const char* why) noexcept;
+  bool save_store(const char* why) noexcept;  // false when it failed (logged, and in status)
   void journal_store() noexcept;
   void recover_journal() noexcept;
   bool journal_failing = false;  // the last journal append failed (logged once until one works)
@@ -309,12 +309,13 @@ void Daemon::Impl::journal_store() noexcept {
   }
 }
 
-void Daemon::Impl::save_store(const char* why) noexcept {
+bool Daemon::Impl::save_store(const char* why) noexcept {
   try {
     store.save(store_path);
     spdlog::debug("training: saved {} pairs to {} ({})", store.size(), store_path.string(), why);
     std::lock_guard lock(state_mutex);
     save_error.clear();
+    return true;
   } catch (const std::exception& e) {
     spdlog::error("training: cannot save {} ({}): {}", store_path.string(), why, e.what());
     try {
@@ -323,6 +324,7 @@ void Daemon::Impl::save_store(const char* why) noexcept {
     } catch (...) {
     }
   }
+  return false;
 }
 
 void Daemon::Impl::reload() {
@@ -581,7 +583,8 @@ int Daemon::run() {
   // outlast systemd's stop timeout, and its SIGKILL must not cost the pairs since the last periodic save.
   d.pipeline->halt();  // output left low, no more training pairs asked for
   d.pipeline->drain_pairs();
-  d.save_store("shutdown");
+  // A store that cannot be saved (disk full) may still take the few records of a journal append.
+  if (!d.save_store("shutdown")) d.journal_store();
   {
     const auto lock = d.model.lock_writes();
     if (const ModelPtr m = d.model.get(); m && !m->empty()) {
@@ -594,7 +597,7 @@ int Daemon::run() {
   }
   d.pipeline->stop();
   // Pairs the tracker made in its last turn, between halt() and its end.
-  if (d.pipeline->drain_pairs() > 0) d.save_store("shutdown");
+  if (d.pipeline->drain_pairs() > 0 && !d.save_store("shutdown")) d.journal_store();
   d.retrainer.stop();
   d.control.reset();
   ::close(sfd);

@@ -101,9 +101,13 @@ void TrainingStore::prune(double now_wall_s) {
 
 void TrainingStore::clear() {
   std::lock_guard lock(mutex_);
+  empty_locked();
+  cleared_ = true;
+}
+
+void TrainingStore::empty_locked() noexcept {
   samples_.clear();
-  new_samples_ = 0;
-  since_save_ = unjournaled_ = 0;
+  new_samples_ = since_save_ = unjournaled_ = 0;
 }
 
 std::vector<Sample> TrainingStore::snapshot() const {
@@ -165,7 +169,10 @@ std::string TrainingStore::serialize_locked() const {
 }
 
 std::string TrainingStore::deserialize(std::string_view blob) {
-  clear();
+  {
+    std::lock_guard lock(mutex_);
+    empty_locked();
+  }
   if (blob.size() < kHeaderSize + sizeof(std::uint32_t))
     return "file too short (" + std::to_string(blob.size()) + " bytes)";
   if (std::memcmp(blob.data(), kMagic, sizeof kMagic) != 0) return "not a training store (bad magic)";
@@ -195,23 +202,36 @@ std::string TrainingStore::deserialize(std::string_view blob) {
 }
 
 void TrainingStore::save(const std::filesystem::path& path) {
+  std::lock_guard io(io_mutex_);
   std::string blob;
   std::size_t saved = 0, unjournaled = 0;
+  bool cleared = false;
   {
     // What the blob holds needs no journal; pairs added from here on do.
     std::lock_guard lock(mutex_);
     blob = serialize_locked();
     saved = since_save_;
     unjournaled = unjournaled_;
+    cleared = cleared_;
     since_save_ = unjournaled_ = 0;
+    cleared_ = false;
   }
   try {
+    // After a clear() the old journal goes first: an empty store's file is the same bytes every time, so
+    // a journal naming an earlier empty file would otherwise bring back pairs cleared since.
+    if (cleared) {
+      remove_file_durable(journal_path(path));
+      std::lock_guard lock(mutex_);
+      journal_current_ = false;
+    }
     write_file_atomic(path, blob);
   } catch (...) {
-    // The previous file and its journal stand; the pairs are still to be saved (and journaled).
+    // The previous file stands, and so does its journal unless it was removed (then it is rewritten
+    // whole); the pairs are still to be saved (and journaled).
     std::lock_guard lock(mutex_);
     since_save_ = std::min(since_save_ + saved, samples_.size());
     unjournaled_ = std::min(unjournaled_ + unjournaled, samples_.size());
+    cleared_ = cleared_ || cleared;
     throw;
   }
   {
@@ -223,23 +243,25 @@ void TrainingStore::save(const std::filesystem::path& path) {
   // The old journal names the old file and would be ignored; a fresh one is started now rather than at
   // the next append. If this fails, the next append tries again.
   try {
-    append_journal(path);
+    append_journal_io(path);
   } catch (const std::exception&) {
   }
 }
 
 std::string TrainingStore::load(const std::filesystem::path& path) {
-  const auto blob = read_file(path);
   {
     std::lock_guard lock(mutex_);
-    saved_crc_ = blob ? trailing_crc(*blob) : 0;
+    saved_crc_ = 0;
     journal_current_ = false;
   }
-  if (!blob) {
-    clear();
-    return {};
-  }
-  return deserialize(*blob);
+  const auto blob = read_file(path);
+  std::string problem = blob ? deserialize(*blob) : std::string();
+  std::lock_guard lock(mutex_);
+  if (!blob) empty_locked();
+  // A journal extends a file that loaded; one written after a corrupt file (set aside by the caller)
+  // extends none, as does one of a first run that never saved.
+  if (blob && problem.empty()) saved_crc_ = trailing_crc(*blob);
+  return problem;
 }
 
 std::filesystem::path TrainingStore::journal_path(const std::filesystem::path& path) {
@@ -249,6 +271,11 @@ std::filesystem::path TrainingStore::journal_path(const std::filesystem::path& p
 }
 
 std::size_t TrainingStore::append_journal(const std::filesystem::path& path) {
+  std::lock_guard io(io_mutex_);
+  return append_journal_io(path);
+}
+
+std::size_t TrainingStore::append_journal_io(const std::filesystem::path& path) {
   std::string out;
   std::size_t count = 0;
   bool rewrite = false;

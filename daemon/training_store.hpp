@@ -28,6 +28,8 @@ class TrainingStore {
   void set_limits(double max_age_s, std::size_t max_samples);
   // Drops samples older than now - max_age.
   void prune(double now_wall_s);
+  // Forgets every pair; the next save() removes the journal before it writes the file, so no power cut
+  // brings the cleared pairs back.
   void clear();
 
   [[nodiscard]] std::vector<Sample> snapshot() const;
@@ -68,9 +70,14 @@ class TrainingStore {
 
  private:
   void enforce_bounds_locked();
+  void empty_locked() noexcept;
+  std::size_t append_journal_io(const std::filesystem::path& path);
   [[nodiscard]] std::string serialize_locked() const;
 
   mutable std::mutex mutex_;
+  // Serialises the file writes (save, journal) of the main loop and of a reset from the control thread,
+  // held across the I/O; mutex_ is taken only to copy, so add() never waits on a disk.
+  std::mutex io_mutex_;
   std::deque<Sample> samples_;
   double max_age_s_;
   std::size_t max_samples_;
@@ -81,6 +88,7 @@ class TrainingStore {
   std::size_t unjournaled_ = 0;
   std::uint32_t saved_crc_ = 0;   // checksum of the saved file the journal extends (0: no file)
   bool journal_current_ = false;  // the journal on disk extends saved_crc_ and ends with a whole record
+  bool cleared_ = false;          // clear() since the last save: the journal holds pairs meant to be gone
 };
 
 [[nodiscard]] std::uint32_t crc32(std::string_view data) noexcept;

@@ -224,6 +224,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   INFO("training pairs before the kill " << before.value("training_samples", 0) << ", after the restart "
                                          << after.value("training_samples", 0));
   CHECK(after.value("training_samples", 0) >= before.value("training_samples", 0) - kUnjournaled);
+  CHECK(after.value("training_samples", 0) <= before.value("training_samples", 0));  // none twice
   const std::vector<double> thetas_after = thetas(after);
   REQUIRE(thetas_after.size() == thetas_before.size());
   for (std::size_t i = 0; i < thetas_before.size(); ++i) {

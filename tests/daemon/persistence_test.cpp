@@ -256,6 +256,47 @@ TEST_CASE("daemon: a journal older than the saved file is not replayed twice") {
   }
 }
 
+TEST_CASE("daemon: pairs journaled after a corrupt file was set aside are replayed at the next start") {
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  write_text(path, "GPTRAIN\ngarbage");
+  TrainingStore store(1e9, 10000);
+  CHECK_FALSE(store.load(path).empty());
+  std::filesystem::rename(path, dir / "training.bin.corrupt");  // what the daemon does with it
+  add_pairs(store, 0, 40);
+  CHECK(store.append_journal(path) == 40);
+  TrainingStore::JournalReplay replay;
+  CHECK(restarted(path, replay)->size() == 40);
+  CHECK(replay.recovered == 40);
+}
+
+TEST_CASE("daemon: pairs cleared by a reset do not come back from the journal") {
+  // Every empty store's file is the same bytes: a journal written after one reset names the file a second
+  // reset writes. The second reset's save removes the journal before it writes the file, so a power cut
+  // between the two cannot pair them up.
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  TrainingStore store(1e9, 10000);
+  add_pairs(store, 0, 10);
+  store.save(path);
+  store.clear();
+  store.save(path);
+  const std::string empty_file = read_text(path);
+  add_pairs(store, 10, 30);
+  CHECK(store.append_journal(path) == 20);
+  store.clear();
+  // The save is cut short at its file write (a directory where the file goes makes the rename fail)...
+  std::filesystem::remove(path);
+  std::filesystem::create_directories(path / "x");
+  CHECK_THROWS(store.save(path));
+  // ...and the power goes with the new (empty, identical) file in place.
+  std::filesystem::remove_all(path);
+  write_text(path, empty_file);
+  TrainingStore::JournalReplay replay;
+  CHECK(restarted(path, replay)->size() == 0);
+  CHECK(replay.recovered == 0);
+}
+
 TEST_CASE("daemon: training store rejects a torn or corrupt file") {
   TrainingStore store(1e9, 10000);
   for (int i = 0; i < 100; ++i)
