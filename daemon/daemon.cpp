@@ -108,6 +108,10 @@ struct Daemon::Impl {
   [[nodiscard]] bool load_state();
   bool save_store(const char* why) noexcept;  // false when it failed (logged, and in status)
   void journal_store() noexcept;
+  // At stop: a store that cannot be saved (disk full) may still take the few records of a journal append.
+  void save_or_journal() noexcept {
+    if (!save_store("shutdown")) journal_store();
+  }
   void recover_journal() noexcept;
   bool journal_failing = false;  // the last journal append failed (logged once until one works)
   void reload();
@@ -183,14 +187,14 @@ void Daemon::Impl::note_state_problem(std::string text) {
 }
 
 // A file that will not load is moved aside to NAME.corrupt (replacing an older one), so the next save
-// does not overwrite what someone may want to look at or recover. Returns where it went ("" if it
-// could not be moved).
+// does not overwrite what someone may want to look at or recover. Returns where it is now, for the log
+// ("kept as NAME.corrupt", or "left where it is" if it could not be moved).
 std::string Daemon::Impl::set_aside(const std::filesystem::path& path) {
   std::filesystem::path aside = path;
   aside += ".corrupt";
   std::error_code ec;
   std::filesystem::rename(path, aside, ec);
-  return ec ? std::string() : aside.string();
+  return ec ? "left where it is" : "kept as " + aside.string();
 }
 
 bool Daemon::Impl::load_state() {
@@ -235,8 +239,7 @@ bool Daemon::Impl::load_state() {
                  loaded.model->gears.size(), loaded.model->samples);
   } else if (!loaded.error.empty()) {
     // Set aside only for its content: a file that could not be read (permissions) may be fine.
-    const std::string aside = loaded.unreadable ? std::string() : set_aside(model_path);
-    const std::string where = aside.empty() ? "left where it is" : "kept as " + aside;
+    const std::string where = loaded.unreadable ? "left where it is" : set_aside(model_path);
     spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path.string(),
                   loaded.error, where);
     note_state_problem("model.json ignored: " + loaded.error + " (" + where + ")");
@@ -247,8 +250,7 @@ bool Daemon::Impl::load_state() {
   try {
     const std::string problem = store.load(store_path);
     if (!problem.empty()) {
-      const std::string aside = set_aside(store_path);
-      const std::string where = aside.empty() ? "left where it is" : "kept as " + aside;
+      const std::string where = set_aside(store_path);
       spdlog::error("training: discarding {}: {}; starting with an empty training store (the file is {})",
                     store_path.string(), problem, where);
       note_state_problem("training.bin discarded: " + problem + " (" + where + ")");
@@ -583,8 +585,7 @@ int Daemon::run() {
   // outlast systemd's stop timeout, and its SIGKILL must not cost the pairs since the last periodic save.
   d.pipeline->halt();  // output left low, no more training pairs asked for
   d.pipeline->drain_pairs();
-  // A store that cannot be saved (disk full) may still take the few records of a journal append.
-  if (!d.save_store("shutdown")) d.journal_store();
+  d.save_or_journal();
   {
     const auto lock = d.model.lock_writes();
     if (const ModelPtr m = d.model.get(); m && !m->empty()) {
@@ -597,7 +598,7 @@ int Daemon::run() {
   }
   d.pipeline->stop();
   // Pairs the tracker made in its last turn, between halt() and its end.
-  if (d.pipeline->drain_pairs() > 0 && !d.save_store("shutdown")) d.journal_store();
+  if (d.pipeline->drain_pairs() > 0) d.save_or_journal();
   d.retrainer.stop();
   d.control.reset();
   ::close(sfd);

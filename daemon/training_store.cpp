@@ -44,6 +44,10 @@ void put_record(std::string& out, const Sample& s) {
   put(out, s.freq);
 }
 
+Sample get_record(std::string_view in, std::size_t offset) {
+  return {get<double>(in, offset), get<double>(in, offset + 8), get<double>(in, offset + 16)};
+}
+
 bool plausible(const Sample& s) {
   return std::isfinite(s.t) && std::isfinite(s.speed) && std::isfinite(s.freq) && s.speed >= 0.0 &&
          s.freq > 0.0;
@@ -94,9 +98,7 @@ void TrainingStore::prune(double now_wall_s) {
   const double oldest = now_wall_s - max_age_s_;
   while (!samples_.empty() && samples_.front().t < oldest)
     samples_.pop_front();
-  new_samples_ = std::min(new_samples_, samples_.size());
-  since_save_ = std::min(since_save_, samples_.size());
-  unjournaled_ = std::min(unjournaled_, samples_.size());
+  clamp_counts_locked();
 }
 
 void TrainingStore::clear() {
@@ -145,6 +147,11 @@ void TrainingStore::enforce_bounds_locked() {
   }
   while (samples_.size() > max_samples_)
     samples_.pop_front();
+  clamp_counts_locked();
+}
+
+// Counts of pairs at the back of samples_ cannot exceed what is left after pairs fell off the front.
+void TrainingStore::clamp_counts_locked() noexcept {
   new_samples_ = std::min(new_samples_, samples_.size());
   since_save_ = std::min(since_save_, samples_.size());
   unjournaled_ = std::min(unjournaled_, samples_.size());
@@ -190,7 +197,7 @@ std::string TrainingStore::deserialize(std::string_view blob) {
   std::deque<Sample> loaded;
   for (std::size_t i = 0; i < count; ++i) {
     const std::size_t at = kHeaderSize + i * kRecordSize;
-    Sample s{get<double>(blob, at), get<double>(blob, at + 8), get<double>(blob, at + 16)};
+    const Sample s = get_record(blob, at);
     if (!plausible(s)) return "implausible record " + std::to_string(i);
     loaded.push_back(s);
   }
@@ -290,10 +297,9 @@ std::size_t TrainingStore::append_journal_io(const std::filesystem::path& path) 
       put(out, saved_crc_);
     }
     for (auto it = samples_.end() - static_cast<std::ptrdiff_t>(count); it != samples_.end(); ++it) {
-      std::string record;
-      put_record(record, *it);
-      put(record, crc32(record));
-      out += record;
+      const std::size_t at = out.size();
+      put_record(out, *it);
+      put(out, crc32(std::string_view(out).substr(at)));
     }
     unjournaled_ = 0;
     journal_current_ = true;
@@ -335,7 +341,7 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
   for (; at + kJournalRecordSize <= blob->size(); at += kJournalRecordSize) {
     const std::string_view record = std::string_view(*blob).substr(at, kRecordSize);
     if (get<std::uint32_t>(*blob, at + kRecordSize) != crc32(record)) break;
-    const Sample s{get<double>(*blob, at), get<double>(*blob, at + 8), get<double>(*blob, at + 16)};
+    const Sample s = get_record(*blob, at);
     if (!plausible(s)) break;
     samples_.push_back(s);
     ++replay.recovered;

@@ -70,6 +70,7 @@ class TrainingStore {
 
  private:
   void enforce_bounds_locked();
+  void clamp_counts_locked() noexcept;
   void empty_locked() noexcept;
   std::size_t append_journal_io(const std::filesystem::path& path);
   [[nodiscard]] std::string serialize_locked() const;
