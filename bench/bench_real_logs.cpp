@@ -4,15 +4,18 @@
 // Outages: 60 s long, the first 120 s after the log starts, then one every 180 s. Methods compared:
 //   (a) hold the last GPS speed;
 //   (b) the paper's method (Table 2 ratios 1.25,1.35,1.50,1.7) with the gear at the outage start kept;
-//   (c) the gear chosen with hindsight (theta x freq closest to the truth), auto model: a floor;
+//   (c) the gear chosen with hindsight (theta x freq closest to the truth, or standing), auto model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
-// Then (c) and (d) over the samples where the car moves, and the share of (d) off by more than 8 km/h by
-// time since GPS was lost.
+// Then (c) and (d) over the samples where the car moves, the share of (d) off by more than 8 km/h by time
+// since GPS was lost, what the synthesis did in the samples it got wrong (its gear against the hindsight
+// gear), and how many upshifts between two samples show less than half of their ratio's drop of revs.
 // Usage: bench_real_logs [DATA_DIR] [--trace FILE]   (default: the shared/data/real beside the source tree;
 // --trace writes every outage sample with the truth, the hindsight gear and the synthesis as CSV)
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -53,11 +56,41 @@ std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
   return logs;
 }
 
+// What the synthesis did in one outage sample, against the choice made with hindsight.
+enum class Kind : std::uint8_t {
+  kHindsightOff,
+  kAtRest,
+  kCoasting,
+  kOneLow,
+  kLower,
+  kOneHigh,
+  kHigher,
+  kRight
+};
+constexpr std::array<const char*, 8> kKindNames = {"hindsight off too", "car at rest",  "coasting, no gear",
+                                                   "one gear low",      "2+ gears low", "one gear high",
+                                                   "2+ gears high",     "right gear"};
+constexpr double kBad = 8.0;  // km/h: an error this large is a wrong gear or a wrong stop, not jitter
+
 struct Errors {
   std::vector<double> a, b, c, d;
   std::vector<bool> moving;   // per sample: the logged speed is above zero
   std::vector<double> since;  // per sample: s since GPS was lost
+  std::vector<Kind> kind;     // per sample
+  std::size_t upshifts = 0;   // hindsight gear up by one between two clean samples inside an outage
+  std::size_t hidden = 0;     // of those, the revs fell by less than half of the two gears' ratio
 };
+
+Kind classify(const GearModel& model, double speed, double freq, double hindsight,
+              const gearpulse::SynthOutput& o) {
+  if (std::abs(hindsight - speed) * kMsToKmh > kBad) return Kind::kHindsightOff;
+  if (speed <= 0.0) return Kind::kAtRest;
+  if (o.gear <= 0) return Kind::kCoasting;
+  const int off = o.gear - 1 - nearest_gear(model, speed, freq);
+  if (off == 0) return Kind::kRight;
+  if (off < 0) return off == -1 ? Kind::kOneLow : Kind::kLower;
+  return off == 1 ? Kind::kOneHigh : Kind::kHigher;
+}
 
 std::FILE* g_trace = nullptr;  // --trace FILE: one row per outage sample
 
@@ -69,6 +102,8 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
   double last_gps = 0.0, hold_b = 0.0, hold_c = 0.0;
   int paper_gear = -1;
   bool was_out = false;
+  int clean_gear = -1;  // hindsight gear of the last outage sample on its gear line (-1: none)
+  double clean_freq = 0.0;
   for (const Sample& s : samples) {
     const bool out = in_outage(s.t - t0);
     const double gps = out ? gearpulse::kMissing : s.speed;
@@ -80,7 +115,7 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
       was_out = false;
       continue;
     }
-    if (!was_out) hold_b = hold_c = last_gps;
+    if (!was_out) hold_b = hold_c = last_gps, clean_gear = -1;
     was_out = true;
     if (!s.has_speed()) continue;  // no truth to compare with
     if (s.has_freq() && paper_gear >= 0 && !paper.gears.empty())
@@ -88,14 +123,27 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
     else if (paper_gear < 0)
       hold_b = last_gps;
     if (s.has_freq() && !model.gears.empty()) {
+      hold_c = hindsight_speed(model, s.speed, s.freq);
+      // An upshift between two samples on their gear lines: how much of the ratio's drop the revs show.
+      constexpr double kOnLine = 3.0 / kMsToKmh;  // m/s
       const int g = nearest_gear(model, s.speed, s.freq);
-      hold_c = model.gears[static_cast<std::size_t>(g)].theta * s.freq;
+      const double theta = model.gears[static_cast<std::size_t>(g)].theta;
+      const bool clean = s.speed > 0.0 && std::abs(theta * s.freq - s.speed) <= kOnLine;
+      if (clean && clean_gear >= 0 && g == clean_gear + 1) {
+        ++err.upshifts;
+        const double ratio = theta / model.gears[static_cast<std::size_t>(clean_gear)].theta;
+        err.hidden += std::log(clean_freq / s.freq) < 0.5 * std::log(ratio);
+      }
+      clean_gear = clean ? g : -1;
+      clean_freq = s.freq;
     }
     err.a.push_back(std::abs(last_gps - s.speed) * kMsToKmh);
     err.b.push_back(std::abs(hold_b - s.speed) * kMsToKmh);
     err.c.push_back(std::abs(hold_c - s.speed) * kMsToKmh);
     err.d.push_back(std::abs(o.speed - s.speed) * kMsToKmh);
     err.moving.push_back(s.speed > 0.0);
+    err.kind.push_back(s.has_freq() && !model.gears.empty() ? classify(model, s.speed, s.freq, hold_c, o)
+                                                            : Kind::kHindsightOff);
     err.since.push_back(std::fmod(s.t - t0 - kOutageStart, kOutagePeriod));
     if (g_trace != nullptr)
       std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%d,%.2f,%.2f\n", s.t, s.speed * kMsToKmh, s.freq,
@@ -149,7 +197,6 @@ void report(const char* title, const Errors& e) {
               quantile(d_moving, 0.95));
   // How the synthesis fares with the time since GPS was lost: share of samples off by more than 8 km/h.
   constexpr double kBin = 10.0;  // s
-  constexpr double kBad = 8.0;   // km/h
   std::printf("  (d) share off by more than %.0f km/h, by s since GPS was lost:", kBad);
   for (double from = 0.0; from < kOutageLength; from += kBin) {
     std::size_t n = 0, bad = 0;
@@ -162,6 +209,30 @@ void report(const char* title, const Errors& e) {
                 n ? 100.0 * static_cast<double>(bad) / static_cast<double>(n) : 0.0);
   }
   std::printf("\n");
+  // Where those errors come from, as shares of all outage samples.
+  std::array<std::size_t, kKindNames.size()> kinds{};
+  std::size_t bad = 0;
+  for (std::size_t k = 0; k < e.d.size(); ++k) {
+    if (e.d[k] <= kBad) continue;
+    ++bad;
+    ++kinds[static_cast<std::size_t>(e.kind[k])];
+  }
+  const auto share = [&](std::size_t n) {
+    return 100.0 * static_cast<double>(n) / static_cast<double>(e.d.size());
+  };
+  std::printf("  (d) off by more than %.0f km/h: %.1f %% of samples:", kBad, share(bad));
+  const char* sep = "";
+  for (std::size_t k = 0; k < kinds.size(); ++k) {
+    if (kinds[k] == 0) continue;
+    std::printf("%s %s %.1f %%", sep, kKindNames[k], share(kinds[k]));
+    sep = ",";
+  }
+  std::printf("\n");
+  if (e.upshifts > 0)
+    std::printf(
+        "  upshifts between two samples on their gear lines: %zu; the revs fell by less than half of the "
+        "ratio in %.0f %%\n",
+        e.upshifts, 100.0 * static_cast<double>(e.hidden) / static_cast<double>(e.upshifts));
 }
 
 // Fit on `train`, replay every log of `test`.

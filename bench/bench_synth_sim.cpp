@@ -6,7 +6,8 @@
 // Outages as bench_real_logs: 60 s long, the first 120 s after the drive starts, then one every 180 s.
 // Methods compared:
 //   (a) hold the last GPS speed;
-//   (c) the gear chosen with hindsight (theta x freq closest to the true speed), fitted model: a floor;
+//   (c) the gear chosen with hindsight (theta x freq closest to the true speed, or standing), fitted
+//       model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the fitted model, causal, stepped at every observed row (the
 //       daemon may step it less often; this bench shows what the filter itself does at each rate).
 // Each drive is observed three ways: an OBD logger (integer km/h and rpm, a 1.8 s polling round, skewed
@@ -117,10 +118,7 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
     if (!was_out) hold_c = last_gps;
     was_out = true;
     const double truth = r.truth.speed;
-    if (std::isfinite(r.freq) && !model.gears.empty()) {
-      const int g = nearest_gear(model, truth, r.freq);
-      hold_c = model.gears[static_cast<std::size_t>(g)].theta * r.freq;
-    }
+    if (std::isfinite(r.freq) && !model.gears.empty()) hold_c = hindsight_speed(model, truth, r.freq);
     if (std::FILE* tr = g_trace) {
       const int sg = o.gear > 0 && static_cast<std::size_t>(o.gear) < true_gear.size()
                          ? true_gear[static_cast<std::size_t>(o.gear)]

@@ -1,7 +1,7 @@
 #pragma once
 // The outage protocol shared by the synthesis benches (bench_real_logs on logged drives, bench_synth_sim
 // on simulated ones): 60 s GPS outages, the first 120 s after a drive starts, then one every 180 s; the
-// hindsight gear; quantiles of the errors.
+// hindsight choice (a gear, or standing); quantiles of the errors.
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -31,6 +31,14 @@ inline int nearest_gear(const GearModel& m, double speed, double freq) {
     if (best < 0 || e < err) best = static_cast<int>(i), err = e;
   }
   return best;
+}
+
+// The speed chosen with hindsight: theta x freq of the nearest gear, or 0 when the truth is closer to
+// standing (at rest the right choice is no gear at all, which no theta x idle revs can give).
+inline double hindsight_speed(const GearModel& m, double speed, double freq) {
+  const int g = nearest_gear(m, speed, freq);
+  const double geared = g < 0 ? 0.0 : m.gears[static_cast<std::size_t>(g)].theta * freq;
+  return std::abs(geared - speed) < speed ? geared : 0.0;
 }
 
 // Linear-interpolated quantile q of v, NaN when v is empty.
