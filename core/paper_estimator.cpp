@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 #include <nlopt.hpp>
 
@@ -56,8 +57,28 @@ void tie_lower(MixtureParams& p, const std::vector<double>& ratios, int from) {
     p.theta[j] = p.theta[j + 1] / prior_step(ratios, j);
 }
 
-double negative_ll(const MixtureData& data, const MixtureParams& p) {
-  return -log_likelihood(data, p);
+// A local, bounded quasi-Newton minimisation of f (value and gradient) from x (NLopt L-BFGS); x keeps the
+// best point reached when NLopt stops early (roundoff-limited stops still carry a usable x).
+template <class F>
+void minimise_local(F& f, std::vector<double>& x, const std::vector<double>& lower,
+                    const std::vector<double>& upper) {
+  for (std::size_t k = 0; k < x.size(); ++k)
+    x[k] = std::clamp(x[k], lower[k], upper[k]);
+  nlopt::opt opt(nlopt::LD_LBFGS, static_cast<unsigned>(x.size()));
+  opt.set_lower_bounds(lower);
+  opt.set_upper_bounds(upper);
+  auto thunk = [](const std::vector<double>& y, std::vector<double>& grad, void* ctx) {
+    return (*static_cast<F*>(ctx))(y, grad);
+  };
+  opt.set_min_objective(thunk, &f);
+  opt.set_ftol_rel(1e-12);
+  opt.set_xtol_rel(1e-9);
+  opt.set_maxeval(500);
+  double val = 0.0;
+  try {
+    opt.optimize(x, val);
+  } catch (const std::exception&) {
+  }
 }
 
 }  // namespace
@@ -121,76 +142,57 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
   if (!(p.g_hi > p.g_lo)) p.g_hi = p.g_lo + 1.0;
   p.g_density = {1.0 / (p.g_hi - p.g_lo)};
 
+  // (15) and (16) are local searches from the heuristic initial values, as the paper's interior-point
+  // method is: the likelihood is multimodal in theta (a gear's Gaussian can move onto a neighbour's
+  // cluster), and the initialisation exists to start in the right basin. Gradients are analytic; with
+  // the lower gears tied by the prior steps, d theta_j / d ln theta_i = theta_j for every j <= i.
+  const GradientLayout layout{m, false, false};
+  const auto tied_gradient = [&](const MixtureParams& q, int top, Eigen::VectorXd& g) {
+    const double ll = log_likelihood_gradient(data, q, layout, g);
+    double d = 0.0;
+    for (int j = 0; j <= top; ++j)
+      d += g[j] * q.theta[static_cast<std::size_t>(j)];
+    return std::pair{ll, d};
+  };
   // (15): theta_M, sigma_v, sigma_s with the lower gears tied to theta_M by the prior ratios.
   {
-    nlopt::opt opt(nlopt::LN_BOBYQA, 3);
     std::vector<double> x = {std::log(p.theta.back()), std::log(p.sigma_s), std::log(p.sigma_v)};
-    opt.set_lower_bounds({x[0] - std::log(1.5), x[1] - 8.0, x[2] - 8.0});
-    opt.set_upper_bounds({x[0] + std::log(1.5), x[1] + 5.0, x[2] + 5.0});
-    auto f = [&](const std::vector<double>& y) {
+    auto f = [&](const std::vector<double>& y, std::vector<double>& grad) {
       MixtureParams q = p;
       q.theta.back() = std::exp(y[0]);
       q.sigma_s = std::exp(y[1]);
       q.sigma_v = std::exp(y[2]);
       tie_lower(q, ratios, m - 1);
-      return negative_ll(data, q);
+      Eigen::VectorXd g;
+      const auto [ll, d_theta] = tied_gradient(q, m - 1, g);
+      if (!grad.empty()) grad = {-d_theta, -g[m] * q.sigma_s, -g[m + 1] * q.sigma_v};
+      return -ll;
     };
-    auto thunk = [](const std::vector<double>& y, std::vector<double>&, void* ctx) {
-      return (*static_cast<decltype(f)*>(ctx))(y);
-    };
-    opt.set_min_objective(thunk, &f);
-    opt.set_xtol_rel(1e-6);
-    opt.set_maxeval(400);
-    double best = 0.0;
-    try {
-      opt.optimize(x, best);
-    } catch (const std::exception&) {
-      // Keep the best point NLopt reached; roundoff-limited stops still carry a usable x.
-    }
+    minimise_local(f, x, {x[0] - std::log(1.5), x[1] - 8.0, x[2] - 8.0},
+                   {x[0] + std::log(1.5), x[1] + 5.0, x[2] + 5.0});
     p.theta.back() = std::exp(x[0]);
     p.sigma_s = std::exp(x[1]);
     p.sigma_v = std::exp(x[2]);
     tie_lower(p, ratios, m - 1);
   }
-  // (16): from high to low gears, one theta at a time over the range between its neighbours' prior
-  // positions, the lower gears following; a grid scan first because the likelihood is multimodal in theta_i.
+  // (16): from high to low gears, one theta at a time, starting where the prior step from the gear above
+  // puts it and kept between its neighbours (the one below at its prior position, the one above as
+  // refined), the lower gears following.
   for (int i = m - 2; i >= 0; --i) {
-    const double upper = p.theta[i + 1];
-    const double lower = p.theta[i + 1] / (prior_step(ratios, i) * (i > 0 ? prior_step(ratios, i - 1) : 1.5));
-    auto f = [&](double th) {
+    const double upper = p.theta[static_cast<std::size_t>(i + 1)];
+    const double lower = upper / (prior_step(ratios, i) * (i > 0 ? prior_step(ratios, i - 1) : 1.5));
+    std::vector<double> x = {std::log(p.theta[static_cast<std::size_t>(i)])};
+    auto f = [&](const std::vector<double>& y, std::vector<double>& grad) {
       MixtureParams q = p;
-      q.theta[i] = th;
+      q.theta[static_cast<std::size_t>(i)] = std::exp(y[0]);
       tie_lower(q, ratios, i);
-      return negative_ll(data, q);
+      Eigen::VectorXd g;
+      const auto [ll, d_theta] = tied_gradient(q, i, g);
+      if (!grad.empty()) grad = {-d_theta};
+      return -ll;
     };
-    double best_th = p.theta[i];
-    double best_f = f(best_th);
-    constexpr int kGrid = 120;
-    for (int g = 1; g < kGrid; ++g) {
-      const double th = lower * std::pow(upper / lower, static_cast<double>(g) / kGrid);
-      const double val = f(th);
-      if (val < best_f) {
-        best_f = val;
-        best_th = th;
-      }
-    }
-    nlopt::opt opt(nlopt::LN_BOBYQA, 1);
-    const double step = std::pow(upper / lower, 1.0 / kGrid);
-    std::vector<double> x = {best_th};
-    opt.set_lower_bounds({std::max(lower, best_th / step)});
-    opt.set_upper_bounds({std::min(upper * (1 - 1e-9), best_th * step)});
-    auto thunk = [](const std::vector<double>& y, std::vector<double>&, void* ctx) {
-      return (*static_cast<decltype(f)*>(ctx))(y[0]);
-    };
-    opt.set_min_objective(thunk, &f);
-    opt.set_xtol_rel(1e-7);
-    opt.set_maxeval(100);
-    double val = 0.0;
-    try {
-      opt.optimize(x, val);
-    } catch (const std::exception&) {
-    }
-    p.theta[i] = x[0];
+    minimise_local(f, x, {std::log(lower)}, {std::log(upper) - 1e-6});
+    p.theta[static_cast<std::size_t>(i)] = std::exp(x[0]);
     tie_lower(p, ratios, i);
   }
   // (9): all thetas and both sigmas, theta kept in Theta by theta_1 = e^{u_1}, theta_{i+1} = theta_i +
@@ -203,7 +205,6 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
       x[i] = std::log(std::max(p.theta[i] - p.theta[i - 1], 1e-9));
     x[m] = std::log(p.sigma_s);
     x[m + 1] = std::log(p.sigma_v);
-    const GradientLayout layout{m, false, false};
     auto f = [&](const std::vector<double>& y, std::vector<double>& grad) {
       MixtureParams q = p;
       q.theta[0] = std::exp(y[0]);
@@ -225,19 +226,9 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
       }
       return -ll;
     };
-    nlopt::opt opt(nlopt::LD_LBFGS, static_cast<unsigned>(n));
-    auto thunk = [](const std::vector<double>& y, std::vector<double>& grad, void* ctx) {
-      return (*static_cast<decltype(f)*>(ctx))(y, grad);
-    };
-    opt.set_min_objective(thunk, &f);
-    opt.set_ftol_rel(1e-12);
-    opt.set_xtol_rel(1e-9);
-    opt.set_maxeval(500);
-    double val = 0.0;
-    try {
-      opt.optimize(x, val);
-    } catch (const std::exception&) {
-    }
+    const std::vector<double> unbounded(static_cast<std::size_t>(n), HUGE_VAL);
+    const std::vector<double> below(unbounded.size(), -HUGE_VAL);
+    minimise_local(f, x, below, unbounded);
     p.theta[0] = std::exp(x[0]);
     for (int i = 1; i < m; ++i)
       p.theta[i] = p.theta[i - 1] + std::exp(x[i]);
