@@ -8,7 +8,8 @@
 //   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
 // Then (c) and (d) over the samples where the car moves, the share of (d) off by more than 8 km/h by time
 // since GPS was lost, what the synthesis did in the samples it got wrong (its gear against the hindsight
-// gear), and how many upshifts between two samples show less than half of their ratio's drop of revs.
+// gear), how often its most probable mode is the hindsight gear by the probability it gives that mode,
+// and how many upshifts between two samples show less than half of their ratio's drop of revs.
 // Usage: bench_real_logs [DATA_DIR] [--trace FILE]   (default: the shared/data/real beside the source tree;
 // --trace writes every outage sample with the truth, the hindsight gear and the synthesis as CSV)
 #include <algorithm>
@@ -79,6 +80,9 @@ struct Errors {
   std::vector<Kind> kind;     // per sample
   std::size_t upshifts = 0;   // hindsight gear up by one between two clean samples inside an outage
   std::size_t hidden = 0;     // of those, the revs fell by less than half of the two gears' ratio
+  // Calibration of the synthesizer's belief, over moving samples on a gear line: by the probability of
+  // its most probable mode (bins of 0.1), how often that mode is the hindsight gear.
+  std::array<std::size_t, 10> belief{}, belief_right{};
 };
 
 Kind classify(const GearModel& model, double speed, double freq, double hindsight,
@@ -136,6 +140,15 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
       }
       clean_gear = clean ? g : -1;
       clean_freq = s.freq;
+      if (clean) {
+        int top = 0;
+        for (int k = 1; k <= static_cast<int>(model.gears.size()); ++k)
+          if (synth.mode_probability(k) > synth.mode_probability(top)) top = k;
+        const auto bin =
+            std::min<std::size_t>(static_cast<std::size_t>(synth.mode_probability(top) * 10.0), 9);
+        ++err.belief[bin];
+        err.belief_right[bin] += top == g + 1;
+      }
     }
     err.a.push_back(std::abs(last_gps - s.speed) * kMsToKmh);
     err.b.push_back(std::abs(hold_b - s.speed) * kMsToKmh);
@@ -227,6 +240,13 @@ void report(const char* title, const Errors& e) {
     std::printf("%s %s %.1f %%", sep, kKindNames[k], share(kinds[k]));
     sep = ",";
   }
+  std::printf("\n");
+  std::printf("  calibration: the synthesis' most probable mode is the hindsight gear, by its probability:");
+  for (std::size_t b = 0; b < e.belief.size(); ++b)
+    if (e.belief[b] >= 20)
+      std::printf(" %.1f-%.1f %.0f %% (%zu)", 0.1 * static_cast<double>(b), 0.1 * static_cast<double>(b + 1),
+                  100.0 * static_cast<double>(e.belief_right[b]) / static_cast<double>(e.belief[b]),
+                  e.belief[b]);
   std::printf("\n");
   if (e.upshifts > 0)
     std::printf(
