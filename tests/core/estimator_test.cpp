@@ -38,6 +38,16 @@ std::vector<Sample> read_real(const std::string& relative) {
   return read_samples(in, path).samples;
 }
 
+// The Etios logs PREFIX1.csv .. PREFIX13.csv pooled (empty when the real logs are absent).
+std::vector<Sample> read_etios(const std::string& prefix) {
+  std::vector<Sample> all;
+  for (int d = 1; d <= 13; ++d) {
+    const auto part = read_real("carloop-etios/" + prefix + std::to_string(d) + ".csv");
+    all.insert(all.end(), part.begin(), part.end());
+  }
+  return all;
+}
+
 }  // namespace
 
 TEST_CASE("estimator: paper mode recovers the BMW 520i within 1 percent") {
@@ -280,14 +290,7 @@ TEST_CASE("estimator: analytic observed information equals the numeric one") {
 }
 
 TEST_CASE("estimator: real manual logs give ascending ladders and the automatic none") {
-  const std::vector<Sample> etios = [] {
-    std::vector<Sample> all;
-    for (int d = 1; d <= 13; ++d) {
-      const auto part = read_real("carloop-etios/drive" + std::to_string(d) + ".csv");
-      all.insert(all.end(), part.begin(), part.end());
-    }
-    return all;
-  }();
+  const std::vector<Sample> etios = read_etios("drive");
   const auto louisville = read_real("torque-louisville/rpms_chart_from_obd.csv");
   const auto automatic = read_real("torque-automatic/trackLog.csv");
   if (etios.empty() || louisville.empty() || automatic.empty()) {
@@ -330,11 +333,7 @@ TEST_CASE("estimator: paper mode on the Etios logs keeps the gear its initialisa
   // fourth's cluster, or two gears onto the third's); the paper's local search stays where (11)-(14)
   // started it.
   for (const char* prefix : {"drive", "long"}) {
-    std::vector<Sample> all;
-    for (int d = 1; d <= 13; ++d) {
-      const auto part = read_real("carloop-etios/" + std::string(prefix) + std::to_string(d) + ".csv");
-      all.insert(all.end(), part.begin(), part.end());
-    }
+    const std::vector<Sample> all = read_etios(prefix);
     if (all.empty()) {
       WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
       return;
