@@ -91,14 +91,17 @@ bool Retrainer::retrain_now() {
   const std::uint64_t generation = model_.generation();
   const std::size_t fresh = store_.new_samples();
   const std::vector<Sample> samples = store_.snapshot();
+  bool no_ladder_before = false;
   {
     std::lock_guard lock(mutex_);
+    no_ladder_before = no_ladder_;
     status_.busy = true;
     ++status_.runs;
     status_.last_run_wall = wall_now();
   }
   std::string result;
   bool changed = false;
+  bool no_ladder = false;
   try {
     if (samples.empty()) {
       result = "no training samples yet";
@@ -109,7 +112,12 @@ bool Retrainer::retrain_now() {
       if (fitted.empty()) {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
                              fitted.reason.empty() ? "no reason given" : fitted.reason);
-        spdlog::warn("retrain: {}", result);
+        // An automatic gives this answer at every retrain: a warning the first time, then a note.
+        no_ladder = true;
+        if (no_ladder_before)
+          spdlog::info("retrain: {} (as at the last attempt)", result);
+        else
+          spdlog::warn("retrain: {}", result);
       } else if (const ModelPtr current = model_.get();
                  current && !current->empty() &&
                  fitted.samples < std::min(current->samples, settings().replace_min_samples)) {
@@ -152,6 +160,7 @@ bool Retrainer::retrain_now() {
   std::lock_guard lock(mutex_);
   status_.busy = false;
   status_.last_result = result;
+  no_ladder_ = no_ladder;
   if (changed) ++status_.accepted;
   return changed;
 }

@@ -73,6 +73,7 @@ class Retrainer {
   std::condition_variable wake_;
   Settings settings_;
   Status status_;
+  bool no_ladder_ = false;  // the last fit found no gear ladder
   bool requested_ = false;
   bool stop_ = false;
   std::thread thread_;

@@ -11,6 +11,8 @@
 #include <string>
 #include <thread>
 
+#include <spdlog/sinks/ringbuffer_sink.h>
+#include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
 #include "daemon/atomic_file.hpp"
@@ -442,6 +444,50 @@ TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
   CHECK(model.get() == good);
   CHECK(retrainer.status().last_result.find("optimizer diverged") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
+}
+
+TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned about at every retrain") {
+  // An automatic answers "no ladder" at every retrain interval; the log at 2 a.m. should say so once.
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  store.add({1.0, 10.0, 100.0});
+  ModelHolder model;
+  bool ladder = false;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) -> GearModel {
+                        if (ladder) return three_gears();
+                        GearModel none;
+                        none.reason = "no discrete ladder";
+                        return none;
+                      },
+                      {});
+  const auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
+  const auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
+  spdlog::set_level(spdlog::level::info);
+  const auto levels_of_ladder_lines = [&] {
+    std::vector<spdlog::level::level_enum> levels;
+    for (const auto& m : sink->last_raw())
+      if (std::string_view(m.payload.data(), m.payload.size()).find("no gear ladder") !=
+          std::string_view::npos)
+        levels.push_back(m.level);
+    return levels;
+  };
+  retrainer.retrain_now();
+  retrainer.retrain_now();
+  retrainer.retrain_now();
+  const auto first = levels_of_ladder_lines();
+  ladder = true;
+  retrainer.retrain_now();
+  ladder = false;
+  retrainer.retrain_now();
+  const auto after = levels_of_ladder_lines();
+  spdlog::set_default_logger(previous);
+  using L = spdlog::level::level_enum;
+  CHECK(first == std::vector<L>{L::warn, L::info, L::info});
+  // Once a fit found a ladder, losing it again is news.
+  CHECK(after == std::vector<L>{L::warn, L::info, L::info, L::warn});
+  CHECK(retrainer.status().last_result.find("no discrete ladder") != std::string::npos);
 }
 
 TEST_CASE("daemon: a fit begun before a model reset is discarded, not installed over the reset") {
