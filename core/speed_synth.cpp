@@ -449,8 +449,8 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 }
 
 // Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
-double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
-                                      bool entering) const noexcept {
+double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight, bool entering,
+                                      bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
     if (is_gear(mode)) return weight * kLostGearLogEvidence;
     // Moving off is told by the revs: without them it is as unsupported as a gear, and at speed not a
@@ -494,6 +494,12 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // of a second, a first gear entered 5 km/h below a declutched car's speed cost next to nothing, since
   // its revs turn that into a spread no wider than the second gear's at the right speed).
   const double z2 = innovation * innovation / s;
+  // A departure beyond the dead zone at a short step is a manoeuvre (a clutch biting, a hard launch in
+  // first gear): the acceleration is open again, so the next readings find the new one and a ramp is paid
+  // for once, as a jump is, not at every reading. A longer step's prediction already carries that
+  // uncertainty (a fifth of the stationary spread or more from a tenth of accel_time on).
+  if (short_step && z2 > kDeadZone * kDeadZone)
+    x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
   return -jump_cost(z2) - 0.5 * (entering ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
          weight * std::log(lugging(mode, freq));
 }
@@ -538,6 +544,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   const int modes = gears_ + 2;
   // Share of a second of evidence this step carries (states are scored per second, see log_evidence).
   const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
+  const bool short_step = dt < 0.1 * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
   const double gps_var = sigma_v_ * sigma_v_;
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
@@ -574,7 +581,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
         x.pvv *= 1.0 - k;
         keep_covariance(x);
       }
-      pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight, i != j);
+      pair_score_[i][j] =
+          log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight, i != j, short_step);
       pair_track_[i][j] = x;
     }
   }

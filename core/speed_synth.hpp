@@ -14,7 +14,9 @@
 // moving off, the clutch slips and the car gains speed at a launch acceleration until first gear bites.
 // Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
 // shifts down). A gear is scored by its innovation in its own units: within a dead zone of ordinary
-// jitter it costs per second of time, beyond it the jump costs once, however often step() is called;
+// jitter it costs per second of time, beyond it the jump costs once, however often step() is called
+// (at steps much shorter than an acceleration lasts, such a jump also reopens the acceleration, so that a
+// ramp the history did not expect is paid once too);
 // entering a gear is an event whose innovation counts whole; being declutched or moving off is scored per
 // second. The result does not depend on the step rate.
 // The output follows the mode at the median of the belief (the most probable one while it holds half of
@@ -114,8 +116,8 @@ class SpeedSynthesizer {
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
-  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
-                                    bool entering) const noexcept;
+  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight, bool entering,
+                                    bool short_step) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
