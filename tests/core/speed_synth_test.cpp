@@ -75,6 +75,34 @@ std::vector<SynthOutput> replay(SpeedSynthesizer& synth, const std::vector<Row>&
   return out;
 }
 
+// Replays a drive recorded from the simulator at 10 Hz (tests/core/data/NAME_10hz.csv: t, GPS speed or blank,
+// frequency, true speed; the model fitted for it in NAME_model.json) through a fresh synthesizer, calling
+// check(t, true speed, output) after every row.
+template <class Check>
+void replay_recording(const std::string& name, Check check) {
+  const std::string dir = GEARPULSE_SOURCE_DIR "/tests/core/data/";
+  std::ifstream model_file(dir + name + "_model.json");
+  std::stringstream model_text;
+  model_text << model_file.rdbuf();
+  SpeedSynthesizer synth(std::make_shared<const GearModel>(gearpulse::parse_model(model_text.str())));
+  std::ifstream rows(dir + name + "_10hz.csv");
+  REQUIRE(rows);
+  std::string line;
+  while (std::getline(rows, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<std::string> cells(1);
+    for (char c : line)
+      if (c == ',')
+        cells.emplace_back();
+      else
+        cells.back().push_back(c);
+    REQUIRE(cells.size() == 4);
+    const double t = std::stod(cells[0]), freq = std::stod(cells[2]), truth = std::stod(cells[3]);
+    const double gps = cells[1].empty() ? kMissing : std::stod(cells[1]);
+    check(t, truth, synth.step(t, gps, freq));
+  }
+}
+
 }  // namespace
 
 TEST_CASE("synth: without a model GPS passes through and outages give none") {
@@ -428,33 +456,15 @@ TEST_CASE("synth: at 10 Hz a move-off and two upshifts in an outage are followed
   // third at 25 km/h, the revs falling freely each time before the next gear bites. First gear at the
   // revs second gear shows is a car 7 km/h slower: entering a gear pays that mismatch whole, however
   // fine the steps, or the filter drifts into first gear and stays there (13 km/h at a true 36).
-  const std::string dir = GEARPULSE_SOURCE_DIR "/tests/core/data/";
-  std::ifstream model_file(dir + "moveoff_upshifts_model.json");
-  std::stringstream model_text;
-  model_text << model_file.rdbuf();
-  SpeedSynthesizer synth(std::make_shared<const GearModel>(gearpulse::parse_model(model_text.str())));
-  std::ifstream rows(dir + "moveoff_upshifts_10hz.csv");
-  std::string line;
   int checked = 0;
-  while (std::getline(rows, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::vector<std::string> cells(1);
-    for (char c : line)
-      if (c == ',')
-        cells.emplace_back();
-      else
-        cells.back().push_back(c);
-    REQUIRE(cells.size() == 4);
-    const double t = std::stod(cells[0]), freq = std::stod(cells[2]), truth = std::stod(cells[3]);
-    const double gps = cells[1].empty() ? kMissing : std::stod(cells[1]);
-    const SynthOutput out = synth.step(t, gps, freq);
-    if (t < 15.0) continue;  // from 15 s the car is in third gear
+  replay_recording("moveoff_upshifts", [&](double t, double truth, const SynthOutput& out) {
+    if (t < 15.0) return;  // from 15 s the car is in third gear
     INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
                 << out.gear);
     CHECK(out.gear == 3);
     CHECK(std::abs(out.speed - truth) < 3.0 * kKmh);
     ++checked;
-  }
+  });
   CHECK(checked == 101);  // 15.0 to 25.0 s
 }
 
@@ -465,32 +475,14 @@ TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through 
   // ahead of that history. Paid again at each reading, that ramp lost first gear to "moving off", whose
   // ceiling then pulled the speed to 8 km/h in the shift to second, and the filter stayed one gear low
   // (15 km/h at a true 29, 24 at 82).
-  const std::string dir = GEARPULSE_SOURCE_DIR "/tests/core/data/";
-  std::ifstream model_file(dir + "hard_launch_jam_model.json");
-  std::stringstream model_text;
-  model_text << model_file.rdbuf();
-  SpeedSynthesizer synth(std::make_shared<const GearModel>(gearpulse::parse_model(model_text.str())));
-  std::ifstream rows(dir + "hard_launch_jam_10hz.csv");
-  std::string line;
   int checked = 0;
-  while (std::getline(rows, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::vector<std::string> cells(1);
-    for (char c : line)
-      if (c == ',')
-        cells.emplace_back();
-      else
-        cells.back().push_back(c);
-    REQUIRE(cells.size() == 4);
-    const double t = std::stod(cells[0]), freq = std::stod(cells[2]), truth = std::stod(cells[3]);
-    const double gps = cells[1].empty() ? kMissing : std::stod(cells[1]);
-    const SynthOutput out = synth.step(t, gps, freq);
-    if (t < 35.0) continue;  // from 35 s the car is in second gear, then third and fourth
+  replay_recording("hard_launch_jam", [&](double t, double truth, const SynthOutput& out) {
+    if (t < 35.0) return;  // from 35 s the car is in second gear, then third and fourth
     INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
                 << out.gear);
     CHECK(std::abs(out.speed - truth) < 3.0 * kKmh);
     ++checked;
-  }
+  });
   CHECK(checked == 251);  // 35.0 to 60.0 s
 }
 
