@@ -18,7 +18,7 @@
 // (at steps much shorter than an acceleration lasts, such a jump also reopens the acceleration, so that a
 // ramp the history did not expect is paid once too);
 // entering a gear is an event whose innovation counts whole; being declutched or moving off is scored per
-// second. The result does not depend on the step rate.
+// second. Apart from that reopening, the result does not depend on the step rate.
 // The output follows the mode at the median of the belief (the most probable one while it holds half of
 // it). No look-ahead: every output depends only on past input.
 //

@@ -463,6 +463,7 @@ TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned ab
                       {});
   const auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
   const auto previous = spdlog::default_logger();
+  const auto previous_level = spdlog::get_level();
   spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
   spdlog::set_level(spdlog::level::info);
   const auto levels_of_ladder_lines = [&] {
@@ -483,6 +484,7 @@ TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned ab
   retrainer.retrain_now();
   const auto after = levels_of_ladder_lines();
   spdlog::set_default_logger(previous);
+  spdlog::set_level(previous_level);
   using L = spdlog::level::level_enum;
   CHECK(first == std::vector<L>{L::warn, L::info, L::info});
   // Once a fit found a ladder, losing it again is news.
