@@ -86,6 +86,41 @@ std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t m
   return out;
 }
 
+std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearModel& model) {
+  // A sample counts for the gear whose theta x freq is nearest its speed, when within two standard
+  // deviations of eq. (4), 0.8 m/s (3 km/h) or 4 %, whichever is widest: integer km/h and rpm and speed
+  // polled at different instants put a gear's samples that far off its line, while adjacent gears lie
+  // 20-70 % apart (Table 1). At a crawl that takes in a slipping clutch and a car rolling out of gear
+  // near first gear's line: the speed synthesis has to weigh those as first gear too.
+  constexpr double kOnLine = 0.8, kOnLineShare = 0.04;
+  const std::vector<Gear>& gears = model.gears;
+  std::vector<double> sum(gears.size(), 0.0), sum2(gears.size(), 0.0);
+  std::vector<GearRevs> out(gears.size());
+  for (std::size_t k = 0; k < data.size(); ++k) {
+    if (data.v[k] < kMovingSpeed || gears.empty()) continue;
+    std::size_t best = 0;
+    for (std::size_t i = 1; i < gears.size(); ++i)
+      if (std::abs(gears[i].theta * data.s[k] - data.v[k]) <
+          std::abs(gears[best].theta * data.s[k] - data.v[k]))
+        best = i;
+    const double theta = gears[best].theta;
+    const double sd = std::hypot(theta * model.sigma_freq, model.sigma_speed);
+    if (std::abs(theta * data.s[k] - data.v[k]) > std::max({2.0 * sd, kOnLine, kOnLineShare * data.v[k]}))
+      continue;
+    const double x = std::log(data.s[k]);
+    sum[best] += x;
+    sum2[best] += x * x;
+    ++out[best].samples;
+  }
+  for (std::size_t i = 0; i < gears.size(); ++i) {
+    if (out[i].samples == 0) continue;
+    const auto n = static_cast<double>(out[i].samples);
+    out[i].mean_log = sum[i] / n;
+    out[i].sd_log = std::sqrt(std::max(sum2[i] / n - out[i].mean_log * out[i].mean_log, 0.0));
+  }
+  return out;
+}
+
 GearModel finish_model(const MixtureData& data, const MixtureParams& p, const std::string& method,
                        const GradientLayout& layout) {
   GearModel model;
@@ -208,6 +243,14 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   constexpr std::size_t kMinIdleSamples = 10;
   if (const auto idle = detail::estimate_idle(data, kMinIdleSamples))
     result.model.extra["idle"] = {{"freq", idle->freq}, {"sd", idle->sd}, {"samples", idle->samples}};
+  // How this driver uses each gear (the engine frequencies it runs at): the speed synthesis weighs a gear
+  // that explains the revs by how usual those revs are in it.
+  if (!result.model.gears.empty()) {
+    nlohmann::json revs = nlohmann::json::array();
+    for (const detail::GearRevs& r : detail::estimate_gear_revs(data, result.model))
+      revs.push_back({{"mean_log", r.mean_log}, {"sd_log", r.sd_log}, {"samples", r.samples}});
+    result.model.extra["revs"] = std::move(revs);
+  }
   return result;
 }
 

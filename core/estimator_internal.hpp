@@ -22,6 +22,17 @@ struct IdleEstimate {
 // The engine's idle from the samples at rest, or nothing when fewer than min_samples of them.
 [[nodiscard]] std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t min_samples);
 
+// How a driver uses each gear: the engine frequency over the samples on that gear's line, in log frequency
+// (a gear used from 1200 to 2400 rpm spans the same width at any ratio).
+struct GearRevs {
+  double mean_log = 0.0;  // mean of ln(freq / Hz)
+  double sd_log = 0.0;    // standard deviation of ln(freq)
+  std::size_t samples = 0;
+};
+
+// One entry per gear of the fitted model; a gear no sample lies on has samples = 0.
+[[nodiscard]] std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearModel& model);
+
 // Why a log cannot hold a gear ladder (empty if it may): see estimator.cpp.
 [[nodiscard]] std::string degenerate_log(const MixtureData& data);
 

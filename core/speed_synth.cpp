@@ -93,6 +93,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
         std::clamp(typical / weight_[j], 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
+  load_habits(model);
   // The idle the fit saw, as a prior until GPS shows this car standing (a start on the move).
   if (model && idle_count_ <= 0.0) {
     const auto idle = model->extra.find("idle");
@@ -110,6 +111,39 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     }
   }
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
+}
+
+// What the fit saw of this engine and driver beyond the ratios: the warm idle, and the revs run in each gear.
+// Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
+void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
+  constexpr std::size_t kMinRevsSamples = 20;  // samples on a gear's line before its revs are told
+  warm_idle_ = std::numeric_limits<double>::quiet_NaN();
+  revs_mean_.fill(0.0);
+  revs_sd_.fill(0.0);
+  if (model == nullptr) return;
+  const nlohmann::json& extra = model->extra;
+  if (!extra.is_object()) return;
+  const auto number = [](const nlohmann::json& j, const char* key) {
+    if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
+    const auto it = j.find(key);
+    return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
+  };
+  if (const auto idle = extra.find("idle"); idle != extra.end()) {
+    const double f = number(*idle, "freq");
+    if (std::isfinite(f) && f > 0.0) warm_idle_ = f;
+  }
+  const auto revs = extra.find("revs");
+  if (revs == extra.end() || !revs->is_array() || revs->size() != static_cast<std::size_t>(gears_)) return;
+  for (int j = 1; j <= gears_; ++j) {
+    const nlohmann::json& r = (*revs)[static_cast<std::size_t>(j - 1)];
+    const double mean = number(r, "mean_log"), sd = number(r, "sd_log"), n = number(r, "samples");
+    if (!std::isfinite(mean) || !std::isfinite(sd) || sd < 0.0 ||
+        !(n >= static_cast<double>(kMinRevsSamples)))
+      continue;
+    constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
+    revs_mean_[j] = mean;
+    revs_sd_[j] = std::max(sd, kMinRevsSd);
+  }
 }
 
 void SpeedSynthesizer::reset() noexcept {
@@ -219,7 +253,12 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
   // above idle there mean moving off.
   constexpr double kStandingFree = 0.05;
   const double free_share = speed > kMovingOffSpeed ? 1.0 - tuning_.idle_weight : kStandingFree;
-  const double z = (freq - idle_mean_) / idle_sd();
+  // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
+  // still cold) and the warm idle the fit saw are the idle now.
+  const double floor = std::isfinite(warm_idle_) ? std::min(warm_idle_, idle_mean_) : idle_mean_;
+  const double z = freq > idle_mean_ ? (freq - idle_mean_) / idle_sd()
+                   : freq < floor    ? (floor - freq) / idle_sd()
+                                     : 0.0;
   return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
 }
 
@@ -249,6 +288,32 @@ double SpeedSynthesizer::lugging(int gear, double freq) const noexcept {
   const double at_idle = 1.0 / (1.0 + std::exp(3.0 * (x - 2.5)));  // ~1 up to 2 sd above idle, ~0 past 3.5
   const double floor = gear == 1 ? tuning_.lugging_first : tuning_.lugging_other;
   return 1.0 - (1.0 - floor) * at_idle;
+}
+
+// Scores this step's frequency in each gear by how usual it is there for this driver, against how usual it
+// is in gears at large: ln(p(f | gear) / sum_k alpha_k p(f | k)), over the gears whose revs the model
+// knows (0 for the others), bounded. In steady driving every gear explains the revs equally well; what
+// tells them apart is that this driver runs third at 1500-2200 rpm and fourth at 1800-2600.
+void SpeedSynthesizer::score_revs_habit(double freq) noexcept {
+  revs_habit_.fill(0.0);
+  if (!std::isfinite(freq) || freq <= 0.0 || tuning_.revs_habit <= 0.0) return;
+  const double x = std::log(freq);
+  ModeArray density{};
+  double total = 0.0, weights = 0.0;
+  for (int j = 1; j <= gears_; ++j) {
+    if (revs_sd_[j] <= 0.0) continue;
+    const double z = (x - revs_mean_[j]) / revs_sd_[j];
+    density[j] = std::exp(-0.5 * z * z) / revs_sd_[j];
+    total += weight_[j] * density[j];
+    weights += weight_[j];
+  }
+  if (!(total > 0.0)) return;
+  constexpr double kMaxHabit = 3.0;  // no single reading rules a gear in or out
+  for (int j = 1; j <= gears_; ++j) {
+    if (revs_sd_[j] <= 0.0) continue;
+    const double ratio = density[j] * weights / total;
+    revs_habit_[j] = ratio > 0.0 ? std::clamp(std::log(ratio), -kMaxHabit, kMaxHabit) : -kMaxHabit;
+  }
 }
 
 // How much more likely an upshift (and less likely a downshift) is at this engine frequency than at the
@@ -501,7 +566,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   if (short_step && z2 > kDeadZone * kDeadZone)
     x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
   return -jump_cost(z2) - 0.5 * (entering ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
-         weight * std::log(lugging(mode, freq));
+         weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);
 }
 
 // What GPS teaches about this engine and driver: the idle frequency (standing), the frequencies run at in
@@ -548,6 +613,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   const double gps_var = sigma_v_ * sigma_v_;
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
+  score_revs_habit(freq);
   for (int i = 0; i < modes; ++i) {
     transitions_from(i, dt, shift_freq, track_[i].v, row_);
     const double log_pi = std::log(prob_[i]);

@@ -18,7 +18,10 @@
 // (at steps much shorter than an acceleration lasts, such a jump also reopens the acceleration, so that a
 // ramp the history did not expect is paid once too);
 // entering a gear is an event whose innovation counts whole; being declutched or moving off is scored per
-// second. Apart from that reopening, the result does not depend on the step rate.
+// second, and so is how usual the revs are in a gear for this driver (the fit's revs per gear, model
+// extra.revs): steady revs that several gears explain go, over time, to the gear this driver runs them in.
+// The idle may have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle.
+// Apart from that reopening, the result does not depend on the step rate.
 // The output follows the mode at the median of the belief (the most probable one while it holds half of
 // it). No look-ahead: every output depends only on past input.
 //
@@ -48,25 +51,29 @@ struct SynthOutput {
 // off. They are deliberately generic, not fitted to any one log; what differs between cars and drivers
 // (idle, shift points, how hard the car slows declutched) is learned online while GPS is present.
 struct SynthTuning {
-  double accel_sigma = 0.8;       // m/s^2: spread of a driver's acceleration in gear
-  double accel_time = 3.0;        // s: how long an acceleration persists
-  double coast_accel = -0.6;      // m/s^2: declutched and moving (rolling, braking), until learned
-  double coast_sigma = 0.8;       // m/s^2
-  double coast_time = 8.0;        // s: declutched, a braking or rolling deceleration persists
-  double stop_speed = 4.0;        // m/s: declutched below this, the car is being braked to a stop
-  double stop_accel = -1.5;       // m/s^2: ... at an ordinary firm deceleration
-  double launch_accel = 1.8;      // m/s^2: moving off while the clutch slips
-  double launch_sigma = 1.0;      // m/s^2
-  double gear_dwell = 8.0;        // s: mean time in a gear of average use before it is left
-  double engage_rate = 1.0;       // 1/s: declutched -> a gear while moving (a shift takes about a second)
-  double launch_rate = 0.2;       // 1/s: standing -> moving off (the frequency tells when)
-  double bite_rate = 0.7;         // 1/s: moving off -> the clutch has bitten
-  double launch_second = 0.1;     // share of drivers' launches made in second gear
-  double skip_share = 0.1;        // share of shifts that skip a gear
-  double evidence_time = 1.0;     // s: correlation time of the frequency's departures from the model
-  double idle_weight = 0.6;       // share of the declutched frequency density in the idle spike
-  double lugging_first = 0.2;     // relative chance of first gear with the engine at idle (creeping)
-  double lugging_other = 0.05;    // same for higher gears: drivers do not lug an engine at idle
+  double accel_sigma = 0.8;     // m/s^2: spread of a driver's acceleration in gear
+  double accel_time = 3.0;      // s: how long an acceleration persists
+  double coast_accel = -0.6;    // m/s^2: declutched and moving (rolling, braking), until learned
+  double coast_sigma = 0.8;     // m/s^2
+  double coast_time = 8.0;      // s: declutched, a braking or rolling deceleration persists
+  double stop_speed = 4.0;      // m/s: declutched below this, the car is being braked to a stop
+  double stop_accel = -1.5;     // m/s^2: ... at an ordinary firm deceleration
+  double launch_accel = 1.8;    // m/s^2: moving off while the clutch slips
+  double launch_sigma = 1.0;    // m/s^2
+  double gear_dwell = 8.0;      // s: mean time in a gear of average use before it is left
+  double engage_rate = 1.0;     // 1/s: declutched -> a gear while moving (a shift takes about a second)
+  double launch_rate = 0.2;     // 1/s: standing -> moving off (the frequency tells when)
+  double bite_rate = 0.7;       // 1/s: moving off -> the clutch has bitten
+  double launch_second = 0.1;   // share of drivers' launches made in second gear
+  double skip_share = 0.1;      // share of shifts that skip a gear
+  double evidence_time = 1.0;   // s: correlation time of the frequency's departures from the model
+  double idle_weight = 0.6;     // share of the declutched frequency density in the idle spike
+  double lugging_first = 0.2;   // relative chance of first gear with the engine at idle (creeping)
+  double lugging_other = 0.05;  // same for higher gears: drivers do not lug an engine at idle
+  // Weight, per second in a gear, of how usual the revs are in that gear for this driver (the model's
+  // per-gear revs, recorded by the fit): a wrong gear that explains steady revs as well as the right one
+  // loses to it at this rate. Tempered well below 1, since successive readings are far from independent.
+  double revs_habit = 0.3;
   double min_speed_sigma = 0.15;  // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
   double min_freq_rel = 0.01;     // floor on sigma_s as a fraction of the frequency (tracking jitter)
   double stationary_speed = 0.3;  // m/s: GPS speed below this is "standing" (idle is learned there)
@@ -112,6 +119,7 @@ class SpeedSynthesizer {
 
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
+  void load_habits(const GearModel* model) noexcept;
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row) const noexcept;
@@ -125,6 +133,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
+  void score_revs_habit(double freq) noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
   [[nodiscard]] double upshift_factor(int gear, double freq) const noexcept;
   [[nodiscard]] double downshift_factor(int gear, double freq) const noexcept;
@@ -155,6 +164,10 @@ class SpeedSynthesizer {
   double t_ = 0.0;
   int mode_ = 0;  // current MAP mode
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
+  double warm_idle_ = 0.0;  // idle of the warm engine (the fit's, over many stops); NaN if unknown
+  // Per gear, the log engine frequency this driver runs at (the model's extra.revs; sd 0 = unknown), and
+  // this step's log-score of the frequency by it.
+  ModeArray revs_mean_{}, revs_sd_{}, revs_habit_{};
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
   double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
   double last_gps_ = -1.0;

@@ -417,6 +417,52 @@ TEST_CASE("estimator: a fit records the engine's idle from the samples standing 
   CHECK_FALSE(fit_gear_model(moving, {}).model.extra.contains("idle"));
 }
 
+TEST_CASE("estimator: a fit records the revs each gear is driven at") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  sim::DriveOptions options;
+  options.style = sim::DrivingStyle::kMixed;
+  options.duration = 2400.0;
+  options.seed = 5;
+  const sim::Drive drive = sim::simulate_drive(car, options);
+  const FitResult r = fit_gear_model(sim::to_samples(sim::observe(drive, {})), {});
+  REQUIRE(r.model.gears.size() == car.theta.size());
+  REQUIRE(r.model.extra.contains("revs"));
+  const nlohmann::json& revs = r.model.extra["revs"];
+  REQUIRE(revs.size() == car.theta.size());
+  // Against the truth: ln(engine frequency) over the seconds each gear was engaged while moving. First
+  // gear's entry also holds the crawl on a slipping clutch and a car rolling out of gear at walking pace
+  // (first gear at those revs explains the speed, so the synthesis has to weigh them as first gear): its
+  // revs lie between the idle and those engaged.
+  for (std::size_t g = 0; g < car.theta.size(); ++g) {
+    double sum = 0.0, sum2 = 0.0, n = 0.0;
+    for (const sim::TruthSample& s : drive.truth) {
+      if (s.gear != static_cast<int>(g) + 1 || s.clutch != sim::Clutch::kEngaged || s.speed < 1.0) continue;
+      sum += std::log(s.freq);
+      sum2 += std::log(s.freq) * std::log(s.freq);
+      ++n;
+    }
+    REQUIRE(n > 10.0);
+    const double mean = sum / n, sd = std::sqrt(sum2 / n - mean * mean);
+    const double mean_log = revs[g]["mean_log"].get<double>(), sd_log = revs[g]["sd_log"].get<double>();
+    INFO("gear " << g + 1 << ": true ln(freq) " << mean << " +- " << sd << " over " << n << " s; fit "
+                 << mean_log << " +- " << sd_log);
+    CHECK(revs[g]["samples"].get<double>() > 0.5 * n);
+    if (g == 0) {
+      CHECK(mean_log > std::log(car.idle_freq));
+      CHECK(mean_log < mean + 0.05);
+      continue;
+    }
+    CHECK(mean_log == Approx(mean).margin(0.05));
+    CHECK(sd_log == Approx(sd).margin(0.08));
+  }
+  // A log with no gear ladder records no revs of gears it does not have.
+  const auto cvt = sim::to_samples(
+      sim::simulate_observations(sim::vehicle_preset("cvt"), sim::DrivingStyle::kMixed, 1200.0, 1, 3));
+  const FitResult none = fit_gear_model(cvt, {});
+  CHECK(none.model.gears.empty());
+  CHECK_FALSE(none.model.extra.contains("revs"));
+}
+
 TEST_CASE("estimator: rows repeating the values held by a slow logger count once") {
   // An OBD logger writes rows faster than it polls: each reading repeats until the next poll. The fit of the
   // log with its repeats must be the fit of the readings alone, counted and weighted once each.

@@ -1,12 +1,15 @@
 #include <catch2/catch.hpp>
 
 #include <cmath>
+#include <memory>
 #include <random>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "core/gear_model.hpp"
+#include "core/sample.hpp"
+#include "core/speed_synth.hpp"
 #include "tests/test_util.hpp"
 
 using gearpulse::GearModel;
@@ -72,24 +75,13 @@ TEST_CASE("model: a mangled model file is a model that holds or std::invalid_arg
   m.outlier_weight = 0.12;
   m.method = "auto";
   m.extra["idle"] = {{"freq", 13.1}, {"sd", 0.4}};
+  m.extra["revs"] = nlohmann::json::array();
+  for (double f : {40.0, 38.0, 35.0, 33.0})
+    m.extra["revs"].push_back({{"mean_log", std::log(f)}, {"sd_log", 0.2}, {"samples", 300}});
   const std::string text = gearpulse::serialize_model(m);
-  const std::vector<std::string> pieces = {"\"",
-                                           "{",
-                                           "}",
-                                           "[",
-                                           "]",
-                                           ",",
-                                           ":",
-                                           "-",
-                                           "1e999",
-                                           "null",
-                                           "true",
-                                           "\"theta\"",
-                                           "\"version\"",
-                                           "0",
-                                           ".",
-                                           "e",
-                                           std::string(1, '\0')};
+  const std::vector<std::string> pieces = {
+      "\"",   "{",    "}",         "[",           "]",          ",", ":", "-", "1e999",
+      "null", "true", "\"theta\"", "\"version\"", "\"sd_log\"", "0", ".", "e", std::string(1, '\0')};
   std::mt19937 rng(29);
   int parsed = 0, refused = 0;
   for (int trial = 0; trial < 3000; ++trial) {
@@ -111,6 +103,13 @@ TEST_CASE("model: a mangled model file is a model that holds or std::invalid_arg
       REQUIRE(g.sigma_speed >= 0.0);
       REQUIRE(std::isfinite(g.sigma_freq));
       REQUIRE(g.sigma_freq >= 0.0);
+      // The synthesis takes whatever extras it holds (idle, revs per gear): its speeds stay finite.
+      gearpulse::SpeedSynthesizer synth(std::make_shared<const GearModel>(g));
+      for (int k = 0; k < 20; ++k) {
+        const auto o = synth.step(k, k < 10 ? 8.0 : gearpulse::kMissing, 12.0 + 2.0 * k);
+        REQUIRE(std::isfinite(o.speed));
+        REQUIRE(o.speed >= 0.0);
+      }
     } catch (const std::invalid_argument&) {
       ++refused;
     }

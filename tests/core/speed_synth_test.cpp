@@ -253,7 +253,13 @@ TEST_CASE("synth: step never allocates") {
   const auto drive = gearpulse::sim::simulate_drive(vehicle, {.duration = 600.0, .seed = 3});
   const auto samples = gearpulse::sim::to_samples(gearpulse::sim::observe(drive, {.seed = 4}));
   SpeedSynthesizer synth(model_of(vehicle.theta));
-  const auto replacement = model_of(vehicle.theta, 1.01);
+  // The replacement carries what a fit records beyond the ratios (idle, revs per gear): loading it
+  // allocates nothing either.
+  auto replacement = std::make_shared<GearModel>(*model_of(vehicle.theta, 1.01));
+  replacement->extra["idle"] = {{"freq", vehicle.idle_freq}, {"sd", 0.3}, {"samples", 100}};
+  replacement->extra["revs"] = nlohmann::json::array();
+  for (std::size_t g = 0; g < vehicle.theta.size(); ++g)
+    replacement->extra["revs"].push_back({{"mean_log", 3.3}, {"sd_log", 0.25}, {"samples", 100}});
   const long before = g_allocations.load();
   for (std::size_t i = 0; i < samples.size(); ++i) {
     const auto& s = samples[i];
@@ -448,6 +454,72 @@ TEST_CASE("synth: a warming engine's idle is followed down while the car coasts,
     INFO("t = " << rows[i].t << ", truth " << rows[i].speed << " m/s, synthesized " << out[i].speed);
     CHECK(out[i].gear == 0);
     CHECK(std::abs(out[i].speed - rows[i].speed) < 4.0);
+  }
+}
+
+TEST_CASE("synth: a stop in an outage is seen while the idle still falls from a cold start") {
+  // The car waits at a light with the engine still cold (GPS shows the high idle), drives off, loses GPS in
+  // 5th, brakes in gear, declutches and stands at the next light. The engine is warmer by then: its idle lies
+  // between the one GPS showed and the warm idle the fit recorded. That is a car at rest, not first gear
+  // creeping at walking pace.
+  constexpr double kColdIdle = 17.0, kWarmerIdle = 14.5;
+  auto model = std::make_shared<GearModel>(*model_of(kHatch));
+  model->extra["idle"] = {{"freq", kIdle}, {"sd", 0.3}, {"samples", 500}};
+  std::vector<Row> rows;
+  for (int k = 0; k < 30; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kColdIdle, 0});
+  const auto drive = script(0.0,
+                            {{1, 1.5, 3},
+                             {2, 1.0, 5},
+                             {3, 0.5, 8},
+                             {4, 0.3, 10},
+                             {5, 0.0, 20},
+                             {5, -1.5, 4},
+                             {0, -2.0, 6},
+                             {0, 0.0, 30}},
+                            kHatch);
+  for (Row r : drive) {
+    r.t += 30.0;
+    if (r.gear == 0) r.freq = kWarmerIdle;
+    rows.push_back(r);
+  }
+  SpeedSynthesizer synth(model);
+  const auto out = replay(synth, rows, 70.0);
+  REQUIRE(synth.idle_freq() > kColdIdle - 1.0);  // all GPS showed was the cold idle
+  for (std::size_t i = rows.size() - 25; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t << ", synthesized " << out[i].speed << " m/s in gear " << out[i].gear);
+    CHECK(out[i].speed == 0.0);
+    CHECK(out[i].gear == 0);
+  }
+}
+
+TEST_CASE("synth: after a long coast in an outage, steady revs go to the gear this driver runs them in") {
+  // GPS is lost as the car leaves 5th and coasts out of gear for 25 s, long enough that its speed is only
+  // roughly known; then it runs in 4th at steady revs. A gear entered at the wrong speed explains steady
+  // revs as well as the right one, but this driver (the fit's extra.revs) runs 3rd at about 22 Hz and 4th
+  // at about 30: steady revs of 30 Hz are 4th.
+  auto model = std::make_shared<GearModel>(*model_of(kHatch));
+  model->extra["revs"] = nlohmann::json::array();
+  for (const double freq : {25.0, 24.0, 22.0, 30.0, 33.0})
+    model->extra["revs"].push_back({{"mean_log", std::log(freq)}, {"sd_log", 0.15}, {"samples", 1000}});
+  const auto rows = script(0.0,
+                           {{0, 0.0, 10},
+                            {1, 1.5, 3},
+                            {2, 1.0, 5},
+                            {3, 0.5, 8},
+                            {4, 0.3, 10},
+                            {5, 0.15, 10},
+                            {5, 0.0, 20},
+                            {0, -0.15, 25},
+                            {4, 0.0, 60}},
+                           kHatch);
+  SpeedSynthesizer synth(model);
+  const auto out = replay(synth, rows, 66.0);
+  for (std::size_t i = rows.size() - 30; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t << ", truth " << rows[i].speed << " m/s, synthesized " << out[i].speed
+                << " in gear " << out[i].gear);
+    CHECK(out[i].gear == 4);
+    CHECK(std::abs(out[i].speed - rows[i].speed) < 1.0);
   }
 }
 
