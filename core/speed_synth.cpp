@@ -116,7 +116,6 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
 // What the fit saw of this engine and driver beyond the ratios: the warm idle, and the revs run in each gear.
 // Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
 void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
-  constexpr std::size_t kMinRevsSamples = 20;  // samples on a gear's line before its revs are told
   warm_idle_ = std::numeric_limits<double>::quiet_NaN();
   revs_mean_.fill(0.0);
   revs_sd_.fill(0.0);
@@ -134,15 +133,34 @@ void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
   }
   const auto revs = extra.find("revs");
   if (revs == extra.end() || !revs->is_array() || revs->size() != static_cast<std::size_t>(gears_)) return;
+  // Each gear's revs are shrunk toward those of all gears by a prior worth kPriorSamples samples: a gear
+  // seen on a few samples (a short log, a first gear) says little, and one seen on none says what the
+  // driver's revs say at large, rather than leaving the gears that were seen to outscore it.
+  constexpr double kPriorSamples = 20.0;
+  ModeArray mean{}, var{}, count{};
+  double total = 0.0, pooled_mean = 0.0;
   for (int j = 1; j <= gears_; ++j) {
     const nlohmann::json& r = (*revs)[static_cast<std::size_t>(j - 1)];
-    const double mean = number(r, "mean_log"), sd = number(r, "sd_log"), n = number(r, "samples");
-    if (!std::isfinite(mean) || !std::isfinite(sd) || sd < 0.0 ||
-        !(n >= static_cast<double>(kMinRevsSamples)))
-      continue;
-    constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
-    revs_mean_[j] = mean;
-    revs_sd_[j] = std::max(sd, kMinRevsSd);
+    const double m = number(r, "mean_log"), sd = number(r, "sd_log"), n = number(r, "samples");
+    if (!std::isfinite(m) || !std::isfinite(sd) || sd < 0.0 || !std::isfinite(n) || !(n > 0.0)) continue;
+    mean[j] = m;
+    var[j] = sd * sd;
+    count[j] = std::min(n, 1e9);
+    total += count[j];
+    pooled_mean += count[j] * m;
+  }
+  if (!(total > 0.0)) return;
+  pooled_mean /= total;
+  double pooled_var = 0.0;
+  for (int j = 1; j <= gears_; ++j)
+    pooled_var += count[j] * (var[j] + (mean[j] - pooled_mean) * (mean[j] - pooled_mean));
+  pooled_var /= total;
+  constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
+  for (int j = 1; j <= gears_; ++j) {
+    const double n = count[j];
+    revs_mean_[j] = (n * mean[j] + kPriorSamples * pooled_mean) / (n + kPriorSamples);
+    const double v = (n * var[j] + kPriorSamples * pooled_var) / (n + kPriorSamples);
+    revs_sd_[j] = std::max(std::sqrt(v), kMinRevsSd);
   }
 }
 
@@ -316,6 +334,20 @@ void SpeedSynthesizer::score_revs_habit(double freq) noexcept {
   }
 }
 
+// How much likelier a shift from `from` to `to` at `freq` is for bringing the revs nearer the band this
+// driver runs the new gear in than they are to the band of the old one (the model's revs per gear): a
+// driver shifts up as the revs pass his habit and lands where he usually drives the next gear, and does
+// not shift down into revs he never runs that gear at. 1 when the model does not know both gears' revs.
+double SpeedSynthesizer::shift_comfort(int from, int to, double freq) const noexcept {
+  if (tuning_.shift_comfort <= 0.0 || !std::isfinite(freq) || freq <= 0.0 || revs_sd_[from] <= 0.0 ||
+      revs_sd_[to] <= 0.0)
+    return 1.0;
+  const double now = (std::log(freq) - revs_mean_[from]) / revs_sd_[from];
+  const double after = (std::log(freq * theta_[from] / theta_[to]) - revs_mean_[to]) / revs_sd_[to];
+  constexpr double kMaxLog = 3.0;
+  return std::exp(std::clamp(0.5 * tuning_.shift_comfort * (now * now - after * after), -kMaxLog, kMaxLog));
+}
+
 // How much more likely an upshift (and less likely a downshift) is at this engine frequency than at the
 // frequency this driver usually runs at in gear: drivers shift up as revs rise and down as they sag.
 double SpeedSynthesizer::shift_urge(double freq) const noexcept {
@@ -424,8 +456,10 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
     const double base = leave_rate_[from];
     const double shift_base = base * kToNeighbour;
-    const double up = from < gears_ ? shift_base * upshift_factor(from, freq) : 0.0;
-    const double down = from > 1 ? shift_base * downshift_factor(from, freq) : 0.0;
+    const double up =
+        from < gears_ ? shift_base * upshift_factor(from, freq) * shift_comfort(from, from + 1, freq) : 0.0;
+    const double down =
+        from > 1 ? shift_base * downshift_factor(from, freq) * shift_comfort(from, from - 1, freq) : 0.0;
     const double clutch = base * kToClutch;
     const double total = clutch + up + down;
     row[from] = std::exp(-total * dt);

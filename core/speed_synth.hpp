@@ -74,6 +74,9 @@ struct SynthTuning {
   // per-gear revs, recorded by the fit): a wrong gear that explains steady revs as well as the right one
   // loses to it at this rate. Tempered well below 1, since successive readings are far from independent.
   double revs_habit = 0.3;
+  // Exponent on how much nearer a shift brings the revs to the band this driver runs the new gear in
+  // (model extra.revs), as a factor on the rate of that shift; tempered as revs_habit is.
+  double shift_comfort = 0.3;
   double min_speed_sigma = 0.15;  // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
   double min_freq_rel = 0.01;     // floor on sigma_s as a fraction of the frequency (tracking jitter)
   double stationary_speed = 0.3;  // m/s: GPS speed below this is "standing" (idle is learned there)
@@ -134,6 +137,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   void score_revs_habit(double freq) noexcept;
+  [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
   [[nodiscard]] double upshift_factor(int gear, double freq) const noexcept;
   [[nodiscard]] double downshift_factor(int gear, double freq) const noexcept;
