@@ -96,8 +96,9 @@ std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearMode
   const std::vector<Gear>& gears = model.gears;
   std::vector<double> sum(gears.size(), 0.0), sum2(gears.size(), 0.0);
   std::vector<GearRevs> out(gears.size());
+  if (gears.empty()) return out;
   for (std::size_t k = 0; k < data.size(); ++k) {
-    if (data.v[k] < kMovingSpeed || gears.empty()) continue;
+    if (data.v[k] < kMovingSpeed) continue;
     std::size_t best = 0;
     for (std::size_t i = 1; i < gears.size(); ++i)
       if (std::abs(gears[i].theta * data.s[k] - data.v[k]) <

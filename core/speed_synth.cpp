@@ -309,8 +309,8 @@ double SpeedSynthesizer::lugging(int gear, double freq) const noexcept {
 }
 
 // Scores this step's frequency in each gear by how usual it is there for this driver, against how usual it
-// is in gears at large: ln(p(f | gear) / sum_k alpha_k p(f | k)), over the gears whose revs the model
-// knows (0 for the others), bounded. In steady driving every gear explains the revs equally well; what
+// is in gears at large: ln(p(f | gear) / sum_k alpha_k p(f | k)), bounded (0 for every gear when the model
+// records no revs). In steady driving every gear explains the revs equally well; what
 // tells them apart is that this driver runs third at 1500-2200 rpm and fourth at 1800-2600.
 void SpeedSynthesizer::score_revs_habit(double freq) noexcept {
   revs_habit_.fill(0.0);

@@ -19,7 +19,8 @@
 // ramp the history did not expect is paid once too);
 // entering a gear is an event whose innovation counts whole; being declutched or moving off is scored per
 // second, and so is how usual the revs are in a gear for this driver (the fit's revs per gear, model
-// extra.revs): steady revs that several gears explain go, over time, to the gear this driver runs them in.
+// extra.revs): steady revs that several gears explain go, over time, to the gear this driver runs them in,
+// and a shift is the likelier the nearer it brings the revs to the new gear's band.
 // The idle may have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle.
 // Apart from that reopening, the result does not depend on the step rate.
 // The output follows the mode at the median of the belief (the most probable one while it holds half of
