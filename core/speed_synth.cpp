@@ -94,27 +94,12 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   load_habits(model);
-  // The idle the fit saw, as a prior until GPS shows this car standing (a start on the move).
-  if (model && idle_count_ <= 0.0) {
-    const auto idle = model->extra.find("idle");
-    if (idle != model->extra.end() && idle->is_object()) {
-      const auto freq = idle->find("freq"), sd = idle->find("sd");
-      if (freq != idle->end() && sd != idle->end() && freq->is_number() && sd->is_number()) {
-        const double f = freq->get<double>(), s = sd->get<double>();
-        if (std::isfinite(f) && f > 0.0 && std::isfinite(s) && s >= 0.0) {
-          constexpr double kPriorSamples = 5.0;  // GPS standing overrules the prior within seconds
-          idle_mean_ = f;
-          idle_var_ = s * s;
-          idle_count_ = kPriorSamples;
-        }
-      }
-    }
-  }
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
 }
 
-// What the fit saw of this engine and driver beyond the ratios: the warm idle, and the revs run in each gear.
-// Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
+// What the fit saw of this engine and driver beyond the ratios: the warm idle (also the idle until GPS shows
+// this car standing, for a start on the move), and the revs run in each gear. Anything missing or
+// malformed is left unknown (a hand-edited or older model.json still loads).
 void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
   warm_idle_ = std::numeric_limits<double>::quiet_NaN();
   revs_mean_.fill(0.0);
@@ -128,8 +113,16 @@ void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
     return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
   };
   if (const auto idle = extra.find("idle"); idle != extra.end()) {
-    const double f = number(*idle, "freq");
-    if (std::isfinite(f) && f > 0.0) warm_idle_ = f;
+    const double f = number(*idle, "freq"), sd = number(*idle, "sd");
+    if (std::isfinite(f) && f > 0.0) {
+      warm_idle_ = f;
+      if (idle_count_ <= 0.0 && std::isfinite(sd) && sd >= 0.0) {
+        constexpr double kPriorSamples = 5.0;  // GPS standing overrules the prior within seconds
+        idle_mean_ = f;
+        idle_var_ = sd * sd;
+        idle_count_ = kPriorSamples;
+      }
+    }
   }
   const auto revs = extra.find("revs");
   if (revs == extra.end() || !revs->is_array() || revs->size() != static_cast<std::size_t>(gears_)) return;
