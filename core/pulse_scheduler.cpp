@@ -49,6 +49,13 @@ void PulseScheduler::set_speed(std::int64_t t_ns, double speed_mps) noexcept {
   double f = speed_ * config_.pulses_per_km / 1000.0;
   if (f < config_.min_freq_hz) f = 0.0;
   freq_ = std::min(f, config_.max_freq_hz);
+  // A pulse high for the duty of a slower frequency falls when one at the new frequency would (not before
+  // now): a slow pulse is high for up to duty / min_freq_hz, and held through a speed-up it let the count
+  // fall behind the distance by the pulses owed meanwhile, caught up only over the following seconds.
+  if (high_ && config_.pulse_width_s == 0 && freq_ > 0.0) {
+    const std::int64_t fall = last_rise_ns_ + std::llround(config_.duty / freq_ * kNsPerS);
+    fall_ns_ = std::min(fall_ns_, std::max(fall, t_));
+  }
 }
 
 std::int64_t PulseScheduler::next_rise_ns() const noexcept {

@@ -5,10 +5,11 @@
 // pulse is lost or added: over any profile, pulses = distance * pulses_per_km / 1000 within +-1 (as long
 // as the frequency stays inside [min_freq_hz, max_freq_hz]).
 //
-// Below min_freq_hz the train stops: the phase is frozen (a crawl below that speed adds no distance) and
-// no edge is scheduled except the fall of a pulse already high. Above max_freq_hz the frequency is clamped.
-// Pure and real-time safe: time is an argument (CLOCK_MONOTONIC ns in the daemon), nothing allocates or
-// throws after construction.
+// A pulse high when the speed rises falls as one at the new frequency would (never in the past), so a slow
+// pulse does not hold the train back. Below min_freq_hz the train stops: the phase is frozen (a crawl below
+// that speed adds no distance) and no edge is scheduled except the fall of a pulse already high. Above
+// max_freq_hz the frequency is clamped. Pure and real-time safe: time is an argument (CLOCK_MONOTONIC ns in
+// the daemon), nothing allocates or throws after construction.
 #include <cstdint>
 #include <limits>
 

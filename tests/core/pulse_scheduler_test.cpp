@@ -67,6 +67,27 @@ TEST_CASE("pulse: constant speed gives the exact frequency and duty") {
   CHECK(r.edges[2].t_ns == 100'000'000);
 }
 
+TEST_CASE("pulse: a slow pulse high when the speed rises falls at the new frequency's duty") {
+  // 1 pulse per metre. At 0.5 m/s a pulse rises at 2 s and, at duty 0.5, would stay high for 1 s; at 2.1 s
+  // the car is at 50 m/s. Held high to 3 s, the line would owe 45 pulses by then and the count would trail
+  // the distance for seconds; it falls at once and the train keeps within a pulse of the distance.
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.min_freq_hz = 0.01;
+  c.max_freq_hz = 1e6;
+  PulseScheduler s(c, 0);
+  const std::vector<std::pair<std::int64_t, double>> changes = {{0, 0.5}, {2 * kS + kS / 10, 50.0}};
+  for (const std::int64_t end : {2 * kS + kS / 5, 3 * kS, 5 * kS}) {
+    PulseScheduler run_s = s;
+    const Run r = drive(run_s, changes, end);
+    INFO("at " << end << " ns: " << r.pulses << " pulses for " << distance_m(changes, end) << " m");
+    CHECK(std::fabs(static_cast<double>(r.pulses) - distance_m(changes, end)) <= 1.0);
+    REQUIRE(r.edges.size() >= 2);
+    CHECK(r.edges[1].kind == EdgeKind::kFall);
+    CHECK(r.edges[1].t_ns == 2 * kS + kS / 10);  // the first pulse's fall, brought forward to the change
+  }
+}
+
 TEST_CASE("pulse: count equals distance times pulses per km over random profiles") {
   const unsigned seed = std::random_device{}();
   INFO("seed " << seed);
