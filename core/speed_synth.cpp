@@ -166,6 +166,7 @@ void SpeedSynthesizer::reset() noexcept {
     prob_[j] = j == 0 ? std::max(weight_[0], kColdStartRest) : weight_[j] * (1.0 - kColdStartRest);
   normalise();
   track_.fill(Track{0.0, 0.0, kInitialSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma});
+  age_.fill(0.0);
   started_ = false;
   informed_ = false;
   t_ = 0.0;
@@ -178,7 +179,7 @@ void SpeedSynthesizer::reset() noexcept {
 bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
   const int old_gears = gears_;
-  const ModeArray old_theta = theta_, old_prob = prob_;
+  const ModeArray old_theta = theta_, old_prob = prob_, old_age = age_;
   const TrackArray old_track = track_;
   model_ = std::move(model);
   load_model(model_.get());
@@ -193,9 +194,12 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   prob_.fill(0.0);
   prob_[0] = old_prob[0];
   track_[0] = old_track[0];
+  age_.fill(0.0);
+  age_[0] = old_age[0];
   for (int j = 1; j <= gears_; ++j)
     track_[j] = old_track[0];
   track_[launch_mode()] = old_track[old_gears + 1];
+  age_[launch_mode()] = old_age[old_gears + 1];
   prob_[launch_mode()] = gears_ > 0 ? old_prob[old_gears + 1] : 0.0;
   next_p_.fill(0.0);  // strongest old gear handed to each new gear so far
   for (int i = 1; i <= old_gears && gears_ > 0; ++i) {
@@ -208,6 +212,7 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
     if (old_prob[i] > next_p_[best]) {
       next_p_[best] = old_prob[i];
       track_[best] = old_track[i];
+      age_[best] = old_age[i];
     }
   }
   if (gears_ == 0) {
@@ -449,8 +454,20 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
     const double base = leave_rate_[from];
     const double shift_base = base * kToNeighbour;
-    const double up =
+    double up =
         from < gears_ ? shift_base * upshift_factor(from, freq) * shift_comfort(from, from + 1, freq) : 0.0;
+    // First gear is for moving off: the longer it has lasted, the likelier the upshift (a launch whose
+    // upshift the revs did not show, between two slow readings, is not held in first gear for good). Not
+    // while the revs stay near idle: creeping in a queue is done in first gear for minutes.
+    if (from == 1 && tuning_.launch_gear_time > 0.0) {
+      constexpr double kMaxLaunchUrge = 5.0;
+      constexpr double kCreepRevs = 1.3, kPullingRevs = 1.8;  // x idle: creeping below, pulling above
+      const double x = age_[1] / tuning_.launch_gear_time;
+      double urge = std::min(x * x, kMaxLaunchUrge);
+      if (idle_count_ > 0.0 && std::isfinite(freq))
+        urge *= std::clamp((freq / idle_mean_ - kCreepRevs) / (kPullingRevs - kCreepRevs), 0.0, 1.0);
+      up *= 1.0 + urge;
+    }
     const double down =
         from > 1 ? shift_base * downshift_factor(from, freq) * shift_comfort(from, from - 1, freq) : 0.0;
     const double clutch = base * kToClutch;
@@ -679,7 +696,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       pair_track_[i][j] = x;
     }
   }
-  ModeArray log_p{};
+  ModeArray log_p{}, next_age{};
   for (int j = 0; j < modes; ++j) {
     double top = -std::numeric_limits<double>::infinity();
     for (int i = 0; i < modes; ++i)
@@ -688,16 +705,18 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
     if (!std::isfinite(top)) continue;  // no way into mode j this step
     // Sum over the predecessors, the track matched to the mixture's first two moments.
     ModeArray w{};
-    double w_sum = 0.0, v = 0.0, a = 0.0;
+    double w_sum = 0.0, v = 0.0, a = 0.0, age = 0.0;
     for (int i = 0; i < modes; ++i) {
       if (!std::isfinite(pair_score_[i][j])) continue;
       w[i] = std::exp(pair_score_[i][j] - top);
       w_sum += w[i];
+      if (i == j) age += w[i] * (age_[i] + dt);  // a history that enters mode j starts its clock at 0
       v += w[i] * pair_track_[i][j].v;
       a += w[i] * pair_track_[i][j].a;
     }
     v /= w_sum;
     a /= w_sum;
+    next_age[j] = age / w_sum;
     double pvv = 0.0, pva = 0.0, paa = 0.0;
     for (int i = 0; i < modes; ++i) {
       if (w[i] <= 0.0) continue;
@@ -711,6 +730,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
     keep_covariance(track_[j]);
     log_p[j] = top + std::log(w_sum);
   }
+  age_ = next_age;
   double top = -std::numeric_limits<double>::infinity();
   for (int j = 0; j < modes; ++j)
     top = std::max(top, log_p[j]);
@@ -725,8 +745,10 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   // from the belief of the moment, not from a speed drifted apart while nothing supported it. Nor does a
   // move-off once a gear has bitten: its guessed speed is superseded by the gear's.
   for (int j = 0; j < modes; ++j)
-    if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_))))
+    if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_)))) {
       track_[j] = track_[mode_];
+      age_[j] = 0.0;
+    }
   if (have_gps) {
     learn(dt, gps, freq);
     learn_shift(freq);
@@ -751,6 +773,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noex
       prob_[j] = weight_[j];
     for (Track& x : track_)
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
+    age_.fill(0.0);
     last_gps_ = -1.0;
     dt = 0.0;
   }

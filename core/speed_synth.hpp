@@ -13,18 +13,18 @@
 // the engine falls to idle (learned while GPS says the car stands, or taken from the fit) or runs free;
 // moving off, the clutch slips and the car gains speed at a launch acceleration until first gear bites.
 // Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
-// shifts down). A gear is scored by its innovation in its own units: within a dead zone of ordinary
-// jitter it costs per second of time, beyond it the jump costs once, however often step() is called
-// (at steps much shorter than an acceleration lasts, such a jump also reopens the acceleration, so that a
-// ramp the history did not expect is paid once too);
-// entering a gear is an event whose innovation counts whole; being declutched or moving off is scored per
-// second, and so is how usual the revs are in a gear for this driver (the fit's revs per gear, model
-// extra.revs): steady revs that several gears explain go, over time, to the gear this driver runs them in,
-// and a shift is the likelier the nearer it brings the revs to the new gear's band.
-// The idle may have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle.
-// Apart from that reopening, the result does not depend on the step rate.
-// The output follows the mode at the median of the belief (the most probable one while it holds half of
-// it). No look-ahead: every output depends only on past input.
+// shifts down; out of first gear the sooner the longer it has lasted, since first gear is for moving off). A
+// gear is scored by its innovation in its own units: within a dead zone of ordinary jitter it costs per
+// second of time, beyond it the jump costs once, however often step() is called (at steps much shorter than
+// an acceleration lasts, such a jump also reopens the acceleration, so that a ramp the history did not expect
+// is paid once too); entering a gear is an event whose innovation counts whole; being declutched or moving
+// off is scored per second, and so is how usual the revs are in a gear for this driver (the fit's revs per
+// gear, model extra.revs): steady revs that several gears explain go, over time, to the gear this driver runs
+// them in, and a shift is the likelier the nearer it brings the revs to the new gear's band. The idle may
+// have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle. Apart from that
+// reopening, the result does not depend on the step rate. The output follows the mode at the median of the
+// belief (the most probable one while it holds half of it). No look-ahead: every output depends only on past
+// input.
 //
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
@@ -71,6 +71,10 @@ struct SynthTuning {
   double idle_weight = 0.6;     // share of the declutched frequency density in the idle spike
   double lugging_first = 0.2;   // relative chance of first gear with the engine at idle (creeping)
   double lugging_other = 0.05;  // same for higher gears: drivers do not lug an engine at idle
+  // s: first gear is a launch gear, left for second within seconds of moving off: its upshift rate grows
+  // with the time spent in it, by 1 + (time / launch_gear_time)^2 (at most 6x; none while the revs stay
+  // near idle, creeping), where other gears' rates do not depend on how long they have been held.
+  double launch_gear_time = 3.0;
   // Weight, per second in a gear, of how usual the revs are in that gear for this driver (the model's
   // per-gear revs, recorded by the fit): a wrong gear that explains steady revs as well as the right one
   // loses to it at this rate. Tempered well below 1, since successive readings are far from independent.
@@ -158,6 +162,7 @@ class SpeedSynthesizer {
   double sigma_s_ = 0.0;
 
   ModeArray prob_{};  // max-product probabilities of the modes
+  ModeArray age_{};   // s in each mode, averaged over the histories that hold it (0 when just entered)
   TrackArray track_{};
   ModeArray next_p_{};
   ModeArray row_{};                             // transition probabilities out of one mode over this step

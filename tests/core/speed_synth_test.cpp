@@ -650,6 +650,54 @@ TEST_CASE("synth: moving off inside an outage follows first gear") {
   CHECK(out.back().gear == 2);
 }
 
+TEST_CASE(
+    "synth: a first gear held on after moving off gives way to second, whose upshift no reading showed") {
+  // An OBD logger polls every 2 s. GPS shows the car standing, then is lost; the car moves off, and between
+  // two readings the driver shifts to second and pulls the revs back up: 36 Hz in first, 33 in second. Both
+  // gears explain every later reading as well (first gear at half the speed, barely accelerating), but a
+  // driver does not stay in first gear at 33-46 Hz for half a minute after moving off.
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double idle[] = {13.0, 12.6, 12.1, 11.6, 11.4, 13.1, 13.6, 14.3, 11.8, 12.8, 13.0};
+  std::vector<Row> rows;
+  for (int k = 0; k < 11; ++k)
+    rows.push_back({2.0 * k, 0.0, idle[k], 0});
+  rows.push_back({22.0, 1.5, 22.0, 0});  // the clutch slips
+  rows.push_back({24.0, 4.5, 4.5 / kHatch[0], 1});
+  for (int k = 0; k < 20; ++k) {
+    const double v = 7.5 + 0.2 * k;
+    rows.push_back({26.0 + 2.0 * k, v, v / kHatch[1], 2});
+  }
+  const auto out = replay(synth, rows, 21.0);
+  CHECK(out[12].gear == 1);  // first gear while it lasts
+  for (std::size_t i = rows.size() - 5; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t << ", truth " << rows[i].speed * 3.6 << " km/h, synthesized "
+                << out[i].speed * 3.6 << " in gear " << out[i].gear);
+    CHECK(out[i].gear == 2);
+    CHECK(out[i].speed == Approx(rows[i].speed).margin(1.5 * kKmh));
+  }
+}
+
+TEST_CASE("synth: creeping in first gear near idle stays in first gear however long it lasts") {
+  // A queue: GPS shows the car standing, then is lost while it creeps in first gear for a minute at
+  // 15-19 Hz (7-9 km/h). First gear's urge to shift up grows with time only once the revs leave idle.
+  for (const double dt : {0.1, 1.0, 2.0}) {
+    SpeedSynthesizer synth(model_of(kHatch));
+    double t = 0.0;
+    for (; t < 20.0; t += dt)
+      synth.step(t, 0.0, kIdle + 0.5 * std::sin(t));
+    const double t0 = t;
+    for (; t < t0 + 60.0; t += dt) {
+      const double freq = 17.0 + 2.0 * std::sin(0.3 * (t - t0));
+      const SynthOutput out = synth.step(t, kMissing, freq);
+      if (t < t0 + 5.0) continue;  // first gear bites
+      INFO("step " << dt << " s, t = " << t << ": synthesized " << out.speed * 3.6 << " km/h in gear "
+                   << out.gear);
+      CHECK(out.gear == 1);
+      CHECK(out.speed == Approx(kHatch[0] * freq).margin(1.0 * kKmh));
+    }
+  }
+}
+
 TEST_CASE("synth: a quick move-off straight into second gear is seen under GPS and carried into the outage") {
   // An OBD logger polls every 2 s: GPS shows the car standing, slipping the clutch at 4 km/h, then already
   // at 13 km/h in second gear; GPS is lost as the car keeps accelerating in second.
