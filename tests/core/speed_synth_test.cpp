@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <new>
 #include <random>
@@ -64,6 +65,16 @@ std::vector<Row> script(double v0, const std::vector<Phase>& phases, const std::
       t += 1.0;
     }
   }
+  return rows;
+}
+
+// A car standing at a light as an OBD logger polling every 2 s sees it: `count` rows (at most 11) from
+// t = 0, speed 0, the idle wandering as a real one does.
+std::vector<Row> standing_polled_every_2s(int count) {
+  constexpr double kIdleWander[] = {13.0, 12.6, 12.1, 11.6, 11.4, 13.1, 13.6, 14.3, 11.8, 12.8, 13.0};
+  std::vector<Row> rows;
+  for (int k = 0; k < count && k < static_cast<int>(std::size(kIdleWander)); ++k)
+    rows.push_back({2.0 * k, 0.0, kIdleWander[k], 0});
   return rows;
 }
 
@@ -657,10 +668,7 @@ TEST_CASE(
   // gears explain every later reading as well (first gear at half the speed, barely accelerating), but a
   // driver does not stay in first gear at 33-46 Hz for half a minute after moving off.
   SpeedSynthesizer synth(model_of(kHatch));
-  const double idle[] = {13.0, 12.6, 12.1, 11.6, 11.4, 13.1, 13.6, 14.3, 11.8, 12.8, 13.0};
-  std::vector<Row> rows;
-  for (int k = 0; k < 11; ++k)
-    rows.push_back({2.0 * k, 0.0, idle[k], 0});
+  std::vector<Row> rows = standing_polled_every_2s(11);
   rows.push_back({22.0, 1.5, 22.0, 0});  // the clutch slips
   rows.push_back({24.0, 4.5, 4.5 / kHatch[0], 1});
   for (int k = 0; k < 20; ++k) {
@@ -703,10 +711,7 @@ TEST_CASE("synth: a quick move-off straight into second gear is seen under GPS a
   // at 13 km/h in second gear; GPS is lost as the car keeps accelerating in second.
   SpeedSynthesizer synth(model_of(kHatch));
   const double theta2 = kHatch[1];
-  std::vector<Row> rows;
-  const double idle[] = {13.0, 12.6, 12.1, 11.6, 11.4, 13.1, 13.6, 14.3, 11.8, 12.8};  // a real idle wanders
-  for (int k = 0; k < 10; ++k)
-    rows.push_back({2.0 * k, 0.0, idle[k], 0});
+  std::vector<Row> rows = standing_polled_every_2s(10);
   rows.push_back({20.0, 4.0 * kKmh, 20.6, 0});
   for (double v_kmh : {13.0, 20.0, 25.0, 29.0, 32.0})
     rows.push_back({rows.back().t + 2.0, v_kmh * kKmh, v_kmh * kKmh / theta2, 2});
