@@ -255,4 +255,77 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   return result;
 }
 
+namespace {
+
+// The line gps = slope x wheel + offset through pairs of speeds (Theil-Sen: the median of the pairwise
+// slopes, then the median offset), robust to GPS lag in accelerations and to a logger's rounding.
+std::pair<double, double> speed_line(const std::vector<std::pair<double, double>>& pairs) {
+  constexpr std::size_t kMaxPairs = 1500;  // a stride over longer logs: 1.1 M slopes at most
+  std::vector<std::pair<double, double>> use;
+  const std::size_t stride = (pairs.size() + kMaxPairs - 1) / kMaxPairs;
+  for (std::size_t i = 0; i < pairs.size(); i += stride)
+    use.push_back(pairs[i]);
+  constexpr double kMinSpan = 1.0;  // m/s of wheel speed between two pairs for a slope
+  std::vector<double> slopes;
+  for (std::size_t i = 0; i < use.size(); ++i)
+    for (std::size_t j = i + 1; j < use.size(); ++j) {
+      const double dw = use[j].first - use[i].first;
+      if (std::abs(dw) >= kMinSpan) slopes.push_back((use[j].second - use[i].second) / dw);
+    }
+  if (slopes.empty()) return {1.0, 0.0};
+  const auto median = [](std::vector<double>& v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  const double slope = median(slopes);
+  std::vector<double> offsets;
+  for (const auto& [w, g] : use)
+    offsets.push_back(g - slope * w);
+  return {slope, median(offsets)};
+}
+
+}  // namespace
+
+FitResult fit_gear_model_two_speeds(std::span<const TwoSpeedLog> logs, const FitOptions& options) {
+  constexpr double kMinSpeed = 2.0;  // m/s: GPS Doppler is coarse at a crawl
+  constexpr std::size_t kMinPairs = 30;
+  constexpr double kSteady = 1.0;                // m/s of change between the rows before and after
+  constexpr double kMaxSpan = 3.0;               // s between them
+  std::vector<std::pair<double, double>> pairs;  // (wheel, gps) at one instant
+  std::vector<Sample> gps, wheel;
+  for (const TwoSpeedLog& log : logs) {
+    gps.insert(gps.end(), log.gps.begin(), log.gps.end());
+    wheel.insert(wheel.end(), log.wheel.begin(), log.wheel.end());
+    // Both readings of a row carry its t; the readers keep rows in file order (t never falls). Only rows
+    // where the wheel speed holds count: GPS lags a changing speed.
+    const std::span<const Sample> ws = log.wheel;
+    std::size_t j = 0;
+    for (const Sample& g : log.gps) {
+      while (j < ws.size() && ws[j].t < g.t)
+        ++j;
+      if (j + 1 >= ws.size()) break;
+      if (j == 0 || ws[j].t != g.t || !g.has_speed() || !(g.speed > kMinSpeed)) continue;
+      const Sample &before = ws[j - 1], &w = ws[j], &after = ws[j + 1];
+      const bool steady = w.speed > kMinSpeed && after.t - before.t <= kMaxSpan &&
+                          std::abs(after.speed - before.speed) <= kSteady;
+      if (steady) pairs.emplace_back(w.speed, g.speed);
+    }
+  }
+  FitResult on_gps = fit_gear_model(gps, options);
+  // A ladder only the wheel speed shows is not taken: an automatic's lock-up clutch can hold two tight
+  // ratio clusters in the smooth wheel speed that GPS sees as the continuum they belong to.
+  if (pairs.size() < kMinPairs || on_gps.model.gears.empty()) return on_gps;
+  const auto [slope, offset] = speed_line(pairs);
+  if (!(slope > 0.5 && slope < 2.0)) return on_gps;  // not the same car's speed
+  for (Sample& w : wheel)
+    if (w.has_speed() && w.speed > 0.0) w.speed = std::max(slope * w.speed + offset, 0.0);
+  FitResult result = fit_gear_model(wheel, options);
+  // Whole km/h can blur a low gear that GPS resolves: the reading that shows more of the ladder wins.
+  if (result.model.gears.size() < on_gps.model.gears.size()) return on_gps;
+  result.model.extra["speed_scale"] = {
+      {"from", "wheel"}, {"slope", slope}, {"offset", offset}, {"pairs", pairs.size()}};
+  return result;
+}
+
 }  // namespace gearpulse

@@ -24,4 +24,23 @@ struct FitResult {
 // Samples lacking speed or frequency are ignored. Throws std::invalid_argument for unusable options.
 [[nodiscard]] FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& options);
 
+// One log read twice: speed over ground from GPS (what the daemon sees live) and the car's own wheel speed
+// (OBD), rows matched by t.
+struct TwoSpeedLog {
+  std::span<const Sample> gps;
+  std::span<const Sample> wheel;
+};
+
+// The ladder from the wheel speed, its scale from GPS. The gearbox ties the engine to the wheels: the
+// wheel speed shows a launch as it happens, where GPS Doppler lags by about a second and is coarse at a
+// crawl (first gear then smears into a continuum), but it reads the speedometer's calibration (tyre wear,
+// a maker's margin) and the logger's rounding (whole mph or km/h, often cut down). So the wheel speed is
+// mapped onto GPS speed by the line through the instants where both read a moving car (Theil-Sen), and
+// the model is fitted on it (model extra.speed_scale gives the line). The model is the fit on the GPS
+// speed alone when fewer than 30 such instants exist, when that fit finds no ladder (an automatic's
+// lock-up can leave tight ratio clusters in the smooth wheel speed that GPS shows as the continuum they
+// belong to), or when it finds more gears than the wheel speed does (whole km/h can blur a low gear).
+[[nodiscard]] FitResult fit_gear_model_two_speeds(std::span<const TwoSpeedLog> logs,
+                                                  const FitOptions& options);
+
 }  // namespace gearpulse

@@ -31,11 +31,13 @@ void check_ordered(const GearModel& model) {
   }
 }
 
-std::vector<Sample> read_real(const std::string& relative) {
+std::vector<Sample> read_real(const std::string& relative, TorqueSpeed speed = TorqueSpeed::kAuto) {
   const std::string path = std::string(GEARPULSE_REAL_DATA_DIR "/") + relative;
   std::ifstream in(path);
   if (!in) return {};
-  return read_samples(in, path).samples;
+  ReadOptions options;
+  options.torque_speed = speed;
+  return read_samples(in, path, options).samples;
 }
 
 // The Etios logs PREFIX1.csv .. PREFIX13.csv pooled (empty when the real logs are absent).
@@ -289,6 +291,86 @@ TEST_CASE("estimator: analytic observed information equals the numeric one") {
   }
 }
 
+// A log read twice at each 1 Hz row, as a Torque export with GPS beside the car's own speed: GPS Doppler
+// a second late and noisy, the wheel speed on time but reading `calibration` times the truth, cut down to
+// whole km/h.
+struct TwoSpeeds {
+  std::vector<Sample> gps, wheel;
+};
+
+TwoSpeeds two_speeds(const sim::Vehicle& car, sim::DrivingStyle style, std::uint64_t seed,
+                     double calibration) {
+  sim::DriveOptions opt;
+  opt.style = style;
+  opt.duration = 2400.0;
+  opt.dt = 0.1;
+  opt.seed = seed;
+  const sim::Drive drive = sim::simulate_drive(car, opt);
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  TwoSpeeds out;
+  for (double t = 1.0; t <= opt.duration; t += 1.0) {
+    const sim::TruthSample now = sim::truth_at(drive, t);
+    const double freq = now.freq + 0.2 * noise(rng);
+    out.gps.push_back({t, std::max(0.0, sim::truth_at(drive, t - 1.0).speed + 0.05 * noise(rng)), freq});
+    out.wheel.push_back({t, std::floor(now.speed * calibration * 3.6) / 3.6, freq});
+  }
+  return out;
+}
+
+TEST_CASE("estimator: two speeds: the ladder is read from the wheel speed, on the GPS scale") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  constexpr double kCalibration = 1.04;  // the speedometer reads 4 % high
+  const TwoSpeeds log = two_speeds(car, sim::DrivingStyle::kUrban, 11, kCalibration);
+  const TwoSpeedLog both[] = {{log.gps, log.wheel}};
+  const FitResult fit = fit_gear_model_two_speeds(both, {});
+  INFO("two speeds: " << serialize_model(fit.model));
+  REQUIRE(fit.model.gears.size() == car.theta.size());
+  check_ordered(fit.model);
+  // Every gear on the scale of true speed (which GPS reads, late): the wheel speed's 4 % and its cut-down
+  // half km/h are taken out.
+  for (std::size_t i = 0; i < car.theta.size(); ++i) {
+    INFO("gear " << i + 1);
+    CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.01));
+  }
+  const auto& scale = fit.model.extra["speed_scale"];
+  CHECK(scale["from"] == "wheel");
+  CHECK(scale["slope"].get<double>() == Approx(1.0 / kCalibration).epsilon(0.01));
+  // Flooring to whole km/h reads half a km/h low on average; the line puts it back.
+  CHECK(scale["offset"].get<double>() == Approx(0.5 / 3.6 / kCalibration).margin(0.07));
+  // The wheel speed as it reads would put every gear 4 % high.
+  const FitResult wheel_only = fit_gear_model(log.wheel, {});
+  REQUIRE(wheel_only.model.gears.size() == car.theta.size());
+  CHECK(wheel_only.model.gears.back().theta / car.theta.back() > 1.03);
+}
+
+TEST_CASE(
+    "estimator: two speeds: no ladder from the wheel speed alone, nor without moving instants in common") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  TwoSpeeds log = two_speeds(car, sim::DrivingStyle::kMixed, 12, 1.0);
+  // GPS that shows no ladder (here: speeds unrelated to the engine) keeps the model empty, whatever the
+  // wheel speed shows.
+  std::vector<Sample> unrelated = log.gps;
+  std::mt19937_64 rng(3);
+  std::shuffle(unrelated.begin(), unrelated.end(), rng);
+  for (std::size_t k = 0; k < unrelated.size(); ++k) {
+    unrelated[k].t = log.gps[k].t;
+    unrelated[k].freq = log.gps[k].freq;
+  }
+  const TwoSpeedLog no_ladder[] = {{unrelated, log.wheel}};
+  const FitResult a = fit_gear_model_two_speeds(no_ladder, {});
+  CHECK(a.model.gears.empty());
+  CHECK_FALSE(a.model.extra.contains("speed_scale"));
+  // Rows that never share a time: the GPS fit alone.
+  std::vector<Sample> shifted = log.wheel;
+  for (Sample& w : shifted)
+    w.t += 0.5;
+  const TwoSpeedLog apart[] = {{log.gps, shifted}};
+  const FitResult b = fit_gear_model_two_speeds(apart, {});
+  CHECK_FALSE(b.model.extra.contains("speed_scale"));
+  CHECK(serialize_model(b.model) == serialize_model(fit_gear_model(log.gps, {}).model));
+}
+
 TEST_CASE("estimator: real manual logs give ascending ladders and the automatic none") {
   const std::vector<Sample> etios = read_etios("drive");
   const auto louisville = read_real("torque-louisville/rpms_chart_from_obd.csv");
@@ -324,6 +406,23 @@ TEST_CASE("estimator: real manual logs give ascending ladders and the automatic 
   const FitResult a = fit_gear_model(automatic, {});
   CHECK(a.model.gears.empty());
   CHECK_FALSE(a.model.reason.empty());
+  // Both Torque exports read the speed from GPS and from the car, as `gearpulse fit` uses them. Louisville's
+  // GPS smears first gear (launches lag, a crawl is coarse); its wheel speed shows all five gears, and on
+  // the GPS scale the upper three agree with the GPS fit's. The automatic stays without a ladder.
+  const auto louisville_obd = read_real("torque-louisville/rpms_chart_from_obd.csv", TorqueSpeed::kObd);
+  const TwoSpeedLog louisville_both[] = {{louisville, louisville_obd}};
+  const FitResult l2 = fit_gear_model_two_speeds(louisville_both, {});
+  REQUIRE(l2.model.gears.size() == 5);
+  check_ordered(l2.model);
+  CHECK(l2.model.extra.contains("speed_scale"));
+  for (std::size_t i = 0; i < 3; ++i) {
+    INFO("gear " << i + 3);
+    CHECK(l2.model.gears[i + 2].theta ==
+          Approx(l.model.gears[l.model.gears.size() - 3 + i].theta).epsilon(0.02));
+  }
+  const auto automatic_obd = read_real("torque-automatic/trackLog.csv", TorqueSpeed::kObd);
+  const TwoSpeedLog automatic_both[] = {{automatic, automatic_obd}};
+  CHECK(fit_gear_model_two_speeds(automatic_both, {}).model.gears.empty());
 }
 
 TEST_CASE("estimator: the Swift log gives one five-gear ladder, the same from either half") {
