@@ -304,6 +304,26 @@ TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and n
   CHECK(run(dir, "fit --gears " + std::to_string(gears) + " " + log).err.empty());
 }
 
+TEST_CASE("cli: fit of a Torque export with GPS and OBD speed reads the gears from the wheel speed") {
+  const std::string log = GEARPULSE_REAL_DATA_DIR "/torque-louisville/rpms_chart_from_obd.csv";
+  if (!fs::exists(log)) {
+    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
+    return;
+  }
+  TempDir dir;
+  const Result both = run(dir, "fit " + log);
+  REQUIRE(both.status == 0);
+  const auto model = nlohmann::json::parse(both.out);
+  CHECK(model["gears"].size() == 5);
+  CHECK(model["extra"]["speed_scale"]["from"] == "wheel");
+  CHECK(both.err.find("OBD wheel speed") != std::string::npos);
+  // --speed gps is the GPS speed alone, as before.
+  const Result gps = run(dir, "fit --speed gps " + log);
+  REQUIRE(gps.status == 0);
+  CHECK_FALSE(nlohmann::json::parse(gps.out)["extra"].contains("speed_scale"));
+  CHECK(gps.err.find("OBD wheel speed") == std::string::npos);
+}
+
 TEST_CASE("cli: replay prints t speed gear source for every row") {
   TempDir dir;
   const std::string train = simulated_log(dir, 23);

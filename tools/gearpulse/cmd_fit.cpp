@@ -126,11 +126,36 @@ int run_fit(const FitCommand& cmd) {
                      ": nothing to fit: no sample has both a speed above zero and an engine frequency");
   }
 
+  // Torque exports that read the speed from GPS and from the car: the ladder from the wheel speed, scaled
+  // to GPS (core/estimator.hpp says why).
+  const std::vector<SampleLog> wheel =
+      read.torque_speed == TorqueSpeed::kAuto ? read_wheel_speeds(cmd.files, logs) : std::vector<SampleLog>{};
   FitResult result;
   try {
-    result = fit_gear_model(samples, options);
+    if (wheel.empty()) {
+      result = fit_gear_model(samples, options);
+    } else {
+      std::vector<TwoSpeedLog> both;
+      for (std::size_t i = 0; i < logs.size(); ++i)
+        both.push_back({logs[i].samples, wheel[i].samples});
+      result = fit_gear_model_two_speeds(both, options);
+    }
   } catch (const std::invalid_argument& e) {
     throw UsageError(e.what());
+  }
+  if (const auto scale = result.model.extra.find("speed_scale"); scale != result.model.extra.end()) {
+    // The plot shows what the ladder was read from, on the GPS scale.
+    const double slope = scale->value("slope", 1.0), offset = scale->value("offset", 0.0);
+    samples.clear();
+    for (const SampleLog& log : wheel)
+      for (Sample x : log.samples) {
+        if (x.has_speed() && x.speed > 0.0) x.speed = std::max(slope * x.speed + offset, 0.0);
+        samples.push_back(x);
+      }
+    std::fprintf(stderr,
+                 "gearpulse: gears read from the OBD wheel speed (no GPS lag), mapped onto GPS speed as "
+                 "%.4f x + %.3f m/s (%zu instants); --speed gps fits the GPS speed alone\n",
+                 slope, offset, scale->value("pairs", std::size_t{0}));
   }
   const std::string json = serialize_model(result.model);
   // Files first: a path that cannot be written is an error before anything is printed.
@@ -160,8 +185,10 @@ void add_fit(CLI::App& app, int& status) {
       "Prior ratios c1,... top gear down (paper's Table 2, e.g. 1.25,1.35,1.50,1.7): the paper's method");
   sub->add_option("--out", cmd->out, "Also write the model JSON to this file");
   sub->add_option("--plot", cmd->plot, "Write an SVG of the ratio histogram with the fitted gears");
-  sub->add_option("--speed", cmd->speed,
-                  "Torque Pro logs: speed column to use, auto (GPS if any), gps or obd")
+  sub->add_option(
+         "--speed", cmd->speed,
+         "Torque Pro logs: speed column to use, auto (GPS if any; with an OBD speed too, the gears are read "
+         "from the wheel speed mapped onto GPS), gps or obd")
       ->capture_default_str();
   sub->add_option("files", cmd->files, "Sample logs: t,speed,freq CSV, Torque Pro, Carloop or speed,rpm")
       ->required();

@@ -49,4 +49,24 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
   return logs;
 }
 
+std::vector<SampleLog> read_wheel_speeds(const std::vector<std::string>& paths,
+                                         const std::vector<SampleLog>& logs) {
+  std::vector<SampleLog> wheel;
+  if (paths.size() != logs.size()) return {};
+  for (std::size_t i = 0; i < logs.size(); ++i) {
+    if (logs[i].format != SampleFormat::kTorque || logs[i].speed_column.find("GPS") == std::string::npos)
+      return {};
+    std::ifstream in(paths[i], std::ios::binary);
+    if (!in) return {};
+    ReadOptions options;
+    options.torque_speed = TorqueSpeed::kObd;
+    try {
+      wheel.push_back(read_samples(in, paths[i], options));
+    } catch (const SampleFileError&) {
+      return {};  // no OBD speed column (or none usable): GPS alone
+    }
+  }
+  return wheel;
+}
+
 }  // namespace gearpulse::cli

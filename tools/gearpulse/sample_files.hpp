@@ -15,4 +15,10 @@ namespace gearpulse::cli {
 [[nodiscard]] std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths,
                                                        const ReadOptions& options);
 
+// The OBD wheel speed of Torque Pro exports whose speed was read from GPS (--speed auto), one log per path,
+// rows as `logs`: empty unless every log is such an export with an OBD speed column too. Bad rows were
+// reported by the first reading and are not again.
+[[nodiscard]] std::vector<SampleLog> read_wheel_speeds(const std::vector<std::string>& paths,
+                                                       const std::vector<SampleLog>& logs);
+
 }  // namespace gearpulse::cli
