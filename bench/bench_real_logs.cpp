@@ -40,6 +40,7 @@ namespace {
 struct Log {
   std::string name;
   std::vector<Sample> samples;
+  std::vector<Sample> wheel;  // a Torque export's OBD wheel speed beside its GPS speed, as `gearpulse fit`
 };
 
 std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
@@ -52,7 +53,18 @@ std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
   std::sort(paths.begin(), paths.end());
   for (const auto& p : paths) {
     std::ifstream in(p, std::ios::binary);
-    logs.push_back({p.filename().string(), gearpulse::read_samples(in, p.string()).samples});
+    const gearpulse::SampleLog log = gearpulse::read_samples(in, p.string());
+    logs.push_back({p.filename().string(), log.samples, {}});
+    if (log.format == gearpulse::SampleFormat::kTorque && log.speed_column.find("GPS") != std::string::npos) {
+      std::ifstream again(p, std::ios::binary);
+      gearpulse::ReadOptions obd;
+      obd.torque_speed = gearpulse::TorqueSpeed::kObd;
+      try {
+        logs.back().wheel = gearpulse::read_samples(again, p.string(), obd).samples;
+      } catch (const gearpulse::SampleFileError&) {
+        // no OBD speed: GPS alone
+      }
+    }
   }
   return logs;
 }
@@ -176,10 +188,19 @@ struct Fold {
   GearModel paper, model;
 };
 
-Fold fit_both(const std::vector<Sample>& train) {
+// The paper's method on the GPS speed; gearpulse's as `gearpulse fit` does it (with the wheel speed's
+// ladder where every training log also has one).
+Fold fit_both(const std::vector<Log>& train) {
   gearpulse::FitOptions paper_opt;
   paper_opt.ratios = {1.25, 1.35, 1.50, 1.7};  // Table 2, c1..c4 (top gear down)
-  return {gearpulse::fit_gear_model(train, paper_opt).model, gearpulse::fit_gear_model(train, {}).model};
+  const std::vector<Sample> gps = pool(train);
+  std::vector<gearpulse::TwoSpeedLog> both;
+  for (const Log& l : train)
+    if (!l.wheel.empty()) both.push_back({l.samples, l.wheel});
+  const GearModel model = both.size() == train.size() && !both.empty()
+                              ? gearpulse::fit_gear_model_two_speeds(both, {}).model
+                              : gearpulse::fit_gear_model(gps, {}).model;
+  return {gearpulse::fit_gear_model(gps, paper_opt).model, model};
 }
 
 std::string thetas(const GearModel& m) {
@@ -257,7 +278,7 @@ void report(const char* title, const Errors& e) {
 
 // Fit on `train`, replay every log of `test`.
 void run_fold(const char* label, const std::vector<Log>& train, const std::vector<Log>& test, Errors& e) {
-  const Fold f = fit_both(pool(train));
+  const Fold f = fit_both(train);
   std::printf("  fold %-28s paper theta %s\n", label, thetas(f.paper).c_str());
   std::printf("  %-33s auto  theta %s\n", "", thetas(f.model).c_str());
   for (const Log& l : test) {
@@ -304,10 +325,18 @@ int main(int argc, char** argv) {
   if (!louis.empty()) {
     const std::vector<Sample>& all = louis.front().samples;
     const std::size_t half = all.size() / 2;
-    const std::vector<Log> first = {{"first half", {all.begin(), all.begin() + static_cast<long>(half)}}};
-    const std::vector<Log> second = {{"second half", {all.begin() + static_cast<long>(half), all.end()}}};
+    const double split = all[half].t;
+    std::vector<Sample> wheel_first, wheel_second;
+    for (const Sample& w : louis.front().wheel)
+      (w.t < split ? wheel_first : wheel_second).push_back(w);
+    const std::vector<Log> first = {
+        {"first half", {all.begin(), all.begin() + static_cast<long>(half)}, wheel_first}};
+    const std::vector<Log> second = {
+        {"second half", {all.begin() + static_cast<long>(half), all.end()}, wheel_second}};
     Errors e;
-    std::printf("\nLouisville (Torque, 1 Hz GPS speed): cross-validation halves\n");
+    std::printf(
+        "\nLouisville (Torque, 1 Hz GPS speed; gearpulse's ladder from the OBD wheel speed, scaled to "
+        "GPS): cross-validation halves\n");
     run_fold("fit 1st half, replay 2nd", first, second, e);
     run_fold("fit 2nd half, replay 1st", second, first, e);
     report("Louisville", e);
