@@ -17,8 +17,11 @@ cmake --build build -j"$jobs"
 ctest --test-dir build --output-on-failure -j"$jobs"
 
 echo "== ASan+UBSan build + tests"
-# The benchmarks are built (with -Werror) above and not run here: the sanitizer build skips them.
+# The benchmarks are built (with -Werror) above and not run here: the sanitizer build skips them. -O1 and
+# line tables only (-g1, enough for the sanitizers' file:line reports) build it in about 6 minutes on 2
+# cores instead of about 11 with -O2 -g.
 cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
   -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF >/dev/null
 cmake --build build-asan -j"$jobs"
 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
