@@ -55,16 +55,8 @@ std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
     std::ifstream in(p, std::ios::binary);
     const gearpulse::SampleLog log = gearpulse::read_samples(in, p.string());
     logs.push_back({p.filename().string(), log.samples, {}});
-    if (log.format == gearpulse::SampleFormat::kTorque && log.speed_column.find("GPS") != std::string::npos) {
-      std::ifstream again(p, std::ios::binary);
-      gearpulse::ReadOptions obd;
-      obd.torque_speed = gearpulse::TorqueSpeed::kObd;
-      try {
-        logs.back().wheel = gearpulse::read_samples(again, p.string(), obd).samples;
-      } catch (const gearpulse::SampleFileError&) {
-        // no OBD speed: GPS alone
-      }
-    }
+    std::ifstream again(p, std::ios::binary);
+    if (auto wheel = gearpulse::read_wheel_speed(again, log)) logs.back().wheel = std::move(wheel->samples);
   }
   return logs;
 }
@@ -281,6 +273,9 @@ void run_fold(const char* label, const std::vector<Log>& train, const std::vecto
   const Fold f = fit_both(train);
   std::printf("  fold %-28s paper theta %s\n", label, thetas(f.paper).c_str());
   std::printf("  %-33s auto  theta %s\n", "", thetas(f.model).c_str());
+  if (const auto line = f.model.extra.find("speed_scale"); line != f.model.extra.end())
+    std::printf("  %-33s (wheel speed onto GPS: %.4f x %+.3f m/s over %zu rows)\n", "",
+                line->value("slope", 1.0), line->value("offset", 0.0), line->value("pairs", std::size_t{0}));
   for (const Log& l : test) {
     if (g_trace != nullptr) std::fprintf(g_trace, "# %s\n", l.name.c_str());
     replay(l.samples, f.paper, f.model, e);

@@ -539,6 +539,20 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   return out.finish();
 }
 
+std::optional<SampleLog> read_wheel_speed(std::istream& in, const SampleLog& log) {
+  const bool from_gps =
+      std::any_of(std::begin(kTorqueSpeeds), std::end(kTorqueSpeeds),
+                  [&](const SpeedColumn& c) { return c.gps && log.speed_column == c.header; });
+  if (log.format != SampleFormat::kTorque || !from_gps) return std::nullopt;
+  ReadOptions options;
+  options.torque_speed = TorqueSpeed::kObd;
+  try {
+    return read_samples(in, log.name, options);
+  } catch (const SampleFileError&) {
+    return std::nullopt;  // no OBD speed column, or none usable
+  }
+}
+
 void write_samples(std::ostream& out, std::span<const Sample> samples) {
   out << "t,speed,freq\n";
   char buf[96];

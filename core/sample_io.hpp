@@ -8,6 +8,7 @@
 // skipped and reported as "name:line: reason"; a log with no usable sample is an error.
 #include <cstddef>
 #include <iosfwd>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -59,6 +60,11 @@ struct SampleFileError : std::runtime_error {
 
 [[nodiscard]] SampleLog read_samples(std::istream& in, std::string_view name,
                                      const ReadOptions& options = {});
+
+// For a Torque Pro export whose speed `log` read from GPS: the same export's rows with the car's OBD
+// (wheel) speed instead, read from `in` (the same file again); nothing when `log` is not such an export or
+// the export has no usable OBD speed. Bad rows were reported by the first reading.
+[[nodiscard]] std::optional<SampleLog> read_wheel_speed(std::istream& in, const SampleLog& log);
 
 // Writes the generic CSV (`t,speed,freq`, empty cell = missing) with enough digits to round-trip.
 void write_samples(std::ostream& out, std::span<const Sample> samples);

@@ -227,6 +227,34 @@ TEST_CASE("io: Torque exports pick GPS or OBD speed and unwrap the clock") {
   CHECK(log.samples[1].speed == Approx(23 * 0.44704));
 }
 
+TEST_CASE("io: the wheel speed of a Torque export read from GPS, row for row, and of nothing else") {
+  const std::string both =
+      "GPS Time, Device Time,GPS Speed (Meters/second),Engine RPM(rpm),Speed (OBD)(mph)\n"
+      "Thu Jan 11 19:59:58 EST 2018,59:58.5,10,2000,22\n"
+      "Thu Jan 11 19:59:59 EST 2018,59:59.5,11,2100,24\n";
+  const SampleLog gps = read_text(both);
+  std::istringstream again(both);
+  const std::optional<SampleLog> wheel = gearpulse::read_wheel_speed(again, gps);
+  REQUIRE(wheel);
+  CHECK(wheel->speed_column == "Speed (OBD)(mph)");
+  REQUIRE(wheel->samples.size() == gps.samples.size());
+  CHECK(wheel->samples[1].t == gps.samples[1].t);
+  CHECK(wheel->samples[1].speed == Approx(24 * 0.44704));
+  // Read from the OBD speed already, no OBD column, or not a Torque export: nothing.
+  gearpulse::ReadOptions obd;
+  obd.torque_speed = gearpulse::TorqueSpeed::kObd;
+  std::istringstream third(both);
+  CHECK_FALSE(gearpulse::read_wheel_speed(third, read_text(both, obd)));
+  const std::string gps_only =
+      "GPS Time, Device Time,GPS Speed (Meters/second),Engine RPM(rpm)\n"
+      "Thu Jan 11 19:59:58 EST 2018,59:58.5,10,2000\n";
+  std::istringstream in_gps_only(gps_only);
+  CHECK_FALSE(gearpulse::read_wheel_speed(in_gps_only, read_text(gps_only)));
+  const std::string generic = "t,speed,freq\n0,10,30\n";
+  std::istringstream in_generic(generic);
+  CHECK_FALSE(gearpulse::read_wheel_speed(in_generic, read_text(generic)));
+}
+
 TEST_CASE("io: written CSV reads back") {
   const std::vector<Sample> in = {
       {0.0, 1.25, 40.5}, {0.5, gearpulse::kMissing, 41.0}, {1.0, 3.0, gearpulse::kMissing}};

@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <string>
 
 #include "tools/gearpulse/commands.hpp"
@@ -54,17 +55,10 @@ std::vector<SampleLog> read_wheel_speeds(const std::vector<std::string>& paths,
   std::vector<SampleLog> wheel;
   if (paths.size() != logs.size()) return {};
   for (std::size_t i = 0; i < logs.size(); ++i) {
-    if (logs[i].format != SampleFormat::kTorque || logs[i].speed_column.find("GPS") == std::string::npos)
-      return {};
     std::ifstream in(paths[i], std::ios::binary);
-    if (!in) return {};
-    ReadOptions options;
-    options.torque_speed = TorqueSpeed::kObd;
-    try {
-      wheel.push_back(read_samples(in, paths[i], options));
-    } catch (const SampleFileError&) {
-      return {};  // no OBD speed column (or none usable): GPS alone
-    }
+    std::optional<SampleLog> w = in ? read_wheel_speed(in, logs[i]) : std::nullopt;
+    if (!w) return {};  // GPS alone
+    wheel.push_back(std::move(*w));
   }
   return wheel;
 }
