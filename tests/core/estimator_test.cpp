@@ -345,11 +345,13 @@ TEST_CASE("estimator: two speeds: the ladder is read from the wheel speed, on th
 }
 
 TEST_CASE(
-    "estimator: two speeds: no ladder from the wheel speed alone, nor without moving instants in common") {
+    "estimator: two speeds: GPS alone without a GPS ladder, without rows in common, or with fewer wheel "
+    "gears") {
   const sim::Vehicle car = sim::vehicle_preset("hatch-5");
   TwoSpeeds log = two_speeds(car, sim::DrivingStyle::kMixed, 12, 1.0);
   // GPS that shows no ladder (here: speeds unrelated to the engine) keeps the model empty, whatever the
-  // wheel speed shows.
+  // wheel speed shows. (Shuffled, GPS is unrelated to the wheel speed too, so the line's slope guard
+  // answers as well; the automatic's real log, whose two speeds agree, checks the ladder rule alone.)
   std::vector<Sample> unrelated = log.gps;
   std::mt19937_64 rng(3);
   std::shuffle(unrelated.begin(), unrelated.end(), rng);
@@ -368,7 +370,17 @@ TEST_CASE(
   const TwoSpeedLog apart[] = {{log.gps, shifted}};
   const FitResult b = fit_gear_model_two_speeds(apart, {});
   CHECK_FALSE(b.model.extra.contains("speed_scale"));
-  CHECK(serialize_model(b.model) == serialize_model(fit_gear_model(log.gps, {}).model));
+  const GearModel gps_alone = fit_gear_model(log.gps, {}).model;
+  CHECK(serialize_model(b.model) == serialize_model(gps_alone));
+  // A wheel speed logged in 10 km/h steps blurs the low gears that GPS resolves: the GPS fit is kept.
+  std::vector<Sample> coarse = log.wheel;
+  for (Sample& w : coarse)
+    w.speed = std::round(w.speed * 3.6 / 10.0) * 10.0 / 3.6;
+  REQUIRE(fit_gear_model(coarse, {}).model.gears.size() < gps_alone.gears.size());
+  const TwoSpeedLog blurred[] = {{log.gps, coarse}};
+  const FitResult c = fit_gear_model_two_speeds(blurred, {});
+  CHECK_FALSE(c.model.extra.contains("speed_scale"));
+  CHECK(serialize_model(c.model) == serialize_model(gps_alone));
 }
 
 TEST_CASE("estimator: real manual logs give ascending ladders and the automatic none") {
