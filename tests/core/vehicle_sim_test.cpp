@@ -1,7 +1,9 @@
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <set>
 
 #include "tools/sim/vehicle_sim.hpp"
 
@@ -93,6 +95,48 @@ TEST_CASE("sim: CVT and presets are valid and unknown names are rejected") {
   }
   CHECK_THROWS_AS(sim::vehicle_preset("no-such-car"), std::invalid_argument);
   CHECK_THROWS_AS(sim::parse_style("rally"), std::invalid_argument);
+}
+
+TEST_CASE("sim: random vehicles are plausible manual cars and repeat by seed") {
+  std::set<int> gear_counts;
+  double lowest_idle = 1e9, highest_idle = 0.0;
+  for (std::uint64_t seed = 1; seed <= 60; ++seed) {
+    const sim::Vehicle v = sim::random_vehicle(seed);
+    INFO(v.name);
+    CHECK(v.name == "random-" + std::to_string(seed));
+    REQUIRE(v.gears() >= 4);
+    REQUIRE(v.gears() <= 7);
+    gear_counts.insert(v.gears());
+    // A progressive ladder: every step a real gearbox could have, none wider than the one below it.
+    for (int i = 1; i < v.gears(); ++i) {
+      const double step = v.theta[static_cast<std::size_t>(i)] / v.theta[static_cast<std::size_t>(i - 1)];
+      CHECK(step > 1.1);
+      CHECK(step < 2.3);
+      if (i > 1)
+        CHECK(step <= v.theta[static_cast<std::size_t>(i - 1)] / v.theta[static_cast<std::size_t>(i - 2)]);
+    }
+    const double spread = v.theta.back() / v.theta.front();
+    CHECK(spread >= 3.0);
+    CHECK(spread <= 5.2);
+    // Revs in the order a driver uses them, and top gear at a road speed per 1000 rpm of a road car.
+    CHECK(v.idle_freq * 1.3 < v.downshift_freq);
+    CHECK(v.downshift_freq < v.upshift_freq);
+    CHECK(v.upshift_freq < v.max_freq);
+    // Top gear at idle revs: a road car's 15-40 km/h, whatever multiple of the crank the component is.
+    const double top_at_idle_kmh = v.theta.back() * v.idle_freq * 3.6;
+    CHECK(top_at_idle_kmh > 15.0);
+    CHECK(top_at_idle_kmh < 40.0);
+    lowest_idle = std::min(lowest_idle, v.idle_freq);
+    highest_idle = std::max(highest_idle, v.idle_freq);
+    const sim::Drive d = sim::simulate_drive(v, {sim::DrivingStyle::kMixed, 300.0, 1.0, seed});
+    CHECK(d.truth.size() == 301);
+    // Same seed, same vehicle.
+    CHECK(sim::random_vehicle(seed).theta == v.theta);
+  }
+  CHECK(gear_counts.size() == 4);  // 4, 5, 6 and 7 gears all drawn
+  CHECK(lowest_idle < 16.0);       // the crank ...
+  CHECK(highest_idle > 45.0);      // ... and firing frequencies several times higher
+  CHECK(sim::random_vehicle(1).theta != sim::random_vehicle(2).theta);
 }
 
 TEST_CASE("sim: the driver does not hunt between two gears") {

@@ -1,5 +1,8 @@
 // Vehicle presets. Apart from the paper's BMW, the ladders are invented but plausible: gearbox ratios of
 // common cars divided into a top-gear scale, the engine component being the crank frequency (rpm / 60).
+#include <algorithm>
+#include <cmath>
+#include <random>
 #include <stdexcept>
 #include <string>
 
@@ -72,6 +75,44 @@ std::vector<Vehicle> vehicle_presets() {
     out.push_back(std::move(v));
   }
   return out;
+}
+
+Vehicle random_vehicle(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  const int gears = std::uniform_int_distribution<int>(4, 7)(rng);
+  // Overall spread first / top and how progressive the steps are: step i (from the bottom) is
+  // proportional in log to (1 + progression)^((gears - 2 - i) / (gears - 1)).
+  const double spread = uniform(3.0, 5.2);
+  const double progression = uniform(0.5, 1.0);
+  std::vector<double> weight(static_cast<std::size_t>(gears - 1));
+  double weight_sum = 0.0;
+  for (int i = 0; i + 1 < gears; ++i) {
+    weight[static_cast<std::size_t>(i)] =
+        std::pow(1.0 + progression, double(gears - 2 - i) / double(gears - 1));
+    weight_sum += weight[static_cast<std::size_t>(i)];
+  }
+  // The component tracked: the crank frequency (what OBD rpm / 60 gives), or a firing frequency (an
+  // engine of 4, 6, 8 or 12 cylinders fires 2, 3, 4 or 6 times per turn), where the lighter's ripple is.
+  static constexpr double kMultiples[] = {1.0, 2.0, 2.0, 3.0, 4.0, 6.0};
+  const double multiple = kMultiples[std::uniform_int_distribution<int>(0, 5)(rng)];
+  const double top_theta = uniform(0.40, 0.70) / multiple;  // m/s per Hz of the component, top gear
+  Vehicle v;
+  v.name = "random-" + std::to_string(seed);
+  // theta from the top down: each step divides by exp(log(spread) * weight / weight_sum).
+  v.theta.assign(static_cast<std::size_t>(gears), top_theta);
+  for (int i = gears - 2; i >= 0; --i)
+    v.theta[static_cast<std::size_t>(i)] =
+        v.theta[static_cast<std::size_t>(i + 1)] /
+        std::exp(std::log(spread) * weight[static_cast<std::size_t>(i)] / weight_sum);
+  v.idle_freq = uniform(11.5, 15.0) * multiple;  // 700-900 rpm
+  v.max_freq = uniform(75.0, 110.0) * multiple;  // 4500-6600 rpm
+  // Shift points relative to idle: up at 2.2-4x idle (about 1700-3300 rpm), down at 1.35-2x idle (about
+  // 1000-1700 rpm, the low end a frugal driver's or a diesel's), at most two thirds of the way up.
+  v.upshift_freq = uniform(2.2, 4.0) * v.idle_freq;
+  v.downshift_freq = std::min(uniform(1.35, 2.0) * v.idle_freq, 0.67 * v.upshift_freq);
+  v.max_accel = uniform(1.8, 3.4);
+  return v;
 }
 
 Vehicle vehicle_preset(std::string_view name) {

@@ -40,6 +40,12 @@ struct Vehicle {
 [[nodiscard]] std::vector<Vehicle> vehicle_presets();
 // Throws std::invalid_argument for an unknown name.
 [[nodiscard]] Vehicle vehicle_preset(std::string_view name);
+// A manual vehicle drawn at random, for checks beyond the presets: 4-7 gears, a progressive ladder (the
+// steps shrink toward the top, as real gearboxes' do) from a first gear 3.0-5.2x as short as the top,
+// the engine component a 0.5x-6x multiple of the crank frequency (a harmonic, an alternator's ripple),
+// idle, rev limit, the driver's shift points and the car's pull drawn from plausible ranges. The same
+// seed gives the same vehicle ("random-SEED").
+[[nodiscard]] Vehicle random_vehicle(std::uint64_t seed);
 
 enum class DrivingStyle { kMixed, kUrban, kHighway, kTrafficJam };
 [[nodiscard]] std::string_view style_name(DrivingStyle style) noexcept;
