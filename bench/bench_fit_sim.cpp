@@ -1,5 +1,6 @@
 // Accuracy of the estimator on simulated drives: vehicles x driving styles (40 min at 1 Hz) in auto mode
-// and in the paper's mode, then a Monte-Carlo run comparing the spread of theta with the Cramer-Rao bound.
+// and in the paper's mode, the same on vehicles drawn at random (sim::random_vehicle: nothing tuned to the
+// presets), then a Monte-Carlo run comparing the spread of theta with the Cramer-Rao bound.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -148,6 +149,48 @@ void accuracy_table(int seeds) {
   std::printf("(* = wrong count or an error above 0.5 %%)\n");
 }
 
+// Auto mode on vehicles drawn at random, one 40-minute drive at 1 Hz each, the styles in turn.
+void random_vehicles(int count) {
+  std::printf("\n== random vehicles (sim::random_vehicle 5000..%d), 40 min at 1 Hz, styles in turn\n",
+              5000 + count - 1);
+  int ok = 0;
+  int right_count = 0;
+  int used_rarely = 0;
+  std::string misses;
+  for (int r = 0; r < count; ++r) {
+    const sim::Vehicle car = sim::random_vehicle(5000 + static_cast<std::uint64_t>(r));
+    const sim::DrivingStyle style = kStyles[r % 4];
+    const auto observed =
+        sim::simulate_observations(car, style, 2400.0, 1, 1 + static_cast<std::uint64_t>(r));
+    const Score a = score(car, fit_gear_model(sim::to_samples(observed), {}).model);
+    ok += a.ok ? 1 : 0;
+    right_count += a.found == car.theta.size() ? 1 : 0;
+    if (a.ok) continue;
+    const std::vector<int> n = engaged_counts(car, observed);
+    std::string counts;
+    for (int c : n)
+      counts += (counts.empty() ? "" : ",") + std::to_string(c);
+    const int least = a.found == car.theta.size() ? n[static_cast<std::size_t>(a.worst)]
+                                                  : *std::min_element(n.begin(), n.end());
+    used_rarely += least < 40 ? 1 : 0;
+    char why[200];
+    if (a.found == car.theta.size())
+      std::snprintf(why, sizeof why, "  %s (%d gears) %s: gear %d off %.2f %%; gears engaged [%s] times\n",
+                    car.name.c_str(), car.gears(), std::string(sim::style_name(style)).c_str(), a.worst + 1,
+                    a.max_error, counts.c_str());
+    else
+      std::snprintf(why, sizeof why, "  %s (%d gears) %s: %zu gears found; gears engaged [%s] times\n",
+                    car.name.c_str(), car.gears(), std::string(sim::style_name(style)).c_str(), a.found,
+                    counts.c_str());
+    misses += why;
+  }
+  std::printf("misses:\n%s", misses.c_str());
+  std::printf("random vehicles: right count %d / %d; right count and every theta within 0.5 %%: %d / %d\n",
+              right_count, count, ok, count);
+  std::printf("misses on a gear engaged fewer than 40 times in the drive: %d / %d\n", used_rarely,
+              count - ok);
+}
+
 detail::MixtureData mixture_data(const std::vector<Sample>& samples) {
   detail::MixtureData data;
   for (const Sample& x : samples) {
@@ -266,8 +309,11 @@ void monte_carlo(int runs) {
 int main(int argc, char** argv) {
   const int seeds = argc > 1 ? std::atoi(argv[1]) : 2;
   const int runs = argc > 2 ? std::atoi(argv[2]) : 50;
-  std::printf("bench_fit_sim [seeds per cell = %d] [Monte-Carlo runs = %d]\n", seeds, runs);
-  accuracy_table(seeds);
-  monte_carlo(runs);
+  const int random = argc > 3 ? std::atoi(argv[3]) : 40;
+  std::printf("bench_fit_sim [seeds per cell = %d] [Monte-Carlo runs = %d] [random vehicles = %d]\n", seeds,
+              runs, random);
+  if (seeds > 0) accuracy_table(seeds);
+  if (random > 0) random_vehicles(random);
+  if (runs > 0) monte_carlo(runs);
   return 0;
 }
