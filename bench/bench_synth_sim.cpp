@@ -15,8 +15,10 @@
 // all three, so a synthesis that does not depend on the sample rate gives about the same 1 Hz and 10 Hz
 // figures. "gear off" is the share of outage samples with the clutch engaged in which the synthesizer's
 // gear (mapped to the true gear of nearest theta) differs from the true gear or is none.
-// Usage: bench_synth_sim [SEED] [--quick] [--trace FILE]   (--trace: every outage row as CSV, with the true
-// gear and clutch state beside the synthesis; the synthesizer's gear is mapped to the true gear)
+// Usage: bench_synth_sim [SEED] [--quick] [--random N] [--trace FILE]   (--random N: N vehicles drawn by
+// sim::random_vehicle instead of the presets, one round each, so that nothing here is tuned to the
+// presets; --trace: every outage row as CSV, with the true gear and clutch state beside the synthesis;
+// the synthesizer's gear is mapped to the true gear)
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -173,11 +175,18 @@ constexpr bool starts_cold(std::size_t replay) {
 int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   bool quick = false;
+  int random = 0;
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
   for (int i = 1; i < argc; ++i) {
     const std::string_view arg = argv[i];
     if (arg == "--quick") {
       quick = true;
+    } else if (arg == "--random" && i + 1 < argc) {
+      random = std::atoi(argv[++i]);
+      if (random < 1) {
+        std::fprintf(stderr, "bench_synth_sim: --random needs a count >= 1\n");
+        return 2;
+      }
     } else if (arg == "--trace" && i + 1 < argc) {
       trace.reset(std::fopen(argv[++i], "w"));
       if (!trace) {
@@ -190,7 +199,7 @@ int main(int argc, char** argv) {
       char* end = nullptr;
       const unsigned long long v = std::strtoull(argv[i], &end, 10);
       if (argv[i][0] == '-' || end == argv[i] || *end != '\0') {
-        std::fprintf(stderr, "usage: bench_synth_sim [SEED] [--quick] [--trace FILE]\n");
+        std::fprintf(stderr, "usage: bench_synth_sim [SEED] [--quick] [--random N] [--trace FILE]\n");
         return 2;
       }
       seed = v;
@@ -198,12 +207,18 @@ int main(int argc, char** argv) {
   }
   const auto start = std::chrono::steady_clock::now();
 
-  const std::vector<std::string> vehicles =
-      quick ? std::vector<std::string>{"hatch-5", "close-6", "bmw-520i"}
-            : std::vector<std::string>{"hatch-5", "close-6",   "wide-4",  "van-6",
-                                       "sport-7", "compact-4", "bmw-520i"};
+  std::vector<sim::Vehicle> vehicles;
+  if (random > 0) {
+    for (int i = 0; i < random; ++i)
+      vehicles.push_back(sim::random_vehicle(seed * 1000 + static_cast<std::uint64_t>(i)));
+  } else {
+    for (const char* name : quick ? std::vector<const char*>{"hatch-5", "close-6", "bmw-520i"}
+                                  : std::vector<const char*>{"hatch-5", "close-6", "wide-4", "van-6",
+                                                             "sport-7", "compact-4", "bmw-520i"})
+      vehicles.push_back(sim::vehicle_preset(name));
+  }
   const double train_duration = quick ? 1200.0 : 2400.0;
-  const int rounds = quick ? 1 : 5;
+  const int rounds = quick || random > 0 ? 1 : 5;
   const std::vector<ReplayDrive> replays =
       quick
           ? std::vector<ReplayDrive>{{sim::DrivingStyle::kUrban, 900.0}, {sim::DrivingStyle::kHighway, 900.0}}
@@ -234,8 +249,8 @@ int main(int argc, char** argv) {
 
   std::vector<Errors> overall(kinds.size());
   std::vector<std::vector<Errors>> by_style(kinds.size(), std::vector<Errors>(replays.size()));
-  for (const std::string& name : vehicles) {
-    const sim::Vehicle car = sim::vehicle_preset(name);
+  for (const sim::Vehicle& car : vehicles) {
+    const std::string& name = car.name;
     std::vector<Errors> per_kind(kinds.size());
     std::vector<std::string> found(kinds.size());
     std::vector<double> worst_theta(kinds.size(), -1.0);
