@@ -7,10 +7,11 @@
 namespace gearpulse {
 namespace {
 
-constexpr double kMinProb = 1e-9;         // keeps every mode recoverable
-constexpr double kNegligible = 1e-2;      // belief, relative to the leading mode, worth a history of its own
-constexpr double kInitialSpeedVar = 1.0;  // (m/s)^2: a cold start is most likely near standstill
-constexpr double kMaxSpeedVar = 25.0;     // (m/s)^2: a coasting guess is never "anything at all"
+constexpr double kMinProb = 1e-9;          // keeps every mode recoverable
+constexpr double kNegligible = 1e-2;       // belief, relative to the leading mode, worth a history of its own
+constexpr double kClutchTrackShare = 0.5;  // the same for the clutch led by a gear (outage, short steps)
+constexpr double kInitialSpeedVar = 1.0;   // (m/s)^2: a cold start is most likely near standstill
+constexpr double kMaxSpeedVar = 25.0;      // (m/s)^2: a coasting guess is never "anything at all"
 constexpr double kLostGearLogEvidence = -3.0;  // a gear when the frequency is lost (about e^-3 per second)
 constexpr double kDefaultClutchShare =
     0.15;                                // declutched share when the model gives none (cf. beta, eq. (6))
@@ -743,9 +744,19 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   prev_freq_ = freq;
   // A hypothesis grown negligible keeps no history of its own: if the car later shows it, it is entered
   // from the belief of the moment, not from a speed drifted apart while nothing supported it. Nor does a
-  // move-off once a gear has bitten: its guessed speed is superseded by the gear's.
+  // move-off once a gear has bitten: its guessed speed is superseded by the gear's. Nor, at the tracker's
+  // short steps through an outage, does the clutch while a gear outweighs it: declutched, the revs say
+  // nothing of the speed, so its own history has coasted unseen while the gear's revs followed the car
+  // (a second after a shift under acceleration it still holds a tenth of the belief and lags by a few
+  // km/h). Mixed into the clutch's speed when the clutch does go out at the next shift, that lag makes
+  // the gear below the next one fit the revs when the clutch comes back in, and the filter climbs the
+  // ladder one gear low. At longer steps a declutch and a re-engagement can both fall between two
+  // readings, and a coasting history is a real alternative.
+  const bool clutch_follows_gear =
+      short_step && !have_gps && is_gear(mode_) && prob_[0] < kClutchTrackShare * prob_[mode_];
   for (int j = 0; j < modes; ++j)
-    if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_)))) {
+    if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_)) ||
+                       (j == 0 && clutch_follows_gear))) {
       track_[j] = track_[mode_];
       age_[j] = 0.0;
     }
