@@ -675,6 +675,14 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       // all along once GPS is lost, whatever gain GPS showed it (a slipping clutch, revs no gear explains).
       if (j == 0 && (i != 0 || !have_gps)) x.a = std::min(x.a, 0.0);
       predict(x, moving_off ? launch_mode() : j, dt);
+      // A slipping clutch says only that the car is no faster than first gear turns the revs into: when
+      // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the
+      // gap up to the gear's reading, so a hard launch is not lost to the clutch for having gained more
+      // than the guess (at 1 Hz and slower that guess already spans a whole launch, and measured better).
+      if (short_step && is_gear(j) && (i == launch_mode() || moving_off) && std::isfinite(freq)) {
+        const double gap = theta_[j] * freq - x.v;
+        if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
+      }
       double gps_score = 0.0;
       if (have_gps) {
         // GPS pins the speed and the frequency tells the mode; but a history GPS contradicts beyond

@@ -570,6 +570,23 @@ TEST_CASE("synth: at 10 Hz a seven-speed climbs its ladder in an outage without 
   CHECK(checked == 521);  // 18.0 to 70.0 s
 }
 
+TEST_CASE("synth: at 10 Hz a launch faster than the move-off's guess is taken up when the clutch bites") {
+  // Recorded from the simulator (a random 5-speed): in a jam, GPS is lost with the car at rest; it moves
+  // off hard, 0 to 20 km/h in under two seconds with the clutch slipping, then shifts up to fifth. The
+  // move-off's guessed speed (a launch acceleration from rest) was 9 km/h when first gear bit at 20, and
+  // entering first gear from it cost more than staying declutched; the filter then took second gear's
+  // revs for first and climbed the ladder one gear low (44 km/h in fourth at a true 57 in fifth).
+  int checked = 0;
+  replay_recording("hard_launch_five_speed", "10hz", [&](double t, double truth, const SynthOutput& out) {
+    if (t < 17.0 || t > 68.0) return;  // from 17 s the clutch has bitten; at 68 s the car brakes hard
+    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
+                << out.gear);
+    CHECK(std::abs(out.speed - truth) < 5.0 * kKmh);
+    ++checked;
+  });
+  CHECK(checked == 511);  // 17.0 to 68.0 s
+}
+
 TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through four upshifts") {
   // Recorded from the simulator: in a jam, GPS is lost with the car at rest; it moves off hard (the revs
   // held at 27 Hz while the clutch slips, then 1.9 m/s^2 in first gear) and shifts up to fourth. While the
