@@ -604,11 +604,15 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // of a second, a first gear entered 5 km/h below a declutched car's speed cost next to nothing, since
   // its revs turn that into a spread no wider than the second gear's at the right speed).
   const double z2 = innovation * innovation / s;
-  // A departure beyond the dead zone at a short step is a manoeuvre (a clutch biting, a hard launch in
-  // first gear): the acceleration is open again, so the next readings find the new one and a ramp is paid
-  // for once, as a jump is, not at every reading. A longer step's prediction already carries that
-  // uncertainty (a fifth of the stationary spread or more from a tenth of accel_time on).
-  if (short_step && z2 > kDeadZone * kDeadZone)
+  // A departure beyond the dead zone upward at a short step is a manoeuvre (a clutch biting, a hard launch
+  // in first gear): the acceleration is open again, so the next readings find the new one and a ramp is
+  // paid for once, as a jump is, not at every reading. Not downward: a car's deceleration in gear builds
+  // up over the moment its brakes take, while revs falling at once at a steady speed are the clutch going
+  // out, which the declutched mode explains; reopened, a gear's history read a shift's falling revs as
+  // braking at no more than one jump's cost and outlived the shift one gear low. A longer step's
+  // prediction already carries that uncertainty (a fifth of the stationary spread or more from a tenth of
+  // accel_time on).
+  if (short_step && z2 > kDeadZone * kDeadZone && innovation > 0.0)
     x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
   return -jump_cost(z2) - 0.5 * (entering ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
          weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);

@@ -587,6 +587,23 @@ TEST_CASE("synth: at 10 Hz a launch faster than the move-off's guess is taken up
   CHECK(checked == 511);  // 17.0 to 68.0 s
 }
 
+TEST_CASE("synth: at 10 Hz braking with two downshifts in an outage is followed down the ladder") {
+  // Recorded from the simulator (a random 4-speed): GPS is lost while the car cruises at 53 km/h; it
+  // brakes to 25 km/h, shifting down twice with the revs blipped while declutched. Read as braking in the
+  // old gear at one jump's cost (the acceleration reopened by a fall of revs as by a rise), the downshifts'
+  // revs left a gear history that outlived them, and the filter ended two gears low (14 km/h in first at
+  // a true 25 in second).
+  int checked = 0;
+  replay_recording("braking_downshifts", "10hz", [&](double t, double truth, const SynthOutput& out) {
+    if (t < 24.0) return;  // from 24 s the car brakes
+    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
+                << out.gear);
+    CHECK(std::abs(out.speed - truth) < 5.0 * kKmh);
+    ++checked;
+  });
+  CHECK(checked == 461);  // 24.0 to 70.0 s
+}
+
 TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through four upshifts") {
   // Recorded from the simulator: in a jam, GPS is lost with the car at rest; it moves off hard (the revs
   // held at 27 Hz while the clutch slips, then 1.9 m/s^2 in first gear) and shifts up to fourth. While the
