@@ -16,15 +16,16 @@
 // shifts down; out of first gear the sooner the longer it has lasted, since first gear is for moving off). A
 // gear is scored by its innovation in its own units: within a dead zone of ordinary jitter it costs per
 // second of time, beyond it the jump costs once, however often step() is called (at steps much shorter than
-// an acceleration lasts, such a jump also reopens the acceleration, so that a ramp the history did not expect
-// is paid once too); entering a gear is an event whose innovation counts whole; being declutched or moving
-// off is scored per second, and so is how usual the revs are in a gear for this driver (the fit's revs per
-// gear, model extra.revs): steady revs that several gears explain go, over time, to the gear this driver runs
-// them in, and a shift is the likelier the nearer it brings the revs to the new gear's band. The idle may
-// have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle. Apart from that
-// reopening, the result does not depend on the step rate. The output follows the mode at the median of the
-// belief (the most probable one while it holds half of it). No look-ahead: every output depends only on past
-// input.
+// an acceleration lasts, such a jump upward also reopens the acceleration, so that a ramp the history did not
+// expect is paid once too); entering a gear is an event whose innovation counts whole; being declutched or
+// moving off is scored per second, and so is how usual the revs are in a gear for this driver (the fit's revs
+// per gear, model extra.revs): steady revs that several gears explain go, over time, to the gear this driver
+// runs them in, and a shift is the likelier the nearer it brings the revs to the new gear's band. The idle
+// may have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle. At such short
+// steps in an outage, too, the clutch keeps no speed history of its own while a gear outweighs it, and a
+// clutch biting after a move-off may find the car faster than the move-off guessed. Apart from these, the
+// result does not depend on the step rate. The output follows the mode at the median of the belief (the most
+// probable one while it holds half of it). No look-ahead: every output depends only on past input.
 //
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
