@@ -114,6 +114,20 @@ void replay_recording(const std::string& name, const std::string& rate, Check ch
   }
 }
 
+// Replays a 10 Hz recording (replay_recording) and checks the synthesized speed against the true one for
+// every row from `from` to `to` s; returns how many rows were checked.
+int speed_within(const std::string& name, double from, double to, double tolerance) {
+  int checked = 0;
+  replay_recording(name, "10hz", [&](double t, double truth, const SynthOutput& out) {
+    if (t < from || t > to) return;
+    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
+                << out.gear);
+    CHECK(std::abs(out.speed - truth) < tolerance);
+    ++checked;
+  });
+  return checked;
+}
+
 }  // namespace
 
 TEST_CASE("synth: without a model GPS passes through and outages give none") {
@@ -559,15 +573,8 @@ TEST_CASE("synth: at 10 Hz a seven-speed climbs its ladder in an outage without 
   // fit the revs when the clutch came back in, and the filter climbed the ladder one gear low (34 km/h in
   // fourth at a true 77 in seventh). Within 5 km/h: declutched for a shift, the output coasts a little
   // below the simulated car, which keeps some of its pull.
-  int checked = 0;
-  replay_recording("moveoff_seven_speed", "10hz", [&](double t, double truth, const SynthOutput& out) {
-    if (t < 18.0) return;  // from 18 s the car is past its first shift
-    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
-                << out.gear);
-    CHECK(std::abs(out.speed - truth) < 5.0 * kKmh);
-    ++checked;
-  });
-  CHECK(checked == 521);  // 18.0 to 70.0 s
+  // From 18 s, past the first shift, to the end (70 s).
+  CHECK(speed_within("moveoff_seven_speed", 18.0, 70.0, 5.0 * kKmh) == 521);
 }
 
 TEST_CASE("synth: at 10 Hz a launch faster than the move-off's guess is taken up when the clutch bites") {
@@ -576,15 +583,8 @@ TEST_CASE("synth: at 10 Hz a launch faster than the move-off's guess is taken up
   // move-off's guessed speed (a launch acceleration from rest) was 9 km/h when first gear bit at 20, and
   // entering first gear from it cost more than staying declutched; the filter then took second gear's
   // revs for first and climbed the ladder one gear low (44 km/h in fourth at a true 57 in fifth).
-  int checked = 0;
-  replay_recording("hard_launch_five_speed", "10hz", [&](double t, double truth, const SynthOutput& out) {
-    if (t < 17.0 || t > 68.0) return;  // from 17 s the clutch has bitten; at 68 s the car brakes hard
-    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
-                << out.gear);
-    CHECK(std::abs(out.speed - truth) < 5.0 * kKmh);
-    ++checked;
-  });
-  CHECK(checked == 511);  // 17.0 to 68.0 s
+  // From 17 s, the clutch has bitten, to 68 s, where the car brakes hard.
+  CHECK(speed_within("hard_launch_five_speed", 17.0, 68.0, 5.0 * kKmh) == 511);
 }
 
 TEST_CASE("synth: at 10 Hz braking with two downshifts in an outage is followed down the ladder") {
@@ -593,15 +593,8 @@ TEST_CASE("synth: at 10 Hz braking with two downshifts in an outage is followed 
   // old gear at one jump's cost (the acceleration reopened by a fall of revs as by a rise), the downshifts'
   // revs left a gear history that outlived them, and the filter ended two gears low (14 km/h in first at
   // a true 25 in second).
-  int checked = 0;
-  replay_recording("braking_downshifts", "10hz", [&](double t, double truth, const SynthOutput& out) {
-    if (t < 24.0) return;  // from 24 s the car brakes
-    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
-                << out.gear);
-    CHECK(std::abs(out.speed - truth) < 5.0 * kKmh);
-    ++checked;
-  });
-  CHECK(checked == 461);  // 24.0 to 70.0 s
+  // From 24 s, as the car brakes, to the end (70 s).
+  CHECK(speed_within("braking_downshifts", 24.0, 70.0, 5.0 * kKmh) == 461);
 }
 
 TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through four upshifts") {
@@ -611,15 +604,8 @@ TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through 
   // ahead of that history. Paid again at each reading, that ramp lost first gear to "moving off", whose
   // ceiling then pulled the speed to 8 km/h in the shift to second, and the filter stayed one gear low
   // (15 km/h at a true 29, 24 at 82).
-  int checked = 0;
-  replay_recording("hard_launch_jam", "10hz", [&](double t, double truth, const SynthOutput& out) {
-    if (t < 35.0) return;  // from 35 s the car is in second gear, then third and fourth
-    INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
-                << out.gear);
-    CHECK(std::abs(out.speed - truth) < 3.0 * kKmh);
-    ++checked;
-  });
-  CHECK(checked == 251);  // 35.0 to 60.0 s
+  // From 35 s the car is in second gear, then third and fourth, to the end (60 s).
+  CHECK(speed_within("hard_launch_jam", 35.0, 60.0, 3.0 * kKmh) == 251);
 }
 
 TEST_CASE(
