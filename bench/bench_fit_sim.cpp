@@ -62,6 +62,29 @@ std::vector<double> paper_ratios(const sim::Vehicle& car) {
   return c;
 }
 
+// Why a run missed: the gear at fault and how often the drive engaged it, or, with a wrong count, how often
+// each gear was engaged (a gear seen a dozen times cannot be pinned to 0.5 %: its standard error is about
+// that). Counts the miss in used_rarely when that gear, or the least used one, was engaged fewer than 40
+// times.
+std::string explain_miss(const std::string& run, const sim::Vehicle& car, const Score& a,
+                         const std::vector<int>& engaged, int& used_rarely) {
+  char why[200];
+  if (a.found == car.theta.size()) {
+    const int seen = engaged[static_cast<std::size_t>(a.worst)];
+    used_rarely += seen < 40 ? 1 : 0;
+    std::snprintf(why, sizeof why, "  %s: gear %d (engaged %d times) off %.2f %% = %.1f stderr\n",
+                  run.c_str(), a.worst + 1, seen, a.max_error, a.max_z);
+    return why;
+  }
+  used_rarely += *std::min_element(engaged.begin(), engaged.end()) < 40 ? 1 : 0;
+  std::string counts;
+  for (int c : engaged)
+    counts += (counts.empty() ? "" : ",") + std::to_string(c);
+  std::snprintf(why, sizeof why, "  %s: %zu gears found; gears engaged [%s] times\n", run.c_str(), a.found,
+                counts.c_str());
+  return why;
+}
+
 void accuracy_table(int seeds) {
   std::printf("\n== accuracy: 40 min at 1 Hz, sigma_v 0.05 m/s, sigma_s 0.2 Hz, seeds 1..%d\n", seeds);
   std::printf("%-10s %-8s %5s | %-28s | %-28s\n", "vehicle", "style", "gears", "auto: found / max err % (ok)",
@@ -99,28 +122,9 @@ void accuracy_table(int seeds) {
           within_3se += a.max_z <= 3.0 ? 1 : 0;
         }
         if (!a.ok) {
-          // Why: the gear at fault and how often the drive used it (a gear seen a dozen times cannot be
-          // pinned to 0.5 %: its standard error is about that).
-          const std::vector<int> n = engaged_counts(car, observed);
-          char why[160];
-          if (a.found == car.theta.size()) {
-            const int seen = n[static_cast<std::size_t>(a.worst)];
-            used_rarely += seen < 40 ? 1 : 0;
-            std::snprintf(why, sizeof why,
-                          "  %s %s seed %d: gear %d (engaged %d times) off %.2f %% = %.1f stderr\n",
-                          car.name.c_str(), std::string(sim::style_name(style)).c_str(), seed, a.worst + 1,
-                          seen, a.max_error, a.max_z);
-          } else {
-            int least = *std::min_element(n.begin(), n.end());
-            used_rarely += least < 40 ? 1 : 0;
-            std::string counts;
-            for (int c : n)
-              counts += (counts.empty() ? "" : ",") + std::to_string(c);
-            std::snprintf(why, sizeof why, "  %s %s seed %d: %zu gears found; gears engaged [%s] times\n",
-                          car.name.c_str(), std::string(sim::style_name(style)).c_str(), seed, a.found,
-                          counts.c_str());
-          }
-          misses += why;
+          const std::string run =
+              car.name + " " + std::string(sim::style_name(style)) + " seed " + std::to_string(seed);
+          misses += explain_miss(run, car, a, engaged_counts(car, observed), used_rarely);
         }
         std::snprintf(cell, sizeof cell, "%zu/%.2f%s ", a.found, a.max_error, a.ok ? "" : "*");
         auto_cell += cell;
@@ -166,23 +170,9 @@ void random_vehicles(int count) {
     ok += a.ok ? 1 : 0;
     right_count += a.found == car.theta.size() ? 1 : 0;
     if (a.ok) continue;
-    const std::vector<int> n = engaged_counts(car, observed);
-    std::string counts;
-    for (int c : n)
-      counts += (counts.empty() ? "" : ",") + std::to_string(c);
-    const int least = a.found == car.theta.size() ? n[static_cast<std::size_t>(a.worst)]
-                                                  : *std::min_element(n.begin(), n.end());
-    used_rarely += least < 40 ? 1 : 0;
-    char why[200];
-    if (a.found == car.theta.size())
-      std::snprintf(why, sizeof why, "  %s (%d gears) %s: gear %d off %.2f %%; gears engaged [%s] times\n",
-                    car.name.c_str(), car.gears(), std::string(sim::style_name(style)).c_str(), a.worst + 1,
-                    a.max_error, counts.c_str());
-    else
-      std::snprintf(why, sizeof why, "  %s (%d gears) %s: %zu gears found; gears engaged [%s] times\n",
-                    car.name.c_str(), car.gears(), std::string(sim::style_name(style)).c_str(), a.found,
-                    counts.c_str());
-    misses += why;
+    const std::string run =
+        car.name + " (" + std::to_string(car.gears()) + " gears) " + std::string(sim::style_name(style));
+    misses += explain_miss(run, car, a, engaged_counts(car, observed), used_rarely);
   }
   std::printf("misses:\n%s", misses.c_str());
   std::printf("random vehicles: right count %d / %d; right count and every theta within 0.5 %%: %d / %d\n",

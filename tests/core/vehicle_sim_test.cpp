@@ -118,7 +118,7 @@ TEST_CASE("sim: random vehicles are plausible manual cars and repeat by seed") {
     const double spread = v.theta.back() / v.theta.front();
     CHECK(spread >= 3.0);
     CHECK(spread <= 5.2);
-    // Revs in the order a driver uses them, and top gear at a road speed per 1000 rpm of a road car.
+    // Revs in the order a driver uses them.
     CHECK(v.idle_freq * 1.3 < v.downshift_freq);
     CHECK(v.downshift_freq < v.upshift_freq);
     CHECK(v.upshift_freq < v.max_freq);

@@ -89,7 +89,7 @@ Vehicle random_vehicle(std::uint64_t seed) {
   double weight_sum = 0.0;
   for (int i = 0; i + 1 < gears; ++i) {
     weight[static_cast<std::size_t>(i)] =
-        std::pow(1.0 + progression, double(gears - 2 - i) / double(gears - 1));
+        std::pow(1.0 + progression, static_cast<double>(gears - 2 - i) / static_cast<double>(gears - 1));
     weight_sum += weight[static_cast<std::size_t>(i)];
   }
   // The component tracked: the crank frequency (what OBD rpm / 60 gives), or a firing frequency (an
