@@ -683,7 +683,10 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the
       // gap up to the gear's reading, so a hard launch is not lost to the clutch for having gained more
       // than the guess (at 1 Hz and slower that guess already spans a whole launch, and measured better).
-      if (short_step && is_gear(j) && (i == launch_mode() || moving_off) && std::isfinite(freq)) {
+      // Only out of the move-off, whose clutch has been slipping: a car rolling declutched that engages a
+      // gear within one short step has gained nothing, and with the gap as its spread any gear would fit
+      // (fifth gear's reading at 42 km/h taken up from a roll at 7 km/h as the launch's first gear bit).
+      if (short_step && is_gear(j) && i == launch_mode() && std::isfinite(freq)) {
         const double gap = theta_[j] * freq - x.v;
         if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
       }

@@ -587,6 +587,18 @@ TEST_CASE("synth: at 10 Hz a launch faster than the move-off's guess is taken up
   CHECK(speed_within("hard_launch_five_speed", 17.0, 68.0, 5.0 * kKmh) == 511);
 }
 
+TEST_CASE("synth: at 10 Hz a pull-away from a creep is taken up in first gear, not in a gear far above") {
+  // Recorded from the simulator (a random 5-speed): in a jam, GPS is lost while the car creeps in first
+  // gear at 5-9 km/h, the clutch slipping from 43 s; at 53 s the driver pulls away, the revs rising to
+  // 75 Hz before the clutch bites at 12 km/h. The filter took the rise for the clutch going out on a car
+  // rolling at 7 km/h; when the clutch bit, a gear entered from that roll within one step was treated as
+  // a move-off biting, with the gap up to the gear's reading as its speed's spread, so fifth gear's
+  // reading (42 km/h) cost nothing and the output jumped from 7 to 42 km/h in a tenth of a second, then
+  // stayed a gear or more above first (40 km/h at a true 15).
+  // From 56 s, the clutch has bitten, to 77 s, before the car brakes.
+  CHECK(speed_within("pull_away_from_creep", 56.0, 77.0, 3.0 * kKmh) == 211);
+}
+
 TEST_CASE("synth: at 10 Hz braking with two downshifts in an outage is followed down the ladder") {
   // Recorded from the simulator (a random 4-speed): GPS is lost while the car cruises at 53 km/h; it
   // brakes to 25 km/h, shifting down twice with the revs blipped while declutched. Read as braking in the
