@@ -174,6 +174,7 @@ void SpeedSynthesizer::reset() noexcept {
   mode_ = 0;
   last_gps_ = -1.0;
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
+  roll_span_ = -1.0;
   last_ = {};
 }
 
@@ -273,9 +274,9 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
   // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
   // still cold) and the warm idle the fit saw are the idle now.
   const double floor = std::isfinite(warm_idle_) ? std::min(warm_idle_, idle_mean_) : idle_mean_;
-  const double z = freq > idle_mean_ ? (freq - idle_mean_) / idle_sd()
-                   : freq < floor    ? (floor - freq) / idle_sd()
-                                     : 0.0;
+  // Rolling, many engines are held above their standing idle (the rolling idle, learned under GPS).
+  const double top = speed > kMovingOffSpeed ? rolling_idle() : idle_mean_;
+  const double z = freq > top ? (freq - top) / idle_sd() : freq < floor ? (floor - freq) / idle_sd() : 0.0;
   return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
 }
 
@@ -297,11 +298,19 @@ double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
   return base + std::log(std::max(above, 0.05));
 }
 
-// Relative chance of driving in `gear` with the engine at `freq`: near idle a driver declutches rather than
-// lug the engine, except when creeping in first gear.
+// The idle of the engine while the car rolls declutched: many engines are held above their standing idle
+// there (a throttle kicker, an idle-up against stalling), with revs that stay flat while the car slows.
+// Learned under GPS (see learn()); the standing idle until seen for kRollKnown seconds.
+double SpeedSynthesizer::rolling_idle() const noexcept {
+  constexpr double kRollKnown = 3.0;  // s of such rolling seen
+  return roll_time_ >= kRollKnown ? std::max(idle_mean_, roll_mean_) : idle_mean_;
+}
+
+// Relative chance of driving in `gear` with the engine at `freq`: near idle (standing or rolling) a driver
+// declutches rather than lug the engine, except when creeping in first gear.
 double SpeedSynthesizer::lugging(int gear, double freq) const noexcept {
   if (idle_count_ <= 0.0) return 1.0;
-  const double x = (freq - idle_mean_) / idle_sd();
+  const double x = (freq - rolling_idle()) / idle_sd();
   const double at_idle = 1.0 / (1.0 + std::exp(3.0 * (x - 2.5)));  // ~1 up to 2 sd above idle, ~0 past 3.5
   const double floor = gear == 1 ? tuning_.lugging_first : tuning_.lugging_other;
   return 1.0 - (1.0 - floor) * at_idle;
@@ -630,7 +639,10 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
     coast_mean_ += (a - coast_mean_) / coast_count_;
   }
   last_gps_ = gps;
-  if (!std::isfinite(freq) || freq <= 0.0) return;
+  if (!std::isfinite(freq) || freq <= 0.0) {
+    roll_span_ = -1.0;
+    return;
+  }
   const auto add = [&](double& mean, double& var, double& count, double memory) {
     accumulate(freq, mean, var, count, memory / std::max(dt, 0.1));
   };
@@ -642,6 +654,30 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
   // and a car coasting at warm idle looks in gear).
   const bool idling_moving =
       was_moving && mode_ == 0 && prob_[0] > kSureGear && idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
+  // Rolling declutched above the standing idle: revs that no gear explains, flat over a second and a half
+  // or more (within 5 %) while GPS shows the car slowing, are the rolling idle. Not a shift's revs (they
+  // move), nor a slipping clutch's (the car gains speed, or creeps: only above stop_speed), and below 1.6 x
+  // the standing idle.
+  constexpr double kRollSpan = 1.5;     // s
+  constexpr double kRollFlat = 0.05;    // relative
+  constexpr double kRollCeiling = 1.6;  // x the standing idle
+  const bool roll_candidate = gps > tuning_.stop_speed && was_moving && mode_ == 0 && prob_[0] > kSureGear &&
+                              idle_count_ > 0.0 && freq >= idle_mean_ + idle_sd() &&
+                              freq < kRollCeiling * idle_mean_;
+  if (!roll_candidate) {
+    roll_span_ = -1.0;
+  } else if (roll_span_ < 0.0 || std::abs(freq - roll_freq_) > kRollFlat * roll_freq_) {
+    roll_span_ = 0.0;
+    roll_freq_ = freq;
+    roll_speed_ = gps;
+  } else {
+    roll_span_ += dt;
+    if (roll_span_ >= kRollSpan && gps < roll_speed_ - tuning_.stationary_speed) {
+      double var = 0.0;  // the spread is the idle's
+      add(roll_mean_, var, roll_count_, kIdleMemory);
+      roll_time_ += dt;
+    }
+  }
   if (gps < tuning_.stationary_speed || idling_moving) {
     // A warming engine's idle only falls: a reading below the idle learned so far is followed sooner.
     constexpr double kIdleFallMemory = 15.0;  // s
@@ -780,6 +816,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
     learn_shift(freq);
     return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }
+  roll_span_ = -1.0;  // a flat stretch of revs is one GPS saw whole
   const int out = median_mode();
   const double speed = std::max(track_[out].v, 0.0);
   if (is_gear(out)) return {speed, out, SpeedSource::kEngine};

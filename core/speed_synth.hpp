@@ -10,7 +10,9 @@
 // sums over the predecessors of every mode, predicted under that mode's motion and corrected by GPS and
 // the frequency, and matches the mixture's first two moments (generalised pseudo-Bayes of order 2).
 // In gear i the engine frequency is speed / theta_i (eq. (3)); declutched the car rolls and brakes and
-// the engine falls to idle (learned while GPS says the car stands, or taken from the fit) or runs free;
+// the engine falls to idle (learned while GPS says the car stands, or taken from the fit; rolling, the
+// engine may be held above it, at a rolling idle learned while GPS shows the car slowing at flat revs that
+// no gear explains) or runs free;
 // moving off, the clutch slips and the car gains speed at a launch acceleration until first gear bites.
 // Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
 // shifts down; out of first gear the sooner the longer it has lasted, since first gear is for moving off). A
@@ -141,6 +143,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept;
+  [[nodiscard]] double rolling_idle() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   void score_revs_habit(double freq) noexcept;
   [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept;
@@ -181,6 +184,10 @@ class SpeedSynthesizer {
   ModeArray revs_mean_{}, revs_sd_{}, revs_habit_{};
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
   double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
+  // Engine frequency rolling declutched above the standing idle (rolling_idle()): its mean, the s seen,
+  // and the current flat stretch (s, -1 = none; its first frequency and GPS speed).
+  double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
+  double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
   double last_gps_ = -1.0;
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
   double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;

@@ -482,6 +482,43 @@ TEST_CASE("synth: a warming engine's idle is followed down while the car coasts,
   }
 }
 
+TEST_CASE("synth: rolling declutched at revs held above the standing idle is coasting, not a gear lugging") {
+  // Many engines are held above their standing idle while the car rolls declutched, the revs flat while
+  // the car slows. GPS shows the car standing at idle, then twice rolling out of gear at those raised revs;
+  // then GPS is lost and the car rolls out of gear again from 4th. That is a car coasting, not 4th (7.5 m/s)
+  // or 3rd (5.6 m/s) lugging at a steady speed.
+  constexpr double kRollingIdle = 1.2 * kIdle;
+  std::vector<Row> rows;
+  for (int k = 0; k < 20; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  const auto drive = script(0.0,
+                            {{1, 1.8, 3},
+                             {2, 1.2, 8},
+                             {3, 0.5, 15},
+                             {4, 0.2, 20},
+                             {0, -0.4, 15},
+                             {3, 0.3, 20},
+                             {4, 0.1, 20},
+                             {0, -0.4, 15},
+                             {4, 0.3, 20},
+                             {0, -0.4, 20}},
+                            kHatch);
+  for (Row r : drive) {
+    r.t += 20.0;
+    if (r.gear == 0) r.freq = kRollingIdle;
+    rows.push_back(r);
+  }
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double outage_from = rows[rows.size() - 20].t;
+  const auto out = replay(synth, rows, outage_from);
+  for (std::size_t i = rows.size() - 18; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t << ", truth " << rows[i].speed << " m/s, synthesized " << out[i].speed
+                << " in gear " << out[i].gear);
+    CHECK(out[i].gear == 0);
+    CHECK(std::abs(out[i].speed - rows[i].speed) < 3.0);
+  }
+}
+
 TEST_CASE("synth: a stop in an outage is seen while the idle still falls from a cold start") {
   // The car waits at a light with the engine still cold (GPS shows the high idle), drives off, loses GPS in
   // 5th, brakes in gear, declutches and stands at the next light. The engine is warmer by then: its idle lies
