@@ -62,6 +62,13 @@ Eigen::VectorXd theta_variances(const Eigen::MatrixXd& info, int gears) {
   return Eigen::VectorXd::Constant(gears, NAN);
 }
 
+// The median of x (the upper one of an even count).
+double median_of(std::vector<double> x) {
+  const auto mid = x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2);
+  std::nth_element(x.begin(), mid, x.end());
+  return *mid;
+}
+
 }  // namespace
 
 std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t min_samples) {
@@ -69,49 +76,50 @@ std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t m
   for (std::size_t i = 0; i < data.size(); ++i)
     if (data.v[i] < kStandingSpeed) idle.push_back(data.s[i]);
   if (idle.empty() || idle.size() < min_samples) return std::nullopt;
-  const auto median = [](std::vector<double> x) {
-    const auto mid = x.begin() + static_cast<std::ptrdiff_t>(x.size() / 2);
-    std::nth_element(x.begin(), mid, x.end());
-    return *mid;
-  };
   IdleEstimate out;
-  out.freq = median(idle);
+  out.freq = median_of(idle);
   std::vector<double> deviation;
   deviation.reserve(idle.size());
   for (double f : idle)
     deviation.push_back(std::abs(f - out.freq));
   constexpr double kMadToSd = 1.4826;  // normal consistency factor of the median absolute deviation
-  out.sd = kMadToSd * median(std::move(deviation));
+  out.sd = kMadToSd * median_of(std::move(deviation));
   out.samples = idle.size();
   return out;
 }
 
-std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearModel& model) {
-  // A sample counts for the gear whose theta x freq is nearest its speed, when within two standard
-  // deviations of eq. (4), 0.8 m/s (3 km/h) or 4 %, whichever is widest: integer km/h and rpm and speed
-  // polled at different instants put a gear's samples that far off its line, while adjacent gears lie
-  // 20-70 % apart (Table 1). At a crawl that takes in a slipping clutch and a car rolling out of gear
-  // near first gear's line: the speed synthesis has to weigh those as first gear too.
+std::optional<std::size_t> gear_on_line(const GearModel& model, double speed, double freq) {
+  // Within two standard deviations of eq. (4), 0.8 m/s (3 km/h) or 4 %, whichever is widest: integer km/h
+  // and rpm and speed polled at different instants put a gear's samples that far off its line, while
+  // adjacent gears lie 20-70 % apart (Table 1).
   constexpr double kOnLine = 0.8, kOnLineShare = 0.04;
+  const std::vector<Gear>& gears = model.gears;
+  if (gears.empty()) return std::nullopt;
+  std::size_t best = 0;
+  for (std::size_t i = 1; i < gears.size(); ++i)
+    if (std::abs(gears[i].theta * freq - speed) < std::abs(gears[best].theta * freq - speed)) best = i;
+  const double theta = gears[best].theta;
+  const double sd = std::hypot(theta * model.sigma_freq, model.sigma_speed);
+  if (std::abs(theta * freq - speed) > std::max({2.0 * sd, kOnLine, kOnLineShare * speed}))
+    return std::nullopt;
+  return best;
+}
+
+std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearModel& model) {
+  // A sample counts for the gear whose line it lies on (gear_on_line). At a crawl that takes in a slipping
+  // clutch and a car rolling out of gear near first gear's line: the speed synthesis has to weigh those as
+  // first gear too.
   const std::vector<Gear>& gears = model.gears;
   std::vector<double> sum(gears.size(), 0.0), sum2(gears.size(), 0.0);
   std::vector<GearRevs> out(gears.size());
-  if (gears.empty()) return out;
   for (std::size_t k = 0; k < data.size(); ++k) {
     if (data.v[k] < kMovingSpeed) continue;
-    std::size_t best = 0;
-    for (std::size_t i = 1; i < gears.size(); ++i)
-      if (std::abs(gears[i].theta * data.s[k] - data.v[k]) <
-          std::abs(gears[best].theta * data.s[k] - data.v[k]))
-        best = i;
-    const double theta = gears[best].theta;
-    const double sd = std::hypot(theta * model.sigma_freq, model.sigma_speed);
-    if (std::abs(theta * data.s[k] - data.v[k]) > std::max({2.0 * sd, kOnLine, kOnLineShare * data.v[k]}))
-      continue;
+    const std::optional<std::size_t> gear = gear_on_line(model, data.v[k], data.s[k]);
+    if (!gear) continue;
     const double x = std::log(data.s[k]);
-    sum[best] += x;
-    sum2[best] += x * x;
-    ++out[best].samples;
+    sum[*gear] += x;
+    sum2[*gear] += x * x;
+    ++out[*gear].samples;
   }
   for (std::size_t i = 0; i < gears.size(); ++i) {
     if (out[i].samples == 0) continue;
@@ -119,6 +127,35 @@ std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearMode
     out[i].mean_log = sum[i] / n;
     out[i].sd_log = std::sqrt(std::max(sum2[i] / n - out[i].mean_log * out[i].mean_log, 0.0));
   }
+  return out;
+}
+
+std::optional<IdleEstimate> estimate_rolling_idle(const MixtureData& data, const GearModel& model,
+                                                  const IdleEstimate& idle, std::size_t min_samples) {
+  // The speed synthesis learns the same from GPS (SpeedSynthesizer::learn): revs off every gear line,
+  // above the idle's spread and below 1.6 x idle, flat within 5 % for 1.5 s or more while the car, faster
+  // than 4 m/s, slows by more than standing jitter. A gap of more than 5 s (or a new log) ends a stretch.
+  constexpr double kRollSpeed = 4.0, kRollSpan = 1.5, kRollFlat = 0.05, kRollCeiling = 1.6, kMaxGap = 5.0;
+  const double floor = idle.freq + std::clamp(idle.sd, 0.03 * idle.freq, 0.1 * idle.freq);
+  std::vector<double> rolling;
+  std::optional<std::size_t> start;
+  for (std::size_t k = 0; k < data.size(); ++k) {
+    const double v = data.v[k], s = data.s[k];
+    const bool candidate = v > kRollSpeed && s >= floor && s < kRollCeiling * idle.freq &&
+                           !gear_on_line(model, v, s).has_value();
+    const bool gap = k > 0 && (data.t[k] < data.t[k - 1] || data.t[k] - data.t[k - 1] > kMaxGap);
+    if (!candidate) {
+      start.reset();
+    } else if (!start || gap || std::abs(s - data.s[*start]) > kRollFlat * data.s[*start]) {
+      start = k;
+    } else if (data.t[k] - data.t[*start] >= kRollSpan && v < data.v[*start] - kStandingSpeed) {
+      rolling.push_back(s);
+    }
+  }
+  if (rolling.size() < min_samples) return std::nullopt;
+  IdleEstimate out;
+  out.samples = rolling.size();
+  out.freq = median_of(std::move(rolling));
   return out;
 }
 
@@ -242,8 +279,8 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   // The engine's idle, from the samples standing still: the speed synthesis needs it to tell a car at a
   // light from one rolling in a high gear before GPS has shown it standing.
   constexpr std::size_t kMinIdleSamples = 10;
-  if (const auto idle = detail::estimate_idle(data, kMinIdleSamples))
-    result.model.extra["idle"] = {{"freq", idle->freq}, {"sd", idle->sd}, {"samples", idle->samples}};
+  const auto idle = detail::estimate_idle(data, kMinIdleSamples);
+  if (idle) result.model.extra["idle"] = {{"freq", idle->freq}, {"sd", idle->sd}, {"samples", idle->samples}};
   // How this driver uses each gear (the engine frequencies it runs at): the speed synthesis weighs a gear
   // that explains the revs by how usual those revs are in it.
   if (!result.model.gears.empty()) {
@@ -251,6 +288,11 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     for (const detail::GearRevs& r : detail::estimate_gear_revs(data, result.model))
       revs.push_back({{"mean_log", r.mean_log}, {"sd_log", r.sd_log}, {"samples", r.samples}});
     result.model.extra["revs"] = std::move(revs);
+    // The revs the engine is held at while the car rolls declutched, above its standing idle.
+    if (idle) {
+      if (const auto rolling = detail::estimate_rolling_idle(data, result.model, *idle, kMinIdleSamples))
+        result.model.extra["rolling_idle"] = {{"freq", rolling->freq}, {"samples", rolling->samples}};
+    }
   }
   return result;
 }
@@ -273,16 +315,11 @@ std::pair<double, double> speed_line(const std::vector<std::pair<double, double>
       if (std::abs(dw) >= kMinSpan) slopes.push_back((use[j].second - use[i].second) / dw);
     }
   if (slopes.empty()) return {1.0, 0.0};
-  const auto median = [](std::vector<double>& v) {
-    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-    std::nth_element(v.begin(), mid, v.end());
-    return *mid;
-  };
-  const double slope = median(slopes);
+  const double slope = detail::median_of(std::move(slopes));
   std::vector<double> offsets;
   for (const auto& [w, g] : use)
     offsets.push_back(g - slope * w);
-  return {slope, median(offsets)};
+  return {slope, detail::median_of(std::move(offsets))};
 }
 
 }  // namespace

@@ -30,8 +30,18 @@ struct GearRevs {
   std::size_t samples = 0;
 };
 
+// The gear of `model` whose line (theta x freq = speed) the sample lies on, if any.
+[[nodiscard]] std::optional<std::size_t> gear_on_line(const GearModel& model, double speed, double freq);
+
 // One entry per gear of the fitted model; a gear no sample lies on has samples = 0.
 [[nodiscard]] std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearModel& model);
+
+// The engine's idle while the car rolls declutched (freq only; sd unused), when it is held above the
+// standing `idle` on at least min_samples samples; nothing otherwise.
+[[nodiscard]] std::optional<IdleEstimate> estimate_rolling_idle(const MixtureData& data,
+                                                                const GearModel& model,
+                                                                const IdleEstimate& idle,
+                                                                std::size_t min_samples);
 
 // Why a log cannot hold a gear ladder (empty if it may): see estimator.cpp.
 [[nodiscard]] std::string degenerate_log(const MixtureData& data);

@@ -18,6 +18,7 @@ constexpr double kDefaultClutchShare =
 constexpr double kMinGearShare = 0.02;   // no gear is ever ruled out by its training weight
 constexpr double kStandingVar = 0.01;    // (m/s)^2: a car at rest is at rest
 constexpr double kMovingOffSpeed = 2.0;  // m/s: below this a declutched car may be moving off
+constexpr double kRollKnown = 3.0;       // s of rolling declutched seen before its idle counts (rolling_idle)
 
 // Running mean and variance with a bounded memory (in samples).
 void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
@@ -123,6 +124,17 @@ void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
         idle_var_ = sd * sd;
         idle_count_ = kPriorSamples;
       }
+    }
+  }
+  // The rolling idle the fit saw, until GPS shows this car rolling (a prior worth a few samples, as the
+  // idle's).
+  if (const auto rolling = extra.find("rolling_idle"); rolling != extra.end() && roll_time_ <= 0.0) {
+    const double f = number(*rolling, "freq");
+    if (std::isfinite(f) && f > 0.0) {
+      constexpr double kPriorSamples = 5.0;
+      roll_mean_ = f;
+      roll_count_ = kPriorSamples;
+      roll_time_ = kRollKnown;
     }
   }
   const auto revs = extra.find("revs");
@@ -302,7 +314,6 @@ double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
 // there (a throttle kicker, an idle-up against stalling), with revs that stay flat while the car slows.
 // Learned under GPS (see learn()); the standing idle until seen for kRollKnown seconds.
 double SpeedSynthesizer::rolling_idle() const noexcept {
-  constexpr double kRollKnown = 3.0;  // s of such rolling seen
   return roll_time_ >= kRollKnown ? std::max(idle_mean_, roll_mean_) : idle_mean_;
 }
 

@@ -528,6 +528,42 @@ TEST_CASE("estimator: a fit records the engine's idle from the samples standing 
   CHECK_FALSE(fit_gear_model(moving, {}).model.extra.contains("idle"));
 }
 
+TEST_CASE("estimator: a fit records the idle an engine is held at while the car rolls declutched") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  auto samples = sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kUrban, 1200.0, 1, 3));
+  // The simulated engine falls to its standing idle declutched: no rolling idle is recorded.
+  REQUIRE(fit_gear_model(samples, {}).model.extra.contains("idle"));
+  CHECK_FALSE(fit_gear_model(samples, {}).model.extra.contains("rolling_idle"));
+  // The same drive with five rolls out of gear, the engine held at 1.2 x idle while the car slows from 20
+  // m/s over 15 s (the flat revs a throttle kicker or an idle-up against stalling gives; at that speed
+  // no gear's line passes near them).
+  const double rolling = 1.2 * car.idle_freq;
+  double t = samples.back().t;
+  for (int roll = 0; roll < 5; ++roll) {
+    t += 10.0;
+    for (int k = 0; k < 15; ++k) {
+      t += 1.0;
+      samples.push_back({t, 20.0 - 0.4 * k, rolling * (1.0 + 0.01 * ((k % 3) - 1))});
+    }
+  }
+  const FitResult r = fit_gear_model(samples, {});
+  REQUIRE(r.model.extra.contains("rolling_idle"));
+  CHECK(r.model.extra["rolling_idle"]["freq"].get<double>() == Approx(rolling).epsilon(0.02));
+  CHECK(r.model.extra["rolling_idle"]["samples"].get<double>() >= 50);
+  // The Etios holds its engine about a fifth above its standing idle rolling declutched.
+  const auto etios = read_etios("drive");
+  if (etios.empty()) {
+    WARN("Etios logs not found under " GEARPULSE_REAL_DATA_DIR "; that part skipped");
+    return;
+  }
+  const FitResult e = fit_gear_model(etios, {});
+  REQUIRE(e.model.extra.contains("rolling_idle"));
+  const double ratio =
+      e.model.extra["rolling_idle"]["freq"].get<double>() / e.model.extra["idle"]["freq"].get<double>();
+  CHECK(ratio > 1.1);
+  CHECK(ratio < 1.35);
+}
+
 TEST_CASE("estimator: a fit records the revs each gear is driven at") {
   const sim::Vehicle car = sim::vehicle_preset("hatch-5");
   sim::DriveOptions options;

@@ -519,6 +519,39 @@ TEST_CASE("synth: rolling declutched at revs held above the standing idle is coa
   }
 }
 
+TEST_CASE("synth: the rolling idle the fit recorded counts before GPS has shown the car rolling") {
+  // As above, but GPS never shows the car rolling out of gear before it is lost: the fit's rolling idle
+  // (model extra.rolling_idle) tells the coast from 4th gear lugging.
+  constexpr double kRollingIdle = 1.2 * kIdle;
+  auto model = std::make_shared<GearModel>(*model_of(kHatch));
+  model->extra["rolling_idle"] = {{"freq", kRollingIdle}, {"samples", 200}};
+  std::vector<Row> rows;
+  for (int k = 0; k < 20; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  const auto drive = script(
+      0.0, {{1, 1.8, 3}, {2, 1.2, 8}, {3, 0.5, 15}, {4, 0.2, 20}, {4, 0.3, 20}, {0, -0.4, 20}}, kHatch);
+  for (Row r : drive) {
+    r.t += 20.0;
+    if (r.gear == 0) r.freq = kRollingIdle;
+    rows.push_back(r);
+  }
+  for (const bool with_prior : {true, false}) {
+    SpeedSynthesizer synth(with_prior ? model : model_of(kHatch));
+    const auto out = replay(synth, rows, rows[rows.size() - 20].t);
+    int coasting = 0;
+    for (std::size_t i = rows.size() - 18; i < rows.size(); ++i) {
+      INFO("t = " << rows[i].t << ", truth " << rows[i].speed << " m/s, synthesized " << out[i].speed
+                  << " in gear " << out[i].gear);
+      coasting += out[i].gear == 0 && std::abs(out[i].speed - rows[i].speed) < 3.0 ? 1 : 0;
+    }
+    INFO((with_prior ? "with" : "without") << " the fit's rolling idle: " << coasting << " of 18 coasting");
+    if (with_prior)
+      CHECK(coasting == 18);
+    else
+      CHECK(coasting < 18);  // the test's premise: without it, the revs look like a gear
+  }
+}
+
 TEST_CASE("synth: a stop in an outage is seen while the idle still falls from a cold start") {
   // The car waits at a light with the engine still cold (GPS shows the high idle), drives off, loses GPS in
   // 5th, brakes in gear, declutches and stands at the next light. The engine is warmer by then: its idle lies
