@@ -284,6 +284,40 @@ void run_fold(const char* label, const std::vector<Log>& train, const std::vecto
 
 }  // namespace
 
+// How far above its standing idle an engine runs while the car rolls declutched: over runs of three
+// readings with flat revs (within 6 %) while the car, above 3 m/s, slows by more than 1 m/s, the revs
+// against that log's standing idle (the median at speed 0). The upper quartile holds shifts caught between
+// readings.
+void print_rolling_revs(const char* title, const std::vector<Log>& logs) {
+  std::vector<double> ratios;
+  for (const Log& log : logs) {
+    std::vector<double> standing;
+    for (const Sample& s : log.samples)
+      if (s.has_speed() && s.has_freq() && s.speed == 0.0 && s.freq > 0.0) standing.push_back(s.freq);
+    if (standing.empty()) continue;
+    const double idle = quantile(standing, 0.5);
+    const std::vector<Sample>& x = log.samples;
+    for (std::size_t i = 0; i + 2 < x.size(); ++i) {
+      bool usable = true;
+      double lo = 0.0, hi = 0.0, slowest = 0.0;
+      for (std::size_t k = i; k < i + 3; ++k) {
+        usable = usable && x[k].has_speed() && x[k].has_freq() && x[k].freq > 0.0;
+        if (!usable) break;
+        lo = k == i ? x[k].freq : std::min(lo, x[k].freq);
+        hi = k == i ? x[k].freq : std::max(hi, x[k].freq);
+        slowest = k == i ? x[k].speed : std::min(slowest, x[k].speed);
+      }
+      if (usable && slowest >= 3.0 && hi <= 1.06 * lo && x[i + 2].speed < x[i].speed - 1.0)
+        ratios.push_back(x[i + 1].freq / idle);
+    }
+  }
+  if (ratios.empty()) return;
+  std::printf(
+      "%s: rolling declutched, %zu runs of three readings with flat revs while slowing above 3 m/s: revs / "
+      "standing idle quartiles %.2f / %.2f / %.2f\n",
+      title, ratios.size(), quantile(ratios, 0.25), quantile(ratios, 0.5), quantile(ratios, 0.75));
+}
+
 int main(int argc, char** argv) {
   fs::path root = GEARPULSE_REAL_DATA_DIR;
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
@@ -312,6 +346,9 @@ int main(int argc, char** argv) {
     run_fold("fit drive*, replay long*", drives, longs, e);
     run_fold("fit long*, replay drive*", longs, drives, e);
     report("Etios", e);
+    std::vector<Log> all = drives;
+    all.insert(all.end(), longs.begin(), longs.end());
+    print_rolling_revs("Etios", all);
   } else {
     std::printf("Etios logs not found under %s\n", etios.c_str());
   }

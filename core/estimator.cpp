@@ -132,23 +132,23 @@ std::vector<GearRevs> estimate_gear_revs(const MixtureData& data, const GearMode
 
 std::optional<IdleEstimate> estimate_rolling_idle(const MixtureData& data, const GearModel& model,
                                                   const IdleEstimate& idle, std::size_t min_samples) {
-  // The speed synthesis learns the same from GPS (SpeedSynthesizer::learn): revs off every gear line,
-  // above the idle's spread and below 1.6 x idle, flat within 5 % for 1.5 s or more while the car, faster
-  // than 4 m/s, slows by more than standing jitter. A gap of more than 5 s (or a new log) ends a stretch.
-  constexpr double kRollSpeed = 4.0, kRollSpan = 1.5, kRollFlat = 0.05, kRollCeiling = 1.6, kMaxGap = 5.0;
-  const double floor = idle.freq + std::clamp(idle.sd, 0.03 * idle.freq, 0.1 * idle.freq);
+  // The rule of gear_model.hpp's rolling_idle, as the speed synthesis applies it under GPS; slowing means
+  // by more than standing jitter. A gap of more than 5 s (or a new log) ends a stretch.
+  using namespace rolling_idle;
+  constexpr double kMaxGap = 5.0;
+  const double floor = idle.freq + idle_spread(idle.freq, idle.sd);
   std::vector<double> rolling;
   std::optional<std::size_t> start;
   for (std::size_t k = 0; k < data.size(); ++k) {
     const double v = data.v[k], s = data.s[k];
-    const bool candidate = v > kRollSpeed && s >= floor && s < kRollCeiling * idle.freq &&
-                           !gear_on_line(model, v, s).has_value();
+    const bool candidate =
+        v > kMinSpeed && s >= floor && s < kCeiling * idle.freq && !gear_on_line(model, v, s).has_value();
     const bool gap = k > 0 && (data.t[k] < data.t[k - 1] || data.t[k] - data.t[k - 1] > kMaxGap);
     if (!candidate) {
       start.reset();
-    } else if (!start || gap || std::abs(s - data.s[*start]) > kRollFlat * data.s[*start]) {
+    } else if (!start || gap || std::abs(s - data.s[*start]) > kFlat * data.s[*start]) {
       start = k;
-    } else if (data.t[k] - data.t[*start] >= kRollSpan && v < data.v[*start] - kStandingSpeed) {
+    } else if (data.t[k] - data.t[*start] >= kSpan && v < data.v[*start] - kStandingSpeed) {
       rolling.push_back(s);
     }
   }

@@ -1,6 +1,7 @@
 #pragma once
 // The learned model: one scale factor theta_i = v / s per forward gear (paper eq. (3)), with the noise
 // levels of eqs. (1)-(2). Immutable once built; the daemon swaps whole models atomically.
+#include <algorithm>
 #include <cstddef>
 #include <string>
 #include <string_view>
@@ -32,6 +33,23 @@ struct GearModel {
 
   [[nodiscard]] bool empty() const noexcept { return gears.empty(); }
 };
+
+// The rolling idle (extra.rolling_idle): the revs an engine is held at, above its standing idle, while the
+// car rolls declutched. The fit (over a log) and the speed synthesis (under GPS, live) learn it by one rule:
+// revs above the idle's spread and below kCeiling x idle that no gear explains, flat within kFlat for kSpan
+// or more while the car, faster than kMinSpeed, slows.
+namespace rolling_idle {
+inline constexpr double kMinSpeed = 4.0;  // m/s: not a car braked to a stop or creeping on a slipping clutch
+inline constexpr double kSpan = 1.5;      // s
+inline constexpr double kFlat = 0.05;     // relative
+inline constexpr double kCeiling = 1.6;   // x the standing idle
+}  // namespace rolling_idle
+
+// Spread of the idle frequency, bounded to 3-10 % of it so that a cold start's high idle or a single blip
+// cannot make it cover the whole driving range (nor a perfectly steady idle make it vanish).
+[[nodiscard]] inline double idle_spread(double idle, double sd) noexcept {
+  return std::clamp(sd, 0.03 * idle, 0.1 * idle);
+}
 
 // JSON of `gearpulse fit --out` and of state_dir/model.json (INTERFACES.md).
 [[nodiscard]] nlohmann::json model_to_json(const GearModel& model);

@@ -254,10 +254,9 @@ double SpeedSynthesizer::freq_sigma(double freq) const noexcept {
   return std::max(sigma_s_, tuning_.min_freq_rel * freq);
 }
 
-// Spread of the idle frequency, bounded so that a cold start's high idle or a single blip cannot make the
-// spike cover the whole driving range.
+// Spread of the idle frequency learned (bounded: idle_spread).
 double SpeedSynthesizer::idle_sd() const noexcept {
-  return std::clamp(std::sqrt(idle_var_), 0.03 * idle_mean_, 0.1 * idle_mean_);
+  return idle_spread(idle_mean_, std::sqrt(idle_var_));
 }
 
 // The modes are scored by how well each explains the frequency in units of its own spread (a gear: the
@@ -665,25 +664,22 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
   // and a car coasting at warm idle looks in gear).
   const bool idling_moving =
       was_moving && mode_ == 0 && prob_[0] > kSureGear && idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
-  // Rolling declutched above the standing idle: revs that no gear explains, flat over a second and a half
-  // or more (within 5 %) while GPS shows the car slowing, are the rolling idle. Not a shift's revs (they
-  // move), nor a slipping clutch's (the car gains speed, or creeps: only above stop_speed), and below 1.6 x
-  // the standing idle.
-  constexpr double kRollSpan = 1.5;     // s
-  constexpr double kRollFlat = 0.05;    // relative
-  constexpr double kRollCeiling = 1.6;  // x the standing idle
-  const bool roll_candidate = gps > tuning_.stop_speed && was_moving && mode_ == 0 && prob_[0] > kSureGear &&
+  // Rolling declutched above the standing idle (gear_model.hpp's rolling_idle rule, as the fit applies it
+  // to a log): revs that no gear explains, flat while GPS shows the car slowing, are the rolling idle. Not a
+  // shift's revs (they move), nor a slipping clutch's (the car gains speed, or creeps).
+  using namespace rolling_idle;
+  const bool roll_candidate = gps > kMinSpeed && was_moving && mode_ == 0 && prob_[0] > kSureGear &&
                               idle_count_ > 0.0 && freq >= idle_mean_ + idle_sd() &&
-                              freq < kRollCeiling * idle_mean_;
+                              freq < kCeiling * idle_mean_;
   if (!roll_candidate) {
     roll_span_ = -1.0;
-  } else if (roll_span_ < 0.0 || std::abs(freq - roll_freq_) > kRollFlat * roll_freq_) {
+  } else if (roll_span_ < 0.0 || std::abs(freq - roll_freq_) > kFlat * roll_freq_) {
     roll_span_ = 0.0;
     roll_freq_ = freq;
     roll_speed_ = gps;
   } else {
     roll_span_ += dt;
-    if (roll_span_ >= kRollSpan && gps < roll_speed_ - tuning_.stationary_speed) {
+    if (roll_span_ >= kSpan && gps < roll_speed_ - tuning_.stationary_speed) {
       double var = 0.0;  // the spread is the idle's
       add(roll_mean_, var, roll_count_, kIdleMemory);
       roll_time_ += dt;

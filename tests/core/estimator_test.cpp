@@ -532,8 +532,9 @@ TEST_CASE("estimator: a fit records the idle an engine is held at while the car 
   const sim::Vehicle car = sim::vehicle_preset("hatch-5");
   auto samples = sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kUrban, 1200.0, 1, 3));
   // The simulated engine falls to its standing idle declutched: no rolling idle is recorded.
-  REQUIRE(fit_gear_model(samples, {}).model.extra.contains("idle"));
-  CHECK_FALSE(fit_gear_model(samples, {}).model.extra.contains("rolling_idle"));
+  const FitResult plain = fit_gear_model(samples, {});
+  REQUIRE(plain.model.extra.contains("idle"));
+  CHECK_FALSE(plain.model.extra.contains("rolling_idle"));
   // The same drive with five rolls out of gear, the engine held at 1.2 x idle while the car slows from 20
   // m/s over 15 s (the flat revs a throttle kicker or an idle-up against stalling gives; at that speed
   // no gear's line passes near them).

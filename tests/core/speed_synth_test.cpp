@@ -86,6 +86,21 @@ std::vector<SynthOutput> replay(SpeedSynthesizer& synth, const std::vector<Row>&
   return out;
 }
 
+// 20 s standing at idle, then the scripted drive (script()) with the engine held at `rolling_idle` whenever
+// the car is out of gear, as many engines are held above their standing idle while the car rolls.
+std::vector<Row> stand_then_drive_rolling_at(double rolling_idle, const std::vector<Phase>& phases) {
+  constexpr int kStanding = 20;  // s
+  std::vector<Row> rows;
+  for (int k = 0; k < kStanding; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  for (Row r : script(0.0, phases, kHatch)) {
+    r.t += kStanding;
+    if (r.gear == 0) r.freq = rolling_idle;
+    rows.push_back(r);
+  }
+  return rows;
+}
+
 // Replays a drive recorded from the simulator at RATE ("10hz", "1hz"; tests/core/data/NAME_RATE.csv: t, GPS
 // speed or blank, frequency, true speed; the model fitted for it in NAME_model.json) through a fresh
 // synthesizer, calling check(t, true speed, output) after every row.
@@ -487,27 +502,16 @@ TEST_CASE("synth: rolling declutched at revs held above the standing idle is coa
   // the car slows. GPS shows the car standing at idle, then twice rolling out of gear at those raised revs;
   // then GPS is lost and the car rolls out of gear again from 4th. That is a car coasting, not 4th (7.5 m/s)
   // or 3rd (5.6 m/s) lugging at a steady speed.
-  constexpr double kRollingIdle = 1.2 * kIdle;
-  std::vector<Row> rows;
-  for (int k = 0; k < 20; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
-  const auto drive = script(0.0,
-                            {{1, 1.8, 3},
-                             {2, 1.2, 8},
-                             {3, 0.5, 15},
-                             {4, 0.2, 20},
-                             {0, -0.4, 15},
-                             {3, 0.3, 20},
-                             {4, 0.1, 20},
-                             {0, -0.4, 15},
-                             {4, 0.3, 20},
-                             {0, -0.4, 20}},
-                            kHatch);
-  for (Row r : drive) {
-    r.t += 20.0;
-    if (r.gear == 0) r.freq = kRollingIdle;
-    rows.push_back(r);
-  }
+  const auto rows = stand_then_drive_rolling_at(1.2 * kIdle, {{1, 1.8, 3},
+                                                              {2, 1.2, 8},
+                                                              {3, 0.5, 15},
+                                                              {4, 0.2, 20},
+                                                              {0, -0.4, 15},
+                                                              {3, 0.3, 20},
+                                                              {4, 0.1, 20},
+                                                              {0, -0.4, 15},
+                                                              {4, 0.3, 20},
+                                                              {0, -0.4, 20}});
   SpeedSynthesizer synth(model_of(kHatch));
   const double outage_from = rows[rows.size() - 20].t;
   const auto out = replay(synth, rows, outage_from);
@@ -525,16 +529,8 @@ TEST_CASE("synth: the rolling idle the fit recorded counts before GPS has shown 
   constexpr double kRollingIdle = 1.2 * kIdle;
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
   model->extra["rolling_idle"] = {{"freq", kRollingIdle}, {"samples", 200}};
-  std::vector<Row> rows;
-  for (int k = 0; k < 20; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
-  const auto drive = script(
-      0.0, {{1, 1.8, 3}, {2, 1.2, 8}, {3, 0.5, 15}, {4, 0.2, 20}, {4, 0.3, 20}, {0, -0.4, 20}}, kHatch);
-  for (Row r : drive) {
-    r.t += 20.0;
-    if (r.gear == 0) r.freq = kRollingIdle;
-    rows.push_back(r);
-  }
+  const auto rows = stand_then_drive_rolling_at(
+      kRollingIdle, {{1, 1.8, 3}, {2, 1.2, 8}, {3, 0.5, 15}, {4, 0.2, 20}, {4, 0.3, 20}, {0, -0.4, 20}});
   for (const bool with_prior : {true, false}) {
     SpeedSynthesizer synth(with_prior ? model : model_of(kHatch));
     const auto out = replay(synth, rows, rows[rows.size() - 20].t);
