@@ -181,6 +181,49 @@ void random_vehicles(int count) {
               count - ok);
 }
 
+// Auto mode on the presets under other logging conditions than the paper's (1 Hz, a u-blox class
+// receiver, a clean tracker): rows every 2 s, a coarse GPS, a noisy tracker, an OBD logger (integer km/h
+// and rpm, skewed polls every 1.8 s). Right count, and how close the thetas are when it is right.
+void logging_conditions(int seeds) {
+  struct Condition {
+    const char* name;
+    sim::ObservationOptions options;
+  };
+  std::vector<Condition> conditions(5);
+  conditions[0].name = "1 Hz (as above)";
+  conditions[1].name = "rows every 2 s";
+  conditions[1].options.period = 2.0;
+  conditions[2].name = "GPS sigma 0.3 m/s";
+  conditions[2].options.sigma_speed = 0.3;
+  conditions[3].name = "tracker sigma 1 Hz";
+  conditions[3].options.sigma_freq = 1.0;
+  conditions[4].name = "OBD 1.8 s polls";
+  conditions[4].options.obd = true;
+  conditions[4].options.period = 0.5;
+  std::printf("\n== logging conditions: 7 manual presets x 4 styles, 40 min, seeds 1..%d (%d runs each)\n",
+              seeds, 28 * seeds);
+  std::printf("%-20s %12s %10s %10s %10s\n", "condition", "right count", "<= 0.5 %", "<= 1 %", "<= 2 %");
+  for (const Condition& c : conditions) {
+    int right = 0;
+    int within[3] = {0, 0, 0};
+    for (const sim::Vehicle& car : sim::vehicle_presets()) {
+      if (car.is_cvt()) continue;
+      for (sim::DrivingStyle style : kStyles) {
+        for (int seed = 1; seed <= seeds; ++seed) {
+          const auto observed = sim::simulate_observations(car, style, 2400.0, 1, seed, c.options);
+          const Score a = score(car, fit_gear_model(sim::to_samples(observed), {}).model);
+          if (a.found != car.theta.size()) continue;
+          ++right;
+          within[0] += a.max_error <= 0.5 ? 1 : 0;
+          within[1] += a.max_error <= 1.0 ? 1 : 0;
+          within[2] += a.max_error <= 2.0 ? 1 : 0;
+        }
+      }
+    }
+    std::printf("%-20s %12d %10d %10d %10d\n", c.name, right, within[0], within[1], within[2]);
+  }
+}
+
 detail::MixtureData mixture_data(const std::vector<Sample>& samples) {
   detail::MixtureData data;
   for (const Sample& x : samples) {
@@ -300,10 +343,14 @@ int main(int argc, char** argv) {
   const int seeds = argc > 1 ? std::atoi(argv[1]) : 2;
   const int runs = argc > 2 ? std::atoi(argv[2]) : 50;
   const int random = argc > 3 ? std::atoi(argv[3]) : 40;
-  std::printf("bench_fit_sim [seeds per cell = %d] [Monte-Carlo runs = %d] [random vehicles = %d]\n", seeds,
-              runs, random);
+  const int conditions = argc > 4 ? std::atoi(argv[4]) : 2;
+  std::printf(
+      "bench_fit_sim [seeds per cell = %d] [Monte-Carlo runs = %d] [random vehicles = %d] [seeds per logging "
+      "condition = %d]\n",
+      seeds, runs, random, conditions);
   if (seeds > 0) accuracy_table(seeds);
   if (random > 0) random_vehicles(random);
+  if (conditions > 0) logging_conditions(conditions);
   if (runs > 0) monte_carlo(runs);
   return 0;
 }
