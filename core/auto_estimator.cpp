@@ -146,9 +146,14 @@ struct LadderCheck {
 
 class LadderJudge {
  public:
-  LadderJudge(const MixtureData& work, std::size_t total_samples, std::vector<double> steady_log_ratios)
-      : work_(work), total_(total_samples), log_ratios_(std::move(steady_log_ratios)) {
+  LadderJudge(const MixtureData& work, std::size_t total_samples, std::vector<double> steady_log_ratios,
+              std::vector<double> moving_log_ratios)
+      : work_(work),
+        total_(total_samples),
+        log_ratios_(std::move(steady_log_ratios)),
+        moving_(std::move(moving_log_ratios)) {
     std::sort(log_ratios_.begin(), log_ratios_.end());
+    std::sort(moving_.begin(), moving_.end());
     // The idle frequency, from standstill samples, if the log has enough of them.
     constexpr std::size_t kMinIdleSamples = 20;
     if (const auto idle = estimate_idle(work, kMinIdleSamples)) idle_freq_ = idle->freq;
@@ -200,21 +205,33 @@ class LadderJudge {
   }
 
  private:
-  std::size_t count_in(double lo, double hi) const {
-    return static_cast<std::size_t>(std::upper_bound(log_ratios_.begin(), log_ratios_.end(), hi) -
-                                    std::lower_bound(log_ratios_.begin(), log_ratios_.end(), lo));
+  static std::size_t count_in(const std::vector<double>& sorted, double lo, double hi) {
+    return static_cast<std::size_t>(std::upper_bound(sorted.begin(), sorted.end(), hi) -
+                                    std::lower_bound(sorted.begin(), sorted.end(), lo));
   }
+  std::size_t count_in(double lo, double hi) const { return count_in(log_ratios_, lo, hi); }
 
   double steady_support(double centre, double half_width) const {
     return static_cast<double>(count_in(centre - half_width, centre + half_width));
   }
 
+  // The steady ratios decide where they show both clusters. A gear held for less than the log's sample
+  // interval (first gear at 0.5 Hz: a second or two per launch) leaves few samples that agree with a
+  // neighbour; then all moving ratios decide (a cluster's own samples and the valley beside it).
   bool valley_between(double a, double b) const {
+    const int steady = valley_in(log_ratios_, a, b);
+    return steady >= 0 ? steady == 1 : valley_in(moving_, a, b) == 1;
+  }
+
+  // 1 = a valley between the peaks at a and b, 0 = none, -1 = too few samples at a peak to tell.
+  static int valley_in(const std::vector<double>& sorted, double a, double b) {
     const double w = (b - a) / 6.0;
-    const double peak = static_cast<double>(std::min(count_in(a - w, a + w), count_in(b - w, b + w)));
+    const double peak =
+        static_cast<double>(std::min(count_in(sorted, a - w, a + w), count_in(sorted, b - w, b + w)));
     const double mid = 0.5 * (a + b);
-    const double valley = static_cast<double>(count_in(mid - w, mid + w));
-    return peak >= 6.0 && valley < 0.5 * peak;
+    const double valley = static_cast<double>(count_in(sorted, mid - w, mid + w));
+    if (peak < 6.0) return -1;
+    return valley < 0.5 * peak ? 1 : 0;
   }
 
   struct FreqSpread {
@@ -241,6 +258,7 @@ class LadderJudge {
   const MixtureData& work_;
   std::size_t total_;
   std::vector<double> log_ratios_;
+  std::vector<double> moving_;
   double idle_freq_ = 0.0;
 };
 
@@ -465,7 +483,7 @@ GearModel fit_auto(const MixtureData& input, int gears) {
   }
   if (steady.size() < 30) steady = log_ratios;
   const MixtureData work = subsample(all, kWorkingSamples);
-  const LadderJudge judge(work, all.size(), steady);
+  const LadderJudge judge(work, all.size(), steady, log_ratios);
   std::vector<double> init =
       candidate_scales(steady, static_cast<std::size_t>(std::max(kMaxCandidates, gears)));
   // A forced count larger than the modes found: fill the widest gaps geometrically.

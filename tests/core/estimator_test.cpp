@@ -128,6 +128,36 @@ TEST_CASE("estimator: a first gear seen on a few launches of a highway drive is 
   }
 }
 
+TEST_CASE("estimator: a first gear held for less than a 0.5 Hz log's interval is found") {
+  // Logged every 2 s, a launch shows first gear on one sample, rarely on two in a row: the cluster has
+  // hardly any sample that agrees with a neighbour, which the ladder check otherwise relies on.
+  sim::ObservationOptions every_2s;
+  every_2s.period = 2.0;
+  for (const char* name : {"bmw-520i", "close-6", "sport-7", "compact-4"}) {
+    const sim::Vehicle car = sim::vehicle_preset(name);
+    const auto observed = sim::simulate_observations(car, sim::DrivingStyle::kMixed, 2400.0, 1, 2, every_2s);
+    int first = 0;
+    int first_in_a_row = 0;
+    for (std::size_t k = 0; k < observed.size(); ++k) {
+      auto in_first = [&](std::size_t j) {
+        return observed[j].truth.clutch == sim::Clutch::kEngaged && observed[j].truth.gear == 1;
+      };
+      if (!in_first(k)) continue;
+      ++first;
+      first_in_a_row += (k > 0 && in_first(k - 1)) || (k + 1 < observed.size() && in_first(k + 1)) ? 1 : 0;
+    }
+    INFO(name << ": first gear on " << first << " samples, " << first_in_a_row << " beside another");
+    REQUIRE(first >= 8);
+    REQUIRE(first_in_a_row < 6);
+    const FitResult fit = fit_gear_model(sim::to_samples(observed), {});
+    REQUIRE(fit.model.gears.size() == car.theta.size());
+    check_ordered(fit.model);
+    CHECK(fit.model.gears[0].theta == Approx(car.theta[0]).epsilon(0.02));
+    for (std::size_t i = 1; i < car.theta.size(); ++i)
+      CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.01));
+  }
+}
+
 TEST_CASE("estimator: a log without stops or clutch-out samples still gets standard errors") {
   // Moving samples on three gear lines only: the standstill and clutch-out weights go to their bound,
   // which must not take the standard errors of theta with them.
