@@ -193,6 +193,42 @@ GearModel finish_model(const MixtureData& data, const MixtureParams& p, const st
 // that changes at one speed is no more than one gear told from its neighbour). Real drives spread both
 // widely (the Etios logs: engine frequency 1.7-2.7x from the 10th to the 90th percentile). Returns the
 // reason, empty if the log is usable.
+bool detail::holds_values(const MixtureData& data) {
+  const std::size_t n = data.size();
+  if (data.t.size() != n) return false;
+  // A logger that holds values: its moving rows mostly bring one new value of the two (a GPS and a tracker
+  // read at every row change both).
+  constexpr double kHeldShare = 0.2;
+  std::size_t pairs = 0, one_new = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    if (!(data.v[k] > 0.0 && data.v[k - 1] > 0.0) || !(data.t[k] - data.t[k - 1] <= kHeldSpan)) continue;
+    ++pairs;
+    one_new += (data.v[k] == data.v[k - 1]) != (data.s[k] == data.s[k - 1]) ? 1 : 0;
+  }
+  return pairs > 0 && static_cast<double>(one_new) >= kHeldShare * static_cast<double>(pairs);
+}
+
+void detail::interpolate_held(MixtureData& data) {
+  const std::size_t n = data.size();
+  if (data.t.size() != n) return;
+  auto fill = [&](std::vector<double>& x) {
+    std::size_t last = 0;  // first sample of the current run of one value (when it was polled)
+    for (std::size_t k = 1; k <= n; ++k) {
+      if (k < n && x[k] == x[last] && data.t[k] >= data.t[k - 1]) continue;
+      // [last, k) hold one value; k (if any) brings the next one. A speed of 0 is a car standing.
+      if (k < n && k > last + 1 && x[last] != 0.0 && data.t[k] > data.t[last] &&
+          data.t[k] - data.t[last] <= kHeldSpan) {
+        const double span = data.t[k] - data.t[last];
+        for (std::size_t j = last + 1; j < k; ++j)
+          x[j] = x[last] + (x[k] - x[last]) * (data.t[j] - data.t[last]) / span;
+      }
+      last = k;
+    }
+  };
+  fill(data.v);
+  fill(data.s);
+}
+
 std::string detail::degenerate_log(const detail::MixtureData& data) {
   if (data.t.size() == data.size() && data.size() >= 2 &&
       std::all_of(data.t.begin(), data.t.end(), [&](double t) { return t == data.t.front(); }))
@@ -259,10 +295,20 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     result.model.reason = problem;
     return result;
   }
-  if (!options.ratios.empty()) {
-    result.model = detail::fit_paper(data, options.ratios);
-  } else {
-    result.model = detail::fit_auto(data, options.gears);
+  {
+    // The ladder from speed and frequency as of one instant; what the driver does (idle, revs per gear,
+    // rolling idle) below from the values as logged, as the synthesis sees them live.
+    std::optional<detail::MixtureData> aligned;
+    if (detail::holds_values(data)) {
+      aligned = data;
+      detail::interpolate_held(*aligned);
+    }
+    const detail::MixtureData& fit_data = aligned ? *aligned : data;
+    if (!options.ratios.empty()) {
+      result.model = detail::fit_paper(fit_data, options.ratios);
+    } else {
+      result.model = detail::fit_auto(fit_data, options.gears);
+    }
   }
   if (result.model.method.empty()) result.model.method = options.ratios.empty() ? "auto" : "paper";
   // A ladder is only handed out if it is one (eq. (5)): positive, finite, strictly ascending thetas. An

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "core/estimator.hpp"
+#include "core/estimator_internal.hpp"
 #include "core/mixture_likelihood.hpp"
 #include "core/sample_io.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -368,10 +369,12 @@ TEST_CASE("estimator: two speeds: the ladder is read from the wheel speed, on th
   CHECK(scale["slope"].get<double>() == Approx(1.0 / kCalibration).epsilon(0.01));
   // Flooring to whole km/h reads half a km/h low on average; the line puts it back.
   CHECK(scale["offset"].get<double>() == Approx(0.5 / 3.6 / kCalibration).margin(0.07));
-  // The wheel speed as it reads would put every gear 4 % high.
+  // The wheel speed as it reads would put every gear 4 % high (a little less in top gear: between two
+  // changes of its whole km/h the fit reads the speed on the line from one to the next, which takes out
+  // part of the flooring's half km/h).
   const FitResult wheel_only = fit_gear_model(log.wheel, {});
   REQUIRE(wheel_only.model.gears.size() == car.theta.size());
-  CHECK(wheel_only.model.gears.back().theta / car.theta.back() > 1.03);
+  CHECK(wheel_only.model.gears.back().theta / car.theta.back() > 1.025);
 }
 
 TEST_CASE(
@@ -658,5 +661,64 @@ TEST_CASE("estimator: rows repeating the values held by a slow logger count once
   for (std::size_t i = 0; i < once.model.gears.size(); ++i) {
     CHECK(rows.model.gears[i].theta == Approx(once.model.gears[i].theta).epsilon(1e-9));
     CHECK(rows.model.gears[i].std_error == Approx(once.model.gears[i].std_error).epsilon(1e-9));
+  }
+}
+
+TEST_CASE("estimator: a value held from an earlier poll is read on the line to the next poll") {
+  // Speed polled at 0 and 2 s, rpm at 0.5 and 1.5 s, rows every 0.5 s, each value repeated until its
+  // next poll.
+  detail::MixtureData d;
+  d.t = {0.0, 0.5, 1.0, 1.5, 2.0, 2.5};
+  d.v = {10.0, 10.0, 10.0, 10.0, 12.0, 12.0};
+  d.s = {30.0, 31.0, 31.0, 33.0, 33.0, 33.0};
+  REQUIRE(detail::holds_values(d));
+  detail::interpolate_held(d);
+  CHECK(d.v == std::vector<double>{10.0, 10.5, 11.0, 11.5, 12.0, 12.0});  // the last value has no next poll
+  CHECK(d.s == std::vector<double>{30.0, 31.0, 32.0, 33.0, 33.0, 33.0});
+
+  // A car standing keeps its 0 up to the instant it is seen moving; values held longer than a polling
+  // round and a half were read again unchanged, and stay.
+  detail::MixtureData standing;
+  standing.t = {0.0, 1.0, 2.0, 3.0, 3.5, 10.0};
+  standing.v = {0.0, 0.0, 0.0, 0.0, 1.5, 1.5};
+  standing.s = {13.0, 13.0, 13.0, 13.0, 20.0, 25.0};
+  detail::interpolate_held(standing);
+  CHECK(standing.v == std::vector<double>{0.0, 0.0, 0.0, 0.0, 1.5, 1.5});
+  CHECK(standing.s == std::vector<double>{13.0, 13.0, 13.0, 13.0, 20.0, 25.0});
+}
+
+TEST_CASE("estimator: a GPS and tracker log is not taken for one that holds values") {
+  // Every moving row brings both values new; only the car standing repeats its 0.
+  const auto samples = sim::to_samples(
+      sim::simulate_observations(sim::vehicle_preset("hatch-5"), sim::DrivingStyle::kUrban, 600.0, 1, 4));
+  detail::MixtureData d;
+  for (const Sample& s : samples) {
+    if (!s.has_speed() || !s.has_freq()) continue;
+    d.t.push_back(s.t);
+    d.v.push_back(s.speed);
+    d.s.push_back(s.freq);
+  }
+  CHECK_FALSE(detail::holds_values(d));
+}
+
+TEST_CASE("estimator: an OBD log's ladder is fitted on speed and rpm as of one instant") {
+  // An OBD logger polls speed and rpm at different instants of each 1.8 s round and repeats each until its
+  // next poll. In a jam most of the driving is first and second gear, launching and braking, where half
+  // a second of skew moves the speed/rpm ratio by tens of percent; read as of one instant, the ladder of
+  // 40 minutes comes out within 1 % (paired as logged, six of these twelve drives were off by 1.0-1.4 %).
+  sim::ObservationOptions obd;
+  obd.obd = true;
+  obd.period = 0.5;
+  for (const char* name : {"bmw-520i", "wide-4", "van-6", "compact-4"}) {
+    const sim::Vehicle car = sim::vehicle_preset(name);
+    for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+      const auto samples = sim::to_samples(
+          sim::simulate_observations(car, sim::DrivingStyle::kTrafficJam, 2400.0, 1, seed, obd));
+      const FitResult fit = fit_gear_model(samples, {});
+      INFO(name << " seed " << seed);
+      REQUIRE(fit.model.gears.size() == car.theta.size());
+      for (std::size_t i = 0; i < car.theta.size(); ++i)
+        CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.01));
+    }
   }
 }
