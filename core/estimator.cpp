@@ -188,11 +188,6 @@ GearModel finish_model(const MixtureData& data, const MixtureParams& p, const st
 
 }  // namespace detail
 
-// Logs no gear ladder can be read from: every sample at one instant, or a speed or an engine frequency
-// that hardly changes while the car moves (a ladder is read from the two changing together; a frequency
-// that changes at one speed is no more than one gear told from its neighbour). Real drives spread both
-// widely (the Etios logs: engine frequency 1.7-2.7x from the 10th to the 90th percentile). Returns the
-// reason, empty if the log is usable.
 bool detail::holds_values(const MixtureData& data) {
   const std::size_t n = data.size();
   if (data.t.size() != n) return false;
@@ -229,6 +224,11 @@ void detail::interpolate_held(MixtureData& data) {
   fill(data.s);
 }
 
+// Logs no gear ladder can be read from: every sample at one instant, or a speed or an engine frequency
+// that hardly changes while the car moves (a ladder is read from the two changing together; a frequency
+// that changes at one speed is no more than one gear told from its neighbour). Real drives spread both
+// widely (the Etios logs: engine frequency 1.7-2.7x from the 10th to the 90th percentile). Returns the
+// reason, empty if the log is usable.
 std::string detail::degenerate_log(const detail::MixtureData& data) {
   if (data.t.size() == data.size() && data.size() >= 2 &&
       std::all_of(data.t.begin(), data.t.end(), [&](double t) { return t == data.t.front(); }))
