@@ -196,7 +196,8 @@ bool detail::holds_values(const MixtureData& data) {
   constexpr double kHeldShare = 0.2;
   std::size_t pairs = 0, one_new = 0;
   for (std::size_t k = 1; k < n; ++k) {
-    if (!(data.v[k] > 0.0 && data.v[k - 1] > 0.0) || !(data.t[k] - data.t[k - 1] <= kHeldSpan)) continue;
+    const double dt = data.t[k] - data.t[k - 1];
+    if (!(data.v[k] > 0.0 && data.v[k - 1] > 0.0) || !(dt > 0.0 && dt <= kHeldSpan)) continue;
     ++pairs;
     one_new += (data.v[k] == data.v[k - 1]) != (data.s[k] == data.s[k - 1]) ? 1 : 0;
   }
