@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <optional>
 
 #include "core/estimator_internal.hpp"
 
@@ -219,19 +220,17 @@ class LadderJudge {
   // interval (first gear at 0.5 Hz: a second or two per launch) leaves few samples that agree with a
   // neighbour; then all moving ratios decide (a cluster's own samples and the valley beside it).
   bool valley_between(double a, double b) const {
-    const int steady = valley_in(log_ratios_, a, b);
-    return steady >= 0 ? steady == 1 : valley_in(moving_, a, b) == 1;
+    return valley_in(log_ratios_, a, b).value_or(valley_in(moving_, a, b).value_or(false));
   }
 
-  // 1 = a valley between the peaks at a and b, 0 = none, -1 = too few samples at a peak to tell.
-  static int valley_in(const std::vector<double>& sorted, double a, double b) {
+  // Whether a valley lies between the peaks at a and b; nothing when a peak has too few samples to tell.
+  static std::optional<bool> valley_in(const std::vector<double>& sorted, double a, double b) {
     const double w = (b - a) / 6.0;
     const double peak =
         static_cast<double>(std::min(count_in(sorted, a - w, a + w), count_in(sorted, b - w, b + w)));
+    if (peak < 6.0) return std::nullopt;
     const double mid = 0.5 * (a + b);
-    const double valley = static_cast<double>(count_in(sorted, mid - w, mid + w));
-    if (peak < 6.0) return -1;
-    return valley < 0.5 * peak ? 1 : 0;
+    return static_cast<double>(count_in(sorted, mid - w, mid + w)) < 0.5 * peak;
   }
 
   struct FreqSpread {
