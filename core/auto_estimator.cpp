@@ -177,6 +177,18 @@ class LadderJudge {
       }
     }
     if (weakest >= 0) return {weakest, "a gear cluster carries too few samples"};
+    // Two clusters alone are the weakest sign of a gearbox: a CVT holds its top ratio at speed (one heavy
+    // cluster), and a bump of its continuum below it (a speed often driven at one engine speed) makes a
+    // pair. A drive that shows a manual in only two gears drives both, while such a bump carries a few
+    // percent of the in-gear weight at most.
+    constexpr double kMinPairShare = 0.05;
+    if (m == 2) {
+      const int lighter = p.alpha[0] < p.alpha[1] ? 0 : 1;
+      if (p.alpha[lighter] < kMinPairShare * gear_total)
+        return {lighter,
+                "two gear clusters, the lighter with under 5 % of the driving in gear (one heavy "
+                "cluster and a bump beside it, as a CVT gives)"};
+    }
     // Adjacent gears are distinct (eq. (10)) and separated by a valley of the log(v/s) density: a smear
     // (clutch slip, CVT) fitted by several narrow components has no valleys.
     for (int i = 0; i + 1 < m; ++i) {
