@@ -488,9 +488,21 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
         urge *= std::clamp((freq / idle_mean_ - kCreepRevs) / (kPullingRevs - kCreepRevs), 0.0, 1.0);
       up *= 1.0 + urge;
     }
-    const double down =
+    double down =
         from > 1 ? shift_base * downshift_factor(from, freq) * shift_comfort(from, from - 1, freq) : 0.0;
-    const double clutch = base * kToClutch;
+    double clutch = base * kToClutch;
+    // Leaving a gear is never given a hazard beyond the cost of a second of free revs, which the clutch
+    // pays for any reading: past that, staying in a gear whose line the revs keep following costs more per
+    // second than the clutch explaining nothing. A hard launch revved out in first gear, far past this
+    // driver's upshift revs and first gear's time, was lost to the clutch while the car still pulled, and
+    // with it the speed (11 km/h in first gear at a true 27 in fourth, for half a minute).
+    const double max_leave = 0.5 * kFreeRevs * kFreeRevs;
+    if (const double sum = clutch + up + down; sum > max_leave) {
+      const double k = max_leave / sum;
+      clutch *= k;
+      up *= k;
+      down *= k;
+    }
     const double total = clutch + up + down;
     row[from] = std::exp(-total * dt);
     spread(total, 0, clutch);

@@ -686,6 +686,17 @@ TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through 
   CHECK(speed_within("hard_launch_jam", 35.0, 60.0, 3.0 * kKmh) == 251);
 }
 
+TEST_CASE("synth: at 10 Hz a launch revved out in first gear is not lost to the clutch") {
+  // Recorded from the simulator (a random 7-speed whose engine frequency is a firing frequency): in a jam,
+  // GPS is lost with the car at rest; at 42 s it moves off hard and holds first gear to 191 Hz, far past
+  // this driver's upshift revs, then shifts to second, third and fourth. The hazard of the upshift at such
+  // revs (with first gear's time on top) grew past the cost of free revs, so the clutch took the belief
+  // while the revs still followed first gear's line; the car pulled on, the clutch's speed did not, and
+  // the filter took fourth gear's revs for first (11 km/h at a true 27, to the end).
+  // From 42 s, as the car moves off, to the end (70 s).
+  CHECK(speed_within("jam_revved_first", 42.0, 70.0, 3.0 * kKmh) == 280);
+}
+
 TEST_CASE(
     "synth: at 1 Hz a hard climb in second is not taken for an upshift, and the upshifts are followed") {
   // Recorded from the simulator (wide-4, urban): GPS is lost at a light; the car moves off and climbs
