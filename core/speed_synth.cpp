@@ -267,6 +267,9 @@ double SpeedSynthesizer::idle_sd() const noexcept {
 constexpr double kFreeRevs = 3.0;
 constexpr double kLaunchRevs = 2.5;  // moving off: likelier than free revs with the car at rest
 constexpr double kDeadZone = 2.0;    // sigmas of a gear's reading that are ordinary jitter
+// Declutched, the engine runs free: its revs fall toward idle, or rise in a blip the driver gives (matching
+// the revs for a downshift). Revs that climb by more than kFreeRise a second are an engine pulling the car.
+constexpr double kFreeRise = 0.2;  // 1/s, relative; above the tracker's hop-to-hop jitter
 
 // Log-cost of a departure of z2 squared sigmas as an event: what lies beyond the dead zone, paid once.
 constexpr double jump_cost(double z2) noexcept {
@@ -599,7 +602,11 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
     return mode == launch_mode() ? weight * (kLostGearLogEvidence + launch_plausibility(x.v)) : 0.0;
   }
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
-  if (mode == 0) return weight * log_declutched(freq, x.v);
+  if (mode == 0) {
+    // Rolling, revs climbing fast cost the clutch up to as much again as free revs (climb_, filter_step).
+    const double climb = x.v > kMovingOffSpeed ? climb_ * 0.5 * kFreeRevs * kFreeRevs : 0.0;
+    return weight * (log_declutched(freq, x.v) - climb);
+  }
   if (mode == launch_mode()) {
     // The clutch slips: the engine turns faster than the wheels in first gear, so the car is no faster
     // than theta_1 x freq. A track beyond that is pulled back to it, for the squared excess (an event).
@@ -718,6 +725,17 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
   score_revs_habit(freq);
+  // How fast the revs climb, from kFreeRise (0) to twice it (1): only at the tracker's short steps, where
+  // one reading to the next is shorter than a shift, so the climb is the engine's and not a shift's
+  // between two readings. A driver who shifts every second or so otherwise had each gear outweigh the
+  // clutch only a second after it bit, with the clutch's speed left behind as the car pulled; mixed in at
+  // the next declutch, that speed made the gear below fit the revs (a random 6-speed in town, climbing to
+  // 40 km/h in fifth, was read in second at 15).
+  climb_ = 0.0;
+  if (short_step && dt > 0.0 && std::isfinite(freq) && std::isfinite(prev_freq_) && prev_freq_ > 0.0) {
+    const double rise = (freq - prev_freq_) / (prev_freq_ * dt);
+    climb_ = std::clamp((rise - kFreeRise) / kFreeRise, 0.0, 1.0);
+  }
   for (int i = 0; i < modes; ++i) {
     transitions_from(i, dt, shift_freq, track_[i].v, row_);
     const double log_pi = std::log(prob_[i]);

@@ -197,6 +197,7 @@ class SpeedSynthesizer {
   int sure_gear_ = 0;            // last gear held with confidence under GPS
   double sure_gear_freq_ = 0.0;  // its last frequency
   double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
+  double climb_ = 0.0;           // how fast the revs climb this step, 0..1 (filter_step)
   SynthOutput last_{};
 };
 
