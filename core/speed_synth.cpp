@@ -265,6 +265,7 @@ double SpeedSynthesizer::idle_sd() const noexcept {
 // in other gears would gain on the true one with every steady sample. A frequency that no gear explains
 // within kFreeRevs sigmas is as well explained by an engine running free.
 constexpr double kFreeRevs = 3.0;
+constexpr double kFreeRevsCost = 0.5 * kFreeRevs * kFreeRevs;  // a second of free revs, log-units
 constexpr double kLaunchRevs = 2.5;  // moving off: likelier than free revs with the car at rest
 constexpr double kDeadZone = 2.0;    // sigmas of a gear's reading that are ordinary jitter
 // Declutched, the engine runs free: its revs fall toward idle, or rise in a blip the driver gives (matching
@@ -279,7 +280,7 @@ constexpr double jump_cost(double z2) noexcept {
 // Score of the frequency declutched at `speed`: the engine falls to idle (a spike, as the paper's g() has one
 // at standstill, section 3.1) or runs free anywhere in its range.
 double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcept {
-  const double free = -0.5 * kFreeRevs * kFreeRevs;
+  const double free = -kFreeRevsCost;
   if (idle_count_ <= 0.0) return free;
   // Revs running free are a shift in progress; with the car at rest they are rare (a blip), and revs held
   // above idle there mean moving off.
@@ -299,7 +300,7 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
 // free revs are not taken for a launch. 0 at walking pace.
 double SpeedSynthesizer::launch_plausibility(double speed) const noexcept {
   const double slow = -0.5 * kLaunchRevs * kLaunchRevs;
-  const double fast = -0.5 * kFreeRevs * kFreeRevs + std::log(1.0 - tuning_.idle_weight) - 1.0;
+  const double fast = -kFreeRevsCost + std::log(1.0 - tuning_.idle_weight) - 1.0;
   const double share = std::clamp((speed - kMovingOffSpeed) / (3.0 * kMovingOffSpeed), 0.0, 1.0);
   return share * (fast - slow);
 }
@@ -499,9 +500,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // second than the clutch explaining nothing. A hard launch revved out in first gear, far past this
     // driver's upshift revs and first gear's time, was lost to the clutch while the car still pulled, and
     // with it the speed (11 km/h in first gear at a true 27 in fourth, for half a minute).
-    const double max_leave = 0.5 * kFreeRevs * kFreeRevs;
-    if (const double sum = clutch + up + down; sum > max_leave) {
-      const double k = max_leave / sum;
+    if (const double sum = clutch + up + down; sum > kFreeRevsCost) {
+      const double k = kFreeRevsCost / sum;
       clutch *= k;
       up *= k;
       down *= k;
@@ -604,7 +604,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) {
     // Rolling, revs climbing fast cost the clutch up to as much again as free revs (climb_, filter_step).
-    const double climb = x.v > kMovingOffSpeed ? climb_ * 0.5 * kFreeRevs * kFreeRevs : 0.0;
+    const double climb = x.v > kMovingOffSpeed ? climb_ * kFreeRevsCost : 0.0;
     return weight * (log_declutched(freq, x.v) - climb);
   }
   if (mode == launch_mode()) {
