@@ -112,10 +112,15 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
   bool was_out = false;
   int clean_gear = -1;  // hindsight gear of the last outage sample on its gear line (-1: none)
   double clean_freq = 0.0;
+  gearpulse::SynthOutput o;
+  Sample previous{};  // as the synthesis saw it (speed blanked inside the outages)
   for (const Sample& s : samples) {
     const bool out = in_outage(s.t - t0);
     const double gps = out ? gearpulse::kMissing : s.speed;
-    const gearpulse::SynthOutput o = synth.step(s.t, gps, s.freq);
+    // As `gearpulse replay` does: a sample whose speed the outage took and whose rpm is held brings nothing.
+    const Sample seen{s.t, gps, s.freq};
+    if (!gearpulse::repeats_held_freq(previous, seen)) o = synth.step(s.t, gps, s.freq);
+    previous = seen;
     if (!out) {
       if (s.has_speed()) last_gps = s.speed;
       if (s.has_speed() && s.has_freq())

@@ -411,6 +411,54 @@ TEST_CASE(
   }
 }
 
+TEST_CASE(
+    "cli: replay answers an outage row that only repeats the held rpm with the output of the row before") {
+  TempDir dir;
+  const std::string train = simulated_log(dir, 23);
+  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  // An OBD logger's drive as a generic CSV: integer km/h and rpm, each polled once per 1.8 s round and
+  // written on every row (every 0.5 s), the speed blanked for a minute. Inside the outage a row whose rpm
+  // was not polled again repeats the row before and brings nothing new.
+  using namespace gearpulse::sim;
+  auto samples = to_samples(simulate_observations(vehicle_preset("hatch-5"), DrivingStyle::kUrban, 400.0, 1,
+                                                  25, {.period = 0.5, .obd = true, .seed = 26}));
+  for (auto& s : samples)
+    if (s.t >= 200.0 && s.t < 260.0) s.speed = gearpulse::kMissing;
+  const std::string test = dir.file("obd.csv");
+  {
+    std::ofstream out(test, std::ios::binary);
+    gearpulse::write_samples(out, samples);
+  }
+  const gearpulse::SampleLog input = [&] {
+    std::ifstream in(test, std::ios::binary);
+    return gearpulse::read_samples(in, test);
+  }();
+  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + test);
+  REQUIRE(r.status == 0);
+  std::istringstream out(r.out);
+  std::string line;
+  std::getline(out, line);
+  std::vector<std::string> rows;
+  while (std::getline(out, line))
+    rows.push_back(line.substr(line.find(',') + 1));  // speed,gear,source
+  REQUIRE(rows.size() == input.samples.size());
+  std::size_t held = 0, fresh = 0, changed = 0;
+  for (std::size_t i = 1; i < rows.size(); ++i) {
+    const auto& s = input.samples[i];
+    if (s.has_speed() || !s.has_freq()) continue;
+    if (s.freq == input.samples[i - 1].freq) {
+      ++held;
+      CHECK(rows[i] == rows[i - 1]);
+    } else {
+      ++fresh;
+      changed += rows[i] != rows[i - 1];
+    }
+  }
+  CHECK(held >= 40);   // about three of every four rows
+  CHECK(fresh >= 20);  // one poll a round
+  CHECK(changed >= fresh / 2);
+}
+
 TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds keep their fractions)") {
   TempDir dir;
   const std::string train = simulated_log(dir, 23);

@@ -48,7 +48,8 @@ int run_replay(const ReplayCommand& cmd) {
   const SampleLog log = std::move(read_sample_files({cmd.file}, read).front());
 
   // One output row per accepted input row: a sample steps the synthesis once, at its first row; an OBD
-  // row repeating held values answers with the output of the sample it repeats.
+  // row repeating held values answers with the output of the sample it repeats, and so does a sample
+  // without speed that only repeats the held rpm (repeats_held_freq).
   SpeedSynthesizer synth(model);
   std::string out = "t,speed,gear,source\n";
   SynthOutput o;
@@ -58,7 +59,8 @@ int run_replay(const ReplayCommand& cmd) {
   for (const InputRow& r : log.rows) {
     for (; stepped <= r.sample; ++stepped) {
       const Sample& s = log.samples[stepped];
-      o = synth.step(s.t, s.speed, s.freq);
+      if (stepped == 0 || !repeats_held_freq(log.samples[stepped - 1], s))
+        o = synth.step(s.t, s.speed, s.freq);
     }
     // t as the shortest text that reads back to the same double (epoch seconds keep their fractions).
     const int t_len = static_cast<int>(std::to_chars(t, t + sizeof t, r.t).ptr - t);
