@@ -7,6 +7,7 @@
 
 #include "core/gear_model.hpp"
 #include "core/mixture_likelihood.hpp"
+#include "core/sample.hpp"
 
 namespace gearpulse::detail {
 
@@ -46,9 +47,8 @@ struct GearRevs {
 // OBD loggers poll speed and rpm at different instants and repeat each value until its next poll: the
 // log then pairs a fresh value of one with a held value of the other. holds_values tells such a log (most
 // moving rows bring one new value of the two); interpolate_held replaces every held value by the straight
-// line from its poll to the next one, when the two are at most kHeldSpan apart (a speed of 0 stays: a car
-// standing).
-inline constexpr double kHeldSpan = 3.0;  // s: a polling round and a half
+// line from its poll to the next one, when the two are at most kHeldSpan (sample.hpp) apart (a speed of 0
+// stays: a car standing).
 [[nodiscard]] bool holds_values(const MixtureData& data);
 void interpolate_held(MixtureData& data);
 

@@ -104,6 +104,22 @@ TEST_CASE("io: the skip list is capped but every skip is counted") {
   CHECK(log.samples.size() == 1);
 }
 
+TEST_CASE("io: an outage row repeating the held rpm within a polling round and a half brings nothing") {
+  using gearpulse::kMissing;
+  using gearpulse::repeats_held_freq;
+  const gearpulse::Sample stepped{100.0, 12.0, 25.0};
+  // Within kHeldSpan of the last sample stepped, the same rpm without a speed is a held copy.
+  CHECK(repeats_held_freq(stepped, {100.5, kMissing, 25.0}));
+  CHECK(repeats_held_freq(stepped, {100.0 + gearpulse::kHeldSpan, kMissing, 25.0}));
+  // Later, it is a reading again: an engine that keeps one value (switched off, 0 rpm) is not frozen out.
+  CHECK_FALSE(repeats_held_freq(stepped, {100.1 + gearpulse::kHeldSpan, kMissing, 25.0}));
+  CHECK_FALSE(repeats_held_freq({100.0, kMissing, 0.0}, {130.0, kMissing, 0.0}));
+  // A new value, a row with a speed (GPS brings a reading) or no frequency at all are stepped.
+  CHECK_FALSE(repeats_held_freq(stepped, {100.5, kMissing, 25.1}));
+  CHECK_FALSE(repeats_held_freq(stepped, {100.5, 12.5, 25.0}));
+  CHECK_FALSE(repeats_held_freq({100.0, kMissing, kMissing}, {100.5, kMissing, kMissing}));
+}
+
 TEST_CASE("io: Carloop rows that refresh nothing are dropped and rpm becomes Hz") {
   const std::string header = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),THROTTLE (),\r\n";
   const SampleLog log = read_text(header +
