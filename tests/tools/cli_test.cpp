@@ -71,6 +71,12 @@ std::size_t lines(const std::string& text) {
   return n;
 }
 
+// The samples gearpulse's reader takes from `path`, as `replay` reads them.
+gearpulse::SampleLog read_log(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return gearpulse::read_samples(in, path);
+}
+
 // A simulated 20-minute drive of an Etios-like hatchback at 1 Hz, as a generic CSV.
 std::string simulated_log(const TempDir& dir, std::uint64_t seed, double outage_from = -1.0) {
   using namespace gearpulse::sim;
@@ -329,10 +335,7 @@ TEST_CASE("cli: replay prints t speed gear source for every row") {
   const std::string train = simulated_log(dir, 23);
   REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
   const std::string test = simulated_log(dir, 24, 300.0);
-  const gearpulse::SampleLog input = [&] {
-    std::ifstream in(test, std::ios::binary);
-    return gearpulse::read_samples(in, test);
-  }();
+  const gearpulse::SampleLog input = read_log(test);
   const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + test);
   REQUIRE(r.status == 0);
   std::istringstream out(r.out);
@@ -429,10 +432,7 @@ TEST_CASE(
     std::ofstream out(test, std::ios::binary);
     gearpulse::write_samples(out, samples);
   }
-  const gearpulse::SampleLog input = [&] {
-    std::ifstream in(test, std::ios::binary);
-    return gearpulse::read_samples(in, test);
-  }();
+  const gearpulse::SampleLog input = read_log(test);
   const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + test);
   REQUIRE(r.status == 0);
   std::istringstream out(r.out);
