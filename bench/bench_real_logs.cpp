@@ -112,17 +112,12 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
   bool was_out = false;
   int clean_gear = -1;  // hindsight gear of the last outage sample on its gear line (-1: none)
   double clean_freq = 0.0;
-  gearpulse::SynthOutput o;
-  Sample last{};  // the last sample stepped, as the synthesis saw it (speed blanked inside the outages)
+  gearpulse::LogReplayer replayer(synth);
   for (const Sample& s : samples) {
     const bool out = in_outage(s.t - t0);
     const double gps = out ? gearpulse::kMissing : s.speed;
     // As `gearpulse replay` does: a sample whose speed the outage took and whose rpm is held brings nothing.
-    const Sample seen{s.t, gps, s.freq};
-    if (!gearpulse::repeats_held_freq(last, seen)) {
-      o = synth.step(s.t, gps, s.freq);
-      last = seen;
-    }
+    const gearpulse::SynthOutput o = replayer.step({s.t, gps, s.freq});
     if (!out) {
       if (s.has_speed()) last_gps = s.speed;
       if (s.has_speed() && s.has_freq())

@@ -104,8 +104,7 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
   double last_gps = 0.0, hold_c = 0.0;
   bool was_out = false;
   double last_speed = -1.0, last_freq = -1.0;
-  gearpulse::SynthOutput o;
-  gearpulse::Sample last;  // the last row stepped, as the synthesis saw it (speed blanked inside the outages)
+  gearpulse::LogReplayer replayer(synth);
   for (const sim::Observation& r : rows) {
     // As gearpulse's readers do with OBD logs: a row repeating both held values carries nothing new.
     if (r.speed == last_speed && r.freq == last_freq) continue;
@@ -114,11 +113,7 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
     const double t = r.truth.t;
     const bool out = in_outage(t - t0);
     // As `gearpulse replay` does: a row whose speed the outage took and whose rpm is held brings nothing.
-    const gearpulse::Sample seen{t, out ? gearpulse::kMissing : r.speed, r.freq};
-    if (!gearpulse::repeats_held_freq(last, seen)) {
-      o = synth.step(t, seen.speed, seen.freq);
-      last = seen;
-    }
+    const gearpulse::SynthOutput o = replayer.step({t, out ? gearpulse::kMissing : r.speed, r.freq});
     if (!out) {
       if (std::isfinite(r.speed)) last_gps = r.speed;
       was_out = false;

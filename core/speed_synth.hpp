@@ -37,6 +37,7 @@
 #include <string_view>
 
 #include "core/gear_model.hpp"
+#include "core/sample.hpp"
 
 namespace gearpulse {
 
@@ -199,6 +200,26 @@ class SpeedSynthesizer {
   double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
   double climb_ = 0.0;           // how fast the revs climb this step, 0..1 (filter_step)
   SynthOutput last_{};
+};
+
+// Steps a synthesizer over the samples of a log, in order, as `gearpulse replay` and the benches do: a
+// sample that only repeats a held rpm (repeats_held_freq) answers with the last output instead of a step.
+class LogReplayer {
+ public:
+  explicit LogReplayer(SpeedSynthesizer& synth) noexcept : synth_(synth) {}
+
+  const SynthOutput& step(const Sample& s) noexcept {
+    if (!repeats_held_freq(last_, s)) {
+      out_ = synth_.step(s.t, s.speed, s.freq);
+      last_ = s;
+    }
+    return out_;
+  }
+
+ private:
+  SpeedSynthesizer& synth_;
+  Sample last_;  // the last sample stepped
+  SynthOutput out_;
 };
 
 }  // namespace gearpulse

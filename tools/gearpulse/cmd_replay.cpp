@@ -51,20 +51,15 @@ int run_replay(const ReplayCommand& cmd) {
   // row repeating held values answers with the output of the sample it repeats, and so does a sample
   // without speed that only repeats the held rpm (repeats_held_freq).
   SpeedSynthesizer synth(model);
+  LogReplayer replayer(synth);
   std::string out = "t,speed,gear,source\n";
   SynthOutput o;
-  std::size_t stepped = 0;  // samples read so far
-  Sample last;              // the last sample the synthesis was stepped with
+  std::size_t stepped = 0;  // samples stepped so far
   char t[32];               // the shortest text of any double fits
   char row[512];            // room for any double in %.4f (at most 309 digits before the point)
   for (const InputRow& r : log.rows) {
-    for (; stepped <= r.sample; ++stepped) {
-      const Sample& s = log.samples[stepped];
-      if (stepped == 0 || !repeats_held_freq(last, s)) {
-        o = synth.step(s.t, s.speed, s.freq);
-        last = s;
-      }
-    }
+    for (; stepped <= r.sample; ++stepped)
+      o = replayer.step(log.samples[stepped]);
     // t as the shortest text that reads back to the same double (epoch seconds keep their fractions).
     const int t_len = static_cast<int>(std::to_chars(t, t + sizeof t, r.t).ptr - t);
     const std::string_view source = source_name(o.source);
