@@ -497,14 +497,15 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     }
     double down =
         from > 1 ? shift_base * downshift_factor(from, freq) * shift_comfort(from, from - 1, freq) : 0.0;
-    // Every shift passes through the clutch. Between readings a second or more apart, a reading may fall
-    // inside the declutch of a shift due at these revs, with revs that neither gear explains: that chance is
-    // the declutch's share of the step, over and above the shift that the reading finds done. Without it, a
-    // skip-shift from third to fifth caught at 30 Hz, its revs falling from third's 43 at 54 km/h, was fifth
-    // gear's at 62 km/h (a jump beyond the dead zone costs less than free revs and the leaving of a gear),
-    // and fourth gear's reading of the next one, 12 km/h low, later took the belief back for most of the
-    // outage. At the tracker's short steps the declutch shows on several readings and the clutch's own rate
-    // holds it (measured: counted there too, it cost the 10 Hz figures, presets 2.23 -> 2.59 km/h p95).
+    // Every shift passes through the clutch. Between readings further apart than the tracker's hops, a
+    // reading may fall inside the declutch of a shift due at these revs, with revs that neither gear
+    // explains: that chance is the declutch's share of the step, over and above the shift that the reading
+    // finds done. Without it, a skip-shift from third to fifth caught at 30 Hz, its revs falling from
+    // third's 43 at 54 km/h, was fifth gear's at 62 km/h (a jump beyond the dead zone costs less than free
+    // revs and the leaving of a gear), and fourth gear's reading of the next one, 12 km/h low, later took
+    // the belief back for most of the outage. At the tracker's short steps the declutch shows on several
+    // readings and the clutch's own rate holds it (measured: counted there too, it cost the 10 Hz figures,
+    // presets 2.23 -> 2.59 km/h p95).
     constexpr double kDeclutchTime = 0.5;  // s: the clutch out in a shift
     double clutch = base * kToClutch;
     if (dt >= kShortStep * tuning_.accel_time) clutch += up * std::min(1.0, kDeclutchTime / dt);
