@@ -93,6 +93,23 @@ std::string simulated_log(const TempDir& dir, std::uint64_t seed, double outage_
   return path;
 }
 
+// Fits the model the replay tests read, from the simulated drive of seed 23; returns its path.
+std::string fitted_model(const TempDir& dir) {
+  const std::string train = simulated_log(dir, 23);
+  const std::string model = dir.file("model.json");
+  REQUIRE(run(dir, "fit --out " + model + " " + train).status == 0);
+  return model;
+}
+
+// The comma-separated cells of one output row.
+std::vector<std::string> cells_of(const std::string& line) {
+  std::vector<std::string> cells;
+  std::stringstream ls(line);
+  for (std::string cell; std::getline(ls, cell, ',');)
+    cells.push_back(cell);
+  return cells;
+}
+
 }  // namespace
 
 TEST_CASE("cli: fit prints the model JSON of INTERFACES.md and writes --out and --plot") {
@@ -332,11 +349,10 @@ TEST_CASE("cli: fit of a Torque export with GPS and OBD speed reads the gears fr
 
 TEST_CASE("cli: replay prints t speed gear source for every row") {
   TempDir dir;
-  const std::string train = simulated_log(dir, 23);
-  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  const std::string model = fitted_model(dir);
   const std::string test = simulated_log(dir, 24, 300.0);
   const gearpulse::SampleLog input = read_log(test);
-  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + test);
+  const Result r = run(dir, "replay --model " + model + " " + test);
   REQUIRE(r.status == 0);
   std::istringstream out(r.out);
   std::string line;
@@ -345,10 +361,7 @@ TEST_CASE("cli: replay prints t speed gear source for every row") {
   std::size_t rows = 0, outage_rows = 0, engine_rows = 0;
   while (std::getline(out, line)) {
     const auto& s = input.samples.at(rows);
-    std::vector<std::string> cells;
-    std::stringstream ls(line);
-    for (std::string cell; std::getline(ls, cell, ',');)
-      cells.push_back(cell);
+    const std::vector<std::string> cells = cells_of(line);
     REQUIRE(cells.size() == 4);
     CHECK(std::stod(cells[0]) == Approx(s.t));
     CHECK(std::stod(cells[1]) >= 0.0);
@@ -373,8 +386,7 @@ TEST_CASE("cli: replay prints t speed gear source for every row") {
 TEST_CASE(
     "cli: replay answers every row of an OBD log, a repeated row with the output of the row it repeats") {
   TempDir dir;
-  const std::string train = simulated_log(dir, 23);
-  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  const std::string model = fitted_model(dir);
   // A Carloop log: the run-time counter in whole seconds, rpm and speed held between polls, so most rows
   // repeat the row before; one bad row, which is reported and skipped.
   std::string log = "ENGINE_RUN_TINE (), ENGINE_RPM (), VEHICLE_SPEED (), THROTTLE (),\n";
@@ -389,7 +401,7 @@ TEST_CASE(
     if (i == 200) log += "101.000000, garbage, 3.000000, 17.6,\n";
   }
   write(dir.file("carloop.csv"), log);
-  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + dir.file("carloop.csv"));
+  const Result r = run(dir, "replay --model " + model + " " + dir.file("carloop.csv"));
   REQUIRE(r.status == 0);
   CHECK(r.err.find("carloop.csv:203:") != std::string::npos);
   std::istringstream out(r.out);
@@ -398,10 +410,7 @@ TEST_CASE(
   REQUIRE(line == "t,speed,gear,source");
   std::vector<std::vector<std::string>> rows;
   while (std::getline(out, line)) {
-    std::vector<std::string> cells;
-    std::stringstream ls(line);
-    for (std::string cell; std::getline(ls, cell, ',');)
-      cells.push_back(cell);
+    const std::vector<std::string> cells = cells_of(line);
     REQUIRE(cells.size() == 4);
     rows.push_back(cells);
   }
@@ -417,8 +426,7 @@ TEST_CASE(
 TEST_CASE(
     "cli: replay answers an outage row that only repeats the held rpm with the output of the row before") {
   TempDir dir;
-  const std::string train = simulated_log(dir, 23);
-  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  const std::string model = fitted_model(dir);
   // An OBD logger's drive as a generic CSV: integer km/h and rpm, each polled once per 1.8 s round and
   // written on every row (every 0.5 s), the speed blanked for a minute. Inside the outage a row whose rpm
   // was not polled again repeats the row before and brings nothing new.
@@ -433,7 +441,7 @@ TEST_CASE(
     gearpulse::write_samples(out, samples);
   }
   const gearpulse::SampleLog input = read_log(test);
-  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + test);
+  const Result r = run(dir, "replay --model " + model + " " + test);
   REQUIRE(r.status == 0);
   std::istringstream out(r.out);
   std::string line;
@@ -465,8 +473,7 @@ TEST_CASE(
 
 TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds keep their fractions)") {
   TempDir dir;
-  const std::string train = simulated_log(dir, 23);
-  REQUIRE(run(dir, "fit --out " + dir.file("model.json") + " " + train).status == 0);
+  const std::string model = fitted_model(dir);
   std::string log = "t,speed,freq\n";
   for (int i = 0; i < 50; ++i) {
     char row[96];
@@ -474,7 +481,7 @@ TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds kee
     log += row;
   }
   write(dir.file("epoch.csv"), log);
-  const Result r = run(dir, "replay --model " + dir.file("model.json") + " " + dir.file("epoch.csv"));
+  const Result r = run(dir, "replay --model " + model + " " + dir.file("epoch.csv"));
   REQUIRE(r.status == 0);
   std::istringstream in(log), out(r.out);
   std::string want, got;
