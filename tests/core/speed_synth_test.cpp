@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <memory>
 #include <new>
 #include <random>
@@ -129,11 +130,12 @@ void replay_recording(const std::string& name, const std::string& rate, Check ch
   }
 }
 
-// Replays a 10 Hz recording (replay_recording) and checks the synthesized speed against the true one for
-// every row from `from` to `to` s; returns how many rows were checked.
-int speed_within(const std::string& name, double from, double to, double tolerance) {
+// Replays a recording (replay_recording; 10 Hz unless `rate` says otherwise) and checks the synthesized
+// speed against the true one for every row from `from` to `to` s; returns how many rows were checked.
+int speed_within(const std::string& name, double from, double to, double tolerance,
+                 const std::string& rate = "10hz") {
   int checked = 0;
-  replay_recording(name, "10hz", [&](double t, double truth, const SynthOutput& out) {
+  replay_recording(name, rate, [&](double t, double truth, const SynthOutput& out) {
     if (t < from || t > to) return;
     INFO("t = " << t << " s: truth " << truth * 3.6 << " km/h, synthesized " << out.speed * 3.6 << " in gear "
                 << out.gear);
@@ -715,14 +717,8 @@ TEST_CASE(
   // that fast fit third at a higher speed too; but this driver (the fit's revs per gear) runs third at
   // about 26 Hz (+-16 %), and a shift out of second at 27 Hz would have landed at 17: the climb stays in
   // second, and the real upshifts, which land nearer his usual revs, are taken when they come.
-  int checked = 0;
-  replay_recording("climb_in_second", "1hz", [&](double t, double truth, const SynthOutput& out) {
-    if (t < 136.0) return;
-    INFO("t = " << t << ", truth " << truth << " m/s, synthesized " << out.speed << " in gear " << out.gear);
-    CHECK(std::abs(out.speed - truth) < 4.0 * kKmh);
-    ++checked;
-  });
-  CHECK(checked == 44);
+  constexpr double kEnd = std::numeric_limits<double>::infinity();
+  CHECK(speed_within("climb_in_second", 136.0, kEnd, 4.0 * kKmh, "1hz") == 44);
 }
 
 TEST_CASE(
@@ -732,14 +728,8 @@ TEST_CASE(
   // the declutch (30 Hz, the revs falling freely). Fifth gear reads it as 62 km/h and fourth the next one
   // as 41; the declutch a shift at these revs passes through explains it at the car's own speed, and fifth
   // gear is then found at the next reading.
-  int checked = 0;
-  replay_recording("skip_shift", "1hz", [&](double t, double truth, const SynthOutput& out) {
-    if (t < 120.0) return;
-    INFO("t = " << t << ", truth " << truth << " m/s, synthesized " << out.speed << " in gear " << out.gear);
-    CHECK(std::abs(out.speed - truth) < 3.0 * kKmh);
-    ++checked;
-  });
-  CHECK(checked == 61);
+  constexpr double kEnd = std::numeric_limits<double>::infinity();
+  CHECK(speed_within("skip_shift", 120.0, kEnd, 3.0 * kKmh, "1hz") == 61);
 }
 
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {

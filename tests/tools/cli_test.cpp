@@ -110,6 +110,27 @@ std::vector<std::string> cells_of(const std::string& line) {
   return cells;
 }
 
+// What `replay --model MODEL LOG` printed: the run, and the cells of every row under the header of
+// INTERFACES.md (t,speed,gear,source), each row checked to have four.
+struct Replay {
+  Result result;
+  std::vector<std::vector<std::string>> rows;
+};
+
+Replay replay(const TempDir& dir, const std::string& model, const std::string& log) {
+  Replay r{run(dir, "replay --model " + model + " " + log), {}};
+  REQUIRE(r.result.status == 0);
+  std::istringstream out(r.result.out);
+  std::string line;
+  std::getline(out, line);
+  REQUIRE(line == "t,speed,gear,source");
+  while (std::getline(out, line)) {
+    r.rows.push_back(cells_of(line));
+    REQUIRE(r.rows.back().size() == 4);
+  }
+  return r;
+}
+
 }  // namespace
 
 TEST_CASE("cli: fit prints the model JSON of INTERFACES.md and writes --out and --plot") {
@@ -352,17 +373,9 @@ TEST_CASE("cli: replay prints t speed gear source for every row") {
   const std::string model = fitted_model(dir);
   const std::string test = simulated_log(dir, 24, 300.0);
   const gearpulse::SampleLog input = read_log(test);
-  const Result r = run(dir, "replay --model " + model + " " + test);
-  REQUIRE(r.status == 0);
-  std::istringstream out(r.out);
-  std::string line;
-  std::getline(out, line);
-  CHECK(line == "t,speed,gear,source");
   std::size_t rows = 0, outage_rows = 0, engine_rows = 0;
-  while (std::getline(out, line)) {
+  for (const std::vector<std::string>& cells : replay(dir, model, test).rows) {
     const auto& s = input.samples.at(rows);
-    const std::vector<std::string> cells = cells_of(line);
-    REQUIRE(cells.size() == 4);
     CHECK(std::stod(cells[0]) == Approx(s.t));
     CHECK(std::stod(cells[1]) >= 0.0);
     CHECK(std::stoi(cells[2]) >= 0);
@@ -401,19 +414,9 @@ TEST_CASE(
     if (i == 200) log += "101.000000, garbage, 3.000000, 17.6,\n";
   }
   write(dir.file("carloop.csv"), log);
-  const Result r = run(dir, "replay --model " + model + " " + dir.file("carloop.csv"));
-  REQUIRE(r.status == 0);
-  CHECK(r.err.find("carloop.csv:203:") != std::string::npos);
-  std::istringstream out(r.out);
-  std::string line;
-  std::getline(out, line);
-  REQUIRE(line == "t,speed,gear,source");
-  std::vector<std::vector<std::string>> rows;
-  while (std::getline(out, line)) {
-    const std::vector<std::string> cells = cells_of(line);
-    REQUIRE(cells.size() == 4);
-    rows.push_back(cells);
-  }
+  const Replay r = replay(dir, model, dir.file("carloop.csv"));
+  CHECK(r.result.err.find("carloop.csv:203:") != std::string::npos);
+  const auto& rows = r.rows;
   REQUIRE(rows.size() == data_rows);
   for (std::size_t i = 1; i < rows.size(); ++i) {
     CHECK(std::stod(rows[i][0]) >= std::stod(rows[i - 1][0]));
@@ -441,15 +444,10 @@ TEST_CASE(
     gearpulse::write_samples(out, samples);
   }
   const gearpulse::SampleLog input = read_log(test);
-  const Result r = run(dir, "replay --model " + model + " " + test);
-  REQUIRE(r.status == 0);
-  std::istringstream out(r.out);
-  std::string line;
-  std::getline(out, line);
-  std::vector<std::string> rows;
-  while (std::getline(out, line))
-    rows.push_back(line.substr(line.find(',') + 1));  // speed,gear,source
+  std::vector<std::vector<std::string>> rows = replay(dir, model, test).rows;
   REQUIRE(rows.size() == input.samples.size());
+  for (auto& row : rows)
+    row.erase(row.begin());  // speed,gear,source: what the row answers
   // A held copy: the rpm of the row that last brought one, within 3 s of it (an OBD round and a half).
   std::size_t held = 0, fresh = 0, changed = 0;
   double read_freq = -1.0, read_t = 0.0;
