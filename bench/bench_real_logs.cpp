@@ -9,7 +9,8 @@
 // Then (c) and (d) over the samples where the car moves, the share of (d) off by more than 8 km/h by time
 // since GPS was lost, what the synthesis did in the samples it got wrong (its gear against the hindsight
 // gear), how often its most probable mode is the hindsight gear by the probability it gives that mode,
-// and how many upshifts between two samples show less than half of their ratio's drop of revs.
+// how many upshifts between two samples show less than half of their ratio's drop of revs, and how many
+// downshifts keep the revs level (braking while shifting down), against the level steps that stay in gear.
 // Usage: bench_real_logs [DATA_DIR] [--trace FILE]   (default: the shared/data/real beside the source tree;
 // --trace writes every outage sample with the truth, the hindsight gear and the synthesis as CSV)
 #include <algorithm>
@@ -84,6 +85,9 @@ struct Errors {
   std::vector<Kind> kind;     // per sample
   std::size_t upshifts = 0;   // hindsight gear up by one between two clean samples inside an outage
   std::size_t hidden = 0;     // of those, the revs fell by less than half of the two gears' ratio
+  // Downshifts between two clean samples inside an outage, and how many of them kept the revs flat, against
+  // the clean samples that stayed in the gear before with flat revs: all, and with both samples at speed.
+  std::array<std::size_t, 2> downshifts{}, flat_down{}, flat_kept{};
   // Calibration of the synthesizer's belief, over moving samples on a gear line: by the probability of
   // its most probable mode (bins of 0.1), how often that mode is the hindsight gear.
   std::array<std::size_t, 10> belief{}, belief_right{};
@@ -111,7 +115,7 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
   int paper_gear = -1;
   bool was_out = false;
   int clean_gear = -1;  // hindsight gear of the last outage sample on its gear line (-1: none)
-  double clean_freq = 0.0;
+  double clean_freq = 0.0, clean_speed = 0.0;
   gearpulse::LogReplayer replayer(synth);
   for (const Sample& s : samples) {
     const bool out = in_outage(s.t - t0);
@@ -135,7 +139,9 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
     if (s.has_freq() && !model.gears.empty()) {
       hold_c = hindsight_speed(model, s.speed, s.freq);
       // An upshift between two samples on their gear lines: how much of the ratio's drop the revs show.
-      constexpr double kOnLine = 3.0 / kMsToKmh;  // m/s
+      constexpr double kOnLine = 3.0 / kMsToKmh;    // m/s
+      constexpr double kFlatRevs = 0.05;            // |ln| of the revs from one clean sample to the next
+      constexpr double kAtSpeed = 30.0 / kMsToKmh;  // m/s: out of town, where a driver seldom shifts down
       const int g = nearest_gear(model, s.speed, s.freq);
       const double theta = model.gears[static_cast<std::size_t>(g)].theta;
       const bool clean = s.speed > 0.0 && std::abs(theta * s.freq - s.speed) <= kOnLine;
@@ -144,8 +150,18 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
         const double ratio = theta / model.gears[static_cast<std::size_t>(clean_gear)].theta;
         err.hidden += std::log(clean_freq / s.freq) < 0.5 * std::log(ratio);
       }
+      if (clean && clean_gear >= 0) {
+        const bool flat = std::abs(std::log(s.freq / clean_freq)) < kFlatRevs;
+        for (std::size_t k = 0; k < 2; ++k) {
+          if (k == 1 && std::min(s.speed, clean_speed) <= kAtSpeed) continue;
+          err.downshifts[k] += g == clean_gear - 1;
+          err.flat_down[k] += flat && g == clean_gear - 1;
+          err.flat_kept[k] += flat && g == clean_gear;
+        }
+      }
       clean_gear = clean ? g : -1;
       clean_freq = s.freq;
+      clean_speed = s.speed;
       if (clean) {
         int top = 0;
         for (int k = 1; k <= static_cast<int>(model.gears.size()); ++k)
@@ -268,6 +284,16 @@ void report(const char* title, const Errors& e) {
         "  upshifts between two samples on their gear lines: %zu; the revs fell by less than half of the "
         "ratio in %.0f %%\n",
         e.upshifts, 100.0 * static_cast<double>(e.hidden) / static_cast<double>(e.upshifts));
+  const auto pct = [](std::size_t part, std::size_t whole) {
+    return whole > 0 ? 100.0 * static_cast<double>(part) / static_cast<double>(whole) : 0.0;
+  };
+  for (std::size_t k = 0; k < 2; ++k)
+    if (e.flat_down[k] + e.flat_kept[k] > 0)
+      std::printf(
+          "  downshifts between two samples on their gear lines%s: %zu, %.0f %% with the revs within 5 %%; "
+          "of the steps with revs so flat, %.1f %% are a downshift (%zu stayed in gear)\n",
+          k == 0 ? "" : ", both above 30 km/h", e.downshifts[k], pct(e.flat_down[k], e.downshifts[k]),
+          pct(e.flat_down[k], e.flat_down[k] + e.flat_kept[k]), e.flat_kept[k]);
 }
 
 // Fit on `train`, replay every log of `test`.
