@@ -288,7 +288,7 @@ void report(const char* title, const Errors& e) {
     return whole > 0 ? 100.0 * static_cast<double>(part) / static_cast<double>(whole) : 0.0;
   };
   for (std::size_t k = 0; k < 2; ++k)
-    if (e.flat_down[k] + e.flat_kept[k] > 0)
+    if (e.downshifts[k] > 0)
       std::printf(
           "  downshifts between two samples on their gear lines%s: %zu, %.0f %% with the revs within 5 %%; "
           "of the steps with revs so flat, %.1f %% are a downshift (%zu stayed in gear)\n",
