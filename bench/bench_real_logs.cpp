@@ -138,7 +138,8 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
       hold_b = last_gps;
     if (s.has_freq() && !model.gears.empty()) {
       hold_c = hindsight_speed(model, s.speed, s.freq);
-      // An upshift between two samples on their gear lines: how much of the ratio's drop the revs show.
+      // A shift between two samples on their gear lines: how much of the ratio's drop of revs an upshift
+      // shows, and whether a downshift keeps the revs level.
       constexpr double kOnLine = 3.0 / kMsToKmh;    // m/s
       constexpr double kFlatRevs = 0.05;            // |ln| of the revs from one clean sample to the next
       constexpr double kAtSpeed = 30.0 / kMsToKmh;  // m/s: out of town, where a driver seldom shifts down
