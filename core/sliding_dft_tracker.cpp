@@ -43,6 +43,15 @@ constexpr double kDriftMemory = 0.7;
 constexpr double kToneMemoryS = 20.0;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
 constexpr double kToneFitLevel = 4.0;
+// Share of the tone memory in which a bin near a candidate estimate's orders must have stood above
+// kToneFitLevel before it is learned as a tone while the track is not confident (about 2 s of a line
+// present at every hop; see learn_tones).
+constexpr double kTonePersist = 0.1;
+constexpr double kToneCandidate = 0.05;    // probability from which the estimate's line is a candidate
+constexpr double kToneQuickWindows = 5.0;  // a candidate line that would be a tone within this many windows
+// The estimate holds its line's peak when its power is within 3 dB of the peak's, or within the noise of it
+// (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
+constexpr double kToneCandidateMismatch = 2.0;
 // Memory (per hop) of the band's noise level behind the reported SNR.
 constexpr double kNoiseMemory = 0.9;
 // Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
@@ -164,10 +173,11 @@ struct SlidingDftTracker::Impl {
   // that stays put while the engine moves. Bins near a confident track are not learned, so a cruising
   // engine does not become a "tone".
   std::vector<double> tone;
-  std::vector<char> near_tone;  // within one resolution bin of a learned tone (per fine bin, this hop)
-  double tone_keep = 1.0;       // per hop
-  double drift_hz_per_s = 0.0;  // recent rate of change of the tracked line
-  double last_freq = kNaN;      // previous hop's estimate while confident, else NaN
+  std::vector<double> tone_time;  // per fine bin: share of the tone memory spent above kToneFitLevel
+  std::vector<char> near_tone;    // within one resolution bin of a learned tone (per fine bin, this hop)
+  double tone_keep = 1.0;         // per hop
+  double drift_hz_per_s = 0.0;    // recent rate of change of the tracked line
+  double last_freq = kNaN;        // previous hop's estimate while confident, else NaN
   int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
   double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
 
@@ -207,7 +217,7 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
     return power[k] / (noise[k] * std::max(1.0, tone[k] - 1.0));
   }
-  void learn_tones(double freq, bool on_track) noexcept;
+  void learn_tones(double freq, double right) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
   void mark_tones() noexcept;
   void reset_track() noexcept;
@@ -308,6 +318,7 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   power.assign(bins, 0.0);
   noise.assign(bins, 0.0);
   tone.assign(bins, 1.0);
+  tone_time.assign(bins, 0.0);
   near_tone.assign(bins, 0);
   tone_keep = std::exp(-cfg.hop_s / kToneMemoryS);
   block_scratch.assign(bins, 0.0);
@@ -907,20 +918,54 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * std::max(ev.snr[1] - 1.0, 1.0);
   else
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * kDefaultRho;
-  learn_tones(ev.freq, right >= 0.5);
+  learn_tones(ev.freq, right);
   return out;
 }
 
-void SlidingDftTracker::Impl::learn_tones(double freq, bool on_track) noexcept {
-  for (int k = noise_lo; k <= noise_hi; ++k) {
-    if (on_track) {
-      bool near = false;
-      for (int o = 0; o < kOrders && !near; ++o)
-        near = std::abs(k * df - kOrder[o] * freq) <= 2.0 * lobe * df;
-      if (near) continue;
+// Learns the fixed tones from this window, leaving out the orders of the estimate `freq` while it is
+// probably the engine (`right`, the probability that it is) and, while it is a candidate not yet
+// confident, until they have persisted.
+void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
+  const bool on_track = right >= 0.5;
+  // A candidate: some belief in the estimate, a fundamental that holds its neighbourhood (the peak of its
+  // line, not the shoulder of another: a fan read as a 2nd harmonic has no line of its own at the
+  // estimate, and is learned at once) and another order standing out (a fan's tone has none).
+  bool candidate = false;
+  if (std::isfinite(freq) && right >= kToneCandidate) {
+    const int kc = static_cast<int>(std::lround(freq / df));
+    if (kc >= 1 && kc < nfft / 2) {
+      const auto z = [this](int j) {
+        return power[static_cast<std::size_t>(j)] / noise[static_cast<std::size_t>(j)];
+      };
+      const double own = z(kc);
+      double peak = own;
+      for (int j = std::max(1, kc - lobe); j <= std::min(nfft / 2 - 1, kc + lobe); ++j)
+        peak = std::max(peak, z(j));
+      const bool holds = own >= 0.5 * peak || std::sqrt(peak) - std::sqrt(own) <= kToneCandidateMismatch;
+      bool ladder = false;
+      for (int o = 0; o < kOrders && !ladder; ++o) {
+        const double pos = kOrder[o] * freq / df;
+        if (o == 1 || pos * df > harmonic_limit_hz || pos < noise_lo) continue;
+        ladder = z(static_cast<int>(std::lround(pos))) >= kToneFitLevel;
+      }
+      // Only a line loud enough to become a tone within a few windows needs the grace: fainter ones are
+      // learned over many, as before (a fan next to a faint engine line is learned as soon).
+      const bool loud = own * kToneQuickWindows * (1.0 - tone_keep) >= kToneFitLevel - 1.0;
+      candidate = holds && ladder && loud;
     }
+  }
+  for (int k = noise_lo; k <= noise_hi; ++k) {
+    bool near = false;
+    for (int o = 0; o < kOrders && !near && std::isfinite(freq); ++o)
+      near = std::abs(k * df - kOrder[o] * freq) <= 2.0 * lobe * df;
+    if (on_track && near) continue;
     const auto i = static_cast<std::size_t>(k);
     const double z = power[i] / noise[i];
+    tone_time[i] = tone_keep * tone_time[i] + (z >= kToneFitLevel ? 1.0 - tone_keep : 0.0);
+    // The orders of a candidate not yet confident are learned only once they have persisted: a loud window
+    // moves a bin's mean power past the fit level at once, and a clean engine line (40 dB over the noise)
+    // not yet tracked at its first window was taken for a tone at its second and never acquired.
+    if (candidate && near && tone_time[i] < kTonePersist) continue;
     tone[i] = std::max(1.0, tone_keep * tone[i] + (1.0 - tone_keep) * std::min(z, 1e3));
   }
 }
@@ -1005,6 +1050,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.next_centre = static_cast<std::uint64_t>(first_hop * s.hop_frames);
   s.reset_track();
   std::fill(s.tone.begin(), s.tone.end(), 1.0);
+  std::fill(s.tone_time.begin(), s.tone_time.end(), 0.0);
   s.log_noise = kNaN;
   s.q_head = s.q_size = 0;
   s.h_head = s.h_size = 0;
