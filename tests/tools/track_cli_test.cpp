@@ -168,6 +168,7 @@ TEST_CASE("track: stereo WAV takes the chosen channel or the mix") {
   REQUIRE(mix.status == 0);
   CHECK(rows(mix).size() >= 28);
   check_one_line_error(run(dir, "--channel 2 '" + wav + "'"));
+  check_one_line_error(run(dir, "--channel -1 '" + wav + "'"));
 }
 
 TEST_CASE("track: hop window and band options are honoured") {
@@ -273,4 +274,45 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
     check_one_line_error(run(dir, "--bogus '" + good + "'"));
     check_one_line_error(run(dir, ""));
   }
+}
+
+TEST_CASE("track: one row per hop at hops far shorter than a read block") {
+  TempDir dir;
+  const sim::FrequencyTrajectory truth = [](double) { return 100.0; };
+  const auto wav = make_wav(dir, "short-hops.wav", engine(8000.0, 3.0, truth, 7), 1, 8000);
+  const Result r = run(dir, "--hop 0.001 '" + wav + "'");
+  REQUIRE(r.status == 0);
+  const auto v = rows(r);
+  REQUIRE(v.size() > 2);
+  // Windows of 0.1 s centred every millisecond: one row for every hop from the first to the last, none
+  // missing (a read block holds more hops than the tracker's output queue).
+  const double first = v.front().t, last = v.back().t;
+  CHECK(first <= 0.06);  // the first whole window
+  CHECK(last >= 2.9);
+  CHECK(static_cast<double>(v.size()) == Approx((last - first) / 0.001 + 1.0).margin(1.0));
+  for (std::size_t i = 1; i < v.size(); ++i)
+    REQUIRE(v[i].t - v[i - 1].t < 0.0015);
+}
+
+TEST_CASE("track: a WAV whose header gives no length is read with a warning") {
+  TempDir dir;
+  const sim::FrequencyTrajectory truth = [](double) { return 100.0; };
+  const auto good = make_wav(dir, "good.wav", engine(8000.0, 2.0, truth, 6), 1, 8000);
+  const Result reference = run(dir, std::string("'") + good + "'");
+  REQUIRE(reference.status == 0);
+  std::string bytes = slurp(good);
+  const auto data = bytes.find("data");
+  REQUIRE(data != std::string::npos);
+  // A recorder writing to a pipe, or cut off before it finished its header: the RIFF and data sizes are
+  // placeholders for "unknown" (0xFFFFFFFF), not sizes the recording had.
+  for (std::size_t i = 0; i < 4; ++i) {
+    bytes[4 + i] = static_cast<char>(0xFF);
+    bytes[data + 4 + i] = static_cast<char>(0xFF);
+  }
+  std::ofstream(dir.file("streamed.wav"), std::ios::binary) << bytes;
+  const Result r = run(dir, std::string("'") + dir.file("streamed.wav") + "'");
+  CHECK(r.status == 0);
+  CHECK(r.out == reference.out);
+  CHECK(r.err.find("streamed.wav") != std::string::npos);
+  CHECK(r.err.find("no length") != std::string::npos);
 }

@@ -62,9 +62,18 @@ bool readable_encoding(int format) {
   }
 }
 
+// A data chunk size that a recorder writing to a pipe, or one cut off before it could finish its header,
+// leaves as a placeholder for "unknown length": not a size the recording ever had.
+bool placeholder_size(long long declared) {
+  return declared == 0xFFFFFFFFLL || declared == 0x7FFFFFFFLL || declared == 0xFFFFFFFFLL - 8 ||
+         declared == 0x7FFFFFFFLL - 8;
+}
+
 // libsndfile opens a WAV whose data chunk runs past the end of the file and quietly reads what is
-// there; its log says "data : <declared> (should be <actual>)". A cut recording is bad input.
-bool truncated(SNDFILE* file, long long& declared, long long& actual) {
+// there; its log says "data : <declared> (should be <actual>)". A cut recording is bad input, unless its
+// header declares no real length (a streamed or interrupted recording: `streamed` is set, and what is
+// there is read).
+bool truncated(SNDFILE* file, long long& declared, long long& actual, bool& streamed) {
   std::string log(16384, '\0');
   sf_command(file, SFC_GET_LOG_INFO, log.data(), static_cast<int>(log.size()));
   for (std::size_t at = log.find("data"); at != std::string::npos; at = log.find("data", at + 4)) {
@@ -72,8 +81,10 @@ bool truncated(SNDFILE* file, long long& declared, long long& actual) {
     const std::size_t eol = log.find('\n', at);
     const std::string line = log.substr(at, eol == std::string::npos ? std::string::npos : eol - at);
     if (std::sscanf(line.c_str(), "data : %lld (should be %lld)", &declared, &actual) == 2 &&
-        declared > actual)
-      return true;
+        declared > actual) {
+      streamed = placeholder_size(declared);
+      return !streamed;
+    }
   }
   return false;
 }
@@ -105,11 +116,16 @@ int run_track(const TrackOptions& o) {
   if (!file) throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr));
   if (!readable_encoding(info.format))
     throw UsageError(o.file + ": unsupported sample encoding (PCM, float or G.711 expected)");
-  if (long long declared = 0, actual = 0; truncated(file.get(), declared, actual))
+  bool streamed = false;
+  if (long long declared = 0, actual = 0; truncated(file.get(), declared, actual, streamed))
     throw UsageError(o.file + ": truncated: the data chunk declares " + std::to_string(declared) +
                      " bytes, the file holds " + std::to_string(actual));
+  if (streamed)
+    std::fprintf(stderr,
+                 "%s: the header gives no length (a streamed or interrupted recording): reading the %lld "
+                 "frames the file holds\n",
+                 o.file.c_str(), static_cast<long long>(info.frames));
   if (info.frames <= 0 || info.channels <= 0) throw UsageError(o.file + ": no audio frames");
-  if (o.channel < -1) throw UsageError("--channel must be 0 or more (leave it out to mix all channels)");
   if (o.channel >= info.channels)
     throw UsageError(o.file + ": --channel " + std::to_string(o.channel) + " but the file has " +
                      std::to_string(info.channels) + " channel(s)");
@@ -131,10 +147,16 @@ int run_track(const TrackOptions& o) {
     const std::size_t frames =
         extract_channel(std::span<const float>(interleaved.data(), static_cast<std::size_t>(got) * channels),
                         info.channels, o.channel, mono);
-    tracker->push(std::span<const float>(mono.data(), frames));
-    TrackPoint p;
-    while (tracker->pop(p))
-      print_point(p, o.confidence);
+    // At most half the tracker's output queue of hops per push: at short hops a whole block holds more
+    // hops than the queue, and the oldest were dropped (one row per hop is the contract).
+    const auto hop_frames = static_cast<std::size_t>(std::max(1.0, o.hop_s * info.samplerate));
+    const std::size_t step = std::max<std::size_t>(1, tracker->queue_capacity() / 2 * hop_frames);
+    for (std::size_t at = 0; at < frames; at += step) {
+      tracker->push(std::span<const float>(mono.data() + at, std::min(step, frames - at)));
+      TrackPoint p;
+      while (tracker->pop(p))
+        print_point(p, o.confidence);
+    }
   }
   if (sf_error(file.get()) != SF_ERR_NO_ERROR)
     throw UsageError(o.file + ": read error after " + std::to_string(total) +
@@ -156,7 +178,8 @@ void add_track(CLI::App& app, int& status) {
       ->capture_default_str();
   cmd->add_option("--hop", options->hop_s, "time between outputs (s)")->capture_default_str();
   cmd->add_option("--window", options->window_s, "analysis window (s)")->capture_default_str();
-  cmd->add_option("--channel", options->channel, "channel to use (0-based); default: mix all channels");
+  cmd->add_option("--channel", options->channel, "channel to use (0-based); default: mix all channels")
+      ->check(CLI::Range(0, 1023));
   cmd->add_option("--max-slew", options->max_slew, "fastest followed frequency change (Hz/s)")
       ->capture_default_str();
   cmd->add_flag("--any-line", options->any_line, "also acquire lines without harmonics (pure-sine ripple)");
