@@ -675,7 +675,11 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
 // warming engine and a change of road.
 void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
   const bool was_moving = last_gps_ > 5.0 * tuning_.stationary_speed;
-  if (dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8) {
+  // Declutched is known from the revs: with the frequency lost every gear fades and the clutch holds the
+  // belief whatever the car does, and a cruise seen so taught a deceleration of zero (after which a car
+  // that lost GPS too was carried on at its last speed for good).
+  if (dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8 && std::isfinite(freq) &&
+      freq > 0.0) {
     constexpr double kCoastMemory = 100.0;  // samples
     const double a = std::clamp((gps - last_gps_) / dt, -4.0, 1.0);
     coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);

@@ -400,6 +400,23 @@ using gearpulse::bench::quantile;
 
 }  // namespace
 
+// A tracker that never locks (no ripple on this car's supply) while GPS shows a steady cruise, then GPS lost
+// too: nothing says the car keeps its speed. The declutched mode held the belief under GPS (every gear
+// fades without revs) and learned the cruise as its deceleration, zero, so the output stayed at the last
+// GPS speed for good: 390 s at 72 km/h, 7.8 km of pulses for a car that may have stopped.
+TEST_CASE("synth: with neither GPS nor engine frequency the speed is not held for good") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  for (int k = 0; k <= 10; ++k)
+    synth.step(k, 20.0, kMissing);
+  double last = 20.0;
+  for (int k = 11; k <= 400; ++k) {
+    const SynthOutput o = synth.step(k, kMissing, kMissing);
+    REQUIRE(o.speed <= last + 1e-9);  // never gaining speed
+    last = o.speed;
+  }
+  CHECK(last == 0.0);
+}
+
 TEST_CASE("synth: outage speeds do not depend on the step rate") {
   // The same drives, observed at 1 Hz (GPS, logs) and at 10 Hz (the tracker's hops): the filter's motion,
   // mode changes and evidence are per second, so both rates give about the same speeds.
