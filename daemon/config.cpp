@@ -2,7 +2,9 @@
 
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -12,6 +14,13 @@
 
 namespace gearpulse::daemon {
 namespace {
+
+// A number as a user would write it: 300, 0.05, 1e+06.
+std::string format_number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
 
 std::string where(const std::string& file, const toml::source_region& region) {
   std::string out = file;
@@ -192,47 +201,59 @@ void read_log(Section& s, LogConfig& l) {
   l.level = s.choice("level", l.level, {"trace", "debug", "info", "warn", "error", "critical", "off"});
 }
 
-// Checks between keys, after every key on its own is known to be valid.
+// Checks between keys, after every key on its own is known to be valid. Each error points at the first of
+// the keys involved that the file sets, by its line, and names it (a relation broken by one key the user
+// wrote is not reported against another he did not), else at the file.
 void check_relations(const Config& c, const toml::table& root, const std::string& file) {
-  const auto at = [&](std::string_view section, std::string_view key) {
-    const toml::node* n = root.at_path(std::string(section) + "." + std::string(key)).node();
-    return n ? where(file, n->source()) : file;
+  const auto fail = [&](std::initializer_list<std::string_view> keys, const std::string& what) {
+    for (std::string_view key : keys)
+      if (const toml::node* n = root.at_path(key).node())
+        throw ConfigError(where(file, n->source()) + ": " + std::string(key) + ": " + what);
+    throw ConfigError(file + ": " + std::string(*keys.begin()) + ": " + what);
   };
+  const auto hz = [](double v) { return format_number(v) + " Hz"; };
   if (c.tracker.band_high <= c.tracker.band_low)
-    throw ConfigError(at("tracker", "band_high") + ": tracker.band_high: must be above tracker.band_low");
+    fail({"tracker.band_high", "tracker.band_low"}, "tracker.band_high (" + hz(c.tracker.band_high) +
+                                                        ") must be above tracker.band_low (" +
+                                                        hz(c.tracker.band_low) + ")");
   if (c.tracker.band_high >= c.audio.rate / 2.0)
-    throw ConfigError(at("tracker", "band_high") + ": tracker.band_high: must be below half of audio.rate (" +
-                      std::to_string(c.audio.rate / 2) + " Hz)");
+    fail({"tracker.band_high", "audio.rate"}, "tracker.band_high (" + hz(c.tracker.band_high) +
+                                                  ") must be below half of audio.rate (" +
+                                                  hz(c.audio.rate / 2.0) + ")");
   if (c.tracker.hop > c.tracker.window * 4.0)
-    throw ConfigError(at("tracker", "hop") +
-                      ": tracker.hop: more than 4 windows; audio between windows would be ignored");
+    fail({"tracker.hop", "tracker.window"},
+         "tracker.hop is more than 4 tracker.window; audio between windows would be ignored");
   // Whatever else the tracker would refuse at the configured rate (the window must hold 4 periods of
   // band_low, ...), refused here, before any device is opened.
   if (const std::string problem = SlidingDftTracker::validate(tracker_config_of(c.tracker, c.audio.rate));
       !problem.empty()) {
-    // Point at the key the problem is about: the window (or the band edge it must hold), the hop, else
+    // Point at the keys the problem is about: the window (or the band edge it must hold), the hop, else
     // the band's upper edge against the rate.
-    const bool window = problem.starts_with("window");
-    const char* key = window                       ? (root.at_path("tracker.window") ? "window" : "band_low")
-                      : problem.starts_with("hop") ? "hop"
-                                                   : "band_high";
-    throw ConfigError(at("tracker", key) + ": tracker: " + problem);
+    if (problem.starts_with("window"))
+      fail({"tracker.window", "tracker.band_low"}, "tracker: " + problem);
+    else if (problem.starts_with("hop"))
+      fail({"tracker.hop", "tracker.window"}, "tracker: " + problem);
+    else
+      fail({"tracker.band_high", "tracker.band_low", "audio.rate"}, "tracker: " + problem);
   }
   // sun_path holds 108 bytes including the terminator.
-  if (c.control.socket.size() > 107)
-    throw ConfigError(at("control", "socket") + ": control.socket: path longer than 107 bytes");
+  if (c.control.socket.size() > 107) fail({"control.socket"}, "path longer than 107 bytes");
   if (c.output.max_frequency <= c.output.min_frequency)
-    throw ConfigError(at("output", "max_frequency") +
-                      ": output.max_frequency: must be above output.min_frequency");
+    fail({"output.max_frequency", "output.min_frequency"},
+         "output.max_frequency (" + hz(c.output.max_frequency) + ") must be above output.min_frequency (" +
+             hz(c.output.min_frequency) + ")");
   // A fixed-width pulse must fit in the shortest period, or pulses would merge.
   if (c.output.duty == 0.0 && c.output.pulse_width * c.output.max_frequency >= 1.0)
-    throw ConfigError(at("output", "pulse_width") +
-                      ": output.pulse_width: not shorter than the period at output.max_frequency");
+    fail({"output.pulse_width", "output.max_frequency"},
+         "output.pulse_width (" + format_number(c.output.pulse_width) +
+             " s) is not shorter than the period at output.max_frequency (" + hz(c.output.max_frequency) +
+             ")");
   // Whatever the pulse scheduler would refuse at start is refused here, where --check-config sees it.
   try {
     validate(pulse_config_of(c.output));
   } catch (const std::invalid_argument& e) {
-    throw ConfigError(at("output", "min_frequency") + ": [output]: " + e.what());
+    fail({"output.min_frequency", "output.max_frequency", "output.pulse_width", "output.duty"},
+         std::string("[output]: ") + e.what());
   }
 }
 
@@ -315,6 +336,9 @@ Config parse_config(std::string_view text, const std::string& source_name) {
 }
 
 Config load_config(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw ConfigError(path + ": cannot read config file: is a directory");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ConfigError(path + ": cannot open config file: " + std::strerror(errno));
   std::ostringstream text;

@@ -1,5 +1,6 @@
 #include <catch2/catch.hpp>
 
+#include <filesystem>
 #include <string>
 
 #include "daemon/config.hpp"
@@ -114,10 +115,10 @@ TEST_CASE("config: malformed TOML names file and line") {
 }
 
 TEST_CASE("config: relations between keys are checked") {
-  CHECK(error_of("[tracker]\nband_low = 300\nband_high = 200\n")
-            .starts_with("test.toml:3: tracker.band_high: must be above"));
+  CHECK(error_of("[tracker]\nband_low = 300\nband_high = 200\n") ==
+        "test.toml:3: tracker.band_high: tracker.band_high (200 Hz) must be above tracker.band_low (300 Hz)");
   CHECK(error_of("[audio]\nrate = 8000\n[tracker]\nband_high = 4500\n")
-            .starts_with("test.toml:4: tracker.band_high: must be below half"));
+            .starts_with("test.toml:4: tracker.band_high: tracker.band_high (4500 Hz) must be below half"));
   CHECK(error_of("[output]\npulse_width = 0.01\nmax_frequency = 500\n")
             .starts_with("test.toml:2: output.pulse_width:"));
   CHECK(error_of("[output]\nmin_frequency = 5\nmax_frequency = 2\n")
@@ -125,6 +126,14 @@ TEST_CASE("config: relations between keys are checked") {
   // A train that never stops at standstill is one the pulse scheduler refuses at start: refused here, so
   // --check-config (ExecStartPre) catches it instead of a daemon that exits at every restart.
   CHECK(error_of("[output]\nmin_frequency = 0\n").starts_with("test.toml:2: output.min_frequency:"));
+  // A relation broken by the one key the file sets is reported at that key, by its line and name, not
+  // against the other key of the pair, which the file does not set.
+  CHECK(error_of("[tracker]\nband_low = 300\n") ==
+        "test.toml:2: tracker.band_low: tracker.band_high (200 Hz) must be above tracker.band_low (300 Hz)");
+  CHECK(
+      error_of("[tracker]\nwindow = 0.01\n").starts_with("test.toml:2: tracker.window: tracker.hop is more"));
+  CHECK(error_of("[output]\nmin_frequency = 1000\n").starts_with("test.toml:2: output.min_frequency:"));
+  CHECK(error_of("[output]\nmax_frequency = 100000\n").starts_with("test.toml:2: output.max_frequency:"));
 }
 
 TEST_CASE("config: every accepted output section is one the pulse scheduler takes") {
@@ -141,9 +150,11 @@ TEST_CASE("config: every accepted tracker section is one the tracker takes at th
   // What the tracker would refuse when the daemon opens the audio is refused by the config (so by
   // --check-config), with the line of the key to change.
   CHECK(error_of("[tracker]\nband_low = 30.0\n")
-            .starts_with("test.toml:2: tracker: window 0.1 s is too short"));
-  CHECK(error_of("[tracker]\nband_low = 30.0\nwindow = 0.1\n").starts_with("test.toml:3: tracker: window"));
-  CHECK(error_of("[tracker]\nwindow = 0.05\n").starts_with("test.toml:2: tracker: window 0.05 s"));
+            .starts_with("test.toml:2: tracker.band_low: tracker: window 0.1 s is too short"));
+  CHECK(error_of("[tracker]\nband_low = 30.0\nwindow = 0.1\n")
+            .starts_with("test.toml:3: tracker.window: tracker: window"));
+  CHECK(error_of("[tracker]\nwindow = 0.05\n")
+            .starts_with("test.toml:2: tracker.window: tracker: window 0.05 s"));
   CHECK(error_of("[tracker]\nband_low = 30.0\nwindow = 0.14\n").empty());
   int accepted = 0;
   for (const char* rate : {"8000", "48000"})
@@ -188,6 +199,17 @@ TEST_CASE("config: a missing file is an error naming it") {
     FAIL("no error");
   } catch (const ConfigError& e) {
     CHECK(std::string(e.what()).starts_with("/nonexistent/gearpulse.toml: "));
+  }
+}
+
+TEST_CASE("config: a directory given as the file is an error naming it") {
+  // An ifstream opens a directory, and reading it gave an empty text: every default, "configuration OK".
+  const std::string dir = std::filesystem::temp_directory_path().string();
+  try {
+    (void)gearpulse::daemon::load_config(dir);
+    FAIL("no error");
+  } catch (const ConfigError& e) {
+    CHECK(std::string(e.what()) == dir + ": cannot read config file: is a directory");
   }
 }
 
