@@ -1,6 +1,8 @@
 // `gearpulse fit` and `gearpulse replay`, run as the built binary (INTERFACES.md contracts).
 #include <stdlib.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -346,6 +348,37 @@ TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and n
   CHECK(forced.status == 0);
   CHECK(forced.err.find("warning: gears") != std::string::npos);
   CHECK(run(dir, "fit --gears " + std::to_string(gears) + " " + log).err.empty());
+  // Paper mode fits as many gears as its ratios say: priors that ask for more than the car has are named
+  // the same way.
+  const Result priors = run(dir, "fit --ratios 1.3,1.3,1.3,1.3,1.3,1.3,1.3 " + log);
+  CHECK(priors.status == 0);
+  CHECK(priors.err.find("warning: gears") != std::string::npos);
+  CHECK(priors.err.find("--ratios") != std::string::npos);
+}
+
+TEST_CASE("cli: fit --out follows a symbolic link and writes into a FIFO rather than replace either") {
+  TempDir dir;
+  const std::string log = simulated_log(dir, 21);
+  const std::string json = run(dir, "fit " + log).out;
+  REQUIRE_FALSE(json.empty());
+  write(dir.file("model.json"), "{}");
+  std::filesystem::create_symlink("model.json", dir.file("current.json"));
+  REQUIRE(run(dir, "fit --out " + dir.file("current.json") + " " + log).status == 0);
+  CHECK(std::filesystem::is_symlink(dir.file("current.json")));
+  CHECK(slurp(dir.file("model.json")) == json);
+  REQUIRE(mkfifo(dir.file("pipe").c_str(), 0600) == 0);
+  // A reader on the FIFO, as `gearpulse fit --out /dev/stdout | ...` has one.
+  const std::string got = dir.file("from-pipe.json");
+  const std::string reader = "cat '" + dir.file("pipe") + "' > '" + got + "' &";
+  REQUIRE(std::system(reader.c_str()) == 0);
+  CHECK(run(dir, "fit --out " + dir.file("pipe") + " " + log).status == 0);
+  for (int i = 0; i < 100 && slurp(got) != json; ++i)
+    usleep(20000);
+  CHECK(std::filesystem::is_fifo(dir.file("pipe")));
+  CHECK(slurp(got) == json);
+  const Result into_dir = run(dir, "fit --out " + dir.path.string() + " " + log);
+  CHECK(into_dir.status == 2);
+  CHECK(into_dir.err.find("is a directory") != std::string::npos);
 }
 
 TEST_CASE("cli: fit of a Torque export with GPS and OBD speed reads the gears from the wheel speed") {

@@ -66,8 +66,28 @@ std::vector<double> parse_ratios(const std::optional<std::string>& given) {
 }
 
 // Written next to the target and renamed over it, so a reader never sees half a file.
+// Writes `text` to `path` whole or not at all (a temporary file renamed over it). A symbolic link is
+// followed, so the file it points to is replaced and the link stays; a path that is there but is no
+// regular file (a FIFO, /dev/stdout, a device) is written to directly, not replaced by a file.
 void write_file_atomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::path target = path;
+  for (int hops = 0; fs::is_symlink(target, ec) && hops < 40; ++hops) {
+    const fs::path link = fs::read_symlink(target, ec);
+    if (ec) break;
+    target = link.is_absolute() ? link : target.parent_path() / link;
+  }
+  if (const fs::file_status st = fs::status(target, ec); !ec && fs::exists(st) && !fs::is_regular_file(st)) {
+    if (fs::is_directory(st)) throw UsageError(path + ": is a directory");
+    std::ofstream out(target, std::ios::binary);
+    if (!out) throw UsageError(path + ": cannot write");
+    out << text;
+    out.flush();
+    if (!out) throw UsageError(path + ": write failed");
+    return;
+  }
+  const std::string tmp = target.string() + ".tmp";
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw UsageError(path + ": cannot write");
@@ -75,10 +95,9 @@ void write_file_atomically(const std::string& path, const std::string& text) {
     out.flush();
     if (!out) throw UsageError(path + ": write failed");
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
+  fs::rename(tmp, target, ec);
   if (ec) {
-    std::filesystem::remove(tmp, ec);
+    fs::remove(tmp, ec);
     throw UsageError(path + ": cannot write");
   }
 }
@@ -96,7 +115,7 @@ void warn_indistinct_gears(const GearModel& model, const std::string& gears) {
     if (gap < std::max(kMinGap, kStderrs * se))
       std::fprintf(stderr,
                    "gearpulse: warning: gears %zu and %zu are one (theta %.5f and %.5f): the data has fewer "
-                   "gears than --gears %s\n",
+                   "gears than %s\n",
                    i, i + 1, a.theta, b.theta, gears.c_str());
   }
 }
@@ -168,7 +187,12 @@ int run_fit(const FitCommand& cmd) {
         result.model.reason.empty() ? "no discrete gear ladder in the data" : result.model.reason;
     std::fprintf(stderr, "gearpulse: no gear ladder: %s\n", reason.c_str());
   }
-  if (options.gears != 0) warn_indistinct_gears(result.model, cmd.gears);
+  // A count forced by --gears or by the ratios of --ratios (paper mode fits as many gears as the priors
+  // say, a ladder or not: an automatic's log gives two gears 0.002 % apart).
+  if (options.gears != 0)
+    warn_indistinct_gears(result.model, "--gears " + cmd.gears);
+  else if (!options.ratios.empty())
+    warn_indistinct_gears(result.model, "--ratios gives (" + std::to_string(options.ratios.size() + 1) + ")");
   return 0;
 }
 
