@@ -161,11 +161,24 @@ class LogBuilder {
       return false;
     }
     if (!log_.samples.empty() && s.t < log_.samples.back().t) {
+      const std::size_t n = log_.samples.size();
+      // The row before jumped ahead of both its neighbours (a corrupt time cell): that row is the bad one,
+      // not this one and every row after it.
+      if (last_line_ != 0 && n >= 2 && s.t >= log_.samples[n - 2].t) {
+        std::snprintf(buf, sizeof buf, "time %.6g is ahead of the rows around it", log_.samples.back().t);
+        while (!log_.rows.empty() && log_.rows.back().sample == n - 1)
+          log_.rows.pop_back();
+        log_.samples.pop_back();
+        skip(last_line_, buf);
+        last_line_ = 0;
+        return add(line, s);
+      }
       std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", s.t, log_.samples.back().t);
       skip(line, buf);
       return false;
     }
     log_.samples.push_back(s);
+    last_line_ = line;
     add_repeat(s.t);
     return true;
   }
@@ -198,6 +211,7 @@ class LogBuilder {
  private:
   const ReadOptions& options_;
   SampleLog log_;
+  std::size_t last_line_ = 0;  // line of the sample added last; 0 once it was taken back
 };
 
 struct LineReader {

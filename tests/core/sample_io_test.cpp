@@ -80,6 +80,25 @@ TEST_CASE("io: bad rows are skipped and reported with file and line") {
   CHECK(log.skipped[5].rfind("log.csv:9: non-finite", 0) == 0);
 }
 
+TEST_CASE("io: one row whose time jumps ahead of its neighbours is the bad row, not all that follow") {
+  const SampleLog log = read_text(
+      "t,speed,freq\n"
+      "1,10,50\n"
+      "2,10,50\n"
+      "1e300,10,50\n"
+      "3,10,50\n"
+      "4,10,50\n"
+      "2.5,10,50\n"
+      "5,10,50\n");
+  REQUIRE(log.samples.size() == 5);
+  CHECK(log.samples[2].t == Approx(3));
+  CHECK(log.samples[4].t == Approx(5));
+  REQUIRE(log.skipped.size() == 2);
+  CHECK(log.skipped[0].rfind("log.csv:4: time 1e+300 is ahead of the rows around it", 0) == 0);
+  // A row that goes back behind the row before it and the one before that is the bad one itself.
+  CHECK(log.skipped[1].rfind("log.csv:7: time goes backwards", 0) == 0);
+}
+
 TEST_CASE("io: empty, headerless and useless files are one-line errors") {
   CHECK(error_of("") == "log.csv: empty file");
   CHECK(error_of("\n\n") == "log.csv: empty file");
