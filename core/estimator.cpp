@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <stdexcept>
 #include <vector>
@@ -277,14 +278,17 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   data.t.reserve(samples.size());
   // A row repeating both values of the one before carries nothing new: loggers that poll slower than they
   // write (OBD) repeat held values, and counting each copy would make the fit as sure of them as of
-  // fresh readings.
-  double last_speed = -1.0, last_freq = -1.0;
+  // fresh readings. Within a poll's reach only: the same values kHeldFor after they were read are a
+  // reading again (a steady cruise or a car at rest logged with rounded values), as replay counts them.
+  constexpr double kHeldFor = 3.0;  // s
+  double last_speed = -1.0, last_freq = -1.0, last_t = -std::numeric_limits<double>::infinity();
   for (const Sample& s : samples) {
     if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0 || !std::isfinite(s.speed / s.freq))
       continue;
-    if (s.speed == last_speed && s.freq == last_freq) continue;
+    if (s.speed == last_speed && s.freq == last_freq && s.t - last_t < kHeldFor) continue;
     last_speed = s.speed;
     last_freq = s.freq;
+    last_t = s.t;
     data.v.push_back(s.speed);
     data.s.push_back(s.freq);
     data.t.push_back(s.t);

@@ -66,6 +66,19 @@ TEST_CASE("estimator: paper mode recovers the BMW 520i within 1 percent") {
   check_ordered(fit.model);
 }
 
+// A logger that writes faster than it polls repeats held values: such copies count once. The same values
+// read again later are a reading (a steady cruise logged with rounded values), as replay counts them.
+TEST_CASE("estimator: repeated values count once within a poll's reach and again after it") {
+  std::vector<Sample> steady;
+  for (int k = 0; k < 100; ++k)
+    steady.push_back({static_cast<double>(k), 10.0, 50.0});  // 1 Hz, 100 s of one rounded reading
+  CHECK(fit_gear_model(steady, {}).model.samples == 34);     // one every 3 s
+  std::vector<Sample> polled;
+  for (int k = 0; k < 100; ++k)  // rows every 0.5 s, values polled every 1.5 s
+    polled.push_back({0.5 * k, 10.0 + static_cast<double>(k / 3), 50.0 + static_cast<double>(k / 3)});
+  CHECK(fit_gear_model(polled, {}).model.samples == 34);  // one per poll
+}
+
 TEST_CASE("estimator: auto mode finds gear count and every theta within 0.5 percent") {
   struct Case {
     const char* vehicle;
