@@ -197,7 +197,9 @@ class LogBuilder {
     if (!usable) {
       std::string msg = log_.name + ": no usable samples";
       if (log_.skipped_count > 0) {
-        msg += " (" + std::to_string(log_.skipped_count) + " bad rows; first: " + log_.skipped.front() + ")";
+        msg += " (" + std::to_string(log_.skipped_count) +
+               (log_.skipped_count == 1 ? " bad row" : " bad rows") + "; first: " + log_.skipped.front() +
+               ")";
       } else if (log_.samples.empty() && log_.repeated_rows == 0) {
         msg += " (no data rows after the header)";
       } else {

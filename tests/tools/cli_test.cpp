@@ -326,6 +326,11 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
   // Each names what is wrong: the command, and a gear count in the range the fit takes.
   CHECK(run(dir, "frobnicate " + log).err.find("unknown command 'frobnicate'") != std::string::npos);
   CHECK(run(dir, "fit --gears 1 " + log).err.find("from 2 to") != std::string::npos);
+  // A count forgotten before the file: the file name taken for the count is named, not a missing file.
+  const Result swallowed = run(dir, "fit --gears " + log);
+  CHECK(swallowed.status == 2);
+  CHECK(swallowed.err.find("--gears") != std::string::npos);
+  CHECK(swallowed.err.find("x.csv") != std::string::npos);
   // A known command missing what it needs is not "unknown".
   const Result missing = run(dir, "replay " + log);
   CHECK(missing.err.find("unknown command") == std::string::npos);

@@ -202,8 +202,20 @@ void add_fit(CLI::App& app, int& status) {
   auto cmd = std::make_shared<FitCommand>();
   CLI::App* sub =
       app.add_subcommand("fit", "Learn the gear scales (theta per gear) from sample logs; print JSON");
+  // Checked as it is parsed, so that `--gears model.csv` names the bad count rather than a missing file.
   sub->add_option("--gears", cmd->gears, "Number of gears, or 'auto' to choose from the data")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            try {
+              (void)parse_gears(text);
+            } catch (const UsageError&) {
+              return "must be 'auto' or a gear count from 2 to " + std::to_string(kMaxGears) + ", not '" +
+                     text + "'";
+            }
+            return std::string();
+          },
+          "auto|N"));
   sub->add_option(
       "--ratios", cmd->ratios,
       "Prior ratios c1,... top gear down (paper's Table 2, e.g. 1.25,1.35,1.50,1.7): the paper's method");
