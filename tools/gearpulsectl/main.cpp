@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstring>
 #include <iostream>
+#include <optional>
+#include <sstream>
 #include <string>
 #include <string_view>
 
@@ -18,6 +20,7 @@
 
 namespace {
 
+constexpr std::size_t kMaxReply = 1 << 20;  // bytes: a status or gears reply is a few kB
 constexpr int kReplyTimeoutMs = 10'000;
 
 struct Failure {
@@ -71,6 +74,8 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
       throw Failure{std::string("cannot read reply: ") + std::strerror(errno), 1};
     }
     reply.append(buf, static_cast<std::size_t>(n));
+    if (reply.size() > kMaxReply && reply.find('\n') == std::string::npos)
+      throw Failure{"gearpulsed sent a reply longer than 1 MiB without ending it", 1};
   }
   reply.resize(reply.find('\n'));
   try {
@@ -185,9 +190,16 @@ int main(int argc, char** argv) {
         return 2;
       }
     }
-    return app.exit(e) == 0 ? 0 : 2;
+    std::cerr << "gearpulsectl: " << e.what() << "\n";
+    return 2;
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
+    // One line, as every other error of this tool.
+    std::cerr << "gearpulsectl: " << e.what() << "\n";
+    return 2;
   }
   const std::string command = app.get_subcommands().front()->get_name();
   nlohmann::json request = {{"v", gearpulse::control::kProtocolVersion}, {"cmd", command}};
@@ -199,8 +211,19 @@ int main(int argc, char** argv) {
     request["confirm"] = true;
     if (keep_samples) request["keep_samples"] = true;
   }
+  // The reply is printed whole or not at all: a reply of another shape found halfway through the status
+  // must not leave half a status on stdout above the error.
+  std::ostringstream printed;
+  struct Capture {
+    std::streambuf* saved;
+    explicit Capture(std::ostream& to) : saved(std::cout.rdbuf(to.rdbuf())) {}
+    ~Capture() { std::cout.rdbuf(saved); }
+    Capture(const Capture&) = delete;
+    Capture& operator=(const Capture&) = delete;
+  };
   try {
     const nlohmann::json reply = ask_daemon(socket, request);
+    std::optional<Capture> capture(std::in_place, printed);
     const bool ok = reply.value("ok", false);
     if (json) {
       std::cout << reply.dump(2) << "\n";
@@ -218,6 +241,8 @@ int main(int argc, char** argv) {
     } else {
       std::cout << "model reset; " << str(reply, "training_samples") << " training pairs kept\n";
     }
+    capture.reset();
+    std::cout << printed.str() << std::flush;
     return ok ? 0 : 1;
   } catch (const Failure& f) {
     std::cerr << "gearpulsectl: " << f.message << "\n";
