@@ -326,6 +326,14 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
   // Each names what is wrong: the command, and a gear count in the range the fit takes.
   CHECK(run(dir, "frobnicate " + log).err.find("unknown command 'frobnicate'") != std::string::npos);
   CHECK(run(dir, "fit --gears 1 " + log).err.find("from 2 to") != std::string::npos);
+  // A directory where a file belongs is named as one.
+  for (const std::string& args :
+       {"fit " + dir.path.string(), "replay --model " + dir.path.string() + " " + log}) {
+    INFO(args);
+    const Result r = run(dir, args);
+    CHECK(r.status == 2);
+    CHECK(r.err.find("is a directory") != std::string::npos);
+  }
   // A count forgotten before the file: the file name taken for the count is named, not a missing file.
   const Result swallowed = run(dir, "fit --gears " + log);
   CHECK(swallowed.status == 2);

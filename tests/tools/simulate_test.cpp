@@ -176,7 +176,7 @@ TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
   for (const std::string args :
        {" --outage 20", " --outage a:5", " --outage 10:-3", " --outage 10:1e308", " --vehicle nosuchcar",
         " --style racing", " --duration 2", " --duration 1e308", " --rate 10", " --snr nan", " --tone 1e9",
-        " --tone nan", " --pulses-per-km -5"}) {
+        " --tone nan", " --pulses-per-km -5", " --duration 60 --outage 1000:10"}) {
     const Result r = run(kCli + " simulate" + out + args);
     INFO(args << ": " << r.out);
     CHECK(r.status == 2);
@@ -237,6 +237,9 @@ TEST_CASE("feed: a missing input or a bad format is an error", "[feed]") {
   CHECK(r.out.find("odd.raw") != std::string::npos);
   r = run(kCli + " feed --format s24 " + (dir.path / "odd.raw").string() + " x");
   CHECK(r.status == 2);
+  r = run(kCli + " feed " + dir.path.string() + " x");
+  CHECK(r.status == 2);
+  CHECK(r.out.find("is a directory") != std::string::npos);
   // Sizes that overflow a frame's byte count are refused, not divided by.
   for (const char* size : {" --channels 1073741824", " --channels 536870912", " --period 2147483647"}) {
     r = run(kCli + " feed --format s32" + size + " " + (dir.path / "odd.raw").string() + " x");

@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -41,6 +42,8 @@ int bytes_per_sample(const std::string& format) {
 }
 
 std::vector<std::uint8_t> read_whole_file(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw UsageError(path + ": is a directory");
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (f == nullptr) throw UsageError(path + ": " + std::strerror(errno));
   std::vector<std::uint8_t> data;

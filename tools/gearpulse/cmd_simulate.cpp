@@ -130,6 +130,9 @@ int run_simulate(const SimulateOptions& o) {
     if (!(outage.start >= 0.0 && outage.length >= 0.0 && outage.start + outage.length <= kMaxDuration))
       throw std::invalid_argument("outage '" + o.outage +
                                   "': START and LEN must be 0 or more, within a week");
+    if (outage.length > 0.0 && outage.start >= o.duration)
+      throw std::invalid_argument("outage '" + o.outage + "' starts after the drive's end (--duration " +
+                                  std::to_string(static_cast<long long>(o.duration)) + " s)");
     vehicle = sim::vehicle_preset(o.vehicle);
     style = sim::parse_style(o.style);
   } catch (const std::invalid_argument& e) {

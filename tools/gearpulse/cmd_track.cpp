@@ -138,8 +138,8 @@ int run_track(const TrackOptions& o) {
   const auto channels = static_cast<std::size_t>(info.channels);
   std::vector<float> interleaved(static_cast<std::size_t>(kBlock) * channels);
   std::vector<float> mono(static_cast<std::size_t>(kBlock));
-  std::printf(o.confidence ? "t,freq,snr_db,confidence\n" : "t,freq,snr_db\n");
   sf_count_t total = 0;
+  std::size_t rows = 0;
   for (;;) {
     const sf_count_t got = sf_readf_float(file.get(), interleaved.data(), kBlock);
     if (got <= 0) break;
@@ -154,13 +154,21 @@ int run_track(const TrackOptions& o) {
     for (std::size_t at = 0; at < frames; at += step) {
       tracker->push(std::span<const float>(mono.data() + at, std::min(step, frames - at)));
       TrackPoint p;
-      while (tracker->pop(p))
+      while (tracker->pop(p)) {
+        // The header with the first row: a file too short for one window is an error with nothing on stdout.
+        if (rows++ == 0) std::printf(o.confidence ? "t,freq,snr_db,confidence\n" : "t,freq,snr_db\n");
         print_point(p, o.confidence);
+      }
     }
   }
   if (sf_error(file.get()) != SF_ERR_NO_ERROR)
     throw UsageError(o.file + ": read error after " + std::to_string(total) +
                      " frames: " + sf_strerror(file.get()));
+  if (rows == 0)
+    throw UsageError(o.file + ": " + std::to_string(total) + " frames (" +
+                     std::to_string(static_cast<double>(total) / info.samplerate).substr(0, 5) +
+                     " s) hold no whole analysis window of " + std::to_string(o.window_s).substr(0, 5) +
+                     " s");
   if (total < info.frames)
     throw UsageError(o.file + ": truncated: header announces " + std::to_string(info.frames) +
                      " frames, file holds " + std::to_string(total));

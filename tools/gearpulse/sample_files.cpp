@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
@@ -26,6 +27,8 @@ TorqueSpeed parse_torque_speed(const std::string& text) {
 std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, const ReadOptions& options) {
   std::vector<SampleLog> logs;
   for (const std::string& path : paths) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) throw UsageError(path + ": is a directory");
     std::ifstream in(path, std::ios::binary);
     if (!in) throw UsageError(path + ": cannot open: " + std::strerror(errno));
     try {
