@@ -408,17 +408,26 @@ void Pipeline::Impl::tracker_loop() noexcept {
           next_frame_t = t0;
         }
         next_frame_t += n / rate;
-        tracker->push(std::span<const float>(block.data(), n));
         read_frames += n;
+        // Pushed in pieces of at most half the tracker's output queue of hops, drained after each: a
+        // backlog read in one pass (a stall) or a long period at short hops holds more hops than the
+        // queue, whose oldest would be dropped.
+        const auto piece = std::max<std::size_t>(
+            1, tracker->queue_capacity() / 2 *
+                   static_cast<std::size_t>(
+                       std::max(1.0, tracker->config().hop_s * tracker->config().sample_rate_hz)));
+        for (std::size_t at = 0; at < n; at += piece) {
+          tracker->push(std::span<const float>(block.data() + at, std::min(piece, n - at)));
+          TrackPoint p;
+          while (tracker->pop(p)) {
+            got_points = true;
+            last_points_at = now;
+            step(p.t, p.freq, p.snr_db, p.tracked);
+          }
+        }
         if (n < block.size()) break;
       }
       ring_drops.store(r.dropped(), std::memory_order_relaxed);
-      TrackPoint p;
-      while (tracker->pop(p)) {
-        got_points = true;
-        last_points_at = now;
-        step(p.t, p.freq, p.snr_db, p.tracked);
-      }
     }
     // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
     const bool audio_silent = !tracker || now - last_points_at > audio_stall_s;
