@@ -1171,6 +1171,9 @@ double SlidingDftTracker::decimated_rate_hz() const noexcept {
 std::size_t SlidingDftTracker::queue_capacity() const noexcept {
   return impl_->queue.size();
 }
+std::size_t SlidingDftTracker::max_push_frames() const noexcept {
+  return std::max<std::size_t>(1, impl_->queue.size() / 2 * static_cast<std::size_t>(impl_->hop_frames));
+}
 std::size_t SlidingDftTracker::history_size() const noexcept {
   return impl_->history.size();
 }

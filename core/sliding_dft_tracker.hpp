@@ -103,6 +103,9 @@ class SlidingDftTracker {
   [[nodiscard]] const TrackerConfig& config() const noexcept;
   [[nodiscard]] double decimated_rate_hz() const noexcept;
   [[nodiscard]] std::size_t queue_capacity() const noexcept;
+  // The most frames one push() should take when the caller pops only after it: half the output queue of
+  // hops (a longer push fills the queue and the oldest outputs are dropped).
+  [[nodiscard]] std::size_t max_push_frames() const noexcept;
   [[nodiscard]] std::size_t history_size() const noexcept;
   [[nodiscard]] std::uint64_t dropped_outputs() const noexcept;  // outputs lost because nobody popped
 

@@ -412,10 +412,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
         // Pushed in pieces of at most half the tracker's output queue of hops, drained after each: a
         // backlog read in one pass (a stall) or a long period at short hops holds more hops than the
         // queue, whose oldest would be dropped.
-        const auto piece = std::max<std::size_t>(
-            1, tracker->queue_capacity() / 2 *
-                   static_cast<std::size_t>(
-                       std::max(1.0, tracker->config().hop_s * tracker->config().sample_rate_hz)));
+        const std::size_t piece = tracker->max_push_frames();
         for (std::size_t at = 0; at < n; at += piece) {
           tracker->push(std::span<const float>(block.data() + at, std::min(piece, n - at)));
           TrackPoint p;

@@ -125,6 +125,23 @@ TEST_CASE("tracker: a clean line far above the noise is tracked") {
   CHECK(s.rmse <= 0.5);
 }
 
+TEST_CASE("tracker: pushes of max_push_frames() popped after each lose no output, longer ones do") {
+  TrackerConfig c = config_at(8000.0);
+  c.hop_s = 0.005;  // the shortest hop the daemon takes
+  sim::LighterSignalConfig g;
+  g.sample_rate_hz = 8000.0;
+  const auto x = sim::make_lighter_signal(
+      g, [](double) { return 100.0; }, 30.0);
+  SlidingDftTracker fits(c);
+  REQUIRE(fits.max_push_frames() < x.size());
+  const auto points = track(fits, x, fits.max_push_frames());
+  CHECK(fits.dropped_outputs() == 0);
+  CHECK(points.size() >= static_cast<std::size_t>(29.8 / c.hop_s));
+  SlidingDftTracker whole(c);
+  (void)track(whole, x, x.size());  // one push of 30 s: 6000 hops against a queue of a few hundred
+  CHECK(whole.dropped_outputs() > 0);
+}
+
 TEST_CASE("tracker: the harmonic ladder wins over a louder fixed tone") {
   const sim::FrequencyTrajectory truth = [](double t) { return 85.0 + 5.0 * std::sin(t); };
   sim::LighterSignalConfig g;

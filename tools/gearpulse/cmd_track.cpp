@@ -149,8 +149,7 @@ int run_track(const TrackOptions& o) {
                         info.channels, o.channel, mono);
     // At most half the tracker's output queue of hops per push: at short hops a whole block holds more
     // hops than the queue, and the oldest were dropped (one row per hop is the contract).
-    const auto hop_frames = static_cast<std::size_t>(std::max(1.0, o.hop_s * info.samplerate));
-    const std::size_t step = std::max<std::size_t>(1, tracker->queue_capacity() / 2 * hop_frames);
+    const std::size_t step = tracker->max_push_frames();
     for (std::size_t at = 0; at < frames; at += step) {
       tracker->push(std::span<const float>(mono.data() + at, std::min(step, frames - at)));
       TrackPoint p;
