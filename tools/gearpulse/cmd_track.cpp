@@ -122,7 +122,8 @@ int run_track(const TrackOptions& o) {
                      " bytes, the file holds " + std::to_string(actual));
   if (streamed)
     std::fprintf(stderr,
-                 "%s: the header gives no length (a streamed or interrupted recording): reading the %lld "
+                 "gearpulse: warning: %s: the header gives no length (a streamed or interrupted recording): "
+                 "reading the %lld "
                  "frames the file holds\n",
                  o.file.c_str(), static_cast<long long>(info.frames));
   if (info.frames <= 0 || info.channels <= 0) throw UsageError(o.file + ": no audio frames");
@@ -163,11 +164,12 @@ int run_track(const TrackOptions& o) {
   if (sf_error(file.get()) != SF_ERR_NO_ERROR)
     throw UsageError(o.file + ": read error after " + std::to_string(total) +
                      " frames: " + sf_strerror(file.get()));
-  if (rows == 0)
-    throw UsageError(o.file + ": " + std::to_string(total) + " frames (" +
-                     std::to_string(static_cast<double>(total) / info.samplerate).substr(0, 5) +
-                     " s) hold no whole analysis window of " + std::to_string(o.window_s).substr(0, 5) +
-                     " s");
+  if (rows == 0) {
+    char what[128];
+    std::snprintf(what, sizeof what, "%lld frames (%.3g s) hold no whole analysis window of %.3g s",
+                  static_cast<long long>(total), static_cast<double>(total) / info.samplerate, o.window_s);
+    throw UsageError(o.file + ": " + what);
+  }
   if (total < info.frames)
     throw UsageError(o.file + ": truncated: header announces " + std::to_string(info.frames) +
                      " frames, file holds " + std::to_string(total));
