@@ -65,7 +65,6 @@ std::vector<double> parse_ratios(const std::optional<std::string>& given) {
   return ratios;
 }
 
-// Written next to the target and renamed over it, so a reader never sees half a file.
 // Writes `text` to `path` whole or not at all (a temporary file renamed over it). A symbolic link is
 // followed, so the file it points to is replaced and the link stays; a path that is there but is no
 // regular file (a FIFO, /dev/stdout, a device) is written to directly, not replaced by a file.
