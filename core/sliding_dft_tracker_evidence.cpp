@@ -10,6 +10,7 @@ namespace {
 
 // Table axes: log10 of the per-bin SNR rho, and sqrt(z) (fine steps where z is small).
 constexpr double kLogRhoLo = -1.0, kLogRhoHi = 4.0;
+constexpr double kRhoHi = 1e4;  // 10^kLogRhoHi
 constexpr int kRhoSteps = 50;
 constexpr double kUMax = 45.0;  // z up to ~2000; beyond, the ratios are flat (bounded by the tone prior)
 constexpr int kUSteps = 450;
@@ -118,7 +119,7 @@ double HarmonicEvidence::lookup(const std::vector<double>& table, double z, doub
   // Beyond the table (a bin louder than ~33 dB over the noise), the ratios are saturated: z and rho are
   // scaled down together, so a loud line is read at the table's edge with its level against the expected
   // one kept, rather than with one of the two clamped (a clean line then read as mismatched to itself).
-  if (const double k = std::max({1.0, z / (kUMax * kUMax), rho / std::pow(10.0, kLogRhoHi)}); k > 1.0) {
+  if (const double k = std::max({1.0, z / (kUMax * kUMax), rho / kRhoHi}); k > 1.0) {
     z /= k;
     rho /= k;
   }
