@@ -8,9 +8,10 @@
 namespace gearpulse {
 namespace {
 
+// An optional field may also be null: a model with no gear ladder has no mixture to give it a value.
 double finite_number(const nlohmann::json& obj, const char* key, bool required) {
   const auto it = obj.find(key);
-  if (it == obj.end()) {
+  if (it == obj.end() || (!required && it->is_null())) {
     if (required) throw std::invalid_argument(std::string("model: missing field '") + key + "'");
     return 0.0;
   }
@@ -29,13 +30,17 @@ nlohmann::json model_to_json(const GearModel& model) {
   for (const Gear& g : model.gears) {
     gears.push_back({{"theta", g.theta}, {"weight", g.weight}, {"stderr", g.std_error}});
   }
+  // Without a gear ladder no mixture was fitted: its figures are null rather than zeros that read as fitted.
+  const auto fitted = [&](double value) {
+    return model.gears.empty() ? nlohmann::json(nullptr) : nlohmann::json(value);
+  };
   nlohmann::json out = {{"version", GearModel::kVersion},
                         {"gears", std::move(gears)},
-                        {"sigma_speed", model.sigma_speed},
-                        {"sigma_freq", model.sigma_freq},
+                        {"sigma_speed", fitted(model.sigma_speed)},
+                        {"sigma_freq", fitted(model.sigma_freq)},
                         {"samples", model.samples},
-                        {"log_likelihood", model.log_likelihood},
-                        {"outlier_weight", model.outlier_weight}};
+                        {"log_likelihood", fitted(model.log_likelihood)},
+                        {"outlier_weight", fitted(model.outlier_weight)}};
   if (!model.method.empty()) out["method"] = model.method;
   if (!model.reason.empty()) out["reason"] = model.reason;
   if (!model.extra.empty()) out["extra"] = model.extra;

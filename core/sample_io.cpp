@@ -27,20 +27,25 @@ std::string_view trim(std::string_view s) noexcept {
 }
 
 // Splits on commas (Carloop uses ", " and a trailing comma: trimming handles the first, the second only
-// adds an empty cell past the last column).
-void split_cells(std::string_view line, std::vector<std::string_view>& cells) {
+// adds an empty cell past the last column). At most `limit` cells are kept, so that a row of millions of
+// commas costs no more than the columns read from it; returns false when cells were left unsplit.
+bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit) {
   cells.clear();
   std::size_t start = 0;
-  while (true) {
+  while (cells.size() < limit) {
     const std::size_t comma = line.find(',', start);
     if (comma == std::string_view::npos) {
       cells.push_back(trim(line.substr(start)));
-      break;
+      return true;
     }
     cells.push_back(trim(line.substr(start, comma - start)));
     start = comma + 1;
   }
+  return false;
 }
+
+// A header wider than this is not a log (Torque's widest exports have a few hundred columns).
+constexpr std::size_t kMaxColumns = 4096;
 
 std::string quoted(std::string_view cell) {
   constexpr std::size_t kMaxShown = 24;
@@ -247,7 +252,7 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   std::vector<std::string_view> cells;
   while (reader.next()) {
     if (blank(reader.line)) continue;
-    split_cells(reader.line, cells);
+    split_cells(reader.line, cells, need);
     if (cells.size() < need) {
       out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
@@ -335,7 +340,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double counter = static_cast<double>(row++);
-    split_cells(reader.line, cells);
+    split_cells(reader.line, cells, need);
     if (cells.size() < need) {
       out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
@@ -460,7 +465,7 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double row_time = static_cast<double>(counter++);
-    split_cells(reader.line, cells);
+    split_cells(reader.line, cells, need);
     if (cells.size() < need) {
       out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
@@ -533,7 +538,9 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     throw SampleFileError(std::string(name) + ": empty file");
   }
   std::vector<std::string_view> views;
-  split_cells(reader.line, views);
+  if (!split_cells(reader.line, views, kMaxColumns))
+    throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
+                          ": header has more than " + std::to_string(kMaxColumns) + " columns");
   std::vector<std::string> header(views.begin(), views.end());
   const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
 

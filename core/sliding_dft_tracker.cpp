@@ -1009,6 +1009,9 @@ std::string SlidingDftTracker::validate(const TrackerConfig& c) {
     return format("hop %g s is outside (0, 60] s", c.hop_s);
   if (c.hop_s * c.sample_rate_hz < 1.0)
     return format("hop %g s is shorter than one frame at %g Hz", c.hop_s, c.sample_rate_hz);
+  if (c.hop_s > 4.0 * c.window_s)
+    return format("hop %g s is more than 4 windows (%g s): the audio between windows would be ignored",
+                  c.hop_s, 4.0 * c.window_s);
   // No engine's frequency changes by more than some hundreds of Hz per second; the bound keeps the gates
   // (in bins) far from integer overflow.
   constexpr double kMaxSlew = 1e5;  // Hz/s

@@ -220,9 +220,6 @@ void check_relations(const Config& c, const toml::table& root, const std::string
     fail({"tracker.band_high", "audio.rate"}, "tracker.band_high (" + hz(c.tracker.band_high) +
                                                   ") must be below half of audio.rate (" +
                                                   hz(c.audio.rate / 2.0) + ")");
-  if (c.tracker.hop > c.tracker.window * 4.0)
-    fail({"tracker.hop", "tracker.window"},
-         "tracker.hop is more than 4 tracker.window; audio between windows would be ignored");
   // Whatever else the tracker would refuse at the configured rate (the window must hold 4 periods of
   // band_low, ...), refused here, before any device is opened.
   if (const std::string problem = SlidingDftTracker::validate(tracker_config_of(c.tracker, c.audio.rate));

@@ -110,6 +110,18 @@ TEST_CASE("io: empty, headerless and useless files are one-line errors") {
     CHECK(e.find('\n') == std::string::npos);
 }
 
+TEST_CASE("io: a header of thousands of columns is an error, a row of millions of commas only its columns") {
+  CHECK(error_of("t,speed,freq" + std::string(5000, ',') + "\n0,1,2\n") ==
+        "log.csv:1: header has more than 4096 columns");
+  // The row's cells past the header's columns are ignored unsplit: the row reads as any other.
+  const SampleLog log =
+      read_text("t,speed,freq,note\n0,1,2\n1,3,4" + std::string(5'000'000, ',') + "\n2,5,6\n");
+  REQUIRE(log.samples.size() == 3);
+  CHECK(log.samples[1].speed == 3.0);
+  CHECK(log.samples[1].freq == 4.0);
+  CHECK(log.skipped_count == 0);
+}
+
 TEST_CASE("io: the skip list is capped but every skip is counted") {
   std::string text = "t,speed,freq\n";
   for (int i = 0; i < 50; ++i)

@@ -130,8 +130,10 @@ TEST_CASE("config: relations between keys are checked") {
   // against the other key of the pair, which the file does not set.
   CHECK(error_of("[tracker]\nband_low = 300\n") ==
         "test.toml:2: tracker.band_low: tracker.band_high (200 Hz) must be above tracker.band_low (300 Hz)");
-  CHECK(
-      error_of("[tracker]\nwindow = 0.01\n").starts_with("test.toml:2: tracker.window: tracker.hop is more"));
+  CHECK(error_of("[tracker]\nhop = 0.5\n") ==
+        "test.toml:2: tracker.hop: tracker: hop 0.5 s is more than 4 windows (0.4 s): the audio between "
+        "windows "
+        "would be ignored");
   CHECK(error_of("[output]\nmin_frequency = 1000\n").starts_with("test.toml:2: output.min_frequency:"));
   CHECK(error_of("[output]\nmax_frequency = 100000\n").starts_with("test.toml:2: output.max_frequency:"));
 }

@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 #include "tests/test_util.hpp"
 
+#include "core/gear_model.hpp"
 #include "core/sample_io.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
@@ -286,6 +287,11 @@ TEST_CASE("cli: logs no gearbox made give no ladder, with the reason") {
     const auto json = nlohmann::json::parse(r.out);
     CHECK(json["gears"].empty());
     CHECK(json.value("reason", "").find(c.reason) != std::string::npos);
+    // No mixture was fitted: its figures are null, not zeros that read as a fit, and the model loads.
+    for (const char* key : {"sigma_speed", "sigma_freq", "log_likelihood", "outlier_weight"})
+      CHECK(json.at(key).is_null());
+    CHECK(json["samples"].get<long>() > 0);
+    CHECK(gearpulse::parse_model(r.out).empty());
   }
 }
 

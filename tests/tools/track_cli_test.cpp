@@ -276,6 +276,10 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
     check_one_line_error(run(dir, "--band 50:x '" + good + "'"));
     check_one_line_error(run(dir, "--hop abc '" + good + "'"));
     check_one_line_error(run(dir, "--hop 0 '" + good + "'"));
+    // As the daemon's configuration: a hop beyond 4 windows would skip the audio between them.
+    const Result wide = run(dir, "--hop 0.5 '" + good + "'");
+    check_one_line_error(wide);
+    CHECK(wide.err.find("more than 4 windows") != std::string::npos);
     check_one_line_error(run(dir, "--window 0.01 '" + good + "'"));
     check_one_line_error(run(dir, "--bogus '" + good + "'"));
     check_one_line_error(run(dir, ""));
