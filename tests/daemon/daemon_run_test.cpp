@@ -17,6 +17,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "daemon/control_server.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
 #include "tests/drivers/alsa_fifo.hpp"
@@ -486,6 +487,35 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
 
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
+}
+
+TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe it leaves") {
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  gearpulse::daemon::ControlServer server(
+      sock,
+      [](const json&) {
+        return json{{"x", 1}};
+      },
+      gearpulse::daemon::ControlLimits{.max_clients = 1});
+  server.start();
+  LineClient holder(sock);  // takes the one slot
+  REQUIRE(holder.send_all("{\"cmd\":\"status\"}\n"));
+  REQUIRE(holder.read_line().has_value());
+  // The server writes its reason and closes without reading: most runs' request then meets a closed
+  // socket (EPIPE), and the reason waiting in it is what the user must see.
+  for (int i = 0; i < 10; ++i) {
+    const auto out = dir / ("busy" + std::to_string(i) + ".txt");
+    Process p({ctl, "--socket", sock, "status"}, out);
+    CHECK(p.wait() == 1);
+    CHECK(read_text(out) == "gearpulsectl: too many clients\n");
+  }
+  // A path that is no socket is named as such, not as a daemon that is not running.
+  write_text(dir / "plain", "x");
+  Process plain({ctl, "--socket", (dir / "plain").string(), "status"}, dir / "plain.txt");
+  CHECK(plain.wait() == 3);
+  CHECK(read_text(dir / "plain.txt").find("is not a socket") != std::string::npos);
 }
 
 TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of aborting") {

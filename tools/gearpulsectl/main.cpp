@@ -1,6 +1,7 @@
 // gearpulsectl: asks a running gearpulsed over its control socket.
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -42,6 +43,9 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
   } closer{fd};
   if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
     const int err = errno;
+    struct stat st {};
+    if (err == ECONNREFUSED && ::stat(path.c_str(), &st) == 0 && !S_ISSOCK(st.st_mode))
+      throw Failure{path + " is not a socket (is --socket or control.socket right?)", 3};
     if (err == ENOENT || err == ECONNREFUSED)
       throw Failure{"gearpulsed is not running (no daemon at " + path + ")", 3};
     if (err == EACCES)
@@ -49,11 +53,17 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
     throw Failure{"cannot connect to " + path + ": " + std::strerror(err), 3};
   }
   const std::string line = request.dump() + "\n";
+  // A daemon that refuses the connection (too many clients) writes its reason and closes before reading:
+  // the send then fails, and the reason waiting in the socket is the error to report.
+  int send_error = 0;
   for (std::size_t done = 0; done < line.size();) {
     const ssize_t n = ::send(fd, line.data() + done, line.size() - done, MSG_NOSIGNAL);
     if (n < 0) {
       if (errno == EINTR) continue;
-      throw Failure{std::string("cannot send request: ") + std::strerror(errno), 1};
+      if (errno != EPIPE && errno != ECONNRESET)
+        throw Failure{std::string("cannot send request: ") + std::strerror(errno), 1};
+      send_error = errno;
+      break;
     }
     done += static_cast<std::size_t>(n);
   }
@@ -68,7 +78,13 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
       throw Failure{std::string("poll: ") + std::strerror(errno), 1};
     }
     const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
-    if (n == 0) throw Failure{"gearpulsed closed the connection without a reply", 1};
+    if (n == 0 || (n < 0 && send_error != 0 && errno != EINTR)) {
+      if (send_error != 0)
+        throw Failure{std::string("gearpulsed closed the connection before taking the request (") +
+                          std::strerror(send_error) + ")",
+                      1};
+      throw Failure{"gearpulsed closed the connection without a reply", 1};
+    }
     if (n < 0) {
       if (errno == EINTR) continue;
       throw Failure{std::string("cannot read reply: ") + std::strerror(errno), 1};
