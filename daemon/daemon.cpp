@@ -161,6 +161,17 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
   if (now.output_state != before.output_state && now.output_state == "write-errors")
     spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
                  config.output.path);
+  if (now.output_dropped > before.output_dropped) {
+    std::uint64_t suppressed = 0;
+    if (limiter.allow("output-dropped", suppressed))
+      spdlog::warn(
+          "output: the reader of {} is not reading: {} pulse(s) dropped (total {}); it will get the "
+          "pulses still queued when it reads again",
+          config.output.path, now.output_dropped - before.output_dropped, now.output_dropped);
+  } else if (before.output_state == "reader-behind" && now.output_state != "reader-behind") {
+    limiter.reset("output-dropped");
+    spdlog::info("output: the reader of {} keeps up again", config.output.path);
+  }
   if (now.xruns > before.xruns) {
     std::uint64_t suppressed = 0;
     if (limiter.allow("xrun", suppressed))
@@ -384,8 +395,10 @@ nlohmann::json Daemon::Impl::status_json() {
       {"training_samples", store.size()},
       {"uptime", std::chrono::duration<double>(Clock::now() - started).count()},
   };
-  reply["output"] = {
-      {"kind", to_string(config.output.kind)}, {"state", p.output_state}, {"error", p.output_error}};
+  reply["output"] = {{"kind", to_string(config.output.kind)},
+                     {"state", p.output_state},
+                     {"error", p.output_error},
+                     {"dropped", p.output_dropped}};
   reply["output"]["pulses_per_km"] = config.output.pulses_per_km;
   if (config.output.kind == OutputKind::kPty) reply["output"]["path"] = config.output.path;
   if (config.output.kind == OutputKind::kGpio)

@@ -56,6 +56,8 @@ SampleFormat format_of(const std::string& name) {
 // Between tries to open an output device that would not open (a GPIO line still held by another
 // process, a USB GPIO adapter that enumerates after the daemon started).
 constexpr auto kOutputRetry = std::chrono::seconds(2);
+// The output is "reader-behind" while pulses were dropped (the reader's queue full) within this time.
+constexpr std::chrono::nanoseconds kReaderBehind = std::chrono::seconds(5);
 
 // What the pulse thread drives: the device once it is open; until then a stand-in that counts the pulses.
 // The device is attached once, by the main thread, while the pulse thread runs: the thread finds it
@@ -71,6 +73,9 @@ class LateOutput final : public PulseOutput {
   void fall() noexcept override { current_.load(std::memory_order_acquire)->fall(); }
   [[nodiscard]] std::uint64_t errors() const noexcept override {
     return current_.load(std::memory_order_acquire)->errors();
+  }
+  [[nodiscard]] std::uint64_t dropped() const noexcept override {
+    return current_.load(std::memory_order_acquire)->dropped();
   }
   [[nodiscard]] std::string describe() const override {
     return current_.load(std::memory_order_acquire)->describe();
@@ -108,6 +113,9 @@ struct Pipeline::Impl {
   std::unique_ptr<GpsdClient> gps;
   mutable std::mutex output_mutex;  // output_error: set by the main thread, read by status queries
   std::string output_error;
+  // Last dropped-pulse count a snapshot saw and when it changed (snapshots come from several threads).
+  mutable std::atomic<std::uint64_t> dropped_seen{0};
+  mutable std::atomic<std::int64_t> dropped_at_ns{0};
   std::chrono::steady_clock::time_point next_output_try;
 
   // Audio: owned by the tracker thread once started; stats read under audio_mutex.
@@ -296,6 +304,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
   bool audio_was_up = false;
   bool audio_interrupted = false;   // the open capture lost its device and is being reopened
   bool audio_frozen = false;        // its periods repeat (AlsaCaptureStats::frozen)
+  bool audio_stalled = false;       // it delivers nothing (AlsaCaptureStats::stalled)
   std::uint64_t repeated_seen = 0;  // AlsaCaptureStats::repeated when the last hole was looked at
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
   // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
@@ -399,7 +408,8 @@ void Pipeline::Impl::tracker_loop() noexcept {
               if (repeated == repeated_seen)
                 report("audio-hole", spdlog::level::warn,
                        "audio: " + std::to_string(std::llround(gap_frames)) +
-                           " frames lost before the ring (overrun or device restart); tracking resumes after "
+                           " frames lost before the ring (overrun, device restart or a stalled source); "
+                           "tracking resumes after "
                            "the hole");
               repeated_seen = repeated;
             }
@@ -489,6 +499,17 @@ void Pipeline::Impl::tracker_loop() noexcept {
       } else if (!s.frozen && audio_frozen) {
         audio_frozen = false;
         clear_fault("audio-frozen", "audio: samples from " + config.audio.device + " change again");
+      }
+      if (s.stalled && !audio_stalled) {
+        audio_stalled = true;
+        report(
+            "audio-stalled", spdlog::level::warn,
+            fmt::format("audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); "
+                        "speed follows GPS until they come again",
+                        config.audio.device, s.silent_s));
+      } else if (!s.stalled && audio_stalled) {
+        audio_stalled = false;
+        clear_fault("audio-stalled", "audio: samples from " + config.audio.device + " come again");
       }
     }
     if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
@@ -598,10 +619,20 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       std::lock_guard lock(d.output_mutex);
       s.output_error = d.output_error;
     }
+    // A reader that has not taken a pulse for kReaderBehind: the count grew within that time.
+    s.output_dropped = d.output.dropped();
+    if (const std::uint64_t seen = d.dropped_seen.load(std::memory_order_relaxed); s.output_dropped != seen) {
+      d.dropped_seen.store(s.output_dropped, std::memory_order_relaxed);
+      d.dropped_at_ns.store(now, std::memory_order_relaxed);
+    }
+    const std::int64_t dropped_at = d.dropped_at_ns.load(std::memory_order_relaxed);
+    const bool reader_behind = dropped_at > 0 && now - dropped_at < kReaderBehind.count();
     if (!s.output_error.empty())
       s.output_state = "error";
     else if (d.output.errors() > 0)
       s.output_state = "write-errors";
+    else if (reader_behind)
+      s.output_state = "reader-behind";
     else
       s.output_state = d.config.output.kind == OutputKind::kNone ? "off" : "ok";
   }
@@ -629,7 +660,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     std::lock_guard lock(d.audio_mutex);
     if (d.capture) {
       const AlsaCaptureStats a = d.capture->stats();
-      s.audio_state = !a.streaming ? "recovering" : a.frozen ? "frozen" : "running";
+      s.audio_state = !a.streaming ? "recovering" : a.frozen ? "frozen" : a.stalled ? "stalled" : "running";
       s.xruns = a.xruns;
       s.audio_error = a.last_error != 0 && !a.streaming ? "ALSA error " + std::to_string(a.last_error) : "";
     } else {

@@ -21,8 +21,9 @@ struct PipelineSnapshot {
   int gear = 0;
   std::uint64_t pulses = 0;
   double pulse_frequency = 0.0;      // Hz
-  std::string output_state = "off";  // ok, error, off
+  std::string output_state = "off";  // ok, reader-behind, write-errors, error, off
   std::string output_error;
+  std::uint64_t output_dropped = 0;  // pulses a present reader did not take (PulseOutput::dropped)
   // GPS.
   std::string gps_state = "disconnected";  // fix, no-fix, disconnected
   double gps_speed = -1.0;                 // m/s of the last fix, < 0 none
@@ -32,7 +33,8 @@ struct PipelineSnapshot {
   std::uint64_t gps_failures = 0;  // failed connection attempts and lost connections
   std::string gps_error;
   // Audio and tracker.
-  std::string audio_state = "stopped";  // running, frozen (periods repeat), recovering, retrying, stopped
+  // running, frozen (periods repeat), stalled (no frames), recovering, retrying, stopped
+  std::string audio_state = "stopped";
   std::string audio_error;
   std::uint64_t xruns = 0;
   std::uint64_t ring_drops = 0;

@@ -13,6 +13,9 @@
 namespace gearpulse {
 namespace {
 
+// No frame for this long (or 4 periods, if longer) from an open device is a stall (AlsaCaptureStats).
+constexpr double kStallS = 2.0;
+
 snd_pcm_t* as_pcm(void* p) noexcept {
   return static_cast<snd_pcm_t*>(p);
 }
@@ -212,6 +215,11 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
   s.running = running_.load(std::memory_order_relaxed);
   s.streaming = streaming_.load(std::memory_order_relaxed);
+  if (const std::int64_t last = last_frames_ns_.load(std::memory_order_relaxed); s.streaming && last > 0) {
+    const double period_s = static_cast<double>(period_frames_) / static_cast<double>(rate_);
+    s.silent_s = std::max(0.0, static_cast<double>(monotonic_ns() - last) * 1e-9);
+    s.stalled = s.silent_s > std::max(kStallS, 4.0 * period_s);
+  }
   return s;
 }
 
@@ -330,6 +338,7 @@ void AlsaCapture::run() noexcept {
     streaming_.store(false, std::memory_order_relaxed);
   };
 
+  last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
   streaming_.store(pcm != nullptr, std::memory_order_relaxed);
   if (pcm) {
     if (const int err = restart(); err < 0) recover(err);
@@ -365,6 +374,7 @@ void AlsaCapture::run() noexcept {
         continue;
       }
       pcm = fresh;
+      last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
       streaming_.store(true, std::memory_order_relaxed);
       reopens_.fetch_add(1, std::memory_order_relaxed);
       backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
@@ -388,6 +398,7 @@ void AlsaCapture::run() noexcept {
     }
     const double measured = measure(pcm, n);
     frames_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_relaxed);
+    last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
     const std::size_t frames = static_cast<std::size_t>(n);
 
     // A period identical to the one before is a stopped source or digital silence (AlsaCaptureStats::

@@ -79,6 +79,10 @@ struct AlsaCaptureStats {
   // (a muted input). A live analogue input never repeats a period exactly, so a repeated period carries
   // nothing and is not pushed (from the first one; `repeated` counts them).
   bool frozen = false;
+  // The device is open but has delivered no frame for 2 s or 4 periods, whichever is longer (a card whose
+  // pointer stopped, a source that holds its stream open and sends nothing); `silent_s` says how long.
+  bool stalled = false;
+  double silent_s = 0.0;
 };
 
 class AlsaCapture final : public AudioSource {
@@ -140,6 +144,7 @@ class AlsaCapture final : public AudioSource {
       clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
   std::atomic<bool> realtime_ok_{false}, memory_locked_{false}, frozen_{false};
+  std::atomic<std::int64_t> last_frames_ns_{0};  // monotonic time of the last frames read (or of the start)
 };
 
 }  // namespace gearpulse

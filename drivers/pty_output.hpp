@@ -28,6 +28,7 @@ class PtyOutput final : public PulseOutput {
   [[nodiscard]] std::uint64_t errors() const noexcept override {
     return errors_.load(std::memory_order_relaxed);
   }
+  [[nodiscard]] std::uint64_t dropped() const noexcept override { return overflowed(); }
   [[nodiscard]] std::string describe() const override;
 
   [[nodiscard]] const std::filesystem::path& link() const noexcept { return link_; }

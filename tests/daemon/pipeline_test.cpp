@@ -1,5 +1,8 @@
 // The live chain in-process through real components: ALSA capture from the file plugin fed by a paced
 // FIFO, gpsd started by gpsfake, the tracker and the synthesis stepped by the pipeline's own thread.
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -202,4 +205,48 @@ TEST_CASE(
   // The writer is back: the audio runs and pairs come again.
   REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 20s));
   CHECK(wait_for([&] { return pipeline.drain_pairs() > 0; }, 10s));
+}
+
+TEST_CASE("pipeline: audio that stops coming (the device open, no frames) is stalled, then running again") {
+  // The ripple's writer holds the FIFO open and writes nothing for 6 s, 4 s in: the capture waits on the
+  // device with nothing to read, as with a card whose pointer stopped.
+  constexpr unsigned kPeriod = 512;
+  const gearpulse::test::WriterBreak held{gearpulse::test::WriterBreak::kStall, 4 * kRate / kPeriod, 6s};
+  LiveChain chain(kPeriod, 60, 0.5, held);  // about 30 s of GPS
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  REQUIRE(wait_for([&] { return pipeline.snapshot().tracker_freq > 0.0; }, 10s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "stalled"; }, 10s));
+  CHECK(pipeline.snapshot().tracker_freq < 0.0);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 15s));
+  CHECK(wait_for([&] { return pipeline.snapshot().tracker_freq > 0.0; }, 10s));
+}
+
+TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer once it reads again") {
+  LiveChain chain(512, 60, 0.5);  // about 30 s of GPS at kSpeed
+  const auto link = chain.dir / "pulse";
+  chain.config.output.kind = gearpulse::daemon::OutputKind::kPty;
+  chain.config.output.path = link.string();
+  // 1600 pulses a second at kSpeed: a reader that does not read has its queue full within seconds.
+  chain.config.output.pulses_per_km = 100000.0;
+  chain.config.output.max_frequency = 2000.0;
+  chain.config.output.pulse_width = 0.0002;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  REQUIRE(wait_for([&] { return std::filesystem::is_symlink(link); }, 10s));
+  const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);  // opened, never read
+  REQUIRE(fd >= 0);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().source == "gps"; }, 20s));
+  CHECK(pipeline.snapshot().output_state == "ok");
+  REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == "reader-behind"; }, 15s));
+  CHECK(pipeline.snapshot().output_dropped > 0);
+  // The reader reads again: within the 5 s the state lasts after the last dropped pulse, it is ok.
+  char buf[4096];
+  const bool ok = wait_for(
+      [&] {
+        while (::read(fd, buf, sizeof buf) > 0) {
+        }
+        return pipeline.snapshot().output_state == "ok";
+      },
+      10s);
+  CHECK(ok);
+  ::close(fd);
 }

@@ -416,6 +416,28 @@ TEST_CASE(
   CHECK(timestamps_increase(cap, 0, got.size() - 1));
 }
 
+// A source that holds its stream open and sends nothing (a card whose pointer stopped) is said to be
+// stalled once 2 s pass without a frame, and no longer once frames come again.
+TEST_CASE("alsa: an open device that delivers nothing for seconds is stalled, until frames come again") {
+  TempDir dir;
+  const auto fifo = make_paced_pcm(dir);
+  constexpr unsigned kPeriod = 480, kRate = 48000;
+  const auto src = numbered(kPeriod, 200);  // 2 s
+  FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kStall, 50, 4000ms});
+  SpscRing<float> ring(1 << 18);
+  AlsaCapture cap(paced_config(kPeriod), ring);
+  cap.start();
+  feeder.go();
+  CHECK_FALSE(cap.stats().stalled);
+  REQUIRE(wait_for([&] { return cap.stats().stalled; }, 5s));
+  CHECK(cap.stats().silent_s > 2.0);
+  CHECK(cap.stats().streaming);
+  const auto got = read_frames(ring, src.size());
+  REQUIRE(got.size() == src.size());
+  CHECK_FALSE(cap.stats().stalled);
+  cap.stop();
+}
+
 TEST_CASE("alsa: a period that repeats the one before is not pushed, and the capture says it is frozen") {
   TempDir dir;
   constexpr unsigned kPeriod = 480;
