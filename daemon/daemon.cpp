@@ -4,6 +4,7 @@
 #include <poll.h>
 #include <signal.h>
 #include <sys/signalfd.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -127,6 +128,8 @@ struct Daemon::Impl {
 // repeated faults at most once a minute, so a log read at 2 a.m. tells what happened and when.
 void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now) {
   const std::string server = fmt::format("{}:{}", config.gps.host, config.gps.port);
+  if (before.gps_state == "disconnected" && now.gps_state != "disconnected")
+    spdlog::info("gps: connected to gpsd at {}", server);
   if (now.gps_state != before.gps_state) {
     std::uint64_t suppressed = 0;
     if (now.gps_state == "fix") {
@@ -226,16 +229,35 @@ bool Daemon::Impl::load_state() {
       spdlog::warn("state: {}; nothing stops a second daemon from sharing {}", e.what(), state_dir.string());
     }
     // Said now, not at the first save minutes later (or at shutdown).
+    // A block is written and synced, so that a full disk shows as well as a read-only one.
     const std::filesystem::path probe = state_dir / ".gearpulse-write-test";
     const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    if (fd < 0) {
-      const std::string why = std::strerror(errno);
+    int err = fd < 0 ? errno : 0;
+    if (fd >= 0) {
+      static constexpr char kBlock[4096] = {};
+      const ssize_t n = ::write(fd, kBlock, sizeof kBlock);
+      if (n != static_cast<ssize_t>(sizeof kBlock)) err = n < 0 ? errno : ENOSPC;
+      if (err == 0 && ::fdatasync(fd) != 0) err = errno;
+      ::close(fd);
+      ::unlink(probe.c_str());
+    }
+    if (err != 0) {
+      const std::string why = std::strerror(err);
       spdlog::error("state: cannot write in {}: {}; the model and training pairs will not survive a restart",
                     state_dir.string(), why);
       note_state_problem("cannot write in " + state_dir.string() + ": " + why);
-    } else {
-      ::close(fd);
-      ::unlink(probe.c_str());
+    } else if (struct statvfs fs{}; ::statvfs(state_dir.c_str(), &fs) == 0) {
+      // A full store is replaced by writing the new one beside it: room for two is needed.
+      const double free_bytes = static_cast<double>(fs.f_bavail) * static_cast<double>(fs.f_frsize);
+      const double need = 2.0 * TrainingStore::file_bytes(config.model.max_samples);
+      if (free_bytes < need) {
+        const std::string text = fmt::format(
+            "only {:.1f} MB free in {}; a full training store (model.max_samples = {}) needs {:.1f} MB "
+            "while it is saved",
+            free_bytes / 1e6, state_dir.string(), config.model.max_samples, need / 1e6);
+        spdlog::warn("state: {}", text);
+        note_state_problem(text);
+      }
     }
   }
   // A crash between writing a temp file and renaming it leaves the temp file; the real file is intact.
@@ -603,7 +625,9 @@ int Daemon::run() {
     const auto lock = d.model.lock_writes();
     if (const ModelPtr m = d.model.get(); m && !m->empty()) {
       try {
-        save_model_file(d.model_path, *m);
+        // Written only if the file does not already hold it (a model unchanged since it was loaded or
+        // saved is not rewritten at every stop, on media that may be read-only or worn).
+        if (!model_file_holds(d.model_path, *m)) save_model_file(d.model_path, *m);
       } catch (const std::exception& e) {
         spdlog::error("model: cannot save {} at shutdown: {}", d.model_path.string(), e.what());
       }

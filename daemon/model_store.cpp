@@ -26,4 +26,13 @@ void save_model_file(const std::filesystem::path& path, const GearModel& model) 
   write_file_atomic(path, serialize_model(model) + "\n");
 }
 
+bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept {
+  try {
+    const std::optional<std::string> text = read_file(path);
+    return text && *text == serialize_model(model) + "\n";
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 }  // namespace gearpulse::daemon

@@ -51,5 +51,7 @@ struct ModelLoad {
 [[nodiscard]] ModelLoad load_model_file(const std::filesystem::path& path) noexcept;
 // Atomic write. Throws std::system_error.
 void save_model_file(const std::filesystem::path& path, const GearModel& model);
+// True when the file at `path` holds exactly what save_model_file would write for `model`.
+[[nodiscard]] bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept;
 
 }  // namespace gearpulse::daemon

@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
+#include <string>
 #include <thread>
 
 #include <alsa/asoundlib.h>
@@ -200,7 +202,9 @@ void Pipeline::Impl::open_output_device() {
         // As for the control socket and the state directory: a missing directory is made.
         const std::filesystem::path dir = std::filesystem::path(o.path).parent_path();
         std::error_code ec;
-        if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+        if (!dir.empty() && !std::filesystem::create_directories(dir, ec) && ec)
+          throw std::runtime_error("cannot create the directory " + dir.string() + " for " + o.path + ": " +
+                                   ec.message());
         device = std::make_unique<PtyOutput>(o.path);
         break;
       }
@@ -377,8 +381,9 @@ void Pipeline::Impl::tracker_loop() noexcept {
           error = audio_error;
         }
         report("audio", spdlog::level::err,
-               "audio: " + error + "; retrying every " +
-                   std::to_string(backoff.count() / 1000.0).substr(0, 4) + " s, speed follows GPS meanwhile");
+               fmt::format("audio: {}; retrying in {:.1f} s (the delay grows to 10 s), speed follows GPS "
+                           "meanwhile",
+                           error, static_cast<double>(backoff.count()) / 1000.0));
         next_audio_try = std::chrono::steady_clock::now() + backoff;
         backoff = std::min(backoff * 2, std::chrono::milliseconds(10'000));
       }

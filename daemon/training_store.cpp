@@ -271,6 +271,11 @@ std::string TrainingStore::load(const std::filesystem::path& path) {
   return problem;
 }
 
+double TrainingStore::file_bytes(std::size_t pairs) noexcept {
+  return static_cast<double>(kHeaderSize + sizeof(std::uint32_t)) +
+         static_cast<double>(pairs) * static_cast<double>(kRecordSize);
+}
+
 std::filesystem::path TrainingStore::journal_path(const std::filesystem::path& path) {
   std::filesystem::path journal = path;
   journal += ".journal";

@@ -55,6 +55,8 @@ class TrainingStore {
   // The journal of `path` (journal_path()): magic, version, the checksum of the saved file it extends,
   // then records of one pair and its own CRC-32.
   [[nodiscard]] static std::filesystem::path journal_path(const std::filesystem::path& path);
+  // Size in bytes of a saved store of `pairs` pairs.
+  [[nodiscard]] static double file_bytes(std::size_t pairs) noexcept;
   // Appends the pairs added since the last save or append to the journal and syncs it (rewriting the
   // journal whole, atomically, when it is missing, stale or after a failed append). Returns how many
   // pairs were written. Throws std::system_error; the pairs are then tried again at the next call.

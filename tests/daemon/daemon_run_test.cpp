@@ -4,10 +4,13 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <thread>
@@ -17,6 +20,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/gear_model.hpp"
 #include "daemon/control_server.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
@@ -275,6 +279,76 @@ TEST_CASE("daemon: model.json is loaded at start and survives kill -9") {
   CHECK(status["gears"].size() == 3);
   again.signal(SIGTERM);
   CHECK(again.wait() == 0);
+}
+
+TEST_CASE("daemon: a model unchanged since it was loaded is not rewritten at stop, a changed file is") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  const auto path = dir / "state/model.json";
+  gearpulse::daemon::save_model_file(path, gearpulse::parse_model(kModel));
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  const auto inode = [&] {
+    struct stat st {};
+    REQUIRE(::stat(path.c_str(), &st) == 0);
+    return st.st_ino;
+  };
+  const auto before = inode();
+  {
+    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+    REQUIRE(wait_for_status(dir, daemon).is_object());
+    daemon.signal(SIGTERM);
+    CHECK(daemon.wait() == 0);
+  }
+  CHECK(inode() == before);  // an atomic save would have renamed a new file over it
+  // The file as a person wrote it (other spacing): saved at stop in the daemon's own form.
+  write_text(path, kModel);
+  {
+    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+    REQUIRE(wait_for_status(dir, daemon).is_object());
+    daemon.signal(SIGTERM);
+    CHECK(daemon.wait() == 0);
+  }
+  CHECK(gearpulse::daemon::model_file_holds(path, gearpulse::parse_model(kModel)));
+}
+
+TEST_CASE("daemon: a PTY link whose directory cannot be made says why") {
+  TempDir dir;
+  write_text(dir / "run", "a file where a directory should be\n");
+  write_text(dir / "gearpulse.toml", pty_config_for(dir, dir / "run" / "pulse"));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  REQUIRE(status.is_object());
+  CHECK(status["output"]["state"] == "error");
+  const std::string error = status["output"]["error"].get<std::string>();
+  CHECK(error.find("cannot create the directory") != std::string::npos);
+  CHECK(error.find("Not a directory") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
+TEST_CASE("daemon: a state_dir without room for the training store is said at start") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  // A 64 kB file system: needs the right to mount one (root in a container that allows it).
+  if (std::system(
+          ("mount -t tmpfs -o size=64k tmpfs '" + (dir / "state").string() + "' 2>/dev/null").c_str()) != 0) {
+    std::puts("GEARPULSE_SKIP: cannot mount a small tmpfs here");
+    return;
+  }
+  struct Unmount {
+    std::string at;
+    ~Unmount() { (void)!std::system(("umount '" + at + "'").c_str()); }
+  } unmount{(dir / "state").string()};
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  const std::string problems = status["model"]["problems"].dump();
+  CHECK(problems.find("MB free in") != std::string::npos);
+  CHECK(read_text(dir / "log.txt").find("a full training store") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
 }
 
 TEST_CASE("daemon: a corrupt model and training store are logged, set aside and shown in status") {
