@@ -198,6 +198,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   CHECK(gps_after_outage > 0);
   // At info level the log says when GPS was lost and back, not every declutch inside the outage.
   const std::string log = slurp(work.dir / "gearpulsed.log");
+  CHECK(log.find("gps: connected to gpsd at 127.0.0.1:") != std::string::npos);
   CHECK(log.find("speed source gps -> ") != std::string::npos);
   CHECK(log.find(" -> gps at ") != std::string::npos);
   CHECK(log.find("speed source engine -> coast") == std::string::npos);
