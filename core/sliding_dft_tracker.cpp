@@ -52,6 +52,13 @@ constexpr double kToneQuickWindows = 5.0;  // a candidate line that would be a t
 // The estimate holds its line's peak when its power is within 3 dB of the peak's, or within the noise of it
 // (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
 constexpr double kToneCandidateMismatch = 2.0;
+// Whether this signal carries a half order is learned from confident hops whose fundamental stands this
+// far over the noise (per bin), so that a half order at the prior's lowest ratio (0.05) would show;
+// over this time (s). Until then the prior's kOrderAbsent holds.
+constexpr double kHalfObserveRho = 100.0;
+constexpr double kHalfAbsentPrior = 0.03;  // the evidence tables' prior (HarmonicEvidence::order)
+constexpr double kHalfMemoryS = 1.0;
+constexpr double kHalfObserveRight = 0.95;
 // Memory (per hop) of the band's noise level behind the reported SNR.
 constexpr double kNoiseMemory = 0.9;
 // Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
@@ -162,8 +169,10 @@ struct SlidingDftTracker::Impl {
   int s_lo = 0;                    // lowest state, fine bin (half the band's lower edge)
   int noise_lo = 1, noise_hi = 1;  // fine bins used for the noise floor
   const HarmonicEvidence& evidence = HarmonicEvidence::shared();
-  double temper = 1.0;  // overlapping windows are not independent evidence
-  int lobe = 1;         // fine bins per resolution bin (1 / window)
+  double temper = 1.0;        // overlapping windows are not independent evidence
+  double half_present = 1.0;  // share of clear confident hops that showed a half order (see kHalfMemoryS)
+  double half_keep = 1.0;     // per hop
+  int lobe = 1;               // fine bins per resolution bin (1 / window)
 
   // Track state: posterior over the states s_lo..k_hi and "absent", after the latest hop.
   std::vector<double> post, loglik, cumsum;
@@ -333,6 +342,7 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   loglik.assign(states, 0.0);
   cumsum.assign(states + 1, 0.0);
   temper = std::min(1.0, cfg.hop_s / cfg.window_s);
+  half_keep = std::exp(-cfg.hop_s / kHalfMemoryS);
   lobe = std::max(1, nfft / n_win);
   const double dt = cfg.hop_s;
   gate_steady = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df)) + 1;
@@ -801,6 +811,7 @@ void SlidingDftTracker::Impl::mark_tones() noexcept {
 }
 
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
+  const double half_absent = 1.0 - (1.0 - kHalfAbsentPrior) * half_present;
   for (int k = s_lo; k <= k_hi; ++k) {
     const double z1 = z_at(static_cast<std::size_t>(k));
     // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one
@@ -820,7 +831,8 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
         const double pos = kOrder[o] * k;
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
-        if (!near_tone[b]) l += evidence.order(z_at(b), rho, o == 0);
+        if (!near_tone[b])
+          l += o == 0 ? evidence.half_order(z_at(b), rho, half_absent) : evidence.order(z_at(b), rho, false);
       }
     }
     out[static_cast<std::size_t>(k - s_lo)] = temper * l;
@@ -919,6 +931,12 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   else
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * kDefaultRho;
   learn_tones(ev.freq, right);
+  // This signal's half order, from hops that can tell: a confident estimate with a loud fundamental.
+  if (right >= kHalfObserveRight && ev.available[0] && ev.snr[1] >= kHalfObserveRho) {
+    const auto b = static_cast<std::size_t>(std::lround(0.5 * ev.freq / df));
+    if (b < near_tone.size() && !near_tone[b])
+      half_present = half_keep * half_present + (1.0 - half_keep) * (ev.snr[0] >= kToneFitLevel ? 1.0 : 0.0);
+  }
   return out;
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iterator>
 #include <numbers>
 
 namespace gearpulse {
@@ -26,6 +27,9 @@ constexpr double kMatched = 0.5;
 constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 constexpr int kRatioSteps = 20;
 constexpr double kOrderAbsent = 0.03;
+// Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
+constexpr double kHalfAbsent[] = {kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
+constexpr int kHalfTables = static_cast<int>(std::size(kHalfAbsent));
 
 double log_i0(double x) {
   if (x < 20.0) {
@@ -93,6 +97,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
   ladder_.assign(fund_.size(), 0.0);
   half_.assign(fund_.size(), 0.0);
+  half_absent_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
     const double log_broad =
@@ -103,14 +108,18 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       const std::size_t at = static_cast<std::size_t>(i) * cols + static_cast<std::size_t>(j);
       fund_[at] =
           log_add(std::log(kMatched) + log_rice(z, rho), std::log1p(-kMatched) + log_broad) - log_background;
-      const auto ratio = [&](double hi) {
-        const double log_ratio =
-            log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
-        const double engine = log_add(std::log1p(-kOrderAbsent) + log_ratio, std::log(kOrderAbsent) - z);
+      const auto with_absent = [&](double log_ratio, double absent) {
+        const double engine = log_add(std::log1p(-absent) + log_ratio, std::log(absent) - z);
         return log_add(log_no_tone + engine, log_tone + log_broad) - log_background;
       };
-      ladder_[at] = ratio(kRatioHi);
-      half_[at] = ratio(kHalfRatioHi);
+      const auto log_ratio = [&](double hi) {
+        return log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
+      };
+      ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
+      const double half_ratio = log_ratio(kHalfRatioHi);
+      half_[at] = with_absent(half_ratio, kOrderAbsent);
+      for (int n = 0; n < kHalfTables; ++n)
+        half_absent_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
     }
   }
 }
@@ -140,6 +149,17 @@ double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept 
 
 double HarmonicEvidence::order(double z, double rho_fundamental, bool half) const noexcept {
   return lookup(half ? half_ : ladder_, z, rho_fundamental);
+}
+
+double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
+  absent = std::clamp(absent, kHalfAbsent[0], kHalfAbsent[kHalfTables - 1]);
+  int n = 0;
+  while (n + 2 < kHalfTables && absent > kHalfAbsent[n + 1])
+    ++n;
+  const double w = (absent - kHalfAbsent[n]) / (kHalfAbsent[n + 1] - kHalfAbsent[n]);
+  const auto i = static_cast<std::size_t>(n);
+  return (1.0 - w) * lookup(half_absent_[i], z, rho_fundamental) +
+         w * lookup(half_absent_[i + 1], z, rho_fundamental);
 }
 
 }  // namespace gearpulse

@@ -30,12 +30,17 @@ class HarmonicEvidence {
   // Log likelihood ratio of another order's bin (the half order or a harmonic), given the per-bin SNR of
   // the candidate's fundamental.
   [[nodiscard]] double order(double z, double rho_fundamental, bool half) const noexcept;
+  // The half order's ratio when the probability that this engine's signal has no half order is `absent`
+  // (learned per recording; `order(z, rho, true)` is the prior's, kOrderAbsent), within [0, 0.9].
+  [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
 
  private:
   [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
   std::vector<double> fund_;    // over (log10 rho, sqrt z)
   std::vector<double> ladder_;  // over (log10 rho, sqrt z)
   std::vector<double> half_;    // over (log10 rho, sqrt z)
+  // The half order's table at more probabilities of its absence (kHalfAbsent), over (log10 rho, sqrt z).
+  std::vector<std::vector<double>> half_absent_;
 };
 
 }  // namespace gearpulse
