@@ -54,9 +54,8 @@ constexpr double kToneQuickWindows = 5.0;  // a candidate line that would be a t
 constexpr double kToneCandidateMismatch = 2.0;
 // Whether this signal carries a half order is learned from confident hops whose fundamental stands this
 // far over the noise (per bin), so that a half order at the prior's lowest ratio (0.05) would show;
-// over this time (s). Until then the prior's kOrderAbsent holds.
+// over this time (s). Until then HarmonicEvidence::kOrderAbsent holds.
 constexpr double kHalfObserveRho = 100.0;
-constexpr double kHalfAbsentPrior = 0.03;  // the evidence tables' prior (HarmonicEvidence::order)
 constexpr double kHalfMemoryS = 1.0;
 constexpr double kHalfObserveRight = 0.95;
 // Memory (per hop) of the band's noise level behind the reported SNR.
@@ -811,7 +810,7 @@ void SlidingDftTracker::Impl::mark_tones() noexcept {
 }
 
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
-  const double half_absent = 1.0 - (1.0 - kHalfAbsentPrior) * half_present;
+  const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
   for (int k = s_lo; k <= k_hi; ++k) {
     const double z1 = z_at(static_cast<std::size_t>(k));
     // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one

@@ -26,9 +26,8 @@ constexpr double kMatched = 0.5;
 // engine's 2nd harmonic), or the order absent altogether.
 constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 constexpr int kRatioSteps = 20;
-constexpr double kOrderAbsent = 0.03;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
-constexpr double kHalfAbsent[] = {kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
+constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
 constexpr int kHalfTables = static_cast<int>(std::size(kHalfAbsent));
 
 double log_i0(double x) {
@@ -96,8 +95,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
   ladder_.assign(fund_.size(), 0.0);
-  half_.assign(fund_.size(), 0.0);
-  half_absent_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
+  half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
     const double log_broad =
@@ -117,9 +115,8 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       };
       ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
-      half_[at] = with_absent(half_ratio, kOrderAbsent);
       for (int n = 0; n < kHalfTables; ++n)
-        half_absent_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
+        half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
     }
   }
 }
@@ -148,7 +145,7 @@ double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept 
 }
 
 double HarmonicEvidence::order(double z, double rho_fundamental, bool half) const noexcept {
-  return lookup(half ? half_ : ladder_, z, rho_fundamental);
+  return lookup(half ? half_.front() : ladder_, z, rho_fundamental);
 }
 
 double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
@@ -158,8 +155,8 @@ double HarmonicEvidence::half_order(double z, double rho_fundamental, double abs
     ++n;
   const double w = (absent - kHalfAbsent[n]) / (kHalfAbsent[n + 1] - kHalfAbsent[n]);
   const auto i = static_cast<std::size_t>(n);
-  return (1.0 - w) * lookup(half_absent_[i], z, rho_fundamental) +
-         w * lookup(half_absent_[i + 1], z, rho_fundamental);
+  if (w <= 0.0) return lookup(half_[i], z, rho_fundamental);
+  return (1.0 - w) * lookup(half_[i], z, rho_fundamental) + w * lookup(half_[i + 1], z, rho_fundamental);
 }
 
 }  // namespace gearpulse

@@ -12,7 +12,8 @@
 // the longer integration a steady engine allows) or anywhere over a broad range (acquisition, level
 // changes). The other orders (f/2, 2f, 3f) are expected at a fraction r of the fundamental's SNR, r
 // unknown over two decades, or absent: a loud line whose harmonics are all missing is unlikely to be
-// the engine; a weak one whose harmonics drown in the noise is not penalised.
+// the engine; a weak one whose harmonics drown in the noise is not penalised. Some signals have no half
+// order at all: the probability of its absence can be given as learned (half_order()).
 //
 // Everything is tabulated at construction; lookups are noexcept and allocation-free.
 #include <vector>
@@ -21,6 +22,8 @@ namespace gearpulse {
 
 class HarmonicEvidence {
  public:
+  // Prior probability that an order other than the fundamental is absent (half_order() takes a learned one).
+  static constexpr double kOrderAbsent = 0.03;
   // The tables for the default tone prior, built once (thread-safe) and shared by every tracker.
   static const HarmonicEvidence& shared();
   explicit HarmonicEvidence(double tone_prior);
@@ -38,9 +41,9 @@ class HarmonicEvidence {
   [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
   std::vector<double> fund_;    // over (log10 rho, sqrt z)
   std::vector<double> ladder_;  // over (log10 rho, sqrt z)
-  std::vector<double> half_;    // over (log10 rho, sqrt z)
-  // The half order's table at more probabilities of its absence (kHalfAbsent), over (log10 rho, sqrt z).
-  std::vector<std::vector<double>> half_absent_;
+  // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
+  // (log10 rho, sqrt z).
+  std::vector<std::vector<double>> half_;
 };
 
 }  // namespace gearpulse
