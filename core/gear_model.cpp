@@ -8,7 +8,8 @@
 namespace gearpulse {
 namespace {
 
-// An optional field may also be null: a model with no gear ladder has no mixture to give it a value.
+// An optional field may also be null (read as absent), as a program writing a model without a mixture may
+// give it.
 double finite_number(const nlohmann::json& obj, const char* key, bool required) {
   const auto it = obj.find(key);
   if (it == obj.end() || (!required && it->is_null())) {
@@ -30,17 +31,16 @@ nlohmann::json model_to_json(const GearModel& model) {
   for (const Gear& g : model.gears) {
     gears.push_back({{"theta", g.theta}, {"weight", g.weight}, {"stderr", g.std_error}});
   }
-  // Without a gear ladder no mixture was fitted: its figures are null rather than zeros that read as fitted.
-  const auto fitted = [&](double value) {
-    return model.gears.empty() ? nlohmann::json(nullptr) : nlohmann::json(value);
-  };
+  // The contract's fields are numbers whatever the fit found: without a gear ladder no mixture was fitted,
+  // its figures stay 0 and `fitted` (an added field) says they are not estimates.
   nlohmann::json out = {{"version", GearModel::kVersion},
                         {"gears", std::move(gears)},
-                        {"sigma_speed", fitted(model.sigma_speed)},
-                        {"sigma_freq", fitted(model.sigma_freq)},
+                        {"sigma_speed", model.sigma_speed},
+                        {"sigma_freq", model.sigma_freq},
                         {"samples", model.samples},
-                        {"log_likelihood", fitted(model.log_likelihood)},
-                        {"outlier_weight", fitted(model.outlier_weight)}};
+                        {"log_likelihood", model.log_likelihood},
+                        {"outlier_weight", model.outlier_weight},
+                        {"fitted", !model.gears.empty()}};
   if (!model.method.empty()) out["method"] = model.method;
   if (!model.reason.empty()) out["reason"] = model.reason;
   if (!model.extra.empty()) out["extra"] = model.extra;

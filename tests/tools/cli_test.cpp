@@ -155,6 +155,7 @@ TEST_CASE("cli: fit prints the model JSON of INTERFACES.md and writes --out and 
   }
   for (const char* key : {"sigma_speed", "sigma_freq", "samples", "log_likelihood"})
     CHECK(json.contains(key));
+  CHECK(json["fitted"] == true);
   CHECK(json["samples"].get<long>() > 500);
   CHECK(slurp(dir.file("model.json")) == r.out);
   const std::string svg = slurp(dir.file("fit.svg"));
@@ -287,9 +288,11 @@ TEST_CASE("cli: logs no gearbox made give no ladder, with the reason") {
     const auto json = nlohmann::json::parse(r.out);
     CHECK(json["gears"].empty());
     CHECK(json.value("reason", "").find(c.reason) != std::string::npos);
-    // No mixture was fitted: its figures are null, not zeros that read as a fit, and the model loads.
+    // No mixture was fitted: its figures keep the contract's type (numbers, 0), `fitted` says they are not
+    // estimates, and the model loads.
     for (const char* key : {"sigma_speed", "sigma_freq", "log_likelihood", "outlier_weight"})
-      CHECK(json.at(key).is_null());
+      CHECK(json.at(key).is_number());
+    CHECK(json.at("fitted") == false);
     CHECK(json["samples"].get<long>() > 0);
     CHECK(gearpulse::parse_model(r.out).empty());
   }
