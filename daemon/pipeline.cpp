@@ -414,8 +414,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
                 report("audio-hole", spdlog::level::warn,
                        "audio: " + std::to_string(std::llround(gap_frames)) +
                            " frames lost before the ring (overrun, device restart or a stalled source); "
-                           "tracking resumes after "
-                           "the hole");
+                           "tracking resumes after the hole");
               repeated_seen = repeated;
             }
             tracker->retime(t0);

@@ -123,8 +123,7 @@ int run_track(const TrackOptions& o) {
   if (streamed)
     std::fprintf(stderr,
                  "gearpulse: warning: %s: the header gives no length (a streamed or interrupted recording): "
-                 "reading the %lld "
-                 "frames the file holds\n",
+                 "reading the %lld frames the file holds\n",
                  o.file.c_str(), static_cast<long long>(info.frames));
   if (info.frames <= 0 || info.channels <= 0) throw UsageError(o.file + ": no audio frames");
   if (o.channel >= info.channels)
