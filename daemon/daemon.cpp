@@ -121,6 +121,7 @@ struct Daemon::Impl {
   std::string status_line();
   void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
   LogLimiter limiter;
+  bool gps_connected = false;           // as log_changes() last said
   std::uint64_t gps_failures_seen = 0;  // GPS connection failures log_changes() has looked at
 };
 
@@ -128,8 +129,12 @@ struct Daemon::Impl {
 // repeated faults at most once a minute, so a log read at 2 a.m. tells what happened and when.
 void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now) {
   const std::string server = fmt::format("{}:{}", config.gps.host, config.gps.port);
-  if (before.gps_state == "disconnected" && now.gps_state != "disconnected")
-    spdlog::info("gps: connected to gpsd at {}", server);
+  // From the connection itself, not from a change between two snapshots: the first connection is often
+  // made before the first snapshot is taken.
+  if (const bool up = now.gps_state != "disconnected"; up != gps_connected) {
+    gps_connected = up;
+    if (up) spdlog::info("gps: connected to gpsd at {}", server);
+  }
   if (now.gps_state != before.gps_state) {
     std::uint64_t suppressed = 0;
     if (now.gps_state == "fix") {
