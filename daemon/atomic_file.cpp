@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <fstream>
 #include <string>
 #include <system_error>
 #include <vector>
@@ -58,6 +59,30 @@ void write_all(int fd, std::string_view data, const std::filesystem::path& path)
   }
 }
 
+// The process's umask, read without changing it (umask(2) sets it, which would race with other threads
+// creating files). /proc/self/status has it since Linux 4.7; 022 where it cannot be read.
+mode_t process_umask() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("Umask:", 0) == 0) {
+      try {
+        return static_cast<mode_t>(std::stoul(line.substr(6), nullptr, 8)) & 0777;
+      } catch (const std::exception&) {
+        break;
+      }
+    }
+  }
+  return 022;
+}
+
+// mkostemp creates 0600: the replacement gets the mode the old file had, or a new file's.
+mode_t mode_for(const std::filesystem::path& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) return st.st_mode & 07777;
+  return 0666 & ~process_umask();
+}
+
 }  // namespace
 
 void write_file_atomic(const std::filesystem::path& path, std::string_view data) {
@@ -69,7 +94,7 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
   if (fd.get() < 0) throw_errno("cannot create temp file for", path);
   const std::string tmp(name.data());
   try {
-    if (::fchmod(fd.get(), 0644) != 0) throw_errno("cannot chmod", tmp);
+    if (::fchmod(fd.get(), mode_for(path)) != 0) throw_errno("cannot chmod", tmp);
     write_all(fd.get(), data, tmp);
     if (::fsync(fd.get()) != 0) throw_errno("cannot fsync", tmp);
     if (::close(fd.release()) != 0) throw_errno("cannot close", tmp);

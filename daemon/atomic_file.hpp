@@ -10,6 +10,8 @@ namespace gearpulse::daemon {
 
 // Writes `data` to a temp file in the same directory, fsyncs it, renames it over `path` and fsyncs the
 // directory. Throws std::system_error naming the path on failure (the old file is then untouched).
+// A file that exists keeps its permissions; a new one gets those of a file created under the process's
+// umask (0644 under 022, 0640 under the unit's 0027).
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);
 
 // Appends `data` to the existing file `path` and fdatasyncs it: a journal's records are on disk when this

@@ -1,6 +1,7 @@
 #include <catch2/catch.hpp>
 
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -56,6 +57,21 @@ TEST_CASE("daemon: atomic write replaces the content and leaves no temp file") {
   CHECK(read_text(file) == "second, longer content");
   CHECK(count_entries(dir.path()) == 1);
   CHECK(read_file(dir / "absent").has_value() == false);
+}
+
+TEST_CASE("daemon: atomic write gives a new file the umask's permissions and keeps an old file's") {
+  TempDir dir;
+  const auto file = dir / "model.json";
+  const auto perms = [&] { return std::filesystem::status(file).permissions(); };
+  using P = std::filesystem::perms;
+  const mode_t old_mask = ::umask(027);
+  write_file_atomic(file, "first");
+  ::umask(old_mask);
+  CHECK(perms() == (P::owner_read | P::owner_write | P::group_read));
+  std::filesystem::permissions(file, P::owner_read | P::owner_write);
+  write_file_atomic(file, "second");
+  CHECK(perms() == (P::owner_read | P::owner_write));
+  CHECK(read_text(file) == "second");
 }
 
 TEST_CASE("daemon: atomic write into a missing directory fails and names the path") {
