@@ -98,7 +98,7 @@ struct Daemon::Impl {
   // as corrupt, a directory that cannot be written) and the last failed save, cleared when one works.
   mutable std::mutex state_mutex;
   std::vector<std::string> state_problems;
-  std::string save_error;
+  FaultSpell save_fault;                     // the training store's saves failing (the last one's error)
   std::string reload_error;                  // the last SIGHUP's file was refused ("" = it was taken)
   std::vector<std::string> restart_pending;  // changed by the last reload, waiting for a restart
   void note_state_problem(std::string text);
@@ -114,7 +114,7 @@ struct Daemon::Impl {
     if (!save_store("shutdown")) journal_store();
   }
   void recover_journal() noexcept;
-  bool journal_failing = false;  // the last journal append failed (logged once until one works)
+  FaultSpell journal_fault;  // journal appends failing (said once per spell)
   void reload();
   nlohmann::json handle(const nlohmann::json& request);
   nlohmann::json status_json();
@@ -337,15 +337,16 @@ void Daemon::Impl::journal_store() noexcept {
   try {
     const std::size_t n = store.append_journal(store_path);
     if (n > 0) spdlog::trace("training: journaled {} pairs", n);
-    if (journal_failing)
+    if (journal_fault.succeeded())
       spdlog::info("training: {} written again", TrainingStore::journal_path(store_path).string());
-    journal_failing = false;
   } catch (const std::exception& e) {
     // Said once per failing spell, not every few seconds; the periodic save reports in status.
-    if (!journal_failing)
-      spdlog::error("training: cannot write {}: {}; pairs since the last save are at risk until it works",
-                    TrainingStore::journal_path(store_path).string(), e.what());
-    journal_failing = true;
+    try {
+      if (journal_fault.failed(e.what()))
+        spdlog::error("training: cannot write {}: {}; pairs since the last save are at risk until it works",
+                      TrainingStore::journal_path(store_path).string(), e.what());
+    } catch (...) {
+    }
   }
 }
 
@@ -354,13 +355,16 @@ bool Daemon::Impl::save_store(const char* why) noexcept {
     store.save(store_path);
     spdlog::debug("training: saved {} pairs to {} ({})", store.size(), store_path.string(), why);
     std::lock_guard lock(state_mutex);
-    save_error.clear();
+    if (save_fault.succeeded()) spdlog::info("training: {} saved again ({})", store_path.string(), why);
     return true;
   } catch (const std::exception& e) {
-    spdlog::error("training: cannot save {} ({}): {}", store_path.string(), why, e.what());
     try {
       std::lock_guard lock(state_mutex);
-      save_error = std::string("cannot save training.bin: ") + e.what();
+      // A periodic save that keeps failing the same way is said once per spell (status keeps saying
+      // it); a save at shutdown or reset is said every time.
+      if (save_fault.failed(std::string("cannot save training.bin: ") + e.what()) ||
+          std::string_view(why) != "periodic")
+        spdlog::error("training: cannot save {} ({}): {}", store_path.string(), why, e.what());
     } catch (...) {
     }
   }
@@ -455,7 +459,7 @@ nlohmann::json Daemon::Impl::status_json() {
   {
     std::lock_guard lock(state_mutex);
     std::vector<std::string> problems = state_problems;
-    if (!save_error.empty()) problems.push_back(save_error);
+    if (save_fault.failing()) problems.push_back(save_fault.what());
     reply["model"]["problems"] = problems;  // the state directory's: files set aside, failed saves
     reply["config"] = {
         {"file", config_path}, {"reload_error", reload_error}, {"restart_pending", restart_pending}};

@@ -44,4 +44,28 @@ class LogLimiter {
   std::map<std::string, Entry> entries_;
 };
 
+// A fault that persists across attempts (a save failing every few minutes on a full or read-only disk)
+// is said when it starts, when it changes and when it ends, not at every attempt. Not thread-safe: one
+// owner, or the caller's lock.
+class FaultSpell {
+ public:
+  // An attempt failed with `what`: true when it should be said (the spell's first, or unlike the last).
+  bool failed(std::string what) {
+    const bool news = what != what_;
+    what_ = std::move(what);
+    return news;
+  }
+  // An attempt worked: true when that ends a spell (say it works again).
+  bool succeeded() noexcept {
+    const bool ended = !what_.empty();
+    what_.clear();
+    return ended;
+  }
+  [[nodiscard]] bool failing() const noexcept { return !what_.empty(); }
+  [[nodiscard]] const std::string& what() const noexcept { return what_; }
+
+ private:
+  std::string what_;
+};
+
 }  // namespace gearpulse::daemon
