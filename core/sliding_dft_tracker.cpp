@@ -1071,6 +1071,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.reset_track();
   std::fill(s.tone.begin(), s.tone.end(), 1.0);
   std::fill(s.tone_time.begin(), s.tone_time.end(), 0.0);
+  s.half_present = 1.0;  // the half order is the source's: learned again from the new stream
   s.log_noise = kNaN;
   s.q_head = s.q_size = 0;
   s.h_head = s.h_size = 0;

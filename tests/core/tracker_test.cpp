@@ -386,6 +386,41 @@ TEST_CASE("tracker: output times are window centres in the caller's time base") 
   }
 }
 
+// start() begins a new stream (another source, a reopened device): nothing learned from the one before
+// may shape the new one's output, neither its tones nor whether its signal has a half order.
+TEST_CASE("tracker: after start() it tracks as a fresh tracker does, whatever it heard before") {
+  const double fs = 8000.0;
+  sim::LighterSignalConfig loud;  // a loud line without a half order: teaches its absence
+  loud.sample_rate_hz = fs;
+  loud.snr_db = 40.0;
+  loud.half_order = 0.0;
+  loud.tone_hz = 150.0;  // and a fixed tone to learn
+  loud.seed = 15;
+  sim::LighterSignalConfig next;
+  next.sample_rate_hz = fs;
+  next.snr_db = 5.0;
+  next.seed = 16;
+  const sim::FrequencyTrajectory before = [](double t) { return 60.0 + 8.0 * t; };
+  const sim::FrequencyTrajectory after = [](double t) { return 45.0 + 15.0 * t + 3.0 * std::sin(3.0 * t); };
+  const auto x = sim::make_lighter_signal(next, after, 8.0);
+
+  SlidingDftTracker fresh(config_at(fs));
+  const auto expected = track(fresh, x);
+  SlidingDftTracker reused(config_at(fs));
+  (void)track(reused, sim::make_lighter_signal(loud, before, 10.0));
+  reused.start(0.0);
+  const auto got = track(reused, x);
+  REQUIRE(got.size() == expected.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    const TrackPoint& a = got[i];
+    const TrackPoint& b = expected[i];
+    const bool same_freq = (std::isnan(a.freq) && std::isnan(b.freq)) || a.freq == b.freq;
+    differ += !(a.t == b.t && same_freq && a.tracked == b.tracked && a.confidence == b.confidence);
+  }
+  CHECK(differ == 0);
+}
+
 TEST_CASE("tracker: at() estimates a window centred on any recent time") {
   const sim::FrequencyTrajectory truth = [](double t) { return 80.0 + 15.0 * t; };
   sim::LighterSignalConfig g;
