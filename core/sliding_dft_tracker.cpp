@@ -44,11 +44,14 @@ constexpr double kToneMemoryS = 20.0;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
 constexpr double kToneFitLevel = 4.0;
 // Share of the tone memory in which a bin near a candidate estimate's orders must have stood above
-// kToneFitLevel before it is learned as a tone while the track is not confident (about 2 s of a line
-// present at every hop; see learn_tones).
+// kToneFitLevel before it is learned as a tone while the track is not confident, and that a bin read loud
+// must have before the reading counts in full (about 2 s of a line present at every hop; see learn_tones).
 constexpr double kTonePersist = 0.1;
-constexpr double kToneCandidate = 0.05;    // probability from which the estimate's line is a candidate
-constexpr double kToneQuickWindows = 5.0;  // a candidate line that would be a tone within this many windows
+constexpr double kToneCandidate = 0.05;  // probability from which the estimate's line is a candidate
+// A bin this far below the strongest within two resolution bins of it is on a louder line's skirt, not a
+// line of its own: a Hann window's first sidelobe is 31 dB down, its main lobe 15 dB down 1.5 bins out.
+constexpr double kToneSkirt = 100.0;
+constexpr double kToneQuickWindows = 5.0;  // a line is loud that would be a tone within this many windows
 // The estimate holds its line's peak when its power is within 3 dB of the peak's, or within the noise of it
 // (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
 constexpr double kToneCandidateMismatch = 2.0;
@@ -183,9 +186,12 @@ struct SlidingDftTracker::Impl {
   std::vector<double> tone;
   std::vector<double> tone_time;  // per fine bin: share of the tone memory spent above kToneFitLevel
   std::vector<char> near_tone;    // within one resolution bin of a learned tone (per fine bin, this hop)
-  double tone_keep = 1.0;         // per hop
-  double drift_hz_per_s = 0.0;    // recent rate of change of the tracked line
-  double last_freq = kNaN;        // previous hop's estimate while confident, else NaN
+  // Per fine bin, this hop: the normalised power, and its maximum within two resolution bins (with the
+  // block maxima that give it in one pass).
+  std::vector<double> z_here, z_around, z_pre, z_suf;
+  double tone_keep = 1.0;                              // per hop
+  double drift_hz_per_s = 0.0;                         // recent rate of change of the tracked line
+  double last_freq = kNaN;                             // previous hop's estimate while confident, else NaN
   int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
   double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
 
@@ -226,6 +232,7 @@ struct SlidingDftTracker::Impl {
     return power[k] / (noise[k] * std::max(1.0, tone[k] - 1.0));
   }
   void learn_tones(double freq, double right) noexcept;
+  void local_maxima(int radius) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
   void mark_tones() noexcept;
   void reset_track() noexcept;
@@ -328,6 +335,10 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   tone.assign(bins, 1.0);
   tone_time.assign(bins, 0.0);
   near_tone.assign(bins, 0);
+  z_here.assign(bins, 0.0);
+  z_around.assign(bins, 0.0);
+  z_pre.assign(bins, 0.0);
+  z_suf.assign(bins, 0.0);
   tone_keep = std::exp(-cfg.hop_s / kToneMemoryS);
   block_scratch.assign(bins, 0.0);
 
@@ -971,19 +982,50 @@ void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
       candidate = holds && ladder && loud;
     }
   }
+  local_maxima(2 * lobe);
   for (int k = noise_lo; k <= noise_hi; ++k) {
     bool near = false;
     for (int o = 0; o < kOrders && !near && std::isfinite(freq); ++o)
       near = std::abs(k * df - kOrder[o] * freq) <= 2.0 * lobe * df;
     if (on_track && near) continue;
     const auto i = static_cast<std::size_t>(k);
-    const double z = power[i] / noise[i];
+    // The skirt of a loud line (30 dB and more over the noise spreads its leakage over several resolution
+    // bins) moves with that line: it is not a tone of its own, and learned as one it blanked the band.
+    const double z = z_here[i] * kToneSkirt >= z_around[i] ? z_here[i] : std::min(z_here[i], 1.0);
     tone_time[i] = tone_keep * tone_time[i] + (z >= kToneFitLevel ? 1.0 - tone_keep : 0.0);
     // The orders of a candidate not yet confident are learned only once they have persisted: a loud window
     // moves a bin's mean power past the fit level at once, and a clean engine line (40 dB over the noise)
     // not yet tracked at its first window was taken for a tone at its second and never acquired.
     if (candidate && near && tone_time[i] < kTonePersist) continue;
-    tone[i] = std::max(1.0, tone_keep * tone[i] + (1.0 - tone_keep) * std::min(z, 1e3));
+    // So is any loud reading: a loud line sweeping past (an order the estimate does not cover, an engine
+    // not yet tracked) stays in a bin a few windows, a tone stays for good. Until it has persisted it may
+    // raise the bin's mean to half the fit level (nothing is left out for it yet, and a tone that stays is
+    // learned soon after); fainter readings are learned over many windows anyway.
+    const bool loud = z * kToneQuickWindows * (1.0 - tone_keep) >= kToneFitLevel - 1.0;
+    const double next = std::max(1.0, tone_keep * tone[i] + (1.0 - tone_keep) * std::min(z, 1e3));
+    tone[i] =
+        loud && tone_time[i] < kTonePersist ? std::min(next, std::max(tone[i], 0.5 * kToneFitLevel)) : next;
+  }
+}
+
+// z_around[k] = the largest normalised power within `radius` fine bins of k (noise_lo..noise_hi), in one
+// pass over blocks of the window's width (van Herk / Gil-Werman): a window spans at most two blocks.
+void SlidingDftTracker::Impl::local_maxima(int radius) noexcept {
+  const int n = noise_hi - noise_lo + 1;
+  const int w = 2 * radius + 1;
+  const auto at = [this](int j) { return static_cast<std::size_t>(noise_lo + j); };
+  for (int j = 0; j < n; ++j)
+    z_here[at(j)] = power[at(j)] / noise[at(j)];
+  for (int j = 0; j < n; ++j)
+    z_pre[at(j)] = j % w == 0 ? z_here[at(j)] : std::max(z_pre[at(j - 1)], z_here[at(j)]);
+  for (int j = n - 1; j >= 0; --j)
+    z_suf[at(j)] = j == n - 1 || (j + 1) % w == 0 ? z_here[at(j)] : std::max(z_suf[at(j + 1)], z_here[at(j)]);
+  for (int j = 0; j < n; ++j) {
+    const int a = std::max(0, j - radius);
+    const int b = std::min(n - 1, j + radius);
+    // Within one block only when clipped by an end of the range: the part from its start or to its end.
+    z_around[at(j)] =
+        a / w == b / w ? (a % w == 0 ? z_pre[at(b)] : z_suf[at(a)]) : std::max(z_suf[at(a)], z_pre[at(b)]);
   }
 }
 
