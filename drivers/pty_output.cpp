@@ -1,5 +1,7 @@
 #include "drivers/pty_output.hpp"
 
+#include "drivers/clock.hpp"
+
 #include <fcntl.h>
 #include <poll.h>
 #include <sys/ioctl.h>
@@ -7,6 +9,7 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -33,7 +36,8 @@ int open_peer(int master, const std::string& slave_name) noexcept {
 
 }  // namespace
 
-PtyOutput::PtyOutput(std::filesystem::path link) : link_(std::move(link)) {
+PtyOutput::PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_age)
+    : link_(std::move(link)), max_age_ns_(max_age.count()) {
   if (link_.empty()) fail(link_, "empty path");
   const std::filesystem::path dir = link_.has_parent_path() ? link_.parent_path() : ".";
   std::error_code ec;
@@ -100,6 +104,7 @@ void PtyOutput::rise() noexcept {
     return;
   }
   idle_ = false;
+  drop_stale(monotonic_ns());
   static constexpr char kPulse = 'P';
   const ssize_t n = ::write(master_, &kPulse, 1);
   if (n == 1) {
@@ -111,6 +116,31 @@ void PtyOutput::rise() noexcept {
   } else {
     errors_.fetch_add(1, std::memory_order_relaxed);
   }
+}
+
+void PtyOutput::drop_stale(std::int64_t now_ns) noexcept {
+  // Looks a quarter of the shortest age apart, so the last kLooks span four ages.
+  const Look& last = looks_[(looks_next_ + kLooks - 1) % kLooks];
+  if (last.t_ns != 0 && now_ns - last.t_ns < max_age_ns_ / 4) return;
+  const std::uint64_t written = written_.load(std::memory_order_relaxed);
+  looks_[looks_next_] = Look{now_ns, written};
+  looks_next_ = (looks_next_ + 1) % kLooks;
+  const int peer = open_peer(master_, slave_name_);
+  if (peer < 0) return;
+  int queued = 0;
+  if (::ioctl(peer, FIONREAD, &queued) == 0 && queued > 0) {
+    // The oldest byte queued is the (written - queued)-th written: before every look that had more
+    // written than that. Stale when the earliest of those is over max_age ago (a byte older than every
+    // look is older than the earliest look).
+    const std::uint64_t oldest =
+        written - std::min<std::uint64_t>(written, static_cast<std::uint64_t>(queued));
+    std::int64_t written_by_ns = now_ns;
+    for (const Look& l : looks_)
+      if (l.t_ns != 0 && l.written > oldest) written_by_ns = std::min(written_by_ns, l.t_ns);
+    if (now_ns - written_by_ns > max_age_ns_ && ::tcflush(peer, TCIFLUSH) == 0)
+      overflowed_.fetch_add(static_cast<std::uint64_t>(queued), std::memory_order_relaxed);
+  }
+  ::close(peer);
 }
 
 std::string PtyOutput::describe() const {

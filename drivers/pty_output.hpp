@@ -4,8 +4,12 @@
 //
 // Readers come and go: the master stays open for the life of the object, writes are non-blocking, and a
 // pulse emitted while no reader has the slave open is counted in unheard() rather than queued, so a
-// reader that (re)opens the device sees only pulses emitted after it opened.
+// reader that (re)opens the device sees only pulses emitted after it opened. A reader that has the device
+// open but stops reading gets no old pulses either when it resumes: pulses that have waited longer than
+// max_age in its queue are dropped (counted in overflowed()), as a wire would not have kept them.
+#include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -18,7 +22,7 @@ class PtyOutput final : public PulseOutput {
  public:
   // Creates the pair in raw mode and the symlink `link` -> slave. A stale symlink at `link` is replaced;
   // anything else there, or a missing directory, throws std::runtime_error with a one-line reason.
-  explicit PtyOutput(std::filesystem::path link);
+  explicit PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_age = std::chrono::seconds(2));
   ~PtyOutput() override;  // removes the symlink if it still points at this PTY
   PtyOutput(const PtyOutput&) = delete;
   PtyOutput& operator=(const PtyOutput&) = delete;
@@ -36,7 +40,8 @@ class PtyOutput final : public PulseOutput {
   [[nodiscard]] std::uint64_t written() const noexcept { return written_.load(std::memory_order_relaxed); }
   // Pulses emitted while no reader had the slave open.
   [[nodiscard]] std::uint64_t unheard() const noexcept { return unheard_.load(std::memory_order_relaxed); }
-  // Pulses dropped because a reader that is present did not keep up (its input queue was full).
+  // Pulses dropped because a reader that is present did not keep up (its input queue was full, or they
+  // had waited in it longer than max_age).
   [[nodiscard]] std::uint64_t overflowed() const noexcept {
     return overflowed_.load(std::memory_order_relaxed);
   }
@@ -46,6 +51,17 @@ class PtyOutput final : public PulseOutput {
   std::string slave_name_;
   int master_ = -1;
   bool idle_ = true;  // pulse-thread state: no reader had the slave open at the last pulse
+  // Pulse-thread state for the age of the reader's queue: at each look (at most every kLookNs, at a pulse)
+  // the time and the count of pulses written by then, the last kLooks of them.
+  void drop_stale(std::int64_t now_ns) noexcept;
+  struct Look {
+    std::int64_t t_ns = 0;
+    std::uint64_t written = 0;
+  };
+  static constexpr std::size_t kLooks = 16;
+  std::array<Look, kLooks> looks_{};
+  std::size_t looks_next_ = 0;
+  std::int64_t max_age_ns_;
   std::atomic<std::uint64_t> written_{0};
   std::atomic<std::uint64_t> unheard_{0};
   std::atomic<std::uint64_t> overflowed_{0};

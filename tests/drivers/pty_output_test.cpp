@@ -10,6 +10,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <thread>
 #include <vector>
 
 #include "drivers/pty_output.hpp"
@@ -119,6 +121,45 @@ TEST_CASE("pty: a reader that does not read never blocks the pulse thread") {
     out.rise();  // a blocking write would hang here once the queue is full
   CHECK(out.written() + out.overflowed() == 100000);
   CHECK(out.overflowed() > 0);
+  CHECK(out.errors() == 0);
+}
+
+// A reader that has the device open but stops reading (a navigator suspended with the screen off) once
+// got, when it resumed, every pulse still queued at once: up to the PTY's queue, kilometres of them.
+// Pulses older than max_age are dropped instead; a reader that keeps up loses none.
+TEST_CASE("pty: a reader that resumes after a stall gets no pulses older than max_age") {
+  using namespace std::chrono_literals;
+  TempDir dir;
+  PtyOutput out(dir / "pulse", 200ms);
+  Reader reader(dir / "pulse");
+  // Pulses at 1 kHz for `length`, the reader draining every 20 ms or not at all; returns the pulses sent.
+  const auto pulse_for = [&](std::chrono::milliseconds length, bool read, std::string& got) {
+    const auto start = std::chrono::steady_clock::now();
+    auto next_read = start;
+    std::size_t sent = 0;
+    for (auto t = start; t < start + length; t += 1ms) {
+      std::this_thread::sleep_until(t);
+      out.rise();
+      ++sent;
+      if (read && std::chrono::steady_clock::now() >= next_read) {
+        got += reader.read_once(0ms);
+        next_read += 20ms;
+      }
+    }
+    return sent;
+  };
+  std::string got;
+  const std::size_t kept_up = pulse_for(1000ms, true, got);
+  got += reader.drain();
+  CHECK(got.size() == kept_up);
+  CHECK(out.overflowed() == 0);
+
+  std::string none;
+  const std::size_t stalled = pulse_for(1000ms, false, none);
+  const std::string resumed = reader.drain();
+  INFO(stalled << " pulses while the reader stalled, " << resumed.size() << " read when it resumed");
+  CHECK(resumed.size() < stalled / 2);  // about the last 200-300 ms of them
+  CHECK(out.overflowed() + resumed.size() == stalled);
   CHECK(out.errors() == 0);
 }
 
