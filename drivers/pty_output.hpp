@@ -51,8 +51,8 @@ class PtyOutput final : public PulseOutput {
   std::string slave_name_;
   int master_ = -1;
   bool idle_ = true;  // pulse-thread state: no reader had the slave open at the last pulse
-  // Pulse-thread state for the age of the reader's queue: at each look (at most every kLookNs, at a pulse)
-  // the time and the count of pulses written by then, the last kLooks of them.
+  // Pulse-thread state for the age of the reader's queue: at each look (at a pulse, at most every quarter of
+  // max_age) the time and the count of pulses written by then, the last kLooks of them.
   void drop_stale(std::int64_t now_ns) noexcept;
   struct Look {
     std::int64_t t_ns = 0;
