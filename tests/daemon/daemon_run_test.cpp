@@ -393,6 +393,12 @@ TEST_CASE("daemon: a state directory it cannot write in is said at start and in 
   REQUIRE(status["model"]["problems"].size() >= 1);
   CHECK(status["model"]["problems"][0].get<std::string>().find("cannot create") != std::string::npos);
   CHECK(read_text(dir / "log.txt").find("will not survive a restart") != std::string::npos);
+  // The plain status shows it as it shows a GPS or audio problem.
+  Process table(
+      {GEARPULSE_BINARY_DIR "/tools/gearpulsectl", "--socket", (dir / "ctl.sock").string(), "status"},
+      dir / "table.txt");
+  CHECK(table.wait() == 0);
+  CHECK(read_text(dir / "table.txt").find("! model: cannot create") != std::string::npos);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
@@ -541,6 +547,9 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
   const std::string text = read_text(dir / "table.txt");
   CHECK(text.find("source") != std::string::npos);
   CHECK(text.find("model        learning") != std::string::npos);
+
+  Process full({ctl, "--socket", sock, "status"}, "/dev/full");  // a reply that cannot be written
+  CHECK(full.wait() == 2);
 
   Process raw({ctl, "--socket", sock, "status", "--json"}, dir / "raw.txt");
   CHECK(raw.wait() == 0);

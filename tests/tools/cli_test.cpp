@@ -524,6 +524,18 @@ TEST_CASE(
   CHECK(changed >= fresh / 2);
 }
 
+TEST_CASE("cli: output that cannot be written is an error, not a truncated success") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string log = simulated_log(dir, 24, 300.0);
+  for (const std::string& command : {"replay --model " + model + " " + log, "fit " + log}) {
+    INFO(command);
+    const Result r = run(dir, command + " >/dev/full");
+    CHECK(r.status == 2);
+    CHECK(r.err.find("cannot write the output to stdout") != std::string::npos);
+  }
+}
+
 TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds keep their fractions)") {
   TempDir dir;
   const std::string model = fitted_model(dir);

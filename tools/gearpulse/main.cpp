@@ -1,5 +1,7 @@
 // gearpulse: the offline tool (fit, replay, track, simulate) over logs and recordings.
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <string>
 
@@ -47,6 +49,14 @@ int main(int argc, char** argv) {
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "gearpulse: error: %s\n", e.what());
+    return 2;
+  }
+  // Output that did not reach stdout (a full disk, /dev/full) is an error: a truncated CSV must not look
+  // like a finished one.
+  errno = 0;
+  if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+    std::fprintf(stderr, "gearpulse: cannot write the output to stdout%s%s\n", errno ? ": " : "",
+                 errno ? std::strerror(errno) : "");
     return 2;
   }
   return status;

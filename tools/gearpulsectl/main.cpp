@@ -163,6 +163,21 @@ void print_status(const nlohmann::json& s) {
     const std::string err = str(part, "error");
     if (err != "-" && !err.empty()) std::cout << "! " << name << ": " << err << "\n";
   }
+  // The state directory's problems (a file set aside, a save that fails) and the configuration's (a
+  // reload refused, settings waiting for a restart): shown as the others, not only in the JSON.
+  if (model.contains("problems") && model["problems"].is_array())
+    for (const auto& p : model["problems"])
+      if (p.is_string()) std::cout << "! model: " << p.get<std::string>() << "\n";
+  const auto config = obj("config");
+  const std::string reload_error = str(config, "reload_error");
+  if (reload_error != "-" && !reload_error.empty()) std::cout << "! config: " << reload_error << "\n";
+  if (config.contains("restart_pending") && config["restart_pending"].is_array() &&
+      !config["restart_pending"].empty()) {
+    std::string keys;
+    for (const auto& k : config["restart_pending"])
+      if (k.is_string()) keys += (keys.empty() ? "" : ", ") + k.get<std::string>();
+    std::cout << "! config: changed, applied at the next restart: " << keys << "\n";
+  }
   std::cout << "gears\n";
   print_gears(s.value("gears", nlohmann::json::array()));
 }
@@ -259,6 +274,11 @@ int main(int argc, char** argv) {
     }
     capture.reset();
     std::cout << printed.str() << std::flush;
+    // A reply that did not reach stdout (a full disk, /dev/full) is an error, not a success.
+    if (!std::cout) {
+      std::cerr << "gearpulsectl: cannot write the reply to stdout\n";
+      return 2;
+    }
     return ok ? 0 : 1;
   } catch (const Failure& f) {
     std::cerr << "gearpulsectl: " << f.message << "\n";
