@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 #include <optional>
 #include <vector>
@@ -37,12 +38,6 @@ using Clock = std::chrono::steady_clock;
 // without a shutdown controller loses power with the ignition) costs at most this much learning, for a
 // few hundred bytes and one sync per interval.
 constexpr std::chrono::seconds kJournalInterval{10};
-
-double wall_now() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
-}
 
 // JSON null for "not available" rather than a magic number.
 nlohmann::json number_or_null(double v, bool available) {
@@ -301,7 +296,6 @@ bool Daemon::Impl::load_state() {
                   e.what());
   }
   recover_journal();
-  store.prune(wall_now());
   // Pairs stored after the model's last fit are new to it, whichever run gathered them.
   if (const ModelPtr m = model.get()) {
     const auto until = m->extra.find(kTrainedUntil);
@@ -309,6 +303,13 @@ bool Daemon::Impl::load_state() {
       store.set_new_after(until->get<double>());
       spdlog::info("training: {} of the {} stored pairs are newer than the model's last fit",
                    store.new_samples(), store.size());
+    } else if (store.size() > 0) {
+      // A model this daemon did not fit (`gearpulse fit --out` from a log) has seen none of them.
+      store.set_new_after(-std::numeric_limits<double>::infinity());
+      spdlog::info(
+          "training: the model was not fitted by gearpulsed (no extra.{}): all {} stored pairs are new "
+          "to it",
+          kTrainedUntil, store.size());
     }
   }
   return true;
@@ -611,7 +612,6 @@ int Daemon::run() {
     }
     if (now - last_save >= std::chrono::duration<double>(d.config.model.save_interval)) {
       last_save = last_journal = now;
-      d.store.prune(wall_now());
       if (snap.pairs_added != d.pairs_at_last_save) {
         d.pairs_at_last_save = snap.pairs_added;
         d.save_store("periodic");

@@ -93,14 +93,6 @@ void TrainingStore::set_limits(double max_age_s, std::size_t max_samples) {
   enforce_bounds_locked();
 }
 
-void TrainingStore::prune(double now_wall_s) {
-  std::lock_guard lock(mutex_);
-  const double oldest = now_wall_s - max_age_s_;
-  while (!samples_.empty() && samples_.front().t < oldest)
-    samples_.pop_front();
-  clamp_counts_locked();
-}
-
 void TrainingStore::clear() {
   std::lock_guard lock(mutex_);
   empty_locked();

@@ -26,8 +26,6 @@ class TrainingStore {
   // falls out of the bounds. Returns false if the sample was rejected.
   bool add(const Sample& sample);
   void set_limits(double max_age_s, std::size_t max_samples);
-  // Drops samples older than now - max_age.
-  void prune(double now_wall_s);
   // Forgets every pair; the next save() removes the journal before it writes the file, so no power cut
   // brings the cleared pairs back.
   void clear();

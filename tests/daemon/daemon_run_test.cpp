@@ -403,6 +403,40 @@ TEST_CASE("daemon: a state directory it cannot write in is said at start and in 
   CHECK(daemon.wait() == 0);
 }
 
+// A model installed with `gearpulse fit --out` carries no extra.trained_until: it has seen none of the
+// stored pairs, so they count as new at start (they once counted as none, and a car driven only on short
+// trips never retrained).
+TEST_CASE("daemon: stored pairs are new to a model it did not fit, and it learns from them at start") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  write_text(dir / "state/model.json", kModel);
+  const auto vehicle = gearpulse::sim::vehicle_preset("bmw-520i");
+  const auto obs =
+      gearpulse::sim::simulate_observations(vehicle, gearpulse::sim::DrivingStyle::kMixed, 2400.0, 1, 22);
+  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
+  const double now = static_cast<double>(std::time(nullptr));
+  for (const auto& s : gearpulse::sim::to_samples(obs))
+    store.add({now - 2400.0 + s.t, s.speed, s.freq});
+  REQUIRE(store.size() > 1234);  // more than the installed model was fitted on
+  store.save(dir / "state/training.bin");
+  std::string text = config_for(dir);
+  text.replace(text.find("[model]\n"), 8, "[model]\nmin_new_samples = 1000\nretrain_interval = 3600\n");
+  write_text(dir / "gearpulse.toml", text);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  json status;
+  for (int i = 0; i < 600; ++i) {
+    status = wait_for_status(dir, daemon);
+    if (!status.is_object() || status["gears"].size() == vehicle.theta.size()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["gears"].size() == vehicle.theta.size());
+  CHECK(read_text(dir / "log.txt").find("stored pairs are new to it") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
 TEST_CASE("daemon: learns a model from a restored training store and saves it") {
   TempDir dir;
   std::filesystem::create_directories(dir / "state");
@@ -410,9 +444,10 @@ TEST_CASE("daemon: learns a model from a restored training store and saves it") 
   const auto obs =
       gearpulse::sim::simulate_observations(vehicle, gearpulse::sim::DrivingStyle::kMixed, 2400.0, 1, 21);
   gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
-  const double now = static_cast<double>(std::time(nullptr));
+  // Driven, then parked for 60 h (more than store_hours): time parked does not age what was learned.
+  const double parked_since = static_cast<double>(std::time(nullptr)) - 60.0 * 3600.0;
   for (const auto& s : gearpulse::sim::to_samples(obs))
-    store.add({now - 2400.0 + s.t, s.speed, s.freq});
+    store.add({parked_since - 2400.0 + s.t, s.speed, s.freq});
   REQUIRE(store.size() > 1000);
   store.save(dir / "state/training.bin");
   // config_for already has a [model] table: the retrain keys go into it.
@@ -446,7 +481,7 @@ TEST_CASE("daemon: learns a model from a restored training store and saves it") 
   REQUIRE(later.load(dir / "state/training.bin").empty());
   const std::size_t before = later.size();
   for (int i = 0; i < 1200; ++i)
-    later.add({now + 10.0 + i, 10.0, 60.0});
+    later.add({parked_since + 10.0 + i, 10.0, 60.0});
   later.save(dir / "state/training.bin");
   Process again({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   json restarted;
