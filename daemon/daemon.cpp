@@ -204,9 +204,15 @@ void Daemon::Impl::note_state_problem(std::string text) {
 // does not overwrite what someone may want to look at or recover. Returns where it is now, for the log
 // ("kept as NAME.corrupt", or "left where it is" if it could not be moved).
 std::string Daemon::Impl::set_aside(const std::filesystem::path& path) {
+  // A name not yet taken: the evidence of an earlier corruption is kept too.
   std::filesystem::path aside = path;
   aside += ".corrupt";
   std::error_code ec;
+  for (int n = 1; std::filesystem::symlink_status(aside, ec).type() != std::filesystem::file_type::not_found;
+       ++n) {
+    aside = path;
+    aside += ".corrupt." + std::to_string(n);
+  }
   std::filesystem::rename(path, aside, ec);
   return ec ? "left where it is" : "kept as " + aside.string();
 }
@@ -265,14 +271,17 @@ bool Daemon::Impl::load_state() {
     if (const std::size_t n = remove_stale_temp_files(p))
       spdlog::info("state: removed {} temp file(s) of an interrupted save of {}", n, p.string());
 
+  const std::optional<FileStamp> stamp = stamp_of(model_path);
   const ModelLoad loaded = load_model_file(model_path);
   if (loaded.model) {
     model.set(loaded.model);
+    model.set_file_stamp(stamp);
     spdlog::info("model: loaded {} ({} gears, fitted on {} samples)", model_path.string(),
                  loaded.model->gears.size(), loaded.model->samples);
   } else if (!loaded.error.empty()) {
-    // Set aside only for its content: a file that could not be read (permissions) may be fine.
-    const std::string where = loaded.unreadable ? "left where it is" : set_aside(model_path);
+    // Set aside, whether for its content or because it cannot be read (a file another user installed
+    // with mode 0600): the daemon's own saves then go to a fresh file and never over it.
+    const std::string where = set_aside(model_path);
     spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path.string(),
                   loaded.error, where);
     note_state_problem("model.json ignored: " + loaded.error + " (" + where + ")");
@@ -496,6 +505,7 @@ nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
       model.set(nullptr);
       try {
         remove_file_durable(model_path);
+        model.set_file_stamp(std::nullopt);
       } catch (const std::exception& e) {
         throw ControlError(e.what());
       }
@@ -635,8 +645,13 @@ int Daemon::run() {
     if (const ModelPtr m = d.model.get(); m && !m->empty()) {
       try {
         // Written only if the file does not already hold it (a model unchanged since it was loaded or
-        // saved is not rewritten at every stop, on media that may be read-only or worn).
-        if (!model_file_holds(d.model_path, *m)) save_model_file(d.model_path, *m);
+        // saved is not rewritten at every stop, on media that may be read-only or worn), and never over
+        // a model.json installed while the daemon ran.
+        if (save_model_if_ours(d.model, d.model_path, *m) == ModelSave::kReplacedByOther)
+          spdlog::warn(
+              "model: {} was replaced while gearpulsed ran; left as it is (it is loaded at the next "
+              "start), so the model in use is not saved",
+              d.model_path.string());
       } catch (const std::exception& e) {
         spdlog::error("model: cannot save {} at shutdown: {}", d.model_path.string(), e.what());
       }

@@ -1,5 +1,7 @@
 #include "daemon/model_store.hpp"
 
+#include <sys/stat.h>
+
 #include <optional>
 
 #include "daemon/atomic_file.hpp"
@@ -33,6 +35,23 @@ bool model_file_holds(const std::filesystem::path& path, const GearModel& model)
   } catch (const std::exception&) {
     return false;
   }
+}
+
+std::optional<FileStamp> stamp_of(const std::filesystem::path& path) noexcept {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return std::nullopt;
+  return FileStamp{static_cast<std::uint64_t>(st.st_dev), static_cast<std::uint64_t>(st.st_ino),
+                   static_cast<std::uint64_t>(st.st_size),
+                   static_cast<std::int64_t>(st.st_mtim.tv_sec) * 1'000'000'000 + st.st_mtim.tv_nsec};
+}
+
+ModelSave save_model_if_ours(ModelHolder& holder, const std::filesystem::path& path, const GearModel& model) {
+  const std::optional<FileStamp> now = stamp_of(path);
+  if (now && now != holder.file_stamp()) return ModelSave::kReplacedByOther;
+  if (now && model_file_holds(path, model)) return ModelSave::kAlreadyThere;
+  save_model_file(path, model);
+  holder.set_file_stamp(stamp_of(path));
+  return ModelSave::kSaved;
 }
 
 }  // namespace gearpulse::daemon

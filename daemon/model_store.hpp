@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include "core/gear_model.hpp"
@@ -13,6 +14,15 @@
 namespace gearpulse::daemon {
 
 using ModelPtr = std::shared_ptr<const GearModel>;
+
+// What identifies one version of a file: a file replaced (renamed over, rewritten) gets another.
+struct FileStamp {
+  std::uint64_t device = 0, inode = 0, size = 0;
+  std::int64_t mtime_ns = 0;
+  bool operator==(const FileStamp&) const = default;
+};
+// The stamp of the file at `path`, or none when there is no file.
+[[nodiscard]] std::optional<FileStamp> stamp_of(const std::filesystem::path& path) noexcept;
 
 class ModelHolder {
  public:
@@ -34,8 +44,13 @@ class ModelHolder {
     const ModelPtr m = get();
     return m && !m->empty();
   }
+  // The version of model.json this daemon last loaded or wrote (none: it has neither, or removed it).
+  // Read and set under lock_writes().
+  [[nodiscard]] const std::optional<FileStamp>& file_stamp() const noexcept { return file_stamp_; }
+  void set_file_stamp(std::optional<FileStamp> stamp) noexcept { file_stamp_ = stamp; }
 
  private:
+  std::optional<FileStamp> file_stamp_;
   std::atomic<ModelPtr> model_;
   std::atomic<std::uint64_t> generation_{0};
   std::mutex write_mutex_;
@@ -53,5 +68,11 @@ struct ModelLoad {
 void save_model_file(const std::filesystem::path& path, const GearModel& model);
 // True when the file at `path` holds exactly what save_model_file would write for `model`.
 [[nodiscard]] bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept;
+
+enum class ModelSave { kSaved, kAlreadyThere, kReplacedByOther };
+// Saves `model` to `path` for the daemon whose model `holder` keeps (under holder.lock_writes()), unless a
+// file is there that the daemon neither loaded nor wrote: a model.json installed while it ran (a user's
+// `gearpulse fit --out`) is not overwritten; it is loaded at the next start. Throws std::system_error.
+ModelSave save_model_if_ours(ModelHolder& holder, const std::filesystem::path& path, const GearModel& model);
 
 }  // namespace gearpulse::daemon

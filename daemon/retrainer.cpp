@@ -143,7 +143,13 @@ bool Retrainer::retrain_now() {
         result = fmt::format("fit on {} samples: {} gears in {:.2f} s", samples.size(), gears, secs);
         spdlog::info("retrain: {}; new model in use", result);
         try {
-          save_model_file(model_path_, *next);
+          if (save_model_if_ours(model_, model_path_, *next) == ModelSave::kReplacedByOther) {
+            spdlog::warn(
+                "retrain: {} was replaced while gearpulsed ran; left as it is (it is loaded at the "
+                "next start), so this fit is not saved",
+                model_path_.string());
+            result += "; not saved: model.json was replaced by another program";
+          }
         } catch (const std::exception& e) {
           spdlog::error("retrain: cannot save {}: {}; the new model is used but will be lost at restart",
                         model_path_.string(), e.what());

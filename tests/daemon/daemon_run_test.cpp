@@ -379,6 +379,53 @@ TEST_CASE("daemon: a corrupt model and training store are logged, set aside and 
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
 }
 
+// A second corruption keeps the first one's evidence; a model.json that cannot be read at all (here a
+// directory; for a daemon user, a file another user installed with mode 0600) is set aside too, so the
+// daemon's saves never go over it.
+TEST_CASE("daemon: a model.json set aside takes a name not yet taken, and an unreadable one is set aside") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state/model.json");  // cannot be read as a file
+  write_text(dir / "state/model.json.corrupt", "the first corruption\n");
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  REQUIRE(status.is_object());
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  INFO(read_text(dir / "log.txt"));
+  CHECK(read_text(dir / "state/model.json.corrupt") == "the first corruption\n");
+  CHECK(std::filesystem::is_directory(dir / "state/model.json.corrupt.1"));
+  CHECK_FALSE(std::filesystem::exists(dir / "state/model.json"));
+}
+
+// A user installs a model with `gearpulse fit --out STATE/model.json` while the daemon runs: the daemon
+// does not save its own over it at stop (it once did, silently), and loads it at the next start.
+TEST_CASE(
+    "daemon: a model.json installed while it runs is not overwritten, and is loaded at the next start") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  const auto path = dir / "state/model.json";
+  gearpulse::daemon::save_model_file(path, gearpulse::parse_model(kModel));
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  const char* installed = R"({"version":1,"gears":[{"theta":0.05,"weight":0.5,"stderr":0.0002},
+{"theta":0.09,"weight":0.5,"stderr":0.0003}],"sigma_speed":0.3,"sigma_freq":0.6,"samples":999,
+"log_likelihood":-1.5})";
+  {
+    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+    REQUIRE(wait_for_status(dir, daemon)["gears"].size() == 3);
+    gearpulse::daemon::save_model_file(path, gearpulse::parse_model(installed));
+    daemon.signal(SIGTERM);
+    CHECK(daemon.wait() == 0);
+  }
+  INFO(read_text(dir / "log.txt"));
+  CHECK(gearpulse::daemon::model_file_holds(path, gearpulse::parse_model(installed)));
+  CHECK(read_text(dir / "log.txt").find("was replaced while gearpulsed ran") != std::string::npos);
+  Process again({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log2.txt");
+  CHECK(wait_for_status(dir, again)["gears"].size() == 2);
+  again.signal(SIGTERM);
+  CHECK(again.wait() == 0);
+}
+
 TEST_CASE("daemon: a state directory it cannot write in is said at start and in status") {
   TempDir dir;
   // A state_dir under a regular file: it cannot be made, so nothing can be saved there (a directory
