@@ -233,6 +233,13 @@ void check_relations(const Config& c, const toml::table& root, const std::string
     else
       fail({"tracker.band_high", "tracker.band_low", "audio.rate"}, "tracker: " + problem);
   }
+  // The capture pushes a period at a time into the ring: one that cannot hold two drops audio at every
+  // period the tracker has not yet taken.
+  if (c.audio.ring_seconds * c.audio.rate < 2.0 * c.audio.period_frames)
+    fail({"audio.ring_seconds", "audio.period_frames", "audio.rate"},
+         "audio.ring_seconds (" + format_number(c.audio.ring_seconds) + " s) must hold two periods of " +
+             std::to_string(c.audio.period_frames) + " frames at " + hz(c.audio.rate) + " (" +
+             format_number(2.0 * c.audio.period_frames / c.audio.rate) + " s)");
   // sun_path holds 108 bytes including the terminator.
   if (c.control.socket.size() > 107) fail({"control.socket"}, "path longer than 107 bytes");
   if (c.output.max_frequency <= c.output.min_frequency)

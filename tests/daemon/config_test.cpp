@@ -135,6 +135,11 @@ TEST_CASE("config: relations between keys are checked") {
         "windows "
         "would be ignored");
   CHECK(error_of("[output]\nmin_frequency = 1000\n").starts_with("test.toml:2: output.min_frequency:"));
+  // A ring that cannot hold two capture periods dropped about half the audio, with nothing said.
+  CHECK(error_of("[audio]\nrate = 16000\nperiod_frames = 4096\nring_seconds = 0.1\n") ==
+        "test.toml:4: audio.ring_seconds: audio.ring_seconds (0.1 s) must hold two periods of 4096 frames at "
+        "16000 Hz (0.512 s)");
+  CHECK(error_of("[audio]\nrate = 16000\nperiod_frames = 4096\nring_seconds = 0.6\n").empty());
   CHECK(error_of("[output]\nmax_frequency = 100000\n").starts_with("test.toml:2: output.max_frequency:"));
 }
 
