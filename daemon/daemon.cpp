@@ -623,8 +623,12 @@ int Daemon::run() {
     if (now - last_save >= std::chrono::duration<double>(d.config.model.save_interval)) {
       last_save = last_journal = now;
       if (snap.pairs_added != d.pairs_at_last_save) {
-        d.pairs_at_last_save = snap.pairs_added;
-        d.save_store("periodic");
+        // A save that fails (a full disk) leaves the journal to keep the pairs, however short the save
+        // interval: with saves due before every journal append, none was written once.
+        if (d.save_store("periodic"))
+          d.pairs_at_last_save = snap.pairs_added;
+        else
+          d.journal_store();
       }
     } else if (now - last_journal >= kJournalInterval) {
       last_journal = now;
