@@ -320,6 +320,10 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
   JournalReplay replay;
   const auto blob = read_file(journal_path(path));
   if (!blob) return replay;
+  if (blob->empty()) {
+    replay.problem = "empty (nothing to recover)";
+    return replay;
+  }
   if (blob->size() < kJournalHeaderSize ||
       std::memcmp(blob->data(), kJournalMagic, sizeof kJournalMagic) != 0) {
     replay.problem = "not a training journal (bad magic)";
@@ -330,7 +334,10 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
     return replay;
   }
   std::lock_guard lock(mutex_);
-  if (get<std::uint32_t>(*blob, sizeof kJournalMagic + 4) != saved_crc_) {
+  // A journal names the saved file it follows: one that follows another file holds pairs that file
+  // already has. But with no pairs loaded (that file lost or set aside as corrupt) its pairs are in no
+  // other place, and are kept.
+  if (get<std::uint32_t>(*blob, sizeof kJournalMagic + 4) != saved_crc_ && !samples_.empty()) {
     replay.stale = true;
     return replay;
   }
@@ -343,7 +350,10 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
     samples_.push_back(s);
     ++replay.recovered;
   }
-  if (at < blob->size())
+  if (at + kJournalRecordSize <= blob->size())
+    replay.problem = "record " + std::to_string(replay.recovered + 1) + " fails its checksum; it and the " +
+                     std::to_string(blob->size() - at) + " bytes from it on are dropped";
+  else if (at < blob->size())
     replay.problem = std::to_string(blob->size() - at) + " bytes at the end are not a whole record (dropped)";
   // The recovered pairs are in no saved file: they count as added since the save, and the journal is
   // rewritten with them (past any torn end) at the next append.

@@ -234,7 +234,8 @@ TEST_CASE("daemon: pairs journaled after the last save survive a power cut") {
     write_text(TrainingStore::journal_path(path), journal);
     TrainingStore::JournalReplay flipped;
     CHECK(restarted(path, flipped)->size() == 50 + 32);
-    CHECK_FALSE(flipped.problem.empty());
+    // Said as what it is: whole records, the first of them failing its checksum.
+    CHECK(flipped.problem == "record 33 fails its checksum; it and the 84 bytes from it on are dropped");
   }
 }
 
@@ -284,6 +285,34 @@ TEST_CASE("daemon: pairs journaled after a corrupt file was set aside are replay
   TrainingStore::JournalReplay replay;
   CHECK(restarted(path, replay)->size() == 40);
   CHECK(replay.recovered == 40);
+}
+
+// The journal names the saved file it follows. When that file is lost (deleted, or corrupt and set
+// aside), the journal's pairs are in no other place: they were once dropped as belonging to another file.
+TEST_CASE("daemon: pairs journaled after a save are kept when the saved file is lost") {
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  TrainingStore store(1e9, 10000);
+  add_pairs(store, 0, 50);
+  store.save(path);
+  add_pairs(store, 50, 67);
+  REQUIRE(store.append_journal(path) == 17);
+  SECTION("corrupt, set aside") {
+    std::string bytes = read_text(path);
+    bytes[bytes.size() / 2] ^= 0x01;
+    write_text(path, bytes);
+    TrainingStore back(1e9, 10000);
+    CHECK_FALSE(back.load(path).empty());
+    std::filesystem::rename(path, dir / "training.bin.corrupt");
+    const TrainingStore::JournalReplay replay = back.replay_journal(path);
+    CHECK(replay.recovered == 17);
+    CHECK(back.size() == 17);
+  }
+  SECTION("deleted") {
+    std::filesystem::remove(path);
+    TrainingStore::JournalReplay replay;
+    CHECK(restarted(path, replay)->size() == 17);
+  }
 }
 
 TEST_CASE("daemon: pairs cleared by a reset do not come back from the journal") {
