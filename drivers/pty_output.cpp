@@ -4,6 +4,7 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/file.h>
 #include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <termios.h>
@@ -46,13 +47,30 @@ PtyOutput::PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_ag
   const auto st = std::filesystem::symlink_status(link_, ec);
   if (std::filesystem::exists(st) && !std::filesystem::is_symlink(st))
     fail(link_, "exists and is not a symlink (refusing to replace it)");
+  // One owner per link: another process publishing its PTY at this path holds this lock (released by the
+  // kernel when it exits, however it exits), and its link is not taken from under its reader.
+  const std::string lock_path = link_.string() + ".lock";
+  lock_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+  if (lock_ < 0) fail(link_, "cannot open " + lock_path, errno);
+  if (::flock(lock_, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(lock_);
+    lock_ = -1;
+    if (err == EWOULDBLOCK) fail(link_, "in use by another process (it holds " + lock_path + ")");
+    fail(link_, "cannot lock " + lock_path, err);
+  }
 
   master_ = ::posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-  if (master_ < 0) fail(link_, "posix_openpt", errno);
+  if (master_ < 0) {
+    const int err = errno;
+    ::close(lock_);
+    fail(link_, "posix_openpt", err);
+  }
   char name[128];
   if (::grantpt(master_) != 0 || ::unlockpt(master_) != 0 || ::ptsname_r(master_, name, sizeof name) != 0) {
     const int err = errno;
     ::close(master_);
+    ::close(lock_);
     fail(link_, "cannot set up the pseudo-terminal", err);
   }
   slave_name_ = name;
@@ -76,6 +94,7 @@ PtyOutput::PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_ag
     const int err = errno;
     ::unlink(tmp.c_str());
     ::close(master_);
+    ::close(lock_);
     fail(link_, "cannot create the symlink to " + slave_name_, err);
   }
 }
@@ -85,6 +104,7 @@ PtyOutput::~PtyOutput() {
   const ssize_t n = ::readlink(link_.c_str(), target, sizeof target - 1);
   if (n > 0 && std::string(target, static_cast<std::size_t>(n)) == slave_name_) ::unlink(link_.c_str());
   if (master_ >= 0) ::close(master_);
+  if (lock_ >= 0) ::close(lock_);  // the lock file stays: removing it would race with the next owner
 }
 
 void PtyOutput::rise() noexcept {

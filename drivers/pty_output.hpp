@@ -21,7 +21,8 @@ namespace gearpulse {
 class PtyOutput final : public PulseOutput {
  public:
   // Creates the pair in raw mode and the symlink `link` -> slave. A stale symlink at `link` is replaced;
-  // anything else there, or a missing directory, throws std::runtime_error with a one-line reason.
+  // anything else there, a missing directory, or a link another live process publishes (it holds the
+  // lock file "<link>.lock") throws std::runtime_error with a one-line reason.
   explicit PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_age = std::chrono::seconds(2));
   ~PtyOutput() override;  // removes the symlink if it still points at this PTY
   PtyOutput(const PtyOutput&) = delete;
@@ -50,6 +51,7 @@ class PtyOutput final : public PulseOutput {
   std::filesystem::path link_;
   std::string slave_name_;
   int master_ = -1;
+  int lock_ = -1;     // flock on "<link>.lock", held for the object's life
   bool idle_ = true;  // pulse-thread state: no reader had the slave open at the last pulse
   // Pulse-thread state for the age of the reader's queue: at each look (at a pulse, at most every quarter of
   // max_age) the time and the count of pulses written by then, the last kLooks of them.

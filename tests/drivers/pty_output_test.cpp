@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -174,6 +175,25 @@ TEST_CASE("pty: a missing directory or a non-symlink path is a clear error") {
   }
   std::ofstream(dir / "file") << "x";
   CHECK_THROWS_WITH(PtyOutput(dir / "file"), Catch::Contains("not a symlink"));
+}
+
+// A second daemon configured with the same path (another state_dir, another socket) once took the link
+// over, and removed it when it stopped: the first one's reader lost its pulses while its status said ok.
+TEST_CASE("pty: a link another live owner publishes is not taken over") {
+  TempDir dir;
+  const auto link = dir / "pulse";
+  auto first = std::make_unique<PtyOutput>(link);
+  const auto target = std::filesystem::read_symlink(link);
+  try {
+    PtyOutput second(link);
+    FAIL("a second owner took the link");
+  } catch (const std::runtime_error& e) {
+    CHECK(std::string(e.what()).find("in use by another process") != std::string::npos);
+  }
+  CHECK(std::filesystem::read_symlink(link) == target);
+  first.reset();  // the owner gone (as when it exits, however it exits), the path is free again
+  PtyOutput third(link);
+  CHECK(std::filesystem::read_symlink(link) == third.slave_name());
 }
 
 TEST_CASE("pty: a stale symlink is replaced and the link is removed on close") {
