@@ -224,6 +224,7 @@ bool Daemon::Impl::load_state() {
     spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
                   state_dir.string(), ec.message());
     note_state_problem("cannot create " + state_dir.string() + ": " + ec.message());
+    return true;  // nothing there to load (a model.json "ignored" under it would only mislead)
   } else {
     try {
       state_lock.emplace(state_dir);

@@ -439,6 +439,7 @@ TEST_CASE("daemon: a state directory it cannot write in is said at start and in 
   REQUIRE(status.is_object());
   REQUIRE(status["model"]["problems"].size() >= 1);
   CHECK(status["model"]["problems"][0].get<std::string>().find("cannot create") != std::string::npos);
+  CHECK(status["model"]["problems"].size() == 1);  // not also a model.json "ignored" under a file
   CHECK(read_text(dir / "log.txt").find("will not survive a restart") != std::string::npos);
   // The plain status shows it as it shows a GPS or audio problem.
   Process table(

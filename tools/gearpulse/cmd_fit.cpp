@@ -1,7 +1,9 @@
 // `gearpulse fit`: learns the gear scales from sample logs and prints the model as JSON (INTERFACES.md).
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -80,7 +82,7 @@ void write_file_atomically(const std::string& path, const std::string& text) {
   if (const fs::file_status st = fs::status(target, ec); !ec && fs::exists(st) && !fs::is_regular_file(st)) {
     if (fs::is_directory(st)) throw UsageError(path + ": is a directory");
     std::ofstream out(target, std::ios::binary);
-    if (!out) throw UsageError(path + ": cannot write");
+    if (!out) throw UsageError(path + ": cannot write: " + std::strerror(errno));
     out << text;
     out.flush();
     if (!out) throw UsageError(path + ": write failed");
@@ -89,15 +91,16 @@ void write_file_atomically(const std::string& path, const std::string& text) {
   const std::string tmp = target.string() + ".tmp";
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw UsageError(path + ": cannot write");
+    if (!out) throw UsageError(path + ": cannot write: " + std::strerror(errno));
     out << text;
     out.flush();
     if (!out) throw UsageError(path + ": write failed");
   }
   fs::rename(tmp, target, ec);
   if (ec) {
+    const std::string reason = ec.message();
     fs::remove(tmp, ec);
-    throw UsageError(path + ": cannot write");
+    throw UsageError(path + ": cannot write: " + reason);
   }
 }
 
