@@ -88,6 +88,35 @@ const char* kModel = R"({"version":1,"gears":[{"theta":0.043,"weight":0.2,"stder
 {"theta":0.072,"weight":0.3,"stderr":0.0003},{"theta":0.106,"weight":0.5,"stderr":0.0004}],
 "sigma_speed":0.3,"sigma_freq":0.6,"samples":1234,"log_likelihood":-10.5})";
 
+// Saves in `dir`/state a training store of a 40-minute bmw-520i drive (seed `seed`) that ended at
+// `end_wall_s`, and a config that retrains at start on 1000 new pairs; returns the store's size.
+std::size_t store_a_drive(const TempDir& dir, std::uint64_t seed, double end_wall_s) {
+  std::filesystem::create_directories(dir / "state");
+  const auto obs = gearpulse::sim::simulate_observations(
+      gearpulse::sim::vehicle_preset("bmw-520i"), gearpulse::sim::DrivingStyle::kMixed, 2400.0, 1, seed);
+  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
+  for (const auto& s : gearpulse::sim::to_samples(obs))
+    store.add({end_wall_s - 2400.0 + s.t, s.speed, s.freq});
+  store.save(dir / "state/training.bin");
+  // config_for already has a [model] table: the retrain keys go into it.
+  std::string text = config_for(dir);
+  text.replace(text.find("[model]\n"), 8, "[model]\nmin_new_samples = 1000\nretrain_interval = 3600\n");
+  write_text(dir / "gearpulse.toml", text);
+  return store.size();
+}
+
+// Status once `done` holds for it (or the daemon answers no more, or a minute has passed).
+template <class Done>
+json status_once(const TempDir& dir, Process& daemon, Done done) {
+  json status;
+  for (int i = 0; i < 600; ++i) {
+    status = wait_for_status(dir, daemon);
+    if (!status.is_object() || done(status)) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return status;
+}
+
 }  // namespace
 
 TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status") {
@@ -456,30 +485,15 @@ TEST_CASE("daemon: a state directory it cannot write in is said at start and in 
 // trips never retrained).
 TEST_CASE("daemon: stored pairs are new to a model it did not fit, and it learns from them at start") {
   TempDir dir;
-  std::filesystem::create_directories(dir / "state");
+  const std::size_t pairs = store_a_drive(dir, 22, static_cast<double>(std::time(nullptr)));
+  REQUIRE(pairs > 1234);  // more than the installed model was fitted on
   write_text(dir / "state/model.json", kModel);
-  const auto vehicle = gearpulse::sim::vehicle_preset("bmw-520i");
-  const auto obs =
-      gearpulse::sim::simulate_observations(vehicle, gearpulse::sim::DrivingStyle::kMixed, 2400.0, 1, 22);
-  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
-  const double now = static_cast<double>(std::time(nullptr));
-  for (const auto& s : gearpulse::sim::to_samples(obs))
-    store.add({now - 2400.0 + s.t, s.speed, s.freq});
-  REQUIRE(store.size() > 1234);  // more than the installed model was fitted on
-  store.save(dir / "state/training.bin");
-  std::string text = config_for(dir);
-  text.replace(text.find("[model]\n"), 8, "[model]\nmin_new_samples = 1000\nretrain_interval = 3600\n");
-  write_text(dir / "gearpulse.toml", text);
+  const std::size_t gears = gearpulse::sim::vehicle_preset("bmw-520i").theta.size();
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-  json status;
-  for (int i = 0; i < 600; ++i) {
-    status = wait_for_status(dir, daemon);
-    if (!status.is_object() || status["gears"].size() == vehicle.theta.size()) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  const json status = status_once(dir, daemon, [&](const json& s) { return s["gears"].size() == gears; });
   INFO(read_text(dir / "log.txt"));
   REQUIRE(status.is_object());
-  CHECK(status["gears"].size() == vehicle.theta.size());
+  CHECK(status["gears"].size() == gears);
   CHECK(read_text(dir / "log.txt").find("stored pairs are new to it") != std::string::npos);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
@@ -487,35 +501,20 @@ TEST_CASE("daemon: stored pairs are new to a model it did not fit, and it learns
 
 TEST_CASE("daemon: learns a model from a restored training store and saves it") {
   TempDir dir;
-  std::filesystem::create_directories(dir / "state");
   const auto vehicle = gearpulse::sim::vehicle_preset("bmw-520i");
-  const auto obs =
-      gearpulse::sim::simulate_observations(vehicle, gearpulse::sim::DrivingStyle::kMixed, 2400.0, 1, 21);
-  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
   // Driven, then parked for 60 h (more than store_hours): time parked does not age what was learned.
   const double parked_since = static_cast<double>(std::time(nullptr)) - 60.0 * 3600.0;
-  for (const auto& s : gearpulse::sim::to_samples(obs))
-    store.add({parked_since - 2400.0 + s.t, s.speed, s.freq});
-  REQUIRE(store.size() > 1000);
-  store.save(dir / "state/training.bin");
-  // config_for already has a [model] table: the retrain keys go into it.
-  std::string text = config_for(dir);
-  text.replace(text.find("[model]\n"), 8, "[model]\nmin_new_samples = 1000\nretrain_interval = 3600\n");
-  write_text(dir / "gearpulse.toml", text);
+  const std::size_t pairs = store_a_drive(dir, 21, parked_since);
+  REQUIRE(pairs > 1000);
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-  json status;
-  for (int i = 0; i < 600; ++i) {
-    status = wait_for_status(dir, daemon);
-    if (!status.is_object() || status["model"]["state"] == "trained") break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  json status = status_once(dir, daemon, [](const json& s) { return s["model"]["state"] == "trained"; });
   INFO(read_text(dir / "log.txt"));
   REQUIRE(status.is_object());
   REQUIRE(status["model"]["state"] == "trained");
   REQUIRE(status["gears"].size() == vehicle.theta.size());
   for (std::size_t i = 0; i < vehicle.theta.size(); ++i)
     CHECK(status["gears"][i]["theta"].get<double>() == Approx(vehicle.theta[i]).epsilon(0.02));
-  CHECK(status["training_samples"].get<std::size_t>() == store.size());
+  CHECK(status["training_samples"].get<std::size_t>() == pairs);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
   // Written atomically in the format of `gearpulse fit --out`, and loaded again.
@@ -532,12 +531,8 @@ TEST_CASE("daemon: learns a model from a restored training store and saves it") 
     later.add({parked_since + 10.0 + i, 10.0, 60.0});
   later.save(dir / "state/training.bin");
   Process again({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-  json restarted;
-  for (int i = 0; i < 600; ++i) {
-    restarted = wait_for_status(dir, again);
-    if (!restarted.is_object() || restarted["model"]["retrain_runs"].get<int>() >= 1) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  const json restarted =
+      status_once(dir, again, [](const json& s) { return s["model"]["retrain_runs"].get<int>() >= 1; });
   INFO(read_text(dir / "log.txt"));
   REQUIRE(restarted.is_object());
   CHECK(restarted["model"]["retrain_runs"].get<int>() >= 1);
