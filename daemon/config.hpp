@@ -65,7 +65,7 @@ struct ModelConfig {
   double retrain_interval = 600.0;         // s between retrain attempts
   std::size_t min_new_samples = 600;       // new training pairs needed before a retrain
   std::size_t replace_min_samples = 3600;  // a trained model is replaced only by a fit on this many
-  double store_hours = 50.0;               // pairs this much older than the newest are dropped
+  double store_hours = 50.0;               // hours of driving the stored pairs cover
   std::size_t max_samples = 1'000'000;     // hard cap on the store, whatever the age
   double save_interval = 300.0;            // s between periodic saves of the training store
 };

@@ -75,10 +75,25 @@ std::uint32_t crc32(std::string_view data) noexcept {
 TrainingStore::TrainingStore(double max_age_s, std::size_t max_samples)
     : max_age_s_(max_age_s), max_samples_(max_samples) {}
 
+double TrainingStore::step(const Sample& a, const Sample& b) noexcept {
+  return std::min(std::abs(b.t - a.t), kMaxStepS);
+}
+
+void TrainingStore::push_back_locked(const Sample& s) {
+  if (!samples_.empty()) span_s_ += step(samples_.back(), s);
+  samples_.push_back(s);
+}
+
+void TrainingStore::pop_front_locked() noexcept {
+  if (samples_.size() >= 2) span_s_ -= step(samples_[0], samples_[1]);
+  samples_.pop_front();
+  if (samples_.size() <= 1) span_s_ = 0.0;
+}
+
 bool TrainingStore::add(const Sample& sample) {
   if (!plausible(sample)) return false;
   std::lock_guard lock(mutex_);
-  samples_.push_back(sample);
+  push_back_locked(sample);
   ++new_samples_;
   ++since_save_;
   ++unjournaled_;
@@ -101,6 +116,7 @@ void TrainingStore::clear() {
 
 void TrainingStore::empty_locked() noexcept {
   samples_.clear();
+  span_s_ = 0.0;
   new_samples_ = since_save_ = unjournaled_ = 0;
 }
 
@@ -131,14 +147,13 @@ void TrainingStore::set_new_after(double t) {
 }
 
 void TrainingStore::enforce_bounds_locked() {
-  // Age is judged against the newest sample, so a wrong wall clock cannot wipe the store.
-  if (!samples_.empty()) {
-    const double oldest = samples_.back().t - max_age_s_;
-    while (!samples_.empty() && samples_.front().t < oldest)
-      samples_.pop_front();
-  }
+  // Age is the driving time since a pair, not the wall clock's: pairs older than max_age of driving fall
+  // off the front. (Judged against the newest pair's time, a weekend parked or a clock set forward
+  // emptied the store at the first new pair, and a pair stamped in the future stopped all pruning.)
+  while (samples_.size() > 1 && span_s_ > max_age_s_)
+    pop_front_locked();
   while (samples_.size() > max_samples_)
-    samples_.pop_front();
+    pop_front_locked();
   clamp_counts_locked();
 }
 
@@ -195,6 +210,9 @@ std::string TrainingStore::deserialize(std::string_view blob) {
   }
   std::lock_guard lock(mutex_);
   samples_ = std::move(loaded);
+  span_s_ = 0.0;
+  for (std::size_t i = 1; i < samples_.size(); ++i)
+    span_s_ += step(samples_[i - 1], samples_[i]);
   new_samples_ = 0;
   enforce_bounds_locked();
   return {};
@@ -347,7 +365,7 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
     if (get<std::uint32_t>(*blob, at + kRecordSize) != crc32(record)) break;
     const Sample s = get_record(*blob, at);
     if (!plausible(s)) break;
-    samples_.push_back(s);
+    push_back_locked(s);
     ++replay.recovered;
   }
   if (at + kJournalRecordSize <= blob->size())

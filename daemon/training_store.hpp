@@ -1,6 +1,6 @@
 #pragma once
 // The bounded store of aligned (t, GPS speed, engine frequency) pairs the retrainer learns from.
-// It keeps the last `max_age` seconds (and at most `max_samples`), survives restarts through an
+// It keeps the last `max_age` seconds of driving (and at most `max_samples`), survives restarts through an
 // atomically written file with a header and a checksum, and detects a torn or corrupt file.
 // Between those (large, infrequent) saves, the pairs added since the last one go to a journal beside
 // the file, appended in small synced writes: a power cut loses at most the pairs since the last append.
@@ -80,6 +80,13 @@ class TrainingStore {
   // held across the I/O; mutex_ is taken only to copy, so add() never waits on a disk.
   std::mutex io_mutex_;
   std::deque<Sample> samples_;
+  // Driving time samples_ covers: the steps between consecutive pairs, each counted up to kMaxStepS, so
+  // that neither a car parked for days nor a wall clock set forward or back by years ages the pairs.
+  static constexpr double kMaxStepS = 10.0;
+  double span_s_ = 0.0;
+  [[nodiscard]] static double step(const Sample& a, const Sample& b) noexcept;
+  void push_back_locked(const Sample& s);
+  void pop_front_locked() noexcept;
   double max_age_s_;
   std::size_t max_samples_;
   std::size_t new_samples_ = 0;

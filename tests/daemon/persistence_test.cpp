@@ -129,6 +129,41 @@ TEST_CASE("daemon: training store is bounded by age and by count") {
   CHECK(store.size() == 50);
 }
 
+// A car PC's wall clock may be days apart between two pairs (the car parked) or jump by years (no RTC
+// battery, then set from GPS): neither ages the pairs. Judged against the newest pair's time, one pair
+// after a weekend parked left a store of one pair, and one stamped years ahead stopped all pruning.
+TEST_CASE("daemon: training store ages pairs by driving time, not by the wall clock") {
+  TrainingStore store(100.0, 1000);
+  for (int i = 0; i < 50; ++i)
+    store.add({1000.0 + i, 10.0, 100.0});
+  SECTION("parked for 60 h") {
+    store.add({1049.0 + 60 * 3600.0, 10.0, 100.0});
+    CHECK(store.size() == 51);
+  }
+  SECTION("the clock set back by years") {
+    store.add({1049.0 - 3 * 365 * 86400.0, 10.0, 100.0});
+    CHECK(store.size() == 51);
+  }
+  SECTION("a pair stamped years ahead, then driving on: still bounded") {
+    store.add({1049.0 + 5 * 365 * 86400.0, 10.0, 100.0});
+    for (int i = 0; i < 300; ++i)
+      store.add({2000.0 + i, 10.0, 100.0});
+    CHECK(store.size() == 101);  // 100 s of driving and the pair it starts from
+    CHECK(store.snapshot().front().t == Approx(2199.0));
+  }
+  SECTION("and the same after a save and a load") {
+    TempDir dir;
+    store.add({1049.0 + 60 * 3600.0, 10.0, 100.0});
+    store.save(dir / "training.bin");
+    TrainingStore back(100.0, 1000);
+    REQUIRE(back.load(dir / "training.bin").empty());
+    CHECK(back.size() == 51);
+    for (int i = 1; i <= 60; ++i)
+      back.add({1049.0 + 60 * 3600.0 + i, 10.0, 100.0});
+    CHECK(back.size() == 92);  // 49 s + 10 s (the parked step) + 60 s = 119 s: the 19 oldest went
+  }
+}
+
 TEST_CASE("daemon: training store counts new pairs for the retrainer") {
   TrainingStore store(1e9, 1000);
   for (int i = 0; i < 10; ++i)
