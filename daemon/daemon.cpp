@@ -139,10 +139,21 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
       spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
     } else if (now.gps_state == "no-fix" && limiter.allow("gps-no-fix", suppressed)) {
       // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
+      // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
       const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
-      spdlog::warn("gps: no usable fix from gpsd at {} {}; speed now from {}{}", server, gone, now.source,
+      spdlog::warn("gps: no usable fix from gpsd at {} {}{}", server, gone,
                    suppressed ? fmt::format(" ({} more times since the last report)", suppressed) : "");
     }
+  }
+  // A receiver's glitch refused: said at once, then at most once a minute with how many more.
+  if (now.gps_implausible > before.gps_implausible) {
+    std::uint64_t suppressed = 0;
+    if (limiter.allow("gps-implausible", suppressed))
+      spdlog::warn(
+          "gps: a speed of {:.0f} km/h from gpsd at {} ignored (no car reaches it, or not that fast); "
+          "{} such reports so far{}",
+          now.gps_last_implausible * 3.6, server, now.gps_implausible,
+          suppressed ? fmt::format(" ({} since the last report)", suppressed) : "");
   }
   // One count per failed attempt (the backoff spaces them), not per turn of this loop.
   if (now.gps_state == "disconnected" && !now.gps_error.empty() && now.gps_failures != gps_failures_seen) {
@@ -450,6 +461,7 @@ nlohmann::json Daemon::Impl::status_json() {
                   {"mode", p.gps_mode},
                   {"age", number_or_null(p.gps_age, p.gps_age >= 0)},
                   {"reconnects", p.gps_reconnects},
+                  {"implausible", p.gps_implausible},
                   {"server", fmt::format("{}:{}", config.gps.host, config.gps.port)},
                   {"error", p.gps_error}};
   reply["audio"] = {{"state", p.audio_state}, {"device", config.audio.device}, {"rate", config.audio.rate},

@@ -657,6 +657,8 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       s.gps_age = (now - fix_ns) * 1e-9;
     }
     s.gps_failures = g.failures;
+    s.gps_implausible = g.implausible;
+    s.gps_last_implausible = g.last_implausible;
     // Its errors are about the connection: once connected again they are history.
     if (s.gps_state != "disconnected") s.gps_error.clear();
   }

@@ -30,7 +30,9 @@ struct PipelineSnapshot {
   int gps_mode = 0;
   double gps_age = -1.0;  // s since the last usable fix, < 0 never
   std::uint64_t gps_reconnects = 0;
-  std::uint64_t gps_failures = 0;  // failed connection attempts and lost connections
+  std::uint64_t gps_failures = 0;     // failed connection attempts and lost connections
+  std::uint64_t gps_implausible = 0;  // reports whose speed the GpsSpeedGate refused
+  double gps_last_implausible = 0.0;  // m/s, the last refused speed
   std::string gps_error;
   // Audio and tracker.
   // running, frozen (periods repeat), stalled (no frames), recovering, retrying, stopped

@@ -198,12 +198,24 @@ void GpsdClient::run() {
         newest = r;
       } while (::gps_waiting(&conn.data(), 0));
       if (newest) {
+        // A speed no car reaches (or reaches that fast) is published as none: a glitch of the receiver
+        // must neither drive the pulses nor teach the estimator.
+        double refused = std::nan("");
+        if (newest->usable() && gate_.check(newest->fix_time, static_cast<double>(newest->rx_ns) * 1e-9,
+                                            newest->speed) != GpsSpeedGate::Verdict::kAccepted) {
+          refused = newest->speed;
+          newest->speed = std::nan("");
+        }
         {
           std::lock_guard lock(mutex_);
           latest_ = newest;
           ++status_.reports;
           status_.superseded += drained;
           status_.bad_reads += bad;
+          if (refused == refused) {
+            ++status_.implausible;
+            status_.last_implausible = refused;
+          }
         }
         backoff = config_.backoff_min;
         if (on_report_) on_report_(*newest);

@@ -12,6 +12,7 @@
 #include <string>
 #include <thread>
 
+#include "core/gps_speed_gate.hpp"
 #include "drivers/gps_source.hpp"
 
 namespace gearpulse {
@@ -33,7 +34,11 @@ struct GpsdStatus {
   std::uint64_t connects = 0;    // successful connections (1 = first, more = reconnects)
   std::uint64_t failures = 0;    // failed connection attempts and lost connections
   std::uint64_t bad_reads = 0;   // reads libgps could not parse
-  std::string last_error;        // empty if none yet
+  // Reports whose speed no car reaches, or reaches that fast (GpsSpeedGate): published without a speed,
+  // so they count as no fix; the last such speed (m/s).
+  std::uint64_t implausible = 0;
+  double last_implausible = 0.0;
+  std::string last_error;  // empty if none yet
 };
 
 [[nodiscard]] const char* to_string(GpsdState state) noexcept;
@@ -77,6 +82,7 @@ class GpsdClient final : public GpsSource {
   std::atomic<bool> connecting_{false};
   std::optional<GpsReport> latest_;
   GpsdStatus status_;
+  GpsSpeedGate gate_;  // client thread only
 };
 
 }  // namespace gearpulse

@@ -154,6 +154,46 @@ TEST_CASE("gpsd: generated NMEA speeds arrive within NMEA precision and an outag
   CHECK(client.status().connects == 1);
 }
 
+// A receiver's glitch (a multipath spike, a bad epoch) once went straight to the pulse train: 300 m/s for
+// five epochs is 1.5 km of pulses. Such fixes are published without a speed and counted.
+TEST_CASE("gpsd: a speed no car reaches, or not that fast, is published as none and counted") {
+  TempDir dir;
+  const std::vector<double> speeds = {10.0, 10.0, 10.0, 10.0, 10.0, 10.5, 300.0, 300.0, 11.0,
+                                      11.5, 60.0, 12.0, 12.5, 13.0, 13.0, 13.0,  13.0,  13.0};
+  const auto log = write_log(dir, speeds);
+  const int port = gearpulse::test::free_port();
+  GpsFake fake(log, port, 0.1, true);
+  REQUIRE(GpsFake::wait_listening(port, 10s));
+  Recorder rec;
+  GpsdClient client(config_for(port), rec.callback());
+  client.start();
+  const double t0 = utc_of(2026, 1, 15, 12, 0, 0);
+  REQUIRE(wait_for(
+      [&] {
+        const auto r = client.latest();
+        return r && r->fix_time >= t0 + static_cast<double>(speeds.size()) - 1.0;
+      },
+      20s));
+  std::size_t spikes_seen = 0, good_seen = 0;
+  for (const GpsReport& r : rec.snapshot()) {
+    if (!std::isfinite(r.fix_time)) continue;
+    const auto epoch = static_cast<std::size_t>(std::lround(r.fix_time - t0));
+    REQUIRE(epoch < speeds.size());
+    const bool spike = epoch == 6 || epoch == 7 || epoch == 10;
+    if (spike) {
+      CHECK_FALSE(r.usable());
+      ++spikes_seen;
+    } else if (epoch > 0 && r.mode >= 2) {
+      CHECK(r.usable());
+      ++good_seen;
+    }
+  }
+  CHECK(spikes_seen >= 2);  // gpsd may merge or drop an epoch under gpsfake's pace
+  CHECK(good_seen >= 10);
+  CHECK(client.status().implausible == spikes_seen);
+  CHECK(client.status().last_implausible > 50.0);
+}
+
 TEST_CASE("gpsd: keeps trying while gpsd is absent and connects once it starts") {
   TempDir dir;
   std::vector<double> speeds(40, 12.5);
