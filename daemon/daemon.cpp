@@ -320,7 +320,14 @@ bool Daemon::Impl::load_state() {
   // Pairs stored after the model's last fit are new to it, whichever run gathered them.
   if (const ModelPtr m = model.get()) {
     const auto until = m->extra.find(kTrainedUntil);
-    if (until != m->extra.end() && until->is_number()) {
+    const auto last = m->extra.find(kTrainedLast);
+    if (last != m->extra.end() && last->is_array() && last->size() == 3 && (*last)[0].is_number() &&
+        (*last)[1].is_number() && (*last)[2].is_number() &&
+        store.set_new_after_pair(
+            {(*last)[0].get<double>(), (*last)[1].get<double>(), (*last)[2].get<double>()})) {
+      spdlog::info("training: {} of the {} stored pairs were stored after the model's last fit",
+                   store.new_samples(), store.size());
+    } else if (until != m->extra.end() && until->is_number()) {
       store.set_new_after(until->get<double>());
       spdlog::info("training: {} of the {} stored pairs are newer than the model's last fit",
                    store.new_samples(), store.size());

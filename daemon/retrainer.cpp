@@ -137,6 +137,8 @@ bool Retrainer::retrain_now() {
         for (const Sample& s : samples)
           newest = std::max(newest, s.t);
         fitted.extra[std::string(kTrainedUntil)] = newest;
+        fitted.extra[std::string(kTrainedLast)] = {samples.back().t, samples.back().speed,
+                                                   samples.back().freq};
         auto next = std::make_shared<const GearModel>(std::move(fitted));
         model_.set(next);
         changed = true;

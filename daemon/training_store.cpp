@@ -140,6 +140,18 @@ void TrainingStore::mark_trained(std::size_t consumed) {
   new_samples_ -= std::min(consumed, new_samples_);
 }
 
+bool TrainingStore::set_new_after_pair(const Sample& last) {
+  std::lock_guard lock(mutex_);
+  for (std::size_t i = samples_.size(); i-- > 0;) {
+    const Sample& s = samples_[i];
+    if (s.t == last.t && s.speed == last.speed && s.freq == last.freq) {
+      new_samples_ = samples_.size() - i - 1;
+      return true;
+    }
+  }
+  return false;
+}
+
 void TrainingStore::set_new_after(double t) {
   std::lock_guard lock(mutex_);
   new_samples_ = static_cast<std::size_t>(

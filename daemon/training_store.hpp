@@ -38,6 +38,9 @@ class TrainingStore {
   // Counts as new the pairs later than `t` (wall-clock s): those a fit ending at `t` has not seen, kept
   // from earlier runs of the daemon.
   void set_new_after(double t);
+  // Counts as new the pairs after the last one equal to `last` (store order); false, and nothing
+  // changed, when no pair is.
+  bool set_new_after_pair(const Sample& last);
 
   // File format: magic, version, record count, records, CRC-32 of all that precedes it.
   [[nodiscard]] std::string serialize() const;
