@@ -176,7 +176,8 @@ TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
   for (const std::string args :
        {" --outage 20", " --outage a:5", " --outage 10:-3", " --outage 10:1e308", " --vehicle nosuchcar",
         " --style racing", " --duration 2", " --duration 1e308", " --rate 10", " --snr nan", " --tone 1e9",
-        " --tone nan", " --pulses-per-km -5", " --duration 60 --outage 1000:10"}) {
+        " --tone nan", " --pulses-per-km -5", " --duration 60 --outage 1000:10", " --seed -1",
+        " --seed 99999999999999999999"}) {
     const Result r = run(kCli + " simulate" + out + args);
     INFO(args << ": " << r.out);
     CHECK(r.status == 2);

@@ -2,6 +2,7 @@
 // card would capture (raw S16 for the ALSA file plugin, WAV for `gearpulse track`), the NMEA log gpsd
 // would read (no fix during the outage), the truth, and the 1 Hz sample CSV `gearpulse fit` reads.
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -229,7 +230,18 @@ void add_simulate(CLI::App& app, int& status) {
   CLI::App* cmd = app.add_subcommand(
       "simulate", "Write a simulated drive: lighter voltage (raw, wav), NMEA, truth and sample CSVs");
   cmd->add_option("--out", opts->out, "Output directory (created)")->required();
-  cmd->add_option("--seed", opts->seed, "Random seed: same seed, same drive")->capture_default_str();
+  cmd->add_option("--seed", opts->seed, "Random seed: same seed, same drive")
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](const std::string& text) {
+            // CLI11 takes "-1" and overflowing digits as some seed: only a whole number that fits.
+            std::uint64_t v = 0;
+            const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+            return ec == std::errc() && end == text.data() + text.size() && !text.empty()
+                       ? std::string()
+                       : "a whole number from 0 to 18446744073709551615, not " + text;
+          },
+          "SEED"));
   cmd->add_option("--duration", opts->duration, "Seconds; the drive ends at the next standstill after it")
       ->capture_default_str();
   cmd->add_option("--outage", opts->outage, "GPS outage START:LEN in seconds (no fix inside)");
