@@ -246,5 +246,9 @@ TEST_CASE("feed: a missing input or a bad format is an error", "[feed]") {
     r = run(kCli + " feed --format s32" + size + " " + (dir.path / "odd.raw").string() + " x");
     INFO(size << ": " << r.out);
     CHECK(r.status == 2);
+    // The message names the option that is out of range, not all three.
+    CHECK(r.out.find(std::string(size).substr(1, std::string(size).find(' ', 1) - 1) + " ") !=
+          std::string::npos);
+    CHECK(r.out.find("is out of range") != std::string::npos);
   }
 }

@@ -79,10 +79,14 @@ bool write_all(int fd, const std::uint8_t* buf, std::size_t len) {
 
 int run_feed(const FeedOptions& o) {
   // ALSA's own limits: at most 1024 channels; a period of at most a few seconds of audio.
-  if (o.period <= 0 || o.rate <= 0 || o.channels <= 0 || o.channels > 1024 || o.period > (1 << 24) ||
-      o.rate > 768000) {
-    throw UsageError("--period (1..16777216), --rate (1..768000) and --channels (1..1024) are out of range");
-  }
+  const auto within = [](const char* name, long long v, long long hi) {
+    if (v < 1 || v > hi)
+      throw UsageError(std::string(name) + " " + std::to_string(v) + " is out of range (1.." +
+                       std::to_string(hi) + ")");
+  };
+  within("--period", o.period, 1 << 24);
+  within("--rate", o.rate, 768000);
+  within("--channels", o.channels, 1024);
   const std::size_t frame_bytes = static_cast<std::size_t>(o.channels * bytes_per_sample(o.format));
   const std::size_t period_bytes = frame_bytes * static_cast<std::size_t>(o.period);
   std::vector<std::uint8_t> data = read_whole_file(o.input);
