@@ -179,8 +179,8 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
     std::uint64_t suppressed = 0;
     if (limiter.allow("output-dropped", suppressed))
       spdlog::warn(
-          "output: the reader of {} is not reading: {} pulse(s) dropped (total {}); it will get the "
-          "pulses still queued when it reads again",
+          "output: the reader of {} is not reading: {} pulse(s) dropped (total {}); pulses that wait in "
+          "its queue over 2 s are dropped rather than delivered late",
           config.output.path, now.output_dropped - before.output_dropped, now.output_dropped);
   } else if (before.output_state == "reader-behind" && now.output_state != "reader-behind") {
     limiter.reset("output-dropped");
