@@ -144,8 +144,8 @@ double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept 
   return lookup(fund_, z, rho_track);
 }
 
-double HarmonicEvidence::order(double z, double rho_fundamental, bool half) const noexcept {
-  return lookup(half ? half_.front() : ladder_, z, rho_fundamental);
+double HarmonicEvidence::order(double z, double rho_fundamental) const noexcept {
+  return lookup(ladder_, z, rho_fundamental);
 }
 
 double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {

@@ -30,11 +30,11 @@ class HarmonicEvidence {
   // Log likelihood ratio (engine fundamental over noise-or-tone) of a bin with normalised power z, when
   // the track's recent fundamental SNR is rho_track (per bin, linear).
   [[nodiscard]] double fundamental(double z, double rho_track) const noexcept;
-  // Log likelihood ratio of another order's bin (the half order or a harmonic), given the per-bin SNR of
-  // the candidate's fundamental.
-  [[nodiscard]] double order(double z, double rho_fundamental, bool half) const noexcept;
-  // The half order's ratio when the probability that this engine's signal has no half order is `absent`
-  // (learned per recording; `order(z, rho, true)` is the prior's, kOrderAbsent), within [0, 0.9].
+  // Log likelihood ratio of a harmonic's bin (2f, 3f), given the per-bin SNR of the candidate's
+  // fundamental.
+  [[nodiscard]] double order(double z, double rho_fundamental) const noexcept;
+  // The same for the half order's bin, when the probability that this engine's signal has none is
+  // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
   [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
 
  private:
