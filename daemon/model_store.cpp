@@ -13,7 +13,7 @@ ModelLoad load_model_file(const std::filesystem::path& path) noexcept {
   try {
     text = read_file(path);
   } catch (const std::exception& e) {
-    return {nullptr, e.what(), true};
+    return {nullptr, e.what()};
   }
   if (!text) return {};
   try {

@@ -57,12 +57,11 @@ class ModelHolder {
 };
 
 struct ModelLoad {
-  ModelPtr model;           // null when absent or rejected
-  std::string error;        // why a present file was rejected (empty otherwise)
-  bool unreadable = false;  // ... because it could not be read (permissions, I/O), not for its content
+  ModelPtr model;     // null when absent or rejected
+  std::string error;  // why a present file was rejected, for its content or because it cannot be read
 };
 
-// Reads `path`; a missing file gives {null, ""}; a corrupt one gives {null, reason}. Never throws.
+// Reads `path`; a missing file gives {null, ""}; a corrupt or unreadable one {null, reason}. Never throws.
 [[nodiscard]] ModelLoad load_model_file(const std::filesystem::path& path) noexcept;
 // Atomic write. Throws std::system_error.
 void save_model_file(const std::filesystem::path& path, const GearModel& model);

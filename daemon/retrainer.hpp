@@ -21,7 +21,8 @@
 namespace gearpulse::daemon {
 
 // Key in a model's `extra` object the daemon's fits carry: the wall-clock time (UNIX s) of the newest
-// training pair the fit saw. Pairs after it count as new for the next retrain, across restarts.
+// training pair the fit saw. Pairs after it count as new for the next retrain, across restarts, for a
+// model without kTrainedLast (or whose last pair has left the store).
 inline constexpr std::string_view kTrainedUntil = "trained_until";
 // And the last pair it saw in the store's order, [t, speed, freq]: the pairs after it in the store are
 // new, whatever the wall clock said when either was made (a car PC's clock may be years off until set).
