@@ -261,7 +261,15 @@ void check_relations(const Config& c, const toml::table& root, const std::string
   }
 }
 
-Config from_table(const toml::table& root, const std::string& file) {
+// A relative path in the file is taken from the file's own directory, as the file's author sees it: under
+// systemd the daemon runs from /, not from where the file lives.
+void resolve_paths(Config& c, const std::filesystem::path& base) {
+  if (base.empty()) return;
+  for (std::string* p : {&c.output.path, &c.model.state_dir, &c.control.socket})
+    if (!p->empty() && std::filesystem::path(*p).is_relative()) *p = (base / *p).lexically_normal().string();
+}
+
+Config from_table(const toml::table& root, const std::string& file, const std::filesystem::path& base) {
   Config config;
   config.source = file;
   static constexpr std::string_view kSections[] = {"audio", "tracker", "gps", "output",
@@ -288,6 +296,7 @@ Config from_table(const toml::table& root, const std::string& file) {
   section("model", read_model, config.model);
   section("control", read_control, config.control);
   section("log", read_log, config.log);
+  resolve_paths(config, base);
   check_relations(config, root, file);
   return config;
 }
@@ -329,14 +338,15 @@ const char* to_string(OutputKind kind) noexcept {
   return "none";
 }
 
-Config parse_config(std::string_view text, const std::string& source_name) {
+Config parse_config(std::string_view text, const std::string& source_name,
+                    const std::filesystem::path& base_dir) {
   toml::table root;
   try {
     root = toml::parse(text, std::string_view(source_name));
   } catch (const toml::parse_error& e) {
     throw ConfigError(where(source_name, e.source()) + ": " + std::string(e.description()));
   }
-  return from_table(root, source_name);
+  return from_table(root, source_name, base_dir);
 }
 
 Config load_config(const std::string& path) {
@@ -348,7 +358,7 @@ Config load_config(const std::string& path) {
   std::ostringstream text;
   text << in.rdbuf();
   if (in.bad()) throw ConfigError(path + ": read error");
-  return parse_config(text.str(), path);
+  return parse_config(text.str(), path, std::filesystem::absolute(path, ec).parent_path());
 }
 
 std::vector<std::string> restart_required_changes(const Config& a, const Config& b) {

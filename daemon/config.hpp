@@ -2,6 +2,7 @@
 // The daemon's configuration (TOML). Every key has a default; unknown keys, wrong types and out-of-range
 // values are errors of the form "file:line: key: reason", raised before any device is opened.
 #include <cstdint>
+#include <filesystem>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -95,10 +96,13 @@ struct ConfigError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Parses and validates; throws ConfigError.
+// Parses and validates; throws ConfigError. Relative paths in the file (output.path, model.state_dir,
+// control.socket) are taken from the file's directory, not the daemon's working directory.
 [[nodiscard]] Config load_config(const std::string& path);
-// Same from text (tests); `source_name` is used in messages.
-[[nodiscard]] Config parse_config(std::string_view text, const std::string& source_name);
+// Same from text (tests); `source_name` is used in messages, relative paths are taken from `base_dir`
+// (left as written when it is empty).
+[[nodiscard]] Config parse_config(std::string_view text, const std::string& source_name,
+                                  const std::filesystem::path& base_dir = {});
 
 [[nodiscard]] const char* to_string(OutputKind kind) noexcept;
 

@@ -1,9 +1,11 @@
 #include <catch2/catch.hpp>
 
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "daemon/config.hpp"
+#include "tests/test_util.hpp"
 
 using gearpulse::daemon::Config;
 using gearpulse::daemon::ConfigError;
@@ -218,6 +220,25 @@ TEST_CASE("config: a directory given as the file is an error naming it") {
   } catch (const ConfigError& e) {
     CHECK(std::string(e.what()) == dir + ": cannot read config file: is a directory");
   }
+}
+
+TEST_CASE("config: relative paths are taken from the config file's directory") {
+  // Under systemd the daemon's working directory is /: "state" must not become /state.
+  const gearpulse::test::TempDir dir;
+  std::filesystem::create_directories(dir / "etc");
+  const auto file = dir / "etc/gearpulse.toml";
+  std::ofstream(file) << "[output]\npath = \"pulse\"\n[model]\nstate_dir = \"../state\"\n"
+                         "[control]\nsocket = \"/run/x/ctl.sock\"\n";
+  const Config c = gearpulse::daemon::load_config(file.string());
+  CHECK(c.output.path == (dir / "etc/pulse").string());
+  CHECK(c.model.state_dir == (dir / "state").string());
+  CHECK(c.control.socket == "/run/x/ctl.sock");  // absolute: as written
+  // From text with no file, as written.
+  CHECK(parse_config("[model]\nstate_dir = \"s\"\n", "a").model.state_dir == "s");
+  // The socket's length limit applies to the path the daemon will bind.
+  std::ofstream(file) << "[control]\nsocket = \"" << std::string(100, 'x') << "\"\n";
+  CHECK_THROWS_WITH(gearpulse::daemon::load_config(file.string()),
+                    Catch::Matchers::Contains("control.socket: path longer than 107 bytes"));
 }
 
 TEST_CASE("config: changes that need a restart are named") {
