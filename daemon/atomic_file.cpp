@@ -23,27 +23,8 @@ std::string temp_prefix(const std::filesystem::path& path) {
   throw std::system_error(errno, std::generic_category(), what + " " + path.string());
 }
 
-class Fd {
- public:
-  explicit Fd(int fd) noexcept : fd_(fd) {}
-  ~Fd() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  Fd(const Fd&) = delete;
-  Fd& operator=(const Fd&) = delete;
-  [[nodiscard]] int get() const noexcept { return fd_; }
-  int release() noexcept {
-    const int fd = fd_;
-    fd_ = -1;
-    return fd;
-  }
-
- private:
-  int fd_;
-};
-
 void sync_directory(const std::filesystem::path& dir) {
-  Fd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+  UniqueFd dfd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
   if (dfd.get() < 0 || ::fsync(dfd.get()) != 0) throw_errno("cannot fsync directory", dir);
 }
 
@@ -90,7 +71,7 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
   std::string tmpl = (dir / (temp_prefix(path) + "XXXXXX")).string();
   std::vector<char> name(tmpl.begin(), tmpl.end());
   name.push_back('\0');
-  Fd fd(::mkostemp(name.data(), O_CLOEXEC));
+  UniqueFd fd(::mkostemp(name.data(), O_CLOEXEC));
   if (fd.get() < 0) throw_errno("cannot create temp file for", path);
   const std::string tmp(name.data());
   try {
@@ -108,7 +89,7 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
 }
 
 void append_file_durable(const std::filesystem::path& path, std::string_view data) {
-  Fd fd(::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC));
+  UniqueFd fd(::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC));
   if (fd.get() < 0) throw_errno("cannot open", path);
   write_all(fd.get(), data, path);
   if (::fdatasync(fd.get()) != 0) throw_errno("cannot fsync", path);
@@ -124,7 +105,7 @@ void remove_file_durable(const std::filesystem::path& path) {
 }
 
 std::optional<std::string> read_file(const std::filesystem::path& path) {
-  Fd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
   if (fd.get() < 0) {
     if (errno == ENOENT) return std::nullopt;
     throw_errno("cannot open", path);
@@ -160,23 +141,16 @@ std::size_t remove_stale_temp_files(const std::filesystem::path& path) noexcept 
 
 DirectoryLock::DirectoryLock(const std::filesystem::path& dir) {
   const std::filesystem::path path = dir / ".lock";
-  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
-  if (fd_ < 0) throw_errno("cannot open lock file", path);
-  if (::flock(fd_, LOCK_EX | LOCK_NB) == 0) {
+  fd_.reset(::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600));
+  if (!fd_) throw_errno("cannot open lock file", path);
+  if (::flock(fd_.get(), LOCK_EX | LOCK_NB) == 0) {
     held_ = true;
   } else if (errno != EWOULDBLOCK) {
     // No locks on this file system (some network or FUSE mounts): say so, rather than take it for a
     // second daemon.
     const int err = errno;
-    ::close(fd_);
-    fd_ = -1;
-    errno = err;
-    throw_errno("cannot lock", path);
+    throw std::system_error(err, std::generic_category(), "cannot lock " + path.string());
   }
-}
-
-DirectoryLock::~DirectoryLock() {
-  if (fd_ >= 0) ::close(fd_);  // releases the lock
 }
 
 }  // namespace gearpulse::daemon

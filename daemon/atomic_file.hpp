@@ -6,6 +6,8 @@
 #include <string>
 #include <string_view>
 
+#include "drivers/unique_fd.hpp"
+
 namespace gearpulse::daemon {
 
 // Writes `data` to a temp file in the same directory, fsyncs it, renames it over `path` and fsyncs the
@@ -38,14 +40,13 @@ class DirectoryLock {
   // Throws std::system_error naming the lock file when it cannot be opened or the file system has no
   // locks; held() is false only when another process holds the lock.
   explicit DirectoryLock(const std::filesystem::path& dir);
-  ~DirectoryLock();
   DirectoryLock(const DirectoryLock&) = delete;
   DirectoryLock& operator=(const DirectoryLock&) = delete;
   // False when another process holds the lock.
   [[nodiscard]] bool held() const noexcept { return held_; }
 
  private:
-  int fd_ = -1;
+  UniqueFd fd_;  // closing it releases the lock
   bool held_ = false;
 };
 

@@ -42,12 +42,12 @@ void clear_stale_socket(const std::string& path) {
   if (::lstat(path.c_str(), &st) != 0) return;
   if (!S_ISSOCK(st.st_mode))
     throw std::runtime_error("control socket path " + path + " exists and is not a socket; not touching it");
-  const int probe = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (probe < 0) throw_errno("socket");
+  UniqueFd probe(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  if (!probe) throw_errno("socket");
   const sockaddr_un addr = make_address(path);
-  const int rc = ::connect(probe, reinterpret_cast<const sockaddr*>(&addr), sizeof addr);
+  const int rc = ::connect(probe.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr);
   const int err = errno;
-  ::close(probe);
+  probe.reset();
   if (rc == 0) throw std::runtime_error("another gearpulsed is already serving " + path);
   if (err != ECONNREFUSED && err != ENOENT)
     throw std::system_error(err, std::generic_category(), "cannot probe existing socket " + path);
@@ -56,15 +56,12 @@ void clear_stale_socket(const std::string& path) {
 }
 
 struct Client {
-  int fd = -1;
+  UniqueFd fd;
   std::string in;
   std::string out;
   bool close_after_flush = false;
   std::uint32_t events = EPOLLIN | EPOLLRDHUP;
   std::chrono::steady_clock::time_point last_activity;
-  ~Client() {
-    if (fd >= 0) ::close(fd);
-  }
 };
 
 }  // namespace
@@ -79,34 +76,32 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
       throw std::system_error(ec, "cannot create directory " + parent.string() + " for the control socket");
   }
   clear_stale_socket(path_);
-  listen_fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (listen_fd_ < 0) throw_errno("socket");
+  listen_fd_.reset(::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
+  if (!listen_fd_) throw_errno("socket");
   const sockaddr_un addr = make_address(path_);
   try {
-    if (::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0)
+    if (::bind(listen_fd_.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0)
       throw_errno("cannot bind control socket " + path_);
     // Owner and group (the gearpulse group) may talk to the daemon; nobody else. Set before listen so
     // no connection is ever accepted under a wider mode.
     if (::chmod(path_.c_str(), 0660) != 0) throw_errno("cannot chmod control socket " + path_);
-    if (::listen(listen_fd_, 16) != 0) throw_errno("cannot listen on " + path_);
-    epoll_fd_ = ::epoll_create1(EPOLL_CLOEXEC);
-    if (epoll_fd_ < 0) throw_errno("epoll_create1");
-    wake_fd_ = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-    if (wake_fd_ < 0) throw_errno("eventfd");
+    if (::listen(listen_fd_.get(), 16) != 0) throw_errno("cannot listen on " + path_);
+    epoll_fd_.reset(::epoll_create1(EPOLL_CLOEXEC));
+    if (!epoll_fd_) throw_errno("epoll_create1");
+    wake_fd_.reset(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
+    if (!wake_fd_) throw_errno("eventfd");
   } catch (...) {
-    if (epoll_fd_ >= 0) ::close(epoll_fd_);
-    ::close(listen_fd_);
-    ::unlink(path_.c_str());
+    ::unlink(path_.c_str());  // the descriptors close as the members go
     throw;
   }
 }
 
 ControlServer::~ControlServer() {
   stop();
-  if (wake_fd_ >= 0) ::close(wake_fd_);
-  if (epoll_fd_ >= 0) ::close(epoll_fd_);
-  if (listen_fd_ >= 0) {
-    ::close(listen_fd_);
+  wake_fd_.reset();
+  epoll_fd_.reset();
+  if (listen_fd_) {
+    listen_fd_.reset();
     ::unlink(path_.c_str());
   }
 }
@@ -120,7 +115,7 @@ void ControlServer::stop() noexcept {
   if (!thread_.joinable()) return;
   running_.store(false);
   const std::uint64_t one = 1;
-  [[maybe_unused]] const ssize_t n = ::write(wake_fd_, &one, sizeof one);
+  [[maybe_unused]] const ssize_t n = ::write(wake_fd_.get(), &one, sizeof one);
   thread_.join();
 }
 
@@ -162,27 +157,27 @@ void ControlServer::run() noexcept {
     epoll_event ev{};
     ev.events = events;
     ev.data.fd = fd;
-    return ::epoll_ctl(epoll_fd_, EPOLL_CTL_ADD, fd, &ev) == 0;
+    return ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_ADD, fd, &ev) == 0;
   };
   const auto set_events = [this](int fd, std::uint32_t events) {
     epoll_event ev{};
     ev.events = events;
     ev.data.fd = fd;
-    ::epoll_ctl(epoll_fd_, EPOLL_CTL_MOD, fd, &ev);
+    ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_MOD, fd, &ev);
   };
   const auto drop = [&](int fd, const char* why) {
     if (why) {
       dropped_.fetch_add(1, std::memory_order_relaxed);
       spdlog::debug("control: dropping client fd {}: {}", fd, why);
     }
-    ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, fd, nullptr);
+    ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_DEL, fd, nullptr);
     clients.erase(fd);
     clients_.store(clients.size(), std::memory_order_relaxed);
   };
   // Writes what the socket accepts now; returns false if the client must go.
   const auto flush = [&](Client& c) {
     while (!c.out.empty()) {
-      const ssize_t n = ::send(c.fd, c.out.data(), c.out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+      const ssize_t n = ::send(c.fd.get(), c.out.data(), c.out.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
       if (n < 0) {
         if (errno == EINTR) continue;
         if (errno == EAGAIN || errno == EWOULDBLOCK) break;
@@ -196,7 +191,7 @@ void ControlServer::run() noexcept {
                                  (c.out.empty() ? 0u : std::uint32_t{EPOLLOUT});
     if (events != c.events) {
       c.events = events;
-      set_events(c.fd, events);
+      set_events(c.fd.get(), events);
     }
     return true;
   };
@@ -206,7 +201,7 @@ void ControlServer::run() noexcept {
     return c.out.size() <= limits_.max_output_bytes;
   };
 
-  if (!add_fd(listen_fd_, EPOLLIN) || !add_fd(wake_fd_, EPOLLIN)) {
+  if (!add_fd(listen_fd_.get(), EPOLLIN) || !add_fd(wake_fd_.get(), EPOLLIN)) {
     spdlog::error("control: epoll registration failed: {}; control socket unavailable", std::strerror(errno));
     return;
   }
@@ -217,24 +212,24 @@ void ControlServer::run() noexcept {
   auto accept_resume = std::chrono::steady_clock::now();
   LogLimiter accept_limiter;
   while (running_.load()) {
-    const int n = ::epoll_wait(epoll_fd_, events, 32, accept_paused ? 100 : 1000);
+    const int n = ::epoll_wait(epoll_fd_.get(), events, 32, accept_paused ? 100 : 1000);
     if (n < 0 && errno != EINTR) {
       spdlog::error("control: epoll_wait failed: {}", std::strerror(errno));
       break;
     }
     const auto now = std::chrono::steady_clock::now();
-    if (accept_paused && now >= accept_resume && add_fd(listen_fd_, EPOLLIN)) accept_paused = false;
+    if (accept_paused && now >= accept_resume && add_fd(listen_fd_.get(), EPOLLIN)) accept_paused = false;
     for (int i = 0; i < n; ++i) {
       const int fd = events[i].data.fd;
-      if (fd == wake_fd_) continue;
-      if (fd == listen_fd_) {
+      if (fd == wake_fd_.get()) continue;
+      if (fd == listen_fd_.get()) {
         for (;;) {
-          const int cfd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC);
-          if (cfd < 0) {
+          UniqueFd cfd(::accept4(listen_fd_.get(), nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));
+          if (!cfd) {
             const int err = errno;
             if (err == EAGAIN || err == EWOULDBLOCK || err == EINTR || err == ECONNABORTED) break;
             if (err == EMFILE || err == ENFILE || err == ENOBUFS || err == ENOMEM) {
-              ::epoll_ctl(epoll_fd_, EPOLL_CTL_DEL, listen_fd_, nullptr);
+              ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_DEL, listen_fd_.get(), nullptr);
               accept_paused = true;
               accept_resume = now + std::chrono::seconds(1);
               std::uint64_t suppressed = 0;
@@ -247,16 +242,16 @@ void ControlServer::run() noexcept {
           if (clients.size() >= limits_.max_clients) {
             static constexpr char kBusy[] = "{\"ok\":false,\"error\":\"too many clients\",\"v\":1}\n";
             [[maybe_unused]] const ssize_t w =
-                ::send(cfd, kBusy, sizeof kBusy - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
-            ::close(cfd);
+                ::send(cfd.get(), kBusy, sizeof kBusy - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
             dropped_.fetch_add(1, std::memory_order_relaxed);
             continue;
           }
+          const int key = cfd.get();
           auto c = std::make_unique<Client>();
-          c->fd = cfd;
+          c->fd = std::move(cfd);
           c->last_activity = now;
-          if (!add_fd(cfd, EPOLLIN | EPOLLRDHUP)) continue;  // unique_ptr closes it
-          clients.emplace(cfd, std::move(c));
+          if (!add_fd(key, EPOLLIN | EPOLLRDHUP)) continue;  // unique_ptr closes it
+          clients.emplace(key, std::move(c));
           clients_.store(clients.size(), std::memory_order_relaxed);
         }
         continue;

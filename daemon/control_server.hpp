@@ -12,6 +12,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "drivers/unique_fd.hpp"
+
 namespace gearpulse::daemon {
 
 // Thrown by a handler to answer {"ok":false,"error":what()}.
@@ -58,9 +60,9 @@ class ControlServer {
   std::string path_;
   Handler handler_;
   ControlLimits limits_;
-  int listen_fd_ = -1;
-  int epoll_fd_ = -1;
-  int wake_fd_ = -1;
+  UniqueFd listen_fd_;
+  UniqueFd epoll_fd_;
+  UniqueFd wake_fd_;
   std::thread thread_;
   std::atomic<bool> running_{false};
   std::atomic<std::size_t> clients_{0};

@@ -28,6 +28,7 @@
 #include "daemon/systemd_notify.hpp"
 #include "daemon/training_store.hpp"
 #include "daemon/watchdog.hpp"
+#include "drivers/unique_fd.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -249,14 +250,14 @@ bool Daemon::Impl::load_state() {
     // Said now, not at the first save minutes later (or at shutdown).
     // A block is written and synced, so that a full disk shows as well as a read-only one.
     const std::filesystem::path probe = state_dir / ".gearpulse-write-test";
-    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    int err = fd < 0 ? errno : 0;
-    if (fd >= 0) {
+    UniqueFd fd(::open(probe.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600));
+    int err = fd ? 0 : errno;
+    if (fd) {
       static constexpr char kBlock[4096] = {};
-      const ssize_t n = ::write(fd, kBlock, sizeof kBlock);
+      const ssize_t n = ::write(fd.get(), kBlock, sizeof kBlock);
       if (n != static_cast<ssize_t>(sizeof kBlock)) err = n < 0 ? errno : ENOSPC;
-      if (err == 0 && ::fdatasync(fd) != 0) err = errno;
-      ::close(fd);
+      if (err == 0 && ::fdatasync(fd.get()) != 0) err = errno;
+      fd.reset();
       ::unlink(probe.c_str());
     }
     if (err != 0) {
@@ -566,24 +567,20 @@ int Daemon::run() {
     spdlog::critical("cannot block signals");
     return 1;
   }
-  const int sfd = signalfd(-1, &mask, SFD_CLOEXEC | SFD_NONBLOCK);
-  if (sfd < 0) {
+  const UniqueFd sfd(signalfd(-1, &mask, SFD_CLOEXEC | SFD_NONBLOCK));
+  if (!sfd) {
     spdlog::critical("signalfd failed: {}", std::strerror(errno));
     return 1;
   }
   ::signal(SIGPIPE, SIG_IGN);
 
-  if (!d.load_state()) {
-    ::close(sfd);
-    return 1;
-  }
+  if (!d.load_state()) return 1;
   try {
     d.control.emplace(
         d.config.control.socket, [&d](const nlohmann::json& req) { return d.handle(req); },
         ControlLimits{.max_clients = d.config.control.max_clients});
   } catch (const std::exception& e) {
     spdlog::critical("control: {}; exiting", e.what());
-    ::close(sfd);
     return 1;
   }
   d.pipeline.emplace(d.config, d.model, d.store);
@@ -610,11 +607,11 @@ int Daemon::run() {
   PipelineSnapshot previous = d.pipeline->snapshot();
   bool running = true;
   while (running) {
-    pollfd pfd{sfd, POLLIN, 0};
+    pollfd pfd{sfd.get(), POLLIN, 0};
     const int n = ::poll(&pfd, 1, static_cast<int>(std::max<long long>(tick.count(), 50)));
     if (n > 0) {
       signalfd_siginfo info{};
-      while (::read(sfd, &info, sizeof info) == static_cast<ssize_t>(sizeof info)) {
+      while (::read(sfd.get(), &info, sizeof info) == static_cast<ssize_t>(sizeof info)) {
         if (info.ssi_signo == SIGHUP) {
           d.reload();
         } else {
@@ -686,7 +683,6 @@ int Daemon::run() {
   if (d.pipeline->drain_pairs() > 0) d.save_or_journal();
   d.retrainer.stop();
   d.control.reset();
-  ::close(sfd);
   spdlog::info("gearpulsed stopped");
   return 0;
 }

@@ -27,12 +27,12 @@ namespace {
 }
 
 // A file descriptor for the slave side without a path lookup where the kernel offers it (Linux >= 4.13).
-int open_peer(int master, const std::string& slave_name) noexcept {
+UniqueFd open_peer(int master, const std::string& slave_name) noexcept {
 #ifdef TIOCGPTPEER
   const int fd = ::ioctl(master, TIOCGPTPEER, O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-  if (fd >= 0) return fd;
+  if (fd >= 0) return UniqueFd(fd);
 #endif
-  return ::open(slave_name.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+  return UniqueFd(::open(slave_name.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC));
 }
 
 }  // namespace
@@ -50,42 +50,34 @@ PtyOutput::PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_ag
   // One owner per link: another process publishing its PTY at this path holds this lock (released by the
   // kernel when it exits, however it exits), and its link is not taken from under its reader.
   const std::string lock_path = link_.string() + ".lock";
-  lock_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
-  if (lock_ < 0) fail(link_, "cannot open " + lock_path, errno);
-  if (::flock(lock_, LOCK_EX | LOCK_NB) != 0) {
+  lock_.reset(::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600));
+  if (const int err = errno; !lock_) fail(link_, "cannot open " + lock_path, err);
+  if (::flock(lock_.get(), LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
-    ::close(lock_);
-    lock_ = -1;
     if (err == EWOULDBLOCK) fail(link_, "in use by another process (it holds " + lock_path + ")");
     fail(link_, "cannot lock " + lock_path, err);
   }
 
-  master_ = ::posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
-  if (master_ < 0) {
-    const int err = errno;
-    ::close(lock_);
-    fail(link_, "posix_openpt", err);
-  }
+  master_.reset(::posix_openpt(O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC));
+  if (const int err = errno; !master_) fail(link_, "posix_openpt", err);
   char name[128];
-  if (::grantpt(master_) != 0 || ::unlockpt(master_) != 0 || ::ptsname_r(master_, name, sizeof name) != 0) {
+  if (::grantpt(master_.get()) != 0 || ::unlockpt(master_.get()) != 0 ||
+      ::ptsname_r(master_.get(), name, sizeof name) != 0) {
     const int err = errno;
-    ::close(master_);
-    ::close(lock_);
     fail(link_, "cannot set up the pseudo-terminal", err);
   }
   slave_name_ = name;
   // Raw mode on the pair (termios ioctls on a Linux master act on the slave): bytes pass unchanged, no
   // echo, no line buffering, so every pulse byte is readable at once.
   termios tio{};
-  if (::tcgetattr(master_, &tio) == 0) {
+  if (::tcgetattr(master_.get(), &tio) == 0) {
     ::cfmakeraw(&tio);
-    ::tcsetattr(master_, TCSANOW, &tio);
+    ::tcsetattr(master_.get(), TCSANOW, &tio);
   }
   ::chmod(slave_name_.c_str(), 0660);
   // Open and close the slave once: from then on the master reports POLLHUP whenever no reader has the
   // slave open, which is how rise() knows that a pulse would only be queued for nobody.
-  const int peer = open_peer(master_, slave_name_);
-  if (peer >= 0) ::close(peer);
+  (void)open_peer(master_.get(), slave_name_);
 
   // Publish atomically: a reader never sees a missing or half-made link.
   const std::filesystem::path tmp = link_.string() + ".tmp" + std::to_string(::getpid());
@@ -93,31 +85,25 @@ PtyOutput::PtyOutput(std::filesystem::path link, std::chrono::nanoseconds max_ag
   if (::symlink(slave_name_.c_str(), tmp.c_str()) != 0 || ::rename(tmp.c_str(), link_.c_str()) != 0) {
     const int err = errno;
     ::unlink(tmp.c_str());
-    ::close(master_);
-    ::close(lock_);
     fail(link_, "cannot create the symlink to " + slave_name_, err);
   }
 }
 
+// The descriptors close after this, the master first: the lock file stays (removing it would race with
+// the next owner).
 PtyOutput::~PtyOutput() {
   char target[256];
   const ssize_t n = ::readlink(link_.c_str(), target, sizeof target - 1);
   if (n > 0 && std::string(target, static_cast<std::size_t>(n)) == slave_name_) ::unlink(link_.c_str());
-  if (master_ >= 0) ::close(master_);
-  if (lock_ >= 0) ::close(lock_);  // the lock file stays: removing it would race with the next owner
 }
 
 void PtyOutput::rise() noexcept {
-  pollfd p{master_, 0, 0};
+  pollfd p{master_.get(), 0, 0};
   if (::poll(&p, 1, 0) > 0 && (p.revents & POLLHUP)) {
     if (!idle_) {
       // The reader just left: bytes it did not read would otherwise greet the next reader as a burst of
       // stale pulses. Drop them once, then count pulses as unheard until somebody opens the slave.
-      const int peer = open_peer(master_, slave_name_);
-      if (peer >= 0) {
-        ::tcflush(peer, TCIFLUSH);
-        ::close(peer);
-      }
+      if (const UniqueFd peer = open_peer(master_.get(), slave_name_)) ::tcflush(peer.get(), TCIFLUSH);
       idle_ = true;
     }
     unheard_.fetch_add(1, std::memory_order_relaxed);
@@ -126,7 +112,7 @@ void PtyOutput::rise() noexcept {
   idle_ = false;
   drop_stale(monotonic_ns());
   static constexpr char kPulse = 'P';
-  const ssize_t n = ::write(master_, &kPulse, 1);
+  const ssize_t n = ::write(master_.get(), &kPulse, 1);
   if (n == 1) {
     written_.fetch_add(1, std::memory_order_relaxed);
   } else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
@@ -145,10 +131,10 @@ void PtyOutput::drop_stale(std::int64_t now_ns) noexcept {
   const std::uint64_t written = written_.load(std::memory_order_relaxed);
   looks_[looks_next_] = Look{now_ns, written};
   looks_next_ = (looks_next_ + 1) % kLooks;
-  const int peer = open_peer(master_, slave_name_);
-  if (peer < 0) return;
+  const UniqueFd peer = open_peer(master_.get(), slave_name_);
+  if (!peer) return;
   int queued = 0;
-  if (::ioctl(peer, FIONREAD, &queued) == 0 && queued > 0) {
+  if (::ioctl(peer.get(), FIONREAD, &queued) == 0 && queued > 0) {
     // The oldest byte queued is the (written - queued)-th written: before every look that had more
     // written than that. Stale when the earliest of those is over max_age ago (a byte older than every
     // look is older than the earliest look).
@@ -157,10 +143,9 @@ void PtyOutput::drop_stale(std::int64_t now_ns) noexcept {
     std::int64_t written_by_ns = now_ns;
     for (const Look& l : looks_)
       if (l.t_ns != 0 && l.written > oldest) written_by_ns = std::min(written_by_ns, l.t_ns);
-    if (now_ns - written_by_ns > max_age_ns_ && ::tcflush(peer, TCIFLUSH) == 0)
+    if (now_ns - written_by_ns > max_age_ns_ && ::tcflush(peer.get(), TCIFLUSH) == 0)
       overflowed_.fetch_add(static_cast<std::uint64_t>(queued), std::memory_order_relaxed);
   }
-  ::close(peer);
 }
 
 std::string PtyOutput::describe() const {

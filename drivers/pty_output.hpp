@@ -15,6 +15,7 @@
 #include <string>
 
 #include "drivers/pulse_output.hpp"
+#include "drivers/unique_fd.hpp"
 
 namespace gearpulse {
 
@@ -50,8 +51,8 @@ class PtyOutput final : public PulseOutput {
  private:
   std::filesystem::path link_;
   std::string slave_name_;
-  int master_ = -1;
-  int lock_ = -1;     // flock on "<link>.lock", held for the object's life
+  UniqueFd lock_;  // flock on "<link>.lock", held for the object's life (released after the master)
+  UniqueFd master_;
   bool idle_ = true;  // pulse-thread state: no reader had the slave open at the last pulse
   // Pulse-thread state for the age of the reader's queue: at each look (at a pulse, at most every quarter of
   // max_age) the time and the count of pulses written by then, the last kLooks of them.

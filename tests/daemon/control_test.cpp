@@ -132,7 +132,7 @@ TEST_CASE("control: many clients at once") {
     for (int i = 0; i < kClients; ++i) {
       const auto line = clients[i]->read_line();
       REQUIRE(line.has_value());
-      CHECK(json::parse(*line)["echo"] == "c" + std::to_string(i));
+      CHECK(json::parse(*line)["echo"] == std::string("c").append(std::to_string(i)));
     }
   // Concurrent threads too.
   std::atomic<int> good{0};

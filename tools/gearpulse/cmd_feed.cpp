@@ -20,6 +20,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "drivers/unique_fd.hpp"
 #include "tools/gearpulse/commands.hpp"
 
 namespace gearpulse::cli {
@@ -99,8 +100,9 @@ int run_feed(const FeedOptions& o) {
   data.resize(periods * period_bytes, 0);
 
   std::signal(SIGPIPE, SIG_IGN);
-  const int fd = ::open(o.fifo.c_str(), O_WRONLY);  // blocks until the capture side opens it
-  if (fd < 0) throw UsageError(o.fifo + ": " + std::strerror(errno));
+  const gearpulse::UniqueFd fifo(::open(o.fifo.c_str(), O_WRONLY));  // blocks until the capture side opens it
+  if (!fifo) throw UsageError(o.fifo + ": " + std::strerror(errno));
+  const int fd = fifo.get();
 
   timespec start{};
   clock_gettime(CLOCK_MONOTONIC, &start);
@@ -114,7 +116,6 @@ int run_feed(const FeedOptions& o) {
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, nullptr) == EINTR) {
     }
   }
-  ::close(fd);
   if (written < periods) {
     std::fprintf(stderr, "gearpulse feed: %s: reader closed after %zu of %zu periods\n", o.fifo.c_str(),
                  written, periods);

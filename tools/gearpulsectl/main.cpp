@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_protocol.hpp"
+#include "drivers/unique_fd.hpp"
 
 namespace {
 
@@ -35,12 +36,9 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
   addr.sun_family = AF_UNIX;
   if (path.size() >= sizeof addr.sun_path) throw Failure{"socket path too long: " + path, 2};
   std::memcpy(addr.sun_path, path.c_str(), path.size() + 1);
-  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  if (fd < 0) throw Failure{std::string("socket: ") + std::strerror(errno), 1};
-  struct Closer {
-    int fd;
-    ~Closer() { ::close(fd); }
-  } closer{fd};
+  const gearpulse::UniqueFd socket(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  if (!socket) throw Failure{std::string("socket: ") + std::strerror(errno), 1};
+  const int fd = socket.get();
   if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
     const int err = errno;
     struct stat st {};
