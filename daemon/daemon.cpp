@@ -98,6 +98,7 @@ struct Daemon::Impl {
   std::string reload_error;                  // the last SIGHUP's file was refused ("" = it was taken)
   std::vector<std::string> restart_pending;  // changed by the last reload, waiting for a restart
   void note_state_problem(std::string text);
+  static constexpr int kMaxSetAside = 100;  // copies of a file kept as NAME.corrupt[.N]
   [[nodiscard]] std::string set_aside(const std::filesystem::path& path);
 
   std::optional<DirectoryLock> state_lock;
@@ -216,17 +217,22 @@ void Daemon::Impl::note_state_problem(std::string text) {
 // does not overwrite what someone may want to look at or recover. Returns where it is now, for the log
 // ("kept as NAME.corrupt", or "left where it is" if it could not be moved).
 std::string Daemon::Impl::set_aside(const std::filesystem::path& path) {
-  // A name not yet taken: the evidence of an earlier corruption is kept too.
+  // A name not yet taken: the evidence of an earlier corruption is kept too. A name that cannot be looked
+  // up (a directory the daemon may not search) ends the search: it would never find a free one.
   std::filesystem::path aside = path;
   aside += ".corrupt";
   std::error_code ec;
-  for (int n = 1; std::filesystem::symlink_status(aside, ec).type() != std::filesystem::file_type::not_found;
-       ++n) {
+  for (int n = 1; n <= kMaxSetAside; ++n) {
+    const auto type = std::filesystem::symlink_status(aside, ec).type();
+    if (type == std::filesystem::file_type::not_found) {
+      std::filesystem::rename(path, aside, ec);
+      return ec ? "left where it is: " + ec.message() : "kept as " + aside.string();
+    }
+    if (ec) return "left where it is: " + ec.message();
     aside = path;
     aside += ".corrupt." + std::to_string(n);
   }
-  std::filesystem::rename(path, aside, ec);
-  return ec ? "left where it is" : "kept as " + aside.string();
+  return "left where it is: " + std::to_string(kMaxSetAside) + " copies are set aside already";
 }
 
 bool Daemon::Impl::load_state() {

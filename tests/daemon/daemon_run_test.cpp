@@ -455,6 +455,32 @@ TEST_CASE(
   CHECK(again.wait() == 0);
 }
 
+// A state_dir the daemon's user may not search (root's, mode 0700): every lookup in it fails with EACCES.
+// Looking for a free name to set model.json aside spun forever there, at full CPU, deaf to SIGTERM.
+TEST_CASE("daemon: a state directory it may not search is said at start, and the daemon runs") {
+  TempDir dir;
+  const std::string as_nobody = "/usr/bin/setpriv --reuid=65534 --regid=65534 --clear-groups ";
+  if (::geteuid() != 0 || !std::filesystem::exists("/usr/bin/setpriv") ||
+      std::system((as_nobody + "test -x " + kDaemon).c_str()) != 0) {
+    std::puts("GEARPULSE_SKIP: needs root and a gearpulsed that user nobody may run");
+    return;
+  }
+  std::filesystem::permissions(dir.path(), std::filesystem::perms::all);  // nobody makes its socket here
+  std::filesystem::create_directories(dir / "state");
+  std::filesystem::permissions(dir / "state", std::filesystem::perms::owner_all);
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({"/usr/bin/setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", kDaemon, "--config",
+                  (dir / "gearpulse.toml").string()},
+                 dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["model"]["problems"].size() >= 1);
+  CHECK(read_text(dir / "log.txt").find("Permission denied") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
 TEST_CASE("daemon: a state directory it cannot write in is said at start and in status") {
   TempDir dir;
   // A state_dir under a regular file: it cannot be made, so nothing can be saved there (a directory
