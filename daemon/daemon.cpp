@@ -539,7 +539,19 @@ nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
     }
     if (!keep) {
       store.clear();
-      save_store("reset-model");
+      // The file that cannot be replaced still holds the cleared pairs, and the next start would bring
+      // them back: it goes (with its journal), or the reply says it stays.
+      if (!save_store("reset-model")) {
+        try {
+          remove_file_durable(TrainingStore::journal_path(store_path));
+          remove_file_durable(store_path);
+        } catch (const std::exception& e) {
+          throw ControlError(fmt::format(
+              "the model is forgotten, but the training pairs cannot be cleared from {} ({}): they come "
+              "back at the next start",
+              store_path.string(), e.what()));
+        }
+      }
     }
     spdlog::warn("control: model reset{}; pulses follow GPS while the model is learning again",
                  keep ? " (training pairs kept)" : " and training pairs cleared");

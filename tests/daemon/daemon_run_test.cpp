@@ -162,6 +162,23 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
 }
 
+TEST_CASE("daemon: reset-model says so when the training pairs cannot be cleared from disk") {
+  TempDir dir;
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+  // A store file that can be neither replaced nor removed: a directory with something in it.
+  std::filesystem::create_directories(dir / "state/training.bin/keep");
+  const json reply = ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true})");
+  INFO(reply.dump());
+  CHECK(reply["ok"] == false);
+  CHECK(reply["error"].get<std::string>().find("cannot be cleared") != std::string::npos);
+  std::filesystem::remove_all(dir / "state/training.bin");
+  CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true})")["ok"] == true);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
 TEST_CASE("daemon: a PTY output in a directory that does not exist yet is made there") {
   TempDir dir;
   const std::filesystem::path link = dir / "run" / "sub" / "pulse";
