@@ -7,6 +7,8 @@
 #include <unistd.h>
 
 #include <ctime>
+#include <exception>
+#include <thread>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -21,13 +23,26 @@ double wall_now() {
 }
 
 // A fit may take a second of CPU on a week of data; the capture, tracker and pulse threads must not
-// notice, so this thread only runs when nothing else wants the CPU.
-void lower_priority() {
-  const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
-  if (::setpriority(PRIO_PROCESS, tid, 19) != 0) spdlog::debug("retrain: setpriority failed");
-  sched_param param{};
-  if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &param) != 0)
-    spdlog::debug("retrain: SCHED_IDLE not available; running at nice 19");
+// notice, so the fit runs in a thread of its own that only runs when nothing else wants the CPU. Only the
+// fit: that thread holds no lock another thread waits on (the store's copy, the model's installation and
+// its save, the log are done at normal priority, where a busy CPU cannot hold them up for seconds).
+GearModel fit_at_low_priority(const Retrainer::Fitter& fitter, std::span<const Sample> samples) {
+  GearModel fitted;
+  std::exception_ptr failure;
+  std::thread worker([&]() noexcept {
+    const auto tid = static_cast<id_t>(::syscall(SYS_gettid));
+    (void)::setpriority(PRIO_PROCESS, tid, 19);
+    sched_param param{};
+    (void)pthread_setschedparam(pthread_self(), SCHED_IDLE, &param);  // else nice 19 stands
+    try {
+      fitted = fitter(samples);
+    } catch (...) {
+      failure = std::current_exception();
+    }
+  });
+  worker.join();
+  if (failure) std::rethrow_exception(failure);
+  return fitted;
 }
 
 }  // namespace
@@ -107,7 +122,7 @@ bool Retrainer::retrain_now() {
       result = "no training samples yet";
     } else {
       const auto t0 = std::chrono::steady_clock::now();
-      GearModel fitted = fitter_(samples);
+      GearModel fitted = fit_at_low_priority(fitter_, samples);
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (fitted.empty()) {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
@@ -174,7 +189,6 @@ bool Retrainer::retrain_now() {
 }
 
 void Retrainer::run() noexcept {
-  lower_priority();
   std::unique_lock lock(mutex_);
   // At start, learn right away rather than after a full interval when there is something to learn from:
   // a restored store and no model yet, or enough pairs the model has not seen (gathered on trips shorter
@@ -182,7 +196,15 @@ void Retrainer::run() noexcept {
   bool first = true;
   while (!stop_) {
     if (!first && !requested_) {
-      wake_.wait_for(lock, settings_.interval, [this] { return stop_ || requested_; });
+      // The interval as set now: a reload that shortens it wakes this wait, which then ends at the new
+      // deadline rather than the old one.
+      const auto since = std::chrono::steady_clock::now();
+      while (!stop_ && !requested_) {
+        const auto deadline =
+            since + std::chrono::duration_cast<std::chrono::steady_clock::duration>(settings_.interval);
+        if (std::chrono::steady_clock::now() >= deadline) break;
+        wake_.wait_until(lock, deadline);
+      }
       if (stop_) break;
     }
     const bool forced = requested_;

@@ -59,10 +59,13 @@ class Retrainer {
   void stop() noexcept;
   // Fit as soon as possible, whatever the count of new samples.
   void request() noexcept;
+  // Takes effect at once, a wait under way included (it ends at the new interval).
   void set_settings(Settings settings) noexcept;
   [[nodiscard]] Status status() const;
   [[nodiscard]] Settings settings() const;
-  // Runs one fit now on the calling thread (what the thread does); returns true if the model changed.
+  // Runs one retrain now (what the thread does): the store's copy, the model's installation and its save on
+  // the calling thread, the fit itself in a thread of its own at the lowest priority; returns true if the
+  // model changed.
   bool retrain_now();
 
  private:

@@ -1,14 +1,18 @@
 #include <catch2/catch.hpp>
 
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <memory>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <thread>
 
@@ -628,6 +632,62 @@ TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
   retrainer.stop();
   CHECK(fits.load() == 1);
   CHECK(model.trained());
+}
+
+TEST_CASE("daemon: a retrain interval shortened while the retrainer waits applies at once") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  ModelHolder model;
+  std::atomic<int> fits{0};
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) {
+                        ++fits;
+                        return three_gears();
+                      },
+                      {std::chrono::duration<double>(3600.0), 5});
+  retrainer.start();  // nothing to learn from at start: it waits an hour
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  for (int i = 0; i < 10; ++i)
+    store.add({double(i), 10.0, 100.0});
+  // As a reload sets it: the wait under way ends at the new interval, not the old one.
+  Retrainer::Settings shorter = retrainer.settings();
+  shorter.interval = std::chrono::duration<double>(0.2);
+  retrainer.set_settings(shorter);
+  for (int i = 0; i < 500 && fits.load() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  retrainer.stop();
+  CHECK(fits.load() >= 1);
+}
+
+TEST_CASE("daemon: the fit runs in a thread of its own at low priority, the rest at the caller's") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 5; ++i)
+    store.add({double(i), 10.0, 100.0});
+  ModelHolder model;
+  std::thread::id fit_thread;
+  int fit_nice = 0;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) {
+                        fit_thread = std::this_thread::get_id();
+                        errno = 0;
+                        fit_nice = ::getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)));
+                        return three_gears();
+                      },
+                      {std::chrono::duration<double>(600.0), 1});
+  errno = 0;
+  const int caller_nice = ::getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)));
+  CHECK(retrainer.retrain_now());
+  CHECK(fit_thread != std::this_thread::get_id());
+  CHECK(fit_nice == 19);
+  // The caller (who takes the store's copy and installs and saves the model) keeps its priority.
+  CHECK(::getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid))) == caller_nice);
+  // A fit that throws is reported as it was on the caller's thread.
+  Retrainer failing(store, model, dir / "model.json",
+                    [](std::span<const Sample>) -> GearModel { throw std::runtime_error("no memory"); },
+                    {std::chrono::duration<double>(600.0), 1});
+  CHECK_FALSE(failing.retrain_now());
+  CHECK(failing.status().last_result.find("no memory") != std::string::npos);
 }
 
 TEST_CASE("daemon: a fit on few samples does not replace a model learned on many") {
