@@ -85,7 +85,12 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
     throw;
   }
   // The rename is durable only once the directory entry is on disk.
-  sync_directory(dir);
+  try {
+    sync_directory(dir);
+  } catch (const std::system_error& e) {
+    throw DirectorySyncError(
+        e.code(), "renamed " + path.string() + " into place but cannot fsync directory " + dir.string());
+  }
 }
 
 void append_file_durable(const std::filesystem::path& path, std::string_view data) {

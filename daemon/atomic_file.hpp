@@ -5,13 +5,21 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <system_error>
 
 #include "drivers/unique_fd.hpp"
 
 namespace gearpulse::daemon {
 
+// The new file is in place (readers see it) but its directory could not be synced: a power cut may still
+// bring back the old one. Callers that track what the file holds must count it as written.
+struct DirectorySyncError : std::system_error {
+  using std::system_error::system_error;
+};
+
 // Writes `data` to a temp file in the same directory, fsyncs it, renames it over `path` and fsyncs the
-// directory. Throws std::system_error naming the path on failure (the old file is then untouched).
+// directory. Throws std::system_error naming the path on failure: the old file is then untouched, except
+// for a DirectorySyncError, thrown after the rename.
 // A file that exists keeps its permissions; a new one gets those of a file created under the process's
 // umask (0644 under 022, 0640 under the unit's 0027).
 void write_file_atomic(const std::filesystem::path& path, std::string_view data);

@@ -49,7 +49,12 @@ ModelSave save_model_if_ours(ModelHolder& holder, const std::filesystem::path& p
   const std::optional<FileStamp> now = stamp_of(path);
   if (now && now != holder.file_stamp()) return ModelSave::kReplacedByOther;
   if (now && model_file_holds(path, model)) return ModelSave::kAlreadyThere;
-  save_model_file(path, model);
+  try {
+    save_model_file(path, model);
+  } catch (const DirectorySyncError&) {
+    holder.set_file_stamp(stamp_of(path));  // it is ours, in place if not yet durable
+    throw;
+  }
   holder.set_file_stamp(stamp_of(path));
   return ModelSave::kSaved;
 }

@@ -253,7 +253,19 @@ void TrainingStore::save(const std::filesystem::path& path) {
       std::lock_guard lock(mutex_);
       journal_current_ = false;
     }
-    write_file_atomic(path, blob);
+    try {
+      write_file_atomic(path, blob);
+    } catch (const DirectorySyncError&) {
+      // The new file is the one in place: the bookkeeping is that of a save (a journal from now on must
+      // name it), and the error is still said (the caller tries again).
+      std::lock_guard lock(mutex_);
+      saved_crc_ = trailing_crc(blob);
+      journal_current_ = false;
+      unjournaled_ = since_save_;
+      throw;
+    }
+  } catch (const DirectorySyncError&) {
+    throw;
   } catch (...) {
     // The previous file stands, and so does its journal unless it was removed (then it is rewritten
     // whole); the pairs are still to be saved (and journaled).
