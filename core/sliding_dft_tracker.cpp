@@ -89,6 +89,21 @@ std::mutex& planner_mutex() {
   return m;
 }
 
+// A plan, destroyed (under the planner's lock) with its owner, also when the owner's constructor throws
+// after making it.
+struct FftwPlan {
+  fftw_plan p = nullptr;
+  FftwPlan() noexcept = default;
+  FftwPlan(const FftwPlan&) = delete;
+  FftwPlan& operator=(const FftwPlan&) = delete;
+  ~FftwPlan() {
+    if (p) {
+      const std::lock_guard lock(planner_mutex());
+      fftw_destroy_plan(p);
+    }
+  }
+};
+
 double bessel_i0(double x) {
   double sum = 1.0, term = 1.0;
   for (int k = 1; k < 50; ++k) {
@@ -161,7 +176,7 @@ struct SlidingDftTracker::Impl {
   std::vector<double> raw;  // decimated window as filtered (for the least-squares fit)
   std::unique_ptr<double, FftwFree> fft_in;
   std::unique_ptr<fftw_complex, FftwFree> fft_out;
-  fftw_plan plan = nullptr;
+  FftwPlan plan;
   std::vector<double> power;
   std::vector<double> noise;  // per fine bin
   std::vector<double> block_scratch;
@@ -214,7 +229,6 @@ struct SlidingDftTracker::Impl {
   };
 
   explicit Impl(const TrackerConfig& c);
-  ~Impl();
 
   [[nodiscard]] double time_of(double frame) const noexcept { return t0 + frame / fs; }
   void write_frame(float x) noexcept {
@@ -325,9 +339,9 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   if (!fft_in || !fft_out || !resid_in || !resid_out) throw std::bad_alloc();
   {
     const std::lock_guard lock(planner_mutex());
-    plan = fftw_plan_dft_r2c_1d(nfft, fft_in.get(), fft_out.get(), FFTW_ESTIMATE);
+    plan.p = fftw_plan_dft_r2c_1d(nfft, fft_in.get(), fft_out.get(), FFTW_ESTIMATE);
   }
-  if (!plan) throw std::runtime_error("SlidingDftTracker: FFTW could not make a plan");
+  if (!plan.p) throw std::runtime_error("SlidingDftTracker: FFTW could not make a plan");
   std::fill(fft_in.get(), fft_in.get() + nfft, 0.0);
   std::fill(resid_in.get(), resid_in.get() + nfft, 0.0);
   power.assign(bins, 0.0);
@@ -369,13 +383,6 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
       8, static_cast<std::size_t>(std::ceil(cfg.history_s / std::max(cfg.hop_s, 1e-3))) + 2));
 }
 
-SlidingDftTracker::Impl::~Impl() {
-  if (plan) {
-    const std::lock_guard lock(planner_mutex());
-    fftw_destroy_plan(plan);
-  }
-}
-
 // Decimates, detrends and tapers the window centred on input frame `centre`, then fills the power
 // spectrum and the noise floor. False on a silent window.
 bool SlidingDftTracker::Impl::analyse(std::uint64_t centre) noexcept {
@@ -411,7 +418,7 @@ bool SlidingDftTracker::Impl::analyse(std::uint64_t centre) noexcept {
     energy += v * v;
   }
   if (!(energy > 1e-20 * std::max(1.0, level * level * n_win)) || !std::isfinite(energy)) return false;
-  fftw_execute_dft_r2c(plan, fft_in.get(), fft_out.get());
+  fftw_execute_dft_r2c(plan.p, fft_in.get(), fft_out.get());
   const int bins = nfft / 2 + 1;
   for (int k = 0; k < bins; ++k) {
     const auto i = static_cast<std::size_t>(k);
@@ -627,7 +634,7 @@ double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) n
     const auto i = static_cast<std::size_t>(j);
     in[i] = (raw[i] - model) * window[i];
   }
-  fftw_execute_dft_r2c(plan, in, resid_out.get());
+  fftw_execute_dft_r2c(plan.p, in, resid_out.get());
   // The band's fine bins; the median by selection in the (now free) scratch of the noise floor.
   const int lo = std::max(noise_lo, k_lo), hi = std::max(lo, k_hi);
   double* scratch = block_scratch.data();

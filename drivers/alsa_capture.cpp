@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <stdexcept>
 
 #include "drivers/clock.hpp"
@@ -161,21 +162,21 @@ AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
   snd_pcm_t* pcm = nullptr;
   if (open_pcm(config_, &pcm, got, why) < 0)
     throw std::runtime_error("ALSA capture '" + config_.device + "': " + why);
-  pcm_ = pcm;
+  // Closed on any way out of here but the last line, which hands it to the object (a device left open by
+  // a failed constructor would be busy for every later attempt).
+  std::unique_ptr<snd_pcm_t, decltype(&::snd_pcm_close)> owner(pcm, &::snd_pcm_close);
   rate_ = got.rate;
   channels_ = got.channels;
   format_ = got.format;
   period_frames_ = got.period;
-  if (config_.channel >= static_cast<int>(channels_)) {
-    ::snd_pcm_close(pcm);
-    pcm_ = nullptr;
+  if (config_.channel >= static_cast<int>(channels_))
     throw std::runtime_error("ALSA capture '" + config_.device + "': channel " +
                              std::to_string(config_.channel) + " requested but the device gives " +
                              std::to_string(channels_));
-  }
   raw_.resize(static_cast<std::size_t>(period_frames_) * channels_ * bytes_per_sample(format_));
   previous_.resize(raw_.size());
   mono_.resize(period_frames_);
+  pcm_ = owner.release();
 }
 
 AlsaCapture::~AlsaCapture() {

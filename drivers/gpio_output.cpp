@@ -27,28 +27,24 @@ bool gpio_chip_available() {
 
 GpioOutput::GpioOutput(const std::string& chip, unsigned offset) : chip_name_(chip), offset_(offset) {
   errno = 0;
-  chip_ = ::gpiod_chip_open_lookup(chip.c_str());  // name, path or number
+  chip_.reset(::gpiod_chip_open_lookup(chip.c_str()));  // name, path or number
   if (!chip_) fail(chip, offset, "cannot open the GPIO chip", errno ? errno : ENODEV);
-  if (offset >= ::gpiod_chip_num_lines(chip_)) {
-    const unsigned n = ::gpiod_chip_num_lines(chip_);
-    ::gpiod_chip_close(chip_);
+  if (offset >= ::gpiod_chip_num_lines(chip_.get())) {
+    const unsigned n = ::gpiod_chip_num_lines(chip_.get());
     fail(chip, offset, "offset out of range (the chip has " + std::to_string(n) + " lines)");
   }
-  line_ = ::gpiod_chip_get_line(chip_, offset);
+  line_ = ::gpiod_chip_get_line(chip_.get(), offset);
   if (!line_) {
     const int err = errno;
-    ::gpiod_chip_close(chip_);
     fail(chip, offset, "cannot get the line", err);
   }
   if (::gpiod_line_is_used(line_)) {
     const char* owner = ::gpiod_line_consumer(line_);
     const std::string who = owner ? owner : "the kernel or another process";
-    ::gpiod_chip_close(chip_);
     fail(chip, offset, "line is busy (used by " + who + ")");
   }
   if (::gpiod_line_request_output(line_, kConsumer, 0) != 0) {
     const int err = errno;
-    ::gpiod_chip_close(chip_);
     fail(chip, offset, err == EBUSY ? "line is busy" : "cannot request the line as output", err);
   }
 }
@@ -58,7 +54,10 @@ GpioOutput::~GpioOutput() {
     ::gpiod_line_set_value(line_, 0);
     ::gpiod_line_release(line_);
   }
-  if (chip_) ::gpiod_chip_close(chip_);
+}
+
+void GpioOutput::ChipCloser::operator()(gpiod_chip* chip) const noexcept {
+  ::gpiod_chip_close(chip);
 }
 
 void GpioOutput::rise() noexcept {

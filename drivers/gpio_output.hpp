@@ -3,6 +3,7 @@
 // "gearpulse", driven high for the pulse width and low otherwise, and left low on close.
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "drivers/pulse_output.hpp"
@@ -33,7 +34,10 @@ class GpioOutput final : public PulseOutput {
  private:
   std::string chip_name_;
   unsigned offset_;
-  gpiod_chip* chip_ = nullptr;
+  struct ChipCloser {
+    void operator()(gpiod_chip* chip) const noexcept;
+  };
+  std::unique_ptr<gpiod_chip, ChipCloser> chip_;  // closed after the line is released
   gpiod_line* line_ = nullptr;
   std::atomic<std::uint64_t> errors_{0};
 };

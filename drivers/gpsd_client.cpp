@@ -26,7 +26,12 @@ class GpsConnection {
     }
     open_ = true;
     if (::gps_stream(&data_, WATCH_ENABLE | WATCH_JSON, nullptr) != 0) {
-      error_ = "gpsd at " + host + ":" + port + " refused the watch request";
+      try {
+        error_ = "gpsd at " + host + ":" + port + " refused the watch request";
+      } catch (...) {
+        ::gps_close(&data_);  // a constructor that throws gets no destructor
+        throw;
+      }
     }
   }
   ~GpsConnection() {
