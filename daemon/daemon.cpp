@@ -107,8 +107,11 @@ struct Daemon::Impl {
   bool save_store(const char* why) noexcept;  // false when it failed (logged, and in status)
   void journal_store() noexcept;
   // At stop: a store that cannot be saved (disk full) may still take the few records of a journal append.
+  // A store the file already holds is not written again (a full one is 24 MB, on flash that wears).
   void save_or_journal() noexcept {
-    if (!save_store("shutdown")) journal_store();
+    std::error_code ec;
+    if ((store.unsaved() || !std::filesystem::exists(store_path, ec)) && !save_store("shutdown"))
+      journal_store();
   }
   void recover_journal() noexcept;
   FaultSpell journal_fault;  // journal appends failing (said once per spell)

@@ -130,6 +130,11 @@ std::size_t TrainingStore::size() const {
   return samples_.size();
 }
 
+bool TrainingStore::unsaved() const {
+  std::lock_guard lock(mutex_);
+  return since_save_ > 0 || cleared_;
+}
+
 std::size_t TrainingStore::new_samples() const {
   std::lock_guard lock(mutex_);
   return new_samples_;

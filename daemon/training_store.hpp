@@ -32,6 +32,8 @@ class TrainingStore {
 
   [[nodiscard]] std::vector<Sample> snapshot() const;
   [[nodiscard]] std::size_t size() const;
+  // Something the file at the last save() does not hold: pairs added, or a clear().
+  [[nodiscard]] bool unsaved() const;
   // Pairs added since the last mark_trained() (or since start).
   [[nodiscard]] std::size_t new_samples() const;
   void mark_trained(std::size_t consumed);

@@ -357,6 +357,29 @@ TEST_CASE("daemon: a model unchanged since it was loaded is not rewritten at sto
   CHECK(gearpulse::daemon::model_file_holds(path, gearpulse::parse_model(kModel)));
 }
 
+TEST_CASE("daemon: a training store the file already holds is not rewritten at stop") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  const auto path = dir / "state/training.bin";
+  gearpulse::daemon::TrainingStore store(1e9, 1000);
+  const double now = static_cast<double>(std::time(nullptr));
+  for (int i = 0; i < 30; ++i)
+    store.add({now - 60.0 + i, 10.0, 50.0});
+  store.save(path);
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  struct stat before {};
+  REQUIRE(::stat(path.c_str(), &before) == 0);
+  {
+    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+    REQUIRE(wait_for_status(dir, daemon)["training_samples"] == 30);
+    daemon.signal(SIGTERM);
+    CHECK(daemon.wait() == 0);
+  }
+  struct stat after {};
+  REQUIRE(::stat(path.c_str(), &after) == 0);
+  CHECK(after.st_ino == before.st_ino);  // a save would have renamed a new file over it
+}
+
 TEST_CASE("daemon: a PTY link whose directory cannot be made says why") {
   TempDir dir;
   write_text(dir / "run", "a file where a directory should be\n");
