@@ -185,6 +185,7 @@ void SpeedSynthesizer::reset() noexcept {
   t_ = 0.0;
   mode_ = 0;
   last_gps_ = -1.0;
+  held_speed_ = -1.0;
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   roll_span_ = -1.0;
   last_ = {};
@@ -880,6 +881,14 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
   return {speed < tuning_.stationary_speed ? 0.0 : speed, 0, SpeedSource::kCoast};
 }
 
+SynthOutput SpeedSynthesizer::hold_step(double t, double gps) noexcept {
+  if (std::isfinite(gps)) return {gps, 0, SpeedSource::kGps};
+  if (held_speed_ < 0.0) return {0.0, 0, SpeedSource::kNone};
+  const double coasted = std::max(0.0, t - held_t_ - tuning_.hold_time);
+  const double v = std::max(0.0, held_speed_ + tuning_.coast_accel * coasted);
+  return {v < tuning_.stationary_speed ? 0.0 : v, 0, SpeedSource::kCoast};
+}
+
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noexcept {
   if (!std::isfinite(t)) return last_;
   double dt = started_ ? t - t_ : 0.0;
@@ -897,6 +906,10 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noex
   }
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
+  if (have_gps) {
+    held_speed_ = gps_speed;  // for an outage without a ladder (hold_step), whenever the ladder went
+    held_t_ = t;
+  }
 
   // Before the first fix or frequency reading nothing is known: no speed, not a guess.
   informed_ = informed_ || have_gps || std::isfinite(freq);
@@ -904,7 +917,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noex
   if (!informed_) {
     out = {0.0, 0, SpeedSource::kNone};
   } else if (gears_ == 0) {
-    out = have_gps ? SynthOutput{gps_speed, 0, SpeedSource::kGps} : SynthOutput{0.0, 0, SpeedSource::kNone};
+    out = hold_step(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN());
   } else {
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq);
   }

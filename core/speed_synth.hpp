@@ -90,6 +90,10 @@ struct SynthTuning {
   double min_freq_rel = 0.01;     // floor on sigma_s as a fraction of the frequency (tracking jitter)
   double stationary_speed = 0.3;  // m/s: GPS speed below this is "standing" (idle is learned there)
   double max_gap = 30.0;          // s: a longer gap between steps forgets the speed track
+  // Without a gear ladder (no model yet, an automatic or CVT) the frequency says nothing of the speed: an
+  // outage holds the last GPS speed this long (a tunnel's speed is most likely the speed going in), then
+  // comes down to rest at coast_accel (a long outage most likely ends parked).
+  double hold_time = 60.0;  // s
 };
 
 class SpeedSynthesizer {
@@ -190,6 +194,7 @@ class SpeedSynthesizer {
   double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
   double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
   double last_gps_ = -1.0;
+  double held_speed_ = -1.0, held_t_ = 0.0;  // last GPS speed and its time, for hold_step (-1 = none yet)
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
   double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
   double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
@@ -200,6 +205,7 @@ class SpeedSynthesizer {
   double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
   double climb_ = 0.0;           // how fast the revs climb this step, 0..1 (filter_step)
   SynthOutput last_{};
+  SynthOutput hold_step(double t, double gps) noexcept;
 };
 
 // Steps a synthesizer over the samples of a log, in order, as `gearpulse replay` and the benches do: a

@@ -147,20 +147,36 @@ int speed_within(const std::string& name, double from, double to, double toleran
 
 }  // namespace
 
-TEST_CASE("synth: without a model GPS passes through and outages give none") {
+TEST_CASE("synth: without a model GPS passes through and an outage holds its last speed, then stops") {
   SpeedSynthesizer synth;
-  SynthOutput o = synth.step(0.0, 12.5, 40.0);
-  CHECK(o.source == SpeedSource::kGps);
-  CHECK(o.speed == 12.5);
-  CHECK(o.gear == 0);
-  o = synth.step(1.0, kMissing, 40.0);
+  // No GPS yet: nothing is known.
+  SynthOutput o = synth.step(0.0, kMissing, 40.0);
   CHECK(o.source == SpeedSource::kNone);
   CHECK(o.speed == 0.0);
   CHECK(gearpulse::source_name(o.source) == "none");
+  o = synth.step(1.0, 12.5, 40.0);
+  CHECK(o.source == SpeedSource::kGps);
+  CHECK(o.speed == 12.5);
+  CHECK(o.gear == 0);
+  // The frequency says nothing of the speed without a ladder: a tunnel is driven at the speed going in...
+  const double hold = gearpulse::SynthTuning{}.hold_time;
+  o = synth.step(2.0, kMissing, 80.0);
+  CHECK(o.source == SpeedSource::kCoast);
+  CHECK(o.speed == 12.5);
+  CHECK(synth.step(1.0 + hold, kMissing, 20.0).speed == 12.5);
+  // ... and a long outage most likely ends parked: down to rest at the coasting deceleration.
+  o = synth.step(1.0 + hold + 5.0, kMissing, 20.0);
+  CHECK(o.speed == Approx(12.5 + 5.0 * gearpulse::SynthTuning{}.coast_accel));
+  o = synth.step(1.0 + hold + 60.0, kMissing, 20.0);
+  CHECK(o.speed == 0.0);
+  CHECK(o.source == SpeedSource::kCoast);
 
+  // A model without gears (an automatic, a CVT) alike.
   SpeedSynthesizer empty(std::make_shared<const GearModel>());
   CHECK(empty.step(0.0, 3.0, 20.0).source == SpeedSource::kGps);
-  CHECK(empty.step(1.0, kMissing, 20.0).source == SpeedSource::kNone);
+  o = empty.step(1.0, kMissing, 20.0);
+  CHECK(o.source == SpeedSource::kCoast);
+  CHECK(o.speed == 3.0);
 }
 
 TEST_CASE("synth: tracks the gear while GPS is present") {
@@ -278,9 +294,12 @@ TEST_CASE("synth: a model swap mid-outage keeps the output continuous") {
   CHECK(std::abs(out[45].speed - out[44].speed) < 0.05 * out[44].speed);
   CHECK(out[45].source == SpeedSource::kEngine);
 
-  // Dropping the model: outages then give none, GPS still passes.
+  // Dropping the model: an outage then holds the last GPS speed (from 29 s, 71 s ago: coming to rest),
+  // GPS still passes.
   synth.set_model(nullptr);
-  CHECK(synth.step(100.0, kMissing, 30.0).source == SpeedSource::kNone);
+  const SynthOutput dropped = synth.step(100.0, kMissing, 30.0);
+  CHECK(dropped.source == SpeedSource::kCoast);
+  CHECK(dropped.speed < out[29].speed);
   CHECK(synth.step(101.0, 5.0, 30.0).source == SpeedSource::kGps);
   // More gears than the fixed capacity: refused, the old model stays.
   std::vector<double> many;
