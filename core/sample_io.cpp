@@ -523,6 +523,44 @@ std::string_view format_name(SampleFormat format) noexcept {
   return "unknown";
 }
 
+namespace {
+
+// The generic format's units are the user's to get right; the two slips that still read are said. Speeds
+// beyond any car's top speed (270 km/h as m/s) are most likely km/h; rows minutes apart, milliseconds.
+void warn_units(SampleLog& log) {
+  constexpr double kTopSpeed = 75.0;  // m/s
+  constexpr double kSlowRows = 30.0;  // s between rows, at the median
+  double top = 0.0;
+  std::vector<double> steps;
+  steps.reserve(log.samples.size());
+  for (std::size_t i = 0; i < log.samples.size(); ++i) {
+    if (std::isfinite(log.samples[i].speed)) top = std::max(top, log.samples[i].speed);
+    if (i > 0 && log.samples[i].t > log.samples[i - 1].t)
+      steps.push_back(log.samples[i].t - log.samples[i - 1].t);
+  }
+  char buf[256];
+  if (top > kTopSpeed) {
+    std::snprintf(
+        buf, sizeof buf,
+        ": speeds up to %.4g m/s (%.4g km/h): the t,speed,freq format takes m/s; is the speed column "
+        "in km/h?",
+        top, top * 3.6);
+    log.warnings.push_back(log.name + buf);
+  }
+  if (steps.size() >= 10) {
+    const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
+    std::nth_element(steps.begin(), mid, steps.end());
+    if (*mid > kSlowRows) {
+      std::snprintf(buf, sizeof buf,
+                    ": rows %.4g s apart at the median: the t,speed,freq format takes seconds; is t in ms?",
+                    *mid);
+      log.warnings.push_back(log.name + buf);
+    }
+  }
+}
+
+}  // namespace
+
 SampleLog read_samples(std::istream& in, std::string_view name, const ReadOptions& options) {
   LineReader reader{in, {}, 0};
   LogBuilder out(name, options);
@@ -559,7 +597,9 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
                           " (expected t,speed,freq or a Torque Pro, Carloop or speed,rpm log)");
   }
   if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
-  return out.finish();
+  SampleLog log = out.finish();
+  if (log.format == SampleFormat::kGeneric) warn_units(log);
+  return log;
 }
 
 std::optional<SampleLog> read_wheel_speed(std::istream& in, const SampleLog& log) {

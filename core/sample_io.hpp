@@ -50,6 +50,8 @@ struct SampleLog {
   std::size_t skipped_count = 0;     // every skipped bad row
   std::size_t repeated_rows = 0;     // OBD rows dropped because nothing was refreshed (not errors)
   std::vector<InputRow> rows;        // with ReadOptions::keep_rows: every accepted row, in file order
+  // "name: ..." lines for a log that reads but looks wrong (a generic log's speed in km/h, its time in ms).
+  std::vector<std::string> warnings;
 };
 
 // Thrown when nothing usable can be read (empty stream, unknown header, no valid row). what() is one

@@ -35,6 +35,7 @@ std::string error_of(const std::string& text) {
 }
 
 const std::filesystem::path kReal = GEARPULSE_REAL_DATA_DIR;
+constexpr double kPiOver100 = 3.14159265358979 / 100.0;
 
 }  // namespace
 
@@ -54,6 +55,33 @@ TEST_CASE("io: generic CSV with empty cells and extra columns") {
   CHECK(named.format == SampleFormat::kGeneric);
   REQUIRE(named.samples.size() == 1);
   CHECK(named.samples[0].freq == Approx(50));
+}
+
+TEST_CASE("io: a generic log in km/h or in ms reads, with a warning that says so") {
+  // A drive at 1 Hz, 0-90 km/h: in m/s, in km/h, and in m/s with t in ms.
+  std::string mps = "t,speed,freq\n", kmh = mps, ms = mps;
+  for (int i = 0; i < 100; ++i) {
+    const double v = 25.0 * std::sin(kPiOver100 * i) * std::sin(kPiOver100 * i);
+    mps += std::to_string(i) + "," + std::to_string(v) + ",40\n";
+    kmh += std::to_string(i) + "," + std::to_string(v * 3.6) + ",40\n";
+    ms += std::to_string(i * 1000) + "," + std::to_string(v) + ",40\n";
+  }
+  CHECK(read_text(mps).warnings.empty());
+  const SampleLog fast = read_text(kmh);
+  REQUIRE(fast.warnings.size() == 1);
+  INFO(fast.warnings[0]);
+  CHECK(fast.warnings[0].starts_with("log.csv: speeds up to 90 m/s (324 km/h)"));
+  CHECK(fast.warnings[0].find("in km/h?") != std::string::npos);
+  const SampleLog slow = read_text(ms);
+  REQUIRE(slow.warnings.size() == 1);
+  CHECK(slow.warnings[0] ==
+        "log.csv: rows 1000 s apart at the median: the t,speed,freq format takes seconds; is t in ms?");
+  // Every real log reads without one.
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(kReal)) {
+    if (entry.path().extension() != ".csv") continue;
+    std::ifstream in(entry.path(), std::ios::binary);
+    CHECK(read_samples(in, entry.path().string()).warnings.empty());
+  }
 }
 
 TEST_CASE("io: bad rows are skipped and reported with file and line") {

@@ -42,6 +42,8 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
           stderr,
           "gearpulse: warning: %s: --speed applies to Torque Pro exports; this %s log has one speed\n",
           path.c_str(), std::string(format_name(log.format)).c_str());
+    for (const std::string& warning : log.warnings)
+      std::fprintf(stderr, "gearpulse: warning: %s\n", warning.c_str());
     for (std::size_t i = 0; i < log.skipped.size() && i < kMaxPrintedSkips; ++i)
       std::fprintf(stderr, "%s\n", log.skipped[i].c_str());
     if (log.skipped_count > 0) {
