@@ -323,8 +323,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     // disagreement between the sound card's clock and the GPS cannot hide a good fix).
     double gps_speed = kNan;
     if (gps) {
-      if (const auto r = gps->latest(); r && r->usable() && gps->has_gps(monotonic_ns()))
-        gps_speed = r->speed;
+      if (const auto r = gps->fresh(monotonic_ns())) gps_speed = r->speed;
     }
     const bool confident =
         tracked && std::isfinite(freq) && snr >= min_snr_db.load(std::memory_order_relaxed);

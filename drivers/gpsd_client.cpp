@@ -102,10 +102,15 @@ std::optional<GpsReport> GpsdClient::latest() const {
 }
 
 bool GpsdClient::has_gps(std::int64_t now_ns) const {
+  return fresh(now_ns).has_value();
+}
+
+std::optional<GpsReport> GpsdClient::fresh(std::int64_t now_ns) const {
   std::lock_guard lock(mutex_);
-  if (!latest_ || !latest_->usable()) return false;
+  if (!latest_ || !latest_->usable()) return std::nullopt;
   const std::int64_t timeout_ns = std::chrono::nanoseconds(config_.no_fix_timeout).count();
-  return now_ns - latest_->rx_ns <= timeout_ns;
+  if (now_ns - latest_->rx_ns > timeout_ns) return std::nullopt;
+  return latest_;
 }
 
 GpsdStatus GpsdClient::status() const {

@@ -56,6 +56,7 @@ class GpsdClient final : public GpsSource {
 
   [[nodiscard]] std::optional<GpsReport> latest() const override;
   [[nodiscard]] bool has_gps(std::int64_t now_ns) const override;
+  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const override;
   [[nodiscard]] GpsdStatus status() const;
   // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
   // turn of its loop, at least every 100 ms while connected and every kBeatNs while backing off, so an
