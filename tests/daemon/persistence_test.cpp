@@ -50,6 +50,20 @@ GearModel three_gears() {
   return m;
 }
 
+// A fitter that counts its calls in `fits` and finds three gears.
+Retrainer::Fitter counting_fitter(std::atomic<int>& fits) {
+  return [&fits](std::span<const Sample>) {
+    ++fits;
+    return three_gears();
+  };
+}
+
+// Waits up to 5 s for a first fit.
+void wait_for_a_fit(const std::atomic<int>& fits) {
+  for (int i = 0; i < 500 && fits.load() == 0; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+}
+
 }  // namespace
 
 TEST_CASE("daemon: atomic write replaces the content and leaves no temp file") {
@@ -619,16 +633,11 @@ TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
     store.add({double(i), 10.0, 100.0});
   ModelHolder model;
   std::atomic<int> fits{0};
-  Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) {
-                        ++fits;
-                        return three_gears();
-                      },
+  Retrainer retrainer(store, model, dir / "model.json", counting_fitter(fits),
                       {std::chrono::duration<double>(3600.0), 1000});
   retrainer.start();
   retrainer.request();
-  for (int i = 0; i < 500 && fits.load() == 0; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  wait_for_a_fit(fits);
   retrainer.stop();
   CHECK(fits.load() == 1);
   CHECK(model.trained());
@@ -639,11 +648,7 @@ TEST_CASE("daemon: a retrain interval shortened while the retrainer waits applie
   TrainingStore store(1e9, 10000);
   ModelHolder model;
   std::atomic<int> fits{0};
-  Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) {
-                        ++fits;
-                        return three_gears();
-                      },
+  Retrainer retrainer(store, model, dir / "model.json", counting_fitter(fits),
                       {std::chrono::duration<double>(3600.0), 5});
   retrainer.start();  // nothing to learn from at start: it waits an hour
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
@@ -653,8 +658,7 @@ TEST_CASE("daemon: a retrain interval shortened while the retrainer waits applie
   Retrainer::Settings shorter = retrainer.settings();
   shorter.interval = std::chrono::duration<double>(0.2);
   retrainer.set_settings(shorter);
-  for (int i = 0; i < 500 && fits.load() == 0; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  wait_for_a_fit(fits);
   retrainer.stop();
   CHECK(fits.load() >= 1);
 }
