@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <exception>
 
 #include "daemon/atomic_file.hpp"
 
@@ -240,6 +241,7 @@ void TrainingStore::save(const std::filesystem::path& path) {
   std::string blob;
   std::size_t saved = 0, unjournaled = 0;
   bool cleared = false;
+  std::exception_ptr unsynced;
   {
     // What the blob holds needs no journal; pairs added from here on do.
     std::lock_guard lock(mutex_);
@@ -262,15 +264,9 @@ void TrainingStore::save(const std::filesystem::path& path) {
       write_file_atomic(path, blob);
     } catch (const DirectorySyncError&) {
       // The new file is the one in place: the bookkeeping is that of a save (a journal from now on must
-      // name it), and the error is still said (the caller tries again).
-      std::lock_guard lock(mutex_);
-      saved_crc_ = trailing_crc(blob);
-      journal_current_ = false;
-      unjournaled_ = since_save_;
-      throw;
+      // name it), and the error is still said once it is done (the caller tries again).
+      unsynced = std::current_exception();
     }
-  } catch (const DirectorySyncError&) {
-    throw;
   } catch (...) {
     // The previous file stands, and so does its journal unless it was removed (then it is rewritten
     // whole); the pairs are still to be saved (and journaled).
@@ -292,6 +288,7 @@ void TrainingStore::save(const std::filesystem::path& path) {
     append_journal_io(path);
   } catch (const std::exception&) {
   }
+  if (unsynced) std::rethrow_exception(unsynced);
 }
 
 std::string TrainingStore::load(const std::filesystem::path& path) {

@@ -27,11 +27,10 @@ class GpsSource {
   virtual ~GpsSource() = default;
   // The newest report, if any arrived yet.
   [[nodiscard]] virtual std::optional<GpsReport> latest() const = 0;
-  // True if the newest report is usable and was received no longer ago than the no-fix timeout.
-  [[nodiscard]] virtual bool has_gps(std::int64_t now_ns) const = 0;
-  // The newest report if has_gps(now_ns), judged on that one report (a report arriving between a call to
-  // latest() and one to has_gps() could make them disagree).
+  // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
+  // and its freshness judged on that one report).
   [[nodiscard]] virtual std::optional<GpsReport> fresh(std::int64_t now_ns) const = 0;
+  [[nodiscard]] bool has_gps(std::int64_t now_ns) const { return fresh(now_ns).has_value(); }
 };
 
 }  // namespace gearpulse

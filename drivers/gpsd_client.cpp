@@ -101,10 +101,6 @@ std::optional<GpsReport> GpsdClient::latest() const {
   return latest_;
 }
 
-bool GpsdClient::has_gps(std::int64_t now_ns) const {
-  return fresh(now_ns).has_value();
-}
-
 std::optional<GpsReport> GpsdClient::fresh(std::int64_t now_ns) const {
   std::lock_guard lock(mutex_);
   if (!latest_ || !latest_->usable()) return std::nullopt;

@@ -55,7 +55,6 @@ class GpsdClient final : public GpsSource {
   void stop();   // joins the thread within ~100 ms
 
   [[nodiscard]] std::optional<GpsReport> latest() const override;
-  [[nodiscard]] bool has_gps(std::int64_t now_ns) const override;
   [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const override;
   [[nodiscard]] GpsdStatus status() const;
   // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
