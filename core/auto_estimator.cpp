@@ -2,7 +2,9 @@
 // generalised mixture for every gear count, the count chosen by BIC among ladders that pass physical
 // checks, then a polish on the full data and standard errors from the observed information.
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <optional>
 
@@ -372,6 +374,63 @@ double shifted_speed(const MixtureData& d, std::size_t k, double delta, double m
   return std::max(0.0, d.v[a] + (d.v[b] - d.v[a]) * (target - d.t[a]) / dt);
 }
 
+// Speed at t_k + delta for the lag search: linear interpolation between the two samples around that
+// time, plus as much of the four surrounding samples' curvature contrast as brings the weights' sum of
+// squares back to one. Every offset then carries a whole sample's noise, as the unshifted speeds do:
+// plain interpolation halves the noise half a sample away, which sharpens the lines by itself and pulled
+// the search to shifts of a quarter to half a sample in drives without any lag. NaN where the four
+// samples are not there or straddle a gap.
+double search_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
+  const double target = d.t[k] + delta;
+  const std::size_t n = d.size();
+  std::size_t a = k;  // the sample at or before target
+  while (a + 1 < n && d.t[a + 1] <= target)
+    ++a;
+  while (a > 0 && d.t[a] > target)
+    --a;
+  if (a == 0 || a + 2 >= n || d.t[a] > target) return std::numeric_limits<double>::quiet_NaN();
+  std::array<double, 4> x{};
+  for (std::size_t j = 0; j < 4; ++j) {
+    x[j] = d.t[a - 1 + j] - target;
+    if (j > 0 && !(x[j] - x[j - 1] > 0.0 && x[j] - x[j - 1] <= max_gap))
+      return std::numeric_limits<double>::quiet_NaN();
+  }
+  const double f = -x[1] / (x[2] - x[1]);
+  std::array<double, 4> w{0.0, 1.0 - f, f, 0.0};
+  // The curvature contrast: (x - mean)^2 made orthogonal to a constant and a slope, unit length.
+  const double mean_x = (x[0] + x[1] + x[2] + x[3]) / 4.0;
+  double sxx = 0.0;
+  double mean_q = 0.0;
+  std::array<double, 4> u{};
+  for (std::size_t j = 0; j < 4; ++j) {
+    sxx += (x[j] - mean_x) * (x[j] - mean_x);
+    u[j] = (x[j] - mean_x) * (x[j] - mean_x);
+    mean_q += u[j] / 4.0;
+  }
+  double ux = 0.0;
+  for (std::size_t j = 0; j < 4; ++j)
+    ux += (u[j] - mean_q) * (x[j] - mean_x);
+  double uu = 0.0;
+  for (std::size_t j = 0; j < 4; ++j) {
+    u[j] = u[j] - mean_q - ux / sxx * (x[j] - mean_x);
+    uu += u[j] * u[j];
+  }
+  double wu = 0.0;
+  double ww = 0.0;
+  for (std::size_t j = 0; j < 4; ++j) {
+    u[j] /= std::sqrt(uu);
+    wu += w[j] * u[j];
+    ww += w[j] * w[j];
+  }
+  // (w + alpha u)^2 = 1, the smaller root (zero at a sample).
+  const double root = std::sqrt(std::max(0.0, wu * wu + 1.0 - ww));
+  const double alpha = -wu + (wu > 0.0 ? root : -root);
+  double v = 0.0;
+  for (std::size_t j = 0; j < 4; ++j)
+    v += (w[j] + alpha * u[j]) * d.v[a - 1 + j];
+  return v;
+}
+
 // Sharpness of the log(v/s) density (sum of squared bin shares, a collision probability) over the
 // samples [begin, end): gear lines give narrow peaks, a misaligned speed channel smears them in
 // proportion to the acceleration.
@@ -381,7 +440,7 @@ double ratio_sharpness(const MixtureData& d, std::size_t begin, std::size_t end,
   std::vector<double> keys;
   keys.reserve(end - begin);
   for (std::size_t k = begin; k < end; ++k) {
-    const double v = shifted_speed(d, k, delta, max_gap);
+    const double v = search_speed(d, k, delta, max_gap);
     if (v > kMovingSpeed && d.s[k] > 0.0) keys.push_back(std::floor(std::log(v / d.s[k]) / kBin));
   }
   if (keys.empty()) return 0.0;
@@ -407,17 +466,22 @@ double ratio_sharpness(const MixtureData& d, std::size_t begin, std::size_t end,
 // sampling interval if longer), coarse then fine, is the one that makes the gear lines sharpest; the
 // speeds are moved to it. The search looks at a contiguous stretch of at most kAlignSamples samples
 // (enough to see the lag, and it keeps a week-long log fast). Without time stamps nothing changes.
-MixtureData aligned_channels(const MixtureData& all) {
+struct Aligned {
+  MixtureData data;
+  double lag = 0.0;  // s: the speed paired with engine speed at t is the one logged at t + lag
+};
+
+Aligned aligned_channels(const MixtureData& all) {
   constexpr double kMaxLag = 2.0;                // s
   constexpr std::size_t kAlignSamples = 200000;  // samples the search looks at
   const std::size_t n = all.size();
-  if (all.t.size() != n || n < 30) return all;
+  if (all.t.size() != n || n < 30) return {all, 0.0};
   std::vector<double> gaps;
   for (std::size_t k = 1; k < n; ++k) {
     const double dt = all.t[k] - all.t[k - 1];
     if (dt > 0.0) gaps.push_back(dt);
   }
-  if (gaps.size() < n / 2) return all;
+  if (gaps.size() < n / 2) return {all, 0.0};
   std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
   const double gap = gaps[gaps.size() / 2];
   const double max_gap = 3.0 * gap;
@@ -451,23 +515,25 @@ MixtureData aligned_channels(const MixtureData& all) {
       }
     }
   }
-  // A few percent of sharpness is what sampling noise alone gives. Interpolating between two samples
-  // also averages their noise, which sharpens the lines by itself (at 10 Hz more than a lag does): that
-  // gain is the same for the opposite shift, a lag's is not, so the shift must beat its mirror too.
+  // A few percent of sharpness is what sampling noise alone gives. The search's speeds carry the same
+  // noise at every offset (search_speed), and a shift must also beat its mirror: a gain the opposite
+  // shift shares is no lag's.
   const double mirror = best_delta != 0.0 ? sharpness(-best_delta) : unshifted;
-  if (best < 1.05 * std::max(unshifted, mirror)) return all;
-  MixtureData out = all;
+  if (best < 1.05 * std::max(unshifted, mirror)) return {all, 0.0};
+  Aligned out{all, best_delta};
   for (std::size_t k = 0; k < n; ++k)
-    out.v[k] = shifted_speed(all, k, best_delta, max_gap);
+    out.data.v[k] = shifted_speed(all, k, best_delta, max_gap);
   return out;
 }
 
 }  // namespace
 
 GearModel fit_auto(const MixtureData& input, int gears) {
-  const MixtureData all = aligned_channels(input);
+  const Aligned aligned = aligned_channels(input);
+  const MixtureData& all = aligned.data;
   GearModel model;
   model.method = "auto";
+  model.extra["speed_lag"] = aligned.lag;
   model.samples = all.size();
   std::vector<double> log_ratios;
   double vmax = 0.0;
@@ -536,7 +602,9 @@ GearModel fit_auto(const MixtureData& input, int gears) {
   p = best.params;
   // The subsample chose the ladder; the full data sets the final values.
   if (work.size() < all.size()) (void)run_em(all, p, kFullDataIterations, 1e-9, false);
-  return finish_model(all, p, "auto", GradientLayout{p.gears(), true, p.beta_stand > 0.0});
+  GearModel fitted = finish_model(all, p, "auto", GradientLayout{p.gears(), true, p.beta_stand > 0.0});
+  fitted.extra["speed_lag"] = aligned.lag;
+  return fitted;
 }
 
 }  // namespace gearpulse::detail

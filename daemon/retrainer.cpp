@@ -158,6 +158,12 @@ bool Retrainer::retrain_now() {
         model_.set(next);
         changed = true;
         result = fmt::format("fit on {} samples: {} gears in {:.2f} s", samples.size(), gears, secs);
+        // The pairs' GPS speeds agreeing best with the engine speed of another instant: the fix's
+        // instant (receive time - gps.latency) is off by that much. The fit moved them itself.
+        if (const double lag = next->extra.value("speed_lag", 0.0); lag != 0.0)
+          result += fmt::format(
+              " (GPS speed matched the engine {:.2f} s {} than stamped: gps.latency may be {:.2f} s too {})",
+              std::abs(lag), lag > 0.0 ? "later" : "earlier", std::abs(lag), lag > 0.0 ? "short" : "long");
         spdlog::info("retrain: {}; new model in use", result);
         try {
           if (save_model_if_ours(model_, model_path_, *next) == ModelSave::kReplacedByOther) {

@@ -482,6 +482,32 @@ TEST_CASE("daemon: retrainer swaps in and saves a fitted model") {
   CHECK(next_start.new_samples() == 6);
 }
 
+TEST_CASE("daemon: a retrain that found the GPS speeds late against the engine says gps.latency is off") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 20; ++i)
+    store.add({double(i), 10.0, 100.0});
+  ModelHolder model;
+  double lag = 0.0;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>) {
+                        GearModel m = three_gears();
+                        m.extra["speed_lag"] = lag;
+                        return m;
+                      },
+                      {});
+  CHECK(retrainer.retrain_now());
+  CHECK(retrainer.status().last_result.find("gps.latency") == std::string::npos);
+  lag = 0.375;  // the fit paired each engine reading with the speed stamped 0.375 s after it
+  store.add({20.0, 10.0, 100.0});
+  CHECK(retrainer.retrain_now());
+  CHECK(retrainer.status().last_result.find("gps.latency may be 0.38 s too short") != std::string::npos);
+  lag = -0.5;
+  store.add({21.0, 10.0, 100.0});
+  CHECK(retrainer.retrain_now());
+  CHECK(retrainer.status().last_result.find("gps.latency may be 0.50 s too long") != std::string::npos);
+}
+
 TEST_CASE("daemon: retrainer fits at start when the store holds enough pairs its model has not seen") {
   // Trips shorter than the retrain interval: the pairs gathered over several of them are learned from at
   // the next start, not never.
