@@ -231,6 +231,7 @@ TEST_CASE("estimator: noisy 1 Hz speeds without lag are not shifted in time") {
       const auto samples = sim::to_samples(sim::simulate_observations(car, style, 2400.0, 1, 11, noisy));
       const FitResult fit = fit_gear_model(samples, {});
       INFO(name << " " << sim::style_name(style));
+      CHECK(fit.model.extra.value("speed_lag", -1.0) == 0.0);
       if (fit.model.gears.size() != car.theta.size()) continue;  // a count missed is another test's
       ++checked;
       for (std::size_t i = 0; i < car.theta.size(); ++i) {
@@ -264,6 +265,7 @@ TEST_CASE("estimator: a speed channel lagging engine speed by up to 2 s is reali
       samples.push_back({observed[k].truth.t, observed[k - lag_rows].speed, observed[k].freq});
     const FitResult fit = fit_gear_model(samples, {});
     INFO("lag " << c.lag << " s, " << 10 / c.every << " Hz");
+    CHECK(fit.model.extra.value("speed_lag", 0.0) == Approx(c.lag).margin(0.1));
     REQUIRE(fit.model.gears.size() == 5);
     CHECK(fit.model.gears[0].theta == Approx(car.theta[0]).epsilon(c.first_gear_tolerance));
     for (std::size_t i = 1; i < 5; ++i)
