@@ -245,25 +245,27 @@ void speed_lag_table(int seeds) {
     std::size_t every;  // rows of the 10 Hz observation kept
     double sigma_speed;
   };
-  const Rate rates[] = {{"1 Hz", 10, 0.05}, {"1 Hz, sigma 0.3", 10, 0.3}, {"10 Hz", 1, 0.05}};
+  // Observed at 50 Hz, rows kept at 1 or 10 Hz; the lags are not whole samples at either rate.
+  constexpr double kFine = 0.02;
+  const Rate rates[] = {{"1 Hz", 50, 0.05}, {"1 Hz, sigma 0.3", 50, 0.3}, {"10 Hz", 5, 0.05}};
   std::printf("\n== speed lag: 7 manual presets, urban, 40 min, seeds 1..%d (%d runs per cell)\n", seeds,
               7 * seeds);
   std::printf("%-16s %6s | %22s | %12s %10s %10s %10s\n", "observed", "lag s", "found: median / worst",
               "right count", "<= 0.5 %", "<= 1 %", "<= 2 %");
   for (const Rate& rate : rates) {
-    for (double lag : {0.0, 0.3, 0.7, 1.5}) {
+    for (double lag : {0.0, 0.32, 0.74, 1.46}) {
       std::vector<double> off;
       int right = 0;
       int within[3] = {0, 0, 0};
       for (const sim::Vehicle& car : sim::vehicle_presets()) {
         if (car.is_cvt()) continue;
         for (int seed = 1; seed <= seeds; ++seed) {
-          sim::ObservationOptions ten_hz;
-          ten_hz.period = 0.1;
-          ten_hz.sigma_speed = rate.sigma_speed;
+          sim::ObservationOptions fine;
+          fine.period = kFine;
+          fine.sigma_speed = rate.sigma_speed;
           const auto observed = sim::simulate_observations(car, sim::DrivingStyle::kUrban, 2400.0, 1,
-                                                           static_cast<std::uint64_t>(seed), ten_hz);
-          const auto lag_rows = static_cast<std::size_t>(std::lround(lag / 0.1));
+                                                           static_cast<std::uint64_t>(seed), fine);
+          const auto lag_rows = static_cast<std::size_t>(std::lround(lag / kFine));
           std::vector<Sample> samples;
           for (std::size_t k = lag_rows; k < observed.size(); k += rate.every)
             samples.push_back({observed[k].truth.t, observed[k - lag_rows].speed, observed[k].freq});
@@ -282,7 +284,7 @@ void speed_lag_table(int seeds) {
       std::sort(size.begin(), size.end());
       const double worst = *std::max_element(off.begin(), off.end(),
                                              [](double x, double y) { return std::abs(x) < std::abs(y); });
-      std::printf("%-16s %6.1f | %+10.3f / %+9.3f | %12d %10d %10d %10d\n", rate.name, lag,
+      std::printf("%-16s %6.2f | %+10.3f / %+9.3f | %12d %10d %10d %10d\n", rate.name, lag,
                   size[size.size() / 2], worst, right, within[0], within[1], within[2]);
     }
   }

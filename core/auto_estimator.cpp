@@ -374,75 +374,140 @@ double shifted_speed(const MixtureData& d, std::size_t k, double delta, double m
   return std::max(0.0, d.v[a] + (d.v[b] - d.v[a]) * (target - d.t[a]) / dt);
 }
 
-// Speed at t_k + delta for the lag search, from the four samples around that time: the cubic through
-// them, evaluated there, plus as much of their cubic contrast (the pattern no cubic's three lower terms
-// show) as brings the weights' sum of squares back to one, with the sign alternating from sample to
-// sample. Every offset then carries a whole sample's noise, as the unshifted speeds do, and a speed
-// curve's slope and bend are read alike at every offset. Plain linear interpolation does neither: it
-// halves the noise half a sample away, which sharpens the lines by itself (with a drive's own asymmetries
-// that passed for a lag in drives without any, 0.125-0.5 s at 1 Hz), and it cuts every bend short there.
-// NaN where the four samples are not there or straddle a gap.
-double search_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
-  const double target = d.t[k] + delta;
-  const std::size_t n = d.size();
-  std::size_t a = k;  // the sample at or before target
-  while (a + 1 < n && d.t[a + 1] <= target)
-    ++a;
-  while (a > 0 && d.t[a] > target)
-    --a;
-  if (a == 0 || a + 2 >= n || d.t[a] > target) return std::numeric_limits<double>::quiet_NaN();
-  std::array<double, 4> x{};
-  for (std::size_t j = 0; j < 4; ++j) {
-    x[j] = d.t[a - 1 + j] - target;
-    if (j > 0 && !(x[j] - x[j - 1] > 0.0 && x[j] - x[j - 1] <= max_gap))
-      return std::numeric_limits<double>::quiet_NaN();
+// Speed at t_k + delta for the lag search, from the six samples around that time: the cubic through the
+// middle four, evaluated there, plus as much of the six's quartic contrast (the pattern no cubic shows)
+// as brings the weights' sum of squares back to one, the amount nearer zero. On a regular grid every
+// offset then carries a whole sample's noise, as the unshifted speeds do; a speed curve's slope, bend and
+// jerk are read alike at every offset; and the reading moves smoothly with the offset, mirror-alike about
+// the middle between two samples. Plain linear interpolation does none of this: it halves the noise half
+// a sample away, which sharpens the lines by itself (with a drive's own asymmetries that passed for a lag
+// in drives without any, 0.125-0.5 s at 1 Hz), and it cuts every bend short there. NaN where the six
+// samples are not there or straddle a gap or a restart of the clock.
+constexpr std::size_t kSearchTaps = 6;
+using SearchKernel = std::array<double, kSearchTaps>;
+
+// The weights for samples at times x (from the instant read, ascending, none at 0); nullopt when the
+// spacing leaves more than twice a sample's noise (a step much shorter than its neighbours).
+std::optional<SearchKernel> search_kernel(std::array<double, kSearchTaps> x) {
+  const double scale = std::max(-x[0], x[kSearchTaps - 1]);
+  for (double& xj : x)
+    xj /= scale;
+  // Lagrange weights of the cubic through the middle four, at x = 0.
+  SearchKernel w{};
+  for (std::size_t j = 1; j + 1 < kSearchTaps; ++j) {
+    w[j] = 1.0;
+    for (std::size_t i = 1; i + 1 < kSearchTaps; ++i)
+      if (i != j) w[j] *= -x[i] / (x[j] - x[i]);
   }
-  // Lagrange weights of the cubic through the four samples, at x = 0, and the cubic contrast: the third
-  // divided difference's weights 1 / prod (x_j - x_i), which every quadratic sums to zero against, so
-  // adding it leaves a quadratic read exactly; unit length.
-  std::array<double, 4> w{};
-  std::array<double, 4> u{};
-  double uu = 0.0;
-  for (std::size_t j = 0; j < 4; ++j) {
-    double num = 1.0;
-    double den = 1.0;
-    for (std::size_t i = 0; i < 4; ++i) {
-      if (i == j) continue;
-      num *= -x[i];
-      den *= x[j] - x[i];
+  // The quartic contrast: x^4 made orthogonal to 1, x, x^2 and x^3 on the six points (Gram-Schmidt),
+  // unit length. An even pattern: it leaves every cubic read exactly, and its amount is the same for an
+  // offset and its mirror.
+  std::array<SearchKernel, 5> basis{};
+  for (std::size_t m = 0; m < 5; ++m) {
+    for (std::size_t j = 0; j < kSearchTaps; ++j)
+      basis[m][j] = m == 0 ? 1.0 : basis[m - 1][j] * x[j];  // degree m: orthogonalised, as x^m would be
+    for (std::size_t i = 0; i < m; ++i) {
+      double dot = 0.0;
+      for (std::size_t j = 0; j < kSearchTaps; ++j)
+        dot += basis[m][j] * basis[i][j];
+      for (std::size_t j = 0; j < kSearchTaps; ++j)
+        basis[m][j] -= dot * basis[i][j];
     }
-    w[j] = num / den;
-    u[j] = 1.0 / den;
-    uu += u[j] * u[j];
+    double norm = 0.0;
+    for (std::size_t j = 0; j < kSearchTaps; ++j)
+      norm += basis[m][j] * basis[m][j];
+    norm = std::sqrt(norm);
+    for (std::size_t j = 0; j < kSearchTaps; ++j)
+      basis[m][j] /= norm;
   }
-  const double norm = std::sqrt(uu);
-  for (double& uj : u)
-    uj /= norm;
+  const SearchKernel& u = basis[4];
   double wu = 0.0;
   double ww = 0.0;
-  for (std::size_t j = 0; j < 4; ++j) {
+  for (std::size_t j = 0; j < kSearchTaps; ++j) {
     wu += w[j] * u[j];
     ww += w[j] * w[j];
   }
-  // (w + alpha u)^2 = 1: the positive root at even samples, the negative one at odd samples.
-  const double root = std::sqrt(std::max(0.0, wu * wu + 1.0 - ww));
-  const double alpha = ww >= 1.0 ? 0.0 : -wu + (k % 2 == 0 ? root : -root);
+  // (w + alpha u)^2 = 1, the root nearer zero. Uneven spacing can leave no root: the contrast then only
+  // lowers the sum of squares as far as it goes.
+  const double disc = wu * wu + 1.0 - ww;
+  const double alpha = disc >= 0.0 ? -wu + (wu > 0.0 ? std::sqrt(disc) : -std::sqrt(disc)) : -wu;
+  double sum_sq = 0.0;
+  for (std::size_t j = 0; j < kSearchTaps; ++j) {
+    w[j] += alpha * u[j];
+    sum_sq += w[j] * w[j];
+  }
+  if (!(sum_sq <= 2.0)) return std::nullopt;
+  return w;
+}
+
+double search_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
+  constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  const double target = d.t[k] + delta;
+  const std::size_t n = d.size();
+  // The sample at or before target, walking only over steps of time forward within max_gap (joined logs
+  // restart their clocks: the walk would read another log, and cross all of it).
+  std::size_t a = k;
+  while (a + 1 < n && d.t[a + 1] <= target) {
+    if (!(d.t[a + 1] - d.t[a] > 0.0 && d.t[a + 1] - d.t[a] <= max_gap)) return kNone;
+    ++a;
+  }
+  while (a > 0 && d.t[a] > target) {
+    if (!(d.t[a] - d.t[a - 1] > 0.0 && d.t[a] - d.t[a - 1] <= max_gap)) return kNone;
+    --a;
+  }
+  if (a < 2 || a + 3 >= n || d.t[a] > target) return kNone;
+  if (d.t[a] == target) return d.v[a];  // on a sample: the sample itself
+  std::array<double, kSearchTaps> x{};  // times of samples a-2 .. a+3 from target
+  for (std::size_t j = 0; j < kSearchTaps; ++j) {
+    x[j] = d.t[a - 2 + j] - target;
+    if (j > 0 && !(x[j] - x[j - 1] > 0.0 && x[j] - x[j - 1] <= max_gap)) return kNone;
+  }
+  const auto w = search_kernel(x);
+  if (!w) return kNone;
   double v = 0.0;
-  for (std::size_t j = 0; j < 4; ++j)
-    v += (w[j] + alpha * u[j]) * d.v[a - 1 + j];
+  for (std::size_t j = 0; j < kSearchTaps; ++j)
+    v += (*w)[j] * d.v[a - 2 + j];
   return v;
 }
 
 // Sharpness of the log(v/s) density (sum of squared bin shares, a collision probability) over the
 // samples [begin, end): gear lines give narrow peaks, a misaligned speed channel smears them in
 // proportion to the acceleration.
-double ratio_sharpness(const MixtureData& d, std::size_t begin, std::size_t end, double delta,
+double ratio_sharpness(const MixtureData& d, std::size_t begin, std::size_t end, double delta, double gap,
                        double max_gap) {
   constexpr double kBin = 0.015;  // log units, the middle smoothing width of candidate_scales
   std::vector<double> keys;
   keys.reserve(end - begin);
+  // On a regular grid of step `gap` every sample is read with the same weights: computed once here,
+  // used wherever the six samples sit on that grid, the general reading elsewhere.
+  const double rows = std::floor(delta / gap);
+  const double frac = delta / gap - rows;
+  std::optional<SearchKernel> regular;
+  if (frac > 1e-9 && frac < 1.0 - 1e-9) {
+    std::array<double, kSearchTaps> x{};
+    for (std::size_t j = 0; j < kSearchTaps; ++j)
+      x[j] = (static_cast<double>(j) - 2.0 - frac) * gap;
+    regular = search_kernel(x);
+  }
+  const auto shift = static_cast<std::ptrdiff_t>(rows);
+  auto on_grid = [&](std::size_t k) {
+    const std::ptrdiff_t a = static_cast<std::ptrdiff_t>(k) + shift;
+    if (a < 2 || a + 3 >= static_cast<std::ptrdiff_t>(d.size())) return false;
+    for (std::ptrdiff_t j = -2; j <= 3; ++j)
+      if (std::abs(d.t[static_cast<std::size_t>(a + j)] - (d.t[k] + (rows + static_cast<double>(j)) * gap)) >
+          1e-6 * gap)
+        return false;
+    return true;
+  };
   for (std::size_t k = begin; k < end; ++k) {
-    const double v = search_speed(d, k, delta, max_gap);
+    double v = 0.0;
+    if (regular && on_grid(k)) {
+      const std::size_t a = static_cast<std::size_t>(static_cast<std::ptrdiff_t>(k) + shift);
+      for (std::size_t j = 0; j < kSearchTaps; ++j)
+        v += (*regular)[j] * d.v[a - 2 + j];
+    } else {
+      v = search_speed(d, k, delta, max_gap);
+    }
     if (v > kMovingSpeed && d.s[k] > 0.0) keys.push_back(std::floor(std::log(v / d.s[k]) / kBin));
   }
   if (keys.empty()) return 0.0;
@@ -489,7 +554,7 @@ Aligned aligned_channels(const MixtureData& all) {
   const double max_gap = 3.0 * gap;
   const std::size_t begin = n > kAlignSamples ? (n - kAlignSamples) / 2 : 0;
   const std::size_t end = std::min(n, begin + kAlignSamples);
-  auto sharpness = [&](double delta) { return ratio_sharpness(all, begin, end, delta, max_gap); };
+  auto sharpness = [&](double delta) { return ratio_sharpness(all, begin, end, delta, gap, max_gap); };
   const double unshifted = sharpness(0.0);
   const double range = std::max(kMaxLag, gap);
   const double coarse = range / 8.0;

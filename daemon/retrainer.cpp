@@ -158,12 +158,16 @@ bool Retrainer::retrain_now() {
         model_.set(next);
         changed = true;
         result = fmt::format("fit on {} samples: {} gears in {:.2f} s", samples.size(), gears, secs);
-        // The pairs' GPS speeds agreeing best with the engine speed of another instant: the fix's
-        // instant (receive time - gps.latency) is off by that much. The fit moved them itself.
-        if (const double lag = next->extra.value("speed_lag", 0.0); lag != 0.0)
+        // A pair is stamped receive time - gps.latency; a fit that finds its GPS speed describing the
+        // engine lag s before that stamp (speed_lag > 0) says the latency is longer than set by about
+        // that much. The fit moved the speeds itself; the synthesis pairs them as stamped. Lags under
+        // kLagWorthSaying are within what the search resolves at 1 Hz.
+        constexpr double kLagWorthSaying = 0.1;  // s
+        if (const double lag = next->extra.value("speed_lag", 0.0); std::abs(lag) >= kLagWorthSaying)
           result += fmt::format(
-              " (GPS speed matched the engine {:.2f} s {} than stamped: gps.latency may be {:.2f} s too {})",
-              std::abs(lag), lag > 0.0 ? "later" : "earlier", std::abs(lag), lag > 0.0 ? "short" : "long");
+              " (the GPS speeds describe the engine {:.2f} s {} their stamps: gps.latency may be "
+              "{:.2f} s too {})",
+              std::abs(lag), lag > 0.0 ? "before" : "after", std::abs(lag), lag > 0.0 ? "short" : "long");
         spdlog::info("retrain: {}; new model in use", result);
         try {
           if (save_model_if_ours(model_, model_path_, *next) == ModelSave::kReplacedByOther) {

@@ -265,7 +265,8 @@ TEST_CASE("estimator: a speed channel lagging engine speed by up to 2 s is reali
       samples.push_back({observed[k].truth.t, observed[k - lag_rows].speed, observed[k].freq});
     const FitResult fit = fit_gear_model(samples, {});
     INFO("lag " << c.lag << " s, " << 10 / c.every << " Hz");
-    CHECK(fit.model.extra.value("speed_lag", 0.0) == Approx(c.lag).margin(0.1));
+    // Found within what the search resolves: 0.08 s at 1 Hz, 0.03 s at 10 Hz.
+    CHECK(fit.model.extra.value("speed_lag", 0.0) == Approx(c.lag).margin(c.every == 1 ? 0.03 : 0.08));
     REQUIRE(fit.model.gears.size() == 5);
     CHECK(fit.model.gears[0].theta == Approx(car.theta[0]).epsilon(c.first_gear_tolerance));
     for (std::size_t i = 1; i < 5; ++i)
