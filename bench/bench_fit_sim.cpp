@@ -43,6 +43,19 @@ Score score(const sim::Vehicle& car, const GearModel& model) {
 }
 
 // Samples with each gear engaged (index 0 = first gear).
+// Runs with the right gear count, and of those the ones with every theta within 0.5, 1 and 2 %.
+struct Tally {
+  int right = 0;
+  int within[3] = {0, 0, 0};
+  void add(const sim::Vehicle& car, const Score& a) {
+    if (a.found != car.theta.size()) return;
+    ++right;
+    within[0] += a.max_error <= 0.5 ? 1 : 0;
+    within[1] += a.max_error <= 1.0 ? 1 : 0;
+    within[2] += a.max_error <= 2.0 ? 1 : 0;
+  }
+};
+
 std::vector<int> engaged_counts(const sim::Vehicle& car, const std::vector<sim::Observation>& observed) {
   std::vector<int> n(static_cast<std::size_t>(car.gears()), 0);
   for (const sim::Observation& o : observed) {
@@ -209,8 +222,7 @@ void logging_conditions(int seeds) {
   std::printf("%-20s %12s %10s %10s %10s   %s\n", "condition", "right count", "<= 0.5 %", "<= 1 %", "<= 2 %",
               "CVT: ladders in 4 styles x seeds 1..20");
   for (const Condition& c : conditions) {
-    int right = 0;
-    int within[3] = {0, 0, 0};
+    Tally tally;
     int cvt_ladders = 0;
     for (const sim::Vehicle& car : sim::vehicle_presets()) {
       for (sim::DrivingStyle style : kStyles) {
@@ -221,17 +233,12 @@ void logging_conditions(int seeds) {
             cvt_ladders += model.gears.empty() ? 0 : 1;
             continue;
           }
-          const Score a = score(car, model);
-          if (a.found != car.theta.size()) continue;
-          ++right;
-          within[0] += a.max_error <= 0.5 ? 1 : 0;
-          within[1] += a.max_error <= 1.0 ? 1 : 0;
-          within[2] += a.max_error <= 2.0 ? 1 : 0;
+          tally.add(car, score(car, model));
         }
       }
     }
-    std::printf("%-20s %12d %10d %10d %10d   %d / %d\n", c.name, right, within[0], within[1], within[2],
-                cvt_ladders, 4 * kCvtSeeds);
+    std::printf("%-20s %12d %10d %10d %10d   %d / %d\n", c.name, tally.right, tally.within[0],
+                tally.within[1], tally.within[2], cvt_ladders, 4 * kCvtSeeds);
   }
 }
 
@@ -255,8 +262,7 @@ void speed_lag_table(int seeds) {
   for (const Rate& rate : rates) {
     for (double lag : {0.0, 0.32, 0.74, 1.46}) {
       std::vector<double> off;
-      int right = 0;
-      int within[3] = {0, 0, 0};
+      Tally tally;
       for (const sim::Vehicle& car : sim::vehicle_presets()) {
         if (car.is_cvt()) continue;
         for (int seed = 1; seed <= seeds; ++seed) {
@@ -271,12 +277,7 @@ void speed_lag_table(int seeds) {
             samples.push_back({observed[k].truth.t, observed[k - lag_rows].speed, observed[k].freq});
           const GearModel model = fit_gear_model(samples, {}).model;
           off.push_back(model.extra.value("speed_lag", 0.0) - lag);
-          const Score a = score(car, model);
-          if (a.found != car.theta.size()) continue;
-          ++right;
-          within[0] += a.max_error <= 0.5 ? 1 : 0;
-          within[1] += a.max_error <= 1.0 ? 1 : 0;
-          within[2] += a.max_error <= 2.0 ? 1 : 0;
+          tally.add(car, score(car, model));
         }
       }
       std::vector<double> size(off.size());
@@ -285,7 +286,8 @@ void speed_lag_table(int seeds) {
       const double worst = *std::max_element(off.begin(), off.end(),
                                              [](double x, double y) { return std::abs(x) < std::abs(y); });
       std::printf("%-16s %6.2f | %+10.3f / %+9.3f | %12d %10d %10d %10d\n", rate.name, lag,
-                  size[size.size() / 2], worst, right, within[0], within[1], within[2]);
+                  size[size.size() / 2], worst, tally.right, tally.within[0], tally.within[1],
+                  tally.within[2]);
     }
   }
 }
