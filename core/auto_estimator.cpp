@@ -374,20 +374,12 @@ double shifted_speed(const MixtureData& d, std::size_t k, double delta, double m
   return std::max(0.0, d.v[a] + (d.v[b] - d.v[a]) * (target - d.t[a]) / dt);
 }
 
-// Speed at t_k + delta for the lag search, from the six samples around that time: the cubic through the
-// middle four, evaluated there, plus as much of the six's quartic contrast (the pattern no cubic shows)
-// as brings the weights' sum of squares back to one, the amount nearer zero. On a regular grid every
-// offset then carries a whole sample's noise, as the unshifted speeds do; a speed curve's slope, bend and
-// jerk are read alike at every offset; and the reading moves smoothly with the offset, mirror-alike about
-// the middle between two samples. Plain linear interpolation does none of this: it halves the noise half
-// a sample away, which sharpens the lines by itself (with a drive's own asymmetries that passed for a lag
-// in drives without any, 0.125-0.5 s at 1 Hz), and it cuts every bend short there. NaN where the six
-// samples are not there or straddle a gap or a restart of the clock.
 constexpr std::size_t kSearchTaps = 6;
 using SearchKernel = std::array<double, kSearchTaps>;
 
-// The weights for samples at times x (from the instant read, ascending, none at 0); nullopt when the
-// spacing leaves more than twice a sample's noise (a step much shorter than its neighbours).
+// The lag search's reading (search_speed below) as weights on six samples at times x from the instant
+// read (ascending, none at 0); nullopt when the spacing leaves more than twice a sample's noise (a step
+// much shorter than its neighbours).
 std::optional<SearchKernel> search_kernel(std::array<double, kSearchTaps> x) {
   const double scale = std::max(-x[0], x[kSearchTaps - 1]);
   for (double& xj : x)
@@ -440,6 +432,15 @@ std::optional<SearchKernel> search_kernel(std::array<double, kSearchTaps> x) {
   return w;
 }
 
+// Speed at t_k + delta for the lag search, from the six samples around that time: the cubic through the
+// middle four, evaluated there, plus as much of the six's quartic contrast (the pattern no cubic shows)
+// as brings the weights' sum of squares back to one, the amount nearer zero. On a regular grid every
+// offset then carries a whole sample's noise, as the unshifted speeds do; a speed curve's slope, bend and
+// jerk are read alike at every offset; and the reading moves smoothly with the offset, mirror-alike about
+// the middle between two samples. Plain linear interpolation does none of this: it halves the noise half
+// a sample away, which sharpens the lines by itself (with a drive's own asymmetries that passed for a lag
+// in drives without any, 0.125-0.5 s at 1 Hz), and it cuts every bend short there. NaN where the six
+// samples are not there or straddle a gap or a restart of the clock.
 double search_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
   constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
   const double target = d.t[k] + delta;
