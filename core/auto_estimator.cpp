@@ -345,33 +345,39 @@ std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std:
   return out;
 }
 
+// The sample at or before `target`, walking from sample k only over steps of time forward within
+// max_gap (joined logs restart their clocks: a walk across one would read another log, and could cross
+// all of it); nullopt where the walk meets such a step or target lies before the first sample.
+std::optional<std::size_t> sample_at_or_before(const MixtureData& d, std::size_t k, double target,
+                                               double max_gap) {
+  const std::size_t n = d.size();
+  auto step_ok = [&](std::size_t i) { return d.t[i + 1] - d.t[i] > 0.0 && d.t[i + 1] - d.t[i] <= max_gap; };
+  std::size_t a = k;
+  while (a + 1 < n && d.t[a + 1] <= target) {
+    if (!step_ok(a)) return std::nullopt;
+    ++a;
+  }
+  while (a > 0 && d.t[a] > target) {
+    if (!step_ok(a - 1)) return std::nullopt;
+    --a;
+  }
+  if (d.t[a] > target) return std::nullopt;
+  return a;
+}
+
 // Speed read at a time offset from engine speed: v interpolated linearly to t + delta between the two
 // samples around it (no change at the ends or across a gap).
 double shifted_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
   if (delta == 0.0) return d.v[k];
   const double target = d.t[k] + delta;
-  const std::size_t n = d.size();
-  std::size_t a = k;  // the sample at or before target (delta > 0) or at or after it (delta < 0)
-  std::size_t b = k;
-  if (delta > 0.0) {
-    while (a + 1 < n && d.t[a + 1] < target) {
-      if (!(d.t[a + 1] - d.t[a] > 0.0) || d.t[a + 1] - d.t[a] > max_gap) return d.v[k];
-      ++a;
-    }
-    if (a + 1 >= n) return d.v[k];
-    b = a + 1;
-  } else {
-    while (a > 0 && d.t[a - 1] > target) {
-      if (!(d.t[a] - d.t[a - 1] > 0.0) || d.t[a] - d.t[a - 1] > max_gap) return d.v[k];
-      --a;
-    }
-    if (a == 0) return d.v[k];
-    b = a;
-    a = b - 1;
-  }
-  const double dt = d.t[b] - d.t[a];
+  const auto a = sample_at_or_before(d, k, target, max_gap);
+  if (!a) return d.v[k];
+  if (d.t[*a] == target) return std::max(0.0, d.v[*a]);
+  const std::size_t b = *a + 1;
+  if (b >= d.size()) return d.v[k];
+  const double dt = d.t[b] - d.t[*a];
   if (!(dt > 0.0) || dt > max_gap) return d.v[k];  // a gap, or time restarting
-  return std::max(0.0, d.v[a] + (d.v[b] - d.v[a]) * (target - d.t[a]) / dt);
+  return std::max(0.0, d.v[*a] + (d.v[b] - d.v[*a]) * (target - d.t[*a]) / dt);
 }
 
 constexpr std::size_t kSearchTaps = 6;
@@ -444,19 +450,9 @@ std::optional<SearchKernel> search_kernel(std::array<double, kSearchTaps> x) {
 double search_speed(const MixtureData& d, std::size_t k, double delta, double max_gap) {
   constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
   const double target = d.t[k] + delta;
-  const std::size_t n = d.size();
-  // The sample at or before target, walking only over steps of time forward within max_gap (joined logs
-  // restart their clocks: the walk would read another log, and cross all of it).
-  std::size_t a = k;
-  while (a + 1 < n && d.t[a + 1] <= target) {
-    if (!(d.t[a + 1] - d.t[a] > 0.0 && d.t[a + 1] - d.t[a] <= max_gap)) return kNone;
-    ++a;
-  }
-  while (a > 0 && d.t[a] > target) {
-    if (!(d.t[a] - d.t[a - 1] > 0.0 && d.t[a] - d.t[a - 1] <= max_gap)) return kNone;
-    --a;
-  }
-  if (a < 2 || a + 3 >= n || d.t[a] > target) return kNone;
+  const auto at = sample_at_or_before(d, k, target, max_gap);
+  if (!at || *at < 2 || *at + 3 >= d.size()) return kNone;
+  const std::size_t a = *at;
   if (d.t[a] == target) return d.v[a];  // on a sample: the sample itself
   std::array<double, kSearchTaps> x{};  // times of samples a-2 .. a+3 from target
   for (std::size_t j = 0; j < kSearchTaps; ++j) {
