@@ -294,6 +294,53 @@ TEST_CASE("daemon: pairs journaled after the last save survive a power cut") {
   }
 }
 
+// A disk that has no room for the whole store (a save writes all of it) may still take a journal's few
+// records: the daemon's periodic save falls back to the journal then. A file size limit stands in for the
+// full disk (it fails the same writes, and works for root, who runs these tests in CI).
+TEST_CASE("daemon: pairs a failed save could not write are kept by the journal") {
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  TrainingStore store(1e9, 10000);
+  add_pairs(store, 0, 1000);
+  store.save(path);
+  add_pairs(store, 1000, 1040);
+  REQUIRE(store.append_journal(path) == 40);
+  add_pairs(store, 1040, 1060);
+  {
+    struct FileSizeLimit {  // restored however the block ends
+      rlimit old{};
+      struct sigaction old_action {};
+      explicit FileSizeLimit(rlim_t bytes) {
+        struct sigaction ignore {};
+        ignore.sa_handler = SIG_IGN;
+        REQUIRE(::sigaction(SIGXFSZ, &ignore, &old_action) == 0);  // a write past it fails with EFBIG
+        REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
+        rlimit low = old;
+        low.rlim_cur = bytes;
+        REQUIRE(::setrlimit(RLIMIT_FSIZE, &low) == 0);
+      }
+      ~FileSizeLimit() {
+        ::setrlimit(RLIMIT_FSIZE, &old);
+        ::sigaction(SIGXFSZ, &old_action, nullptr);
+      }
+    } limit(TrainingStore::file_bytes(1060) / 2);
+    CHECK_THROWS_AS(store.save(path), std::system_error);
+    CHECK(count_entries(dir.path()) == 2);  // the file and its journal as they were, no temp file left
+    CHECK(store.unsaved());
+    CHECK(store.append_journal(path) == 20);
+  }
+  // Power lost before room came back: the old file and the journal hold every pair.
+  TrainingStore::JournalReplay replay;
+  CHECK(restarted(path, replay)->size() == 1060);
+  CHECK(replay.recovered == 60);
+  CHECK(replay.problem.empty());
+  // With room again the next save takes them all and starts a fresh journal.
+  store.save(path);
+  TrainingStore::JournalReplay again;
+  CHECK(restarted(path, again)->size() == 1060);
+  CHECK(again.recovered == 0);
+}
+
 TEST_CASE("daemon: a journal older than the saved file is not replayed twice") {
   TempDir dir;
   const auto path = dir / "training.bin";
