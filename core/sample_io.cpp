@@ -137,15 +137,59 @@ std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
   return std::nullopt;
 }
 
+// The rows of a log (their times, in file order) to drop so that its time never runs backwards, each
+// with its reason, in row order. A row whose time jumps ahead of the rows on both sides (a corrupt cell)
+// is the bad one, not every row after it: ahead of the next row, which follows on from the last row kept
+// (or, for the rows before any is kept, from which the row after it follows on while the jump stays ahead
+// of that one too). Otherwise a row behind the last row kept is the bad one (a clock that restarts keeps
+// the rows before the restart).
+struct TimeDrop {
+  std::size_t row;
+  std::string reason;
+};
+std::vector<TimeDrop> time_order_drops(std::span<const double> t) {
+  std::vector<TimeDrop> drops;
+  const std::size_t n = t.size();
+  std::optional<std::size_t> last;  // the last row kept
+  char buf[96];
+  for (std::size_t i = 0; i < n; ++i) {
+    if (last && t[i] < t[*last]) {
+      std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", t[i], t[*last]);
+      drops.push_back({i, buf});
+      continue;
+    }
+    if (i + 1 < n && t[i] > t[i + 1]) {
+      const bool next_follows =
+          last ? t[*last] <= t[i + 1] : i + 2 < n && t[i + 1] <= t[i + 2] && t[i] > t[i + 2];
+      if (next_follows) {
+        std::snprintf(buf, sizeof buf, "time %.6g is ahead of the rows around it", t[i]);
+        drops.push_back({i, buf});
+        continue;
+      }
+    }
+    last = i;
+  }
+  return drops;
+}
+
 // Collects samples and skip reports; enforces the rules common to every format.
 class LogBuilder {
  public:
   LogBuilder(std::string_view name, const ReadOptions& options) : options_(options) { log_.name = name; }
 
+  // Reports a bad row. The messages kept are those of the first rows in the file, in line order, whichever
+  // order the reader finds them in (a row's time is judged once the rows after it are read).
   void skip(std::size_t line, std::string_view reason) {
     ++log_.skipped_count;
-    if (log_.skipped.size() < options_.max_messages)
-      log_.skipped.push_back(log_.name + ":" + std::to_string(line) + ": " + std::string(reason));
+    const auto at = std::upper_bound(skipped_lines_.begin(), skipped_lines_.end(), line);
+    if (static_cast<std::size_t>(at - skipped_lines_.begin()) >= options_.max_messages) return;
+    log_.skipped.insert(log_.skipped.begin() + (at - skipped_lines_.begin()),
+                        log_.name + ":" + std::to_string(line) + ": " + std::string(reason));
+    skipped_lines_.insert(at, line);
+    if (skipped_lines_.size() > options_.max_messages) {
+      skipped_lines_.pop_back();
+      log_.skipped.pop_back();
+    }
   }
   // Returns false (and reports) when t runs backwards or a value is beyond any road vehicle.
   bool add(std::size_t line, Sample s) {
@@ -165,25 +209,13 @@ class LogBuilder {
       skip(line, buf);
       return false;
     }
+    // The readers drop rows out of time order before (time_order_drops); this holds for any caller.
     if (!log_.samples.empty() && s.t < log_.samples.back().t) {
-      const std::size_t n = log_.samples.size();
-      // The row before jumped ahead of both its neighbours (a corrupt time cell): that row is the bad one,
-      // not this one and every row after it.
-      if (last_line_ != 0 && n >= 2 && s.t >= log_.samples[n - 2].t) {
-        std::snprintf(buf, sizeof buf, "time %.6g is ahead of the rows around it", log_.samples.back().t);
-        while (!log_.rows.empty() && log_.rows.back().sample == n - 1)
-          log_.rows.pop_back();
-        log_.samples.pop_back();
-        skip(last_line_, buf);
-        last_line_ = 0;
-        return add(line, s);
-      }
       std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", s.t, log_.samples.back().t);
       skip(line, buf);
       return false;
     }
     log_.samples.push_back(s);
-    last_line_ = line;
     add_repeat(s.t);
     return true;
   }
@@ -218,7 +250,31 @@ class LogBuilder {
  private:
   const ReadOptions& options_;
   SampleLog log_;
-  std::size_t last_line_ = 0;  // line of the sample added last; 0 once it was taken back
+  std::vector<std::size_t> skipped_lines_;  // the line of each message in log_.skipped
+};
+
+// A reader's rows, in file order, walked against their time_order_drops(): keep() reports a dropped row
+// as skipped and returns false.
+class TimeOrder {
+ public:
+  template <class Rows, class Time>
+  TimeOrder(const Rows& rows, Time time) {
+    std::vector<double> t;
+    t.reserve(rows.size());
+    for (const auto& r : rows)
+      t.push_back(time(r));
+    drops_ = time_order_drops(t);
+    next_ = drops_.begin();
+  }
+  bool keep(std::size_t row, std::size_t line, LogBuilder& out) {
+    if (next_ == drops_.end() || next_->row != row) return true;
+    out.skip(line, (next_++)->reason);
+    return false;
+  }
+
+ private:
+  std::vector<TimeDrop> drops_;
+  std::vector<TimeDrop>::const_iterator next_;
 };
 
 struct LineReader {
@@ -250,6 +306,8 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   out.log().format = SampleFormat::kGeneric;
   out.log().speed_column = "speed";
   std::vector<std::string_view> cells;
+  std::vector<std::size_t> lines;
+  std::vector<Sample> rows;
   while (reader.next()) {
     if (blank(reader.line)) continue;
     split_cells(reader.line, cells, need);
@@ -269,8 +327,12 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
       out.skip(reader.number, bad->problem);
       continue;
     }
-    out.add(reader.number, Sample{t.value, v.value, f.value});
+    lines.push_back(reader.number);
+    rows.push_back(Sample{t.value, v.value, f.value});
   }
+  TimeOrder order(rows, [](const Sample& r) { return r.t; });
+  for (std::size_t i = 0; i < rows.size(); ++i)
+    if (order.keep(i, lines[i], out)) out.add(lines[i], rows[i]);
 }
 
 // The Carloop logger writes rows at a steady rate (it polls its PIDs round-robin) but its run-time
@@ -337,6 +399,11 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     std::size_t of, line;
   };
   std::vector<Repeat> repeats;
+  struct Parsed {
+    std::size_t line;
+    double counter, t, rpm, speed;
+  };
+  std::vector<Parsed> parsed;
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double counter = static_cast<double>(row++);
@@ -360,29 +427,29 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
       out.skip(reader.number, bad->problem);
       continue;
     }
-    if (t.value < last_t) {
-      char buf[96];
-      std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", t.value, last_t);
-      out.skip(reader.number, buf);
-      continue;
+    parsed.push_back({reader.number, counter, t.value, rpm.value, speed.value});
+  }
+  TimeOrder order(parsed, [](const Parsed& p) { return p.t; });
+  for (std::size_t i = 0; i < parsed.size(); ++i) {
+    const Parsed& p = parsed[i];
+    if (!order.keep(i, p.line, out)) continue;
+    if (p.t != last_t) {
+      refresh_row.push_back(p.counter);
+      refresh_t.push_back(p.t + 0.5);
     }
-    if (t.value != last_t) {
-      refresh_row.push_back(counter);
-      refresh_t.push_back(t.value + 0.5);
-    }
-    last_t = t.value;
+    last_t = p.t;
     const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
-    if (have_last && same(rpm.value, last_rpm) && same(speed.value, last_speed)) {
+    if (have_last && same(p.rpm, last_rpm) && same(p.speed, last_speed)) {
       ++out.log().repeated_rows;
-      if (out.keeps_rows()) repeats.push_back({counter, t.value, kept.size() - 1, reader.number});
+      if (out.keeps_rows()) repeats.push_back({p.counter, p.t, kept.size() - 1, p.line});
       continue;
     }
-    last_rpm = rpm.value;
-    last_speed = speed.value;
+    last_rpm = p.rpm;
+    last_speed = p.speed;
     have_last = true;
-    lines.push_back(reader.number);
-    rows.push_back(counter);
-    kept.push_back(Sample{t.value, speed.value * kKmhToMs, rpm.value / kSecondsPerMinute});
+    lines.push_back(p.line);
+    rows.push_back(p.counter);
+    kept.push_back(Sample{p.t, p.speed * kKmhToMs, p.rpm / kSecondsPerMinute});
   }
   if (format == SampleFormat::kCarloop && it && refresh_row.size() >= 2) {
     // The counter on a row is the whole second at its last refresh, at most one polling round old: the
@@ -502,9 +569,15 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
     throw SampleFileError(out.log().name +
                           ":1: no speed values (no OBD speed column and no GPS speed value)");
   out.log().speed_column = use_gps ? gps_col->header : obd_col->header;
-  const double t0 = rows.empty() ? 0.0 : rows.front().t;
-  for (const Row& r : rows)
-    out.add(r.line, Sample{r.t - t0, use_gps ? r.gps : r.obd, r.freq});
+  // Times count from the first row kept (a first row dropped for a corrupt time would shift them all).
+  TimeOrder order(rows, [](const Row& r) { return r.t; });
+  std::optional<double> t0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Row& r = rows[i];
+    if (!order.keep(i, r.line, out)) continue;
+    if (!t0) t0 = r.t;
+    out.add(r.line, Sample{r.t - *t0, use_gps ? r.gps : r.obd, r.freq});
+  }
 }
 
 }  // namespace

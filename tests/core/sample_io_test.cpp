@@ -127,6 +127,53 @@ TEST_CASE("io: one row whose time jumps ahead of its neighbours is the bad row, 
   CHECK(log.skipped[1].rfind("log.csv:7: time goes backwards", 0) == 0);
 }
 
+TEST_CASE("io: a corrupt time in the first row or in an OBD log costs that row, not the rows after it") {
+  SECTION("the first row of a generic log") {
+    const SampleLog log = read_text("t,speed,freq\n99999,10,50\n1,10,50\n2,10,50\n3,10,50\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[0].t == Approx(1));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:2: time 99999 is ahead of the rows around it", 0) == 0);
+  }
+  SECTION("a first row the next one falls behind, with the row after both: the next row is the bad one") {
+    const SampleLog log = read_text("t,speed,freq\n2,10,50\n1.5,10,50\n6,10,50\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[0].t == Approx(2));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:3: time goes backwards (1.5 after 2)", 0) == 0);
+  }
+  SECTION("a Carloop run-time cell, amid rows that repeat its second") {
+    std::string text = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),\n";
+    for (int i = 0; i < 40; ++i)
+      text += std::to_string(i == 21 ? 99999 : 10 + i / 2) + ", " + std::to_string(1000 + 10 * i) + ", " +
+              std::to_string(20 + i) + ",\n";
+    const SampleLog log = read_text(text);
+    CHECK(log.format == SampleFormat::kCarloop);
+    CHECK(log.samples.size() == 39);
+    CHECK(log.samples.back().t < 40.0);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:23: time 99999 is ahead of the rows around it", 0) == 0);
+  }
+  SECTION("the first row of a Torque export: the times count from the first row kept") {
+    const SampleLog log = read_text(
+        "Device Time,GPS Speed (Meters/second),Engine RPM(rpm)\n"
+        "40:00.5,10,2000\n"
+        "20:00.5,10,2000\n"
+        "20:01.5,11,2100\n"
+        "20:02.5,12,2200\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[0].t == Approx(0));
+    CHECK(log.samples[2].t == Approx(2));
+    CHECK(log.skipped.size() == 1);
+  }
+  SECTION("the messages are in line order, a time judged late among bad cells") {
+    const SampleLog log = read_text("t,speed,freq\n1,1,1\n1e9,1,1\nx,1,1\n2,1,1\n");
+    REQUIRE(log.skipped.size() == 2);
+    CHECK(log.skipped[0].rfind("log.csv:3: time 1e+09 is ahead", 0) == 0);
+    CHECK(log.skipped[1].rfind("log.csv:4: not a number", 0) == 0);
+  }
+}
+
 TEST_CASE("io: empty, headerless and useless files are one-line errors") {
   CHECK(error_of("") == "log.csv: empty file");
   CHECK(error_of("\n\n") == "log.csv: empty file");
