@@ -93,7 +93,21 @@ GearModel model_from_json(const nlohmann::json& json) {
 }
 
 std::string serialize_model(const GearModel& model) {
-  return model_to_json(model).dump(2) + "\n";
+  // The contract's keys first, in the order of its example (and a gear's theta, weight, stderr), the added
+  // ones after them and `extra` last: a model read by eye, or by a script line by line, starts as
+  // documented.
+  const nlohmann::json json = model_to_json(model);
+  nlohmann::ordered_json out;
+  for (const char* key : {"version", "gears", "sigma_speed", "sigma_freq", "samples", "log_likelihood"})
+    out[key] = nullptr;
+  out["gears"] = nlohmann::ordered_json::array();
+  for (const auto& gear : json["gears"])
+    out["gears"].push_back(
+        {{"theta", gear["theta"]}, {"weight", gear["weight"]}, {"stderr", gear["stderr"]}});
+  for (const auto& [key, value] : json.items())
+    if (key != "gears" && key != "extra") out[key] = nlohmann::ordered_json(value);
+  if (json.contains("extra")) out["extra"] = nlohmann::ordered_json(json["extra"]);  // the long one last
+  return out.dump(2) + "\n";
 }
 
 GearModel parse_model(std::string_view text) {

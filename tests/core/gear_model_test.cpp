@@ -1,5 +1,6 @@
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <random>
@@ -27,6 +28,23 @@ TEST_CASE("model: JSON round trip keeps gears and noise levels") {
   CHECK(back.gears[0].std_error == Approx(0.0002));
   CHECK(back.samples == 2400);
   CHECK(back.sigma_freq == Approx(1.5));
+}
+
+TEST_CASE("model: the JSON lists the contract's keys first, in the order of its example, and extra last") {
+  GearModel m;
+  m.gears = {{0.043, 0.05, 0.0002}};
+  m.method = "auto";
+  m.extra["idle"] = {{"freq", 13.1}};
+  const std::string text = gearpulse::serialize_model(m);
+  std::vector<std::size_t> at;
+  for (const char* key :
+       {"\"version\"", "\"gears\"", "\"theta\"", "\"weight\"", "\"stderr\"", "\"sigma_speed\"",
+        "\"sigma_freq\"", "\"samples\"", "\"log_likelihood\"", "\"method\"", "\"extra\"", "\"idle\""}) {
+    at.push_back(text.find(key));
+    INFO(key << " in " << text);
+    REQUIRE(at.back() != std::string::npos);
+  }
+  CHECK(std::is_sorted(at.begin(), at.end()));
 }
 
 TEST_CASE("model: rejects unordered, non-positive and versionless models") {

@@ -164,8 +164,10 @@ int run_track(const TrackOptions& o) {
     throw UsageError(o.file + ": read error after " + std::to_string(total) +
                      " frames: " + sf_strerror(file.get()));
   if (rows == 0) {
-    char what[128];
-    std::snprintf(what, sizeof what, "%lld frames (%.3g s) hold no whole analysis window of %.3g s",
+    char what[256];
+    std::snprintf(what, sizeof what,
+                  "%lld frames (%.4g s) hold no whole analysis window of %.3g s (a window starts on the hop "
+                  "grid, after the band filter's run-in: a little more than one window is needed)",
                   static_cast<long long>(total), static_cast<double>(total) / info.samplerate, o.window_s);
     throw UsageError(o.file + ": " + what);
   }
