@@ -128,19 +128,21 @@ TEST_CASE("io: one row whose time jumps ahead of its neighbours is the bad row, 
 }
 
 TEST_CASE("io: a corrupt time in the first row or in an OBD log costs that row, not the rows after it") {
+  const auto one_skip = [](const SampleLog& log, const std::string& message) {
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind(message, 0) == 0);
+  };
   SECTION("the first row of a generic log") {
     const SampleLog log = read_text("t,speed,freq\n99999,10,50\n1,10,50\n2,10,50\n3,10,50\n");
     REQUIRE(log.samples.size() == 3);
     CHECK(log.samples[0].t == Approx(1));
-    REQUIRE(log.skipped.size() == 1);
-    CHECK(log.skipped[0].rfind("log.csv:2: time 99999 is ahead of the rows around it", 0) == 0);
+    one_skip(log, "log.csv:2: time 99999 is ahead of the rows around it");
   }
   SECTION("a first row the next one falls behind, with the row after both: the next row is the bad one") {
     const SampleLog log = read_text("t,speed,freq\n2,10,50\n1.5,10,50\n6,10,50\n");
     REQUIRE(log.samples.size() == 2);
     CHECK(log.samples[0].t == Approx(2));
-    REQUIRE(log.skipped.size() == 1);
-    CHECK(log.skipped[0].rfind("log.csv:3: time goes backwards (1.5 after 2)", 0) == 0);
+    one_skip(log, "log.csv:3: time goes backwards (1.5 after 2)");
   }
   SECTION("a Carloop run-time cell, amid rows that repeat its second") {
     std::string text = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),\n";
@@ -151,8 +153,7 @@ TEST_CASE("io: a corrupt time in the first row or in an OBD log costs that row, 
     CHECK(log.format == SampleFormat::kCarloop);
     CHECK(log.samples.size() == 39);
     CHECK(log.samples.back().t < 40.0);
-    REQUIRE(log.skipped.size() == 1);
-    CHECK(log.skipped[0].rfind("log.csv:23: time 99999 is ahead of the rows around it", 0) == 0);
+    one_skip(log, "log.csv:23: time 99999 is ahead of the rows around it");
   }
   SECTION("the first row of a Torque export: the times count from the first row kept") {
     const SampleLog log = read_text(
