@@ -74,11 +74,13 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view data)
   UniqueFd fd(::mkostemp(name.data(), O_CLOEXEC));
   if (fd.get() < 0) throw_errno("cannot create temp file for", path);
   const std::string tmp(name.data());
+  // Errors name the file being written, not its temp file: the temp name is new at every attempt, and a
+  // fault that repeats (a full disk) reads the same each time, so it is said once per spell.
   try {
-    if (::fchmod(fd.get(), mode_for(path)) != 0) throw_errno("cannot chmod", tmp);
-    write_all(fd.get(), data, tmp);
-    if (::fsync(fd.get()) != 0) throw_errno("cannot fsync", tmp);
-    if (::close(fd.release()) != 0) throw_errno("cannot close", tmp);
+    if (::fchmod(fd.get(), mode_for(path)) != 0) throw_errno("cannot chmod a temp file for", path);
+    write_all(fd.get(), data, path);
+    if (::fsync(fd.get()) != 0) throw_errno("cannot fsync", path);
+    if (::close(fd.release()) != 0) throw_errno("cannot close", path);
     if (::rename(tmp.c_str(), path.c_str()) != 0) throw_errno("cannot rename into", path);
   } catch (...) {
     ::unlink(tmp.c_str());

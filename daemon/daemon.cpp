@@ -106,15 +106,22 @@ struct Daemon::Impl {
   [[nodiscard]] bool load_state();
   bool save_store(const char* why) noexcept;  // false when it failed (logged, and in status)
   void journal_store() noexcept;
-  // At stop: a store that cannot be saved (disk full) may still take the few records of a journal append.
-  // A store the file already holds is not written again (a full one is 24 MB, on flash that wears).
+  // At stop: a store that cannot be saved (disk full) may still take the few records of a journal append;
+  // what neither takes is lost, and said so. A store the file already holds is not written again (a full
+  // one is 24 MB, on flash that wears).
   void save_or_journal() noexcept {
     std::error_code ec;
-    if ((store.unsaved() || !std::filesystem::exists(store_path, ec)) && !save_store("shutdown"))
-      journal_store();
+    const bool due = store.unsaved() || !std::filesystem::exists(store_path, ec);
+    if (!due || save_store("shutdown")) return;
+    journal_store();
+    if (const std::size_t lost = store.unkept(); lost > 0)
+      spdlog::error(
+          "training: {} pairs learned since the last save are lost: neither {} nor its journal "
+          "could be written",
+          lost, store_path.string());
   }
   void recover_journal() noexcept;
-  FaultSpell journal_fault;  // journal appends failing (said once per spell)
+  FaultSpell journal_fault;  // journal appends failing (said once per spell); under state_mutex
   void reload();
   nlohmann::json handle(const nlohmann::json& request);
   nlohmann::json status_json();
@@ -376,12 +383,15 @@ void Daemon::Impl::journal_store() noexcept {
   try {
     const std::size_t n = store.append_journal(store_path);
     if (n > 0) spdlog::trace("training: journaled {} pairs", n);
+    std::lock_guard lock(state_mutex);
     if (journal_fault.succeeded())
       spdlog::info("training: {} written again", TrainingStore::journal_path(store_path).string());
   } catch (const std::exception& e) {
-    // Said once per failing spell, not every few seconds; the periodic save reports in status.
+    // Said once per failing spell, not every few seconds, and shown in status while it lasts (the
+    // periodic save, minutes apart, may not have failed yet).
     try {
-      if (journal_fault.failed(e.what()))
+      std::lock_guard lock(state_mutex);
+      if (journal_fault.failed(std::string("cannot journal training pairs: ") + e.what()))
         spdlog::error("training: cannot write {}: {}; pairs since the last save are at risk until it works",
                       TrainingStore::journal_path(store_path).string(), e.what());
     } catch (...) {
@@ -424,7 +434,13 @@ void Daemon::Impl::reload() {
   }
   if (!apply_log_level(next.log.level)) spdlog::error("reload: unknown log level {}", next.log.level);
   retrainer.set_settings(retrain_settings(next.model));
+  const std::size_t held = store.size();
   store.set_limits(next.model.store_hours * 3600.0, next.model.max_samples);
+  if (const std::size_t kept = store.size(); kept < held)
+    spdlog::warn(
+        "reload: the training store's new limits (model.store_hours {}, model.max_samples {}) drop {} "
+        "of its {} pairs, the oldest; they are gone from {} at the next save",
+        next.model.store_hours, next.model.max_samples, held - kept, held, store_path.string());
   if (pipeline) pipeline->set_tunables({next.gps.latency, next.tracker.min_snr_db});
   const auto restart = restart_required_changes(config, next);
   for (const auto& key : restart)
@@ -500,6 +516,7 @@ nlohmann::json Daemon::Impl::status_json() {
     std::lock_guard lock(state_mutex);
     std::vector<std::string> problems = state_problems;
     if (save_fault.failing()) problems.push_back(save_fault.what());
+    if (journal_fault.failing()) problems.push_back(journal_fault.what());
     reply["model"]["problems"] = problems;  // the state directory's: files set aside, failed saves
     reply["config"] = {
         {"file", config_path}, {"reload_error", reload_error}, {"restart_pending", restart_pending}};

@@ -25,13 +25,15 @@ ModelLoad load_model_file(const std::filesystem::path& path) noexcept {
 }
 
 void save_model_file(const std::filesystem::path& path, const GearModel& model) {
-  write_file_atomic(path, serialize_model(model) + "\n");
+  write_file_atomic(path, serialize_model(model));  // the bytes `gearpulse fit --out` writes
 }
 
+// Judged by what the file says, not by its bytes: a model written by `gearpulse fit --out` or by an earlier
+// version (other spacing, other key order) is not rewritten for that alone.
 bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept {
   try {
     const std::optional<std::string> text = read_file(path);
-    return text && *text == serialize_model(model) + "\n";
+    return text && serialize_model(parse_model(*text)) == serialize_model(model);
   } catch (const std::exception&) {
     return false;
   }

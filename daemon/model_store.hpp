@@ -65,7 +65,8 @@ struct ModelLoad {
 [[nodiscard]] ModelLoad load_model_file(const std::filesystem::path& path) noexcept;
 // Atomic write. Throws std::system_error.
 void save_model_file(const std::filesystem::path& path, const GearModel& model);
-// True when the file at `path` holds exactly what save_model_file would write for `model`.
+// True when the file at `path` holds `model`: what save_model_file would write for it, whatever the
+// spacing and key order of the file (a model written by `gearpulse fit --out`, or by an earlier version).
 [[nodiscard]] bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept;
 
 enum class ModelSave { kSaved, kAlreadyThere, kReplacedByOther };

@@ -381,7 +381,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
         }
         report("audio", spdlog::level::err,
                fmt::format("audio: {}; retrying in {:.1f} s (the delay grows to 10 s), speed follows GPS "
-                           "meanwhile",
+                           "meanwhile (without a fix it coasts down from the last speed)",
                            error, static_cast<double>(backoff.count()) / 1000.0));
         next_audio_try = std::chrono::steady_clock::now() + backoff;
         backoff = std::min(backoff * 2, std::chrono::milliseconds(10'000));
@@ -498,7 +498,9 @@ void Pipeline::Impl::tracker_loop() noexcept {
         report("audio-frozen", spdlog::level::warn,
                "audio: " + config.audio.device +
                    " gives the same samples period after period (a source that has stopped, or digital "
-                   "silence); they are not used, and speed follows GPS, until they change");
+                   "silence); they are not used, and speed follows GPS (without a fix it coasts down from "
+                   "the last "
+                   "speed), until they change");
       } else if (!s.frozen && audio_frozen) {
         audio_frozen = false;
         clear_fault("audio-frozen", "audio: samples from " + config.audio.device + " change again");
@@ -507,9 +509,10 @@ void Pipeline::Impl::tracker_loop() noexcept {
         audio_stalled = true;
         report(
             "audio-stalled", spdlog::level::warn,
-            fmt::format("audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); "
-                        "speed follows GPS until they come again",
-                        config.audio.device, s.silent_s));
+            fmt::format(
+                "audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); "
+                "speed follows GPS (without a fix it coasts down from the last speed) until they come again",
+                config.audio.device, s.silent_s));
       } else if (!s.stalled && audio_stalled) {
         audio_stalled = false;
         clear_fault("audio-stalled", "audio: samples from " + config.audio.device + " come again");

@@ -131,6 +131,12 @@ std::size_t TrainingStore::size() const {
   return samples_.size();
 }
 
+std::size_t TrainingStore::unkept() const {
+  std::lock_guard lock(mutex_);
+  // A journal that is not current is rewritten whole at the next append: count every pair since the save.
+  return journal_current_ ? unjournaled_ : since_save_;
+}
+
 bool TrainingStore::unsaved() const {
   std::lock_guard lock(mutex_);
   return since_save_ > 0 || cleared_;

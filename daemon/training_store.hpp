@@ -34,6 +34,8 @@ class TrainingStore {
   [[nodiscard]] std::size_t size() const;
   // Something the file at the last save() does not hold: pairs added, or a clear().
   [[nodiscard]] bool unsaved() const;
+  // Pairs that neither the file of the last save() nor the journal holds: what a power cut now would lose.
+  [[nodiscard]] std::size_t unkept() const;
   // Pairs added since the last mark_trained() (or since start).
   [[nodiscard]] std::size_t new_samples() const;
   void mark_trained(std::size_t consumed);

@@ -327,7 +327,8 @@ TEST_CASE("daemon: model.json is loaded at start and survives kill -9") {
   CHECK(again.wait() == 0);
 }
 
-TEST_CASE("daemon: a model unchanged since it was loaded is not rewritten at stop, a changed file is") {
+TEST_CASE(
+    "daemon: a model unchanged since it was loaded is not rewritten at stop, however its file is spaced") {
   TempDir dir;
   std::filesystem::create_directories(dir / "state");
   const auto path = dir / "state/model.json";
@@ -346,15 +347,19 @@ TEST_CASE("daemon: a model unchanged since it was loaded is not rewritten at sto
     CHECK(daemon.wait() == 0);
   }
   CHECK(inode() == before);  // an atomic save would have renamed a new file over it
-  // The file as a person wrote it (other spacing): saved at stop in the daemon's own form.
-  write_text(path, kModel);
-  {
+  // The file as a person wrote it (other spacing, no final newline), or as an earlier version did: the
+  // same model, so not rewritten either (it once was, and on read-only media every stop said it failed).
+  for (const std::string& text :
+       {std::string(kModel), gearpulse::serialize_model(gearpulse::parse_model(kModel)) + "\n"}) {
+    write_text(path, text);
+    const auto written = inode();
     Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
     REQUIRE(wait_for_status(dir, daemon).is_object());
     daemon.signal(SIGTERM);
     CHECK(daemon.wait() == 0);
+    CHECK(inode() == written);
+    CHECK(read_text(path) == text);
   }
-  CHECK(gearpulse::daemon::model_file_holds(path, gearpulse::parse_model(kModel)));
 }
 
 TEST_CASE("daemon: a training store the file already holds is not rewritten at stop") {
@@ -789,6 +794,32 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
   }
   server.join();
   ::close(listener);
+}
+
+TEST_CASE("daemon: a reload whose store limits drop stored pairs says how many") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  gearpulse::daemon::TrainingStore store(1e9, 1000);
+  const double now = static_cast<double>(std::time(nullptr));
+  for (int i = 0; i < 300; ++i)
+    store.add({now - 600.0 + i, 10.0, 50.0});
+  store.save(dir / "state/training.bin");
+  const std::string base = config_for(dir);
+  write_text(dir / "gearpulse.toml", base);
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  REQUIRE(wait_for_status(dir, daemon)["training_samples"] == 300);
+  write_text(dir / "gearpulse.toml", with(base, "[model]\n", "[model]\nmax_samples = 100\n"));
+  daemon.signal(SIGHUP);
+  bool said = false;
+  for (int i = 0; i < 200 && !said; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    said = read_text(dir / "log.txt").find("drop 200 of its 300 pairs") != std::string::npos;
+  }
+  INFO(read_text(dir / "log.txt"));
+  CHECK(said);
+  CHECK(wait_for_status(dir, daemon)["training_samples"] == 100);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
 }
 
 TEST_CASE("daemon: SIGHUP applies what it can and names what needs a restart") {

@@ -15,6 +15,7 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <spdlog/sinks/ringbuffer_sink.h>
 #include <spdlog/spdlog.h>
@@ -66,6 +67,28 @@ void wait_for_a_fit(const std::atomic<int>& fits) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
 }
 
+// Writes past `bytes` fail with EFBIG while it lives (SIGXFSZ ignored): a full disk for the writes of this
+// process, which works for root too.
+struct FileSizeLimit {
+  rlimit old{};
+  struct sigaction old_action {};
+  explicit FileSizeLimit(rlim_t bytes) {
+    struct sigaction ignore {};
+    ignore.sa_handler = SIG_IGN;
+    REQUIRE(::sigaction(SIGXFSZ, &ignore, &old_action) == 0);
+    REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
+    rlimit low = old;
+    low.rlim_cur = bytes;
+    REQUIRE(::setrlimit(RLIMIT_FSIZE, &low) == 0);
+  }
+  ~FileSizeLimit() {
+    ::setrlimit(RLIMIT_FSIZE, &old);
+    ::sigaction(SIGXFSZ, &old_action, nullptr);
+  }
+  FileSizeLimit(const FileSizeLimit&) = delete;
+  FileSizeLimit& operator=(const FileSizeLimit&) = delete;
+};
+
 }  // namespace
 
 TEST_CASE("daemon: atomic write replaces the content and leaves no temp file") {
@@ -102,6 +125,29 @@ TEST_CASE("daemon: atomic write into a missing directory fails and names the pat
   } catch (const std::system_error& e) {
     CHECK(std::string(e.what()).find("missing/model.json") != std::string::npos);
   }
+}
+
+TEST_CASE("daemon: a write that fails for room names the file written, the same at every attempt") {
+  // A save failing every few minutes on a full disk is said once per spell, which needs the same words
+  // each time: the temp file's name, new at every attempt, once made every failure news.
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  std::vector<std::string> errors;
+  {
+    const FileSizeLimit limit(1024);
+    for (int attempt = 0; attempt < 2; ++attempt) {
+      try {
+        write_file_atomic(path, std::string(4096, 'x'));
+      } catch (const std::system_error& e) {
+        errors.push_back(e.what());
+      }
+    }
+  }
+  REQUIRE(errors.size() == 2);
+  CHECK(errors[0] == errors[1]);
+  CHECK(errors[0].find(path.string() + ":") != std::string::npos);
+  CHECK(errors[0].find(".tmp.") == std::string::npos);
+  CHECK(count_entries(dir.path()) == 0);
 }
 
 TEST_CASE("daemon: atomic write survives a crash at any moment") {
@@ -307,27 +353,13 @@ TEST_CASE("daemon: pairs a failed save could not write are kept by the journal")
   REQUIRE(store.append_journal(path) == 40);
   add_pairs(store, 1040, 1060);
   {
-    struct FileSizeLimit {  // restored however the block ends
-      rlimit old{};
-      struct sigaction old_action {};
-      explicit FileSizeLimit(rlim_t bytes) {
-        struct sigaction ignore {};
-        ignore.sa_handler = SIG_IGN;
-        REQUIRE(::sigaction(SIGXFSZ, &ignore, &old_action) == 0);  // a write past it fails with EFBIG
-        REQUIRE(::getrlimit(RLIMIT_FSIZE, &old) == 0);
-        rlimit low = old;
-        low.rlim_cur = bytes;
-        REQUIRE(::setrlimit(RLIMIT_FSIZE, &low) == 0);
-      }
-      ~FileSizeLimit() {
-        ::setrlimit(RLIMIT_FSIZE, &old);
-        ::sigaction(SIGXFSZ, &old_action, nullptr);
-      }
-    } limit(TrainingStore::file_bytes(1060) / 2);
+    const FileSizeLimit limit(static_cast<rlim_t>(TrainingStore::file_bytes(1060) / 2));
     CHECK_THROWS_AS(store.save(path), std::system_error);
     CHECK(count_entries(dir.path()) == 2);  // the file and its journal as they were, no temp file left
     CHECK(store.unsaved());
+    CHECK(store.unkept() == 20);  // what a power cut now would lose
     CHECK(store.append_journal(path) == 20);
+    CHECK(store.unkept() == 0);
   }
   // Power lost before room came back: the old file and the journal hold every pair.
   TrainingStore::JournalReplay replay;
