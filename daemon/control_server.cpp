@@ -60,6 +60,7 @@ struct Client {
   std::string in;
   std::string out;
   bool close_after_flush = false;
+  bool spoke = false;  // has sent something
   std::uint32_t events = EPOLLIN | EPOLLRDHUP;
   std::chrono::steady_clock::time_point last_activity;
 };
@@ -277,6 +278,7 @@ void ControlServer::run() noexcept {
           if (errno != EAGAIN && errno != EWOULDBLOCK) error = true;
           break;
         }
+        c.spoke = true;
         c.in.append(buf, static_cast<std::size_t>(r));
         // Complete lines are answered in order.
         std::size_t start = 0;
@@ -319,11 +321,11 @@ void ControlServer::run() noexcept {
       if (eof) c.close_after_flush = true;
       if (!flush(c)) drop(fd, too_long ? "request too long" : nullptr);
     }
-    // Idle clients hold a slot; give it back.
+    // Idle clients hold a slot; give it back (sooner if they never asked anything).
     for (auto it = clients.begin(); it != clients.end();) {
       const auto idle =
           std::chrono::duration_cast<std::chrono::milliseconds>(now - it->second->last_activity);
-      if (idle.count() > limits_.idle_timeout_ms) {
+      if (idle.count() > (it->second->spoke ? limits_.idle_timeout_ms : limits_.first_request_timeout_ms)) {
         const int fd = (it++)->first;
         drop(fd, "idle timeout");
       } else {

@@ -26,6 +26,9 @@ struct ControlLimits {
   std::size_t max_output_bytes = 256 * 1024;  // per client: beyond it the client is dropped
   unsigned max_clients = 32;
   int idle_timeout_ms = 60'000;  // a connection silent this long is closed
+  // ... and one that has asked nothing yet, this long: connections that never speak held every slot
+  // (max_clients) for a minute, refusing gearpulsectl meanwhile.
+  int first_request_timeout_ms = 10'000;
 };
 
 class ControlServer {

@@ -132,7 +132,9 @@ TEST_CASE("control: many clients at once") {
     for (int i = 0; i < kClients; ++i) {
       const auto line = clients[i]->read_line();
       REQUIRE(line.has_value());
-      CHECK(json::parse(*line)["echo"] == std::string("c").append(std::to_string(i)));
+      std::string expected = "c";
+      expected += std::to_string(i);
+      CHECK(json::parse(*line)["echo"].get<std::string>() == expected);
     }
   // Concurrent threads too.
   std::atomic<int> good{0};
@@ -162,6 +164,21 @@ TEST_CASE("control: clients beyond the limit are refused with an error") {
   REQUIRE(line.has_value());
   CHECK(json::parse(*line)["error"] == "too many clients");
   CHECK(c.closed_by_peer());
+}
+
+TEST_CASE("control: connections that never ask anything give their slots back soon") {
+  TempDir dir;
+  ControlServer server(
+      (dir / "ctl.sock").string(), EchoHandler{},
+      ControlLimits{.max_clients = 2, .idle_timeout_ms = 60'000, .first_request_timeout_ms = 300});
+  server.start();
+  LineClient talker((dir / "ctl.sock").string()), mute((dir / "ctl.sock").string());
+  CHECK(ask(talker, R"({"cmd":"x"})")["ok"] == true);
+  // The silent one is closed after the short timeout; the one that spoke keeps its slot (a minute).
+  CHECK(mute.closed_by_peer(5'000));
+  LineClient next((dir / "ctl.sock").string());
+  CHECK(ask(next, R"({"cmd":"y"})")["echo"].get<std::string>() == "y");
+  CHECK(ask(talker, R"({"cmd":"z"})")["echo"].get<std::string>() == "z");
 }
 
 TEST_CASE("control: out of file descriptors the server waits instead of spinning, then serves again") {
