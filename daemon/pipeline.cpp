@@ -498,9 +498,8 @@ void Pipeline::Impl::tracker_loop() noexcept {
         report("audio-frozen", spdlog::level::warn,
                "audio: " + config.audio.device +
                    " gives the same samples period after period (a source that has stopped, or digital "
-                   "silence); they are not used, and speed follows GPS (without a fix it coasts down from "
-                   "the last "
-                   "speed), until they change");
+                   "silence); they are not used, and speed follows GPS (without a fix it coasts down "
+                   "from the last speed), until they change");
       } else if (!s.frozen && audio_frozen) {
         audio_frozen = false;
         clear_fault("audio-frozen", "audio: samples from " + config.audio.device + " change again");
