@@ -143,8 +143,19 @@ void PtyOutput::drop_stale(std::int64_t now_ns) noexcept {
     std::int64_t written_by_ns = now_ns;
     for (const Look& l : looks_)
       if (l.t_ns != 0 && l.written > oldest) written_by_ns = std::min(written_by_ns, l.t_ns);
-    if (now_ns - written_by_ns > max_age_ns_ && ::tcflush(peer.get(), TCIFLUSH) == 0)
-      overflowed_.fetch_add(static_cast<std::uint64_t>(queued), std::memory_order_relaxed);
+    if (now_ns - written_by_ns > max_age_ns_) {
+      // Read out rather than flushed: exactly the bytes taken are counted, and bytes still on their way
+      // from the master (not yet in the queue FIONREAD counts, but flushed with it) stay for the reader. A
+      // flush lost a few pulses uncounted whenever the kernel had not yet moved them.
+      char sink[4096];
+      auto left = static_cast<std::size_t>(queued);
+      while (left > 0) {
+        const ssize_t n = ::read(peer.get(), sink, std::min(left, sizeof sink));
+        if (n <= 0) break;
+        overflowed_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_relaxed);
+        left -= static_cast<std::size_t>(n);
+      }
+    }
   }
 }
 
