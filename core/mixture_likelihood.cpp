@@ -10,15 +10,13 @@ namespace {
 
 constexpr double kLogTwoPi = 1.8378770664093453;
 constexpr double kTiny = 1e-300;
-// Below this many samples a second thread costs more than it saves.
-constexpr std::size_t kParallelThreshold = 40000;
 
 // Runs fn(begin, end, slot) over [0, n) in one or two slices and returns the two slot results.
 template <typename Result, typename Fn>
 std::pair<Result, Result> split_two(std::size_t n, Fn&& fn) {
   Result a{};
   Result b{};
-  if (n < kParallelThreshold) {
+  if (n < kParallelSamples) {
     fn(std::size_t{0}, n, a);
     return {std::move(a), std::move(b)};
   }
@@ -103,13 +101,6 @@ inline double sample_terms(const MixtureParams& p, const Precomputed& c, double 
 }
 
 }  // namespace
-
-double MixtureParams::g_at(double v) const noexcept {
-  if (g_density.empty() || !(v >= g_lo) || !(v <= g_hi)) return 0.0;
-  const auto bins = g_density.size();
-  auto bin = static_cast<std::size_t>((v - g_lo) / (g_hi - g_lo) * static_cast<double>(bins));
-  return g_density[std::min(bin, bins - 1)];
-}
 
 double log_likelihood(const MixtureData& data, const MixtureParams& p) {
   const Precomputed c = precompute(p);

@@ -32,8 +32,11 @@ struct MixtureParams {
   double g_hi = 1.0;
 
   [[nodiscard]] int gears() const noexcept { return static_cast<int>(theta.size()); }
-  [[nodiscard]] double g_at(double v) const noexcept;
 };
+
+// From this many samples on, the passes over the data below run in two threads, each over one half (below
+// it a second thread costs more than it saves).
+inline constexpr std::size_t kParallelSamples = 40000;
 
 // Sum over samples of ln p(v_k | s_k), eq. (7). Uses up to two threads for large inputs.
 [[nodiscard]] double log_likelihood(const MixtureData& data, const MixtureParams& p);

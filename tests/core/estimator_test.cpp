@@ -417,6 +417,102 @@ TEST_CASE("estimator: analytic observed information equals the numeric one") {
   }
 }
 
+TEST_CASE("estimator: a log long enough for two threads gives the sums of its parts") {
+  // Every pass over the data (log-likelihood, gradient, observed information, E-step) splits a log of
+  // kParallelSamples or more between two threads; each part here is short enough for one.
+  const std::size_t n = detail::kParallelSamples + 2001;
+  const std::size_t cut = 15000;
+  REQUIRE(cut < detail::kParallelSamples);
+  REQUIRE(n - cut < detail::kParallelSamples);
+  const sim::Vehicle car = sim::bmw_520i();
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  detail::MixtureData all, head, tail;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double u = unit(rng);
+    double s = 12.0 + 80.0 * unit(rng), v = 0.0;
+    if (u < 0.15) {
+      s = 13.0 + 0.3 * noise(rng);  // standing at idle
+      v = std::abs(0.03 * noise(rng));
+    } else if (u < 0.25) {
+      v = 30.0 * unit(rng);  // declutched
+    } else {
+      const auto gear = static_cast<std::size_t>(unit(rng) * static_cast<double>(car.theta.size()));
+      v = car.theta[std::min(gear, car.theta.size() - 1)] * (s + 0.3 * noise(rng)) + 0.05 * noise(rng);
+    }
+    for (detail::MixtureData* d : {&all, k < cut ? &head : &tail}) {
+      d->v.push_back(v);
+      d->s.push_back(s);
+    }
+  }
+  detail::MixtureParams p;
+  p.theta = car.theta;
+  p.alpha = {0.1, 0.15, 0.15, 0.15, 0.2};
+  p.beta_stand = 0.15;
+  p.stand_sigma = 0.05;
+  p.beta_clutch = 0.1;
+  p.g_lo = 0.0;
+  p.g_hi = 40.0;
+  p.g_density.assign(8, 1.0 / 40.0);
+  p.sigma_s = 0.3;
+  p.sigma_v = 0.05;
+  const auto same = [](double whole, double parts) {
+    return std::abs(whole - parts) <= 1e-9 * (std::abs(whole) + std::abs(parts)) + 1e-12;
+  };
+
+  CHECK(same(detail::log_likelihood(all, p),
+             detail::log_likelihood(head, p) + detail::log_likelihood(tail, p)));
+
+  const detail::GradientLayout layout{5, true, true};
+  Eigen::VectorXd g_all, g_head, g_tail;
+  const double ll_all = detail::log_likelihood_gradient(all, p, layout, g_all);
+  const double ll_parts = detail::log_likelihood_gradient(head, p, layout, g_head) +
+                          detail::log_likelihood_gradient(tail, p, layout, g_tail);
+  CHECK(same(ll_all, ll_parts));
+  REQUIRE(g_all.size() == layout.size());
+  for (int i = 0; i < layout.size(); ++i) {
+    INFO("gradient " << i);
+    CHECK(same(g_all[i], g_head[i] + g_tail[i]));
+  }
+
+  const Eigen::MatrixXd info_all = detail::observed_information(all, p, layout);
+  const Eigen::MatrixXd info_parts =
+      detail::observed_information(head, p, layout) + detail::observed_information(tail, p, layout);
+  for (int i = 0; i < layout.size(); ++i) {
+    for (int j = 0; j < layout.size(); ++j) {
+      // Off the diagonal many entries cancel to zero: they are compared on the scale of the diagonal.
+      INFO("information " << i << ", " << j << ": " << info_all(i, j) << " against " << info_parts(i, j));
+      const double scale = std::sqrt(std::abs(info_all(i, i) * info_all(j, j)));
+      CHECK(std::abs(info_all(i, j) - info_parts(i, j)) <= 1e-9 * scale);
+    }
+  }
+
+  const detail::EStepStats e_all = detail::e_step(all, p);
+  const detail::EStepStats e_head = detail::e_step(head, p);
+  const detail::EStepStats e_tail = detail::e_step(tail, p);
+  CHECK(same(e_all.log_likelihood, e_head.log_likelihood + e_tail.log_likelihood));
+  REQUIRE(e_all.r.size() == car.theta.size());
+  for (std::size_t i = 0; i < e_all.r.size(); ++i) {
+    INFO("gear " << i + 1);
+    CHECK(same(e_all.r[i], e_head.r[i] + e_tail.r[i]));
+    CHECK(same(e_all.rvs[i], e_head.rvs[i] + e_tail.rvs[i]));
+    CHECK(same(e_all.rss[i], e_head.rss[i] + e_tail.rss[i]));
+    CHECK(same(e_all.rvv[i], e_head.rvv[i] + e_tail.rvv[i]));
+  }
+  CHECK(same(e_all.r_stand, e_head.r_stand + e_tail.r_stand));
+  CHECK(same(e_all.r_stand_vv, e_head.r_stand_vv + e_tail.r_stand_vv));
+  CHECK(same(e_all.r_clutch, e_head.r_clutch + e_tail.r_clutch));
+  REQUIRE(e_all.r_clutch_bins.size() == p.g_density.size());
+  for (std::size_t b = 0; b < e_all.r_clutch_bins.size(); ++b)
+    CHECK(same(e_all.r_clutch_bins[b], e_head.r_clutch_bins[b] + e_tail.r_clutch_bins[b]));
+  // Responsibilities sum to one per sample.
+  double total = e_all.r_stand + e_all.r_clutch;
+  for (double r : e_all.r)
+    total += r;
+  CHECK(total == Approx(static_cast<double>(n)).epsilon(1e-9));
+}
+
 // A log read twice at each 1 Hz row, as a Torque export with GPS beside the car's own speed: GPS Doppler
 // a second late and noisy, the wheel speed on time but reading `calibration` times the truth, cut down to
 // whole km/h.
