@@ -35,7 +35,7 @@ struct EchoHandler {
     ++*calls;
     const std::string cmd = request["cmd"].get<std::string>();
     if (cmd == "boom") throw ControlError("refused on purpose");
-    if (cmd == "big") return {{"blob", std::string(8192, 'x')}};
+    if (cmd == "big") return {{"blob", std::string(8192, 'x')}, {"n", calls->load()}};
     return {{"echo", cmd}, {"n", calls->load()}};
   }
 };
@@ -262,6 +262,41 @@ TEST_CASE("control: a stuck client never blocks the others") {
   CHECK(server.dropped_clients() >= 1);
   LineClient after((dir / "ctl.sock").string());
   CHECK(ask(after, R"({"cmd":"status"})")["ok"] == true);
+}
+
+TEST_CASE("control: a client that reads its replies late gets every one, in order") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{},
+                       ControlLimits{.max_output_bytes = 4 * 1024 * 1024});
+  server.start();
+  LineClient late((dir / "ctl.sock").string());
+  REQUIRE(late.connected());
+  // 150 replies of 8 kB each are far more than a socket's buffer: the rest waits in the server until the
+  // client reads, while the server goes on serving others.
+  constexpr int kRequests = 150;
+  std::string burst;
+  for (int i = 0; i < kRequests; ++i)
+    burst += "{\"cmd\":\"big\"}\n";
+  REQUIRE(late.send_all(burst));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  {
+    LineClient other((dir / "ctl.sock").string());
+    REQUIRE(other.connected());
+    CHECK(ask(other, R"({"cmd":"status"})")["ok"] == true);
+  }
+  int n_before = 0;
+  for (int i = 0; i < kRequests; ++i) {
+    const auto line = late.read_line();
+    REQUIRE(line.has_value());
+    const json r = json::parse(*line);
+    CHECK(r["blob"].get<std::string>().size() == 8192);
+    const int n = r["n"].get<int>();
+    CHECK(n > n_before);
+    n_before = n;
+  }
+  // Then it is an ordinary connection again.
+  CHECK(ask(late, R"({"cmd":"again"})")["echo"] == "again");
+  CHECK(server.dropped_clients() == 0);
 }
 
 TEST_CASE("control: a client that half-closes still gets its reply") {
