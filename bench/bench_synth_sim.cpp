@@ -10,10 +10,12 @@
 //       model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the fitted model, causal, stepped at every observed row (the
 //       daemon may step it less often; this bench shows what the filter itself does at each rate).
-// Each drive is observed three ways: an OBD logger (integer km/h and rpm, a 1.8 s polling round, skewed
-// polls, rows every 0.5 s as the Etios logs), GPS at 1 Hz and GPS at 10 Hz. The same drives are used for
-// all three, so a synthesis that does not depend on the sample rate gives about the same 1 Hz and 10 Hz
-// figures. "gear off" is the share of outage samples with the clutch engaged in which the synthesizer's
+// Each drive is observed four ways: an OBD logger (integer km/h and rpm, a 1.8 s polling round, skewed
+// polls, rows every 0.5 s as the Etios logs), GPS at 1 Hz and GPS at 10 Hz, and as the daemon runs: the
+// frequency at every 0.1 s tracker hop with a 1 Hz GPS fix given at each hop until the next (the newest
+// fresh fix, flagged new once), its model fitted on the 1 Hz pairs the daemon trains on. The same drives
+// are used for all, so a synthesis that does not depend on the sample rate gives about the same 1 Hz and
+// 10 Hz figures. "gear off" is the share of outage samples with the clutch engaged in which the synthesizer's
 // gear (mapped to the true gear of nearest theta) differs from the true gear or is none.
 // Usage: bench_synth_sim [SEED] [--quick] [--random N] [--trace FILE]   (--random N: N vehicles drawn by
 // sim::random_vehicle instead of the presets, one round each, so that nothing here is tuned to the
@@ -44,7 +46,9 @@ namespace {
 
 struct ObservationKind {
   const char* name;
-  sim::ObservationOptions options;
+  sim::ObservationOptions options;  // the rows replayed
+  sim::ObservationOptions fit;      // the rows the model is fitted on
+  double fix_interval = 0.0;        // s: GPS fixes this far apart, held at the rows between (0 = every row)
 };
 
 std::vector<ObservationKind> observation_kinds() {
@@ -56,7 +60,10 @@ std::vector<ObservationKind> observation_kinds() {
   sim::ObservationOptions gps1;  // defaults: 1 Hz, sigma_v 0.05 m/s, sigma_s 0.2 Hz
   sim::ObservationOptions gps10 = gps1;
   gps10.period = 0.1;
-  return {{"OBD 1.8 s", obd}, {"GPS 1 Hz", gps1}, {"GPS 10 Hz", gps10}};
+  return {{"OBD 1.8 s", obd, obd},
+          {"GPS 1 Hz", gps1, gps1},
+          {"GPS 10 Hz", gps10, gps10},
+          {"live", gps10, gps1, 1.0}};
 }
 
 struct ReplayDrive {
@@ -95,15 +102,19 @@ std::vector<int> true_gears_of(const sim::Vehicle& car, const GearModel& model) 
   return map;
 }
 
-// Replays one observed drive with outages; appends |error| in km/h of every row inside an outage.
+// Replays one observed drive with outages; appends |error| in km/h of every row inside an outage. With a
+// fix interval, a row's speed is the fix taken at the last whole interval, given at every row as the
+// daemon gives the newest fresh fix at every hop, flagged new at the first.
 void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
-            const std::vector<int>& true_gear, Errors& err) {
+            const std::vector<int>& true_gear, double fix_interval, Errors& err) {
   if (rows.empty()) return;
   gearpulse::SpeedSynthesizer synth(std::make_shared<const GearModel>(model));
   const double t0 = rows.front().truth.t;
   double last_gps = 0.0, hold_c = 0.0;
   bool was_out = false;
   double last_speed = -1.0, last_freq = -1.0;
+  double fix = gearpulse::kMissing;
+  long fix_index = -1;
   gearpulse::LogReplayer replayer(synth);
   for (const sim::Observation& r : rows) {
     // As gearpulse's readers do with OBD logs: a row repeating both held values carries nothing new.
@@ -112,10 +123,22 @@ void replay(const std::vector<sim::Observation>& rows, const GearModel& model,
     last_freq = r.freq;
     const double t = r.truth.t;
     const bool out = in_outage(t - t0);
-    // As `gearpulse replay` does: a row whose speed the outage took and whose rpm is held brings nothing.
-    const gearpulse::SynthOutput o = replayer.step({t, out ? gearpulse::kMissing : r.speed, r.freq});
+    gearpulse::SynthOutput o;
+    if (fix_interval > 0.0) {
+      const long index = std::lround(std::floor((t - t0) / fix_interval + 1e-6));
+      const bool fresh = !out && index != fix_index;
+      if (fresh) {
+        fix = r.speed;
+        fix_index = index;
+      }
+      o = synth.step(t, out ? gearpulse::kMissing : fix, r.freq, fresh);
+    } else {
+      // As `gearpulse replay` does: a row whose speed the outage took and whose rpm is held brings nothing.
+      o = replayer.step({t, out ? gearpulse::kMissing : r.speed, r.freq});
+    }
     if (!out) {
-      if (std::isfinite(r.speed)) last_gps = r.speed;
+      const double seen = fix_interval > 0.0 ? fix : r.speed;
+      if (std::isfinite(seen)) last_gps = seen;
       was_out = false;
       continue;
     }
@@ -279,8 +302,10 @@ int main(int argc, char** argv) {
       for (std::size_t k = 0; k < kinds.size(); ++k) {
         sim::ObservationOptions obs = kinds[k].options;
         obs.seed = base * 7919 + 1;
+        sim::ObservationOptions fit_obs = kinds[k].fit;
+        fit_obs.seed = obs.seed;
         const GearModel model =
-            gearpulse::fit_gear_model(sim::to_samples(sim::observe(train, obs)), {}).model;
+            gearpulse::fit_gear_model(sim::to_samples(sim::observe(train, fit_obs)), {}).model;
         const std::vector<int> true_gear = true_gears_of(car, model);
         for (std::size_t i = 0; i < tests.size(); ++i) {
           obs.seed = base * 7919 + 2 + i;
@@ -288,7 +313,7 @@ int main(int argc, char** argv) {
           const std::string label =
               name + "/" + kinds[k].name + "/" + std::string(sim::style_name(replays[i].style));
           g_label = label.c_str();
-          replay(sim::observe(tests[i], obs), model, true_gear, one);
+          replay(sim::observe(tests[i], obs), model, true_gear, kinds[k].fix_interval, one);
           by_style[k][i].append(one);
           per_kind[k].append(one);
         }

@@ -674,19 +674,24 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
 // What GPS teaches about this engine and driver: the idle frequency (standing), the frequencies run at in
 // gear and the deceleration declutched (moving). Running means with a bounded memory, so they follow a
 // warming engine and a change of road.
-void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
+void SpeedSynthesizer::learn(double dt, double gps, double freq, bool gps_new) noexcept {
   const bool was_moving = last_gps_ > 5.0 * tuning_.stationary_speed;
   // Declutched is known from the revs: with the frequency lost every gear fades and the clutch holds the
   // belief whatever the car does, and a cruise seen so taught a deceleration of zero (after which a car
-  // that lost GPS too was carried on at its last speed for good).
-  if (dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8 && std::isfinite(freq) &&
-      freq > 0.0) {
-    constexpr double kCoastMemory = 100.0;  // samples
-    const double a = std::clamp((gps - last_gps_) / dt, -4.0, 1.0);
-    coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
-    coast_mean_ += (a - coast_mean_) / coast_count_;
+  // that lost GPS too was carried on at its last speed for good). Measured from one fix to the next: a
+  // fix repeated at the steps between them shows no change of speed.
+  if (gps_new) {
+    const double fix_dt = t_ - last_fix_t_;
+    if (fix_dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8 &&
+        std::isfinite(freq) && freq > 0.0) {
+      constexpr double kCoastMemory = 100.0;  // samples
+      const double a = std::clamp((gps - last_gps_) / fix_dt, -4.0, 1.0);
+      coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
+      coast_mean_ += (a - coast_mean_) / coast_count_;
+    }
+    last_gps_ = gps;
+    last_fix_t_ = t_;
   }
-  last_gps_ = gps;
   if (!std::isfinite(freq) || freq <= 0.0) {
     roll_span_ = -1.0;
     return;
@@ -734,8 +739,9 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq) noexcept {
 
 // One step of the filter: every mode sums over its predecessors, each one's track predicted over dt under
 // the mode's motion and corrected by GPS and the frequency, and keeps the moments of that mixture.
-SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) noexcept {
+SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new) noexcept {
   const bool have_gps = std::isfinite(gps);
+  const bool measure_gps = have_gps && gps_new;  // a repeated fix is not measured again
   const int modes = gears_ + 2;
   // Share of a second of evidence this step carries (states are scored per second, see log_evidence).
   const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
@@ -783,7 +789,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
         if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
       }
       double gps_score = 0.0;
-      if (have_gps) {
+      if (measure_gps) {
         // GPS pins the speed and the frequency tells the mode; but a history GPS contradicts beyond
         // ordinary jitter (a car at rest while GPS has it moving) pays for that jump once.
         const double k = x.pvv / (x.pvv + gps_var);
@@ -868,7 +874,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq) no
       age_[j] = 0.0;
     }
   if (have_gps) {
-    learn(dt, gps, freq);
+    learn(dt, gps, freq, gps_new);
     learn_shift(freq);
     return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }
@@ -889,7 +895,7 @@ SynthOutput SpeedSynthesizer::hold_step(double t, double gps) noexcept {
   return {v < tuning_.stationary_speed ? 0.0 : v, 0, SpeedSource::kCoast};
 }
 
-SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noexcept {
+SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new) noexcept {
   if (!std::isfinite(t)) return last_;
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
@@ -919,7 +925,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq) noex
   } else if (gears_ == 0) {
     out = hold_step(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN());
   } else {
-    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq);
+    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
   }
   last_ = out;
   return out;

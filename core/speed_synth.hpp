@@ -109,8 +109,12 @@ class SpeedSynthesizer {
   [[nodiscard]] const std::shared_ptr<const GearModel>& model() const noexcept { return model_; }
 
   // One causal step. gps_speed: m/s or NaN when there is no fresh fix; freq: Hz or NaN when not tracked.
-  // t must not decrease (a step back in time is treated as no time passing).
-  SynthOutput step(double t, double gps_speed, double freq) noexcept;
+  // t must not decrease (a step back in time is treated as no time passing). gps_new: the fix has not
+  // been given to an earlier step. A live caller steps at every tracker hop (10 per second and more) and
+  // passes the newest fresh fix each time, one a second from most receivers: the repeats keep GPS the
+  // source of the output but are not measured again (counted as ten independent readings a second, a
+  // fix held the speed to a value up to a second old and pulled it back at every hop).
+  SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true) noexcept;
 
   // Forget all state except the model (e.g. after the engine was off).
   void reset() noexcept;
@@ -142,7 +146,7 @@ class SpeedSynthesizer {
   void predict(Track& x, int to, double dt) const noexcept;
   [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight, bool entering,
                                     bool short_step) const noexcept;
-  SynthOutput filter_step(double dt, double gps, double freq) noexcept;
+  SynthOutput filter_step(double dt, double gps, double freq, bool gps_new) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
@@ -158,7 +162,7 @@ class SpeedSynthesizer {
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   [[nodiscard]] int median_mode() const noexcept;
-  void learn(double dt, double gps, double freq) noexcept;
+  void learn(double dt, double gps, double freq, bool gps_new) noexcept;
   void normalise() noexcept;
 
   SynthTuning tuning_;
@@ -194,6 +198,7 @@ class SpeedSynthesizer {
   double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
   double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
   double last_gps_ = -1.0;
+  double last_fix_t_ = 0.0;                  // step time of the newest fix (last_gps_)
   double held_speed_ = -1.0, held_t_ = 0.0;  // last GPS speed and its time, for hold_step (-1 = none yet)
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
   double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;

@@ -318,12 +318,23 @@ void Pipeline::Impl::tracker_loop() noexcept {
   double audio_stall_s = no_audio_step_s;
   double last_points_at = 0.0;  // CLOCK_MONOTONIC s when the tracker last gave points
 
+  // The fix the synthesis last measured: its receiver time, or its receive time when it has none (gpsd may
+  // report one fix more than once).
+  double measured_fix_time = kNan;
+  std::int64_t measured_fix_rx = 0;
   const auto step = [&](double t, double freq, double snr, bool tracked) {
     // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
-    // disagreement between the sound card's clock and the GPS cannot hide a good fix).
+    // disagreement between the sound card's clock and the GPS cannot hide a good fix). The synthesis
+    // steps at every hop and gets that fix at each, measuring it once.
     double gps_speed = kNan;
+    bool gps_new = false;
     if (gps) {
-      if (const auto r = gps->fresh(monotonic_ns())) gps_speed = r->speed;
+      if (const auto r = gps->fresh(monotonic_ns())) {
+        gps_speed = r->speed;
+        gps_new = std::isfinite(r->fix_time) ? r->fix_time != measured_fix_time : r->rx_ns != measured_fix_rx;
+        measured_fix_time = r->fix_time;
+        measured_fix_rx = r->rx_ns;
+      }
     }
     const bool confident =
         tracked && std::isfinite(freq) && snr >= min_snr_db.load(std::memory_order_relaxed);
@@ -334,7 +345,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     last_step_t = t;
     // The synthesis steps at every hop: its motion, mode changes and evidence are per second, so the hop
     // rate only makes its output fresher. A hop below the SNR gate reads as no frequency.
-    const SynthOutput out = synth.step(t, gps_speed, confident ? freq : kNan);
+    const SynthOutput out = synth.step(t, gps_speed, confident ? freq : kNan, gps_new);
     if (pulses) pulses->set_speed(out.speed);
     speed.store(out.speed, std::memory_order_relaxed);
     gear.store(out.gear, std::memory_order_relaxed);

@@ -399,17 +399,33 @@ TEST_CASE("synth: whatever the input, an outage never outruns what GPS or the en
 namespace {
 
 // |error| km/h of every outage sample of a simulated drive observed every `period` s (outages of 60 s
-// from 120 s in, then every 180 s: the benches' protocol, bench/outage_protocol.hpp).
-std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double period, std::uint64_t seed) {
+// from 120 s in, then every 180 s: the benches' protocol, bench/outage_protocol.hpp). With a fix
+// interval, GPS gives a fix only every so many seconds, and every step until the next one is given it
+// again, as the daemon gives the newest fresh fix at every tracker hop (flagged new at the first).
+std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double period, std::uint64_t seed,
+                                  double fix_interval = 0.0) {
   gearpulse::sim::ObservationOptions obs;
   obs.period = period;
   obs.seed = seed;
   SpeedSynthesizer synth(model_of(drive.vehicle.theta));
   std::vector<double> errors;
+  double fix = kMissing;
+  long fix_index = -1;
   for (const auto& r : gearpulse::sim::observe(drive, obs)) {
     const double t = r.truth.t;
     const bool out = gearpulse::bench::in_outage(t);
-    const SynthOutput o = synth.step(t, out ? kMissing : r.speed, r.freq);
+    double gps = out ? kMissing : r.speed;
+    bool fresh = true;
+    if (fix_interval > 0.0) {
+      const long index = std::lround(std::floor(t / fix_interval + 1e-6));
+      fresh = !out && index != fix_index;
+      if (fresh) {
+        fix = r.speed;
+        fix_index = index;
+      }
+      if (!out) gps = fix;
+    }
+    const SynthOutput o = synth.step(t, gps, r.freq, fresh);
     if (out) errors.push_back(std::abs(o.speed - r.truth.speed) / kKmh);
   }
   return errors;
@@ -462,6 +478,36 @@ TEST_CASE("synth: outage speeds do not depend on the step rate") {
   CHECK(quantile(slow, 0.5) < 1.0);
   CHECK(quantile(fast, 0.5) < 1.0);
   CHECK(beyond(fast, 10.0) < 2.0 * beyond(slow, 10.0) + 0.03);
+}
+
+TEST_CASE("synth: at 10 Hz hops given a 1 Hz fix at each, outages are followed as with a fix at every hop") {
+  // The daemon steps the synthesis at every tracker hop and gives it the newest fresh fix each time: one a
+  // second from most receivers, so ten steps see the same fix. Measured again at each, a fix held the speed
+  // to a value up to a second old, and the deceleration learned declutched came out at a tenth of the car's.
+  std::vector<double> every, held;
+  for (const char* name : {"hatch-5", "close-6"}) {
+    for (const auto style : {gearpulse::sim::DrivingStyle::kMixed, gearpulse::sim::DrivingStyle::kUrban}) {
+      for (const std::uint64_t seed : {7, 8}) {
+        const auto drive =
+            gearpulse::sim::simulate_drive(gearpulse::sim::vehicle_preset(name),
+                                           {.style = style, .duration = 900.0, .dt = 0.1, .seed = seed});
+        const auto a = outage_errors(drive, 0.1, seed + 4), b = outage_errors(drive, 0.1, seed + 4, 1.0);
+        every.insert(every.end(), a.begin(), a.end());
+        held.insert(held.end(), b.begin(), b.end());
+      }
+    }
+  }
+  const auto beyond = [](const std::vector<double>& e, double km_h) {
+    return static_cast<double>(std::count_if(e.begin(), e.end(), [&](double x) { return x > km_h; })) /
+           static_cast<double>(e.size());
+  };
+  INFO("a fix at every hop: median " << quantile(every, 0.5) << " km/h, p95 " << quantile(every, 0.95) << ", "
+                                     << 100.0 * beyond(every, 5.0)
+                                     << " % beyond 5 km/h; a 1 Hz fix held: " << quantile(held, 0.5) << ", "
+                                     << quantile(held, 0.95) << ", " << 100.0 * beyond(held, 5.0) << " %");
+  CHECK(quantile(held, 0.5) < 1.0);
+  CHECK(beyond(held, 5.0) < 1.2 * beyond(every, 5.0) + 0.005);
+  CHECK(quantile(held, 0.95) < 1.2 * quantile(every, 0.95) + 0.3);
 }
 
 TEST_CASE("synth: knows the idle from the model before GPS has shown the car standing") {
