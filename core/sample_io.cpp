@@ -81,6 +81,14 @@ Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet
     cell.problem = "non-finite value in column " + std::string(column) + ": " + quoted(text);
     return cell;
   }
+  // A log's clock, even in seconds since 1970, stays far below this; a time beyond it is a corrupt cell (and
+  // would overflow the Carloop reader's fit of its row times).
+  constexpr double kMaxTime = 1e10;  // s, over 300 years
+  if ((column == "t" || column == "time") && std::abs(value) > kMaxTime) {
+    cell.kind = CellKind::kBad;
+    cell.problem = "time beyond any log's clock in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
   if (value < 0.0 && column != "t") {
     cell.kind = CellKind::kBad;
     cell.problem = "negative value in column " + std::string(column) + ": " + quoted(text);
@@ -132,6 +140,11 @@ std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
     pos = colon + 1;
     if (count == 3) return std::nullopt;
   }
+  // A clock's fields stay below their wrap: minutes and seconds below 60, hours below 24 ("99:02.0" in a
+  // run of "10:0x" is a corrupt cell, not a time an hour and a half on).
+  if (parts[count - 1] >= 60.0 || (count >= 2 && parts[count - 2] >= 60.0) ||
+      (count == 3 && parts[0] >= 24.0))
+    return std::nullopt;
   if (count == 2) return std::make_pair(parts[0] * 60.0 + parts[1], 3600.0);
   if (count == 3) return std::make_pair(parts[0] * 3600.0 + parts[1] * 60.0 + parts[2], 86400.0);
   return std::nullopt;
@@ -199,6 +212,10 @@ class LogBuilder {
     constexpr double kMaxFreq = 20000.0;  // Hz
     constexpr double kMinFreq = 1e-3;     // Hz: below it (but above 0, an engine at rest) nothing turns
     char buf[96];
+    if (!std::isfinite(s.t)) {  // the readers bound their time cells; this holds for any caller
+      skip(line, "time is not a finite number");
+      return false;
+    }
     if (s.has_speed() && s.speed > kMaxSpeed) {
       std::snprintf(buf, sizeof buf, "speed %.6g m/s is beyond any road vehicle", s.speed);
       skip(line, buf);
@@ -459,7 +476,8 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
       const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
       double previous = -std::numeric_limits<double>::infinity();
       for (std::size_t i = 0; i < at.size(); ++i) {
-        previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
+        const double fitted = std::isfinite(times[i]) ? times[i] : own_t(i);
+        previous = std::max(previous, std::clamp(fitted, own_t(i), own_t(i) + kMaxCounterAge));
         set_t(i, previous);
       }
     };
@@ -496,6 +514,37 @@ constexpr SpeedColumn kTorqueSpeeds[] = {{"GPS Speed (Meters/second)", 1.0, true
                                          {"Speed (OBD)(km/h)", kKmhToMs, false},
                                          {"Speed (OBD)(mph)", kMphToMs, false}};
 
+// Torque's clock wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times are unwrapped in file order.
+// A clock cell that jumps away from the row before it while the row after it goes on from that one is
+// corrupt: its row is skipped, and its jump is not taken for a wrap (one such cell, "45:00" among "10:0x",
+// put every later row an hour on).
+template <typename Row>
+void unwrap_clock(std::vector<Row>& rows, LogBuilder& out) {
+  constexpr double kJump = 60.0;  // s: a log's rows are a second or so apart; more is a pause or corrupt
+  const auto apart = [](double a, double b, double period) {
+    const double d = std::abs(a - b);
+    return std::min(d, period - d);  // either way round the clock
+  };
+  double offset = 0.0, last = -1.0;
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    Row& r = rows[i];
+    const double jump = last >= 0.0 ? apart(r.clock, last, r.period) : 0.0;
+    if (jump > kJump && i + 1 < rows.size() && apart(rows[i + 1].clock, last, r.period) <= kJump) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "time jumps %.0f s away from the rows around it",
+                    std::abs(r.clock - last));
+      out.skip(r.line, buf);
+      continue;
+    }
+    if (last >= 0.0 && r.clock < last - r.period / 2) offset += r.period;
+    last = r.clock;
+    r.t = r.clock + offset;
+    rows[kept++] = r;
+  }
+  rows.resize(kept);
+}
+
 void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
                  TorqueSpeed choice) {
   out.log().format = SampleFormat::kTorque;
@@ -520,6 +569,7 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
   struct Row {
     std::size_t line;
     double t, gps, obd, freq;
+    double clock = -1.0, period = 0.0;  // time of day (s) and its wrap, when the log has a time column
   };
   std::vector<Row> rows;
   std::size_t need = irpm + 1;
@@ -527,7 +577,6 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
     if (i) need = std::max(need, *i + 1);
   std::vector<std::string_view> cells;
   std::size_t counter = 0;
-  double offset = 0.0, last_clock = -1.0;
   std::size_t gps_count = 0;
   while (reader.next()) {
     if (blank(reader.line)) continue;
@@ -544,10 +593,8 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
         out.skip(reader.number, "unreadable time " + quoted(cells[*itime]));
         continue;
       }
-      // The clock wraps every hour (mm:ss) or day (hh:mm:ss): unwrap it.
-      if (last_clock >= 0.0 && clock->first < last_clock - clock->second / 2) offset += clock->second;
-      last_clock = clock->first;
-      row.t = clock->first + offset;
+      row.clock = clock->first;
+      row.period = clock->second;
     }
     const Cell rpm = parse_cell(cells[irpm], header[irpm], true);
     Cell gps, obd;
@@ -564,6 +611,7 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
     if (std::isfinite(row.gps)) ++gps_count;
     rows.push_back(row);
   }
+  if (itime) unwrap_clock(rows, out);
   const bool use_gps = choice == TorqueSpeed::kGps || (choice == TorqueSpeed::kAuto && gps_count > 0);
   if (!use_gps && !iobd)
     throw SampleFileError(out.log().name +

@@ -113,7 +113,7 @@ TEST_CASE("io: one row whose time jumps ahead of its neighbours is the bad row, 
       "t,speed,freq\n"
       "1,10,50\n"
       "2,10,50\n"
-      "1e300,10,50\n"
+      "1e9,10,50\n"
       "3,10,50\n"
       "4,10,50\n"
       "2.5,10,50\n"
@@ -122,7 +122,7 @@ TEST_CASE("io: one row whose time jumps ahead of its neighbours is the bad row, 
   CHECK(log.samples[2].t == Approx(3));
   CHECK(log.samples[4].t == Approx(5));
   REQUIRE(log.skipped.size() == 2);
-  CHECK(log.skipped[0].rfind("log.csv:4: time 1e+300 is ahead of the rows around it", 0) == 0);
+  CHECK(log.skipped[0].rfind("log.csv:4: time 1e+09 is ahead of the rows around it", 0) == 0);
   // A row that goes back behind the row before it and the one before that is the bad one itself.
   CHECK(log.skipped[1].rfind("log.csv:7: time goes backwards", 0) == 0);
 }
@@ -324,6 +324,60 @@ TEST_CASE("io: speed and rpm logs use the row counter as time") {
   CHECK(log.samples[1].t == Approx(2));
   CHECK(log.samples[1].speed == Approx(1 / 3.6));
   CHECK(log.samples[1].freq == Approx(917.0 / 60));
+}
+
+TEST_CASE("io: a time beyond any clock is a bad cell, on the last row too, where no row after it shows it") {
+  SECTION("generic") {
+    const SampleLog log = read_text("t,speed,freq\n1,10,50\n2,10,50\n1e308,10,50\n");
+    REQUIRE(log.samples.size() == 2);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:4: time beyond any log's clock in column t", 0) == 0);
+  }
+  SECTION("Carloop: the fit of its row times saw an overflow and gave a time of minus infinity") {
+    const SampleLog log = read_text(
+        "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED ()\n0,1000,10\n1,1100,11\n7\n1e308,1200,12\n");
+    REQUIRE(log.samples.size() == 2);
+    for (const auto& s : log.samples)
+      CHECK(std::isfinite(s.t));
+    CHECK(log.skipped_count == 2);  // the short row and the time
+  }
+}
+
+TEST_CASE(
+    "io: a Torque clock cell out of range or off its neighbours costs its row, not an hour on every row "
+    "after it") {
+  const auto times = [](const SampleLog& log) {
+    std::vector<double> t;
+    for (const auto& s : log.samples)
+      t.push_back(s.t);
+    return t;
+  };
+  SECTION("a cell no clock shows") {
+    const SampleLog log = read_text(
+        "Device Time,Engine RPM(rpm),Speed (OBD)(km/h)\n"
+        "10:00.0,1000,10\n10:01.0,1100,11\n99:02.0,1200,12\n10:03.0,1300,13\n10:04.0,1400,14\n");
+    CHECK(times(log) == std::vector<double>{0, 1, 3, 4});
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:4: unreadable time '99:02.0'", 0) == 0);
+    CHECK(times(read_text("Device Time,Engine RPM(rpm),Speed (OBD)(km/h)\n10:00.0,1000,10\n10:61.0,1100,11\n"
+                          "Thu Jan 11 25:06:38 EST 2018,1200,12\n"))
+              .size() == 1);
+  }
+  SECTION("a cell in range, jumping away and back") {
+    const SampleLog log = read_text(
+        "Device Time,Engine RPM(rpm),Speed (OBD)(km/h)\n"
+        "10:00.0,1000,10\n10:01.0,1100,11\n45:00.0,1200,12\n10:03.0,1300,13\n10:04.0,1400,14\n");
+    CHECK(times(log) == std::vector<double>{0, 1, 3, 4});
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:4: time jumps 2099 s away from the rows around it", 0) == 0);
+  }
+  SECTION("a wrap and a pause are kept") {
+    const SampleLog log = read_text(
+        "Device Time,Engine RPM(rpm),Speed (OBD)(km/h)\n"
+        "59:58.0,1000,10\n59:59.0,1100,11\n00:00.0,1200,12\n05:00.0,1300,13\n05:01.0,1400,14\n");
+    CHECK(times(log) == std::vector<double>{0, 1, 2, 302, 303});
+    CHECK(log.skipped.empty());
+  }
 }
 
 TEST_CASE("io: Torque exports pick GPS or OBD speed and unwrap the clock") {
