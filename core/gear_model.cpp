@@ -5,6 +5,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/json_depth.hpp"
+
 namespace gearpulse {
 namespace {
 
@@ -111,6 +113,11 @@ std::string serialize_model(const GearModel& model) {
 }
 
 GearModel parse_model(std::string_view text) {
+  // A model nests four levels (extra.revs[i]); one nested deeper is refused before it is parsed: copied or
+  // printed, a deep one overflowed the stack (a 200 kB file at start-up) or grew to gigabytes of text.
+  constexpr std::size_t kMaxNesting = 32;
+  if (json_nesting(text) > kMaxNesting)
+    throw std::invalid_argument("model: nested deeper than " + std::to_string(kMaxNesting) + " levels");
   nlohmann::json json = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
   if (json.is_discarded()) throw std::invalid_argument("model: not valid JSON");
   return model_from_json(json);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/gear_model.hpp"
+#include "core/json_depth.hpp"
 #include "core/sample.hpp"
 #include "core/speed_synth.hpp"
 #include "tests/test_util.hpp"
@@ -78,6 +79,21 @@ TEST_CASE("model: rejects what no fit writes: a wrapped version, too many gears,
   for (int i = 1; i <= 12; ++i)
     twelve += std::string(i > 1 ? "," : "") + R"({"theta":)" + std::to_string(0.05 * i) + "}";
   CHECK(gearpulse::parse_model(twelve + "]}").gears.size() == 12);
+}
+
+TEST_CASE("model: a model nested too deep is refused before it is copied") {
+  // A 200 kB model.json whose extra nests 100,000 arrays overflowed the stack where the model was copied
+  // (the daemon would crash at every start), and one of 40 kB printed as 0.8 GB of indentation.
+  const std::string head =
+      R"({"version":1,"gears":[{"theta":0.1,"weight":1,"stderr":0}],"sigma_speed":0.1,"sigma_freq":1,)"
+      R"("samples":10,"log_likelihood":0,"extra":{"x":)";
+  const std::string deep = head + std::string(100000, '[') + std::string(100000, ']') + "}}";
+  CHECK_THROWS_WITH(gearpulse::parse_model(deep), Catch::Contains("nested deeper than 32 levels"));
+  // As deep as a model goes, and brackets inside strings, which do not nest.
+  const std::string fine = head + R"([{"a":"[[[[{{{{\"[[[["},[[]]]}})";
+  CHECK(gearpulse::parse_model(fine).extra["x"][0]["a"] == "[[[[{{{{\"[[[[");
+  CHECK(gearpulse::json_nesting(R"({"a":[1,{"b":"]]]]"}],"c":[]})") == 3);
+  CHECK(gearpulse::json_nesting("12") == 0);
 }
 
 TEST_CASE("model: a mangled model file is a model that holds or std::invalid_argument, nothing else") {

@@ -796,6 +796,38 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
   ::close(listener);
 }
 
+TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of printing it") {
+  // Printed with --json (recursively), a reply nested 100,000 deep would overflow the stack or grow to
+  // gigabytes of indentation first.
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, sock.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
+  REQUIRE(::listen(listener, 4) == 0);
+  std::thread server([&] {
+    const int c = ::accept(listener, nullptr, nullptr);
+    if (c < 0) return;
+    char buf[512];
+    (void)!::read(c, buf, sizeof buf);
+    const std::string line =
+        R"({"ok":true,"x":)" + std::string(100000, '[') + std::string(100000, ']') + "}\n";
+    (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
+    ::close(c);
+  });
+  Process p({ctl, "--socket", sock, "status", "--json"}, dir / "out.txt");
+  const auto rc = p.wait();
+  server.join();
+  ::close(listener);
+  REQUIRE(rc.has_value());
+  CHECK(*rc == 1);
+  CHECK(read_text(dir / "out.txt") == "gearpulsectl: gearpulsed sent a reply nested deeper than 64 levels\n");
+}
+
 TEST_CASE("daemon: a reload whose store limits drop stored pairs says how many") {
   TempDir dir;
   std::filesystem::create_directories(dir / "state");

@@ -17,6 +17,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "core/json_depth.hpp"
 #include "daemon/control_protocol.hpp"
 #include "drivers/unique_fd.hpp"
 
@@ -92,6 +93,11 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
       throw Failure{"gearpulsed sent a reply longer than 1 MiB without ending it", 1};
   }
   reply.resize(reply.find('\n'));
+  // A reply nested deeper than any of the daemon's would be copied and printed recursively
+  // (core/json_depth.hpp).
+  constexpr std::size_t kMaxNesting = 64;
+  if (gearpulse::json_nesting(reply) > kMaxNesting)
+    throw Failure{"gearpulsed sent a reply nested deeper than " + std::to_string(kMaxNesting) + " levels", 1};
   try {
     return nlohmann::json::parse(reply);
   } catch (const nlohmann::json::exception&) {
