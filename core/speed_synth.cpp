@@ -239,6 +239,8 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   }
   normalise();
   mode_ = map_mode();
+  // The last output (what step() repeats for a step it cannot take) names a gear of the new ladder.
+  if (last_.gear > gears_) last_.gear = is_gear(mode_) ? mode_ : 0;
   return true;
 }
 

@@ -332,6 +332,16 @@ TEST_CASE("synth: step never allocates") {
   static_assert(noexcept(synth.step(0.0, 0.0, 0.0)));
 }
 
+TEST_CASE("synth: a step it cannot take after a swap to a shorter ladder names no gear the ladder lacks") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  for (int k = 0; k < 30; ++k)
+    synth.step(k, 20.0, 20.0 / kHatch[4]);  // fifth gear
+  REQUIRE(synth.last().gear == 5);
+  REQUIRE(synth.set_model(model_of({0.125, 0.225, 0.347})));
+  const SynthOutput o = synth.step(std::numeric_limits<double>::quiet_NaN(), 20.0, 50.0);
+  CHECK(o.gear <= 3);
+}
+
 TEST_CASE("synth: bad input never produces a bad output") {
   SpeedSynthesizer synth(model_of(kHatch));
   const double nan = kMissing, inf = std::numeric_limits<double>::infinity();
