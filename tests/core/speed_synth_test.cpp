@@ -443,6 +443,25 @@ std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double per
 
 using gearpulse::bench::quantile;
 
+// Calls f(drive, seed) for each of eight simulated 15-minute drives at 10 Hz (two cars, mixed and urban).
+template <class F>
+void for_each_test_drive(F f) {
+  for (const char* name : {"hatch-5", "close-6"}) {
+    for (const auto style : {gearpulse::sim::DrivingStyle::kMixed, gearpulse::sim::DrivingStyle::kUrban}) {
+      for (const std::uint64_t seed : {7, 8})
+        f(gearpulse::sim::simulate_drive(gearpulse::sim::vehicle_preset(name),
+                                         {.style = style, .duration = 900.0, .dt = 0.1, .seed = seed}),
+          seed);
+    }
+  }
+}
+
+// Share of the errors over `km_h`.
+double share_beyond(const std::vector<double>& e, double km_h) {
+  return static_cast<double>(std::count_if(e.begin(), e.end(), [&](double x) { return x > km_h; })) /
+         static_cast<double>(e.size());
+}
+
 }  // namespace
 
 // A tracker that never locks (no ripple on this car's supply) while GPS shows a steady cruise, then GPS lost
@@ -466,22 +485,12 @@ TEST_CASE("synth: outage speeds do not depend on the step rate") {
   // The same drives, observed at 1 Hz (GPS, logs) and at 10 Hz (the tracker's hops): the filter's motion,
   // mode changes and evidence are per second, so both rates give about the same speeds.
   std::vector<double> slow, fast;
-  for (const char* name : {"hatch-5", "close-6"}) {
-    for (const auto style : {gearpulse::sim::DrivingStyle::kMixed, gearpulse::sim::DrivingStyle::kUrban}) {
-      for (const std::uint64_t seed : {7, 8}) {
-        const auto drive =
-            gearpulse::sim::simulate_drive(gearpulse::sim::vehicle_preset(name),
-                                           {.style = style, .duration = 900.0, .dt = 0.1, .seed = seed});
-        const auto one = outage_errors(drive, 1.0, seed + 4), ten = outage_errors(drive, 0.1, seed + 4);
-        slow.insert(slow.end(), one.begin(), one.end());
-        fast.insert(fast.end(), ten.begin(), ten.end());
-      }
-    }
-  }
-  const auto beyond = [](const std::vector<double>& e, double km_h) {
-    return static_cast<double>(std::count_if(e.begin(), e.end(), [&](double x) { return x > km_h; })) /
-           static_cast<double>(e.size());
-  };
+  for_each_test_drive([&](const gearpulse::sim::Drive& drive, std::uint64_t seed) {
+    const auto one = outage_errors(drive, 1.0, seed + 4), ten = outage_errors(drive, 0.1, seed + 4);
+    slow.insert(slow.end(), one.begin(), one.end());
+    fast.insert(fast.end(), ten.begin(), ten.end());
+  });
+  const auto beyond = share_beyond;
   INFO("1 Hz median " << quantile(slow, 0.5) << " km/h, " << 100.0 * beyond(slow, 10.0)
                       << " % beyond 10 km/h; 10 Hz " << quantile(fast, 0.5) << ", "
                       << 100.0 * beyond(fast, 10.0) << " %");
@@ -493,24 +502,15 @@ TEST_CASE("synth: outage speeds do not depend on the step rate") {
 TEST_CASE("synth: at 10 Hz hops given a 1 Hz fix at each, outages are followed as with a fix at every hop") {
   // The daemon steps the synthesis at every tracker hop and gives it the newest fresh fix each time: one a
   // second from most receivers, so ten steps see the same fix. Measured again at each, a fix held the speed
-  // to a value up to a second old, and the deceleration learned declutched came out at a tenth of the car's.
+  // to a value up to a second old, and the deceleration learned declutched came out at a fraction of the
+  // car's.
   std::vector<double> every, held;
-  for (const char* name : {"hatch-5", "close-6"}) {
-    for (const auto style : {gearpulse::sim::DrivingStyle::kMixed, gearpulse::sim::DrivingStyle::kUrban}) {
-      for (const std::uint64_t seed : {7, 8}) {
-        const auto drive =
-            gearpulse::sim::simulate_drive(gearpulse::sim::vehicle_preset(name),
-                                           {.style = style, .duration = 900.0, .dt = 0.1, .seed = seed});
-        const auto a = outage_errors(drive, 0.1, seed + 4), b = outage_errors(drive, 0.1, seed + 4, 1.0);
-        every.insert(every.end(), a.begin(), a.end());
-        held.insert(held.end(), b.begin(), b.end());
-      }
-    }
-  }
-  const auto beyond = [](const std::vector<double>& e, double km_h) {
-    return static_cast<double>(std::count_if(e.begin(), e.end(), [&](double x) { return x > km_h; })) /
-           static_cast<double>(e.size());
-  };
+  for_each_test_drive([&](const gearpulse::sim::Drive& drive, std::uint64_t seed) {
+    const auto a = outage_errors(drive, 0.1, seed + 4), b = outage_errors(drive, 0.1, seed + 4, 1.0);
+    every.insert(every.end(), a.begin(), a.end());
+    held.insert(held.end(), b.begin(), b.end());
+  });
+  const auto beyond = share_beyond;
   INFO("a fix at every hop: median " << quantile(every, 0.5) << " km/h, p95 " << quantile(every, 0.95) << ", "
                                      << 100.0 * beyond(every, 5.0)
                                      << " % beyond 5 km/h; a 1 Hz fix held: " << quantile(held, 0.5) << ", "

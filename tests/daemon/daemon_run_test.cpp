@@ -751,18 +751,26 @@ TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe
   CHECK(read_text(dir / "plain.txt").find("is not a socket") != std::string::npos);
 }
 
+namespace {
+// A listening Unix socket at `path` that is not gearpulsed, for gearpulsectl to talk to.
+int listen_unix(const std::string& path) {
+  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
+  REQUIRE(::listen(listener, 4) == 0);
+  return listener;
+}
+}  // namespace
+
 TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of aborting") {
   // Something else on the socket (or a broken daemon) answers valid JSON that is not a status.
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
-  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  REQUIRE(listener >= 0);
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  std::strncpy(addr.sun_path, sock.c_str(), sizeof addr.sun_path - 1);
-  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
-  REQUIRE(::listen(listener, 4) == 0);
+  const int listener = listen_unix(sock);
   // The last two: a status whose "gps" is no object (found after the speed line was printed, which then
   // stood above the error), and a reply that never ends (read without bound before).
   const std::vector<std::string> replies = {R"([1,2])",
@@ -802,13 +810,7 @@ TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of prin
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
-  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  REQUIRE(listener >= 0);
-  sockaddr_un addr{};
-  addr.sun_family = AF_UNIX;
-  std::strncpy(addr.sun_path, sock.c_str(), sizeof addr.sun_path - 1);
-  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
-  REQUIRE(::listen(listener, 4) == 0);
+  const int listener = listen_unix(sock);
   std::thread server([&] {
     const int c = ::accept(listener, nullptr, nullptr);
     if (c < 0) return;
