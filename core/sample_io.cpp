@@ -81,9 +81,10 @@ Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet
     cell.problem = "non-finite value in column " + std::string(column) + ": " + quoted(text);
     return cell;
   }
-  // A log's clock, even in seconds since 1970, stays far below this; a time beyond it is a corrupt cell (and
-  // would overflow the Carloop reader's fit of its row times).
-  constexpr double kMaxTime = 1e10;  // s, over 300 years
+  // A log's clock stays far below this, even in milliseconds since 1970 (read, and warned about as a
+  // generic log's rows far apart); a time beyond it is a corrupt cell (1e308 overflowed the Carloop
+  // reader's fit of its row times).
+  constexpr double kMaxTime = 1e13;
   if ((column == "t" || column == "time") && std::abs(value) > kMaxTime) {
     cell.kind = CellKind::kBad;
     cell.problem = "time beyond any log's clock in column " + std::string(column) + ": " + quoted(text);
