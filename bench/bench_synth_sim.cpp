@@ -9,7 +9,8 @@
 //   (c) the gear chosen with hindsight (theta x freq closest to the true speed, or standing), fitted
 //       model: a floor;
 //   (d) gearpulse's SpeedSynthesizer with the fitted model, causal, stepped at every observed row (the
-//       daemon may step it less often; this bench shows what the filter itself does at each rate).
+//       daemon steps it at every 0.1 s tracker hop, as the live kind below; the others show what the
+//       filter itself does at each rate).
 // Each drive is observed four ways: an OBD logger (integer km/h and rpm, a 1.8 s polling round, skewed
 // polls, rows every 0.5 s as the Etios logs), GPS at 1 Hz and GPS at 10 Hz, and as the daemon runs: the
 // frequency at every 0.1 s tracker hop with a 1 Hz GPS fix given at each hop until the next (the newest
