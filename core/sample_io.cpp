@@ -477,8 +477,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
       const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
       double previous = -std::numeric_limits<double>::infinity();
       for (std::size_t i = 0; i < at.size(); ++i) {
-        const double fitted = std::isfinite(times[i]) ? times[i] : own_t(i);
-        previous = std::max(previous, std::clamp(fitted, own_t(i), own_t(i) + kMaxCounterAge));
+        previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
         set_t(i, previous);
       }
     };

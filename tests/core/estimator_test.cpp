@@ -387,14 +387,9 @@ TEST_CASE("estimator: standard errors match the spread over seeds") {
   }
 }
 
-TEST_CASE("estimator: analytic observed information equals the numeric one") {
-  const sim::Vehicle car = sim::bmw_520i();
-  const auto obs = sim::simulate_observations(car, sim::DrivingStyle::kUrban, 1200.0, 1, 9);
-  detail::MixtureData data;
-  for (const auto& o : obs) {
-    data.v.push_back(o.speed);
-    data.s.push_back(o.freq);
-  }
+namespace {
+// A mixture for the BMW's five gears with a standstill spike and eight bins of clutch-out density.
+detail::MixtureParams bmw_mixture(const sim::Vehicle& car) {
   detail::MixtureParams p;
   p.theta = car.theta;
   p.alpha = {0.03, 0.1, 0.2, 0.2, 0.1};
@@ -406,6 +401,19 @@ TEST_CASE("estimator: analytic observed information equals the numeric one") {
   p.g_density.assign(8, 1.0 / 40.0);
   p.sigma_s = 0.25;
   p.sigma_v = 0.06;
+  return p;
+}
+}  // namespace
+
+TEST_CASE("estimator: analytic observed information equals the numeric one") {
+  const sim::Vehicle car = sim::bmw_520i();
+  const auto obs = sim::simulate_observations(car, sim::DrivingStyle::kUrban, 1200.0, 1, 9);
+  detail::MixtureData data;
+  for (const auto& o : obs) {
+    data.v.push_back(o.speed);
+    data.s.push_back(o.freq);
+  }
+  const detail::MixtureParams p = bmw_mixture(car);
   const detail::GradientLayout layout{5, true, true};
   const Eigen::MatrixXd a = detail::observed_information(data, p, layout);
   const Eigen::MatrixXd n = detail::observed_information_numeric(data, p, layout);
@@ -446,17 +454,7 @@ TEST_CASE("estimator: a log long enough for two threads gives the sums of its pa
       d->s.push_back(s);
     }
   }
-  detail::MixtureParams p;
-  p.theta = car.theta;
-  p.alpha = {0.1, 0.15, 0.15, 0.15, 0.2};
-  p.beta_stand = 0.15;
-  p.stand_sigma = 0.05;
-  p.beta_clutch = 0.1;
-  p.g_lo = 0.0;
-  p.g_hi = 40.0;
-  p.g_density.assign(8, 1.0 / 40.0);
-  p.sigma_s = 0.3;
-  p.sigma_v = 0.05;
+  const detail::MixtureParams p = bmw_mixture(car);
   const auto same = [](double whole, double parts) {
     return std::abs(whole - parts) <= 1e-9 * (std::abs(whole) + std::abs(parts)) + 1e-12;
   };

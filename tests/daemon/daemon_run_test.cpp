@@ -117,6 +117,12 @@ json status_once(const TempDir& dir, Process& daemon, Done done) {
   return status;
 }
 
+// Waits up to `timeout` for the daemon's log (dir/log.txt) to say `text`.
+bool log_says(const TempDir& dir, std::string_view text, std::chrono::milliseconds timeout) {
+  return gearpulse::test::wait_for([&] { return read_text(dir / "log.txt").find(text) != std::string::npos; },
+                                   timeout);
+}
+
 }  // namespace
 
 TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status") {
@@ -240,20 +246,11 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   daemon.signal(SIGTERM);
   // The store is saved while the daemon still waits for the capture thread.
-  bool saved = false;
-  for (int i = 0; i < 100 && !saved; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    saved = read_text(dir / "log.txt").find("(shutdown)") != std::string::npos;
-  }
+  const bool saved = log_says(dir, "(shutdown)", std::chrono::seconds(5));
   INFO(read_text(dir / "log.txt"));
   CHECK(saved);
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
-  bool said = false;
-  for (int i = 0; i < 300 && !said; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    said = read_text(dir / "log.txt").find("has not returned from the device") != std::string::npos;
-  }
-  CHECK(said);
+  CHECK(log_says(dir, "has not returned from the device", std::chrono::seconds(15)));
   CHECK(daemon.running());
   ::close(writer.fd);  // the read returns (end of file): the daemon can finish
   writer.fd = -1;
@@ -844,11 +841,7 @@ TEST_CASE("daemon: a reload whose store limits drop stored pairs says how many")
   REQUIRE(wait_for_status(dir, daemon)["training_samples"] == 300);
   write_text(dir / "gearpulse.toml", with(base, "[model]\n", "[model]\nmax_samples = 100\n"));
   daemon.signal(SIGHUP);
-  bool said = false;
-  for (int i = 0; i < 200 && !said; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(25));
-    said = read_text(dir / "log.txt").find("drop 200 of its 300 pairs") != std::string::npos;
-  }
+  const bool said = log_says(dir, "drop 200 of its 300 pairs", std::chrono::seconds(5));
   INFO(read_text(dir / "log.txt"));
   CHECK(said);
   CHECK(wait_for_status(dir, daemon)["training_samples"] == 100);
