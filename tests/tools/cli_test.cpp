@@ -398,6 +398,11 @@ TEST_CASE("cli: fit --out follows a symbolic link and writes into a FIFO rather 
     usleep(20000);
   CHECK(std::filesystem::is_fifo(dir.file("pipe")));
   CHECK(slurp(got) == json);
+  // /dev/stdout into a pipe: its link in /proc names no path ("pipe:[N]"); written to, not replaced.
+  const Result to_stdout = run(dir, "fit --out /dev/stdout " + log);
+  CHECK(to_stdout.status == 0);
+  CHECK(to_stdout.err.empty());
+  CHECK(to_stdout.out == json + json);
   const Result into_dir = run(dir, "fit --out " + dir.path.string() + " " + log);
   CHECK(into_dir.status == 2);
   CHECK(into_dir.err.find("is a directory") != std::string::npos);

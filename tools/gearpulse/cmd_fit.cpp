@@ -69,24 +69,26 @@ std::vector<double> parse_ratios(const std::optional<std::string>& given) {
 
 // Writes `text` to `path` whole or not at all (a temporary file renamed over it). A symbolic link is
 // followed, so the file it points to is replaced and the link stays; a path that is there but is no
-// regular file (a FIFO, /dev/stdout, a device) is written to directly, not replaced by a file.
+// regular file (a FIFO, /dev/stdout, a device) is written to directly, not replaced by a file. Whether it
+// is one is asked of the kernel, which resolves /dev/stdout's link into /proc: the target that link names
+// for a pipe ("pipe:[N]") is no path.
 void write_file_atomically(const std::string& path, const std::string& text) {
   namespace fs = std::filesystem;
   std::error_code ec;
-  fs::path target = path;
-  for (int hops = 0; fs::is_symlink(target, ec) && hops < 40; ++hops) {
-    const fs::path link = fs::read_symlink(target, ec);
-    if (ec) break;
-    target = link.is_absolute() ? link : target.parent_path() / link;
-  }
-  if (const fs::file_status st = fs::status(target, ec); !ec && fs::exists(st) && !fs::is_regular_file(st)) {
+  if (const fs::file_status st = fs::status(path, ec); !ec && fs::exists(st) && !fs::is_regular_file(st)) {
     if (fs::is_directory(st)) throw UsageError(path + ": is a directory");
-    std::ofstream out(target, std::ios::binary);
+    std::ofstream out(path, std::ios::binary);
     if (!out) throw UsageError(path + ": cannot write: " + std::strerror(errno));
     out << text;
     out.flush();
     if (!out) throw UsageError(path + ": write failed");
     return;
+  }
+  fs::path target = path;
+  for (int hops = 0; fs::is_symlink(target, ec) && hops < 40; ++hops) {
+    const fs::path link = fs::read_symlink(target, ec);
+    if (ec) break;
+    target = link.is_absolute() ? link : target.parent_path() / link;
   }
   const std::string tmp = target.string() + ".tmp";
   {
