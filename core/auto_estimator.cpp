@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numeric>
 #include <optional>
@@ -642,14 +643,19 @@ GearModel fit_auto(const MixtureData& input, int gears) {
   MixtureParams p = initial_params(work, init, vmax);
   Candidate best;
   std::string last_reason = "no discrete gear ladder in the data";
+  LadderCheck forced;  // what the physics says of a forced count's ladder
+  Candidate more;      // with a forced count: the best plausible ladder of more gears met on the way down
   while (true) {
     const double ll = run_em(work, p, kEmIterations, 1e-6);
     const LadderCheck verdict = judge.check(p);
     const int m = p.gears();
     if (gears > 0 && m == gears) {
       best = {p, ll, bic_of(ll, m, work.size())};
+      forced = verdict;
       break;
     }
+    if (gears > 0 && verdict.offender < 0 && bic_of(ll, m, work.size()) < more.bic)
+      more = {p, ll, bic_of(ll, m, work.size())};
     if (verdict.offender < 0 && m >= 2) {
       const double bic = bic_of(ll, m, work.size());
       if (bic < best.bic) best = {p, ll, bic};
@@ -670,6 +676,19 @@ GearModel fit_auto(const MixtureData& input, int gears) {
   if (work.size() < all.size()) (void)run_em(all, p, kFullDataIterations, 1e-9, false);
   GearModel fitted = finish_model(all, p, "auto", GradientLayout{p.gears(), true, p.beta_stand > 0.0});
   fitted.extra["speed_lag"] = aligned.lag;
+  // A forced count is fitted whatever the data shows, but not silently: the ladder's first failing gear
+  // and why (a near-empty gear added beside the real ones, clusters too close or too far apart), or the
+  // larger plausible ladder that explains the data better (a real gear merged away).
+  if (forced.offender >= 0 && static_cast<std::size_t>(forced.offender) < fitted.gears.size()) {
+    char what[64];
+    std::snprintf(what, sizeof what, "gear %d (theta %.5f): ", forced.offender + 1,
+                  fitted.gears[static_cast<std::size_t>(forced.offender)].theta);
+    fitted.extra["forced_doubt"] = {{"gear", forced.offender + 1}, {"reason", what + forced.reason}};
+  } else if (more.bic < best.bic) {
+    fitted.extra["forced_doubt"] = {
+        {"gears", more.params.gears()},
+        {"reason", std::to_string(more.params.gears()) + " gears explain the data better (BIC)"}};
+  }
   return fitted;
 }
 

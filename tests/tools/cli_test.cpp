@@ -370,6 +370,12 @@ TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and n
   CHECK(forced.status == 0);
   CHECK(forced.err.find("warning: gears") != std::string::npos);
   CHECK(run(dir, "fit --gears " + std::to_string(gears) + " " + log).err.empty());
+  // Fewer than the car has: the larger ladder the data supports is named.
+  const Result fewer = run(dir, "fit --gears " + std::to_string(gears - 1) + " " + log);
+  CHECK(fewer.status == 0);
+  CHECK(fewer.err.find("warning: the data does not show " + std::to_string(gears - 1) + " gears: " +
+                       std::to_string(gears) + " gears explain the data better") != std::string::npos);
+  CHECK(nlohmann::json::parse(fewer.out)["extra"]["forced_doubt"]["gears"] == gears);
   // Paper mode fits as many gears as its ratios say: priors that ask for more than the car has are named
   // the same way.
   const Result priors = run(dir, "fit --ratios 1.3,1.3,1.3,1.3,1.3,1.3,1.3 " + log);

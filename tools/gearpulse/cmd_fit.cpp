@@ -193,9 +193,12 @@ int run_fit(const FitCommand& cmd) {
   }
   // A count forced by --gears or by the ratios of --ratios (paper mode fits as many gears as the priors
   // say, a ladder or not: an automatic's log gives two gears 0.002 % apart).
-  if (options.gears != 0)
+  if (options.gears != 0) {
     warn_indistinct_gears(result.model, "--gears " + cmd.gears);
-  else if (!options.ratios.empty())
+    if (const auto doubt = result.model.extra.find("forced_doubt"); doubt != result.model.extra.end())
+      std::fprintf(stderr, "gearpulse: warning: the data does not show %s gears: %s\n", cmd.gears.c_str(),
+                   doubt->value("reason", std::string()).c_str());
+  } else if (!options.ratios.empty())
     warn_indistinct_gears(result.model, "--ratios gives (" + std::to_string(options.ratios.size() + 1) + ")");
   return 0;
 }
