@@ -326,6 +326,80 @@ TEST_CASE("io: speed and rpm logs use the row counter as time") {
   CHECK(log.samples[1].freq == Approx(917.0 / 60));
 }
 
+TEST_CASE("io: cells at the edges of what a log holds") {
+  SECTION("a quoted empty cell is missing, not a bad row") {
+    const SampleLog log = read_text("t,speed,freq\n0,\"\",50\n1,\" \",51\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK_FALSE(log.samples[0].has_speed());
+    CHECK_FALSE(log.samples[1].has_speed());
+    CHECK(log.skipped_count == 0);
+  }
+  SECTION("a negative time is a time (a logger's clock set before the start), a time past any clock not") {
+    const SampleLog log = read_text("t,speed,freq\n-2,1,50\n-1,1,50\n-1e300,1,50\n0,1,50\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[0].t == Approx(-2));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:4: time beyond any log's clock", 0) == 0);
+  }
+  SECTION("a frequency of 0 is an engine at rest; one above 0 but below any engine's is a bad cell") {
+    const SampleLog log = read_text("t,speed,freq\n0,0,0\n1,0,0.0005\n2,0,0.002\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[0].freq == 0.0);
+    CHECK(log.samples[1].freq == Approx(0.002));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:3: frequency 0.0005 Hz is outside any engine's", 0) == 0);
+  }
+  SECTION("Torque's N/A is a missing value; a clock's 60 seconds is no clock") {
+    const SampleLog log = read_text(
+        "Device Time,Engine RPM(rpm),Speed "
+        "(OBD)(km/h)\n10:00.0,1000,N/A\n10:01.0,1100,11\n10:60.0,1200,12\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK_FALSE(log.samples[0].has_speed());
+    CHECK(log.samples[0].freq == Approx(1000.0 / 60.0));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:4: unreadable time '10:60.0'", 0) == 0);
+  }
+  SECTION("rows in milliseconds are told from ten steps on, not fewer") {
+    const auto rows = [](int n) {
+      std::string text = "t,speed,freq\n";
+      for (int i = 0; i < n; ++i)
+        text += std::to_string(i * 1000) + ",10,40\n";
+      return text;
+    };
+    CHECK(read_text(rows(11)).warnings.size() == 1);
+    CHECK(read_text(rows(10)).warnings.empty());
+  }
+}
+
+namespace {
+
+// Serves `text`, then fails as a disk does mid-file (the stream sets badbit on the exception).
+class FailingBuf : public std::streambuf {
+ public:
+  explicit FailingBuf(std::string text) : text_(std::move(text)) {
+    setg(text_.data(), text_.data(), text_.data() + text_.size());
+  }
+
+ protected:
+  int_type underflow() override { throw std::ios_base::failure("I/O error"); }
+
+ private:
+  std::string text_;
+};
+
+}  // namespace
+
+TEST_CASE("io: a read error mid-file is an error and no log cut short") {
+  FailingBuf buf("t,speed,freq\n0,1,50\n1,1,50\n2,1,");
+  std::istream in(&buf);
+  try {
+    (void)read_samples(in, "log.csv");
+    FAIL("a log cut short by a read error was returned");
+  } catch (const SampleFileError& e) {
+    CHECK(std::string(e.what()) == "log.csv: read error");
+  }
+}
+
 TEST_CASE("io: a time beyond any clock is a bad cell, on the last row too, where no row after it shows it") {
   SECTION("generic") {
     const SampleLog log = read_text("t,speed,freq\n1,10,50\n2,10,50\n1e308,10,50\n");
