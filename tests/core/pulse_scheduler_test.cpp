@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -211,4 +212,113 @@ TEST_CASE("pulse: bad configurations are refused with the field name") {
   c = {};
   c.min_freq_hz = 0;
   CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("min_freq_hz"));
+}
+
+TEST_CASE("pulse: a late caller's catch-up rises keep the low time of the maximum frequency after a fall") {
+  // 1 pulse per metre at 50 m/s (50 Hz, high 10 ms at duty 0.5), max 100 Hz. A caller that sets the speed
+  // again only at 100 ms owes five pulses; caught up one after another, each rise must still come at least
+  // the low time at max_freq_hz (5 ms) after the fall before it, or a counter on the line merges pulses.
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.max_freq_hz = 100.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 50.0);
+  s.set_speed(100'000'000, 50.0);
+  std::int64_t last_fall = -kS;
+  int rises = 0;
+  for (PulseEdge e = s.pop_due(200'000'000); e.kind != EdgeKind::kNone; e = s.pop_due(200'000'000)) {
+    if (e.kind == EdgeKind::kFall) {
+      last_fall = e.t_ns;
+      continue;
+    }
+    ++rises;
+    INFO("rise " << rises << " at " << e.t_ns << " ns, previous fall at " << last_fall << " ns");
+    CHECK(e.t_ns - last_fall >= 5'000'000);
+  }
+  CHECK(rises >= 5);
+}
+
+TEST_CASE("pulse: a fixed-width pulse high when the speed rises keeps its width") {
+  // Only a duty-cycle pulse is brought forward by a speed-up; a fixed width is what the receiving
+  // counter was set up for, and a shorter pulse may be missed by it.
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.pulse_width_s = 0.002;
+  c.max_freq_hz = 400.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 300.0);  // 300 Hz
+  const PulseEdge rise = s.pop_due(10'000'000);
+  REQUIRE(rise.kind == EdgeKind::kRise);
+  s.set_speed(4'000'000, 400.0);
+  REQUIRE(s.high());
+  const PulseEdge fall = s.next_edge();
+  CHECK(fall.kind == EdgeKind::kFall);
+  CHECK(fall.t_ns - rise.t_ns == 2'000'000);
+}
+
+TEST_CASE("pulse: pulses owed at a stop are paid out at the maximum frequency's pace") {
+  // 1 pulse per metre at 50 m/s, max 100 Hz; a caller late by 100 ms learns of the stop with five pulses
+  // owed. They come out 10 ms apart, each high for duty / max_freq_hz (5 ms), so the line is quiet by
+  // 145 ms; a width taken from min_freq_hz (1 s each) would keep the train running for seconds after the
+  // car stopped.
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.max_freq_hz = 100.0;
+  PulseScheduler s(c, 0);
+  s.set_speed(0, 50.0);
+  s.set_speed(100'000'000, 0.0);
+  std::vector<PulseEdge> edges;
+  for (PulseEdge e = s.next_edge(); e.kind != EdgeKind::kNone && edges.size() < 100; e = s.next_edge())
+    edges.push_back(s.pop_due(e.t_ns));
+  REQUIRE(edges.size() == 10);
+  CHECK(s.pulses() == 5);
+  CHECK(edges.front().t_ns == 100'000'000);
+  CHECK(edges.back().kind == EdgeKind::kFall);
+  CHECK(edges.back().t_ns <= 145'000'000);
+}
+
+TEST_CASE("pulse: boundary cases: exactly min_freq_hz, exactly one pulse owed, an infinite speed") {
+  PulseConfig c;
+  c.pulses_per_km = 1000.0;
+  c.min_freq_hz = 0.5;
+  c.max_freq_hz = 100.0;
+  SECTION("exactly min_freq_hz runs the train") {
+    PulseScheduler s(c, 0);
+    s.set_speed(0, 0.5);  // 0.5 Hz
+    CHECK(s.frequency_hz() == 0.5);
+    CHECK(s.next_edge().kind == EdgeKind::kRise);
+    CHECK(s.next_edge().t_ns == 2 * kS);
+  }
+  SECTION("a whole pulse owed at a stop is due at once") {
+    // 10 Hz for 100 ms owes exactly one pulse: it is distance covered, so it is emitted at the stop.
+    PulseScheduler s(c, 0);
+    s.set_speed(0, 10.0);
+    s.set_speed(100'000'000, 0.0);
+    CHECK(s.next_edge().kind == EdgeKind::kRise);
+    CHECK(s.next_edge().t_ns == 100'000'000);
+  }
+  SECTION("an infinite speed is no speed, not the maximum frequency") {
+    // Like NaN, an infinite speed is a broken input: it must not drive the train at full rate.
+    PulseScheduler s(c, 0);
+    s.set_speed(0, std::numeric_limits<double>::infinity());
+    CHECK(s.frequency_hz() == 0.0);
+    CHECK(s.speed_mps() == 0.0);
+    CHECK(s.next_edge().kind == EdgeKind::kNone);
+  }
+}
+
+TEST_CASE("pulse: a width of exactly one period and a maximum not above the minimum are refused") {
+  // 5 ms at 200 Hz leaves no low time at all: pulses would merge into a level on the line.
+  PulseConfig c;
+  c.pulse_width_s = 0.005;
+  c.max_freq_hz = 200;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("pulse_width_s"));
+  c.pulse_width_s = 0.0049;
+  CHECK_NOTHROW(PulseScheduler(c));
+  c = {};
+  c.min_freq_hz = 5;
+  c.max_freq_hz = 5;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("max_freq_hz"));
+  c.max_freq_hz = 4;
+  CHECK_THROWS_WITH(PulseScheduler(c), Catch::Contains("max_freq_hz"));
 }
