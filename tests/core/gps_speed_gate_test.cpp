@@ -54,3 +54,52 @@ TEST_CASE("gps gate: fixes delivered in a burst are judged by their own times") 
   CHECK(gate.check(1003.0, 0.3, 35.0) == Verdict::kAccepted);
   CHECK(gate.check(1003.1, 0.35, 90.0) == Verdict::kTooSudden);
 }
+
+TEST_CASE("gps gate: untimed fixes are judged by the time since the last accepted one was received") {
+  // The receive time of each accepted fix is the reference: a spike 0.1 s after one received at 100.1 s
+  // is sudden, whatever the time since the gate was made.
+  GpsSpeedGate gate;
+  CHECK(gate.check(kNoFixTime, 100.0, 10.0) == Verdict::kAccepted);
+  CHECK(gate.check(kNoFixTime, 100.1, 10.5) == Verdict::kAccepted);
+  CHECK(gate.check(kNoFixTime, 100.2, 80.0) == Verdict::kTooSudden);
+}
+
+TEST_CASE("gps gate: a fix timed before the last one is no reference for a change") {
+  // A receiver's clock stepped back (or fixes delivered out of order): a negative time between fixes
+  // allows no change at all, so a steady speed would be refused; it is judged on max_speed alone.
+  GpsSpeedGate gate;
+  CHECK(gate.check(1000.0, 0.0, 10.0) == Verdict::kAccepted);
+  CHECK(gate.check(999.0, 0.1, 10.0) == Verdict::kAccepted);
+}
+
+TEST_CASE("gps gate: two fixes of the same time allow only the noise between them") {
+  GpsSpeedGate gate;
+  CHECK(gate.check(1000.0, 0.0, 10.0) == Verdict::kAccepted);
+  CHECK(gate.check(1000.0, 0.1, 60.0) == Verdict::kTooSudden);
+}
+
+TEST_CASE("gps gate: the receiver's noise is allowed on top of the acceleration") {
+  // 1 m/s in 0.05 s is 20 m/s^2 taken alone, but within the 1 m/s a receiver jitters from epoch to epoch.
+  GpsSpeedGate gate;
+  CHECK(gate.check(kNoFixTime, 0.0, 10.0) == Verdict::kAccepted);
+  CHECK(gate.check(kNoFixTime, 0.05, 11.0) == Verdict::kAccepted);
+}
+
+TEST_CASE("gps gate: a timed fix after an untimed one is judged by the receive times") {
+  // The last accepted fix had no time of its own: the time between the two is the receive times', and a
+  // spike 0.1 s later is refused, not let through for want of a fix time to compare with.
+  GpsSpeedGate gate;
+  CHECK(gate.check(kNoFixTime, 10.0, 10.0) == Verdict::kAccepted);
+  CHECK(gate.check(1000.0, 10.1, 80.0) == Verdict::kTooSudden);
+}
+
+TEST_CASE("gps gate: the reference age and the allowed change are inclusive") {
+  // A speed exactly reference_s old is still a reference: 70 m/s in 5 s is beyond 12 m/s^2 plus noise.
+  GpsSpeedGate gate;
+  CHECK(gate.check(kNoFixTime, 0.0, 0.0) == Verdict::kAccepted);
+  CHECK(gate.check(kNoFixTime, 5.0, 70.0) == Verdict::kTooSudden);
+  // A change of exactly max_accel * dt + noise (13 m/s in 1 s) is allowed.
+  GpsSpeedGate exact;
+  CHECK(exact.check(kNoFixTime, 0.0, 10.0) == Verdict::kAccepted);
+  CHECK(exact.check(kNoFixTime, 1.0, 23.0) == Verdict::kAccepted);
+}
