@@ -100,6 +100,21 @@ TEST_CASE("config: an out of range value names file line and key") {
       error_of("[audio]\nchannels = 2\nchannel = 2\n").starts_with("test.toml:3: audio.channel: channel 2"));
 }
 
+TEST_CASE("config: a number above its range or not a number names file line and key") {
+  // A timeout of 11 days would keep a lost GPS counted as present; a ring of NaN seconds passes every
+  // comparison after it, so both are refused where they are read.
+  CHECK(error_of("[gps]\ntimeout = 1e6\n").starts_with("test.toml:2: gps.timeout: value 1e+06 out of range"));
+  CHECK(error_of("[audio]\nring_seconds = nan\n").starts_with("test.toml:2: audio.ring_seconds: value "));
+  CHECK(error_of("[audio]\nring_seconds = inf\n").starts_with("test.toml:2: audio.ring_seconds: value "));
+  CHECK(error_of("[gps]\ntimeout = 60\n").empty());
+}
+
+TEST_CASE("config: an empty string is refused") {
+  // An empty device name is a value left out, not a device: it is refused at its line instead of reaching
+  // ALSA when the daemon starts.
+  CHECK(error_of("[audio]\ndevice = \"\"\n") == "test.toml:2: audio.device: must not be empty");
+}
+
 TEST_CASE("config: a wrong type names file line and key") {
   CHECK(error_of("[audio]\nrate = \"fast\"\n") == "test.toml:2: audio.rate: expected an integer");
   CHECK(error_of("[gps]\nhost = 12\n") == "test.toml:2: gps.host: expected a string");
@@ -248,4 +263,17 @@ TEST_CASE("config: changes that need a restart are named") {
   const auto changed = gearpulse::daemon::restart_required_changes(a, b);
   REQUIRE(changed.size() == 1);
   CHECK(changed[0] == "[audio]");
+}
+
+TEST_CASE("config: a reload changing the GPS timeout or the state directory needs a restart") {
+  // The GPS client is made with its timeout, and the state directory is locked and holds the model and the
+  // training store from start on: a reload moves neither, so both must be named to the user.
+  const Config a = parse_config("", "a");
+  const auto gps = gearpulse::daemon::restart_required_changes(a, parse_config("[gps]\ntimeout = 3\n", "b"));
+  REQUIRE(gps.size() == 1);
+  CHECK(gps[0] == "gps.host/port/timeout");
+  const auto state =
+      gearpulse::daemon::restart_required_changes(a, parse_config("[model]\nstate_dir = \"/tmp/s\"\n", "b"));
+  REQUIRE(state.size() == 1);
+  CHECK(state[0] == "model.state_dir");
 }
