@@ -81,6 +81,49 @@ TEST_CASE("model: rejects what no fit writes: a wrapped version, too many gears,
   CHECK(gearpulse::parse_model(twelve + "]}").gears.size() == 12);
 }
 
+TEST_CASE("model: a field of the wrong type is refused with std::invalid_argument naming it") {
+  // A bad model is refused with std::invalid_argument and a readable message (`gearpulse replay` turns
+  // just that into an error naming the file): a string or a boolean where a number belongs must be refused
+  // the same way, not escape as the JSON library's own exception, nor a boolean be read as 1.
+  for (const char* theta : {R"("0.1")", "true"}) {
+    const std::string text = std::string(R"({"version":1,"gears":[{"theta":)") + theta + "}]}";
+    INFO(text);
+    CHECK_THROWS_AS(gearpulse::parse_model(text), std::invalid_argument);
+    CHECK_THROWS_WITH(gearpulse::parse_model(text), Catch::Contains("'theta' is not a number"));
+  }
+}
+
+TEST_CASE("model: an optional field given as null is read as absent") {
+  // A program writing a model without a mixture may give its weights as null.
+  const GearModel m = gearpulse::parse_model(R"({"version":1,"gears":[{"theta":0.1,"weight":null}]})");
+  REQUIRE(m.gears.size() == 1);
+  CHECK(m.gears[0].weight == 0.0);
+}
+
+TEST_CASE("model: rejects equal thetas, a negative sample count and a negative outlier weight") {
+  // Two gears of one ratio are one gear: the synthesis picks a gear by its theta, and the ladder must be
+  // strictly ascending (eq. 5).
+  CHECK_THROWS_AS(gearpulse::parse_model(R"({"version":1,"gears":[{"theta":0.1},{"theta":0.1}]})"),
+                  std::invalid_argument);
+  CHECK_THROWS_AS(gearpulse::parse_model(R"({"version":1,"gears":[{"theta":0.1}],"samples":-5})"),
+                  std::invalid_argument);
+  CHECK_THROWS_AS(gearpulse::parse_model(R"({"version":1,"gears":[{"theta":0.1}],"outlier_weight":-0.5})"),
+                  std::invalid_argument);
+}
+
+TEST_CASE("model: a model nested exactly 32 levels loads, and one of 33 is refused") {
+  // The limit is the most a model may nest: a file at it is read, one level more is not.
+  const auto nested = [](int levels) {
+    // The object and "extra" are two levels; the arrays inside make up the rest.
+    return std::string(R"({"version":1,"gears":[],"extra":{"x":)") + std::string(levels - 2, '[') +
+           std::string(levels - 2, ']') + "}}";
+  };
+  REQUIRE(gearpulse::json_nesting(nested(32)) == 32);
+  CHECK_NOTHROW(gearpulse::parse_model(nested(32)));
+  REQUIRE(gearpulse::json_nesting(nested(33)) == 33);
+  CHECK_THROWS_WITH(gearpulse::parse_model(nested(33)), Catch::Contains("nested deeper than 32 levels"));
+}
+
 TEST_CASE("model: a model nested too deep is refused before it is copied") {
   // A 200 kB model.json whose extra nests 100,000 arrays overflowed the stack where the model was copied
   // (the daemon would crash at every start), and one of 40 kB printed as 0.8 GB of indentation.
