@@ -24,11 +24,13 @@ class GpsSpeedGate {
   explicit GpsSpeedGate(Limits limits) noexcept : limits_(limits) {}
 
   // `fix_s`: the fix's own time (UTC s, NaN when unknown); `rx_s`: when it was received (monotonic s);
-  // `speed`: m/s, finite and >= 0. The time between two fixes is the fixes' own when both have one (a
-  // batch delivered late is not a fast change), else the receive times'.
+  // `speed`: m/s, finite and >= 0. The time between two fixes is the fixes' own when both have one and
+  // it runs forward (a batch delivered late is not a fast change), else the receive times' (a receiver
+  // whose clock stepped back is still judged: a spike behind such a step is a spike).
   Verdict check(double fix_s, double rx_s, double speed) noexcept {
     if (!(speed <= limits_.max_speed)) return Verdict::kTooFast;
-    const double dt = std::isfinite(fix_s) && std::isfinite(last_fix_) ? fix_s - last_fix_ : rx_s - last_rx_;
+    const bool timed = std::isfinite(fix_s) && std::isfinite(last_fix_) && fix_s >= last_fix_;
+    const double dt = timed ? fix_s - last_fix_ : rx_s - last_rx_;
     if (has_last_ && dt >= 0.0 && dt <= limits_.reference_s &&
         std::abs(speed - last_speed_) > limits_.max_accel * dt + limits_.noise)
       return Verdict::kTooSudden;

@@ -64,12 +64,15 @@ TEST_CASE("gps gate: untimed fixes are judged by the time since the last accepte
   CHECK(gate.check(kNoFixTime, 100.2, 80.0) == Verdict::kTooSudden);
 }
 
-TEST_CASE("gps gate: a fix timed before the last one is no reference for a change") {
+TEST_CASE("gps gate: a fix timed before the last one is judged by the receive times") {
   // A receiver's clock stepped back (or fixes delivered out of order): a negative time between fixes
-  // allows no change at all, so a steady speed would be refused; it is judged on max_speed alone.
+  // would allow no change at all, so a steady speed would be refused; the receive times judge instead,
+  // so a steady speed passes and a spike behind the step is still refused.
   GpsSpeedGate gate;
   CHECK(gate.check(1000.0, 0.0, 10.0) == Verdict::kAccepted);
   CHECK(gate.check(999.0, 0.1, 10.0) == Verdict::kAccepted);
+  CHECK(gate.check(998.0, 0.2, 85.0) == Verdict::kTooSudden);
+  CHECK(gate.check(998.5, 1.2, 12.0) == Verdict::kAccepted);
 }
 
 TEST_CASE("gps gate: two fixes of the same time allow only the noise between them") {
