@@ -1,7 +1,8 @@
-// A directory that cannot be synced after a file was renamed into it (an I/O error on the medium): the
-// new file is in place, and what the daemon knows of its files must say so. This executable's own fsync()
-// stands in front of the C library's (the daemon's code is linked in statically) and fails on a directory
-// while a test asks it to.
+// A directory or a file that cannot be synced (an I/O error on the medium): what the daemon writes is
+// durable only once it is synced, so a sync that fails is an error, and where a file was already renamed
+// into place, what the daemon knows of its files must say so. This executable's own fsync() and
+// fdatasync() stand in front of the C library's (the daemon's code is linked in statically) and fail on
+// a directory, or on a regular file, while a test asks them to.
 #include <catch2/catch.hpp>
 
 #include <dlfcn.h>
@@ -10,6 +11,7 @@
 #include <atomic>
 #include <cerrno>
 #include <memory>
+#include <string>
 
 #include "daemon/atomic_file.hpp"
 #include "daemon/model_store.hpp"
@@ -18,6 +20,7 @@
 
 namespace {
 std::atomic<bool> fail_directory_sync{false};
+std::atomic<bool> fail_file_sync{false};
 
 // Fails directory syncs while it lives.
 struct FailingDirectorySync {
@@ -26,11 +29,26 @@ struct FailingDirectorySync {
   FailingDirectorySync(const FailingDirectorySync&) = delete;
   FailingDirectorySync& operator=(const FailingDirectorySync&) = delete;
 };
+
+// Fails the syncs of regular files (fsync and fdatasync) while it lives.
+struct FailingFileSync {
+  FailingFileSync() { fail_file_sync = true; }
+  ~FailingFileSync() { fail_file_sync = false; }
+  FailingFileSync(const FailingFileSync&) = delete;
+  FailingFileSync& operator=(const FailingFileSync&) = delete;
+};
+
+// Whether a sync of `fd` is to fail now.
+bool sync_fails(int fd) {
+  struct stat st {};
+  if (!fail_directory_sync && !fail_file_sync) return false;
+  if (::fstat(fd, &st) != 0) return false;
+  return (fail_directory_sync && S_ISDIR(st.st_mode)) || (fail_file_sync && S_ISREG(st.st_mode));
+}
 }  // namespace
 
 extern "C" int fsync(int fd) {
-  struct stat st {};
-  if (fail_directory_sync && ::fstat(fd, &st) == 0 && S_ISDIR(st.st_mode)) {
+  if (sync_fails(fd)) {
     errno = EIO;
     return -1;
   }
@@ -39,9 +57,21 @@ extern "C" int fsync(int fd) {
   return real(fd);
 }
 
+extern "C" int fdatasync(int fd) {
+  if (sync_fails(fd)) {
+    errno = EIO;
+    return -1;
+  }
+  using Fn = int (*)(int);
+  static const auto real = reinterpret_cast<Fn>(::dlsym(RTLD_NEXT, "fdatasync"));
+  return real(fd);
+}
+
 using gearpulse::daemon::DirectorySyncError;
 using gearpulse::daemon::TrainingStore;
+using gearpulse::test::read_text;
 using gearpulse::test::TempDir;
+using gearpulse::test::write_text;
 
 TEST_CASE("state: a training store renamed into place whose directory cannot be synced is the saved one") {
   TempDir dir;
@@ -81,4 +111,87 @@ TEST_CASE("state: a model renamed into place whose directory cannot be synced is
   // The next fit's model goes over it: the file is not one another program put there.
   model.samples = 200;
   CHECK(gearpulse::daemon::save_model_if_ours(holder, path, model) == gearpulse::daemon::ModelSave::kSaved);
+}
+
+// A temp file renamed over model.json before its data is on disk can leave an empty model.json after a
+// power cut: a save whose file will not sync fails there, and the old model stays in place.
+TEST_CASE("state: a file whose data cannot be synced is not renamed into place") {
+  TempDir dir;
+  const auto path = dir / "model.json";
+  gearpulse::daemon::write_file_atomic(path, "the old model");
+  {
+    const FailingFileSync failing;
+    try {
+      gearpulse::daemon::write_file_atomic(path, "the new model");
+      FAIL("no error");
+    } catch (const DirectorySyncError&) {
+      FAIL("renamed into place before its data was synced");
+    } catch (const std::system_error& e) {
+      CHECK(std::string(e.what()).find("cannot fsync " + path.string()) == 0);
+    }
+  }
+  CHECK(read_text(path) == "the old model");
+  CHECK(std::distance(std::filesystem::directory_iterator(dir.path()), {}) == 1);  // no temp file left
+}
+
+// Pairs journaled are counted as kept: an append whose data will not sync has kept nothing, and the
+// journal is written again at the next try.
+TEST_CASE("state: a journal append that cannot be synced fails and keeps its pairs to be journaled") {
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  const auto journal = TrainingStore::journal_path(path);
+  TrainingStore store(1e9, 1000);
+  for (int i = 0; i < 10; ++i)
+    store.add({double(i), 10.0, 50.0});
+  store.save(path);
+  write_text(dir / "log", "first line\n");
+  for (int i = 10; i < 15; ++i)
+    store.add({double(i), 10.0, 50.0});
+  {
+    const FailingFileSync failing;
+    try {
+      gearpulse::daemon::append_file_durable(dir / "log", "second line\n");
+      FAIL("no error");
+    } catch (const std::system_error& e) {
+      CHECK(std::string(e.what()).find("cannot fsync " + (dir / "log").string()) == 0);
+    }
+    CHECK_THROWS_AS(store.append_journal(path), std::system_error);
+    CHECK(store.unkept() == 5);
+  }
+  CHECK(store.append_journal(path) == 5);
+  TrainingStore back(1e9, 1000);
+  REQUIRE(back.load(path).empty());
+  CHECK(back.replay_journal(path).recovered == 5);
+}
+
+// A removal is durable only once its directory is synced: a cleared journal that comes back after a
+// power cut would bring back the pairs a reset cleared.
+TEST_CASE("state: a file removed from a directory that cannot be synced is an error") {
+  TempDir dir;
+  const auto path = dir / "training.bin.journal";
+  write_text(path, "pairs");
+  {
+    const FailingDirectorySync failing;
+    try {
+      gearpulse::daemon::remove_file_durable(path);
+      FAIL("no error");
+    } catch (const std::system_error& e) {
+      CHECK(std::string(e.what()).find("cannot fsync directory") != std::string::npos);
+    }
+  }
+  // The save after a reset removes the old journal first; it is not counted as done.
+  TrainingStore store(1e9, 1000);
+  for (int i = 0; i < 10; ++i)
+    store.add({double(i), 10.0, 50.0});
+  store.save(dir / "training.bin");
+  store.clear();
+  {
+    const FailingDirectorySync failing;
+    CHECK_THROWS_MATCHES(
+        store.save(dir / "training.bin"), std::system_error,
+        Catch::Matchers::Predicate<std::system_error>(
+            [](const std::system_error& e) { return dynamic_cast<const DirectorySyncError*>(&e) == nullptr; },
+            "not a DirectorySyncError"));
+  }
+  CHECK(store.unsaved());
 }
