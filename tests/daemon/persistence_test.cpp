@@ -7,9 +7,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
 #include <memory>
 #include <random>
 #include <stdexcept>
@@ -178,6 +182,21 @@ TEST_CASE("daemon: atomic write survives a crash at any moment") {
   CHECK(count_entries(dir.path()) == 1);
 }
 
+// Only names the daemon's own temp files take ("NAME.tmp." and six characters) are cleaned up at start: a
+// copy a user kept beside the store under a name like it is theirs, and stays.
+TEST_CASE("daemon: stale temp cleanup leaves a user's files that merely look like temp files") {
+  TempDir dir;
+  const auto file = dir / "training.bin";
+  write_text(file, "store");
+  write_text(dir / "training.bin.tmp.keep", "a user's copy");
+  write_text(dir / "training.bin.tmp.Xy12Zq.old", "another");
+  write_text(dir / "training.bin.tmp.Xy12Zq", "partial");
+  CHECK(remove_stale_temp_files(file) == 1);
+  CHECK(read_text(dir / "training.bin.tmp.keep") == "a user's copy");
+  CHECK(read_text(dir / "training.bin.tmp.Xy12Zq.old") == "another");
+  CHECK_FALSE(std::filesystem::exists(dir / "training.bin.tmp.Xy12Zq"));
+}
+
 TEST_CASE("daemon: training store is bounded by age and by count") {
   TrainingStore store(100.0, 1000);
   for (int i = 0; i < 300; ++i)
@@ -192,6 +211,7 @@ TEST_CASE("daemon: training store is bounded by age and by count") {
   CHECK_FALSE(store.add({1.0, kMissing, 50.0}));
   CHECK_FALSE(store.add({1.0, 5.0, kMissing}));
   CHECK_FALSE(store.add({1.0, -1.0, 50.0}));
+  CHECK_FALSE(store.add({1.0, 10.0, 0.0}));  // moving with no engine frequency: no gear gives that
   CHECK(store.size() == 50);
 }
 
@@ -337,6 +357,23 @@ TEST_CASE("daemon: pairs journaled after the last save survive a power cut") {
     CHECK(restarted(path, flipped)->size() == 50 + 32);
     // Said as what it is: whole records, the first of them failing its checksum.
     CHECK(flipped.problem == "record 33 fails its checksum; it and the 84 bytes from it on are dropped");
+  }
+  SECTION("a record that is not a number ends the replay there, though its checksum holds") {
+    // A pair no fit can use (a NaN speed) is not let into training from the journal either.
+    std::string journal = read_text(TrainingStore::journal_path(path));
+    const std::size_t at = journal.size() - 3 * 28;  // third record from the end
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::memcpy(journal.data() + at + 8, &nan, sizeof nan);
+    const std::uint32_t crc = crc32(std::string_view(journal).substr(at, 24));
+    std::memcpy(journal.data() + at + 24, &crc, sizeof crc);
+    write_text(TrainingStore::journal_path(path), journal);
+    TrainingStore::JournalReplay implausible;
+    const auto after = restarted(path, implausible);
+    CHECK(implausible.recovered == 32);
+    CHECK_FALSE(implausible.problem.empty());
+    const auto pairs = after->snapshot();
+    CHECK(pairs.size() == 50 + 32);
+    CHECK(std::all_of(pairs.begin(), pairs.end(), [](const Sample& s) { return std::isfinite(s.speed); }));
   }
 }
 
@@ -501,6 +538,27 @@ TEST_CASE("daemon: training store rejects a torn or corrupt file") {
   }
   SECTION("empty") {
     CHECK_FALSE(back.deserialize("").empty());
+  }
+  // A file another program wrote, or one corrupted before its checksum was taken: the checksum holds, and
+  // what it says is still refused, so that the daemon sets the file aside instead of loading it.
+  const auto with_checksum = [](std::string blob) {
+    const std::uint32_t crc = crc32(std::string_view(blob).substr(0, blob.size() - 4));
+    std::memcpy(blob.data() + blob.size() - 4, &crc, sizeof crc);
+    return blob;
+  };
+  SECTION("a record count so large that its size in bytes wraps round to the file's") {
+    // 2^61 + 100 records of 24 bytes come to 2400 bytes modulo 2^64, what the file holds: taken at its
+    // word, the count has the loader read far past the end of the file.
+    std::string bad = good;
+    const std::uint64_t count = (std::uint64_t{1} << 61) + 100;
+    std::memcpy(bad.data() + 16, &count, sizeof count);
+    CHECK(back.deserialize(with_checksum(bad)).rfind("truncated or padded", 0) == 0);
+  }
+  SECTION("a record that is not a number") {
+    std::string bad = good;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    std::memcpy(bad.data() + 24 + 50 * 24 + 16, &nan, sizeof nan);  // record 50's frequency
+    CHECK(back.deserialize(with_checksum(bad)) == "implausible record 50");
   }
   CHECK(back.size() == 0);
 }
