@@ -469,6 +469,30 @@ TEST_CASE("daemon: a model.json set aside takes a name not yet taken, and an unr
   CHECK_FALSE(std::filesystem::exists(dir / "state/model.json"));
 }
 
+// Copies are kept up to a hundred (NAME.corrupt, then .corrupt.1 to .corrupt.99): the hundredth
+// corruption still has its evidence kept, under the last name.
+TEST_CASE("daemon: a corrupt model.json with 99 copies set aside already is kept as the hundredth") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  const std::string torn_model = std::string(kModel).substr(0, 60);
+  write_text(dir / "state/model.json", torn_model);
+  write_text(dir / "state/model.json.corrupt", "corruption 0\n");
+  for (int n = 1; n <= 98; ++n)
+    write_text(dir / ("state/model.json.corrupt." + std::to_string(n)),
+               "corruption " + std::to_string(n) + "\n");
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  const json status = wait_for_status(dir, daemon);
+  REQUIRE(status.is_object());
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  INFO(read_text(dir / "log.txt"));
+  CHECK(read_text(dir / "state/model.json.corrupt.99") == torn_model);
+  CHECK(read_text(dir / "state/model.json.corrupt.98") == "corruption 98\n");
+  CHECK(read_text(dir / "log.txt").find("kept as " + (dir / "state/model.json.corrupt.99").string()) !=
+        std::string::npos);
+}
+
 // A user installs a model with `gearpulse fit --out STATE/model.json` while the daemon runs: the daemon
 // does not save its own over it at stop (it once did, silently), and loads it at the next start.
 TEST_CASE(
@@ -518,7 +542,10 @@ TEST_CASE("daemon: a state directory it may not search is said at start, and the
   INFO(read_text(dir / "log.txt"));
   REQUIRE(status.is_object());
   CHECK(status["model"]["problems"].size() >= 1);
-  CHECK(read_text(dir / "log.txt").find("Permission denied") != std::string::npos);
+  // The reason model.json stays where it is, not a search for a free name that found none.
+  CHECK(read_text(dir / "log.txt").find("(the file is left where it is: Permission denied)") !=
+        std::string::npos);
+  CHECK(read_text(dir / "log.txt").find("copies are set aside already") == std::string::npos);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
