@@ -392,16 +392,21 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
     return replay;
   }
   std::size_t at = kJournalHeaderSize;
+  bool implausible = false;  // the record that stopped the replay passed its checksum
   for (; at + kJournalRecordSize <= blob->size(); at += kJournalRecordSize) {
     const std::string_view record = std::string_view(*blob).substr(at, kRecordSize);
     if (get<std::uint32_t>(*blob, at + kRecordSize) != crc32(record)) break;
     const Sample s = get_record(*blob, at);
-    if (!plausible(s)) break;
+    if (!plausible(s)) {
+      implausible = true;
+      break;
+    }
     push_back_locked(s);
     ++replay.recovered;
   }
   if (at + kJournalRecordSize <= blob->size())
-    replay.problem = "record " + std::to_string(replay.recovered + 1) + " fails its checksum; it and the " +
+    replay.problem = "record " + std::to_string(replay.recovered + 1) +
+                     (implausible ? " is no plausible pair" : " fails its checksum") + "; it and the " +
                      std::to_string(blob->size() - at) + " bytes from it on are dropped";
   else if (at < blob->size())
     replay.problem = std::to_string(blob->size() - at) + " bytes at the end are not a whole record (dropped)";
