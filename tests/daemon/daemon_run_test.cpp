@@ -75,6 +75,16 @@ json wait_for_status(const TempDir& dir, Process& daemon, int timeout_ms = 15'00
   return nullptr;
 }
 
+// Starts the daemon on dir's gearpulse.toml, waits for its first status, stops it with SIGTERM (it must
+// exit 0) and returns that status (null if it never answered).
+json status_of_one_run(const TempDir& dir) {
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  json status = wait_for_status(dir, daemon);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  return status;
+}
+
 json ask(const TempDir& dir, const std::string& request) {
   LineClient c((dir / "ctl.sock").string());
   REQUIRE(c.connected());
@@ -337,12 +347,7 @@ TEST_CASE(
     return st.st_ino;
   };
   const auto before = inode();
-  {
-    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-    REQUIRE(wait_for_status(dir, daemon).is_object());
-    daemon.signal(SIGTERM);
-    CHECK(daemon.wait() == 0);
-  }
+  REQUIRE(status_of_one_run(dir).is_object());
   CHECK(inode() == before);  // an atomic save would have renamed a new file over it
   // The file as a person wrote it (other spacing, no final newline), or as an earlier version did: the
   // same model, so not rewritten either (it once was, and on read-only media every stop said it failed).
@@ -350,10 +355,7 @@ TEST_CASE(
        {std::string(kModel), gearpulse::serialize_model(gearpulse::parse_model(kModel)) + "\n"}) {
     write_text(path, text);
     const auto written = inode();
-    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-    REQUIRE(wait_for_status(dir, daemon).is_object());
-    daemon.signal(SIGTERM);
-    CHECK(daemon.wait() == 0);
+    REQUIRE(status_of_one_run(dir).is_object());
     CHECK(inode() == written);
     CHECK(read_text(path) == text);
   }
@@ -371,12 +373,7 @@ TEST_CASE("daemon: a training store the file already holds is not rewritten at s
   write_text(dir / "gearpulse.toml", config_for(dir));
   struct stat before {};
   REQUIRE(::stat(path.c_str(), &before) == 0);
-  {
-    Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-    REQUIRE(wait_for_status(dir, daemon)["training_samples"] == 30);
-    daemon.signal(SIGTERM);
-    CHECK(daemon.wait() == 0);
-  }
+  REQUIRE(status_of_one_run(dir)["training_samples"] == 30);
   struct stat after {};
   REQUIRE(::stat(path.c_str(), &after) == 0);
   CHECK(after.st_ino == before.st_ino);  // a save would have renamed a new file over it
@@ -458,11 +455,7 @@ TEST_CASE("daemon: a model.json set aside takes a name not yet taken, and an unr
   std::filesystem::create_directories(dir / "state/model.json");  // cannot be read as a file
   write_text(dir / "state/model.json.corrupt", "the first corruption\n");
   write_text(dir / "gearpulse.toml", config_for(dir));
-  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-  const json status = wait_for_status(dir, daemon);
-  REQUIRE(status.is_object());
-  daemon.signal(SIGTERM);
-  CHECK(daemon.wait() == 0);
+  REQUIRE(status_of_one_run(dir).is_object());
   INFO(read_text(dir / "log.txt"));
   CHECK(read_text(dir / "state/model.json.corrupt") == "the first corruption\n");
   CHECK(std::filesystem::is_directory(dir / "state/model.json.corrupt.1"));
@@ -481,11 +474,7 @@ TEST_CASE("daemon: a corrupt model.json with 99 copies set aside already is kept
     write_text(dir / ("state/model.json.corrupt." + std::to_string(n)),
                "corruption " + std::to_string(n) + "\n");
   write_text(dir / "gearpulse.toml", config_for(dir));
-  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
-  const json status = wait_for_status(dir, daemon);
-  REQUIRE(status.is_object());
-  daemon.signal(SIGTERM);
-  CHECK(daemon.wait() == 0);
+  REQUIRE(status_of_one_run(dir).is_object());
   INFO(read_text(dir / "log.txt"));
   CHECK(read_text(dir / "state/model.json.corrupt.99") == torn_model);
   CHECK(read_text(dir / "state/model.json.corrupt.98") == "corruption 98\n");
