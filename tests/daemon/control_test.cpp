@@ -28,13 +28,15 @@ using nlohmann::json;
 
 namespace {
 
-// A handler that counts calls and echoes the command; "boom" fails like a refused command.
+// A handler that counts calls and echoes the command; "boom" fails like a refused command, "crash" like
+// a handler's own fault.
 struct EchoHandler {
   std::shared_ptr<std::atomic<int>> calls = std::make_shared<std::atomic<int>>(0);
   json operator()(const json& request) const {
     ++*calls;
     const std::string cmd = request["cmd"].get<std::string>();
     if (cmd == "boom") throw ControlError("refused on purpose");
+    if (cmd == "crash") throw std::runtime_error("state file vanished");
     if (cmd == "big") return {{"blob", std::string(8192, 'x')}, {"n", calls->load()}};
     return {{"echo", cmd}, {"n", calls->load()}};
   }
@@ -75,7 +77,8 @@ TEST_CASE("control: bad requests get error replies and the connection stays usab
   LineClient c((dir / "ctl.sock").string());
   REQUIRE(c.connected());
   for (const char* bad : {"not json", "[1,2]", "{\"v\":1}", "{\"cmd\":5}", "{\"v\":99,\"cmd\":\"status\"}",
-                          "{\"v\":\"1\",\"cmd\":\"status\"}", "{\"cmd\":\"boom\"}", "\xff\xfe{"}) {
+                          "{\"v\":0,\"cmd\":\"status\"}", "{\"v\":\"1\",\"cmd\":\"status\"}",
+                          "{\"cmd\":\"boom\"}", "\xff\xfe{"}) {
     INFO(bad);
     const json r = ask(c, bad);
     CHECK(r["ok"] == false);
@@ -83,6 +86,62 @@ TEST_CASE("control: bad requests get error replies and the connection stays usab
     CHECK(r["v"] == 1);
   }
   CHECK(ask(c, R"({"cmd":"status"})")["ok"] == true);
+  // A handler's own failure is told apart from a refusal: the user sees it is the daemon's fault.
+  const json r = ask(c, R"({"cmd":"crash"})");
+  CHECK(r["ok"] == false);
+  CHECK(r["error"] == "internal error: state file vanished");
+}
+
+TEST_CASE("control: blank lines get no reply, so replies stay paired with requests") {
+  // A client that sends an empty line (or one with a CR from a terminal) before its request must read
+  // the request's reply first, not an error for the blank line.
+  TempDir dir;
+  EchoHandler handler;
+  ControlServer server((dir / "ctl.sock").string(), handler);
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.send_all("\n  \t \r\n\r\n{\"cmd\":\"a\"}\r\n"));
+  const auto line = c.read_line();
+  REQUIRE(line.has_value());
+  CHECK(json::parse(*line)["echo"] == "a");
+  CHECK(ask(c, R"({"cmd":"b"})")["echo"] == "b");
+  CHECK(handler.calls->load() == 2);
+  CHECK(server.requests() == 2);
+}
+
+TEST_CASE("control: a request of exactly the length limit is answered") {
+  // max_request_bytes is the longest request served, not the first one refused.
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{}, ControlLimits{.max_request_bytes = 1024});
+  server.start();
+  const std::string head = "{\"cmd\":\"";
+  const std::string request = head + std::string(1024 - head.size() - 2, 'a') + "\"}";
+  REQUIRE(request.size() == 1024);
+  LineClient c((dir / "ctl.sock").string());
+  const json r = ask(c, request);
+  CHECK(r["ok"] == true);
+  CHECK(r["echo"].get<std::string>().size() == 1024 - head.size() - 2);
+  // The CR of a CRLF line is not counted against the limit either.
+  CHECK(ask(c, request + "\r")["ok"] == true);
+  CHECK_FALSE(c.closed_by_peer(200));
+}
+
+TEST_CASE("control: a client that keeps asking keeps its connection past the idle timeout") {
+  // The idle timeout counts from the last request, not from the connection: a monitor polling status
+  // every few seconds must not be cut off after idle_timeout_ms.
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{},
+                       ControlLimits{.idle_timeout_ms = 1'000, .first_request_timeout_ms = 1'000});
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  for (int i = 0; i < 8; ++i) {
+    CHECK(ask(c, R"({"cmd":"poll"})")["echo"] == "poll");
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+  }
+  CHECK(server.dropped_clients() == 0);
+  // Silent for longer than the timeout, it is closed.
+  CHECK(c.closed_by_peer(5'000));
+  CHECK(server.dropped_clients() == 1);
 }
 
 TEST_CASE("control: an oversize request gets an error reply and is disconnected") {
