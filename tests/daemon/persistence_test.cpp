@@ -605,7 +605,15 @@ TEST_CASE("daemon: retrainer swaps in and saves a fitted model") {
                         return three_gears();
                       },
                       {});
+  const auto wall = [] {
+    return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  };
+  const double before = wall();
   CHECK(retrainer.retrain_now());
+  // Status says when the model was last retrained (gearpulsectl's "last retrain").
+  CHECK(retrainer.status().runs == 1);
+  CHECK(retrainer.status().last_run_wall >= std::floor(before));
+  CHECK(retrainer.status().last_run_wall <= wall() + 1.0);
   CHECK(seen == 20);
   REQUIRE(model.trained());
   CHECK(model.get()->gears.size() == 3);
@@ -647,10 +655,14 @@ TEST_CASE("daemon: a retrain that found the GPS speeds late against the engine s
   store.add({20.0, 10.0, 100.0});
   CHECK(retrainer.retrain_now());
   CHECK(retrainer.status().last_result.find("gps.latency may be 0.38 s too short") != std::string::npos);
+  CHECK(retrainer.status().last_result.find("describe the engine 0.38 s before their stamps") !=
+        std::string::npos);
   lag = -0.5;
   store.add({21.0, 10.0, 100.0});
   CHECK(retrainer.retrain_now());
   CHECK(retrainer.status().last_result.find("gps.latency may be 0.50 s too long") != std::string::npos);
+  CHECK(retrainer.status().last_result.find("describe the engine 0.50 s after their stamps") !=
+        std::string::npos);
 }
 
 TEST_CASE(
@@ -733,9 +745,13 @@ TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
   CHECK_FALSE(retrainer.retrain_now());
   CHECK(model.get() == good);
   CHECK(retrainer.status().last_result.find("no discrete ladder") != std::string::npos);
+  store.add({2.0, 10.0, 100.0});
   CHECK_FALSE(retrainer.retrain_now());
   CHECK(model.get() == good);
   CHECK(retrainer.status().last_result.find("optimizer diverged") != std::string::npos);
+  // The pairs a failed fit saw count as tried: the retrainer waits for new ones instead of failing on
+  // the same pairs at every interval.
+  CHECK(store.new_samples() == 0);
   CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
 }
 
