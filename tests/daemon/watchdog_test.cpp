@@ -77,6 +77,26 @@ TEST_CASE("watchdog: a stalled thread withholds WATCHDOG=1 until it beats again"
   CHECK(logged == 1);
 }
 
+TEST_CASE("watchdog: a hang is logged again when another thread joins it or when it comes back") {
+  // One log line per hang, not per tick: but a second thread hanging, or a thread that recovered and
+  // hangs again an hour later, is news the user needs to find in the log.
+  int pings = 0;
+  WatchdogGate gate([&] { ++pings; });
+  const std::vector<std::string> none, gps{"gps"}, gps_pulse{"gps", "pulse"}, pulse{"pulse"};
+  CHECK_FALSE(gate.tick(none));
+  CHECK(gate.tick(gps));
+  CHECK_FALSE(gate.tick(gps));
+  CHECK(gate.tick(gps_pulse));  // the pulse thread hangs too
+  CHECK_FALSE(gate.tick(gps_pulse));
+  CHECK(gate.tick(pulse));  // the GPS thread is back, the pulse thread is not
+  CHECK_FALSE(gate.tick(none));
+  CHECK(pings == 2);
+  CHECK(gate.tick(pulse));  // the same thread hangs again after recovering
+  CHECK_FALSE(gate.tick(pulse));
+  CHECK(gate.withheld() == 7);
+  CHECK(gate.fed() == 2);
+}
+
 TEST_CASE("watchdog: the pipeline watches the GPS thread and an absent gpsd is not a stall") {
   TempDir dir;
   gearpulse::daemon::Config config;
