@@ -29,7 +29,7 @@ using nlohmann::json;
 namespace {
 
 // A handler that counts calls and echoes the command; "boom" fails like a refused command, "crash" like
-// a handler's own fault.
+// a handler's own fault; "list" answers with an array, "not-now" declines without throwing.
 struct EchoHandler {
   std::shared_ptr<std::atomic<int>> calls = std::make_shared<std::atomic<int>>(0);
   json operator()(const json& request) const {
@@ -37,6 +37,8 @@ struct EchoHandler {
     const std::string cmd = request["cmd"].get<std::string>();
     if (cmd == "boom") throw ControlError("refused on purpose");
     if (cmd == "crash") throw std::runtime_error("state file vanished");
+    if (cmd == "list") return json::array({1, 2});
+    if (cmd == "not-now") return {{"ok", false}, {"error", "busy retraining"}};
     if (cmd == "big") return {{"blob", std::string(8192, 'x')}, {"n", calls->load()}};
     return {{"echo", cmd}, {"n", calls->load()}};
   }
@@ -90,6 +92,38 @@ TEST_CASE("control: bad requests get error replies and the connection stays usab
   const json r = ask(c, R"({"cmd":"crash"})");
   CHECK(r["ok"] == false);
   CHECK(r["error"] == "internal error: state file vanished");
+}
+
+TEST_CASE("control: a handler's reply that is not an object, or that says ok itself, keeps its meaning") {
+  // A command answered with something other than an object still gets a well-formed reply, and one that
+  // declines without throwing is not turned into a success.
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  const json list = ask(c, R"({"cmd":"list"})");
+  CHECK(list == json({{"ok", true}, {"v", 1}}));
+  const json declined = ask(c, R"({"cmd":"not-now"})");
+  CHECK(declined["ok"] == false);
+  CHECK(declined["error"] == "busy retraining");
+}
+
+TEST_CASE("control: a socket path too long for the address is refused, one byte shorter is served") {
+  // sun_path holds 108 bytes with the terminating NUL: a path of 108 characters would be cut short (or
+  // overrun the address), so it is refused naming the path.
+  TempDir dir;
+  const std::string base = (dir / "").string();
+  REQUIRE(base.size() < 100);
+  const std::string too_long = base + std::string(108 - base.size(), 's');
+  REQUIRE(too_long.size() == 108);
+  CHECK_THROWS_WITH(ControlServer(too_long, EchoHandler{}),
+                    Catch::Contains("too long") && Catch::Contains(too_long));
+  CHECK_FALSE(std::filesystem::exists(too_long));
+  const std::string longest = too_long.substr(0, 107);
+  ControlServer server(longest, EchoHandler{});
+  server.start();
+  LineClient c(longest);
+  CHECK(ask(c, R"({"cmd":"x"})")["ok"] == true);
 }
 
 TEST_CASE("control: blank lines get no reply, so replies stay paired with requests") {
