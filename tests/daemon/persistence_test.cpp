@@ -755,6 +755,22 @@ TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
   CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
 }
 
+TEST_CASE("daemon: a retrain with no training pairs yet says so and runs no fit") {
+  // A `retrain` right after a reset: the user reads that there is nothing to learn from, not a fit on no
+  // pairs that "found no gear ladder".
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  ModelHolder model;
+  std::atomic<int> fits{0};
+  Retrainer retrainer(store, model, dir / "model.json", counting_fitter(fits), {});
+  CHECK_FALSE(retrainer.retrain_now());
+  CHECK(fits.load() == 0);
+  CHECK_FALSE(model.trained());
+  CHECK(retrainer.status().last_result == "no training samples yet");
+  CHECK(retrainer.status().runs == 1);
+  CHECK(retrainer.status().accepted == 0);
+}
+
 TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned about at every retrain") {
   // An automatic answers "no ladder" at every retrain interval; the log at 2 a.m. should say so once.
   TempDir dir;
