@@ -250,3 +250,115 @@ TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer 
   CHECK(ok);
   ::close(fd);
 }
+
+namespace {
+
+// The pipeline on GPS alone (no sound card: speed follows GPS), gpsd to be started by the test at `port`.
+struct GpsOnly {
+  TempDir dir;
+  int port = gearpulse::test::free_port();
+  gearpulse::daemon::ModelHolder model;
+  gearpulse::daemon::TrainingStore store{3600.0, 1000};
+  gearpulse::daemon::Config config;
+  std::unique_ptr<gearpulse::daemon::Pipeline> pipeline;
+
+  GpsOnly() {
+    config.audio.device = "gearpulse_test_no_such_pcm";
+    config.gps.port = static_cast<unsigned>(port);
+    config.output.kind = gearpulse::daemon::OutputKind::kNone;
+    config.model.state_dir = dir.path().string();
+    config.log.level = "off";
+  }
+  ~GpsOnly() {
+    if (pipeline) pipeline->stop();
+  }
+  GpsOnly(const GpsOnly&) = delete;
+  GpsOnly& operator=(const GpsOnly&) = delete;
+
+  gearpulse::daemon::Pipeline& start() {
+    pipeline = std::make_unique<gearpulse::daemon::Pipeline>(config, model, store);
+    pipeline->start();
+    return *pipeline;
+  }
+  // gpsfake playing `speeds` at 1 Hz of log time (NaN = no fix), `cycle` s per epoch, repeated.
+  std::unique_ptr<GpsFake> gpsd(const std::vector<double>& speeds, double cycle) {
+    const auto log = dir / "drive.nmea";
+    gearpulse::sim::write_nmea_log(log, gearpulse::sim::epochs_at_1hz(speeds));
+    return std::make_unique<GpsFake>(log, port, cycle, false);
+  }
+};
+
+}  // namespace
+
+// The status a user reads after gpsd comes up late and after it restarts: the connection's old error is
+// gone once connected, and only connections after the first count as reconnects.
+TEST_CASE("pipeline: gpsd starting late is no reconnect and leaves no error; a restart is one reconnect") {
+  GpsOnly chain;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  REQUIRE(wait_for([&] { return !pipeline.snapshot().gps_error.empty(); }, 10s));  // gpsd absent
+  const std::vector<double> speeds(40, 12.5);
+  auto fake = chain.gpsd(speeds, 0.1);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  auto s = pipeline.snapshot();
+  CHECK(s.gps_error.empty());
+  CHECK(s.gps_reconnects == 0);
+  CHECK(near(s.gps_speed, 12.5, 0.01));
+  fake->kill();
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "disconnected"; }, 10s));
+  CHECK_FALSE(pipeline.snapshot().gps_error.empty());
+  fake = chain.gpsd(speeds, 0.1);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  s = pipeline.snapshot();
+  CHECK(s.gps_error.empty());
+  CHECK(s.gps_reconnects == 1);
+}
+
+// A receiver that goes quiet (gpsd up and connected, no reports) leaves its last fix as the newest
+// report: it must stop counting as a fix after gps.timeout, not stay "fix" for as long as gpsd is up.
+TEST_CASE("pipeline: a receiver that goes quiet is no fix after gps.timeout and one that resumes is a fix") {
+  GpsOnly chain;
+  chain.config.gps.timeout = 1.0;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  auto fake = chain.gpsd(std::vector<double>(40, 9.0), 0.1);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  fake->pause();
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state != "fix"; }, 5s));
+  const auto quiet = pipeline.snapshot();
+  CHECK(quiet.gps_state == "no-fix");
+  CHECK(quiet.gps_age >= 1.0);
+  CHECK(near(quiet.gps_speed, 9.0, 0.01));
+  fake->resume();
+  CHECK(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 10s));
+}
+
+// Through an outage gpsd goes on reporting, without a fix: the status keeps the speed of the last fix and
+// says how long ago it was, which is how long the pulses have run without GPS.
+TEST_CASE("pipeline: through a GPS outage the status keeps the last fix's speed and its growing age") {
+  GpsOnly chain;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  std::vector<double> speeds(10, 14.0);
+  speeds.resize(50, std::nan(""));  // 8 s without a fix at 0.2 s per epoch
+  auto fake = chain.gpsd(speeds, 0.2);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_mode == 1; }, 10s));  // reports without a fix
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_age > 2.0; }, 5s));
+  const auto s = pipeline.snapshot();
+  CHECK(s.gps_state == "no-fix");
+  CHECK(s.gps_mode == 1);
+  CHECK(near(s.gps_speed, 14.0, 0.01));
+}
+
+// Below output.min_frequency the pulse train does not run: the status says 0 Hz, as the pulses show,
+// not the frequency the speed would have.
+TEST_CASE("pipeline: a speed whose pulses would be below output.min_frequency shows 0 Hz and sends none") {
+  GpsOnly chain;
+  chain.config.output.pulses_per_km = 1000.0;  // 12.5 m/s: 12.5 Hz
+  chain.config.output.min_frequency = 20.0;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  auto fake = chain.gpsd(std::vector<double>(40, 12.5), 0.1);
+  REQUIRE(wait_for([&] { return near(pipeline.snapshot().speed, 12.5, 0.1); }, 20s));
+  std::this_thread::sleep_for(500ms);
+  const auto s = pipeline.snapshot();
+  CHECK(s.pulse_frequency == 0.0);
+  CHECK(s.pulses == 0);
+}

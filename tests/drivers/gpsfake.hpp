@@ -1,6 +1,7 @@
 #pragma once
 // A real gpsd started by gpsfake on a port of the test's own, fed from an NMEA log.
 #include <netinet/in.h>
+#include <signal.h>
 #include <sys/ipc.h>
 #include <sys/shm.h>
 #include <sys/socket.h>
@@ -49,6 +50,11 @@ class GpsFake {
         },
         timeout);
   }
+
+  // SIGSTOP/SIGCONT to gpsfake alone: gpsd stays up and connected but gets nothing from its device, as
+  // with a receiver that goes quiet, until it is resumed.
+  void pause() { process_.signal(SIGSTOP); }
+  void resume() { process_.signal(SIGCONT); }
 
   // SIGKILL to the whole group: gpsd dies without saying goodbye, as in a crash.
   void kill() {
