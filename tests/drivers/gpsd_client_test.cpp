@@ -417,3 +417,72 @@ TEST_CASE("gpsd: a client thread held up stops beating and beats again once it i
   REQUIRE(wait_for([&] { return client.heartbeat_ns() > h1; }, 10s));
   client.stop();
 }
+
+TEST_CASE("gpsd: an absent gpsd is retried with a growing delay, not hammered") {
+  GpsdClient client(config_for(gearpulse::test::free_port()));  // nobody listens; 50 ms doubling to 400 ms
+  client.start();
+  std::this_thread::sleep_for(2s);
+  const auto st = client.status();
+  client.stop();
+  // At a fixed 50 ms it would try about 40 times in 2 s; growing to 400 ms, about 8.
+  INFO("failed attempts: " << st.failures);
+  CHECK(st.failures >= 3);
+  CHECK(st.failures <= 12);
+}
+
+// The delay grown while gpsd was absent is for an absent gpsd: once one has delivered a position report,
+// losing it is retried at once, so a gpsd restart costs the pulses a moment of GPS, not the longest delay.
+TEST_CASE("gpsd: after a working connection a lost one is retried at the shortest delay") {
+  // Bound but not listening: connections are refused until the test listens.
+  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  REQUIRE(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len) == 0);
+  GpsdConfig cfg = config_for(ntohs(a.sin_port));
+  cfg.backoff_max = 3200ms;
+  GpsdClient client(cfg);
+  client.start();
+  // Five refusals: the delay has grown to 1.6 s.
+  REQUIRE(wait_for([&] { return client.status().failures >= 5; }, 10s));
+  REQUIRE(::listen(listener, 4) == 0);
+  const int first = ::accept(listener, nullptr, nullptr);
+  REQUIRE(first >= 0);
+  const std::string tpv =
+      "{\"class\":\"TPV\",\"device\":\"x\",\"mode\":3,\"time\":\"2026-01-15T12:00:00.000Z\",\"speed\":6.5}\n";
+  (void)!::write(first, tpv.data(), tpv.size());
+  REQUIRE(wait_for([&] { return client.latest().has_value(); }, 5s));
+  const auto lost_at = std::chrono::steady_clock::now();
+  ::close(first);  // gpsd goes away
+  const int second = ::accept(listener, nullptr, nullptr);
+  const auto waited = std::chrono::steady_clock::now() - lost_at;
+  REQUIRE(second >= 0);
+  ::close(second);
+  client.stop();
+  ::close(listener);
+  INFO("reconnected after " << std::chrono::duration_cast<std::chrono::milliseconds>(waited).count()
+                            << " ms");
+  CHECK(waited < 1s);
+}
+
+// A gpsd that dies is said at once: the status (and the daemon's "disconnected") must not go on saying
+// connected through the wait before the next attempt.
+TEST_CASE("gpsd: a lost connection is shown as connecting during the wait before the reconnect") {
+  TempDir dir;
+  const auto log = write_log(dir, std::vector<double>(40, 8.0));
+  const int port = gearpulse::test::free_port();
+  GpsFake fake(log, port, 0.05, false);
+  REQUIRE(GpsFake::wait_listening(port, 10s));
+  GpsdConfig cfg = config_for(port);
+  cfg.backoff_min = cfg.backoff_max = 3000ms;
+  GpsdClient client(cfg);
+  client.start();
+  REQUIRE(wait_for([&] { return client.has_gps(gearpulse::monotonic_ns()); }, 20s));
+  fake.kill();
+  CHECK(wait_for([&] { return client.status().state == GpsdState::kConnecting; }, 1s));
+  CHECK_FALSE(client.status().last_error.empty());
+  client.stop();
+}
