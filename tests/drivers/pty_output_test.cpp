@@ -2,6 +2,8 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/ioctl.h>
+#include <sys/stat.h>
 #include <termios.h>
 #include <unistd.h>
 
@@ -164,6 +166,30 @@ TEST_CASE("pty: a reader that resumes after a stall gets no pulses older than ma
   CHECK(out.errors() == 0);
 }
 
+// What a stalled reader would get on resuming is what its queue holds: at no moment more than max_age
+// of pulses and the look interval (max_age / 4) behind it, whenever it resumes.
+TEST_CASE("pty: a stalled reader's queue never holds much more than max_age of pulses") {
+  using namespace std::chrono_literals;
+  TempDir dir;
+  PtyOutput out(dir / "pulse", 200ms);
+  Reader reader(dir / "pulse");
+  int most = 0;
+  bool counted = true;
+  const auto start = std::chrono::steady_clock::now();
+  for (auto t = start; t < start + 1500ms; t += 1ms) {  // 1 kHz, never read
+    std::this_thread::sleep_until(t);
+    out.rise();
+    int queued = 0;
+    counted = counted && ::ioctl(reader.fd(), FIONREAD, &queued) == 0;
+    most = std::max(most, queued);
+  }
+  INFO("most pulses queued: " << most);
+  REQUIRE(counted);
+  CHECK(most >= 150);  // the queue did fill to about max_age
+  CHECK(most <= 350);  // 200 ms at 1 kHz and a look's 50 ms, with room for a late loop
+  CHECK(out.errors() == 0);
+}
+
 TEST_CASE("pty: a missing directory or a non-symlink path is a clear error") {
   TempDir dir;
   try {
@@ -194,6 +220,30 @@ TEST_CASE("pty: a link another live owner publishes is not taken over") {
   first.reset();  // the owner gone (as when it exits, however it exits), the path is free again
   PtyOutput third(link);
   CHECK(std::filesystem::read_symlink(link) == third.slave_name());
+}
+
+// The daemon runs as its own user; a navigator reading the pulses is in the device's group and needs to
+// open it for reading (a pseudo-terminal is made writable by its group only).
+TEST_CASE("pty: the pulse device is readable and writable by its group") {
+  TempDir dir;
+  PtyOutput out(dir / "pulse");
+  struct stat st {};
+  REQUIRE(::stat(out.slave_name().c_str(), &st) == 0);
+  CHECK((st.st_mode & 0777) == 0660);
+}
+
+// A link a user has pointed elsewhere since (another device, another program's PTY) is theirs: closing
+// the output removes only a link that still points at its own PTY.
+TEST_CASE("pty: a link pointed elsewhere is left in place on close") {
+  TempDir dir;
+  const auto link = dir / "pulse";
+  {
+    PtyOutput out(link);
+    std::filesystem::remove(link);
+    std::filesystem::create_symlink("/dev/null", link);
+  }
+  REQUIRE(std::filesystem::is_symlink(link));
+  CHECK(std::filesystem::read_symlink(link) == "/dev/null");
 }
 
 TEST_CASE("pty: a stale symlink is replaced and the link is removed on close") {
