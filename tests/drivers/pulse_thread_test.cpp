@@ -3,6 +3,8 @@
 #include <chrono>
 #include <thread>
 
+#include "drivers/clock.hpp"
+
 #include "drivers/pulse_output.hpp"
 #include "drivers/pulse_thread.hpp"
 
@@ -32,5 +34,66 @@ TEST_CASE("pulse: the thread refuses a bad configuration before starting") {
   cfg.pulse.pulses_per_km = -1.0;
   gearpulse::PulseThread thread(out, cfg);
   CHECK_THROWS_WITH(thread.start(), Catch::Contains("pulses_per_km"));
+  CHECK_FALSE(thread.status().running);
+}
+
+// The daemon starts the train at standstill and sets a speed later: it must be taken up within
+// speed_poll, not when the thread next happens to wake.
+TEST_CASE(
+    "pulse: a start from standstill is taken up within the speed poll, and the thread beats meanwhile") {
+  gearpulse::NullPulseOutput out;
+  gearpulse::PulseThreadConfig cfg;
+  cfg.pulse.pulses_per_km = 1000.0;
+  cfg.speed_poll = 5ms;
+  gearpulse::PulseThread thread(out, cfg);
+  thread.start();
+  std::this_thread::sleep_for(50ms);
+  // At standstill it still turns its loop: the watchdog sees a heartbeat younger than a few polls.
+  const std::int64_t h0 = thread.status().heartbeat_ns;
+  std::this_thread::sleep_for(50ms);
+  CHECK(thread.status().heartbeat_ns > h0);
+  CHECK(gearpulse::monotonic_ns() - thread.status().heartbeat_ns < 40'000'000);
+  const auto set_at = std::chrono::steady_clock::now();
+  thread.set_speed(100.0);  // 100 Hz
+  while (thread.pulses() == 0 && std::chrono::steady_clock::now() - set_at < 2s)
+    std::this_thread::sleep_for(1ms);
+  const auto waited = std::chrono::steady_clock::now() - set_at;
+  thread.stop();
+  CHECK(thread.pulses() > 0);
+  CHECK(waited < 200ms);
+}
+
+// late_edges is how the status says the pulses were not on time: edges a little after their time (the
+// wake-up of any sleep) are not late, or every edge would be.
+TEST_CASE("pulse: edges on time are not counted late") {
+  gearpulse::NullPulseOutput out;
+  gearpulse::PulseThreadConfig cfg;
+  cfg.pulse.pulses_per_km = 1000.0;
+  gearpulse::PulseThread thread(out, cfg);
+  thread.start();
+  thread.set_speed(50.0);  // 50 Hz
+  std::this_thread::sleep_for(400ms);
+  thread.stop();
+  const auto s = thread.status();
+  INFO(s.late_edges << " of " << out.rises() + out.falls() << " edges late, worst " << s.max_late_ns
+                    << " ns");
+  REQUIRE(s.pulses >= 10);
+  CHECK(s.late_edges < s.pulses);
+}
+
+// A second start() of a running thread is nothing: one train, not a second thread (or an abort).
+TEST_CASE("pulse: starting a running thread again keeps the one train") {
+  gearpulse::NullPulseOutput out;
+  gearpulse::PulseThreadConfig cfg;
+  cfg.pulse.pulses_per_km = 1000.0;
+  gearpulse::PulseThread thread(out, cfg);
+  thread.start();
+  thread.set_speed(100.0);
+  std::this_thread::sleep_for(50ms);
+  thread.start();
+  std::this_thread::sleep_for(50ms);
+  thread.stop();
+  CHECK(out.rises() == thread.pulses());
+  CHECK(out.falls() == out.rises());
   CHECK_FALSE(thread.status().running);
 }
