@@ -70,6 +70,13 @@ TEST_CASE("ring: capacity rounds up to a power of two and zero is rejected") {
   CHECK_THROWS_AS(SpscRing<int>(~std::size_t{0}), std::length_error);
 }
 
+// The largest capacity a ring may have is an exact limit: one element more is refused as too large, not
+// rounded up to an allocation of half the address space that fails with bad_alloc.
+TEST_CASE("ring: a capacity one above the limit is too large") {
+  constexpr std::size_t kMax = (std::size_t{1} << (8 * sizeof(std::size_t) - 2)) / sizeof(float);
+  CHECK_THROWS_AS(SpscRing<float>(kMax + 1), std::length_error);
+}
+
 TEST_CASE("ring: capacity one holds exactly one element") {
   SpscRing<int> ring(1);
   CHECK(ring.try_push(7));
@@ -118,6 +125,23 @@ TEST_CASE("ring: a full ring drops and counts without blocking and reports the o
   REQUIRE(ring.read_bulk(out) == 8);
   for (int i = 0; i < 8; ++i)
     CHECK(out[static_cast<std::size_t>(i)] == i);
+}
+
+// The tracker reads audio in blocks and stops at the first short one: a bulk read that took only what it
+// saw at its previous look would leave frames written since then for a later turn, a backlog that grows.
+TEST_CASE("ring: a bulk read takes everything written, also what came after the reader's last look") {
+  SpscRing<int> ring(64);
+  std::vector<int> in(10);
+  std::iota(in.begin(), in.end(), 0);
+  REQUIRE(ring.try_push_bulk(in) == 10);
+  std::array<int, 4> small{};
+  REQUIRE(ring.read_bulk(small) == 4);  // 6 left that the reader has seen
+  std::iota(in.begin(), in.end(), 10);
+  REQUIRE(ring.try_push_bulk(in) == 10);
+  std::array<int, 32> out{};
+  REQUIRE(ring.read_bulk(out) == 16);
+  for (int i = 0; i < 16; ++i)
+    CHECK(out[static_cast<std::size_t>(i)] == i + 4);
 }
 
 TEST_CASE("ring: bulk writes and reads wrap around at every offset and length") {
