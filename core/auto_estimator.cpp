@@ -650,12 +650,11 @@ GearModel fit_auto(const MixtureData& input, int gears) {
     const LadderCheck verdict = judge.check(p);
     const int m = p.gears();
     if (gears > 0 && m == gears) {
+      more = best;
       best = {p, ll, bic_of(ll, m, work.size())};
       forced = verdict;
       break;
     }
-    if (gears > 0 && verdict.offender < 0 && bic_of(ll, m, work.size()) < more.bic)
-      more = {p, ll, bic_of(ll, m, work.size())};
     if (verdict.offender < 0 && m >= 2) {
       const double bic = bic_of(ll, m, work.size());
       if (bic < best.bic) best = {p, ll, bic};

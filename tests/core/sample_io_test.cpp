@@ -351,8 +351,8 @@ TEST_CASE("io: cells at the edges of what a log holds") {
   }
   SECTION("Torque's N/A is a missing value; a clock's 60 seconds is no clock") {
     const SampleLog log = read_text(
-        "Device Time,Engine RPM(rpm),Speed "
-        "(OBD)(km/h)\n10:00.0,1000,N/A\n10:01.0,1100,11\n10:60.0,1200,12\n");
+        "Device Time,Engine RPM(rpm),Speed (OBD)(km/h)\n"
+        "10:00.0,1000,N/A\n10:01.0,1100,11\n10:60.0,1200,12\n");
     REQUIRE(log.samples.size() == 2);
     CHECK_FALSE(log.samples[0].has_speed());
     CHECK(log.samples[0].freq == Approx(1000.0 / 60.0));

@@ -56,8 +56,9 @@ struct Recorder {
   }
 };
 
-// A listening TCP socket on 127.0.0.1 at a free port, for a fake gpsd that misbehaves.
-std::pair<int, int> loopback_listener() {
+// A TCP socket bound on 127.0.0.1 at a free port, not yet listening (connections to it are refused):
+// the socket and its port.
+std::pair<int, int> loopback_bound() {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
   REQUIRE(fd >= 0);
   sockaddr_in a{};
@@ -66,8 +67,14 @@ std::pair<int, int> loopback_listener() {
   socklen_t len = sizeof a;
   REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
   REQUIRE(::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0);
-  REQUIRE(::listen(fd, 4) == 0);
   return {fd, ntohs(a.sin_port)};
+}
+
+// A listening TCP socket on 127.0.0.1 at a free port, for a fake gpsd that misbehaves.
+std::pair<int, int> loopback_listener() {
+  const auto bound = loopback_bound();
+  REQUIRE(::listen(bound.first, 4) == 0);
+  return bound;
 }
 
 GpsdConfig config_for(int port) {
@@ -434,15 +441,8 @@ TEST_CASE("gpsd: an absent gpsd is retried with a growing delay, not hammered") 
 // losing it is retried at once, so a gpsd restart costs the pulses a moment of GPS, not the longest delay.
 TEST_CASE("gpsd: after a working connection a lost one is retried at the shortest delay") {
   // Bound but not listening: connections are refused until the test listens.
-  const int listener = ::socket(AF_INET, SOCK_STREAM, 0);
-  REQUIRE(listener >= 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  REQUIRE(::bind(listener, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
-  REQUIRE(::getsockname(listener, reinterpret_cast<sockaddr*>(&a), &len) == 0);
-  GpsdConfig cfg = config_for(ntohs(a.sin_port));
+  const auto [listener, port] = loopback_bound();
+  GpsdConfig cfg = config_for(port);
   cfg.backoff_max = 3200ms;
   GpsdClient client(cfg);
   client.start();

@@ -4,11 +4,21 @@
 #include <thread>
 
 #include "drivers/clock.hpp"
-
 #include "drivers/pulse_output.hpp"
 #include "drivers/pulse_thread.hpp"
 
 using namespace std::chrono_literals;
+
+namespace {
+
+// A pulse a metre: the speed in m/s is the pulse rate in Hz.
+gearpulse::PulseThreadConfig pulse_a_metre() {
+  gearpulse::PulseThreadConfig cfg;
+  cfg.pulse.pulses_per_km = 1000.0;
+  return cfg;
+}
+
+}  // namespace
 
 TEST_CASE("pulse: the thread leaves the output low whenever it is stopped") {
   for (int i = 0; i < 5; ++i) {
@@ -42,8 +52,7 @@ TEST_CASE("pulse: the thread refuses a bad configuration before starting") {
 TEST_CASE(
     "pulse: a start from standstill is taken up within the speed poll, and the thread beats meanwhile") {
   gearpulse::NullPulseOutput out;
-  gearpulse::PulseThreadConfig cfg;
-  cfg.pulse.pulses_per_km = 1000.0;
+  gearpulse::PulseThreadConfig cfg = pulse_a_metre();
   cfg.speed_poll = 5ms;
   gearpulse::PulseThread thread(out, cfg);
   thread.start();
@@ -67,9 +76,7 @@ TEST_CASE(
 // wake-up of any sleep) are not late, or every edge would be.
 TEST_CASE("pulse: edges on time are not counted late") {
   gearpulse::NullPulseOutput out;
-  gearpulse::PulseThreadConfig cfg;
-  cfg.pulse.pulses_per_km = 1000.0;
-  gearpulse::PulseThread thread(out, cfg);
+  gearpulse::PulseThread thread(out, pulse_a_metre());
   thread.start();
   thread.set_speed(50.0);  // 50 Hz
   std::this_thread::sleep_for(400ms);
@@ -86,9 +93,7 @@ TEST_CASE("pulse: edges on time are not counted late") {
 // A second start() of a running thread is nothing: one train, not a second thread (or an abort).
 TEST_CASE("pulse: starting a running thread again keeps the one train") {
   gearpulse::NullPulseOutput out;
-  gearpulse::PulseThreadConfig cfg;
-  cfg.pulse.pulses_per_km = 1000.0;
-  gearpulse::PulseThread thread(out, cfg);
+  gearpulse::PulseThread thread(out, pulse_a_metre());
   thread.start();
   thread.set_speed(100.0);
   std::this_thread::sleep_for(50ms);
