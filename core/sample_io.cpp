@@ -190,6 +190,7 @@ std::vector<TimeDrop> time_order_drops(std::span<const double> t) {
 class LogBuilder {
  public:
   LogBuilder(std::string_view name, const ReadOptions& options) : options_(options) { log_.name = name; }
+  [[nodiscard]] double row_seconds() const noexcept { return options_.row_seconds; }
 
   // Reports a bad row. The messages kept are those of the first rows in the file, in line order, whichever
   // order the reader finds them in (a row's time is judged once the rows after it are read).
@@ -403,6 +404,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     out.log().speed_column = "speed";
   }
   out.log().format = format;
+  out.log().time_from_rows = !it.has_value();
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
   std::vector<std::string_view> cells;
   std::size_t row = 0;
@@ -434,7 +436,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     const Cell speed = parse_cell(cells[ispeed], "speed", false);
     Cell t;
     t.kind = CellKind::kNumber;
-    t.value = counter;
+    t.value = counter * out.row_seconds();
     if (it) t = parse_cell(cells[*it], "time", false);
     if (t.kind == CellKind::kMissing) {
       out.skip(reader.number, "missing time");
@@ -683,6 +685,8 @@ void warn_units(SampleLog& log) {
 }  // namespace
 
 SampleLog read_samples(std::istream& in, std::string_view name, const ReadOptions& options) {
+  if (!(std::isfinite(options.row_seconds) && options.row_seconds > 0.0))
+    throw std::invalid_argument("ReadOptions::row_seconds must be finite and above 0");
   LineReader reader{in, {}, 0};
   LogBuilder out(name, options);
   bool got_header = false;

@@ -32,6 +32,9 @@ struct ReadOptions {
   TorqueSpeed torque_speed = TorqueSpeed::kAuto;
   std::size_t max_messages = 1000;  // skip messages kept (all are counted)
   bool keep_rows = false;           // fill SampleLog::rows (`gearpulse replay` answers every row)
+  // Logs without a time column (`speed,rpm`, a Carloop log without its run time): seconds between rows,
+  // the row counter's unit. Must be finite and > 0.
+  double row_seconds = 1.0;
 };
 
 // One data row the reader accepted: its time and the sample that carries its values. An OBD row that
@@ -50,6 +53,7 @@ struct SampleLog {
   std::size_t skipped_count = 0;     // every skipped bad row
   std::size_t repeated_rows = 0;     // OBD rows dropped because nothing was refreshed (not errors)
   std::vector<InputRow> rows;        // with ReadOptions::keep_rows: every accepted row, in file order
+  bool time_from_rows = false;       // no time column: t is the row counter times ReadOptions::row_seconds
   // "name: ..." lines for a log that reads but looks wrong (a generic log's speed in km/h, its time in ms).
   std::vector<std::string> warnings;
 };

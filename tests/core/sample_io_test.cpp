@@ -4,8 +4,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -324,6 +326,33 @@ TEST_CASE("io: speed and rpm logs use the row counter as time") {
   CHECK(log.samples[1].t == Approx(2));
   CHECK(log.samples[1].speed == Approx(1 / 3.6));
   CHECK(log.samples[1].freq == Approx(917.0 / 60));
+}
+
+TEST_CASE("io: row_seconds is the row counter's unit in logs without a time column, and only there") {
+  gearpulse::ReadOptions options;
+  options.row_seconds = 0.5;
+  options.keep_rows = true;
+  const SampleLog rows = read_text("speed,rpm\n7,898\n7,898\n1,917\n3,1200\n", options);
+  CHECK(rows.time_from_rows);
+  REQUIRE(rows.samples.size() == 3);
+  CHECK(rows.samples[1].t == Approx(1.0));
+  CHECK(rows.samples[2].t == Approx(1.5));
+  REQUIRE(rows.rows.size() == 4);
+  CHECK(rows.rows[1].t == Approx(0.5));  // a repeated row keeps its own time
+  // A log with its own times keeps them.
+  const SampleLog timed = read_text("t,speed,freq\n0,1,50\n3,1,50\n", options);
+  CHECK_FALSE(timed.time_from_rows);
+  REQUIRE(timed.samples.size() == 2);
+  CHECK(timed.samples[1].t == Approx(3.0));
+  const SampleLog carloop =
+      read_text("ENGINE_RUN_TINE (), ENGINE_RPM (), VEHICLE_SPEED (),\n4, 900, 0,\n5, 1800, 20,\n", options);
+  CHECK_FALSE(carloop.time_from_rows);
+  REQUIRE(carloop.samples.size() == 2);
+  CHECK(carloop.samples[0].t >= 4.0);  // its run-time counter, not the row counter
+  for (const double bad : {0.0, -1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    options.row_seconds = bad;
+    CHECK_THROWS_AS(read_text("speed,rpm\n7,898\n", options), std::invalid_argument);
+  }
 }
 
 TEST_CASE("io: cells at the edges of what a log holds") {

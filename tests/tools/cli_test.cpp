@@ -11,6 +11,7 @@
 #include <functional>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <catch2/catch.hpp>
@@ -320,12 +321,27 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
   TempDir dir;
   const std::string log = dir.file("x.csv");
   write(log, "t,speed,freq\n0,1,10\n");
-  for (const std::string& args :
-       {"fit --bogus " + log, "fit --gears x " + log, "fit --gears 99 " + log, "fit --ratios 1.2,abc " + log,
-        "fit --ratios 0.9 " + log, "fit --ratios 1e308,1e308 " + log, "fit --ratios 1.0000001 " + log,
-        "fit --speed radar " + log, std::string("fit"), "replay " + log,
-        "replay --model " + log + " --frobnicate " + log, "fit --ratios '' " + log, "fit --gears 1 " + log,
-        "frobnicate " + log, std::string("")}) {
+  for (const std::string& args : {"fit --bogus " + log,
+                                  "fit --gears x " + log,
+                                  "fit --gears 99 " + log,
+                                  "fit --ratios 1.2,abc " + log,
+                                  "fit --ratios 0.9 " + log,
+                                  "fit --ratios 1e308,1e308 " + log,
+                                  "fit --ratios 1.0000001 " + log,
+                                  "fit --speed radar " + log,
+                                  std::string("fit"),
+                                  "replay " + log,
+                                  "replay --model " + log + " --frobnicate " + log,
+                                  "fit --ratios '' " + log,
+                                  "fit --gears 1 " + log,
+                                  "frobnicate " + log,
+                                  std::string(""),
+                                  "fit --row-seconds 0 " + log,
+                                  "fit --row-seconds -1 " + log,
+                                  "fit --row-seconds nan " + log,
+                                  "fit --row-seconds inf " + log,
+                                  "fit --row-seconds 2s " + log,
+                                  "replay --model " + log + " --row-seconds 3601 " + log}) {
     INFO(args);
     const Result r = run(dir, args);
     CHECK(r.status == 2);
@@ -569,6 +585,67 @@ TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds kee
     ++rows;
   }
   CHECK(rows == 50);
+}
+
+TEST_CASE("cli: --row-seconds gives the rows of a log without a time column their time, for the synthesis") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  // A drive as speed,rpm rows (km/h and rpm to a tenth) 2 s apart, GPS blanked for 60 s every 180 s, and
+  // the same rows as t,speed,freq with their times.
+  using namespace gearpulse::sim;
+  const auto obs =
+      simulate_observations(vehicle_preset("hatch-5"), DrivingStyle::kUrban, 1200.0, 1, 25, {.seed = 125});
+  const std::vector<gearpulse::Sample> truth = to_samples(obs);
+  std::string rows = "speed,rpm\n", timed = "t,speed,freq\n";
+  std::string last;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < truth.size(); i += 2) {
+    const gearpulse::Sample& s = truth[i];
+    const bool outage = std::fmod(s.t, 180.0) >= 120.0;
+    if (!std::isfinite(s.freq)) continue;
+    const double kmh = std::round(s.speed * 36.0) / 10.0;
+    double rpm = std::round(s.freq * 600.0) / 10.0;
+    char speed[32] = "", row[64];
+    if (s.has_speed() && !outage) std::snprintf(speed, sizeof speed, "%.1f", kmh);
+    std::snprintf(row, sizeof row, "%s,%.1f\n", speed, rpm);
+    if (row == last) {  // a row repeating the one before is a held OBD value, dropped by the reader
+      rpm += 0.1;
+      std::snprintf(row, sizeof row, "%s,%.1f\n", speed, rpm);
+    }
+    last = row;
+    rows += row;
+    char line[128];
+    if (speed[0] != '\0')
+      std::snprintf(line, sizeof line, "%zu,%.17g,%.17g\n", 2 * n, kmh * (1.0 / 3.6), rpm / 60.0);
+    else
+      std::snprintf(line, sizeof line, "%zu,,%.17g\n", 2 * n, rpm / 60.0);
+    timed += line;
+    ++n;
+  }
+  const std::string rows_log = dir.file("rows.csv"), timed_log = dir.file("timed.csv");
+  write(rows_log, rows);
+  write(timed_log, timed);
+  const Result at_two = run(dir, "replay --model " + model + " --row-seconds 2 " + rows_log);
+  const Result with_times = run(dir, "replay --model " + model + " " + timed_log);
+  const Result at_one = run(dir, "replay --model " + model + " " + rows_log);
+  REQUIRE(at_two.status == 0);
+  REQUIRE(with_times.status == 0);
+  REQUIRE(at_one.status == 0);
+  CHECK(lines(at_two.out) == n + 1);
+  CHECK(at_two.out == with_times.out);  // t and every synthesized speed, gear and source
+  CHECK(at_one.out != with_times.out);
+  CHECK(at_two.err.empty());
+  CHECK(at_one.err.find("no time column") != std::string::npos);
+  CHECK(at_one.err.find("--row-seconds") != std::string::npos);
+  // A log with its own times is said to be untouched by it; fit takes it as replay does.
+  const Result on_timed = run(dir, "fit --row-seconds 2 " + timed_log);
+  CHECK(on_timed.status == 0);
+  CHECK(on_timed.err.find("--row-seconds applies to logs without a time column") != std::string::npos);
+  CHECK(on_timed.out == run(dir, "fit " + timed_log).out);
+  const Result fit_rows = run(dir, "fit --row-seconds 2 " + rows_log);
+  CHECK(fit_rows.status == 0);
+  CHECK(fit_rows.err.empty());
+  CHECK(nlohmann::json::parse(fit_rows.out)["gears"].size() >= 4);
 }
 
 TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothing") {

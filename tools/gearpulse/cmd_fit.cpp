@@ -31,6 +31,8 @@ struct FitCommand {
   std::string out;
   std::string plot;
   std::string speed = "auto";
+  double row_seconds = 1.0;
+  const CLI::Option* row_seconds_option = nullptr;
   std::vector<std::string> files;
 };
 
@@ -135,8 +137,10 @@ int run_fit(const FitCommand& cmd) {
                      std::to_string(options.ratios.size() + 1) + " gears)");
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
+  read.row_seconds = cmd.row_seconds;
 
   const std::vector<SampleLog> logs = read_sample_files(cmd.files, read);
+  warn_row_seconds(logs, cmd.row_seconds_option->count() > 0, false);
   std::vector<Sample> samples;
   for (const SampleLog& log : logs)
     samples.insert(samples.end(), log.samples.begin(), log.samples.end());
@@ -233,6 +237,7 @@ void add_fit(CLI::App& app, int& status) {
          "Torque Pro logs: speed column to use, auto (GPS if any; with an OBD speed too, the gears are read "
          "from the wheel speed mapped onto GPS), gps or obd")
       ->capture_default_str();
+  cmd->row_seconds_option = add_row_seconds_option(*sub, cmd->row_seconds);
   sub->add_option("files", cmd->files, "Sample logs: t,speed,freq CSV, Torque Pro, Carloop or speed,rpm")
       ->required();
   sub->callback([cmd, &status] { status = run_fit(*cmd); });

@@ -26,6 +26,8 @@ namespace {
 struct ReplayCommand {
   std::string model;
   std::string speed = "auto";
+  double row_seconds = 1.0;
+  const CLI::Option* row_seconds_option = nullptr;
   std::string file;
 };
 
@@ -48,7 +50,10 @@ int run_replay(const ReplayCommand& cmd) {
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
   read.keep_rows = true;
-  const SampleLog log = std::move(read_sample_files({cmd.file}, read).front());
+  read.row_seconds = cmd.row_seconds;
+  std::vector<SampleLog> logs = read_sample_files({cmd.file}, read);
+  warn_row_seconds(logs, cmd.row_seconds_option->count() > 0, true);
+  const SampleLog log = std::move(logs.front());
 
   // One output row per accepted input row: a sample steps the synthesis once, at its first row; an OBD
   // row repeating held values answers with the output of the sample it repeats, and so does a sample
@@ -89,6 +94,7 @@ void add_replay(CLI::App& app, int& status) {
   sub->add_option("--speed", cmd->speed,
                   "Torque Pro logs: speed column to use, auto (GPS if any), gps or obd")
       ->capture_default_str();
+  cmd->row_seconds_option = add_row_seconds_option(*sub, cmd->row_seconds);
   sub->add_option("file", cmd->file, "Sample log; rows with an empty speed are GPS outages")->required();
   sub->callback([cmd, &status] { status = run_replay(*cmd); });
 }

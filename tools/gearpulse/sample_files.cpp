@@ -1,12 +1,16 @@
 #include "tools/gearpulse/sample_files.hpp"
 
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
+
+#include <CLI/CLI.hpp>
 
 #include "tools/gearpulse/commands.hpp"
 
@@ -22,6 +26,39 @@ TorqueSpeed parse_torque_speed(const std::string& text) {
   if (text == "gps") return TorqueSpeed::kGps;
   if (text == "obd") return TorqueSpeed::kObd;
   throw UsageError("--speed must be auto, gps or obd, not '" + text + "'");
+}
+
+CLI::Option* add_row_seconds_option(CLI::App& sub, double& row_seconds) {
+  constexpr double kMaxRowSeconds = 3600.0;
+  return sub
+      .add_option("--row-seconds", row_seconds,
+                  "Logs without a time column (speed,rpm): seconds between rows, the unit of the row counter")
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v <= 0.0 ||
+                v > kMaxRowSeconds)
+              return "must be a number of seconds above 0 and at most 3600, not '" + text + "'";
+            return std::string();
+          },
+          "SEC"));
+}
+
+void warn_row_seconds(const std::vector<SampleLog>& logs, bool given, bool note_default) {
+  for (const SampleLog& log : logs) {
+    if (given && !log.time_from_rows)
+      std::fprintf(stderr,
+                   "gearpulse: warning: %s: --row-seconds applies to logs without a time column; this %s "
+                   "log has its own times\n",
+                   log.name.c_str(), std::string(format_name(log.format)).c_str());
+    if (!given && note_default && log.time_from_rows)
+      std::fprintf(stderr,
+                   "gearpulse: note: %s has no time column: its rows are taken 1 s apart (--row-seconds "
+                   "sets how far)\n",
+                   log.name.c_str());
+  }
 }
 
 std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, const ReadOptions& options) {

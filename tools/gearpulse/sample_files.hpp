@@ -6,10 +6,24 @@
 
 #include "core/sample_io.hpp"
 
+namespace CLI {
+class App;
+class Option;
+}  // namespace CLI
+
 namespace gearpulse::cli {
 
 // Parses "auto", "gps" or "obd" (the --speed option); throws UsageError otherwise.
 [[nodiscard]] TorqueSpeed parse_torque_speed(const std::string& text);
+
+// Adds --row-seconds (ReadOptions::row_seconds: seconds between the rows of a log without a time column)
+// to a subcommand, checked as it is parsed: finite, above 0, at most an hour.
+// Returns the option, whose count() says whether it was given.
+CLI::Option* add_row_seconds_option(CLI::App& sub, double& row_seconds);
+
+// Says on stderr when --row-seconds was given for a log with a time column of its own (it does nothing
+// there) and, with `note_default`, when a log without one is read at the default 1 s per row.
+void warn_row_seconds(const std::vector<SampleLog>& logs, bool given, bool note_default);
 
 // Throws UsageError (one line, naming the file) if a file cannot be opened or holds nothing usable.
 [[nodiscard]] std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths,
