@@ -348,9 +348,11 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
     CHECK(lines(r.err) == 1);
     CHECK(r.err.rfind("gearpulse: ", 0) == 0);
   }
-  // Each names what is wrong: the command, and a gear count in the range the fit takes.
+  // Each names what is wrong: the command, a gear count in the range the fit takes, a row spacing.
   CHECK(run(dir, "frobnicate " + log).err.find("unknown command 'frobnicate'") != std::string::npos);
   CHECK(run(dir, "fit --gears 1 " + log).err.find("from 2 to") != std::string::npos);
+  CHECK(run(dir, "fit --row-seconds nan " + log).err.find("--row-seconds: must be a number of seconds") !=
+        std::string::npos);
   // A directory where a file belongs is named as one.
   for (const std::string& args :
        {"fit " + dir.path.string(), "replay --model " + dir.path.string() + " " + log}) {
