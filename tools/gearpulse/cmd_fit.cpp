@@ -31,8 +31,7 @@ struct FitCommand {
   std::string out;
   std::string plot;
   std::string speed = "auto";
-  double row_seconds = 1.0;
-  const CLI::Option* row_seconds_option = nullptr;
+  std::optional<double> row_seconds;  // --row-seconds, unset when not given (1 s)
   std::vector<std::string> files;
 };
 
@@ -137,10 +136,10 @@ int run_fit(const FitCommand& cmd) {
                      std::to_string(options.ratios.size() + 1) + " gears)");
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
-  read.row_seconds = cmd.row_seconds;
+  read.row_seconds = cmd.row_seconds.value_or(1.0);
 
   const std::vector<SampleLog> logs = read_sample_files(cmd.files, read);
-  warn_row_seconds(logs, cmd.row_seconds_option->count() > 0, false);
+  warn_row_seconds(logs, cmd.row_seconds.has_value(), false);
   std::vector<Sample> samples;
   for (const SampleLog& log : logs)
     samples.insert(samples.end(), log.samples.begin(), log.samples.end());
@@ -237,7 +236,7 @@ void add_fit(CLI::App& app, int& status) {
          "Torque Pro logs: speed column to use, auto (GPS if any; with an OBD speed too, the gears are read "
          "from the wheel speed mapped onto GPS), gps or obd")
       ->capture_default_str();
-  cmd->row_seconds_option = add_row_seconds_option(*sub, cmd->row_seconds);
+  add_row_seconds_option(*sub, cmd->row_seconds);
   sub->add_option("files", cmd->files, "Sample logs: t,speed,freq CSV, Torque Pro, Carloop or speed,rpm")
       ->required();
   sub->callback([cmd, &status] { status = run_fit(*cmd); });

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -26,8 +27,7 @@ namespace {
 struct ReplayCommand {
   std::string model;
   std::string speed = "auto";
-  double row_seconds = 1.0;
-  const CLI::Option* row_seconds_option = nullptr;
+  std::optional<double> row_seconds;  // --row-seconds, unset when not given (1 s)
   std::string file;
 };
 
@@ -50,9 +50,9 @@ int run_replay(const ReplayCommand& cmd) {
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
   read.keep_rows = true;
-  read.row_seconds = cmd.row_seconds;
+  read.row_seconds = cmd.row_seconds.value_or(1.0);
   std::vector<SampleLog> logs = read_sample_files({cmd.file}, read);
-  warn_row_seconds(logs, cmd.row_seconds_option->count() > 0, true);
+  warn_row_seconds(logs, cmd.row_seconds.has_value(), true);
   const SampleLog log = std::move(logs.front());
 
   // One output row per accepted input row: a sample steps the synthesis once, at its first row; an OBD
@@ -94,7 +94,7 @@ void add_replay(CLI::App& app, int& status) {
   sub->add_option("--speed", cmd->speed,
                   "Torque Pro logs: speed column to use, auto (GPS if any), gps or obd")
       ->capture_default_str();
-  cmd->row_seconds_option = add_row_seconds_option(*sub, cmd->row_seconds);
+  add_row_seconds_option(*sub, cmd->row_seconds);
   sub->add_option("file", cmd->file, "Sample log; rows with an empty speed are GPS outages")->required();
   sub->callback([cmd, &status] { status = run_replay(*cmd); });
 }

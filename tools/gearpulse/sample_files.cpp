@@ -28,12 +28,11 @@ TorqueSpeed parse_torque_speed(const std::string& text) {
   throw UsageError("--speed must be auto, gps or obd, not '" + text + "'");
 }
 
-CLI::Option* add_row_seconds_option(CLI::App& sub, double& row_seconds) {
+void add_row_seconds_option(CLI::App& sub, std::optional<double>& row_seconds) {
   constexpr double kMaxRowSeconds = 3600.0;
-  return sub
-      .add_option("--row-seconds", row_seconds,
-                  "Logs without a time column (speed,rpm): seconds between rows, the unit of the row counter")
-      ->capture_default_str()
+  sub.add_option("--row-seconds", row_seconds,
+                 "Logs without a time column (speed,rpm): seconds between rows, the unit of the row counter "
+                 "(default 1)")
       ->check(CLI::Validator(
           [](std::string& text) {
             char* end = nullptr;

@@ -1,6 +1,7 @@
 #pragma once
 // Reading sample logs named on the command line, for `fit` and `replay`: opens the files, parses them with
 // core/sample_io and reports skipped rows on stderr ("file:line: reason", capped, then a count).
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -8,7 +9,6 @@
 
 namespace CLI {
 class App;
-class Option;
 }  // namespace CLI
 
 namespace gearpulse::cli {
@@ -17,9 +17,8 @@ namespace gearpulse::cli {
 [[nodiscard]] TorqueSpeed parse_torque_speed(const std::string& text);
 
 // Adds --row-seconds (ReadOptions::row_seconds: seconds between the rows of a log without a time column)
-// to a subcommand, checked as it is parsed: finite, above 0, at most an hour.
-// Returns the option, whose count() says whether it was given.
-CLI::Option* add_row_seconds_option(CLI::App& sub, double& row_seconds);
+// to a subcommand, checked as it is parsed: finite, above 0, at most an hour. Unset when not given.
+void add_row_seconds_option(CLI::App& sub, std::optional<double>& row_seconds);
 
 // Says on stderr when --row-seconds was given for a log with a time column of its own (it does nothing
 // there) and, with `note_default`, when a log without one is read at the default 1 s per row.
