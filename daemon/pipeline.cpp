@@ -318,10 +318,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
   double audio_stall_s = no_audio_step_s;
   double last_points_at = 0.0;  // CLOCK_MONOTONIC s when the tracker last gave points
 
-  // The fix the synthesis last measured: its receiver time, or its receive time when it has none (gpsd may
-  // report one fix more than once).
-  double measured_fix_time = kNan;
-  std::int64_t measured_fix_rx = 0;
+  FixNovelty fixes;  // which fixes the synthesis has measured (gpsd may report one fix more than once)
   const auto step = [&](double t, double freq, double snr, bool tracked) {
     // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
     // disagreement between the sound card's clock and the GPS cannot hide a good fix). The synthesis
@@ -331,9 +328,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     if (gps) {
       if (const auto r = gps->fresh(monotonic_ns())) {
         gps_speed = r->speed;
-        gps_new = std::isfinite(r->fix_time) ? r->fix_time != measured_fix_time : r->rx_ns != measured_fix_rx;
-        measured_fix_time = r->fix_time;
-        measured_fix_rx = r->rx_ns;
+        gps_new = fixes.is_new(*r);
       }
     }
     const bool confident =

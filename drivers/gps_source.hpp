@@ -1,6 +1,7 @@
 #pragma once
 // Where GPS speed comes from: gpsd in the daemon, a scripted source in tests. (Not to be confused with
 // core's SpeedSource, which says where a synthesized speed came from.)
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -19,6 +20,34 @@ struct GpsReport {
 
   // A usable speed: a 2D/3D fix with a finite speed (freshness is judged separately).
   [[nodiscard]] bool usable() const noexcept { return mode >= 2 && speed == speed; }
+};
+
+// Tells whether a report carries a measurement not given before. gpsd may report one fix more than once
+// (a receiver's epoch arrives as several sentences, each a report), and a caller that polls the newest
+// report at every step of its own sees it again until the next arrives; the synthesis measures each fix
+// once. A fix is known by its receiver time and speed (a receiver whose clock stands still still moves);
+// a report without a receiver time, by when it was received.
+class FixNovelty {
+ public:
+  // Whether `report` is new against the last one given; it becomes the last one.
+  [[nodiscard]] bool is_new(const GpsReport& report) noexcept {
+    const bool fresh = !seen_ || (std::isfinite(report.fix_time)
+                                      ? report.fix_time != fix_time_ || !same_speed(report.speed, speed_)
+                                      : report.rx_ns != rx_ns_);
+    seen_ = true;
+    fix_time_ = report.fix_time;
+    speed_ = report.speed;
+    rx_ns_ = report.rx_ns;
+    return fresh;
+  }
+
+ private:
+  static bool same_speed(double a, double b) noexcept { return a == b || (a != a && b != b); }
+
+  bool seen_ = false;
+  double fix_time_ = 0.0;
+  double speed_ = 0.0;
+  std::int64_t rx_ns_ = 0;
 };
 
 class GpsSource {
