@@ -576,8 +576,12 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
   double mean = 0.0, sigma = tuning_.accel_sigma;
   if (to == 0) {
     // Declutched, nothing drives the car: whatever GPS taught (a gear mistaken for the clutch while
-    // accelerating), it does not gain speed on its own.
-    mean = coast_count_ > 0.0 ? std::min(coast_mean_, 0.0) : tuning_.coast_accel;
+    // accelerating), it does not gain speed on its own. What GPS taught counts against the generic
+    // deceleration by how much it has seen: a few fixes at a steady speed in a declutch do not make a car
+    // that rolls on for good once the revs and GPS are both lost.
+    constexpr double kCoastPrior = 10.0;  // fixes
+    mean = std::min(
+        (coast_count_ * coast_mean_ + kCoastPrior * tuning_.coast_accel) / (coast_count_ + kCoastPrior), 0.0);
     // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
     const double stopping = std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0);
     mean = std::min(mean, mean + stopping * (tuning_.stop_accel - mean));

@@ -58,7 +58,7 @@ struct SynthOutput {
 struct SynthTuning {
   double accel_sigma = 0.8;     // m/s^2: spread of a driver's acceleration in gear
   double accel_time = 3.0;      // s: how long an acceleration persists
-  double coast_accel = -0.6;    // m/s^2: declutched and moving (rolling, braking), until learned
+  double coast_accel = -0.6;    // m/s^2: declutched and moving (rolling, braking); weighs as 10 fixes learned
   double coast_sigma = 0.8;     // m/s^2
   double coast_time = 8.0;      // s: declutched, a braking or rolling deceleration persists
   double stop_speed = 4.0;      // m/s: declutched below this, the car is being braked to a stop

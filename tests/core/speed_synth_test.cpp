@@ -481,6 +481,28 @@ TEST_CASE("synth: with neither GPS nor engine frequency the speed is not held fo
   CHECK(last == 0.0);
 }
 
+// The same with the engine seen under GPS, declutched a few seconds at a steady speed before the cruise
+// went on in fifth: those fixes taught the clutch a deceleration of zero, which alone made the car roll on
+// at 72 km/h for good once the revs and GPS were both lost.
+TEST_CASE("synth: a few steady fixes declutched do not make the car roll on for good") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double v = 20.0, fifth = v / kHatch[4];
+  int k = 0;
+  for (; k < 30; ++k)
+    synth.step(k, v, fifth);
+  for (; k < 34; ++k)
+    synth.step(k, v, kIdle);
+  for (; k < 90; ++k)
+    synth.step(k, v, fifth);
+  double last = v;
+  for (; k < 400; ++k) {
+    const SynthOutput o = synth.step(k, kMissing, kMissing);
+    REQUIRE(o.speed <= last + 1e-9);
+    last = o.speed;
+  }
+  CHECK(last == 0.0);
+}
+
 TEST_CASE("synth: outage speeds do not depend on the step rate") {
   // The same drives, observed at 1 Hz (GPS, logs) and at 10 Hz (the tracker's hops): the filter's motion,
   // mode changes and evidence are per second, so both rates give about the same speeds.
