@@ -1,7 +1,8 @@
 // Fuzz target for the log readers (core/sample_io): whatever the bytes, read_samples returns a log whose
 // times are finite and never run backwards and whose values are in range, or throws SampleFileError; the
 // wheel-speed reader holds the same; and what write_samples writes reads back identically. The first byte
-// picks the options (Torque speed column, keep_rows, the message cap).
+// picks the options (Torque speed column, keep_rows, the message cap, the row spacing of logs without
+// times).
 #include <cmath>
 #include <cstdint>
 #include <sstream>
@@ -49,6 +50,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   opt.torque_speed = static_cast<TorqueSpeed>(options % 3);
   opt.keep_rows = ((options >> 2) & 1) != 0;
   opt.max_messages = ((options >> 3) & 1) != 0 ? 3 : 1000;
+  constexpr double kRowSeconds[] = {1.0, 2.0, 0.1, 3600.0};
+  opt.row_seconds = kRowSeconds[(options >> 4) & 3];
   const std::string text(reinterpret_cast<const char*>(data + 1), size - 1);
   SampleLog log;
   try {
