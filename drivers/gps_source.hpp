@@ -25,8 +25,8 @@ struct GpsReport {
 // Tells whether a report carries a measurement not given before. gpsd may report one fix more than once
 // (a receiver's epoch arrives as several sentences, each a report), and a caller that polls the newest
 // report at every step of its own sees it again until the next arrives; the synthesis measures each fix
-// once. A fix is known by its receiver time and speed (a receiver whose clock stands still still moves);
-// a report without a receiver time, by when it was received.
+// once. A fix is known by its receiver time and speed (a receiver's clock may stand still while the car
+// moves); a report without a receiver time, by when it was received.
 class FixNovelty {
  public:
   // Whether `report` is new against the last one given; it becomes the last one.
@@ -42,7 +42,7 @@ class FixNovelty {
   }
 
  private:
-  static bool same_speed(double a, double b) noexcept { return a == b || (a != a && b != b); }
+  static bool same_speed(double a, double b) noexcept { return a == b || (std::isnan(a) && std::isnan(b)); }
 
   bool seen_ = false;
   double fix_time_ = 0.0;
