@@ -11,7 +11,6 @@
 #include <functional>
 #include <sstream>
 #include <string>
-#include <utility>
 #include <vector>
 
 #include <catch2/catch.hpp>

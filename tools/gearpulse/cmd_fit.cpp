@@ -31,7 +31,7 @@ struct FitCommand {
   std::string out;
   std::string plot;
   std::string speed = "auto";
-  std::optional<double> row_seconds;  // --row-seconds, unset when not given (1 s)
+  std::optional<double> row_seconds;  // --row-seconds, unset when not given (the reader's default)
   std::vector<std::string> files;
 };
 
@@ -136,7 +136,7 @@ int run_fit(const FitCommand& cmd) {
                      std::to_string(options.ratios.size() + 1) + " gears)");
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
-  read.row_seconds = cmd.row_seconds.value_or(1.0);
+  if (cmd.row_seconds) read.row_seconds = *cmd.row_seconds;
 
   const std::vector<SampleLog> logs = read_sample_files(cmd.files, read);
   warn_row_seconds(logs, cmd.row_seconds.has_value(), false);

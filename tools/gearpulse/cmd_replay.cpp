@@ -27,7 +27,7 @@ namespace {
 struct ReplayCommand {
   std::string model;
   std::string speed = "auto";
-  std::optional<double> row_seconds;  // --row-seconds, unset when not given (1 s)
+  std::optional<double> row_seconds;  // --row-seconds, unset when not given (the reader's default)
   std::string file;
 };
 
@@ -50,7 +50,7 @@ int run_replay(const ReplayCommand& cmd) {
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
   read.keep_rows = true;
-  read.row_seconds = cmd.row_seconds.value_or(1.0);
+  if (cmd.row_seconds) read.row_seconds = *cmd.row_seconds;
   std::vector<SampleLog> logs = read_sample_files({cmd.file}, read);
   warn_row_seconds(logs, cmd.row_seconds.has_value(), true);
   const SampleLog log = std::move(logs.front());

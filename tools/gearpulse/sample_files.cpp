@@ -39,7 +39,8 @@ void add_row_seconds_option(CLI::App& sub, std::optional<double>& row_seconds) {
             const double v = std::strtod(text.c_str(), &end);
             if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v <= 0.0 ||
                 v > kMaxRowSeconds)
-              return "must be a number of seconds above 0 and at most 3600, not '" + text + "'";
+              return "must be a number of seconds above 0 and at most " +
+                     std::to_string(static_cast<int>(kMaxRowSeconds)) + ", not '" + text + "'";
             return std::string();
           },
           "SEC"));
