@@ -10,12 +10,14 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "core/estimator.hpp"
 #include "core/gear_model.hpp"
+#include "daemon/atomic_file.hpp"
 #include "tools/gearpulse/commands.hpp"
 #include "tools/gearpulse/fit_plot.hpp"
 #include "tools/gearpulse/sample_files.hpp"
@@ -68,11 +70,12 @@ std::vector<double> parse_ratios(const std::optional<std::string>& given) {
   return ratios;
 }
 
-// Writes `text` to `path` whole or not at all (a temporary file renamed over it). A symbolic link is
-// followed, so the file it points to is replaced and the link stays; a path that is there but is no
-// regular file (a FIFO, /dev/stdout, a device) is written to directly, not replaced by a file. Whether it
-// is one is asked of the kernel, which resolves /dev/stdout's link into /proc: the target that link names
-// for a pipe ("pipe:[N]") is no path.
+// Writes `text` to `path` whole or not at all, and on disk before it returns (a car PC loses power without
+// warning): a temporary file synced and renamed over it, keeping an existing file's permissions. A
+// symbolic link is followed, so the file it points to is replaced and the link stays; a path that is there
+// but is no regular file (a FIFO, /dev/stdout, a device) is written to directly, not replaced by a file.
+// Whether it is one is asked of the kernel, which resolves /dev/stdout's link into /proc: the target that
+// link names for a pipe ("pipe:[N]") is no path.
 void write_file_atomically(const std::string& path, const std::string& text) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -91,19 +94,14 @@ void write_file_atomically(const std::string& path, const std::string& text) {
     if (ec) break;
     target = link.is_absolute() ? link : target.parent_path() / link;
   }
-  const std::string tmp = target.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw UsageError(path + ": cannot write: " + std::strerror(errno));
-    out << text;
-    out.flush();
-    if (!out) throw UsageError(path + ": write failed");
-  }
-  fs::rename(tmp, target, ec);
-  if (ec) {
-    const std::string reason = ec.message();
-    fs::remove(tmp, ec);
-    throw UsageError(path + ": cannot write: " + reason);
+  try {
+    daemon::write_file_atomic(target, text);
+  } catch (const daemon::DirectorySyncError& e) {
+    // In place, but a power cut may still bring back what was there before.
+    std::fprintf(stderr, "gearpulse: warning: %s: written, but its directory could not be synced: %s\n",
+                 path.c_str(), e.code().message().c_str());
+  } catch (const std::system_error& e) {
+    throw UsageError(path + ": cannot write: " + e.code().message());
   }
 }
 
