@@ -316,7 +316,7 @@ TEST_CASE("alsa: recovery is chosen by the error: overrun restarts, suspend resu
   CHECK(recovery_for(-ENODEV) == AlsaRecovery::kReopen);
   CHECK(recovery_for(-EBADFD) == AlsaRecovery::kReopen);  // the PCM is in no state to read
   CHECK(recovery_for(-EIO) == AlsaRecovery::kReopen);
-  CHECK(recovery_for(-1) == AlsaRecovery::kReopen);  // the file plugin passes a failed read() on as -1
+  CHECK(recovery_for(-1) == AlsaRecovery::kReopen);  // a failure ALSA gives no name
   // A signal that interrupts the wait is no fault: nothing was lost and the device stays open.
   CHECK(recovery_for(-EINTR) == AlsaRecovery::kRetry);
   CHECK(recovery_for(-EAGAIN) == AlsaRecovery::kRetry);
@@ -413,6 +413,75 @@ TEST_CASE(
   CHECK(st.dropped == 0);
   CHECK(st.running);
   CHECK(st.streaming);  // the device stayed open throughout
+  CHECK(timestamps_increase(cap, 0, got.size() - 1));
+}
+
+// A device that fails under the capture (a USB card pulled out) and is back later. The file plugin writes
+// what it captures to its `file`; here a symbolic link to /dev/full, so its flush fails and snd_pcm_readi
+// returns -EIO, as a card that has gone does. Then the infile is removed (every reopen fails and the
+// backoff grows), then a new infile is put in place and the link turned to /dev/null (the reopen
+// succeeds). The capture closes the failed PCM, says it is not streaming, keeps trying and carries the
+// new device's frames bit-exact once it opens.
+TEST_CASE("alsa: a device lost while capturing is closed and reopened, and its frames come through again") {
+  TempDir dir;
+  constexpr unsigned kPeriod = 480;
+  const auto infile = dir / "in.raw", sink = dir / "out";
+  write_raw(infile, numbered(kPeriod, 20));
+  std::filesystem::create_symlink("/dev/full", sink);
+  use_alsa_config(dir, "unplugged", infile, sink);
+  AlsaCaptureConfig cfg;
+  cfg.device = "unplugged";
+  cfg.period_frames = kPeriod;
+  cfg.reopen_min = 20ms;
+  cfg.reopen_max = 200ms;
+  SpscRing<float> ring(1 << 16);
+  AlsaCapture cap(cfg, ring);
+  std::vector<float> got;
+  const auto drain = [&] {
+    float buf[8192];
+    for (std::size_t n; (n = ring.read_bulk(buf)) > 0;)
+      got.insert(got.end(), buf, buf + n);
+  };
+  cap.start();
+  // Failing: each open reads a little, then the read fails and the PCM is closed and opened again.
+  REQUIRE(wait_for(
+      [&] {
+        drain();
+        return cap.stats().reopens >= 2 && cap.stats().last_error == -EIO;
+      },
+      10s));
+  // Gone: no device to open.
+  std::filesystem::remove(infile);
+  REQUIRE(wait_for(
+      [&] {
+        drain();
+        return cap.stats().last_error == -ENOENT;
+      },
+      10s));
+  const auto lost = cap.stats();
+  CHECK_FALSE(lost.streaming);
+  CHECK(lost.running);
+  // Back, with other frames (the sink mended first: no open finds the new infile with the old sink).
+  std::filesystem::remove(sink);
+  std::filesystem::create_symlink("/dev/null", sink);
+  const auto back = numbered(kPeriod, 40, 0);
+  write_raw(dir / "next.raw", back);
+  std::filesystem::rename(dir / "next.raw", infile);
+  REQUIRE(wait_for(
+      [&] {
+        drain();
+        return !got.empty() && got.back() == as_float(back.back());
+      },
+      10s));
+  const auto st = cap.stats();
+  cap.stop();
+  const auto resumed = std::find(got.begin(), got.end(), as_float(back.front()));
+  REQUIRE(resumed != got.end());
+  CHECK(got.end() - resumed == static_cast<long>(back.size()));
+  CHECK(mismatches(got, back, static_cast<std::size_t>(resumed - got.begin())) == 0);
+  CHECK(st.streaming);
+  CHECK(st.reopens > lost.reopens);
+  CHECK(st.dropped == 0);
   CHECK(timestamps_increase(cap, 0, got.size() - 1));
 }
 

@@ -26,12 +26,14 @@
 
 namespace gearpulse::test {
 
+// `file` is where the plugin writes what it captures (a write that fails there fails the read).
 inline void use_alsa_config(const TempDir& dir, const std::string& pcm_name,
-                            const std::filesystem::path& infile) {
+                            const std::filesystem::path& infile,
+                            const std::filesystem::path& file = "/dev/null") {
   const auto conf = dir / "asound.conf";
   std::ofstream f(conf, std::ios::app);
-  f << "pcm." << pcm_name << " { type file slave.pcm null file \"/dev/null\" infile \"" << infile.string()
-    << "\" format raw }\n";
+  f << "pcm." << pcm_name << " { type file slave.pcm null file \"" << file.string() << "\" infile \""
+    << infile.string() << "\" format raw }\n";
   f.close();
   ::setenv("ALSA_CONFIG_PATH", ("/usr/share/alsa/alsa.conf:" + conf.string()).c_str(), 1);
 }
