@@ -658,9 +658,16 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     else
       s.gps_state = d.gps->has_gps(now) ? "fix" : "no-fix";
     if (r) s.gps_mode = r->mode;
-    // Age and speed of the last usable fix, also through an outage (how long GPS has been gone).
-    if (const std::int64_t fix_ns = d.last_fix_ns.load(std::memory_order_relaxed); fix_ns > 0) {
-      s.gps_speed = d.last_fix_speed.load(std::memory_order_relaxed);
+    // Age and speed of the last usable fix, also through an outage (how long GPS has been gone). A fix
+    // the pipeline thread has not taken yet is already the state's: the speed comes with it.
+    std::int64_t fix_ns = d.last_fix_ns.load(std::memory_order_relaxed);
+    double fix_speed = d.last_fix_speed.load(std::memory_order_relaxed);
+    if (r && r->usable() && r->rx_ns > fix_ns) {
+      fix_ns = r->rx_ns;
+      fix_speed = r->speed;
+    }
+    if (fix_ns > 0) {
+      s.gps_speed = fix_speed;
       s.gps_age = (now - fix_ns) * 1e-9;
     }
     s.gps_failures = g.failures;
@@ -675,7 +682,9 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       const AlsaCaptureStats a = d.capture->stats();
       s.audio_state = !a.streaming ? "recovering" : a.frozen ? "frozen" : a.stalled ? "stalled" : "running";
       s.xruns = a.xruns;
-      s.audio_error = a.last_error != 0 && !a.streaming ? "ALSA error " + std::to_string(a.last_error) : "";
+      s.audio_error = a.last_error != 0 && !a.streaming
+                          ? fmt::format("ALSA error {}: {}", a.last_error, ::snd_strerror(a.last_error))
+                          : "";
     } else {
       s.audio_state = "retrying";
       s.audio_error = d.audio_error;

@@ -290,6 +290,43 @@ struct GpsOnly {
 
 }  // namespace
 
+// A sound card that fails while capturing, is then gone, and is back later. The file plugin writes what
+// it captures to its sink, here first a link to /dev/full: each open reads a little, then a read fails
+// with -EIO. Then the infile is removed (no device to open), then put back with the sink turned to
+// /dev/null.
+TEST_CASE("pipeline: a sound card lost while capturing is recovering with its error, and running once back") {
+  GpsOnly chain;
+  const auto infile = chain.dir / "ripple.raw", sink = chain.dir / "sink";
+  gearpulse::test::write_raw(infile, ripple(60.0));
+  std::filesystem::create_symlink("/dev/full", sink);
+  gearpulse::test::use_alsa_config(chain.dir, "unplugged", infile, sink);
+  chain.config.audio.device = "unplugged";
+  chain.config.audio.rate = kRate;
+  chain.config.audio.format = "S16_LE";
+  chain.config.audio.period_frames = 512;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "recovering"; }, 10s));
+  std::filesystem::rename(infile, chain.dir / "unplugged.raw");
+  REQUIRE(wait_for(
+      [&] { return pipeline.snapshot().audio_error == "ALSA error -2: No such file or directory"; }, 10s));
+  for (int i = 0; i < 10; ++i) {
+    std::this_thread::sleep_for(50ms);
+    const auto s = pipeline.snapshot();
+    CHECK(s.audio_state == "recovering");
+    CHECK_FALSE(s.audio_error.empty());
+  }
+  std::filesystem::remove(sink);
+  std::filesystem::create_symlink("/dev/null", sink);
+  std::filesystem::rename(chain.dir / "unplugged.raw", infile);
+  REQUIRE(wait_for(
+      [&] {
+        const auto s = pipeline.snapshot();
+        return s.audio_state == "running" && near(s.tracker_freq, kTone, kWander + 0.5);
+      },
+      20s));
+  CHECK(pipeline.snapshot().audio_error.empty());
+}
+
 // The status a user reads after gpsd comes up late and after it restarts: the connection's old error is
 // gone once connected, and only connections after the first count as reconnects.
 TEST_CASE("pipeline: gpsd starting late is no reconnect and leaves no error; a restart is one reconnect") {
