@@ -68,4 +68,42 @@ class FaultSpell {
   std::string what_;
 };
 
+// A fault that is a state of a device (lost, frozen, stalled), which a loose connector can make come and
+// go many times a minute: its start is said at once, then at most once per interval (with how often it
+// started meanwhile); a start held back is said once the interval is over if the state still holds; its
+// end is said only when its start was. A state that flaps thus writes two lines a minute, not two per
+// flap. Not thread-safe: one owner.
+class StateFault {
+ public:
+  using Clock = std::chrono::steady_clock;
+  enum class Say { kNothing, kStart, kEnd };
+
+  explicit StateFault(std::chrono::seconds interval = std::chrono::seconds(60)) : interval_(interval) {}
+
+  // One look at the state at `now`. On kStart, `starts` is how many times it started since the last start
+  // said (1 when none was held back).
+  Say update(bool active, Clock::time_point now, std::uint64_t& starts) noexcept {
+    if (active && !active_) ++starts_;
+    const bool was = active_;
+    active_ = active;
+    if (!active) {
+      if (!was || !said_) return Say::kNothing;
+      said_ = false;
+      return Say::kEnd;
+    }
+    if (said_ || (ever_said_ && now - last_said_ < interval_)) return Say::kNothing;
+    said_ = ever_said_ = true;
+    last_said_ = now;
+    starts = starts_;
+    starts_ = 0;
+    return Say::kStart;
+  }
+
+ private:
+  std::chrono::seconds interval_;
+  Clock::time_point last_said_{};
+  std::uint64_t starts_ = 0;
+  bool active_ = false, said_ = false, ever_said_ = false;
+};
+
 }  // namespace gearpulse::daemon

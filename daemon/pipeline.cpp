@@ -306,9 +306,9 @@ void Pipeline::Impl::tracker_loop() noexcept {
   auto next_audio_try = std::chrono::steady_clock::now();
   auto backoff = std::chrono::milliseconds(500);
   bool audio_was_up = false;
-  bool audio_interrupted = false;   // the open capture lost its device and is being reopened
-  bool audio_frozen = false;        // its periods repeat (AlsaCaptureStats::frozen)
-  bool audio_stalled = false;       // it delivers nothing (AlsaCaptureStats::stalled)
+  StateFault audio_lost;            // the open capture lost its device and is being reopened
+  StateFault audio_frozen;          // its periods repeat (AlsaCaptureStats::frozen)
+  StateFault audio_stalled;         // it delivers nothing (AlsaCaptureStats::stalled)
   std::uint64_t repeated_seen = 0;  // AlsaCaptureStats::repeated when the last hole was looked at
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
   // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
@@ -484,44 +484,42 @@ void Pipeline::Impl::tracker_loop() noexcept {
     }
 
     if (audio_was_up && tracker) {
-      // A lost device (a USB card unplugged) is reopened by the capture thread; say so, at most once a
-      // minute while it lasts, and say when it is back.
+      // A lost device (a USB card unplugged) is reopened by the capture thread. It, audio that freezes and
+      // audio that stalls are each said when they start and when they end; a device that comes and goes
+      // (a loose connector) at most once a minute (StateFault).
       const AlsaCaptureStats s = capture->stats();
-      if (!s.streaming && s.running) {
-        audio_interrupted = true;
-        std::uint64_t suppressed = 0;
-        if (limiter.allow("audio-run", suppressed))
+      const auto at = std::chrono::steady_clock::now();
+      std::uint64_t starts = 0;
+      const auto meanwhile = [&starts](std::string_view what) {
+        return starts > 1 ? fmt::format(" ({} {} time(s) more since the last report)", what, starts - 1)
+                          : std::string();
+      };
+      using Say = StateFault::Say;
+      if (s.running) {
+        const Say say = audio_lost.update(!s.streaming, at, starts);
+        if (say == Say::kStart)
           spdlog::warn(
-              "audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it",
-              config.audio.device, s.last_error, ::snd_strerror(s.last_error));
-      } else if (audio_interrupted && s.streaming) {
-        audio_interrupted = false;
-        clear_fault("audio-run", "audio: capture from " + config.audio.device + " resumed (" +
-                                     std::to_string(s.reopens) + " reopen(s) so far)");
+              "audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it{}",
+              config.audio.device, s.last_error, ::snd_strerror(s.last_error), meanwhile("lost"));
+        else if (say == Say::kEnd)
+          spdlog::info("audio: capture from {} resumed ({} reopen(s) so far)", config.audio.device,
+                       s.reopens);
       }
-      if (s.frozen && !audio_frozen) {
-        audio_frozen = true;
-        report("audio-frozen", spdlog::level::warn,
-               "audio: " + config.audio.device +
-                   " gives the same samples period after period (a source that has stopped, or digital "
-                   "silence); they are not used, and speed follows GPS (without a fix it coasts down "
-                   "from the last speed), until they change");
-      } else if (!s.frozen && audio_frozen) {
-        audio_frozen = false;
-        clear_fault("audio-frozen", "audio: samples from " + config.audio.device + " change again");
-      }
-      if (s.stalled && !audio_stalled) {
-        audio_stalled = true;
-        report(
-            "audio-stalled", spdlog::level::warn,
-            fmt::format(
-                "audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); "
-                "speed follows GPS (without a fix it coasts down from the last speed) until they come again",
-                config.audio.device, s.silent_s));
-      } else if (!s.stalled && audio_stalled) {
-        audio_stalled = false;
-        clear_fault("audio-stalled", "audio: samples from " + config.audio.device + " come again");
-      }
+      if (const Say say = audio_frozen.update(s.frozen, at, starts); say == Say::kStart)
+        spdlog::warn(
+            "audio: {} gives the same samples period after period (a source that has stopped, or digital "
+            "silence); they are not used, and speed follows GPS (without a fix it coasts down from the last "
+            "speed), until they change{}",
+            config.audio.device, meanwhile("frozen"));
+      else if (say == Say::kEnd)
+        spdlog::info("audio: samples from {} change again", config.audio.device);
+      if (const Say say = audio_stalled.update(s.stalled, at, starts); say == Say::kStart)
+        spdlog::warn(
+            "audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); speed follows "
+            "GPS (without a fix it coasts down from the last speed) until they come again{}",
+            config.audio.device, s.silent_s, meanwhile("stalled"));
+      else if (say == Say::kEnd)
+        spdlog::info("audio: samples from {} come again", config.audio.device);
     }
     if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
   }

@@ -32,3 +32,33 @@ TEST_CASE("log: a fault logged is held back for the interval, each kind on its o
   limiter.reset("gps");
   CHECK(limiter.allow("gps", suppressed));
 }
+
+TEST_CASE("log: a device state that comes and goes is said when it starts and ends, at most once a minute") {
+  using gearpulse::daemon::StateFault;
+  using Say = StateFault::Say;
+  using namespace std::chrono_literals;
+  StateFault lost(60s);
+  auto t = StateFault::Clock::time_point{} + 1000s;
+  std::uint64_t starts = 0;
+  CHECK(lost.update(false, t, starts) == Say::kNothing);  // fine from the start: nothing to say
+  CHECK(lost.update(true, t, starts) == Say::kStart);
+  CHECK(starts == 1);
+  CHECK(lost.update(true, t + 1s, starts) == Say::kNothing);  // still lost: said already
+  CHECK(lost.update(false, t + 2s, starts) == Say::kEnd);
+  // A loose connector: lost and back again and again within the minute; nothing more is said.
+  for (int i = 0; i < 20; ++i) {
+    CHECK(lost.update(true, t + 3s + i * 1s, starts) == Say::kNothing);
+    CHECK(lost.update(false, t + 3s + i * 1s + 500ms, starts) == Say::kNothing);
+  }
+  // Lost again and for good: said once the minute since the last start said is over, with the count.
+  CHECK(lost.update(true, t + 30s, starts) == Say::kNothing);
+  CHECK(lost.update(true, t + 59s, starts) == Say::kNothing);
+  starts = 0;
+  CHECK(lost.update(true, t + 60s, starts) == Say::kStart);
+  CHECK(starts == 21);
+  CHECK(lost.update(true, t + 200s, starts) == Say::kNothing);
+  CHECK(lost.update(false, t + 201s, starts) == Say::kEnd);
+  // Long after: a new start is said at once, as the first.
+  CHECK(lost.update(true, t + 400s, starts) == Say::kStart);
+  CHECK(starts == 1);
+}
