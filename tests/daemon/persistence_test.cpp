@@ -21,8 +21,6 @@
 #include <thread>
 #include <vector>
 
-#include <spdlog/sinks/ringbuffer_sink.h>
-#include <spdlog/spdlog.h>
 #include <nlohmann/json.hpp>
 
 #include "core/estimator.hpp"
@@ -30,6 +28,7 @@
 #include "daemon/model_store.hpp"
 #include "daemon/retrainer.hpp"
 #include "daemon/training_store.hpp"
+#include "tests/daemon/log_lines.hpp"
 #include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
@@ -786,19 +785,8 @@ TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned ab
                         return none;
                       },
                       {});
-  const auto sink = std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(64);
-  const auto previous = spdlog::default_logger();
-  const auto previous_level = spdlog::get_level();
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink));
-  spdlog::set_level(spdlog::level::info);
-  const auto levels_of_ladder_lines = [&] {
-    std::vector<spdlog::level::level_enum> levels;
-    for (const auto& m : sink->last_raw())
-      if (std::string_view(m.payload.data(), m.payload.size()).find("no gear ladder") !=
-          std::string_view::npos)
-        levels.push_back(m.level);
-    return levels;
-  };
+  gearpulse::test::LogLines log;
+  const auto levels_of_ladder_lines = [&] { return log.levels("no gear ladder"); };
   retrainer.retrain_now();
   retrainer.retrain_now();
   retrainer.retrain_now();
@@ -808,8 +796,6 @@ TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned ab
   ladder = false;
   retrainer.retrain_now();
   const auto after = levels_of_ladder_lines();
-  spdlog::set_default_logger(previous);
-  spdlog::set_level(previous_level);
   using L = spdlog::level::level_enum;
   CHECK(first == std::vector<L>{L::warn, L::info, L::info});
   // Once a fit found a ladder, losing it again is news.

@@ -10,11 +10,10 @@
 #include <memory>
 #include <vector>
 
-#include <spdlog/sinks/ringbuffer_sink.h>
-#include <spdlog/spdlog.h>
 #include <catch2/catch.hpp>
 
 #include "daemon/pipeline.hpp"
+#include "tests/daemon/log_lines.hpp"
 #include "tests/drivers/alsa_fifo.hpp"
 #include "tests/drivers/gpsfake.hpp"
 #include "tests/test_util.hpp"
@@ -292,40 +291,12 @@ struct GpsOnly {
 
 }  // namespace
 
-// The daemon's log lines while it lives: spdlog's default logger, put back when done.
-class LogLines {
- public:
-  LogLines() : previous_(spdlog::default_logger()), level_(spdlog::get_level()) {
-    spdlog::set_default_logger(std::make_shared<spdlog::logger>("test", sink_));
-    spdlog::set_level(spdlog::level::info);
-  }
-  ~LogLines() {
-    spdlog::set_default_logger(previous_);
-    spdlog::set_level(level_);
-  }
-  LogLines(const LogLines&) = delete;
-  LogLines& operator=(const LogLines&) = delete;
-  // Lines that contain `text`.
-  [[nodiscard]] std::size_t count(std::string_view text) const {
-    std::size_t n = 0;
-    for (const auto& line : sink_->last_formatted())
-      n += line.find(text) != std::string::npos;
-    return n;
-  }
-
- private:
-  std::shared_ptr<spdlog::sinks::ringbuffer_sink_mt> sink_ =
-      std::make_shared<spdlog::sinks::ringbuffer_sink_mt>(1000);
-  std::shared_ptr<spdlog::logger> previous_;
-  spdlog::level::level_enum level_;
-};
-
 // A sound card that fails while capturing, again and again, is then gone, and is back later. The file
 // plugin writes what it captures to its sink, here first a link to /dev/full: each open reads a little,
 // then a read fails with -EIO (a loose connector: lost and back several times a second). Then the infile
 // is removed (no device to open), then put back with the sink turned to /dev/null.
 TEST_CASE("pipeline: a sound card lost while capturing is recovering with its error, and running once back") {
-  LogLines log;
+  gearpulse::test::LogLines log;
   GpsOnly chain;
   const auto infile = chain.dir / "ripple.raw", sink = chain.dir / "sink";
   gearpulse::test::write_raw(infile, ripple(60.0));
