@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 namespace gearpulse {
 namespace {
@@ -301,6 +302,34 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
   return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
 }
 
+// Score of the frequency read inside the declutch of an upshift from `gear` that began within this step,
+// the car's speed predicted by `x`: the engine, let go, falls from the gear's line toward the next gear's
+// revs (where the clutch coming back in will hold it) or on toward idle, so the reading lies between; half
+// of such readings are taken to lie above the next gear's revs and half anywhere down to idle, uniformly
+// (a density of the revs, in the units of a gear's score: the gear's own spread at its line scores 0).
+// Scored as free revs, such a reading cost the clutch as much as a reading that no mode explains, and a gear
+// that read it as braking kept the belief: at 1 Hz a launch's declutch from first to second at 117 Hz (the
+// paper's BMW 520i) was braking in first gear, and third gear took the next reading, 15 km/h too fast, for
+// the rest of the outage. Not on the gear's line or within one of its sigmas of it: the free engine leaves
+// the line within a moment of the clutch going out, and a reading there is the gear's.
+double SpeedSynthesizer::log_declutching(int gear, double freq, const Track& x) const noexcept {
+  constexpr double kNextShare = 0.5;
+  const double v = std::max(x.v, 0.0);
+  const double line = v / theta_[gear];
+  const double h = 1.0 / theta_[gear];
+  const double sf = std::sqrt(h * h * x.pvv + freq_sigma(freq) * freq_sigma(freq));
+  const double idle = idle_count_ > 0.0 ? rolling_idle() : 0.0;
+  const auto between = [&](double floor) {
+    const double lo = floor - 2.0 * sf, hi = line - sf;
+    return hi > lo && freq >= lo && freq <= hi ? 1.0 / (hi - lo) : 0.0;
+  };
+  const double density = gear < gears_ ? kNextShare * between(std::max(v / theta_[gear + 1], idle)) +
+                                             (1.0 - kNextShare) * between(idle)
+                                       : between(idle);
+  return density > 0.0 ? std::log(std::sqrt(2.0 * std::numbers::pi) * sf * density)
+                       : -std::numeric_limits<double>::infinity();
+}
+
 // Slipping the clutch is how a car moves off, not how it drives: the score of moving off at `speed`
 // (revs set aside) falls as the car gains speed, below that of a shift in progress, so a moving car's
 // free revs are not taken for a launch. 0 at walking pace.
@@ -470,9 +499,10 @@ int SpeedSynthesizer::median_mode() const noexcept {
 // neighbouring gear (a quick shift between two samples; up more likely at high revs, down at low revs);
 // the clutch is left for any gear in proportion to its use, or, standing, for moving off; moving off ends
 // when the clutch bites in first (or second) gear.
-void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double speed,
-                                        ModeArray& row) const noexcept {
+void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
+                                        double& caught_share) const noexcept {
   row.fill(0.0);
+  caught_share = 0.0;
   const int launch = launch_mode();
   const auto spread = [&](double total_rate, int to, double rate) {
     const double leave = total_rate > 0.0 ? 1.0 - std::exp(-total_rate * dt) : 0.0;
@@ -511,7 +541,10 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // presets 2.23 -> 2.59 km/h p95).
     constexpr double kDeclutchTime = 0.5;  // s: the clutch out in a shift
     double clutch = base * kToClutch;
-    if (dt >= kShortStep * tuning_.accel_time) clutch += up * std::min(1.0, kDeclutchTime / dt);
+    const double caught =
+        dt >= kShortStep * tuning_.accel_time ? up * std::min(1.0, kDeclutchTime / dt) : 0.0;
+    clutch += caught;
+    caught_share = clutch > 0.0 ? caught / clutch : 0.0;
     // Leaving a gear is never given a hazard beyond the cost of a second of free revs, which the clutch
     // pays for any reading: past that, staying in a gear whose line the revs keep following costs more per
     // second than the clutch explaining nothing. A hard launch revved out in first gear, far past this
@@ -768,7 +801,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
     climb_ = std::clamp((rise - kFreeRise) / kFreeRise, 0.0, 1.0);
   }
   for (int i = 0; i < modes; ++i) {
-    transitions_from(i, dt, shift_freq, track_[i].v, row_);
+    double caught = 0.0;  // share of the way into the clutch that is an upshift's declutch caught mid-way
+    transitions_from(i, dt, shift_freq, track_[i].v, row_, caught);
     const double log_pi = std::log(prob_[i]);
     for (int j = 0; j < modes; ++j) {
       pair_score_[i][j] = -std::numeric_limits<double>::infinity();
@@ -811,8 +845,15 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
         x.pvv *= 1.0 - k;
         keep_covariance(x);
       }
-      pair_score_[i][j] =
-          log_pi + std::log(row_[j]) + gps_score + log_evidence(x, j, freq, weight, i != j, short_step);
+      double evidence = log_evidence(x, j, freq, weight, i != j, short_step);
+      // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
+      // reading, scores its revs on their way down from the gear's line (log_declutching) where that
+      // explains them better than free revs.
+      if (j == 0 && caught > 0.0 && std::isfinite(freq)) {
+        const double on_the_way = std::max(evidence, weight * log_declutching(i, freq, x));
+        evidence = on_the_way + std::log((1.0 - caught) * std::exp(evidence - on_the_way) + caught);
+      }
+      pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + evidence;
       pair_track_[i][j] = x;
     }
   }

@@ -142,12 +142,14 @@ class SpeedSynthesizer {
   void load_habits(const GearModel* model) noexcept;
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
-  void transitions_from(int from, double dt, double freq, double speed, ModeArray& row) const noexcept;
+  void transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
+                        double& caught_share) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
   [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight, bool entering,
                                     bool short_step) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq, bool gps_new) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
+  [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;

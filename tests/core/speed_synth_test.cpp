@@ -846,6 +846,17 @@ TEST_CASE(
   CHECK(speed_within("skip_shift", 120.0, kEnd, 3.0 * kKmh, "1hz") == 61);
 }
 
+TEST_CASE("synth: at 1 Hz revs falling inside a launch's first upshift are the clutch's, not a shift done") {
+  // Recorded from the simulator (bmw-520i, mixed, 1 Hz): GPS is lost as the car moves off; it pulls in
+  // first gear to 144 Hz at 22 km/h, and the next reading falls inside the declutch of the shift to second
+  // (117 Hz, the revs falling from first gear's line toward second's). Scored as free revs, that reading cost
+  // the clutch as much as revs no mode explains: second gear took it at 30 km/h, third the next one at 36,
+  // and the filter stayed a gear high, 12-13 km/h fast, to the end. Revs on their way down from the gear's
+  // line are what a declutch caught mid-shift reads: the clutch holds the speed, second gear bites next.
+  constexpr double kEnd = std::numeric_limits<double>::infinity();
+  CHECK(speed_within("launch_declutch", 121.0, kEnd, 3.0 * kKmh, "1hz") == 59);
+}
+
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
   // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
