@@ -308,10 +308,10 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
 // of such readings are taken to lie above the next gear's revs and half anywhere down to idle, uniformly
 // (a density of the revs, in the units of a gear's score: the gear's own spread at its line scores 0).
 // Scored as free revs, such a reading cost the clutch as much as a reading that no mode explains, and a gear
-// that read it as braking kept the belief: at 1 Hz a launch's declutch from first to second at 117 Hz (the
-// paper's BMW 520i) was braking in first gear, and third gear took the next reading, 15 km/h too fast, for
-// the rest of the outage. Not on the gear's line or within one of its sigmas of it: the free engine leaves
-// the line within a moment of the clutch going out, and a reading there is the gear's.
+// took it: at 1 Hz a launch's declutch from first to second caught at 117 Hz (the paper's BMW 520i, 23 km/h)
+// was second gear at 30 km/h, third gear took the next reading, and the filter stayed a gear high, 12-13 km/h
+// fast, for the rest of the outage. Not on the gear's line or within one of its sigmas of it: the free
+// engine leaves the line within a moment of the clutch going out, and a reading there is the gear's.
 double SpeedSynthesizer::log_declutching(int gear, double freq, const Track& x) const noexcept {
   constexpr double kNextShare = 0.5;
   const double v = std::max(x.v, 0.0);
