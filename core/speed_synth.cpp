@@ -816,6 +816,13 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // Declutching ends the engine's drive: the car no longer gains speed. Nor does a car declutched
       // all along once GPS is lost, whatever gain GPS showed it (a slipping clutch, revs no gear explains).
       if (j == 0 && (i != 0 || !have_gps)) x.a = std::min(x.a, 0.0);
+      // A shift within the step: the engine's pull reaches the wheels through the new gear, as theta_i /
+      // theta_j of the force at the same torque (eq. (3): theta is the speed per turn of the engine), so a
+      // car that was pulling carries that share of its acceleration into the gear it enters; braking is the
+      // brakes' and stays. Carried whole, a hard launch's pull in first gear made second gear's reading of
+      // revs falling in the declutch (a car at 21 km/h read at 33) a jump the acceleration partly
+      // explained, and at 1 Hz the filter climbed the ladder one gear high.
+      if (is_gear(i) && is_gear(j) && i != j && x.a > 0.0) x.a *= theta_[i] / theta_[j];
       predict(x, moving_off ? launch_mode() : j, dt);
       // A slipping clutch says only that the car is no faster than first gear turns the revs into: when
       // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the

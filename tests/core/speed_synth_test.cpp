@@ -857,6 +857,18 @@ TEST_CASE("synth: at 1 Hz revs falling inside a launch's first upshift are the c
   CHECK(speed_within("launch_declutch", 121.0, kEnd, 3.0 * kKmh, "1hz") == 59);
 }
 
+TEST_CASE("synth: at 1 Hz a launch's pull in first gear is not carried whole into second") {
+  // Recorded from the simulator (compact-4, mixed, 1 Hz): GPS is lost as the car slows to a stop; it moves
+  // off at 134 s and pulls hard in first gear (12 to 17 km/h in a second), then the next reading falls in
+  // the declutch of the shift to second (43 Hz at 21 km/h, the revs on their way down). With first gear's
+  // acceleration carried whole into second, second gear's reading of those revs (33 km/h) was a jump the
+  // acceleration partly explained: second took it, third the next reading, fourth the one after the next
+  // shift, and the filter stayed a gear high, 13-17 km/h fast, to the end. Through a higher gear the same
+  // engine pulls the car less: second gear bites at the right speed two readings later.
+  constexpr double kEnd = std::numeric_limits<double>::infinity();
+  CHECK(speed_within("launch_pull", 139.0, kEnd, 3.0 * kKmh, "1hz") == 41);
+}
+
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
   // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
