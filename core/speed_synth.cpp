@@ -821,8 +821,12 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // car that was pulling carries that share of its acceleration into the gear it enters; braking is the
       // brakes' and stays. Carried whole, a hard launch's pull in first gear made second gear's reading of
       // revs falling in the declutch (a car at 21 km/h read at 33) a jump the acceleration partly
-      // explained, and at 1 Hz the filter climbed the ladder one gear high.
-      if (is_gear(i) && is_gear(j) && i != j && x.a > 0.0) x.a *= theta_[i] / theta_[j];
+      // explained, and at 1 Hz the filter climbed the ladder one gear high. A move-off's acceleration is
+      // first gear's: moving off in second, the car gains speed theta_1 / theta_2 as fast (at 1 Hz a
+      // launch read in second gained enough to fit second's reading of the revs, kept a history of its own
+      // at 1.7 times the speed of a car creeping in first, and took the belief back 8 s later).
+      const int pulling = moving_off || i == launch_mode() ? 1 : i;  // the gear whose pull x.a is
+      if (is_gear(pulling) && is_gear(j) && j != pulling && x.a > 0.0) x.a *= theta_[pulling] / theta_[j];
       predict(x, moving_off ? launch_mode() : j, dt);
       // A slipping clutch says only that the car is no faster than first gear turns the revs into: when
       // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the

@@ -869,6 +869,16 @@ TEST_CASE("synth: at 1 Hz a launch's pull in first gear is not carried whole int
   CHECK(speed_within("launch_pull", 139.0, kEnd, 3.0 * kKmh, "1hz") == 41);
 }
 
+TEST_CASE("synth: at 1 Hz a move-off read in second gear does not gain speed at first gear's pace") {
+  // Recorded from the simulator (bmw-520i, traffic jam, 1 Hz): GPS is lost in a queue; the car moves off
+  // at 139 s and creeps at 15 km/h in first gear near 98 Hz. Read in second gear with the launch's
+  // acceleration (first gear's), the move-off gained enough speed to fit second gear's reading of the revs
+  // and kept a history of its own at 25 km/h; as first gear's time grew, second took the belief at 148 s
+  // and held it, 10 km/h fast, until the queue stopped again. Moving off in second gear the same engine
+  // pulls the car theta_1 / theta_2 as hard: that history is not kept.
+  CHECK(speed_within("creep_after_launch", 140.0, 166.0, 3.0 * kKmh, "1hz") == 27);
+}
+
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
   // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
