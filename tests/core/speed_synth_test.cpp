@@ -863,7 +863,7 @@ TEST_CASE("synth: at 1 Hz a launch's pull in first gear is not carried whole int
   // the declutch of the shift to second (43 Hz at 21 km/h, the revs on their way down). With first gear's
   // acceleration carried whole into second, second gear's reading of those revs (33 km/h) was a jump the
   // acceleration partly explained: second took it, third the next reading, fourth the one after the next
-  // shift, and the filter stayed a gear high, 13-17 km/h fast, to the end. Through a higher gear the same
+  // shift, and the filter stayed a gear high, 13-18 km/h fast, to the end. Through a higher gear the same
   // engine pulls the car less: second gear bites at the right speed two readings later.
   constexpr double kEnd = std::numeric_limits<double>::infinity();
   CHECK(speed_within("launch_pull", 139.0, kEnd, 3.0 * kKmh, "1hz") == 41);
