@@ -428,11 +428,23 @@ double SpeedSynthesizer::upshift_factor(int gear, double freq) const noexcept {
   return std::exp(std::clamp((freq - mean) / sd, -1.5, 3.0));
 }
 
-double SpeedSynthesizer::downshift_factor(int gear, double freq) const noexcept {
+// Before shifts down were seen, between readings further apart than the tracker's hops, the revs the model
+// records for this gear (`extra.revs`) stand in: a driver shifts down out of fifth when the revs sag below
+// where he runs fifth, not below where he runs the car at large. Against the latter, a fifth gear held at
+// 29 Hz in a steady cruise (the Etios, long1 from 681 s; its driver runs fifth at 24 Hz, sd 0.45 in
+// ln(freq)) lost the belief to a fourth gear 11 km/h low for the rest of the outage. Not for shifts up:
+// a gear's band says where it is run, not where it is left upward (first gear's is a creep's, and a car
+// creeping in first at high revs in a queue was read in second, 10 km/h fast); nor at the tracker's hops,
+// where it moved the simulated figures both ways and the daemon's path stays as measured.
+double SpeedSynthesizer::downshift_factor(int gear, double freq, bool long_step) const noexcept {
   if (!std::isfinite(freq)) return 1.0;
   const bool own = gear_down_count_[gear] >= kMinShifts;
   const double mean = own ? gear_down_mean_[gear] : down_mean_, var = own ? gear_down_var_[gear] : down_var_;
-  if (!own && down_count_ < kMinShifts) return 1.0 / shift_urge(freq);
+  if (!own && down_count_ < kMinShifts) {
+    if (long_step && revs_sd_[gear] > 0.0 && freq > 0.0)
+      return std::exp(std::clamp((revs_mean_[gear] - std::log(freq)) / revs_sd_[gear], -3.0, 3.0));
+    return 1.0 / shift_urge(freq);
+  }
   const double sd = std::max(std::sqrt(var), 0.08 * mean);
   return std::exp(std::clamp(-(freq - mean) / sd, -1.5, 3.0));
 }
@@ -513,6 +525,7 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // clutch or for a neighbour: up as the revs pass this driver's upshift point, down as they sag.
     constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
     const double base = leave_rate_[from];
+    const bool long_step = dt >= kShortStep * tuning_.accel_time;  // not the tracker's hops
     const double shift_base = base * kToNeighbour;
     double up =
         from < gears_ ? shift_base * upshift_factor(from, freq) * shift_comfort(from, from + 1, freq) : 0.0;
@@ -529,7 +542,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
       up *= 1.0 + urge;
     }
     double down =
-        from > 1 ? shift_base * downshift_factor(from, freq) * shift_comfort(from, from - 1, freq) : 0.0;
+        from > 1 ? shift_base * downshift_factor(from, freq, long_step) * shift_comfort(from, from - 1, freq)
+                 : 0.0;
     // Every shift passes through the clutch. Between readings further apart than the tracker's hops, a
     // reading may fall inside the declutch of a shift due at these revs, with revs that neither gear
     // explains: that chance is the declutch's share of the step, over and above the shift that the reading
@@ -541,8 +555,7 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // presets 2.23 -> 2.59 km/h p95).
     constexpr double kDeclutchTime = 0.5;  // s: the clutch out in a shift
     double clutch = base * kToClutch;
-    const double caught =
-        dt >= kShortStep * tuning_.accel_time ? up * std::min(1.0, kDeclutchTime / dt) : 0.0;
+    const double caught = long_step ? up * std::min(1.0, kDeclutchTime / dt) : 0.0;
     clutch += caught;
     caught_share = clutch > 0.0 ? caught / clutch : 0.0;
     // Leaving a gear is never given a hazard beyond the cost of a second of free revs, which the clutch

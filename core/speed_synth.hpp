@@ -160,7 +160,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
   [[nodiscard]] double upshift_factor(int gear, double freq) const noexcept;
-  [[nodiscard]] double downshift_factor(int gear, double freq) const noexcept;
+  [[nodiscard]] double downshift_factor(int gear, double freq, bool long_step) const noexcept;
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   [[nodiscard]] int median_mode() const noexcept;

@@ -70,8 +70,9 @@ struct Bytes {
 }  // namespace
 
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  for (const char* name : {"fast_shifter", "skip_shift", "launch_declutch", "launch_pull",
-                           "creep_after_launch", "moveoff_seven_speed", "braking_downshifts"}) {
+  for (const char* name :
+       {"fast_shifter", "skip_shift", "launch_declutch", "launch_pull", "creep_after_launch",
+        "obd_cruise_fourth", "moveoff_seven_speed", "braking_downshifts"}) {
     std::ifstream in(std::string(GEARPULSE_SOURCE_DIR "/tests/core/data/") + name + "_model.json");
     std::stringstream text;
     text << in.rdbuf();
