@@ -391,6 +391,12 @@ void SpeedSynthesizer::score_revs_habit(double freq) noexcept {
   }
 }
 
+// Where `freq` sits in the band of revs this driver runs `gear` at (the model's `extra.revs`), in its sds of
+// ln(freq); the band must be known (revs_sd_ > 0) and freq positive.
+double SpeedSynthesizer::revs_z(int gear, double freq) const noexcept {
+  return (std::log(freq) - revs_mean_[gear]) / revs_sd_[gear];
+}
+
 // How much likelier a shift from `from` to `to` at `freq` is for bringing the revs nearer the band this
 // driver runs the new gear in than they are to the band of the old one (the model's revs per gear): a
 // driver shifts up as the revs pass his habit and lands where he usually drives the next gear, and does
@@ -399,8 +405,8 @@ double SpeedSynthesizer::shift_comfort(int from, int to, double freq) const noex
   if (tuning_.shift_comfort <= 0.0 || !std::isfinite(freq) || freq <= 0.0 || revs_sd_[from] <= 0.0 ||
       revs_sd_[to] <= 0.0)
     return 1.0;
-  const double now = (std::log(freq) - revs_mean_[from]) / revs_sd_[from];
-  const double after = (std::log(freq * theta_[from] / theta_[to]) - revs_mean_[to]) / revs_sd_[to];
+  const double now = revs_z(from, freq);
+  const double after = revs_z(to, freq * theta_[from] / theta_[to]);
   constexpr double kMaxLog = 3.0;
   return std::exp(std::clamp(0.5 * tuning_.shift_comfort * (now * now - after * after), -kMaxLog, kMaxLog));
 }
@@ -442,7 +448,7 @@ double SpeedSynthesizer::downshift_factor(int gear, double freq, bool long_step)
   const double mean = own ? gear_down_mean_[gear] : down_mean_, var = own ? gear_down_var_[gear] : down_var_;
   if (!own && down_count_ < kMinShifts) {
     if (long_step && revs_sd_[gear] > 0.0 && freq > 0.0)
-      return std::exp(std::clamp((revs_mean_[gear] - std::log(freq)) / revs_sd_[gear], -3.0, 3.0));
+      return std::exp(std::clamp(-revs_z(gear, freq), -3.0, 3.0));
     return 1.0 / shift_urge(freq);
   }
   const double sd = std::max(std::sqrt(var), 0.08 * mean);

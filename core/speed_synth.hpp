@@ -157,6 +157,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double rolling_idle() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   void score_revs_habit(double freq) noexcept;
+  [[nodiscard]] double revs_z(int gear, double freq) const noexcept;
   [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
   [[nodiscard]] double upshift_factor(int gear, double freq) const noexcept;
