@@ -8,9 +8,11 @@
 //   (d) gearpulse's SpeedSynthesizer with the auto model, causal, as the daemon runs it.
 // Then (c) and (d) over the samples where the car moves, the share of (d) off by more than 8 km/h by time
 // since GPS was lost, what the synthesis did in the samples it got wrong (its gear against the hindsight
-// gear), how often its most probable mode is the hindsight gear by the probability it gives that mode,
-// how many upshifts between two samples show less than half of their ratio's drop of revs, and how many
-// downshifts keep the revs level (braking while shifting down), against the level steps that stay in gear.
+// gear) and what began each run of samples in a wrong gear (an upshift or downshift the synthesis missed, a
+// shift it made that the car did not, the clutch or a stop, or a gear wrong since GPS was lost), how often
+// its most probable mode is the hindsight gear by the probability it gives that mode, how many upshifts
+// between two samples show less than half of their ratio's drop of revs, and how many downshifts keep the
+// revs level (braking while shifting down), against the level steps that stay in gear.
 // Usage: bench_real_logs [DATA_DIR] [--trace FILE]   (default: the shared/data/real beside the source tree;
 // --trace writes every outage sample with the truth, the hindsight gear and the synthesis as CSV)
 #include <algorithm>
@@ -76,15 +78,45 @@ enum class Kind : std::uint8_t {
 constexpr std::array<const char*, 8> kKindNames = {"hindsight off too", "car at rest",  "coasting, no gear",
                                                    "one gear low",      "2+ gears low", "one gear high",
                                                    "2+ gears high",     "right gear"};
+// What began a run of outage samples in a wrong gear: the step from the last sample whose gear the
+// synthesis and hindsight agreed on (or the start of the outage, if they never did).
+enum class Origin : std::uint8_t {
+  kNone,
+  kFromStart,
+  kMissedUpshift,
+  kMissedDownshift,
+  kFalseDownshift,
+  kFalseUpshift,
+  kClutchOrRest,
+  kOther
+};
+constexpr std::array<const char*, 8> kOriginNames = {"",
+                                                     "wrong since GPS was lost",
+                                                     "upshift missed",
+                                                     "downshift missed",
+                                                     "false downshift",
+                                                     "false upshift",
+                                                     "through the clutch or a stop",
+                                                     "other"};
+Origin origin_of(int prev_hindsight, int prev_synth, int hindsight, int synth) {
+  if (synth == 0 || hindsight == 0) return Origin::kClutchOrRest;
+  if (synth == prev_synth && hindsight > prev_hindsight) return Origin::kMissedUpshift;
+  if (synth == prev_synth && hindsight < prev_hindsight) return Origin::kMissedDownshift;
+  if (hindsight == prev_hindsight && synth < prev_synth) return Origin::kFalseDownshift;
+  if (hindsight == prev_hindsight && synth > prev_synth) return Origin::kFalseUpshift;
+  return Origin::kOther;
+}
+
 constexpr double kBad = 8.0;  // km/h: an error this large is a wrong gear or a wrong stop, not jitter
 
 struct Errors {
   std::vector<double> a, b, c, d;
-  std::vector<bool> moving;   // per sample: the logged speed is above zero
-  std::vector<double> since;  // per sample: s since GPS was lost
-  std::vector<Kind> kind;     // per sample
-  std::size_t upshifts = 0;   // hindsight gear up by one between two clean samples inside an outage
-  std::size_t hidden = 0;     // of those, the revs fell by less than half of the two gears' ratio
+  std::vector<bool> moving;    // per sample: the logged speed is above zero
+  std::vector<double> since;   // per sample: s since GPS was lost
+  std::vector<Kind> kind;      // per sample
+  std::vector<Origin> origin;  // per sample: what began the run of samples in a wrong gear it is part of
+  std::size_t upshifts = 0;    // hindsight gear up by one between two clean samples inside an outage
+  std::size_t hidden = 0;      // of those, the revs fell by less than half of the two gears' ratio
   // Downshifts between two clean samples inside an outage, and how many of them kept the revs flat, against
   // the clean samples that stayed in the gear before with flat revs: all, and with both samples at speed.
   std::array<std::size_t, 2> downshifts{}, flat_down{}, flat_kept{};
@@ -115,6 +147,11 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
   int paper_gear = -1;
   bool was_out = false;
   int clean_gear = -1;  // hindsight gear of the last outage sample on its gear line (-1: none)
+  // The gears (1-based, 0 = none) of the last outage sample, hindsight's and the synthesis', whether they
+  // agreed and whether they ever did in this outage, and what began the current run of disagreement.
+  int prev_hindsight = 0, prev_synth = 0;
+  bool prev_agreed = false, agreed_once = false;
+  Origin run_origin = Origin::kNone;
   double clean_freq = 0.0, clean_speed = 0.0;
   gearpulse::LogReplayer replayer(synth);
   for (const Sample& s : samples) {
@@ -129,7 +166,12 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
       was_out = false;
       continue;
     }
-    if (!was_out) hold_b = hold_c = last_gps, clean_gear = -1;
+    if (!was_out) {
+      hold_b = hold_c = last_gps;
+      clean_gear = -1;
+      prev_agreed = agreed_once = false;
+      run_origin = Origin::kNone;
+    }
     was_out = true;
     if (!s.has_speed()) continue;  // no truth to compare with
     if (s.has_freq() && paper_gear >= 0 && !paper.gears.empty())
@@ -181,9 +223,22 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
     err.kind.push_back(s.has_freq() && !model.gears.empty() ? classify(model, s.speed, s.freq, hold_c, o)
                                                             : Kind::kHindsightOff);
     err.since.push_back(std::fmod(s.t - t0 - kOutageStart, kOutagePeriod));
+    const int nearest = s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0;
+    const int hindsight_gear = s.speed > 0.0 ? nearest : 0;
+    const bool agreed = hindsight_gear > 0 && o.gear == hindsight_gear;
+    if (agreed)
+      run_origin = Origin::kNone;
+    else if (prev_agreed)
+      run_origin = origin_of(prev_hindsight, prev_synth, hindsight_gear, o.gear);
+    else if (!agreed_once)
+      run_origin = Origin::kFromStart;
+    err.origin.push_back(run_origin);
+    prev_hindsight = hindsight_gear;
+    prev_synth = o.gear;
+    prev_agreed = agreed;
+    agreed_once = agreed_once || agreed;
     if (g_trace != nullptr)
-      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%d,%.2f,%.2f\n", s.t, s.speed * kMsToKmh, s.freq,
-                   s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0,
+      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%d,%.2f,%.2f\n", s.t, s.speed * kMsToKmh, s.freq, nearest,
                    o.gear, o.speed * kMsToKmh, hold_c * kMsToKmh);
   }
 }
@@ -270,6 +325,19 @@ void report(const char* title, const Errors& e) {
   for (std::size_t k = 0; k < kinds.size(); ++k) {
     if (kinds[k] == 0) continue;
     std::printf("%s %s %.1f %%", sep, kKindNames[k], share(kinds[k]));
+    sep = ",";
+  }
+  std::printf("\n");
+  // The samples in a wrong gear among them, by the step that began their run of disagreement.
+  std::array<std::size_t, kOriginNames.size()> origins{};
+  for (std::size_t k = 0; k < e.d.size(); ++k)
+    if (e.d[k] > kBad && e.kind[k] >= Kind::kOneLow && e.kind[k] <= Kind::kHigher)
+      ++origins[static_cast<std::size_t>(e.origin[k])];
+  std::printf("  (d) of those in a wrong gear, by what began the run:");
+  sep = "";
+  for (std::size_t k = 1; k < origins.size(); ++k) {
+    if (origins[k] == 0) continue;
+    std::printf("%s %s %.1f %%", sep, kOriginNames[k], share(origins[k]));
     sep = ",";
   }
   std::printf("\n");
