@@ -34,6 +34,16 @@ constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift poin
 
 }  // namespace
 
+double contended_speed(std::span<const double> prob, std::span<const double> speed) noexcept {
+  double sum = 0.0, weights = 0.0;
+  for (std::size_t j = 0; j < prob.size() && j < speed.size(); ++j) {
+    const double w = prob[j] * prob[j];
+    sum += w * speed[j];
+    weights += w;
+  }
+  return weights > 0.0 ? sum / weights : 0.0;
+}
+
 std::string_view source_name(SpeedSource source) noexcept {
   switch (source) {
     case SpeedSource::kGps:
@@ -496,8 +506,8 @@ int SpeedSynthesizer::map_mode() const noexcept {
 }
 
 // The mode whose speed is the median of the belief (each mode's speed weighted by its probability): the
-// most probable mode while it holds half the belief, else the one between the contenders. The error the
-// output makes is then the smallest in the mean absolute sense, however the belief is split.
+// most probable mode while it holds half the belief, else the one between the contenders; its speed errs
+// least in the mean absolute sense, however the belief is split, where the belief is right about its odds.
 int SpeedSynthesizer::median_mode() const noexcept {
   if (prob_[mode_] >= 0.5) return mode_;
   const int modes = gears_ + 2;
@@ -957,7 +967,16 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   }
   roll_span_ = -1.0;  // a flat stretch of revs is one GPS saw whole
   const int out = median_mode();
-  const double speed = std::max(track_[out].v, 0.0);
+  // Each mode's speed as the output counts it: a declutched or moving-off history slower than walking pace
+  // is at rest.
+  ModeArray mode_speed{};
+  for (int j = 0; j < modes; ++j) {
+    const double v = std::max(track_[j].v, 0.0);
+    mode_speed[j] = is_gear(j) || v >= tuning_.stationary_speed ? v : 0.0;
+  }
+  const auto n = static_cast<std::size_t>(modes);
+  const double speed = (1.0 - tuning_.hedge_share) * std::max(track_[out].v, 0.0) +
+                       tuning_.hedge_share * contended_speed({prob_.data(), n}, {mode_speed.data(), n});
   if (is_gear(out)) return {speed, out, SpeedSource::kEngine};
   // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
   // trickle pulses.

@@ -890,6 +890,29 @@ TEST_CASE("synth: from OBD polls a cruise at the low end of a gear's revs is not
   CHECK(speed_within("obd_cruise_fourth", 141.0, kEnd, 3.0 * kKmh, "obd") == 22);
 }
 
+TEST_CASE("synth: a split belief's contenders pull the speed as the square of their belief") {
+  using gearpulse::contended_speed;
+  // Between two modes, the speed of least expected |error|^1.5, found here by a search over a fine grid.
+  const auto least = [](double p1, double v1, double p2, double v2) {
+    double best = v2, best_cost = std::numeric_limits<double>::infinity();
+    for (double a = v2; a <= v1; a += 1e-4) {
+      const double cost = p1 * std::pow(v1 - a, 1.5) + p2 * std::pow(a - v2, 1.5);
+      if (cost < best_cost) best = a, best_cost = cost;
+    }
+    return best;
+  };
+  for (const double p1 : {0.5, 0.6, 0.8, 0.95}) {
+    const std::vector<double> prob = {p1, 1.0 - p1}, speed = {11.0, 8.5};  // third and second at 40, 31 km/h
+    INFO("leader's share " << p1);
+    CHECK(contended_speed(prob, speed) == Approx(least(p1, 11.0, 1.0 - p1, 8.5)).margin(1e-3));
+  }
+  // A clear leader keeps its speed; an even split lies halfway; one mode is its own speed; no belief, 0.
+  CHECK(contended_speed(std::vector<double>{0.95, 0.05}, std::vector<double>{11.0, 8.5}) > 10.99);
+  CHECK(contended_speed(std::vector<double>{0.5, 0.5}, std::vector<double>{11.0, 8.5}) == Approx(9.75));
+  CHECK(contended_speed(std::vector<double>{0.0, 1.0, 0.0}, std::vector<double>{3.0, 7.0, 9.0}) == 7.0);
+  CHECK(contended_speed(std::vector<double>{0.0, 0.0}, std::vector<double>{3.0, 7.0}) == 0.0);
+}
+
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
   // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
