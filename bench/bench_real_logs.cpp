@@ -178,14 +178,16 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
       hold_b = paper.gears[static_cast<std::size_t>(paper_gear)].theta * s.freq;
     else if (paper_gear < 0)
       hold_b = last_gps;
-    if (s.has_freq() && !model.gears.empty()) {
+    // The gear whose line is nearest the sample, 1-based (0: no frequency or no ladder).
+    const int nearest = s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0;
+    if (nearest > 0) {
       hold_c = hindsight_speed(model, s.speed, s.freq);
       // A shift between two samples on their gear lines: how much of the ratio's drop of revs an upshift
       // shows, and whether a downshift keeps the revs level.
       constexpr double kOnLine = 3.0 / kMsToKmh;    // m/s
       constexpr double kFlatRevs = 0.05;            // |ln| of the revs from one clean sample to the next
       constexpr double kAtSpeed = 30.0 / kMsToKmh;  // m/s: out of town, where a driver seldom shifts down
-      const int g = nearest_gear(model, s.speed, s.freq);
+      const int g = nearest - 1;
       const double theta = model.gears[static_cast<std::size_t>(g)].theta;
       const bool clean = s.speed > 0.0 && std::abs(theta * s.freq - s.speed) <= kOnLine;
       if (clean && clean_gear >= 0 && g == clean_gear + 1) {
@@ -223,7 +225,6 @@ void replay(const std::vector<Sample>& samples, const GearModel& paper, const Ge
     err.kind.push_back(s.has_freq() && !model.gears.empty() ? classify(model, s.speed, s.freq, hold_c, o)
                                                             : Kind::kHindsightOff);
     err.since.push_back(std::fmod(s.t - t0 - kOutageStart, kOutagePeriod));
-    const int nearest = s.has_freq() && !model.gears.empty() ? nearest_gear(model, s.speed, s.freq) + 1 : 0;
     const int hindsight_gear = s.speed > 0.0 ? nearest : 0;
     const bool agreed = hindsight_gear > 0 && o.gear == hindsight_gear;
     if (agreed)
