@@ -44,6 +44,35 @@ double contended_speed(std::span<const double> prob, std::span<const double> spe
   return weights > 0.0 ? sum / weights : 0.0;
 }
 
+int belief_quantile_mode(std::span<const double> prob, std::span<const double> speed, double q) noexcept {
+  constexpr std::size_t kMost = 16;
+  const std::size_t n = std::min({prob.size(), speed.size(), kMost});
+  if (n == 0) return -1;
+  std::size_t lead = 0;
+  double total = 0.0;
+  for (std::size_t j = 0; j < n; ++j) {
+    total += prob[j];
+    if (prob[j] > prob[lead]) lead = j;
+  }
+  if (!(total > 0.0)) return static_cast<int>(lead);
+  if (prob[lead] >= std::max(q, 1.0 - q) * total) return static_cast<int>(lead);
+  std::array<std::size_t, kMost> order{};
+  for (std::size_t j = 0; j < n; ++j)
+    order[j] = j;
+  // Slowest first; among equal speeds the most probable first, so that it names its group.
+  std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(n), [&](std::size_t a, std::size_t b) {
+    return speed[a] < speed[b] || (speed[a] == speed[b] && prob[a] > prob[b]);
+  });
+  double below = 0.0;
+  std::size_t group = 0;  // first (most probable) member of the current group of equal speeds
+  for (std::size_t k = 0; k < n; ++k) {
+    if (k == 0 || speed[order[k]] != speed[order[group]]) group = k;
+    below += prob[order[k]];
+    if (below >= q * total) return static_cast<int>(order[group]);
+  }
+  return static_cast<int>(order[group]);
+}
+
 std::string_view source_name(SpeedSource source) noexcept {
   switch (source) {
     case SpeedSource::kGps:
@@ -505,22 +534,14 @@ int SpeedSynthesizer::map_mode() const noexcept {
   return best;
 }
 
-// The mode whose speed is the median of the belief (each mode's speed weighted by its probability): the
-// most probable mode while it holds half the belief, else the one between the contenders; its speed errs
-// least in the mean absolute sense, however the belief is split, where the belief is right about its odds.
-int SpeedSynthesizer::median_mode() const noexcept {
-  if (prob_[mode_] >= 0.5) return mode_;
-  const int modes = gears_ + 2;
-  std::array<int, kModes> order{};
-  for (int j = 0; j < modes; ++j)
-    order[j] = j;
-  std::sort(order.begin(), order.begin() + modes, [&](int a, int b) { return track_[a].v < track_[b].v; });
-  double below = 0.0;
-  for (int k = 0; k < modes; ++k) {
-    below += prob_[order[k]];
-    if (below >= 0.5) return order[k];
-  }
-  return mode_;
+// The mode whose speed carries an outage's output: the belief's quantile output_quantile by speed.
+int SpeedSynthesizer::output_mode() const noexcept {
+  const auto n = static_cast<std::size_t>(gears_ + 2);
+  ModeArray speed{};
+  for (std::size_t j = 0; j < n; ++j)
+    speed[j] = track_[j].v;
+  const int out = belief_quantile_mode({prob_.data(), n}, {speed.data(), n}, tuning_.output_quantile);
+  return out < 0 ? mode_ : out;
 }
 
 // Mode changes over dt out of mode `from`, as rates per second: a gear is left for the clutch or for a
@@ -966,7 +987,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
     return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }
   roll_span_ = -1.0;  // a flat stretch of revs is one GPS saw whole
-  const int out = median_mode();
+  const int out = output_mode();
   // Each mode's speed as the output counts it: a declutched or moving-off history slower than walking pace
   // is at rest.
   ModeArray mode_speed{};

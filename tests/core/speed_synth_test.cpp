@@ -913,6 +913,53 @@ TEST_CASE("synth: a split belief's contenders pull the speed as the square of th
   CHECK(contended_speed(std::vector<double>{0.0, 0.0}, std::vector<double>{3.0, 7.0}) == 0.0);
 }
 
+TEST_CASE("synth: the output's mode is the belief's quantile by speed") {
+  using gearpulse::belief_quantile_mode;
+  // The q-quantile of a belief is the speed of least expected pinball loss (a slower output costs q per
+  // m/s, a faster one 1 - q): found here by trying every mode's speed, over beliefs drawn at random.
+  const auto least_pinball = [](const std::vector<double>& prob, const std::vector<double>& speed, double q) {
+    double best = speed[0], best_cost = std::numeric_limits<double>::infinity();
+    for (const double a : speed) {
+      double cost = 0.0;
+      for (std::size_t j = 0; j < prob.size(); ++j)
+        cost += prob[j] * (speed[j] > a ? q * (speed[j] - a) : (1.0 - q) * (a - speed[j]));
+      if (cost < best_cost - 1e-12) best = a, best_cost = cost;
+    }
+    return best;
+  };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int round = 0; round < 200; ++round) {
+    const std::size_t n = 2 + round % 6;
+    std::vector<double> prob(n), speed(n);
+    double total = 0.0;
+    for (std::size_t j = 0; j < n; ++j) {
+      prob[j] = std::pow(unit(rng), 3.0);
+      speed[j] = 30.0 * unit(rng);
+      total += prob[j];
+    }
+    for (double& p : prob)
+      p /= total;
+    for (const double q : {0.5, 0.6, 0.65}) {
+      INFO("round " << round << ", q " << q);
+      const int mode = belief_quantile_mode(prob, speed, q);
+      REQUIRE(mode >= 0);
+      CHECK(speed[static_cast<std::size_t>(mode)] == least_pinball(prob, speed, q));
+    }
+  }
+  // Third gear leads second 0.55 to 0.45: the median keeps third, a quantile of 0.6 takes fourth when it
+  // holds the rest; a leader holding at least q is its own quantile whatever the speeds.
+  const std::vector<double> speed = {8.5, 11.0, 14.0};  // second, third, fourth at 31, 40, 50 km/h
+  CHECK(belief_quantile_mode(std::vector<double>{0.45, 0.55, 0.0}, speed, 0.5) == 1);
+  CHECK(belief_quantile_mode(std::vector<double>{0.0, 0.55, 0.45}, speed, 0.5) == 1);
+  CHECK(belief_quantile_mode(std::vector<double>{0.0, 0.55, 0.45}, speed, 0.6) == 2);
+  CHECK(belief_quantile_mode(std::vector<double>{0.35, 0.65, 0.0}, speed, 0.6) == 1);
+  // Modes of one speed (negligible ones carry the leader's history) count as one, named by its leader.
+  CHECK(belief_quantile_mode(std::vector<double>{0.3, 0.31, 0.33, 0.06},
+                             std::vector<double>{8.5, 11.0, 11.0, 14.0}, 0.6) == 2);
+  CHECK(belief_quantile_mode(std::vector<double>{}, std::vector<double>{}, 0.6) == -1);
+}
+
 TEST_CASE("synth: a cold start without GPS reports no speed until it knows, then a car at rest") {
   // The daemon starts in an underground car park: no fix and, for the first moments, no frequency track.
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
