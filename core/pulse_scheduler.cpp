@@ -80,11 +80,20 @@ PulseEdge PulseScheduler::next_edge() const noexcept {
 }
 
 PulseEdge PulseScheduler::pop_due(std::int64_t t_ns) noexcept {
+  return commit(t_ns, PulseEdge::kNever);
+}
+
+PulseEdge PulseScheduler::emit_due(std::int64_t now_ns) noexcept {
+  return commit(now_ns, now_ns);
+}
+
+PulseEdge PulseScheduler::commit(std::int64_t t_ns, std::int64_t made_ns) noexcept {
   const PulseEdge e = next_edge();
   if (e.kind == EdgeKind::kNone || e.t_ns > t_ns) return {};
+  const std::int64_t made = std::max(e.t_ns, made_ns == PulseEdge::kNever ? e.t_ns : made_ns);
   if (e.kind == EdgeKind::kFall) {
     high_ = false;
-    last_fall_ns_ = e.t_ns;
+    last_fall_ns_ = made;
     fall_ns_ = PulseEdge::kNever;
     return e;
   }
@@ -92,13 +101,13 @@ PulseEdge PulseScheduler::pop_due(std::int64_t t_ns) noexcept {
   owed_ -= 1.0;
   ++pulses_;
   high_ = true;
-  last_rise_ns_ = e.t_ns;
+  last_rise_ns_ = made;
   // The width is fixed at the rise: a speed change while high moves later pulses, never this fall.
   const double width_s =
       config_.pulse_width_s > 0
           ? config_.pulse_width_s
           : config_.duty / std::max(freq_ > 0 ? freq_ : config_.max_freq_hz, config_.min_freq_hz);
-  fall_ns_ = e.t_ns + static_cast<std::int64_t>(std::llround(width_s * kNsPerS));
+  fall_ns_ = made + static_cast<std::int64_t>(std::llround(width_s * kNsPerS));
   return e;
 }
 

@@ -45,8 +45,15 @@ class PulseScheduler {
   // The next pending edge for the current speed; kind kNone and t_ns kNever if none (stopped, low).
   // Its time may lie before the caller's "now" if the caller is late: emit it at once.
   [[nodiscard]] PulseEdge next_edge() const noexcept;
-  // If the next edge is due at or before t_ns, commits and returns it; otherwise returns kNone.
+  // If the next edge is due at or before t_ns, commits and returns it; otherwise returns kNone. The edge
+  // counts as made at its scheduled time: a simulation's clock, or a caller whose line only keeps count.
   PulseEdge pop_due(std::int64_t t_ns) noexcept;
+  // The same for a caller writing the edge on a line at now_ns: a late edge counts as made when it is
+  // written, so a woken-late thread does not write a rise and its fall back to back (a pulse microseconds
+  // wide, which a counter misses) nor the next rise straight after a fall; the pulse keeps its width and
+  // the low time of max_freq_hz on the line. The count still follows the scheduled phase, so the pulses owed
+  // are caught up at up to max_freq_hz. Returns the edge with its scheduled time (how late it was).
+  PulseEdge emit_due(std::int64_t now_ns) noexcept;
 
   [[nodiscard]] double frequency_hz() const noexcept { return freq_; }     // after clamping / stopping
   [[nodiscard]] double speed_mps() const noexcept { return speed_; }       // as last set
@@ -59,6 +66,7 @@ class PulseScheduler {
  private:
   void advance_to(std::int64_t t_ns) noexcept;  // integrates owed_ from t_ to t_ns at freq_
   [[nodiscard]] std::int64_t next_rise_ns() const noexcept;
+  PulseEdge commit(std::int64_t t_ns, std::int64_t made_ns) noexcept;  // made_ns: when the line shows it
 
   PulseConfig config_;
   double min_spacing_ns_;    // 1 / max_freq_hz: rises never come closer, even when catching up

@@ -64,8 +64,11 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
   double applied = 0.0;
   bool high = false;
   std::int64_t max_late = 0;
+  // Each edge is committed at the instant it is written (read again after every write), so one woken late
+  // writes the overdue edge and sleeps until the next: a pulse keeps its width on the line.
   auto emit_due = [&](std::int64_t now) noexcept {
-    for (PulseEdge e = sched.pop_due(now); e.kind != EdgeKind::kNone; e = sched.pop_due(now)) {
+    for (PulseEdge e = sched.emit_due(now); e.kind != EdgeKind::kNone;
+         e = sched.emit_due(now = monotonic_ns())) {
       if (e.kind == EdgeKind::kRise) {
         output_.rise();
         high = true;

@@ -238,6 +238,50 @@ TEST_CASE("pulse: a late caller's catch-up rises keep the low time of the maximu
   CHECK(rises >= 5);
 }
 
+TEST_CASE("pulse: edges written late keep their width and low time on the line, and the count catches up") {
+  // The pulse thread's loop in simulated time: it sleeps until the next edge and writes each edge at the
+  // instant it wakes, 20-120 us late, and once stalls for 30 ms (a busy machine without real-time
+  // priority). 1 pulse per metre at 90 m/s (90 Hz), fixed width 2 ms, max 200 Hz: on the line every pulse
+  // must stay high 2 ms and low at least the 3 ms of max_freq_hz; a rise and its fall written back to back
+  // after the stall would be a pulse microseconds wide, which a counter misses.
+  for (const double width_s : {0.002, 0.0}) {  // fixed width, and a duty cycle of 0.5
+    INFO("pulse width " << width_s << " s");
+    PulseConfig c;
+    c.pulses_per_km = 1000.0;
+    c.pulse_width_s = width_s;
+    c.max_freq_hz = 200.0;
+    PulseScheduler s(c, 0);
+    s.set_speed(0, 90.0);
+    std::mt19937 rng(3);
+    std::uniform_int_distribution<std::int64_t> wake_late(20'000, 120'000);
+    std::int64_t now = 0, rise_at = -kS, fall_at = -kS;
+    std::uint64_t rises = 0;
+    bool stalled = false;
+    const double min_high_ns = width_s > 0 ? width_s * 1e9 : 0.5 / 200.0 * 1e9;
+    const double min_low_ns = width_s > 0 ? (1.0 / 200.0 - width_s) * 1e9 : 0.5 / 200.0 * 1e9;
+    while (now < 2 * kS) {
+      for (PulseEdge e = s.emit_due(now); e.kind != EdgeKind::kNone; e = s.emit_due(now)) {
+        INFO("edge scheduled at " << e.t_ns << " ns, written at " << now << " ns");
+        if (e.kind == EdgeKind::kRise) {
+          CHECK(static_cast<double>(now - fall_at) >= min_low_ns - 1.0);
+          CHECK(now - rise_at >= 5'000'000 - 1);  // never faster than max_freq_hz on the line
+          rise_at = now;
+          ++rises;
+        } else {
+          CHECK(static_cast<double>(now - rise_at) >= min_high_ns - 1.0);
+          fall_at = now;
+        }
+        now += 2'000;  // the write itself
+      }
+      now = std::max(now, s.next_edge().t_ns) + wake_late(rng);
+      if (!stalled && now > 500'000'000) now += 30'000'000, stalled = true;
+    }
+    // 180 m in 2 s: the pulses owed after the stall are paid out at up to 200 Hz.
+    CHECK(rises >= 179);
+    CHECK(rises <= 181);
+  }
+}
+
 TEST_CASE("pulse: a fixed-width pulse high when the speed rises keeps its width") {
   // Only a duty-cycle pulse is brought forward by a speed-up; a fixed width is what the receiving
   // counter was set up for, and a shorter pulse may be missed by it.
