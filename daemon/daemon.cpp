@@ -82,11 +82,14 @@ struct Daemon::Impl {
   std::filesystem::path state_dir;
   std::filesystem::path model_path;
   std::filesystem::path store_path;
+  // Members are destroyed in reverse order: the state directory's lock outlives the retrainer and the
+  // pipeline (which may still save into it), and the control server goes first (its thread reads all of
+  // these), also when run() leaves by an exception before its orderly stop.
+  std::optional<DirectoryLock> state_lock;
   ModelHolder model;
   TrainingStore store;
   Retrainer retrainer;
   std::optional<Pipeline> pipeline;
-  std::optional<ControlServer> control;
   Clock::time_point started = Clock::now();
   std::uint64_t pairs_at_last_save = 0;
 
@@ -101,7 +104,6 @@ struct Daemon::Impl {
   static constexpr int kMaxSetAside = 100;  // copies of a file kept as NAME.corrupt[.N]
   [[nodiscard]] std::string set_aside(const std::filesystem::path& path);
 
-  std::optional<DirectoryLock> state_lock;
   // False when another gearpulsed keeps its state in state_dir.
   [[nodiscard]] bool load_state();
   bool save_store(const char* why) noexcept;  // false when it failed (logged, and in status)
@@ -128,8 +130,9 @@ struct Daemon::Impl {
   std::string status_line();
   void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
   LogLimiter limiter;
-  bool gps_connected = false;           // as log_changes() last said
-  std::uint64_t gps_failures_seen = 0;  // GPS connection failures log_changes() has looked at
+  bool gps_connected = false;            // as log_changes() last said
+  std::uint64_t gps_failures_seen = 0;   // GPS connection failures log_changes() has looked at
+  std::optional<ControlServer> control;  // last: destroyed first (above)
 };
 
 // The journal gets one line per change of state (GPS lost or back, source switch, output errors), and
@@ -330,8 +333,13 @@ bool Daemon::Impl::load_state() {
     else
       spdlog::info("training: no stored pairs yet ({} will hold them)", store_path.string());
   } catch (const std::exception& e) {
-    spdlog::error("training: cannot read {}: {}; starting with an empty training store", store_path.string(),
-                  e.what());
+    // Set aside as a corrupt store is (a file another user installed with mode 0600, a read error): the
+    // store's saves replace the file whole, and would otherwise put the few pairs of this run over the
+    // history it holds.
+    const std::string where = set_aside(store_path);
+    spdlog::error("training: cannot read {}: {}; starting with an empty training store (the file is {})",
+                  store_path.string(), e.what(), where);
+    note_state_problem("training.bin unreadable: " + std::string(e.what()) + " (" + where + ")");
   }
   recover_journal();
   // Pairs stored after the model's last fit are new to it, whichever run gathered them.

@@ -462,6 +462,21 @@ TEST_CASE("daemon: a model.json set aside takes a name not yet taken, and an unr
   CHECK_FALSE(std::filesystem::exists(dir / "state/model.json"));
 }
 
+// A training.bin that cannot be read (a read error, or a file another user installed with mode 0600; here a
+// directory) is set aside as a corrupt one is: the store's saves replace the file whole, and the few pairs
+// of this run would otherwise take the place of the history it holds.
+TEST_CASE("daemon: an unreadable training.bin is set aside, not saved over") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state/training.bin/history");  // cannot be read as a file
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  REQUIRE(status_of_one_run(dir).is_object());
+  const std::string log = read_text(dir / "log.txt");
+  INFO(log);
+  CHECK(log.find("training: cannot read") != std::string::npos);
+  CHECK(log.find("kept as " + (dir / "state/training.bin.corrupt").string()) != std::string::npos);
+  CHECK(std::filesystem::is_directory(dir / "state/training.bin.corrupt/history"));
+}
+
 // Copies are kept up to a hundred (NAME.corrupt, then .corrupt.1 to .corrupt.99): the hundredth
 // corruption still has its evidence kept, under the last name.
 TEST_CASE("daemon: a corrupt model.json with 99 copies set aside already is kept as the hundredth") {
