@@ -251,25 +251,35 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
   ac.realtime = a.realtime;
   ac.rt_priority = a.rt_priority;
   ac.lock_memory = a.realtime;
-  auto new_ring =
-      std::make_unique<SpscRing<float>>(static_cast<std::size_t>(std::max(1.0, a.ring_seconds * a.rate)));
+  std::unique_ptr<SpscRing<float>> new_ring;
   std::unique_ptr<AlsaCapture> new_capture;
   try {
+    new_ring =
+        std::make_unique<SpscRing<float>>(static_cast<std::size_t>(std::max(1.0, a.ring_seconds * a.rate)));
     new_capture = std::make_unique<AlsaCapture>(ac, *new_ring);
   } catch (const std::exception& e) {
     std::lock_guard lock(audio_mutex);
     audio_error = e.what();
     return false;
   }
-  const gearpulse::TrackerConfig tc = tracker_config_of(config.tracker, new_capture->rate());
-  std::string error;
-  tracker = SlidingDftTracker::create(tc, error);
-  if (!tracker) {
+  // Also the tracker's tables and the capture thread may not be had (memory, a thread limit): tried again
+  // as a device that will not open is, never an exception out of the tracker's thread.
+  try {
+    const gearpulse::TrackerConfig tc = tracker_config_of(config.tracker, new_capture->rate());
+    std::string error;
+    tracker = SlidingDftTracker::create(tc, error);
+    if (!tracker) {
+      std::lock_guard lock(audio_mutex);
+      audio_error = "tracker cannot run on " + new_capture->describe() + ": " + error;
+      return false;
+    }
+    new_capture->start();
+  } catch (const std::exception& e) {
+    tracker.reset();
     std::lock_guard lock(audio_mutex);
-    audio_error = "tracker cannot run on " + new_capture->describe() + ": " + error;
+    audio_error = std::string("cannot start the capture: ") + e.what();
     return false;
   }
-  new_capture->start();
   std::lock_guard lock(audio_mutex);
   ring = std::move(new_ring);
   capture = std::move(new_capture);

@@ -105,7 +105,7 @@ Retrainer::Status Retrainer::status() const {
 bool Retrainer::retrain_now() {
   const std::uint64_t generation = model_.generation();
   const std::size_t fresh = store_.new_samples();
-  const std::vector<Sample> samples = store_.snapshot();
+  std::vector<Sample> samples;
   bool no_ladder_before = false;
   {
     std::lock_guard lock(mutex_);
@@ -118,6 +118,7 @@ bool Retrainer::retrain_now() {
   bool changed = false;
   bool no_ladder = false;
   try {
+    samples = store_.snapshot();  // up to max_samples pairs: a copy that may not find the memory
     if (samples.empty()) {
       result = "no training samples yet";
     } else {
@@ -189,6 +190,11 @@ bool Retrainer::retrain_now() {
     result = std::string("fit failed: ") + e.what() + "; model kept";
     spdlog::error("retrain: {}", result);
     store_.mark_trained(fresh);
+  } catch (...) {
+    // Not a std::exception (a fitter's own type): the retrainer's thread must not end the daemon for it.
+    result = "fit failed: an exception of unknown type; model kept";
+    spdlog::error("retrain: {}", result);
+    store_.mark_trained(fresh);
   }
   std::lock_guard lock(mutex_);
   status_.busy = false;
@@ -224,8 +230,15 @@ void Retrainer::run() noexcept {
     first = false;
     if (!forced && !enough) continue;
     lock.unlock();
-    retrain_now();
+    try {
+      retrain_now();
+    } catch (...) {
+      // Only the bookkeeping around a failed fit can get here (no memory left to say why): the model is
+      // kept, and the next interval tries again.
+      spdlog::error("retrain: failed without a report (out of memory?); model kept");
+    }
     lock.lock();
+    status_.busy = false;
   }
 }
 

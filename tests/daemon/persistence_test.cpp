@@ -907,6 +907,13 @@ TEST_CASE("daemon: the fit runs in a thread of its own at low priority, the rest
                     {std::chrono::duration<double>(600.0), 1});
   CHECK_FALSE(failing.retrain_now());
   CHECK(failing.status().last_result.find("no memory") != std::string::npos);
+  // Nor may a fit that throws something other than a std::exception end the retrainer's thread (and with
+  // it the daemon): it is a failed fit, the model kept.
+  Retrainer odd(store, model, dir / "model.json", [](std::span<const Sample>) -> GearModel { throw 42; },
+                {std::chrono::duration<double>(600.0), 1});
+  CHECK_FALSE(odd.retrain_now());
+  CHECK(odd.status().last_result.find("fit failed") != std::string::npos);
+  CHECK_FALSE(odd.status().busy);
 }
 
 TEST_CASE("daemon: a fit on few samples does not replace a model learned on many") {
