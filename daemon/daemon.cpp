@@ -553,7 +553,10 @@ nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
     const auto it = request.find("confirm");
     if (it == request.end() || !it->is_boolean() || !it->get<bool>())
       throw ControlError("reset-model forgets the learned gears; send \"confirm\": true to do it");
-    const bool keep = request.value("keep_samples", false);
+    const auto keep_it = request.find("keep_samples");
+    if (keep_it != request.end() && !keep_it->is_boolean())
+      throw ControlError("reset-model: \"keep_samples\" is true or false");
+    const bool keep = keep_it != request.end() && keep_it->get<bool>();
     {
       // A fit running now finds the generation changed and discards its result.
       const auto lock = model.lock_writes();

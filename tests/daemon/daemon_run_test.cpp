@@ -158,6 +158,10 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(refused["ok"] == false);
   CHECK(refused["error"].get<std::string>().find("confirm") != std::string::npos);
   CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":false})")["ok"] == false);
+  // A keep_samples that is not a boolean is said so, before anything is forgotten.
+  const json odd = ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true,"keep_samples":"yes"})");
+  CHECK(odd["ok"] == false);
+  CHECK(odd["error"].get<std::string>().find("keep_samples") != std::string::npos);
   CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true})")["ok"] == true);
   CHECK(ask(dir, R"({"v":1,"cmd":"nonsense"})")["ok"] == false);
   CHECK(ask(dir, R"({"v":1,"cmd":"gears"})")["model_state"] == "learning");
