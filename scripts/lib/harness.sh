@@ -237,18 +237,20 @@ hs_restart() {
 
 # The daemon's resources so far: peak and current resident memory, CPU of all its threads over its life.
 hs_resources() {
-  local pid ticks start_ticks uptime utime stime hwm rss
+  local pid ticks start_ticks uptime utime stime hwm rss peak
   pid=$(hs_pid gearpulsed) || return 1
   ticks=$(getconf CLK_TCK)
   read -r utime stime start_ticks < <(awk '{print $14, $15, $22}' "/proc/$pid/stat")
   uptime=$(awk '{print $1}' /proc/uptime)
   hwm=$(awk '/^VmHWM/ {print $2}' "/proc/$pid/status")
   rss=$(awk '/^VmRSS/ {print $2}' "/proc/$pid/status")
+  # Address space: what realtime memory locking counts against the unit's LimitMEMLOCK.
+  peak=$(awk '/^VmPeak/ {print $2}' "/proc/$pid/status")
   awk -v u="$utime" -v s="$stime" -v st="$start_ticks" -v up="$uptime" -v hz="$ticks" -v hwm="$hwm" \
-    -v rss="$rss" 'BEGIN {
+    -v rss="$rss" -v peak="$peak" 'BEGIN {
       wall = up - st / hz
-      printf "gearpulsed: VmHWM %.1f MiB, VmRSS %.1f MiB, CPU %.2f %% of one core (user %.2f s + system %.2f s over %.0f s)\n",
-        hwm / 1024, rss / 1024, 100 * (u + s) / hz / wall, u / hz, s / hz, wall }'
+      printf "gearpulsed: VmHWM %.1f MiB, VmRSS %.1f MiB, CPU %.2f %% of one core (user %.2f s + system %.2f s over %.0f s), VmPeak %.0f MiB\n",
+        hwm / 1024, rss / 1024, 100 * (u + s) / hz / wall, u / hz, s / hz, wall, peak / 1024 }'
 }
 
 hs_status() { "$HS_CTL" --socket "$HS_SOCKET" status --json; }
