@@ -534,16 +534,6 @@ int SpeedSynthesizer::map_mode() const noexcept {
   return best;
 }
 
-// The mode whose speed carries an outage's output: the belief's quantile output_quantile by speed.
-int SpeedSynthesizer::output_mode() const noexcept {
-  const auto n = static_cast<std::size_t>(gears_ + 2);
-  ModeArray speed{};
-  for (std::size_t j = 0; j < n; ++j)
-    speed[j] = track_[j].v;
-  const int out = belief_quantile_mode({prob_.data(), n}, {speed.data(), n}, tuning_.output_quantile);
-  return out < 0 ? mode_ : out;
-}
-
 // Mode changes over dt out of mode `from`, as rates per second: a gear is left for the clutch or for a
 // neighbouring gear (a quick shift between two samples; up more likely at high revs, down at low revs);
 // the clutch is left for any gear in proportion to its use, or, standing, for moving off; moving off ends
@@ -987,15 +977,17 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
     return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
   }
   roll_span_ = -1.0;  // a flat stretch of revs is one GPS saw whole
-  const int out = output_mode();
-  // Each mode's speed as the output counts it: a declutched or moving-off history slower than walking pace
-  // is at rest.
-  ModeArray mode_speed{};
+  // Each mode's speed as its history has it (which orders the belief for the output's mode) and as the
+  // output counts it: a declutched or moving-off history slower than walking pace is at rest.
+  ModeArray track_speed{}, mode_speed{};
   for (int j = 0; j < modes; ++j) {
+    track_speed[j] = track_[j].v;
     const double v = std::max(track_[j].v, 0.0);
     mode_speed[j] = is_gear(j) || v >= tuning_.stationary_speed ? v : 0.0;
   }
   const auto n = static_cast<std::size_t>(modes);
+  int out = belief_quantile_mode({prob_.data(), n}, {track_speed.data(), n}, tuning_.output_quantile);
+  if (out < 0) out = mode_;
   const double speed = (1.0 - tuning_.hedge_share) * std::max(track_[out].v, 0.0) +
                        tuning_.hedge_share * contended_speed({prob_.data(), n}, {mode_speed.data(), n});
   if (is_gear(out)) return {speed, out, SpeedSource::kEngine};

@@ -196,7 +196,6 @@ class SpeedSynthesizer {
   [[nodiscard]] double downshift_factor(int gear, double freq, bool long_step) const noexcept;
   void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
-  [[nodiscard]] int output_mode() const noexcept;
   void learn(double dt, double gps, double freq, bool gps_new) noexcept;
   void normalise() noexcept;
 
