@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <string_view>
 
@@ -12,6 +13,7 @@
 #include "daemon/config.hpp"
 #include "daemon/daemon.hpp"
 #include "daemon/fitter.hpp"
+#include "daemon/log_queue.hpp"
 
 namespace {
 
@@ -71,10 +73,11 @@ int main(int argc, char** argv) {
     return 0;
   }
 
-  // journald stamps every line itself; keep level and text only.
-  auto logger = spdlog::stderr_color_mt("gearpulsed");
-  logger->set_pattern("%^%l%$: %v");
-  spdlog::set_default_logger(logger);
+  // journald stamps every line itself; keep level and text only. Lines reach stderr through a queue of
+  // their own, so no thread of the daemon waits for the journal (LogQueue).
+  const gearpulse::daemon::LogQueue log("gearpulsed",
+                                        std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
+  spdlog::default_logger()->set_pattern("%^%l%$: %v");
   gearpulse::daemon::apply_log_level(config.log.level);
   spdlog::info("gearpulsed starting with {}", config_path);
 
