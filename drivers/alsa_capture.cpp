@@ -213,6 +213,7 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.frozen = frozen_.load(std::memory_order_relaxed);
   s.last_error = last_error_.load(std::memory_order_relaxed);
   s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
+  s.fifo = fifo_.load(std::memory_order_relaxed);
   s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
   s.running = running_.load(std::memory_order_relaxed);
   s.streaming = streaming_.load(std::memory_order_relaxed);
@@ -268,6 +269,7 @@ bool AlsaCapture::frame_time(std::uint64_t index, std::int64_t& t_ns) const noex
 void AlsaCapture::run() noexcept {
   const RealtimeResult rt = make_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
   realtime_ok_.store(rt.fifo);
+  fifo_.store(rt.fifo);
   memory_locked_.store(rt.memory_locked);
   snd_pcm_status_t* status = nullptr;
   if (::snd_pcm_status_malloc(&status) < 0) {
@@ -361,6 +363,9 @@ void AlsaCapture::run() noexcept {
 
   while (!stopping()) {
     if (!pcm) {
+      // A lost device is reopened under the normal policy (AlsaCaptureStats::fifo).
+      if (fifo_.load(std::memory_order_relaxed) && set_fifo(false, 0))
+        fifo_.store(false, std::memory_order_relaxed);
       pause(backoff);
       if (stopping()) break;
       Negotiated got;
@@ -375,6 +380,7 @@ void AlsaCapture::run() noexcept {
         continue;
       }
       pcm = fresh;
+      if (rt.fifo) fifo_.store(set_fifo(true, config_.rt_priority), std::memory_order_relaxed);
       last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
       streaming_.store(true, std::memory_order_relaxed);
       reopens_.fetch_add(1, std::memory_order_relaxed);

@@ -70,7 +70,11 @@ struct AlsaCaptureStats {
   std::uint64_t clock_resets = 0;  // anchors placed after a discontinuity or a large clock error
   std::uint64_t repeated = 0;      // frames of periods identical to the period before (not pushed)
   int last_error = 0;              // last negative ALSA error code seen, 0 if none
-  bool realtime_ok = false;
+  bool realtime_ok = false;        // SCHED_FIFO granted at start
+  // The capture thread runs under SCHED_FIFO now: not while it reopens a lost device, since opening one
+  // (ALSA parses its configuration and allocates) is no real-time work, and at the FIFO priority it would
+  // hold the tracker off its core at every attempt.
+  bool fifo = false;
   bool memory_locked = false;
   bool running = false;    // the capture thread runs
   bool streaming = false;  // ... and the device is open and capturing (false while it is lost and reopened)
@@ -143,7 +147,7 @@ class AlsaCapture final : public AudioSource {
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
       clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
-  std::atomic<bool> realtime_ok_{false}, memory_locked_{false}, frozen_{false};
+  std::atomic<bool> realtime_ok_{false}, fifo_{false}, memory_locked_{false}, frozen_{false};
   std::atomic<std::int64_t> last_frames_ns_{0};  // monotonic time of the last frames read (or of the start)
 };
 

@@ -17,4 +17,10 @@ RealtimeResult make_realtime(const RealtimeRequest& request) noexcept {
   return result;
 }
 
+bool set_fifo(bool fifo, int priority) noexcept {
+  sched_param sp{};
+  sp.sched_priority = fifo ? priority : 0;
+  return ::pthread_setschedparam(::pthread_self(), fifo ? SCHED_FIFO : SCHED_OTHER, &sp) == 0;
+}
+
 }  // namespace gearpulse

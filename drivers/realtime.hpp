@@ -18,4 +18,7 @@ struct RealtimeResult {
 // Applies what `request` asks for; what was not asked for reads false.
 RealtimeResult make_realtime(const RealtimeRequest& request) noexcept;
 
+// Puts the calling thread under SCHED_FIFO at `priority`, or back under the normal policy; true if done.
+bool set_fifo(bool fifo, int priority) noexcept;
+
 }  // namespace gearpulse
