@@ -279,7 +279,15 @@ Config from_table(const toml::table& root, const std::string& file, const std::f
     for (auto s : kSections)
       known = known || key.str() == s;
     const auto& region = key.source().begin.line > 0 ? key.source() : node.source();
-    if (!known) throw ConfigError(where(file, region) + ": " + std::string(key.str()) + ": unknown section");
+    if (!known) {
+      std::string list;
+      for (auto s : kSections)
+        list += (list.empty() ? "[" : ", [") + std::string(s) + "]";
+      throw ConfigError(where(file, region) + ": " + std::string(key.str()) +
+                        (node.is_table()
+                             ? ": unknown section (the sections are " + list + ")"
+                             : ": a key outside any section (each key belongs under one of " + list + ")"));
+    }
     if (!node.is_table())
       throw ConfigError(where(file, region) + ": " + std::string(key.str()) + ": expected a [section]");
   }

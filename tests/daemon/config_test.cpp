@@ -81,9 +81,13 @@ TEST_CASE("config: an unknown key names file line and key") {
 }
 
 TEST_CASE("config: an unknown section names file line and section") {
-  CHECK(error_of("[audio]\nrate = 48000\n[outptu]\nkind = \"pty\"\n") ==
-        "test.toml:3: outptu: unknown section");
-  CHECK(error_of("verbose = true\n") == "test.toml:1: verbose: unknown section");
+  CHECK(
+      error_of("[audio]\nrate = 48000\n[outptu]\nkind = \"pty\"\n") ==
+      "test.toml:3: outptu: unknown section (the sections are [audio], [tracker], [gps], [output], [model], "
+      "[control], [log])");
+  CHECK(error_of("verbose = true\n") ==
+        "test.toml:1: verbose: a key outside any section (each key belongs under one of [audio], [tracker], "
+        "[gps], [output], [model], [control], [log])");
   CHECK(error_of("audio = 5\n") == "test.toml:1: audio: expected a [section]");
 }
 
