@@ -19,7 +19,7 @@ struct PulseThreadConfig {
   std::chrono::microseconds speed_poll{5000};  // longest wait before a new target speed is applied
   bool realtime = false;                       // request SCHED_FIFO (failure is reported, not fatal)
   int rt_priority = 80;
-  bool lock_memory = false;  // mlockall(MCL_CURRENT | MCL_FUTURE) (failure reported)
+  bool lock_memory = false;  // mlockall, as make_realtime does (failure reported)
 };
 
 // One rising edge as planned and as done, for benches and tests.

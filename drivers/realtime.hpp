@@ -1,13 +1,14 @@
 #pragma once
 // Real-time set-up for the calling thread, shared by the capture and pulse threads: SCHED_FIFO at a
-// priority, and all memory locked so a page fault never delays a sample or an edge. Both usually need
+// priority, and memory locked as it is touched so a page once used is never paged out to delay a sample
+// or an edge (the calling thread's stack is touched at once). Both usually need
 // root or CAP_SYS_NICE / CAP_IPC_LOCK; failures are reported, never fatal.
 namespace gearpulse {
 
 struct RealtimeRequest {
   bool fifo = false;         // SCHED_FIFO for the calling thread
   int priority = 70;         // 1..99
-  bool lock_memory = false;  // mlockall(MCL_CURRENT | MCL_FUTURE), process-wide
+  bool lock_memory = false;  // mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT), process-wide
 };
 
 struct RealtimeResult {

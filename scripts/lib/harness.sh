@@ -15,7 +15,9 @@
 #   harness.sh restart WORK      gearpulsed again (with a fresh feeder and reader)
 #   harness.sh stop WORK         stops everything it started
 # Settings (environment, read by prepare): HS_RATE (48000), HS_PERIOD (1024 frames), HS_PPK (2485),
-# HS_TRAIN_SEED (11), HS_TRAIN_DURATION (2400 s), HS_VEHICLE (bmw-520i), HS_LOG_LEVEL (info).
+# HS_TRAIN_SEED (11), HS_TRAIN_DURATION (2400 s), HS_VEHICLE (bmw-520i), HS_LOG_LEVEL (info),
+# HS_REALTIME (false: [audio] realtime, SCHED_FIFO threads and locked memory; true needs root or
+# CAP_SYS_NICE and CAP_IPC_LOCK).
 
 hs_die() {
   echo "harness: $*" >&2
@@ -50,6 +52,7 @@ hs_save_env() {
     echo "HS_PPK='$HS_PPK'"
     echo "HS_PORT='${HS_PORT:-}'"
     echo "HS_LOG_LEVEL='$HS_LOG_LEVEL'"
+    echo "HS_REALTIME='$HS_REALTIME'"
   } >"$HS_WORK/harness.env"
 }
 
@@ -61,6 +64,7 @@ hs_defaults() {
   HS_TRAIN_DURATION=${HS_TRAIN_DURATION:-2400}
   HS_VEHICLE=${HS_VEHICLE:-bmw-520i}
   HS_LOG_LEVEL=${HS_LOG_LEVEL:-info}
+  HS_REALTIME=${HS_REALTIME:-false}  # [audio] realtime: SCHED_FIFO threads and locked memory
 }
 
 hs_check_tools() {
@@ -115,6 +119,7 @@ hs_write_config() {
 device = "replay"
 rate = $HS_RATE
 period_frames = $HS_PERIOD
+realtime = $HS_REALTIME
 [gps]
 host = "127.0.0.1"
 port = $HS_PORT
@@ -237,7 +242,7 @@ hs_restart() {
 
 # The daemon's resources so far: peak and current resident memory, CPU of all its threads over its life.
 hs_resources() {
-  local pid ticks start_ticks uptime utime stime hwm rss peak
+  local pid ticks start_ticks uptime utime stime hwm rss peak lck
   pid=$(hs_pid gearpulsed) || return 1
   ticks=$(getconf CLK_TCK)
   read -r utime stime start_ticks < <(awk '{print $14, $15, $22}' "/proc/$pid/stat")
@@ -246,11 +251,12 @@ hs_resources() {
   rss=$(awk '/^VmRSS/ {print $2}' "/proc/$pid/status")
   # Address space: what realtime memory locking counts against the unit's LimitMEMLOCK.
   peak=$(awk '/^VmPeak/ {print $2}' "/proc/$pid/status")
+  lck=$(awk '/^VmLck/ {print $2}' "/proc/$pid/status")
   awk -v u="$utime" -v s="$stime" -v st="$start_ticks" -v up="$uptime" -v hz="$ticks" -v hwm="$hwm" \
-    -v rss="$rss" -v peak="$peak" 'BEGIN {
+    -v rss="$rss" -v peak="$peak" -v lck="$lck" -v rt="${HS_REALTIME:-false}" 'BEGIN {
       wall = up - st / hz
-      printf "gearpulsed: VmHWM %.1f MiB, VmRSS %.1f MiB, CPU %.2f %% of one core (user %.2f s + system %.2f s over %.0f s), VmPeak %.0f MiB\n",
-        hwm / 1024, rss / 1024, 100 * (u + s) / hz / wall, u / hz, s / hz, wall, peak / 1024 }'
+      printf "gearpulsed: VmHWM %.1f MiB, VmRSS %.1f MiB, CPU %.2f %% of one core (user %.2f s + system %.2f s over %.0f s), VmPeak %.0f MiB, VmLck %.0f MiB (realtime = %s)\n",
+        hwm / 1024, rss / 1024, 100 * (u + s) / hz / wall, u / hz, s / hz, wall, peak / 1024, lck / 1024, rt }'
 }
 
 hs_status() { "$HS_CTL" --socket "$HS_SOCKET" status --json; }
