@@ -22,6 +22,7 @@
 #define GEARPULSE_SANITIZER_SHADOW 1
 #endif
 
+#ifndef GEARPULSE_SANITIZER_SHADOW
 namespace {
 
 // This process's resident memory, kB (VmRSS).
@@ -58,6 +59,7 @@ int locked_growth_mb() {
 }
 
 }  // namespace
+#endif
 
 TEST_CASE("realtime: locked memory is made resident as it is used, not every mapping at once") {
 #ifdef GEARPULSE_SANITIZER_SHADOW
