@@ -24,15 +24,26 @@ struct FileStamp {
 // The stamp of the file at `path`, or none when there is no file.
 [[nodiscard]] std::optional<FileStamp> stamp_of(const std::filesystem::path& path) noexcept;
 
+// The model is held under a mutex held only to copy or swap the pointer, not in a
+// std::atomic<std::shared_ptr>: libstdc++ 12's load() releases that type's internal lock with a relaxed
+// store, so a reader's read of the pointer is not ordered before the next store's write (ThreadSanitizer
+// reports it; on a weakly ordered CPU the reader could pair the new pointer with the old reference count).
 class ModelHolder {
  public:
-  [[nodiscard]] ModelPtr get() const noexcept { return model_.load(std::memory_order_acquire); }
+  [[nodiscard]] ModelPtr get() const noexcept {
+    const std::lock_guard lock(model_mutex_);
+    return model_;
+  }
   // Every set() starts a new generation. A writer that read the generation before long work (a fit)
   // installs its result only if it is unchanged, so a fit begun before a reset-model cannot bring the
   // forgotten model back.
   void set(ModelPtr model) noexcept {
-    model_.store(std::move(model), std::memory_order_release);
-    generation_.fetch_add(1, std::memory_order_acq_rel);
+    {
+      const std::lock_guard lock(model_mutex_);
+      model_.swap(model);
+      generation_.fetch_add(1, std::memory_order_acq_rel);
+    }
+    // The model replaced (in `model`) is released here, outside the lock.
   }
   [[nodiscard]] std::uint64_t generation() const noexcept {
     return generation_.load(std::memory_order_acquire);
@@ -51,7 +62,8 @@ class ModelHolder {
 
  private:
   std::optional<FileStamp> file_stamp_;
-  std::atomic<ModelPtr> model_;
+  mutable std::mutex model_mutex_;
+  ModelPtr model_;
   std::atomic<std::uint64_t> generation_{0};
   std::mutex write_mutex_;
 };
