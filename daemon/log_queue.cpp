@@ -58,10 +58,10 @@ LogQueue::LogQueue(const char* name, std::shared_ptr<spdlog::sinks::sink> sink, 
 }
 
 LogQueue::~LogQueue() {
-  spdlog::set_default_logger(previous_);
-  // The pool's destructor queues its thread's end behind every waiting line and joins it. Lines queued
-  // still hold the logger (and so the sink), so this is the last use of either.
+  // The pool's destructor queues its thread's end behind every waiting line and joins it; the logger and
+  // its sinks are then released on this thread, after the queue's thread is gone.
   pool_.reset();
+  spdlog::set_default_logger(previous_);
 }
 
 std::uint64_t LogQueue::dropped() const {

@@ -21,7 +21,7 @@ class LogQueue {
   // waiting) to `sink`, for the life of this object.
   LogQueue(const char* name, std::shared_ptr<spdlog::sinks::sink> sink, std::size_t capacity = 1024);
   // Writes out every line still waiting (which waits for the sink), then puts the previous default logger
-  // back.
+  // back. No thread may log between the two (the daemon's have all ended by then).
   ~LogQueue();
   LogQueue(const LogQueue&) = delete;
   LogQueue& operator=(const LogQueue&) = delete;
