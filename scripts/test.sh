@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The one test command: installs what is missing, builds with warnings as errors, runs every test,
 # then again under AddressSanitizer+UndefinedBehaviorSanitizer, the threaded parts (the ring, capture,
-# gpsd client, pulse thread, log queue, control server, persistence and the in-process pipeline) under
-# ThreadSanitizer, and checks formatting. Exit status is non-zero if anything fails.
+# gpsd client, pulse thread, log queue, control server, persistence, the in-process pipeline and the
+# daemon's process) under ThreadSanitizer, and checks formatting. Exit status is non-zero if anything fails.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=$(nproc 2>/dev/null || echo 2)
@@ -30,11 +30,11 @@ ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:ha
 
 echo "== TSan: the threaded parts"
 # Every test of these files (ctest lists only the cases of the executables built, so the names' prefixes
-# select exactly them): about 1.5 minutes to build and 1.5 to run on 2 cores, -O1 as the ASan build.
+# select exactly them): about 2 minutes to build and 1.5 to run on 2 cores, -O1 as the ASan build.
 cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF >/dev/null
 cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
-  log_queue_test control_test persistence_test pipeline_test
+  log_queue_test control_test persistence_test pipeline_test gearpulsed gearpulsectl daemon_run_test
 TSAN_OPTIONS=halt_on_error=1 ctest --test-dir build-tsan --output-on-failure -j"$jobs" \
   -R "^(ring|alsa|gpsd|pulse|log queue|control|daemon|pipeline):"
 echo "== all tests passed"
