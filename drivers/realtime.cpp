@@ -24,11 +24,7 @@ void prefault_stack() noexcept {
 
 RealtimeResult make_realtime(const RealtimeRequest& request) noexcept {
   RealtimeResult result;
-  if (request.fifo) {
-    sched_param sp{};
-    sp.sched_priority = request.priority;
-    result.fifo = ::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp) == 0;
-  }
+  if (request.fifo) result.fifo = set_fifo(true, request.priority);
   if (request.lock_memory) {
     // Pages are locked as they are first touched (MCL_ONFAULT), not made resident all at once: every
     // thread's 8 MB stack and every reserved heap page would otherwise be (the demo drive's daemon held

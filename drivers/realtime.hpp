@@ -1,8 +1,8 @@
 #pragma once
 // Real-time set-up for the calling thread, shared by the capture and pulse threads: SCHED_FIFO at a
 // priority, and memory locked as it is touched so a page once used is never paged out to delay a sample
-// or an edge (the calling thread's stack is touched at once). Both usually need
-// root or CAP_SYS_NICE / CAP_IPC_LOCK; failures are reported, never fatal.
+// or an edge (the calling thread's stack is touched at once). Both usually need root or CAP_SYS_NICE /
+// CAP_IPC_LOCK; failures are reported, never fatal.
 namespace gearpulse {
 
 struct RealtimeRequest {
