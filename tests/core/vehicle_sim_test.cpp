@@ -194,3 +194,26 @@ TEST_CASE("sim: a cold engine idles high at the start and settles to its warm id
   options.warm_up = 0.0;
   CHECK_THROWS_AS(sim::simulate_drive(car, options), std::invalid_argument);
 }
+
+TEST_CASE("sim: braking drivers skip a gear down only when asked to") {
+  // Counts downshifts that skip a gear: the gear engaged after the clutch two or more below the one before.
+  const auto skips = [](double share) {
+    sim::DriveOptions options;
+    options.style = sim::DrivingStyle::kUrban;
+    options.duration = 1800.0;
+    options.dt = 0.1;
+    options.seed = 21;
+    options.skip_downshift = share;
+    const sim::Drive drive = sim::simulate_drive(sim::vehicle_preset("hatch-5"), options);
+    int last = 0, count = 0;
+    for (const sim::TruthSample& t : drive.truth) {
+      if (t.gear == 0) continue;
+      if (last > 0 && t.gear <= last - 2) ++count;
+      last = t.gear;
+    }
+    return count;
+  };
+  // Without the option a gear is skipped only when a coast ends in the gear its speed needs.
+  const int unasked = skips(0.0);
+  CHECK(skips(1.0) >= unasked + 5);
+}

@@ -116,7 +116,8 @@ class DriveSimulator {
         rng_(options.seed),
         route_(options.style, rng_, options.duration),
         cold_start_(options.cold_start),
-        warm_up_(options.warm_up) {
+        warm_up_(options.warm_up),
+        skip_downshift_(options.skip_downshift) {
     aggressiveness_ = uniform(0.4, 0.8);  // ordinary drivers, not launches at full throttle
     state_.f = warm_idle_at(0.0);
     stand_left_ = uniform(3.0, 10.0);
@@ -252,7 +253,12 @@ class DriveSimulator {
           }
         }
         if (g > 1 && s.f < veh_.downshift_freq * (stopping_ ? 0.75 : 0.95) && !(stopping_ && g <= 2)) {
-          start_shift(g - 1);
+          // Braking, some drivers skip a gear (4 -> 2, 5 -> 3) where the revs allow it.
+          const bool braking = stopping_ || a < -1.0;
+          const bool skip = braking && skip_downshift_ > 0.0 && g > 2 &&
+                            s.v / veh_.theta[g - 3] < 0.8 * veh_.max_freq &&
+                            uniform(0.0, 1.0) < skip_downshift_;
+          start_shift(skip ? g - 2 : g - 1);
         }
         break;
       }
@@ -386,6 +392,7 @@ class DriveSimulator {
   double slip_left_ = 1.5;
   double cold_start_ = 0.0;
   double warm_up_ = 1.0;  // set from DriveOptions
+  double skip_downshift_ = 0.0;
   double idle_wobble_ = 0.0;
   double jitter_ = 0.0;
   int shift_to_ = 1;

@@ -71,6 +71,9 @@ struct DriveOptions {
   // falls back with time constant warm_up (s). 0 = the engine is warm from the start.
   double cold_start = 0.0;
   double warm_up = 150.0;
+  // Share of downshifts under braking that skip a gear (4 -> 2, 5 -> 3) where the lower gear's revs allow
+  // it. 0 keeps every downshift to the next gear (and the drive of a seed as it was).
+  double skip_downshift = 0.0;
 };
 
 struct Drive {

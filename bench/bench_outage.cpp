@@ -1,0 +1,405 @@
+// Outage bench: how far the synthesized speed carries a navigator through GPS outages, per outage. The
+// daemon's synthesis (SpeedSynthesizer) and the candidate IMM filter (ImmSpeedSynthesizer) run side by side
+// against three baselines computed in the same run with the same model:
+//   keep gear  - the gear engaged when GPS went (nearest theta), kept: theta x frequency;
+//   hold speed - the last GPS speed;
+//   hindsight  - the gear whose theta x frequency is nearest the true speed at every sample (a floor).
+// Headline: per-outage DISTANCE error (|distance synthesized - distance driven| / distance driven, outages
+// of at least 100 m), median and p95; beside it the speed error per sample (km/h), median and p95.
+// Outages: 60 s, the first 120 s into a drive, then every 180 s (bench/outage_protocol.hpp).
+//
+// Sets (never choose a design on the report set):
+//   real logs: the Etios (Carloop OBD) is the tuning car; Louisville (Torque, 1 Hz GPS) and the Swift are
+//     report cars. Each car: fit on some drives, replay the others (two folds).
+//   simulated: the 7 manual presets and random vehicles (sim::random_vehicle), every style, made harder than
+//     the road: skip downshifts under braking, GPS speed 0.5 s late, heavy-tailed (Student t, 3 degrees of
+//     freedom) speed and frequency noise, a cold engine. Cadences: the daemon's (frequency every 0.1 s, a 1
+//     Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app every 5 s. Seeds:
+//     tuning 1..N, report 1001..1000+N.
+// Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--real-only] [--sim-only] [DATA_DIR]
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <random>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bench/outage_protocol.hpp"
+#include "core/estimator.hpp"
+#include "core/imm_speed_synth.hpp"
+#include "core/sample_io.hpp"
+#include "core/speed_synth.hpp"
+#include "tools/sim/vehicle_sim.hpp"
+
+namespace fs = std::filesystem;
+namespace sim = gearpulse::sim;
+using gearpulse::GearModel;
+using gearpulse::Sample;
+using namespace gearpulse::bench;
+
+namespace {
+
+constexpr int kMethods = 5;
+constexpr const char* kMethodNames[kMethods] = {"gearpulse", "IMM cand.", "keep gear", "hold speed",
+                                                "hindsight"};
+std::FILE* g_trace = nullptr;           // --trace FILE: every outage row
+constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
+
+// One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
+// fix is new, the frequency, and the truth.
+struct Row {
+  double t = 0.0, gps = gearpulse::kMissing, freq = gearpulse::kMissing, truth = 0.0;
+  bool gps_new = true;
+};
+
+struct Results {
+  std::vector<double> dist[kMethods];   // per outage, %
+  std::vector<double> speed[kMethods];  // per sample, km/h
+  void append(const Results& o) {
+    for (int m = 0; m < kMethods; ++m) {
+      dist[m].insert(dist[m].end(), o.dist[m].begin(), o.dist[m].end());
+      speed[m].insert(speed[m].end(), o.speed[m].begin(), o.speed[m].end());
+    }
+  }
+};
+
+// Replays rows with outages; a row repeating an OBD logger's held rpm in an outage brings nothing (as
+// `gearpulse replay` does).
+void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Results& res) {
+  if (rows.empty()) return;
+  const auto shared = std::make_shared<const GearModel>(model);
+  gearpulse::SpeedSynthesizer synth(shared);
+  gearpulse::ImmSpeedSynthesizer imm(shared);
+  gearpulse::ImmLogReplayer imm_replayer(imm);
+  const double t0 = rows.front().t;
+  double last_gps = 0.0, last_freq = gearpulse::kMissing;
+  int kept_gear = -1;
+  double dist[kMethods + 1] = {};  // the methods', then the truth's
+  double value[kMethods] = {};
+  bool was_out = false;
+  gearpulse::SynthOutput o, o_imm;
+  gearpulse::LogReplayer replayer(synth);
+  const auto close_outage = [&] {
+    if (dist[kMethods] >= kMinDistance)
+      for (int m = 0; m < kMethods; ++m)
+        res.dist[m].push_back(100.0 * std::abs(dist[m] - dist[kMethods]) / dist[kMethods]);
+    std::fill(std::begin(dist), std::end(dist), 0.0);
+  };
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Row& r = rows[i];
+    const bool out = in_outage(r.t - t0);
+    const double gps = out ? gearpulse::kMissing : r.gps;
+    // Live, as the daemon steps at every hop; a log, as `gearpulse replay` does.
+    o = live ? synth.step(r.t, gps, r.freq, r.gps_new) : replayer.step({r.t, gps, r.freq});
+    o_imm = live ? imm.step(r.t, gps, r.freq, r.gps_new) : imm_replayer.step({r.t, gps, r.freq});
+    if (std::isfinite(r.freq)) last_freq = r.freq;
+    if (!out) {
+      if (was_out) close_outage();
+      was_out = false;
+      if (std::isfinite(gps)) {
+        last_gps = gps;
+        kept_gear = gps > 1.0 && std::isfinite(last_freq) ? nearest_gear(model, gps, last_freq) : -1;
+      }
+      continue;
+    }
+    was_out = true;
+    const double f = last_freq;
+    value[0] = o.speed;
+    value[1] = o_imm.speed;
+    value[2] = kept_gear >= 0 && std::isfinite(f) ? model.gears[static_cast<std::size_t>(kept_gear)].theta * f
+                                                  : last_gps;
+    value[3] = last_gps;
+    value[4] = std::isfinite(f) && !model.gears.empty() ? hindsight_speed(model, r.truth, f) : last_gps;
+    const double next_t = i + 1 < rows.size() ? rows[i + 1].t : r.t;
+    const double dt = std::min(next_t - r.t, 5.0);
+    for (int m = 0; m < kMethods; ++m) {
+      dist[m] += value[m] * dt;
+      res.speed[m].push_back(std::abs(value[m] - r.truth) * kMsToKmh);
+    }
+    dist[kMethods] += r.truth * dt;
+    if (g_trace !=
+        nullptr)  // t, truth, freq, then the candidate's gear, speed and belief, keep gear, hindsight
+      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%.2f,%.2f,%.2f,%.2f\n", r.t - t0, r.truth * kMsToKmh, f,
+                   o_imm.gear, o_imm.speed * kMsToKmh, value[2] * kMsToKmh, value[4] * kMsToKmh,
+                   imm.mode_probability(o_imm.gear));
+  }
+  if (was_out) close_outage();
+  if (std::getenv("GEARPULSE_BENCH_HABITS")) {
+    const auto& h = imm.habits();
+    std::fprintf(
+        stderr,
+        "habits: accel_sd %.2f coast %.2f/%.2f idle %.1f/%.2f revs %.2f/%.2f engage %.2f launch %.3f share",
+        h.accel_sd, h.coast_accel, h.coast_sd, h.idle, h.idle_sd, std::exp(h.revs_mean), h.revs_sd,
+        h.engage_rate, h.launch_rate);
+    for (double x : h.shift_share)
+      std::fprintf(stderr, " %.2f", x);
+    std::fprintf(stderr, " leave");
+    for (std::size_t g = 1; g <= model.gears.size(); ++g)
+      std::fprintf(stderr, " %.3f", h.leave_rate[g]);
+    std::fprintf(stderr, "\n");
+  }
+}
+
+void print_header() {
+  std::printf("%-34s %5s |", "", "outs");
+  for (const char* n : kMethodNames)
+    std::printf(" %-13s", n);
+  std::printf("| speed km/h:");
+  for (const char* n : kMethodNames)
+    std::printf(" %-12s", n);
+  std::printf("\n%-34s %5s |", "", "");
+  for (int m = 0; m < kMethods; ++m)
+    std::printf(" %-13s", "dist% med/p95");
+  std::printf("|            ");
+  for (int m = 0; m < kMethods; ++m)
+    std::printf(" %-12s", "med/p95");
+  std::printf("\n");
+}
+
+void print_line(const std::string& label, const Results& r) {
+  std::printf("%-34s %5zu |", label.c_str(), r.dist[0].size());
+  for (int m = 0; m < kMethods; ++m)
+    std::printf(" %5.2f/%6.2f ", quantile(r.dist[m], 0.5), quantile(r.dist[m], 0.95));
+  std::printf("|            ");
+  for (int m = 0; m < kMethods; ++m)
+    std::printf(" %5.2f/%5.2f ", quantile(r.speed[m], 0.5), quantile(r.speed[m], 0.95));
+  std::printf("\n");
+  std::fflush(stdout);
+}
+
+// ---- real logs ----
+
+std::vector<std::vector<Sample>> read_logs(const fs::path& dir, const std::string& prefix) {
+  std::vector<std::vector<Sample>> logs;
+  if (!fs::exists(dir)) return logs;
+  std::vector<fs::path> paths;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".csv" && e.path().filename().string().rfind(prefix, 0) == 0)
+      paths.push_back(e.path());
+  std::sort(paths.begin(), paths.end());
+  for (const auto& p : paths) {
+    std::ifstream in(p, std::ios::binary);
+    logs.push_back(gearpulse::read_samples(in, p.string()).samples);
+  }
+  return logs;
+}
+
+std::vector<Row> rows_of(const std::vector<Sample>& samples) {
+  std::vector<Row> rows;
+  for (const Sample& s : samples)
+    if (s.has_speed()) rows.push_back({s.t, s.speed, s.freq, s.speed, true});
+  return rows;
+}
+
+void fold(const std::vector<std::vector<Sample>>& train, const std::vector<std::vector<Sample>>& test,
+          Results& res) {
+  std::vector<Sample> pooled;
+  for (const auto& l : train)
+    pooled.insert(pooled.end(), l.begin(), l.end());
+  const GearModel model = gearpulse::fit_gear_model(pooled, {}).model;
+  for (const auto& l : test)
+    replay(rows_of(l), model, false, res);
+}
+
+std::pair<std::vector<std::vector<Sample>>, std::vector<std::vector<Sample>>> halves(std::vector<Sample> all,
+                                                                                     double row_s) {
+  for (Sample& s : all)
+    s.t *= row_s;
+  const auto half = static_cast<long>(all.size() / 2);
+  return {{{all.begin(), all.begin() + half}}, {{all.begin() + half, all.end()}}};
+}
+
+void real_logs(const fs::path& root) {
+  std::printf("\nReal logs (fit on some drives of a car, replay its others)\n");
+  print_header();
+  const auto drives = read_logs(root / "carloop-etios", "drive");
+  const auto longs = read_logs(root / "carloop-etios", "long");
+  if (!drives.empty() && !longs.empty()) {
+    Results r;
+    fold(drives, longs, r);
+    fold(longs, drives, r);
+    print_line("TUNING Etios (OBD ~1.8 s)", r);
+  }
+  const auto louis = read_logs(root / "torque-louisville", "");
+  if (!louis.empty()) {
+    const auto [a, b] = halves(louis.front(), 1.0);
+    Results r;
+    fold(a, b, r);
+    fold(b, a, r);
+    print_line("REPORT Louisville (1 Hz GPS)", r);
+  }
+  const auto swift = read_logs(root / "swift-147", "");
+  for (const double row_s : {1.0, 2.0}) {
+    if (swift.empty()) break;
+    const auto [a, b] = halves(swift.front(), row_s);
+    Results r;
+    fold(a, b, r);
+    fold(b, a, r);
+    print_line(row_s == 1.0 ? "REPORT Swift (1 s per row)" : "REPORT Swift (2 s per row)", r);
+  }
+}
+
+// ---- simulated vehicles ----
+
+struct Cadence {
+  const char* name;
+  double freq_period;  // s between frequency readings (0 = OBD polling)
+  double fix_period;   // s between GPS fixes
+  double obd_refresh;  // s, OBD polling round (0 = not OBD)
+};
+constexpr Cadence kCadences[] = {
+    {"daemon 10 Hz/1 Hz", 0.1, 1.0, 0.0},
+    {"1 Hz", 1.0, 1.0, 0.0},
+    {"OBD 2 s", 0.0, 0.0, 2.0},
+    {"phone OBD 5 s", 0.0, 0.0, 5.0},
+};
+constexpr double kGpsLatency = 0.5;  // s
+constexpr double kSigmaSpeed = 0.1;  // m/s
+constexpr double kSigmaFreq = 0.3;   // Hz
+
+double heavy(std::mt19937_64& rng) {
+  std::student_t_distribution<double> t(3.0);
+  return t(rng) / std::sqrt(3.0);  // unit variance
+}
+
+// GPS-like rows: the frequency every freq_period, a fix every fix_period given at every row until the next.
+std::vector<Row> observe_gps(const sim::Drive& drive, const Cadence& c, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<Row> rows;
+  const double end = drive.truth.back().t;
+  double fix = gearpulse::kMissing;
+  long fix_index = -1;
+  for (double t = kGpsLatency; t <= end; t += c.freq_period) {
+    const sim::TruthSample now = sim::truth_at(drive, t);
+    const long index = std::lround(std::floor(t / c.fix_period + 1e-6));
+    bool fresh = false;
+    if (index != fix_index) {
+      fix = std::max(0.0, sim::truth_at(drive, t - kGpsLatency).speed + kSigmaSpeed * heavy(rng));
+      fix_index = index;
+      fresh = true;
+    }
+    const double f = now.freq + kSigmaFreq * heavy(rng);
+    rows.push_back({t, fix, f > 0.0 ? f : gearpulse::kMissing, now.speed, fresh});
+  }
+  return rows;
+}
+
+std::vector<Row> observe_obd(const sim::Drive& drive, const Cadence& c, std::uint64_t seed) {
+  sim::ObservationOptions o;
+  o.obd = true;
+  o.period = 0.5;
+  o.obd_refresh = c.obd_refresh;
+  o.obd_skew = std::min(1.0, 0.5 * c.obd_refresh);
+  o.seed = seed;
+  std::vector<Row> rows;
+  double last_speed = -1.0, last_freq = -1.0;
+  for (const sim::Observation& x : sim::observe(drive, o)) {
+    if (x.speed == last_speed && x.freq == last_freq) continue;  // a row repeating both held values
+    last_speed = x.speed;
+    last_freq = x.freq;
+    rows.push_back({x.truth.t, x.speed, x.freq, x.truth.speed, true});
+  }
+  return rows;
+}
+
+std::vector<Row> observe(const sim::Drive& drive, const Cadence& c, std::uint64_t seed) {
+  return c.obd_refresh > 0.0 ? observe_obd(drive, c, seed) : observe_gps(drive, c, seed);
+}
+
+sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double duration, std::uint64_t seed) {
+  sim::DriveOptions d;
+  d.style = style;
+  d.duration = duration;
+  d.dt = 0.1;
+  d.seed = seed;
+  d.cold_start = 0.3;
+  d.skip_downshift = 0.3;
+  return sim::simulate_drive(car, d);
+}
+
+// The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a 40-minute mixed drive.
+GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t seed) {
+  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 2400.0, seed);
+  Cadence fit = c;
+  if (fit.obd_refresh == 0.0) fit.freq_period = 1.0, fit.fix_period = 1.0;
+  std::vector<Sample> samples;
+  for (const Row& r : observe(d, fit, seed + 7))
+    samples.push_back({r.t, r.gps, r.freq});
+  return gearpulse::fit_gear_model(samples, {}).model;
+}
+
+void simulated(bool report, int seeds, int randoms) {
+  const std::uint64_t base = report ? 1000 : 0;
+  std::printf(
+      "\nSimulated vehicles, %s seeds %llu..%llu (fit on a 40-min mixed drive, replay 20 min of each "
+      "style)\n",
+      report ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
+      static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)));
+  print_header();
+  std::vector<sim::Vehicle> cars;
+  for (const sim::Vehicle& v : sim::vehicle_presets())
+    if (!v.is_cvt()) cars.push_back(v);
+  for (int k = 1; k <= randoms; ++k)
+    cars.push_back(sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
+  for (const Cadence& c : kCadences) {
+    Results all;
+    Results by_style[4];
+    for (const sim::Vehicle& car : cars)
+      for (int s = 1; s <= seeds; ++s) {
+        const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
+        const GearModel model = fit_model(car, c, seed * 31 + 3);
+        if (model.gears.empty()) continue;
+        int k = 0;
+        for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
+                                              sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
+          Results r;
+          replay(observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k), model,
+                 c.obd_refresh == 0.0, r);
+          by_style[k++].append(r);
+          all.append(r);
+        }
+      }
+    int k = 0;
+    for (const char* style : {"mixed", "urban", "jam", "highway"})
+      print_line(std::string(c.name) + ", " + style, by_style[k++]);
+    print_line(std::string(c.name) + ", ALL", all);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool report = false, real = true, simu = true;
+  int seeds = 2, randoms = 7;
+  fs::path root = GEARPULSE_REAL_DATA_DIR;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view a = argv[i];
+    if (a == "--set" && i + 1 < argc) {
+      report = std::string_view(argv[++i]) == "report";
+    } else if (a == "--seeds" && i + 1 < argc) {
+      seeds = std::atoi(argv[++i]);
+    } else if (a == "--random" && i + 1 < argc) {
+      randoms = std::atoi(argv[++i]);
+    } else if (a == "--trace" && i + 1 < argc) {
+      g_trace = std::fopen(argv[++i], "w");
+    } else if (a == "--real-only") {
+      simu = false;
+    } else if (a == "--sim-only") {
+      real = false;
+    } else {
+      root = a;
+    }
+  }
+  const auto start = std::chrono::steady_clock::now();
+  if (real) real_logs(root);
+  if (simu) simulated(report, seeds, randoms);
+  std::printf("\n(%.1f s)\n",
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  return 0;
+}

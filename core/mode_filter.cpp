@@ -1,0 +1,355 @@
+#include "core/mode_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace gearpulse {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+// Outlier shares: a confident tracker hop on something else than the engine line, a GPS speed off by
+// multipath. A few percent of hops, fewer fixes.
+constexpr double kFreqOutlier = 0.03;
+constexpr double kGpsOutlier = 0.01;
+constexpr double kSpeedRange = 70.0;  // m/s over which a wrong fix may fall
+// In gear, v = theta f up to the tyres' slip and the driveline's wind-up: about 1 %.
+constexpr double kSlip = 0.01;
+// Declutched and rolling, the revs sit at idle about half the time (coasting) and anywhere below the revs
+// seen otherwise (falling after a shift, blipped); standing, at idle but for a blip now and then.
+constexpr double kIdleShareRolling = 0.5, kIdleShareStanding = 0.9;
+// Moving off, the slipping clutch holds the revs between idle and three times it.
+constexpr double kLaunchRevs = 3.0;
+// A move-off given up (stalled, the light stayed red): rare against the bite.
+constexpr double kAbortRate = 0.05;  // 1/s
+// Below this speed (m/s) the declutched car is standing: what follows is a move-off, the clutch biting in
+// first gear (or second, for some drivers).
+constexpr double kStanding = 1.0;
+constexpr double kLaunchSecond = 0.1;
+constexpr double kMinProb = 1e-12;
+
+double log_normal(double y, double var) noexcept {
+  return -0.5 * (std::log(2.0 * kPi * var) + y * y / var);
+}
+
+// Kalman update of a track by a reading z of its speed with variance r, robust to an outlier share eps
+// spread over `range`. Returns the log-likelihood of the reading; the update is weighted by the reading's
+// odds of being no outlier and by `weight` (the share of an independent reading it stands for).
+double robust_update(SpeedTrack& x, double z, double r, double eps, double range, double weight) noexcept {
+  const double s = x.pvv + r;
+  const double y = z - x.v;
+  const double inlier = (1.0 - eps) * std::exp(log_normal(y, s));
+  const double outlier = eps / range;
+  const double resp = inlier / (inlier + outlier);
+  const double w = weight * resp;
+  if (w > 1e-9) {
+    const double sw = x.pvv + r / w;
+    const double kv = x.pvv / sw, ka = x.pva / sw;
+    x.v += kv * y;
+    x.a += ka * y;
+    const double pvv = x.pvv, pva = x.pva;
+    x.pvv = pvv - kv * pvv;
+    x.pva = pva - kv * pva;
+    x.paa -= ka * pva;
+  }
+  return std::log(inlier + outlier);
+}
+
+}  // namespace
+
+void ModeFilter::reset() noexcept {
+  prob_.fill(0.0);
+  const int n = modes();
+  prob_[0] = 0.5;
+  for (int g = 1; g < n; ++g)
+    prob_[static_cast<std::size_t>(g)] = 0.5 / (n - 1);
+  if (n == 1) prob_[0] = 1.0;
+  track_.fill(SpeedTrack{});
+}
+
+void ModeFilter::set_ladder(const GearLadder& ladder) noexcept {
+  ModeArray prob{};
+  std::array<SpeedTrack, kMaxModes> track{};
+  track.fill(track_[0]);
+  prob[0] = prob_[0];
+  prob[ladder.gears + 1] = prob_[launch()];
+  track[ladder.gears + 1] = track_[launch()];
+  ModeArray best{};  // the largest belief carried into each new gear, whose track it takes
+  for (int g = 1; g <= ladder_.gears; ++g) {
+    int nearest = 1;
+    for (int k = 1; k <= ladder.gears; ++k)
+      if (std::abs(std::log(ladder.theta[k] / ladder_.theta[g])) <
+          std::abs(std::log(ladder.theta[nearest] / ladder_.theta[g])))
+        nearest = k;
+    if (ladder.gears == 0) {
+      prob[0] += prob_[g];
+      continue;
+    }
+    const auto n = static_cast<std::size_t>(nearest);
+    prob[n] += prob_[g];
+    if (prob_[g] >= best[n]) best[n] = prob_[g], track[n] = track_[g];
+  }
+  ladder_ = ladder;
+  double total = 0.0;
+  for (int m = 0; m < modes(); ++m)
+    total += prob[m];
+  if (!(total > 0.0)) {
+    track_ = track;
+    reset();
+    track_ = track;
+    return;
+  }
+  for (int m = 0; m < modes(); ++m)
+    prob[m] /= total;
+  prob_ = prob;
+  track_ = track;
+}
+
+double ModeFilter::entry_weight(int gear, double speed, const DrivingHabits& habits) const noexcept {
+  if (!std::isfinite(habits.revs_mean)) return 1.0;
+  // The gear whose revs at this speed sit in the driver's band; a floor keeps every gear possible.
+  const double z = (std::log(speed / ladder_.theta[gear]) - habits.revs_mean) / habits.revs_sd;
+  return std::exp(-0.5 * z * z) + 1e-3;
+}
+
+void ModeFilter::transition_matrix(double dt, const DrivingHabits& habits) noexcept {
+  const int n = modes();
+  Matrix& q = scratch_;
+  for (int i = 0; i < n; ++i)
+    q[i].fill(0.0);
+  const int gears = ladder_.gears;
+  for (int g = 1; g <= gears; ++g) {
+    const double rate = habits.leave_rate[g];
+    const auto& share = habits.shift_share;
+    double declutch = share[static_cast<int>(ShiftKind::kDeclutch)];
+    auto spread = [&](int lo, int hi, double s) {
+      if (lo > hi) return s;  // no such gear: the share goes to the clutch
+      for (int k = lo; k <= hi; ++k)
+        q[g][k] += rate * s / (hi - lo + 1);
+      return 0.0;
+    };
+    declutch += spread(g + 1, std::min(g + 1, gears), share[static_cast<int>(ShiftKind::kUp)]);
+    declutch += spread(std::max(g - 1, 1), g - 1, share[static_cast<int>(ShiftKind::kDown)]);
+    declutch += spread(g + 2, gears, share[static_cast<int>(ShiftKind::kSkipUp)]);
+    declutch += spread(1, g - 2, share[static_cast<int>(ShiftKind::kSkipDown)]);
+    q[g][0] += rate * declutch;
+  }
+  if (gears > 0) {
+    const double v = track_[0].v;
+    const double rate = v < kStanding ? habits.launch_rate : habits.engage_rate;
+    double total = 0.0;
+    for (int g = 1; g <= gears; ++g)
+      total += entry_weight(g, v, habits);
+    for (int g = 1; g <= gears; ++g)
+      q[0][g] = rate * entry_weight(g, v, habits) / total;
+  }
+  double norm = 0.0;
+  for (int i = 0; i < n; ++i) {
+    double out = 0.0;
+    for (int j = 0; j < n; ++j)
+      out += q[i][j];
+    q[i][i] = -out;
+    norm = std::max(norm, 2.0 * out * dt);
+  }
+  // exp(Q dt) by scaling and squaring: a Taylor series of Q dt / 2^s (norm <= 1/4, error < 1e-5), squared
+  // s times.
+  int squarings = 0;
+  while (norm > 0.25 && squarings < 40)
+    norm *= 0.5, ++squarings;
+  const double scale = dt / std::ldexp(1.0, squarings);
+  Matrix& e = trans_;
+  for (int i = 0; i < n; ++i) {
+    e[i].fill(0.0);
+    e[i][i] = 1.0;
+    for (int j = 0; j < n; ++j)
+      q[i][j] *= scale;
+  }
+  // Horner: I + A (I + A/2 (I + A/3 (I + A/4)))
+  Matrix& term = power_;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j)
+      term[i][j] = (i == j ? 1.0 : 0.0) + q[i][j] / 4.0;
+  for (int k = 3; k >= 1; --k) {
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) {
+        double s = 0.0;
+        for (int m = 0; m < n; ++m)
+          s += q[i][m] * term[m][j];
+        e[i][j] = (i == j ? 1.0 : 0.0) + s / k;
+      }
+    if (k > 1)
+      for (int i = 0; i < n; ++i)
+        term[i] = e[i];
+  }
+  for (int s = 0; s < squarings; ++s) {
+    for (int i = 0; i < n; ++i)
+      term[i] = e[i];
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) {
+        double sum = 0.0;
+        for (int m = 0; m < n; ++m)
+          sum += term[i][m] * term[m][j];
+        e[i][j] = sum;
+      }
+  }
+  for (int i = 0; i < n; ++i) {
+    double total = 0.0;
+    for (int j = 0; j < n; ++j)
+      total += e[i][j] = std::max(e[i][j], 0.0);
+    for (int j = 0; j < n; ++j)
+      e[i][j] /= total;
+  }
+}
+
+void ModeFilter::predict(SpeedTrack& x, int mode, double dt, const DrivingHabits& habits) const noexcept {
+  if (dt <= 0.0) return;
+  const bool rolling = mode == 0 && x.v >= kStanding;
+  const bool moving_off = mode == launch();
+  const double mean = rolling ? habits.coast_accel : moving_off ? habits.launch_accel : 0.0;
+  const double sd = is_gear(mode) ? habits.accel_sd : habits.coast_sd;
+  const double tau = habits.accel_time;
+  // The integrated Ornstein-Uhlenbeck acceleration over dt (exact discretisation).
+  const double r = dt / tau;
+  const double phi = std::exp(-r);
+  const double g = tau * (1.0 - phi);
+  x.v += mean * dt + g * (x.a - mean);
+  x.a = mean + phi * (x.a - mean);
+  const double pvv = x.pvv + 2.0 * g * x.pva + g * g * x.paa;
+  const double pva = phi * (x.pva + g * x.paa);
+  const double paa = phi * phi * x.paa;
+  const double s2 = sd * sd;
+  x.pvv = pvv + s2 * tau * tau * std::max(2.0 * r - 3.0 + 4.0 * phi - phi * phi, 0.0);
+  x.pva = pva + s2 * tau * (1.0 - phi) * (1.0 - phi);
+  x.paa = paa + s2 * (1.0 - phi * phi);
+  if (x.v < 0.0) {  // a car does not roll backwards: it stands
+    x.v = 0.0;
+    x.a = std::max(x.a, 0.0);
+  }
+}
+
+double ModeFilter::update_gps(SpeedTrack& x, double gps) const noexcept {
+  const double r = ladder_.sigma_speed * ladder_.sigma_speed;
+  return robust_update(x, gps, r, kGpsOutlier, kSpeedRange, 1.0);
+}
+
+double ModeFilter::update_freq(SpeedTrack& x, int mode, double freq, double weight,
+                               const DrivingHabits& habits) const noexcept {
+  const double high = std::max({1.5 * habits.freq_max, 1.2 * freq, 1.0});
+  if (mode == launch()) {
+    const bool known = std::isfinite(habits.idle);
+    const double lo = known ? habits.idle - 2.0 * habits.idle_sd : 0.0;
+    const double hi = known ? kLaunchRevs * habits.idle : high;
+    const double p = freq >= lo && freq <= hi ? 1.0 / (hi - lo) : 0.0;
+    // A slipping clutch turns the engine faster than first gear would at this speed; once the car has
+    // caught up, the clutch has bitten.
+    const double caught = ladder_.theta[1] * freq;
+    const double sd = std::sqrt(x.pvv + kSlip * kSlip * caught * caught + 0.01);
+    const double slipping = 0.5 * std::erfc(-(caught - x.v) / (sd * std::sqrt(2.0)));
+    return weight * (std::log(std::max(p, kFreqOutlier / high)) + std::log(std::max(slipping, 1e-12)));
+  }
+  if (mode == 0) {
+    double p = 1.0 / high;
+    if (std::isfinite(habits.idle)) {
+      const double share = x.v < kStanding ? kIdleShareStanding : kIdleShareRolling;
+      const double y = freq - habits.idle;
+      p = share * std::exp(log_normal(y, habits.idle_sd * habits.idle_sd)) + (1.0 - share) / high;
+    }
+    return weight * std::log(p);
+  }
+  const double theta = ladder_.theta[mode];
+  const double z = theta * freq;
+  const double se = ladder_.theta_se[mode] * freq;
+  const double r = theta * theta * ladder_.sigma_freq * ladder_.sigma_freq + se * se + kSlip * kSlip * z * z;
+  // The reading in speed units; its density in frequency units carries the Jacobian theta.
+  const double log_l = robust_update(x, z, r, kFreqOutlier, theta * high, weight);
+  // How usual these revs are in this gear for this driver, against his most usual: no one drives on in
+  // fifth at idle revs, and a gear is seldom run far outside the band a driver keeps it in.
+  double habit = 0.0;
+  if (std::isfinite(habits.gear_revs_mean[mode])) {
+    const double zr = (std::log(freq) - habits.gear_revs_mean[mode]) / habits.gear_revs_sd[mode];
+    habit = -0.5 * zr * zr;
+  }
+  return weight * (log_l + std::log(theta) + habit);
+}
+
+void ModeFilter::step(double dt, double gps, double freq, const DrivingHabits& habits,
+                      double evidence) noexcept {
+  dt = std::max(dt, 0.0);
+  const int n = modes();
+  transition_matrix(dt, habits);
+  std::array<SpeedTrack, kMaxModes> mixed{};
+  ModeArray prior{}, log_l{};
+  for (int j = 0; j < n; ++j) {
+    double c = 0.0;
+    for (int i = 0; i < n; ++i)
+      c += trans_[i][j] * prob_[i];
+    prior[j] = c;
+    SpeedTrack& x = mixed[j];
+    if (!(c > 0.0)) {
+      x = track_[j];
+      continue;
+    }
+    x = SpeedTrack{0.0, 0.0, 0.0, 0.0, 0.0};
+    for (int i = 0; i < n; ++i) {
+      const double w = trans_[i][j] * prob_[i] / c;
+      x.v += w * track_[i].v;
+      x.a += w * track_[i].a;
+    }
+    for (int i = 0; i < n; ++i) {
+      const double w = trans_[i][j] * prob_[i] / c;
+      const double dv = track_[i].v - x.v, da = track_[i].a - x.a;
+      x.pvv += w * (track_[i].pvv + dv * dv);
+      x.pva += w * (track_[i].pva + dv * da);
+      x.paa += w * (track_[i].paa + da * da);
+    }
+  }
+  double best = -INFINITY;
+  for (int j = 0; j < n; ++j) {
+    SpeedTrack& x = mixed[j];
+    predict(x, j, dt, habits);
+    double l = 0.0;
+    if (std::isfinite(gps)) l += update_gps(x, gps);
+    if (std::isfinite(freq) && freq > 0.0 && evidence > 0.0) l += update_freq(x, j, freq, evidence, habits);
+    log_l[j] = l;
+    if (prior[j] > 0.0) best = std::max(best, l);
+  }
+  double total = 0.0;
+  for (int j = 0; j < n; ++j) {
+    prob_[j] = prior[j] > 0.0 && std::isfinite(log_l[j]) ? prior[j] * std::exp(log_l[j] - best) : 0.0;
+    total += prob_[j];
+  }
+  if (!(total > 0.0) || !std::isfinite(total)) {  // nothing explains the readings: keep the prior
+    for (int j = 0; j < n; ++j)
+      prob_[j] = prior[j];
+    total = 1.0;
+  }
+  for (int j = 0; j < n; ++j)
+    prob_[j] = std::max(prob_[j] / total, kMinProb);
+  track_ = mixed;
+}
+
+int ModeFilter::most_probable() const noexcept {
+  int best = 0;
+  for (int m = 1; m < modes(); ++m)
+    if (prob_[m] > prob_[best]) best = m;
+  return best;
+}
+
+double ModeFilter::mean_speed() const noexcept {
+  double v = 0.0, total = 0.0;
+  for (int m = 0; m < modes(); ++m)
+    v += prob_[m] * track_[m].v, total += prob_[m];
+  return total > 0.0 ? std::max(v / total, 0.0) : 0.0;
+}
+
+double ModeFilter::speed_sd() const noexcept {
+  const double mean = mean_speed();
+  double var = 0.0, total = 0.0;
+  for (int m = 0; m < modes(); ++m) {
+    const double d = track_[m].v - mean;
+    var += prob_[m] * (track_[m].pvv + d * d);
+    total += prob_[m];
+  }
+  return total > 0.0 ? std::sqrt(var / total) : 0.0;
+}
+
+}  // namespace gearpulse
