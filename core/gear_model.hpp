@@ -51,7 +51,7 @@ inline constexpr double kCeiling = 1.6;   // x the standing idle
   return std::clamp(sd, 0.03 * idle, 0.1 * idle);
 }
 
-// JSON of `gearpulse fit --out` and of state_dir/model.json (INTERFACES.md).
+// JSON of `gearpulse fit --out` and of state_dir/model.json (docs/interfaces.md).
 [[nodiscard]] nlohmann::json model_to_json(const GearModel& model);
 // Throws std::invalid_argument with a readable message if the JSON is not a valid model
 // (wrong version, non-positive or unordered theta, non-finite numbers).

@@ -1,5 +1,5 @@
 #pragma once
-// Readers (and a writer) for sample logs: the generic CSV of INTERFACES.md (`t,speed,freq`), Torque Pro
+// Readers (and a writer) for sample logs: the generic CSV of docs/interfaces.md (`t,speed,freq`), Torque Pro
 // exports, Carloop OBD-II logs and `speed,rpm[,...]` logs. The format is detected from the header.
 // Parsing works on a stream plus a display name (used in messages): core never opens files.
 //

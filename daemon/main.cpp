@@ -14,6 +14,7 @@
 #include "daemon/daemon.hpp"
 #include "daemon/fitter.hpp"
 #include "daemon/log_queue.hpp"
+#include "gearpulse_version.hpp"
 
 namespace {
 
@@ -23,7 +24,8 @@ void usage(std::FILE* to) {
   std::fprintf(to,
                "usage: gearpulsed [--config FILE] [--check-config]\n"
                "  --config FILE    TOML configuration (default %s)\n"
-               "  --check-config   validate the configuration and exit (0 = valid, 2 = invalid)\n",
+               "  --check-config   validate the configuration and exit (0 = valid, 2 = invalid)\n"
+               "  --version        print the version and exit\n",
                kDefaultConfig);
 }
 
@@ -51,6 +53,9 @@ int main(int argc, char** argv) {
       config_path = std::string(arg.substr(9));
     } else if (arg == "--check-config") {
       check_only = true;
+    } else if (arg == "--version") {
+      std::printf("gearpulsed %s\n", gearpulse::kVersion);
+      return 0;
     } else if (arg == "--help" || arg == "-h") {
       usage(stdout);
       return 0;

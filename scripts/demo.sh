@@ -34,7 +34,7 @@ if [ "$setup" = 1 ]; then bash scripts/setup.sh; fi
 echo "== build (Release, into build/)"
 # Warnings stay warnings here (GCC 12 has -O3 false positives); scripts/test.sh builds with -Werror.
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release -DGEARPULSE_WERROR=OFF >/dev/null
-cmake --build build -j"$(nproc 2>/dev/null || echo 2)" --target gearpulse gearpulsectl gearpulsed >/dev/null
+cmake --build build -j"$(nproc 2>/dev/null || echo 2)" --target gearpulse gearpulse-devtools gearpulsectl gearpulsed >/dev/null
 
 # shellcheck source=scripts/lib/harness.sh
 source scripts/lib/harness.sh

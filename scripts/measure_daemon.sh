@@ -2,7 +2,7 @@
 # Measures gearpulsed on the demo drive through the real chain (scripts/lib/harness.sh, 48 kHz capture):
 # peak and current resident memory, CPU of the whole daemon (utime + stime of all threads over its
 # wall time), time from GPS loss to engine-derived speed, and the pulse-count error over the drive.
-#   bash scripts/measure_daemon.sh [BUILD_DIR] [gearpulse simulate options for the drive]
+#   bash scripts/measure_daemon.sh [BUILD_DIR] [gearpulse-devtools simulate options for the drive]
 # Defaults: build/ and the demo drive (seed 1, 190 s, GPS outage 90:60). Prints the figures only.
 set -euo pipefail
 cd "$(dirname "$0")/.."

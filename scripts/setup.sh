@@ -13,6 +13,7 @@ packages=(
   libgpiod-dev gpiod libsystemd-dev
   libtomlplusplus-dev nlohmann-json3-dev libcli11-dev
   libsndfile1-dev libfftw3-dev
+  scdoc
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -16,6 +16,7 @@ echo "== release build + tests"
 cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 cmake --build build -j"$jobs"
 ctest --test-dir build --output-on-failure -j"$jobs"
+bash scripts/test_package.sh build
 
 echo "== ASan+UBSan build + tests"
 # The benchmarks are built (with -Werror) above and not run here: the sanitizer build skips them. -O1 and

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Runs gearpulsed on a simulated drive through the real components: the ALSA `file` plugin reading a
-# FIFO that `gearpulse feed` fills at real-time pace, a real gpsd started by gpsfake from the drive's
+# FIFO that `gearpulse-devtools feed` fills at real-time pace, a real gpsd started by gpsfake from the drive's
 # NMEA log, and the PTY pulse output counted by a reader. Shared by scripts/demo.sh,
 # scripts/measure_daemon.sh and the end-to-end test, so all three drive exactly the same chain.
 #
 # As a library: `source scripts/lib/harness.sh`, then the hs_* functions.
 # As a command (the test uses this; every step keeps its state in the work directory):
-#   harness.sh prepare WORK BUILD [gearpulse simulate options for the drive...]
+#   harness.sh prepare WORK BUILD [gearpulse-devtools simulate options for the drive...]
 #   harness.sh start WORK        feeder, gpsfake, gearpulsed, pulse reader
 #   harness.sh status WORK       `gearpulsectl status --json`
 #   harness.sh pulses WORK       bytes (= pulses) read from the PTY so far
@@ -37,6 +37,7 @@ hs_init() {
     hs_die "$HS_WORK: not prepared (run: harness.sh prepare WORK BUILD)"
   fi
   HS_GEARPULSE="$HS_BUILD/tools/gearpulse"
+  HS_DEVTOOLS="$HS_BUILD/tools/gearpulse-devtools"
   HS_CTL="$HS_BUILD/tools/gearpulsectl"
   HS_DAEMON="$HS_BUILD/daemon/gearpulsed"
   HS_SOCKET="$HS_WORK/control.sock"
@@ -69,7 +70,7 @@ hs_defaults() {
 
 hs_check_tools() {
   local b
-  for b in "$HS_GEARPULSE" "$HS_CTL" "$HS_DAEMON"; do
+  for b in "$HS_GEARPULSE" "$HS_DEVTOOLS" "$HS_CTL" "$HS_DAEMON"; do
     [ -x "$b" ] || hs_die "$b is missing: build first (cmake --build build)"
   done
   command -v gpsfake >/dev/null || PATH=/usr/bin:$PATH command -v gpsfake >/dev/null ||
@@ -87,12 +88,12 @@ hs_prepare() {
   hs_defaults
   hs_check_tools
   echo "harness: training drive ($HS_TRAIN_DURATION s of $HS_VEHICLE, seed $HS_TRAIN_SEED), fitted with gearpulse fit"
-  "$HS_GEARPULSE" simulate --out "$HS_WORK/train" --seed "$HS_TRAIN_SEED" --duration "$HS_TRAIN_DURATION" \
+  "$HS_DEVTOOLS" simulate --out "$HS_WORK/train" --seed "$HS_TRAIN_SEED" --duration "$HS_TRAIN_DURATION" \
     --vehicle "$HS_VEHICLE" --no-audio --pulses-per-km "$HS_PPK" >"$HS_WORK/train.log" ||
     hs_die "training drive failed: $(cat "$HS_WORK/train.log")"
   "$HS_GEARPULSE" fit --out "$HS_WORK/state/model.json" "$HS_WORK/train/samples.csv" >"$HS_WORK/fit.json" \
     2>"$HS_WORK/fit.log" || hs_die "gearpulse fit failed: $(cat "$HS_WORK/fit.log")"
-  "$HS_GEARPULSE" simulate --out "$HS_WORK/drive" --rate "$HS_RATE" --vehicle "$HS_VEHICLE" \
+  "$HS_DEVTOOLS" simulate --out "$HS_WORK/drive" --rate "$HS_RATE" --vehicle "$HS_VEHICLE" \
     --pulses-per-km "$HS_PPK" "$@" >"$HS_WORK/drive.log" || hs_die "drive simulation failed"
   hs_save_env
 }
@@ -152,12 +153,12 @@ hs_alive() {
 }
 
 hs_start_feeder() {
-  hs_spawn feeder "$HS_GEARPULSE" feed --period "$HS_PERIOD" --rate "$HS_RATE" --channels 1 --format s16 \
+  hs_spawn feeder "$HS_DEVTOOLS" feed --period "$HS_PERIOD" --rate "$HS_RATE" --channels 1 --format s16 \
     "$HS_WORK/drive/drive.raw" "$HS_WORK/audio.fifo"
 }
 
 # gpsfake plays the log at once (-n); the log starts some seconds before the drive's t = 0, which is
-# the epoch stamped 12:00:00 UTC (see gearpulse simulate --gps-lead). gpsfake finds gpsd's control
+# the epoch stamped 12:00:00 UTC (see gearpulse-devtools simulate --gps-lead). gpsfake finds gpsd's control
 # socket by its own PID in $TMPDIR and takes a stale file of a killed run with the same PID for it (then
 # gpsd gets no device): it keeps that socket in the run's directory.
 hs_start_gpsfake() {

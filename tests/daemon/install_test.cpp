@@ -1,5 +1,5 @@
-// The install the README gives (`cmake -DCMAKE_INSTALL_PREFIX=/usr`, `cmake --install`): the service unit
-// must find the configuration and the binary where the install puts them. Checked on the install script a
+// The install layout: the service unit names the daemon and its configuration by the absolute paths the
+// install puts them at, for the package's prefix (/usr) and for the default one. Checked on the files a
 // configure-only run writes (no build needed).
 #include <catch2/catch.hpp>
 
@@ -23,27 +23,49 @@ std::string slurp(const std::filesystem::path& p) {
   return s.str();
 }
 
-}  // namespace
+struct Configured {
+  std::string top, daemon, unit, conffiles;
+};
 
-TEST_CASE("install: with the README's prefix the unit finds its configuration and binary") {
-  TempDir dir;
+Configured configure(const TempDir& dir, const std::string& options) {
   const std::string build = (dir / "build").string();
-  const ShellResult configure = run_shell("cmake -S '" + std::string(GEARPULSE_SOURCE_DIR) + "' -B '" +
-                                          build + "' -DCMAKE_INSTALL_PREFIX=/usr -DGEARPULSE_BENCH=OFF > '" +
-                                          (dir / "log").string() + "' 2>&1");
+  const ShellResult configure =
+      run_shell("cmake -S '" + std::string(GEARPULSE_SOURCE_DIR) + "' -B '" + build + "' " + options +
+                " -DGEARPULSE_BENCH=OFF > '" + (dir / "log").string() + "' 2>&1");
   INFO(slurp(dir / "log"));
   REQUIRE(configure.status == 0);
-  const std::string top = slurp(dir / "build" / "cmake_install.cmake");
-  const std::string daemon = slurp(dir / "build" / "daemon" / "cmake_install.cmake");
-  const std::string unit =
-      slurp(std::filesystem::path(GEARPULSE_SOURCE_DIR) / "systemd" / "gearpulsed.service");
+  return {slurp(dir / "build" / "cmake_install.cmake"),
+          slurp(dir / "build" / "daemon" / "cmake_install.cmake"),
+          slurp(dir / "build" / "systemd" / "gearpulsed.service"),
+          slurp(dir / "build" / "packaging" / "conffiles")};
+}
 
-  // The unit reads /etc/gearpulse/gearpulse.toml; the install must put the default configuration there,
-  // not under the prefix (/usr/etc).
-  REQUIRE(unit.find("ExecStart=gearpulsed --config /etc/gearpulse/gearpulse.toml") != std::string::npos);
-  CHECK(top.find("file(INSTALL DESTINATION \"/etc/gearpulse\"") != std::string::npos);
-  CHECK(top.find("/usr/etc") == std::string::npos);
-  // The unit names the binary bare: systemd looks it up in /usr/sbin among its fixed paths.
-  CHECK(daemon.find("DESTINATION \"${CMAKE_INSTALL_PREFIX}/sbin\"") != std::string::npos);
-  CHECK(top.find("DESTINATION \"${CMAKE_INSTALL_PREFIX}/lib/systemd/system\"") != std::string::npos);
+}  // namespace
+
+TEST_CASE("install: with the package's prefix the unit runs /usr/sbin/gearpulsed on /etc's configuration") {
+  TempDir dir;
+  const Configured c = configure(dir, "-DCMAKE_INSTALL_PREFIX=/usr");
+  INFO(c.unit);
+  CHECK(c.unit.find(
+            "\nExecStartPre=/usr/sbin/gearpulsed --config /etc/gearpulse/gearpulse.toml --check-config\n") !=
+        std::string::npos);
+  CHECK(c.unit.find("\nExecStart=/usr/sbin/gearpulsed --config /etc/gearpulse/gearpulse.toml\n") !=
+        std::string::npos);
+  CHECK(c.unit.find("@GEARPULSE") == std::string::npos);  // every path substituted
+  // The configuration goes to /etc, not under the prefix (/usr/etc), and is the package's conffile.
+  CHECK(c.top.find("file(INSTALL DESTINATION \"/etc/gearpulse\"") != std::string::npos);
+  CHECK(c.top.find("/usr/etc") == std::string::npos);
+  CHECK(c.conffiles == "/etc/gearpulse/gearpulse.toml\n");
+  CHECK(c.daemon.find("DESTINATION \"${CMAKE_INSTALL_PREFIX}/sbin\"") != std::string::npos);
+  CHECK(c.top.find("DESTINATION \"${CMAKE_INSTALL_PREFIX}/lib/systemd/system\"") != std::string::npos);
+}
+
+TEST_CASE("install: with the default prefix the unit names the binary and configuration under it") {
+  TempDir dir;
+  const Configured c = configure(dir, "-DCMAKE_INSTALL_PREFIX=/usr/local");
+  INFO(c.unit);
+  CHECK(c.unit.find(
+            "\nExecStart=/usr/local/sbin/gearpulsed --config /usr/local/etc/gearpulse/gearpulse.toml\n") !=
+        std::string::npos);
+  CHECK(c.top.find("file(INSTALL DESTINATION \"/usr/local/etc/gearpulse\"") != std::string::npos);
 }

@@ -1,4 +1,4 @@
-// `gearpulse fit` and `gearpulse replay`, run as the built binary (INTERFACES.md contracts).
+// `gearpulse fit` and `gearpulse replay`, run as the built binary (docs/interfaces.md contracts).
 #include <stdlib.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -114,7 +114,7 @@ std::vector<std::string> cells_of(const std::string& line) {
 }
 
 // What `replay --model MODEL LOG` printed: the run, and the cells of every row under the header of
-// INTERFACES.md (t,speed,gear,source), each row checked to have four.
+// docs/interfaces.md (t,speed,gear,source), each row checked to have four.
 struct Replay {
   Result result;
   std::vector<std::vector<std::string>> rows;
@@ -136,7 +136,7 @@ Replay replay(const TempDir& dir, const std::string& model, const std::string& l
 
 }  // namespace
 
-TEST_CASE("cli: fit prints the model JSON of INTERFACES.md and writes --out and --plot") {
+TEST_CASE("cli: fit prints the model JSON of docs/interfaces.md and writes --out and --plot") {
   TempDir dir;
   const std::string log = simulated_log(dir, 21);
   const Result r =

@@ -1,4 +1,4 @@
-// `gearpulse simulate` and `gearpulse feed`, run as the built binary.
+// `gearpulse-devtools simulate` and `gearpulse-devtools feed`, run as the built binary.
 #include <fcntl.h>
 #include <stdlib.h>
 #include <sys/stat.h>
@@ -23,7 +23,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kCli = GEARPULSE_BINARY_DIR "/tools/gearpulse";
+const std::string kCli = GEARPULSE_BINARY_DIR "/tools/gearpulse-devtools";
 
 using Result = gearpulse::test::ShellResult;
 
@@ -181,7 +181,7 @@ TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
     const Result r = run(kCli + " simulate" + out + args);
     INFO(args << ": " << r.out);
     CHECK(r.status == 2);
-    CHECK(r.out.find("gearpulse:") != std::string::npos);
+    CHECK(r.out.find("gearpulse-devtools:") != std::string::npos);
   }
   CHECK(!fs::exists(dir.path / "x" / "drive.raw"));
 }

@@ -1,4 +1,4 @@
-// `gearpulse fit`: learns the gear scales from sample logs and prints the model as JSON (INTERFACES.md).
+// `gearpulse fit`: learns the gear scales from sample logs and prints the model as JSON (docs/interfaces.md).
 #include <cerrno>
 #include <charconv>
 #include <cmath>

@@ -1,5 +1,5 @@
 // `gearpulse replay`: runs the daemon's speed synthesis over a sample log as if live and prints
-// t,speed,gear,source for every row the reader accepts (INTERFACES.md). Rows with an empty speed are GPS
+// t,speed,gear,source for every row the reader accepts (docs/interfaces.md). Rows with an empty speed are GPS
 // outages.
 #include <algorithm>
 #include <cerrno>

@@ -1,5 +1,6 @@
 #pragma once
-// Subcommands of the offline tool; each lives in its own cmd_*.cpp and registers itself on the app.
+// Subcommands of the offline tool (tools/gearpulse/) and of gearpulse-devtools (tools/devtools/); each
+// lives in its own cmd_*.cpp and registers itself on the app.
 #include <stdexcept>
 #include <string>
 
@@ -9,7 +10,7 @@ class App;
 
 namespace gearpulse::cli {
 
-// Thrown for bad input or options; main prints "gearpulse: <what>" on one line and exits 2.
+// Thrown for bad input or options; run_app() prints "NAME: <what>" on one line and exits 2.
 struct UsageError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
@@ -18,6 +19,7 @@ struct UsageError : std::runtime_error {
 void add_fit(CLI::App& app, int& status);
 void add_replay(CLI::App& app, int& status);
 void add_track(CLI::App& app, int& status);
+// gearpulse-devtools only.
 void add_simulate(CLI::App& app, int& status);
 void add_feed(CLI::App& app, int& status);
 

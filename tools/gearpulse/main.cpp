@@ -1,63 +1,19 @@
-// gearpulse: the offline tool (fit, replay, track, simulate) over logs and recordings.
-#include <cerrno>
-#include <cstdio>
-#include <cstring>
-#include <exception>
+// gearpulse: the offline tool (fit, replay, track) over logs and recordings.
 #include <string>
 
 #include <CLI/CLI.hpp>
 
+#include "gearpulse_version.hpp"
 #include "tools/gearpulse/commands.hpp"
+#include "tools/gearpulse/run_app.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"gearpulse: learn gear scales and synthesize speed pulses, offline"};
+  app.set_version_flag("--version", std::string("gearpulse ") + gearpulse::kVersion);
   app.require_subcommand(1);
   int status = 0;
   gearpulse::cli::add_fit(app, status);
   gearpulse::cli::add_replay(app, status);
   gearpulse::cli::add_track(app, status);
-  gearpulse::cli::add_simulate(app, status);
-  gearpulse::cli::add_feed(app, status);
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::CallForAllHelp& e) {
-    return app.exit(e);
-  } catch (const CLI::Success& e) {
-    return app.exit(e);
-  } catch (const CLI::RequiredError& e) {
-    // An unknown command reads to CLI11 as none at all: name it (a known one missing an option is
-    // reported as CLI11 words it).
-    std::string known;
-    bool is_known = false;
-    for (const CLI::App* sub : app.get_subcommands({})) {
-      known += (known.empty() ? "" : ", ") + sub->get_name();
-      is_known = is_known || (argc > 1 && sub->get_name() == argv[1]);
-    }
-    if (argc > 1 && argv[1][0] != '-' && !is_known) {
-      std::fprintf(stderr, "gearpulse: unknown command '%s' (commands: %s)\n", argv[1], known.c_str());
-    } else {
-      std::fprintf(stderr, "gearpulse: %s\n", e.what());
-    }
-    return 2;
-  } catch (const CLI::ParseError& e) {
-    std::fprintf(stderr, "gearpulse: %s\n", e.what());
-    return 2;
-  } catch (const gearpulse::cli::UsageError& e) {
-    std::fprintf(stderr, "gearpulse: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "gearpulse: error: %s\n", e.what());
-    return 2;
-  }
-  // Output that did not reach stdout (a full disk, /dev/full) is an error: a truncated CSV must not look
-  // like a finished one.
-  errno = 0;
-  if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
-    std::fprintf(stderr, "gearpulse: cannot write the output to stdout%s%s\n", errno ? ": " : "",
-                 errno ? std::strerror(errno) : "");
-    return 2;
-  }
-  return status;
+  return gearpulse::cli::run_app(app, argc, argv, status, "gearpulse");
 }

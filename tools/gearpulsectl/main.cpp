@@ -20,6 +20,7 @@
 #include "core/json_depth.hpp"
 #include "daemon/control_protocol.hpp"
 #include "drivers/unique_fd.hpp"
+#include "gearpulse_version.hpp"
 
 namespace {
 
@@ -196,6 +197,7 @@ int main(int argc, char** argv) {
   bool keep_samples = false;
   app.add_option("--socket", socket, "control socket of gearpulsed")->capture_default_str();
   app.add_flag("--json", json, "print the daemon's raw JSON reply");
+  app.set_version_flag("--version", std::string("gearpulsectl ") + gearpulse::kVersion);
   app.require_subcommand(1);
   app.add_subcommand("status", "speed, source, gear, pulses, GPS, audio, tracker and model");
   app.add_subcommand("gears", "the learned gear scales");
@@ -230,6 +232,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     // One line, as every other error of this tool.

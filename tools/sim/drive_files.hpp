@@ -28,7 +28,7 @@ struct TruthRow {
   int gear = 0;        // 0 = none (clutch out, standstill)
 };
 
-// One row of samples.csv (the INTERFACES generic format); NaN cells are written empty.
+// One row of samples.csv (the generic format of docs/interfaces.md); NaN cells are written empty.
 struct SampleRow {
   double t = 0.0;
   double speed = 0.0;

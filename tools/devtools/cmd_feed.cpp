@@ -1,4 +1,4 @@
-// `gearpulse feed`: plays a raw PCM file into a FIFO at real-time pace, one ALSA period per write.
+// `gearpulse-devtools feed`: plays a raw PCM file into a FIFO at real-time pace, one ALSA period per write.
 //
 // The ALSA `file` plugin, used as a capture PCM with a FIFO as its `infile`, reads one period per
 // transfer; a write of any other size leaves holes in the captured stream. So every write here is
@@ -117,12 +117,12 @@ int run_feed(const FeedOptions& o) {
     }
   }
   if (written < periods) {
-    std::fprintf(stderr, "gearpulse feed: %s: reader closed after %zu of %zu periods\n", o.fifo.c_str(),
-                 written, periods);
+    std::fprintf(stderr, "gearpulse-devtools feed: %s: reader closed after %zu of %zu periods\n",
+                 o.fifo.c_str(), written, periods);
     return 1;
   }
   if (!o.quiet) {
-    std::fprintf(stderr, "gearpulse feed: %zu periods (%.1f s) written to %s\n", periods,
+    std::fprintf(stderr, "gearpulse-devtools feed: %zu periods (%.1f s) written to %s\n", periods,
                  static_cast<double>(periods) * o.period / o.rate, o.fifo.c_str());
   }
   return 0;

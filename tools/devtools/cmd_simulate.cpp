@@ -1,5 +1,5 @@
-// `gearpulse simulate`: writes a simulated drive as the real chain sees it: the lighter voltage a sound
-// card would capture (raw S16 for the ALSA file plugin, WAV for `gearpulse track`), the NMEA log gpsd
+// `gearpulse-devtools simulate`: writes a simulated drive as the real chain sees it: the lighter voltage a
+// sound card would capture (raw S16 for the ALSA file plugin, WAV for `gearpulse track`), the NMEA log gpsd
 // would read (no fix during the outage), the truth, and the 1 Hz sample CSV `gearpulse fit` reads.
 #include <algorithm>
 #include <charconv>
