@@ -16,7 +16,8 @@
 //     freedom) speed and frequency noise, a cold engine. Cadences: the daemon's (frequency every 0.1 s, a 1
 //     Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app every 5 s. Seeds:
 //     tuning 1..N, report 1001..1000+N.
-// Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--real-only] [--sim-only] [DATA_DIR]
+// Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
+//                     [--trace FILE] [DATA_DIR]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -48,7 +49,11 @@ namespace {
 constexpr int kMethods = 5;
 constexpr const char* kMethodNames[kMethods] = {"gearpulse", "IMM cand.", "keep gear", "hold speed",
                                                 "hindsight"};
-std::FILE* g_trace = nullptr;           // --trace FILE: every outage row
+std::FILE* g_trace = nullptr;  // --trace FILE: every outage row
+long g_cadence = -1;
+double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the candidate's belief, per row
+std::string g_debug_car;
+int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -56,6 +61,7 @@ constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful
 struct Row {
   double t = 0.0, gps = gearpulse::kMissing, freq = gearpulse::kMissing, truth = 0.0;
   bool gps_new = true;
+  int gear = -1;  // the true gear where known (simulated drives; 0 = clutch out), for the trace
 };
 
 struct Results {
@@ -98,6 +104,22 @@ void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Res
     // Live, as the daemon steps at every hop; a log, as `gearpulse replay` does.
     o = live ? synth.step(r.t, gps, r.freq, r.gps_new) : replayer.step({r.t, gps, r.freq});
     o_imm = live ? imm.step(r.t, gps, r.freq, r.gps_new) : imm_replayer.step({r.t, gps, r.freq});
+    if (g_debug_from < g_debug_to && r.t - t0 >= g_debug_from && r.t - t0 <= g_debug_to) {
+      const auto& flt = imm.filter();
+      if (r.t - t0 - g_debug_from < 0.15) {
+        const auto& h = imm.habits();
+        std::fprintf(stderr, "idle %.1f/%.2f bands:", h.idle, h.idle_sd);
+        for (int g = 1; g <= static_cast<int>(model.gears.size()); ++g)
+          std::fprintf(stderr, " %.1f/%.2f", std::exp(h.gear_revs_mean[static_cast<std::size_t>(g)]),
+                       h.gear_revs_sd[static_cast<std::size_t>(g)]);
+        std::fprintf(stderr, " sigma_freq %.2f\n", model.sigma_freq);
+      }
+      std::fprintf(stderr, "t %.1f %s truth %.1f g %d f %.1f | out %.1f p:", r.t - t0, out ? "OUT" : "gps",
+                   r.truth, r.gear, r.freq, o_imm.speed);
+      for (int m = 0; m < flt.modes(); ++m)
+        std::fprintf(stderr, " %.2f(%.1f)", flt.probability(m), flt.track(m).v);
+      std::fprintf(stderr, "\n");
+    }
     if (std::isfinite(r.freq)) last_freq = r.freq;
     if (!out) {
       if (was_out) close_outage();
@@ -125,9 +147,9 @@ void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Res
     dist[kMethods] += r.truth * dt;
     if (g_trace !=
         nullptr)  // t, truth, freq, then the candidate's gear, speed and belief, keep gear, hindsight
-      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%.2f,%.2f,%.2f,%.2f\n", r.t - t0, r.truth * kMsToKmh, f,
-                   o_imm.gear, o_imm.speed * kMsToKmh, value[2] * kMsToKmh, value[4] * kMsToKmh,
-                   imm.mode_probability(o_imm.gear));
+      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%.2f,%.2f,%.2f,%.2f,%d,%.2f\n", r.t - t0, r.truth * kMsToKmh,
+                   f, o_imm.gear, o_imm.speed * kMsToKmh, value[2] * kMsToKmh, value[4] * kMsToKmh,
+                   imm.mode_probability(o_imm.gear), r.gear, o.speed * kMsToKmh);
   }
   if (was_out) close_outage();
   if (std::getenv("GEARPULSE_BENCH_HABITS")) {
@@ -139,7 +161,7 @@ void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Res
         h.engage_rate, h.launch_rate);
     for (double x : h.shift_share)
       std::fprintf(stderr, " %.2f", x);
-    std::fprintf(stderr, " leave");
+    std::fprintf(stderr, " bite %.2f launch_accel %.2f leave", h.bite_rate, h.launch_accel);
     for (std::size_t g = 1; g <= model.gears.size(); ++g)
       std::fprintf(stderr, " %.3f", h.leave_rate[g]);
     std::fprintf(stderr, "\n");
@@ -285,7 +307,7 @@ std::vector<Row> observe_gps(const sim::Drive& drive, const Cadence& c, std::uin
       fresh = true;
     }
     const double f = now.freq + kSigmaFreq * heavy(rng);
-    rows.push_back({t, fix, f > 0.0 ? f : gearpulse::kMissing, now.speed, fresh});
+    rows.push_back({t, fix, f > 0.0 ? f : gearpulse::kMissing, now.speed, fresh, now.gear});
   }
   return rows;
 }
@@ -303,7 +325,7 @@ std::vector<Row> observe_obd(const sim::Drive& drive, const Cadence& c, std::uin
     if (x.speed == last_speed && x.freq == last_freq) continue;  // a row repeating both held values
     last_speed = x.speed;
     last_freq = x.freq;
-    rows.push_back({x.truth.t, x.speed, x.freq, x.truth.speed, true});
+    rows.push_back({x.truth.t, x.speed, x.freq, x.truth.speed, true, x.truth.gear});
   }
   return rows;
 }
@@ -348,6 +370,7 @@ void simulated(bool report, int seeds, int randoms) {
   for (int k = 1; k <= randoms; ++k)
     cars.push_back(sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
   for (const Cadence& c : kCadences) {
+    if (g_cadence >= 0 && &c - kCadences != g_cadence) continue;
     Results all;
     Results by_style[4];
     for (const sim::Vehicle& car : cars)
@@ -359,8 +382,12 @@ void simulated(bool report, int seeds, int randoms) {
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
                                               sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
           Results r;
+          if (g_trace != nullptr) std::fprintf(g_trace, "# %s %d\n", car.name.c_str(), k);
+          const double debug_to = g_debug_to;
+          if (car.name != g_debug_car || k != g_debug_style) g_debug_to = 0.0;
           replay(observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k), model,
                  c.obd_refresh == 0.0, r);
+          g_debug_to = debug_to;
           by_style[k++].append(r);
           all.append(r);
         }
@@ -388,6 +415,13 @@ int main(int argc, char** argv) {
       randoms = std::atoi(argv[++i]);
     } else if (a == "--trace" && i + 1 < argc) {
       g_trace = std::fopen(argv[++i], "w");
+    } else if (a == "--cadence" && i + 1 < argc) {
+      g_cadence = std::atol(argv[++i]);
+    } else if (a == "--debug" && i + 4 < argc) {
+      g_debug_car = argv[++i];
+      g_debug_style = std::atoi(argv[++i]);
+      g_debug_from = std::atof(argv[++i]);
+      g_debug_to = std::atof(argv[++i]);
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {

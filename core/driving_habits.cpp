@@ -26,6 +26,8 @@ constexpr double kStopTime = 20.0, kStopWeight = 1.0;
 // everyday launch; 3 m/s^2 is hard); worth two launches.
 constexpr double kBiteTime = 1.5, kBiteWeight = 2.0;
 constexpr double kLaunchAccel = 1.5, kLaunchSd = 0.8, kLaunchWeight = 3.0;
+// A gear above first at idle revs: at most a second in twenty; worth 20 s in gear.
+constexpr double kLugging = 0.05, kLuggingWeight = 20.0;
 // A speed below this (m/s) is standing; above kMoving the car rolls (declutched coasting is learned there).
 constexpr double kStanding = 0.3, kMoving = 2.0;
 
@@ -38,6 +40,13 @@ void HabitLearner::Moments::add(double x, double w) noexcept {
   m2 += w * d * (x - mean);
 }
 
+void HabitLearner::Moments::add_recent(double x, double w, double memory) noexcept {
+  const double keep = std::exp(-w / memory);
+  n *= keep;
+  m2 *= keep;
+  add(x, w);
+}
+
 void HabitLearner::reset() noexcept {
   accel_ = {kAccelWeight, 0.0, kAccelWeight * kAccelSd * kAccelSd};
   coast_ = {kCoastWeight, kCoastAccel, kCoastWeight * kCoastSd * kCoastSd};
@@ -46,6 +55,8 @@ void HabitLearner::reset() noexcept {
   gear_revs_.fill({});
   launch_accel_ = {kLaunchWeight, kLaunchAccel, kLaunchWeight * kLaunchSd * kLaunchSd};
   launch_time_ = kBiteTime * kBiteWeight;
+  upper_gear_time_ = kLuggingWeight;
+  lugging_time_ = kLugging * kLuggingWeight;
   bites_ = kBiteWeight;
   gear_time_.fill(kGearDwell * kDwellWeight);
   gear_leaves_.fill(kDwellWeight);
@@ -117,7 +128,14 @@ void HabitLearner::observe(double dt, int mode, int launch, double speed, double
     if (mode == 0 && moving && at_idle) coast_.add(accel, dt);
     if (mode == launch) launch_accel_.add(accel, dt);
   }
-  if (mode == 0 && standing && std::isfinite(freq) && freq > 0.0) idle_.add(freq, dt);
+  // The idle drifts (a cold engine settles over minutes, the air conditioning raises it): the last minute
+  // of standing counts.
+  constexpr double kIdleMemory = 60.0;  // s
+  if (mode == 0 && standing && std::isfinite(freq) && freq > 0.0) idle_.add_recent(freq, dt, kIdleMemory);
+  if (gear && mode > 1 && std::isfinite(freq) && idle_.n > 0.0) {
+    upper_gear_time_ += dt;
+    if (freq < idle_.mean + 2.0 * idle_spread(idle_.mean, std::sqrt(idle_.var()))) lugging_time_ += dt;
+  }
   if (gear && moving && std::isfinite(freq) && freq > 0.0) {
     revs_.add(std::log(freq), dt);
     gear_revs_[static_cast<std::size_t>(mode)].add(std::log(freq), dt);
@@ -177,6 +195,7 @@ void HabitLearner::update() noexcept {
     h.gear_revs_mean[g] = (m.n * m.mean + kShrink * h.revs_mean) / n;
     h.gear_revs_sd[g] = std::max(std::sqrt((m.m2 + kShrink * h.revs_sd * h.revs_sd) / n), 0.15);
   }
+  h.lugging = lugging_time_ / upper_gear_time_;
   h.freq_max = freq_max_;
   for (int g = 1; g < kMaxModes; ++g)
     h.leave_rate[static_cast<std::size_t>(g)] =

@@ -31,8 +31,11 @@ struct DrivingHabits {
   double revs_sd = 0.35;       // sd of the log engine frequency in gear
   ModeArray gear_revs_mean{};  // per gear: mean log frequency this driver runs it at (the pooled band's
   ModeArray gear_revs_sd{};    // until the gear has been seen), and its sd
-  double freq_max = 0.0;       // Hz: the highest frequency seen; declutched revs are spread below 1.5x it
-  ModeArray leave_rate{};      // 1/s: rate at which each gear (index 1..M) is left
+  // Share of the time in a gear above first spent with the revs at idle (lugging: the engine judders, so
+  // drivers declutch or shift down); first gear creeps at idle as often as it likes.
+  double lugging = 0.05;
+  double freq_max = 0.0;   // Hz: the highest frequency seen; declutched revs are spread below 1.5x it
+  ModeArray leave_rate{};  // 1/s: rate at which each gear (index 1..M) is left
   std::array<double, kShiftKinds> shift_share{};  // where a gear is left for (ShiftKind)
   double engage_rate = 1.0;                       // 1/s: declutched and moving -> a gear
   double launch_rate = 0.05;                      // 1/s: declutched and standing -> moving off
@@ -62,6 +65,8 @@ class HabitLearner {
   struct Moments {
     double n = 0.0, mean = 0.0, m2 = 0.0;  // weight, mean, sum of squared deviations
     void add(double x, double w) noexcept;
+    // As add(), the weight of what came before decaying with time constant `memory` (in units of w).
+    void add_recent(double x, double w, double memory) noexcept;
     [[nodiscard]] double var() const noexcept { return n > 0.0 ? m2 / n : 0.0; }
   };
 
@@ -73,6 +78,7 @@ class HabitLearner {
   double moving_declutched_time_ = 0.0, moving_engages_ = 0.0;
   double standing_time_ = 0.0, launches_ = 0.0;
   double launch_time_ = 0.0, bites_ = 0.0;
+  double upper_gear_time_ = 0.0, lugging_time_ = 0.0;
   int last_sure_ = -1;  // the last mode the learner was sure of
   bool last_standing_ = false;
   double freq_max_ = 0.0;

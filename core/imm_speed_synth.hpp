@@ -58,6 +58,7 @@ class ImmSpeedSynthesizer {
   // Learned idle frequency (Hz), NaN until known.
   [[nodiscard]] double idle_freq() const noexcept { return learner_.habits().idle; }
   [[nodiscard]] const DrivingHabits& habits() const noexcept { return learner_.habits(); }
+  [[nodiscard]] const ModeFilter& filter() const noexcept { return filter_; }
 
  private:
   SynthOutput hold_step(double t, double gps) const noexcept;

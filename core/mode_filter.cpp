@@ -7,17 +7,16 @@ namespace gearpulse {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-// Outlier shares: a confident tracker hop on something else than the engine line, a GPS speed off by
-// multipath. A few percent of hops, fewer fixes.
+// Outlier share of the frequency: a confident tracker hop on something else than the engine line, a few
+// percent of hops. GPS speed is taken as it comes (a receiver's Doppler speed is seldom grossly wrong): a
+// mode whose track rejected fixes as outliers would keep a speed no fix supports.
 constexpr double kFreqOutlier = 0.03;
-constexpr double kGpsOutlier = 0.01;
-constexpr double kSpeedRange = 70.0;  // m/s over which a wrong fix may fall
 // In gear, v = theta f up to the tyres' slip and the driveline's wind-up: about 1 %.
 constexpr double kSlip = 0.01;
 // Declutched and rolling, the revs sit at idle about half the time (coasting) and anywhere below the revs
 // seen otherwise (falling after a shift, blipped); standing, at idle but for a blip now and then.
 constexpr double kIdleShareRolling = 0.5, kIdleShareStanding = 0.9;
-// Moving off, the slipping clutch holds the revs between idle and three times it.
+// Moving off, the slipping clutch holds the revs above idle, up to three times it.
 constexpr double kLaunchRevs = 3.0;
 // A move-off given up (stalled, the light stayed red): rare against the bite.
 constexpr double kAbortRate = 0.05;  // 1/s
@@ -31,16 +30,19 @@ double log_normal(double y, double var) noexcept {
   return -0.5 * (std::log(2.0 * kPi * var) + y * y / var);
 }
 
-// Kalman update of a track by a reading z of its speed with variance r, robust to an outlier share eps
-// spread over `range`. Returns the log-likelihood of the reading; the update is weighted by the reading's
-// odds of being no outlier and by `weight` (the share of an independent reading it stands for).
+// Kalman update of a track by a reading z of its speed with variance r that stands for `weight` (0..1] of an
+// independent reading, robust to an outlier share eps spread over `range`. The reading's density is
+// tempered, N(z; v, r)^weight, whose integral over the track's speed is the Gaussian of variance
+// pvv + r / weight times the normalisation below: a step's share of a correlated reading weighs its noise by
+// that share, and the track's own speed uncertainty in full. Returns the log-likelihood.
 double robust_update(SpeedTrack& x, double z, double r, double eps, double range, double weight) noexcept {
-  const double s = x.pvv + r;
   const double y = z - x.v;
-  const double inlier = (1.0 - eps) * std::exp(log_normal(y, s));
-  const double outlier = eps / range;
-  const double resp = inlier / (inlier + outlier);
-  const double w = weight * resp;
+  const double log_norm = 0.5 * (std::log(2.0 * kPi * r / weight) - weight * std::log(2.0 * kPi * r));
+  const double log_in = std::log(1.0 - eps) + log_normal(y, x.pvv + r / weight) + log_norm;
+  const double log_out = eps > 0.0 ? weight * std::log(eps / range) : -INFINITY;
+  const double top = std::max(log_in, log_out);
+  const double log_l = top + std::log(std::exp(log_in - top) + std::exp(log_out - top));
+  const double w = weight * std::exp(log_in - log_l);  // the reading's weight times its odds of no outlier
   if (w > 1e-9) {
     const double sw = x.pvv + r / w;
     const double kv = x.pvv / sw, ka = x.pva / sw;
@@ -51,7 +53,7 @@ double robust_update(SpeedTrack& x, double z, double r, double eps, double range
     x.pva = pva - kv * pva;
     x.paa -= ka * pva;
   }
-  return std::log(inlier + outlier);
+  return log_l;
 }
 
 }  // namespace
@@ -105,9 +107,11 @@ void ModeFilter::set_ladder(const GearLadder& ladder) noexcept {
 }
 
 double ModeFilter::entry_weight(int gear, double speed, const DrivingHabits& habits) const noexcept {
-  if (!std::isfinite(habits.revs_mean)) return 1.0;
-  // The gear whose revs at this speed sit in the driver's band; a floor keeps every gear possible.
-  const double z = (std::log(speed / ladder_.theta[gear]) - habits.revs_mean) / habits.revs_sd;
+  if (!std::isfinite(habits.gear_revs_mean[gear])) return 1.0;
+  // The gear whose revs at this speed sit in the band this driver runs it in; a floor keeps every gear
+  // possible.
+  const double z =
+      (std::log(speed / ladder_.theta[gear]) - habits.gear_revs_mean[gear]) / habits.gear_revs_sd[gear];
   return std::exp(-0.5 * z * z) + 1e-3;
 }
 
@@ -135,12 +139,19 @@ void ModeFilter::transition_matrix(double dt, const DrivingHabits& habits) noexc
   }
   if (gears > 0) {
     const double v = track_[0].v;
-    const double rate = v < kStanding ? habits.launch_rate : habits.engage_rate;
-    double total = 0.0;
-    for (int g = 1; g <= gears; ++g)
-      total += entry_weight(g, v, habits);
-    for (int g = 1; g <= gears; ++g)
-      q[0][g] = rate * entry_weight(g, v, habits) / total;
+    if (v < kStanding) {
+      q[0][launch()] = habits.launch_rate;
+    } else {
+      double total = 0.0;
+      for (int g = 1; g <= gears; ++g)
+        total += entry_weight(g, v, habits);
+      for (int g = 1; g <= gears; ++g)
+        q[0][g] = habits.engage_rate * entry_weight(g, v, habits) / total;
+    }
+    const double second = gears > 1 ? kLaunchSecond : 0.0;
+    q[launch()][1] = habits.bite_rate * (1.0 - second);
+    if (gears > 1) q[launch()][2] = habits.bite_rate * second;
+    q[launch()][0] = kAbortRate;
   }
   double norm = 0.0;
   for (int i = 0; i < n; ++i) {
@@ -202,7 +213,15 @@ void ModeFilter::transition_matrix(double dt, const DrivingHabits& habits) noexc
 
 void ModeFilter::predict(SpeedTrack& x, int mode, double dt, const DrivingHabits& habits) const noexcept {
   if (dt <= 0.0) return;
-  const bool rolling = mode == 0 && x.v >= kStanding;
+  if (mode == 0 && x.v < kStanding) {
+    // Declutched below walking pace the car is being braked to a stop, and stays there until it moves off
+    // (the moving-off mode): its speed no more uncertain than it was.
+    x.v = std::max(x.v + std::min(habits.coast_accel, 0.0) * dt, 0.0);
+    x.a = 0.0;
+    x.pva = 0.0;
+    return;
+  }
+  const bool rolling = mode == 0;
   const bool moving_off = mode == launch();
   const double mean = rolling ? habits.coast_accel : moving_off ? habits.launch_accel : 0.0;
   const double sd = is_gear(mode) ? habits.accel_sd : habits.coast_sd;
@@ -228,15 +247,16 @@ void ModeFilter::predict(SpeedTrack& x, int mode, double dt, const DrivingHabits
 
 double ModeFilter::update_gps(SpeedTrack& x, double gps) const noexcept {
   const double r = ladder_.sigma_speed * ladder_.sigma_speed;
-  return robust_update(x, gps, r, kGpsOutlier, kSpeedRange, 1.0);
+  return robust_update(x, gps, r, 0.0, 1.0, 1.0);
 }
 
 double ModeFilter::update_freq(SpeedTrack& x, int mode, double freq, double weight,
                                const DrivingHabits& habits) const noexcept {
   const double high = std::max({1.5 * habits.freq_max, 1.2 * freq, 1.0});
   if (mode == launch()) {
+    // The driver raises the revs above idle not to stall the engine as the clutch takes up.
     const bool known = std::isfinite(habits.idle);
-    const double lo = known ? habits.idle - 2.0 * habits.idle_sd : 0.0;
+    const double lo = known ? habits.idle + 2.0 * habits.idle_sd : 0.0;
     const double hi = known ? kLaunchRevs * habits.idle : high;
     const double p = freq >= lo && freq <= hi ? 1.0 / (hi - lo) : 0.0;
     // A slipping clutch turns the engine faster than first gear would at this speed; once the car has
@@ -244,6 +264,8 @@ double ModeFilter::update_freq(SpeedTrack& x, int mode, double freq, double weig
     const double caught = ladder_.theta[1] * freq;
     const double sd = std::sqrt(x.pvv + kSlip * kSlip * caught * caught + 0.01);
     const double slipping = 0.5 * std::erfc(-(caught - x.v) / (sd * std::sqrt(2.0)));
+    // The estimate is held inside that bound (the constrained filter's projection).
+    if (x.v > caught) x.v = caught, x.pvv = std::min(x.pvv, caught * caught);
     return weight * (std::log(std::max(p, kFreqOutlier / high)) + std::log(std::max(slipping, 1e-12)));
   }
   if (mode == 0) {
@@ -268,7 +290,11 @@ double ModeFilter::update_freq(SpeedTrack& x, int mode, double freq, double weig
     const double zr = (std::log(freq) - habits.gear_revs_mean[mode]) / habits.gear_revs_sd[mode];
     habit = -0.5 * zr * zr;
   }
-  return weight * (log_l + std::log(theta) + habit);
+  // Revs at idle in a gear above first: as often as this driver lugs a gear, against the idle's own share
+  // declutched.
+  if (mode > 1 && std::isfinite(habits.idle) && freq < habits.idle + 2.0 * habits.idle_sd)
+    habit += std::log(habits.lugging);
+  return log_l + weight * (std::log(theta) + habit);
 }
 
 void ModeFilter::step(double dt, double gps, double freq, const DrivingHabits& habits,

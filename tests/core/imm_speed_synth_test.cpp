@@ -48,6 +48,8 @@ std::pair<double, double> outage_distance(double dt) {
   return {synth_distance, true_distance};
 }
 
+constexpr double kStandingSpeed = ImmSpeedSynthesizer::kStanding;  // m/s
+
 }  // namespace
 
 TEST_CASE("imm synth: GPS passes through and the engaged gear is found") {
@@ -84,7 +86,7 @@ TEST_CASE("imm synth: a car braking to a stop at idle in an outage comes to rest
     v = std::max(0.0, v - 1.5 * 0.5);
     o = synth.step(t, kMissing, kIdle + 0.3 * std::sin(t));
   }
-  CHECK(o.speed < 1.0);
+  CHECK(o.speed < kStandingSpeed);
   CHECK(o.gear == 0);
 }
 
