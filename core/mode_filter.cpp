@@ -211,6 +211,12 @@ void ModeFilter::transition_matrix(double dt, const DrivingHabits& habits) noexc
   }
 }
 
+ModeFilter::Acceleration ModeFilter::acceleration(int mode, const DrivingHabits& habits) const noexcept {
+  if (mode == 0) return {habits.coast_accel, habits.coast_sd};
+  if (mode == launch()) return {habits.launch_accel, habits.coast_sd};
+  return {0.0, habits.accel_sd};
+}
+
 void ModeFilter::predict(SpeedTrack& x, int mode, double dt, const DrivingHabits& habits) const noexcept {
   if (dt <= 0.0) return;
   if (mode == 0 && x.v < kStanding) {
@@ -221,10 +227,7 @@ void ModeFilter::predict(SpeedTrack& x, int mode, double dt, const DrivingHabits
     x.pva = 0.0;
     return;
   }
-  const bool rolling = mode == 0;
-  const bool moving_off = mode == launch();
-  const double mean = rolling ? habits.coast_accel : moving_off ? habits.launch_accel : 0.0;
-  const double sd = is_gear(mode) ? habits.accel_sd : habits.coast_sd;
+  const auto [mean, sd] = acceleration(mode, habits);
   const double tau = habits.accel_time;
   // The integrated Ornstein-Uhlenbeck acceleration over dt (exact discretisation).
   const double r = dt / tau;
@@ -314,18 +317,28 @@ void ModeFilter::step(double dt, double gps, double freq, const DrivingHabits& h
       x = track_[j];
       continue;
     }
+    // A change of mode ends what the pedals did: the speed carries over, the acceleration is drawn anew
+    // from the new mode's own distribution.
+    const Acceleration fresh = acceleration(j, habits);
+    const auto entering = [&](int i) {
+      if (i == j) return track_[i];
+      const SpeedTrack& from = track_[i];
+      return SpeedTrack{from.v, fresh.mean, from.pvv, 0.0, fresh.sd * fresh.sd};
+    };
     x = SpeedTrack{0.0, 0.0, 0.0, 0.0, 0.0};
     for (int i = 0; i < n; ++i) {
       const double w = trans_[i][j] * prob_[i] / c;
-      x.v += w * track_[i].v;
-      x.a += w * track_[i].a;
+      const SpeedTrack e = entering(i);
+      x.v += w * e.v;
+      x.a += w * e.a;
     }
     for (int i = 0; i < n; ++i) {
       const double w = trans_[i][j] * prob_[i] / c;
-      const double dv = track_[i].v - x.v, da = track_[i].a - x.a;
-      x.pvv += w * (track_[i].pvv + dv * dv);
-      x.pva += w * (track_[i].pva + dv * da);
-      x.paa += w * (track_[i].paa + da * da);
+      const SpeedTrack e = entering(i);
+      const double dv = e.v - x.v, da = e.a - x.a;
+      x.pvv += w * (e.pvv + dv * dv);
+      x.pva += w * (e.pva + dv * da);
+      x.paa += w * (e.paa + da * da);
     }
   }
   double best = -INFINITY;

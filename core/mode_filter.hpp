@@ -67,6 +67,12 @@ class ModeFilter {
 
  private:
   using Matrix = std::array<ModeArray, kMaxModes>;
+  struct Acceleration {
+    double mean = 0.0, sd = 0.0;  // m/s^2
+  };
+  // The acceleration of a mode: mean 0 in gear, the coasting deceleration declutched (rolling), the launch
+  // acceleration moving off; its stationary spread.
+  [[nodiscard]] Acceleration acceleration(int mode, const DrivingHabits& habits) const noexcept;
   void transition_matrix(double dt, const DrivingHabits& habits) noexcept;
   [[nodiscard]] double entry_weight(int gear, double speed, const DrivingHabits& habits) const noexcept;
   void predict(SpeedTrack& x, int mode, double dt, const DrivingHabits& habits) const noexcept;
