@@ -5,12 +5,15 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string_view>
+#include <system_error>
 
 #include <toml++/toml.h>
+
+#include "daemon/atomic_file.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -358,15 +361,17 @@ Config parse_config(std::string_view text, const std::string& source_name,
 }
 
 Config load_config(const std::string& path) {
+  std::optional<std::string> text;
+  try {
+    text = read_file(path, kMaxConfigBytes);
+  } catch (const FileRefused& e) {
+    throw ConfigError(path + ": cannot read config file: " + e.reason());
+  } catch (const std::system_error& e) {
+    throw ConfigError(path + ": cannot read config file: " + e.code().message());
+  }
+  if (!text) throw ConfigError(path + ": cannot open config file: " + std::strerror(ENOENT));
   std::error_code ec;
-  if (std::filesystem::is_directory(path, ec))
-    throw ConfigError(path + ": cannot read config file: is a directory");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot open config file: " + std::strerror(errno));
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw ConfigError(path + ": read error");
-  return parse_config(text.str(), path, std::filesystem::absolute(path, ec).parent_path());
+  return parse_config(*text, path, std::filesystem::absolute(path, ec).parent_path());
 }
 
 std::vector<std::string> restart_required_changes(const Config& a, const Config& b) {

@@ -2,6 +2,7 @@
 
 #include <sys/stat.h>
 
+#include <limits>
 #include <optional>
 
 #include "daemon/atomic_file.hpp"
@@ -11,7 +12,7 @@ namespace gearpulse::daemon {
 ModelLoad load_model_file(const std::filesystem::path& path) noexcept {
   std::optional<std::string> text;
   try {
-    text = read_file(path);
+    text = read_file(path, std::numeric_limits<std::size_t>::max());
   } catch (const std::exception& e) {
     return {nullptr, e.what()};
   }
@@ -32,7 +33,7 @@ void save_model_file(const std::filesystem::path& path, const GearModel& model) 
 // version (other spacing, other key order) is not rewritten for that alone.
 bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept {
   try {
-    const std::optional<std::string> text = read_file(path);
+    const std::optional<std::string> text = read_file(path, std::numeric_limits<std::size_t>::max());
     return text && serialize_model(parse_model(*text)) == serialize_model(model);
   } catch (const std::exception&) {
     return false;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <exception>
+#include <limits>
 
 #include "daemon/atomic_file.hpp"
 
@@ -303,7 +304,7 @@ std::string TrainingStore::load(const std::filesystem::path& path) {
     saved_crc_ = 0;
     journal_current_ = false;
   }
-  const auto blob = read_file(path);
+  const auto blob = read_file(path, std::numeric_limits<std::size_t>::max());
   std::string problem = blob ? deserialize(*blob) : std::string();
   std::lock_guard lock(mutex_);
   if (!blob) empty_locked();
@@ -368,7 +369,7 @@ std::size_t TrainingStore::append_journal_io(const std::filesystem::path& path) 
 
 TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem::path& path) {
   JournalReplay replay;
-  const auto blob = read_file(journal_path(path));
+  const auto blob = read_file(journal_path(path), std::numeric_limits<std::size_t>::max());
   if (!blob) return replay;
   if (blob->empty()) {
     replay.problem = "empty (nothing to recover)";

@@ -312,6 +312,21 @@ TEST_CASE("daemon: a malformed config is refused with file and line before anyth
   CHECK(good.wait() == 0);
 }
 
+TEST_CASE("daemon: a config that never ends or never opens is refused with exit 2, naming it") {
+  TempDir dir;
+  const std::string fifo = (dir / "fifo.toml").string();
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  int n = 0;
+  for (const std::string& path : {std::string("/dev/zero"), fifo}) {
+    CAPTURE(path);
+    const auto log = dir / ("log" + std::to_string(++n) + ".txt");
+    Process check({kDaemon, "--config", path, "--check-config"}, log);
+    CHECK(check.wait(10'000) == 2);
+    CHECK(read_text(log).find("gearpulsed: " + path + ": cannot read config file: not a regular file") !=
+          std::string::npos);
+  }
+}
+
 TEST_CASE("daemon: model.json is loaded at start and survives kill -9") {
   TempDir dir;
   std::filesystem::create_directories(dir / "state");

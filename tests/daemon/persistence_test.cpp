@@ -102,7 +102,7 @@ TEST_CASE("daemon: atomic write replaces the content and leaves no temp file") {
   write_file_atomic(file, "second, longer content");
   CHECK(read_text(file) == "second, longer content");
   CHECK(count_entries(dir.path()) == 1);
-  CHECK(read_file(dir / "absent").has_value() == false);
+  CHECK(read_file(dir / "absent", 1).has_value() == false);
 }
 
 TEST_CASE("daemon: atomic write gives a new file the umask's permissions and keeps an old file's") {
