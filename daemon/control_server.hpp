@@ -8,6 +8,7 @@
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -30,6 +31,11 @@ struct ControlLimits {
   // (max_clients) for a minute, refusing gearpulsectl meanwhile.
   int first_request_timeout_ms = 10'000;
 };
+
+// Text from a request as an error reply names it: in single quotes, with quotes, backslashes and
+// control characters escaped ('st\u0000atus'), so the whole of it shows: a raw NUL would end the message
+// (a ControlError's what() is a C string), and raw control bytes would reach the user's terminal.
+[[nodiscard]] std::string quote_text(std::string_view text);
 
 class ControlServer {
  public:

@@ -588,7 +588,7 @@ nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
                  keep ? " (training pairs kept)" : " and training pairs cleared");
     return {{"reset", true}, {"training_samples", store.size()}};
   }
-  throw ControlError("unknown command '" + cmd + "' (status, gears, retrain, reset-model)");
+  throw ControlError("unknown command " + quote_text(cmd) + " (status, gears, retrain, reset-model)");
 }
 
 std::string Daemon::Impl::status_line() {

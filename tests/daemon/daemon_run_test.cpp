@@ -164,6 +164,9 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(odd["error"].get<std::string>().find("keep_samples") != std::string::npos);
   CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true})")["ok"] == true);
   CHECK(ask(dir, R"({"v":1,"cmd":"nonsense"})")["ok"] == false);
+  // The command is named whole, escaped, even with a NUL inside (it ended the message there).
+  CHECK(ask(dir, R"({"v":1,"cmd":"st\u0000atus\n'"})")["error"] ==
+        R"(unknown command 'st\u0000atus\u000a\'' (status, gears, retrain, reset-model))");
   CHECK(ask(dir, R"({"v":1,"cmd":"gears"})")["model_state"] == "learning");
   CHECK(ask(dir, R"({"v":1,"cmd":"retrain"})")["ok"] == true);
 
