@@ -130,6 +130,7 @@ struct Daemon::Impl {
   std::string status_line();
   void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
   LogLimiter limiter;
+  StateFault no_reader;                  // the pulse output has no reader (a PTY nobody holds open)
   bool gps_connected = false;            // as log_changes() last said
   std::uint64_t gps_failures_seen = 0;   // GPS connection failures log_changes() has looked at
   std::optional<ControlServer> control;  // last: destroyed first (above)
@@ -186,6 +187,23 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
     spdlog::log(routine ? spdlog::level::debug : spdlog::level::info,
                 "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,
                 now.speed * 3.6, now.gear);
+  }
+  // A navigator that should be reading the pulses is not: said when the last reader goes (or none is
+  // there at start) and when one comes, at most once a minute for a reader that opens and closes often.
+  std::uint64_t starts = 0;
+  switch (no_reader.update(now.output_state == "no-reader", std::chrono::steady_clock::now(), starts)) {
+    case StateFault::Say::kStart:
+      spdlog::warn(
+          "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}",
+          config.output.path, now.output_unheard,
+          starts > 1 ? fmt::format(" ({} times since the last report)", starts) : "");
+      break;
+    case StateFault::Say::kEnd:
+      spdlog::info("output: a reader has {} open ({} pulses went unheard in all)", config.output.path,
+                   now.output_unheard);
+      break;
+    case StateFault::Say::kNothing:
+      break;
   }
   if (now.output_state != before.output_state && now.output_state == "write-errors")
     spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
@@ -492,7 +510,8 @@ nlohmann::json Daemon::Impl::status_json() {
   reply["output"] = {{"kind", to_string(config.output.kind)},
                      {"state", p.output_state},
                      {"error", p.output_error},
-                     {"dropped", p.output_dropped}};
+                     {"dropped", p.output_dropped},
+                     {"unheard", p.output_unheard}};
   reply["output"]["pulses_per_km"] = config.output.pulses_per_km;
   if (config.output.kind == OutputKind::kPty) reply["output"]["path"] = config.output.path;
   if (config.output.kind == OutputKind::kGpio)

@@ -233,9 +233,26 @@ TEST_CASE("daemon: an output that will not open is retried until it does, withou
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   CHECK(std::filesystem::is_symlink(link));
   status = wait_for_status(dir, daemon);
-  CHECK(status["output"]["state"] == "ok");
+  // Open, but no process has the device open: said in status and once in the log.
+  CHECK(status["output"]["state"] == "no-reader");
+  CHECK(status["output"]["unheard"] == 0);  // no GPS: no pulses yet
   CHECK(status["output"]["error"] == "");
   CHECK(read_text(dir / "log.txt").find("opened on a retry") != std::string::npos);
+  CHECK(log_says(dir, "no process has " + link.string() + " open", std::chrono::seconds(5)));
+  {
+    const gearpulse::UniqueFd reader(::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK));
+    REQUIRE(reader);
+    CHECK(log_says(dir, "a reader has " + link.string() + " open", std::chrono::seconds(5)));
+    CHECK(wait_for_status(dir, daemon)["output"]["state"] == "ok");
+  }
+  CHECK(gearpulse::test::wait_for(
+      [&] { return wait_for_status(dir, daemon)["output"]["state"] == "no-reader"; },
+      std::chrono::seconds(5)));
+  const std::string log = read_text(dir / "log.txt");
+  std::size_t said = 0;
+  for (std::size_t at = 0; (at = log.find("no process has", at)) != std::string::npos; ++at)
+    ++said;
+  CHECK(said == 1);  // the reader's return and second leave within a minute: not said again
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
