@@ -14,6 +14,7 @@
 #include <toml++/toml.h>
 
 #include "daemon/atomic_file.hpp"
+#include "daemon/training_store.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -191,7 +192,7 @@ void read_model(Section& s, ModelConfig& m) {
   s.integer("min_new_samples", m.min_new_samples, 1, 100'000'000);
   s.integer("replace_min_samples", m.replace_min_samples, 0, 100'000'000);
   s.number("store_hours", m.store_hours, 0.01, 24.0 * 365.0);
-  s.integer("max_samples", m.max_samples, 100, 50'000'000);
+  s.integer("max_samples", m.max_samples, 100, static_cast<std::int64_t>(kMaxStoreSamples));
   s.number("save_interval", m.save_interval, 1.0, 86400.0);
 }
 

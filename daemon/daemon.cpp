@@ -346,9 +346,17 @@ bool Daemon::Impl::load_state() {
       spdlog::error("training: discarding {}: {}; starting with an empty training store (the file is {})",
                     store_path.string(), problem, where);
       note_state_problem("training.bin discarded: " + problem + " (" + where + ")");
-    } else if (std::filesystem::exists(store_path))
+    } else if (std::filesystem::exists(store_path)) {
       spdlog::info("training: {} stored pairs restored from {}", store.size(), store_path.string());
-    else
+      if (const std::size_t skipped = store.skipped(); skipped > 0) {
+        const std::string text = fmt::format(
+            "training.bin: {} record(s) hold their checksum but no plausible pair; skipped, the other {} "
+            "kept",
+            skipped, store.size());
+        spdlog::warn("training: {}", text);
+        note_state_problem(text);
+      }
+    } else
       spdlog::info("training: no stored pairs yet ({} will hold them)", store_path.string());
   } catch (const std::exception& e) {
     // Set aside as a corrupt store is (a file another user installed with mode 0600, a read error): the
@@ -391,7 +399,10 @@ void Daemon::Impl::recover_journal() noexcept {
   const std::filesystem::path journal = TrainingStore::journal_path(store_path);
   try {
     const TrainingStore::JournalReplay replay = store.replay_journal(store_path);
-    if (!replay.problem.empty()) spdlog::warn("training: {}: {}", journal.string(), replay.problem);
+    if (!replay.problem.empty()) {
+      spdlog::warn("training: {}: {}", journal.string(), replay.problem);
+      note_state_problem(journal.filename().string() + ": " + replay.problem);
+    }
     if (replay.stale)
       spdlog::debug("training: {} predates the last save; nothing to recover", journal.string());
     if (replay.recovered > 0) {
@@ -402,6 +413,7 @@ void Daemon::Impl::recover_journal() noexcept {
   } catch (const std::exception& e) {
     spdlog::error("training: cannot read {}: {}; pairs of the last run since its last save are lost",
                   journal.string(), e.what());
+    note_state_problem(journal.filename().string() + " unreadable: " + e.what());
   }
 }
 

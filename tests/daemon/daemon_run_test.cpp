@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <thread>
 #include <vector>
@@ -484,6 +485,36 @@ TEST_CASE("daemon: a corrupt model and training store are logged, set aside and 
   CHECK(read_text(dir / "state/model.json.corrupt") == torn_model);
   CHECK(read_text(dir / "state/training.bin.corrupt") == "GPTRAIN\ngarbage");
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
+}
+
+TEST_CASE("daemon: a training store with one pair that is no pair keeps the rest and says so in status") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
+  for (int i = 0; i < 2401; ++i)
+    store.add({1.7e9 + i, 10.0, 100.0});
+  std::string bytes = store.serialize();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::memcpy(bytes.data() + 24 + 1200 * 24 + 8, &nan, sizeof nan);  // record 1200's speed
+  const std::uint32_t crc = gearpulse::daemon::crc32(std::string_view(bytes).substr(0, bytes.size() - 4));
+  std::memcpy(bytes.data() + bytes.size() - 4, &crc, sizeof crc);
+  write_text(dir / "state/training.bin", bytes);
+  write_text(dir / "state/training.bin.journal", "not a journal");  // said in status too
+  // And a model.json over the bound: refused unparsed, set aside.
+  write_text(dir / "state/model.json", std::string(kModel).substr(0, std::string(kModel).size() - 1) +
+                                           ",\"extra\":{\"x\":\"" + std::string(2 << 20, 'x') + "\"}}");
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  const json status = status_of_one_run(dir);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["training_samples"] == 2400);
+  const std::string problems = status["model"]["problems"].dump();
+  CHECK(problems.find("training.bin: 1 record(s) hold their checksum but no plausible pair; skipped") !=
+        std::string::npos);
+  CHECK(problems.find("longer than 1048576 bytes") != std::string::npos);
+  CHECK(problems.find("training.bin.journal: not a training journal (bad magic)") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir / "state/training.bin.corrupt"));
+  CHECK(std::filesystem::exists(dir / "state/model.json.corrupt"));
 }
 
 // A second corruption keeps the first one's evidence; a model.json that cannot be read at all (here a
