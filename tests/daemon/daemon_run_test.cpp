@@ -3,9 +3,11 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/ptrace.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -25,6 +27,7 @@
 #include "daemon/control_server.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
+#include "daemon/watchdog.hpp"
 #include "tests/drivers/alsa_fifo.hpp"
 #include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -768,6 +771,66 @@ TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
   CHECK(receive_until("WATCHDOG=1"));
   daemon.signal(SIGTERM);
   CHECK(receive_until("STOPPING=1"));
+  CHECK(daemon.wait() == 0);
+  ::close(sock);
+}
+
+TEST_CASE("daemon: a thread that stops turning withholds WATCHDOG=1 until it turns again") {
+  // Every thread but the main one is stopped (ptrace, a thread at a time: the main thread runs on and
+  // judges the others' heartbeats), as a thread stuck in a driver would be.
+  if (::geteuid() != 0) {
+    std::puts("GEARPULSE_SKIP: needs root to stop the daemon's threads with ptrace");
+    return;
+  }
+  TempDir dir;
+  const std::string notify_path = (dir / "notify").string();
+  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, notify_path.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt",
+                 {.env = {"NOTIFY_SOCKET=" + notify_path, "WATCHDOG_USEC=2000000"}});
+  // The WATCHDOG=1 messages that arrive within `ms`.
+  const auto pings_within = [&](int ms) {
+    int pings = 0;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < until) {
+      pollfd pfd{sock, POLLIN, 0};
+      if (::poll(&pfd, 1, 50) <= 0) continue;
+      char buf[4096];
+      const ssize_t n = ::recv(sock, buf, sizeof buf, 0);
+      if (n > 0 && std::string_view(buf, static_cast<std::size_t>(n)).find("WATCHDOG=1") != std::string::npos)
+        ++pings;
+    }
+    return pings;
+  };
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+  CHECK(pings_within(2'000) >= 2);
+  std::vector<pid_t> stopped;
+  for (const auto& task :
+       std::filesystem::directory_iterator("/proc/" + std::to_string(daemon.pid()) + "/task")) {
+    const pid_t tid = std::stoi(task.path().filename().string());
+    if (tid == daemon.pid()) continue;
+    if (::ptrace(PTRACE_SEIZE, tid, nullptr, nullptr) != 0) continue;
+    if (::ptrace(PTRACE_INTERRUPT, tid, nullptr, nullptr) == 0 && ::waitpid(tid, nullptr, __WALL) == tid)
+      stopped.push_back(tid);
+  }
+  REQUIRE(stopped.size() >= 3);  // the tracker, GPS and pulse threads at least
+  // Within the stall limit (5 s) and a tick the pings stop, and stay stopped: longer than the unit's
+  // WatchdogSec (10 s) systemd kills the daemon and, by Restart=on-failure, starts it again.
+  (void)pings_within(static_cast<int>(gearpulse::daemon::kStallNs / 1'000'000) + 1'500);
+  CHECK(pings_within(3'000) == 0);
+  CHECK(daemon.running());
+  for (const pid_t tid : stopped)
+    ::ptrace(PTRACE_DETACH, tid, nullptr, nullptr);
+  CHECK(pings_within(3'000) >= 2);
+  CHECK(log_says(dir, "thread(s) not responding: ", std::chrono::seconds(5)));
+  const std::string unit = read_text(GEARPULSE_SOURCE_DIR "/systemd/gearpulsed.service");
+  CHECK(unit.find("\nWatchdogSec=") != std::string::npos);
+  CHECK(unit.find("\nRestart=on-failure\n") != std::string::npos);
+  daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
   ::close(sock);
 }
