@@ -65,12 +65,20 @@ std::vector<Peak> density_modes(const std::vector<double>& r, double bandwidth) 
   return peaks;
 }
 
+// One sample from each of `target` equal strata of the data, spread over its time as a stride would be,
+// at an offset within the stratum that steps by the golden ratio's fraction from one stratum to the next.
+// A plain stride aliases with any period of the data that shares its factors (every 150th sample of a
+// 2400-sample drive repeated 1000 times is one of the same 16 samples of the drive); the golden-ratio
+// offsets cover every phase of any period evenly.
 MixtureData subsample(const MixtureData& all, std::size_t target) {
   if (all.size() <= target) return all;
   MixtureData out;
   const double stride = static_cast<double>(all.size()) / static_cast<double>(target);
+  const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
   for (std::size_t i = 0; i < target; ++i) {
-    const auto k = static_cast<std::size_t>(static_cast<double>(i) * stride);
+    const double offset = std::fmod(static_cast<double>(i) * golden, 1.0);
+    const auto k =
+        std::min(all.size() - 1, static_cast<std::size_t>((static_cast<double>(i) + offset) * stride));
     out.v.push_back(all.v[k]);
     out.s.push_back(all.s[k]);
   }

@@ -6,6 +6,7 @@
 #include <limits>
 #include <optional>
 #include <stdexcept>
+#include <tuple>
 #include <vector>
 
 #include "core/estimator_internal.hpp"
@@ -272,6 +273,28 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   if (options.gears != 0 && (options.gears < 2 || options.gears > static_cast<int>(GearModel::kMaxGears)))
     throw std::invalid_argument("fit: gears must be 2.." + std::to_string(GearModel::kMaxGears) +
                                 " (or 0 = from the data)");
+  const auto usable = [](const Sample& s) {
+    return s.has_speed() && s.has_freq() && s.speed >= 0.0 && s.freq > 0.0 && std::isfinite(s.speed / s.freq);
+  };
+  // A record that repeats an earlier one whole (time, speed and frequency) is that observation read
+  // again: the same log given twice, overlapping exports, one drive joined to itself. Observations count
+  // once in the likelihood; a copy would make every count-based judgement (the least support of a gear,
+  // the samples a valley is judged on, the selection criterion's sample size) see more evidence than
+  // the driving gave, so the ladder would depend on how often one drive was read. Later copies go.
+  std::vector<bool> copy(samples.size(), false);
+  {
+    std::vector<std::size_t> order;
+    order.reserve(samples.size());
+    for (std::size_t i = 0; i < samples.size(); ++i)
+      if (usable(samples[i]) && std::isfinite(samples[i].t)) order.push_back(i);
+    const auto key = [&](std::size_t i) {
+      return std::tuple(samples[i].t, samples[i].speed, samples[i].freq);
+    };
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return key(a) < key(b); });
+    for (std::size_t j = 1; j < order.size(); ++j)
+      if (key(order[j]) == key(order[j - 1])) copy[order[j]] = true;
+  }
   detail::MixtureData data;
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());
@@ -282,9 +305,9 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   // reading again (a steady cruise or a car at rest logged with rounded values), as replay counts them.
   constexpr double kHeldFor = 3.0;  // s
   double last_speed = -1.0, last_freq = -1.0, last_t = -std::numeric_limits<double>::infinity();
-  for (const Sample& s : samples) {
-    if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0 || !std::isfinite(s.speed / s.freq))
-      continue;
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const Sample& s = samples[i];
+    if (!usable(s) || copy[i]) continue;
     if (s.speed == last_speed && s.freq == last_freq && s.t - last_t < kHeldFor) continue;
     last_speed = s.speed;
     last_freq = s.freq;

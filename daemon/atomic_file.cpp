@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdint>
 #include <fstream>
 #include <string>
 #include <system_error>
@@ -111,13 +112,23 @@ void remove_file_durable(const std::filesystem::path& path) {
   sync_directory(path.has_parent_path() ? path.parent_path() : std::filesystem::path("."));
 }
 
-std::optional<std::string> read_file(const std::filesystem::path& path) {
-  UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+std::optional<std::string> read_file(const std::filesystem::path& path, std::size_t max_bytes) {
+  // O_NONBLOCK: opening a FIFO for reading otherwise waits for a writer, before fstat can refuse it.
+  UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
   if (fd.get() < 0) {
     if (errno == ENOENT) return std::nullopt;
     throw_errno("cannot open", path);
   }
+  struct stat st {};
+  if (::fstat(fd.get(), &st) != 0) throw_errno("cannot stat", path);
+  if (S_ISDIR(st.st_mode)) throw FileRefused(path, "is a directory");
+  if (!S_ISREG(st.st_mode)) throw FileRefused(path, "not a regular file");
+  const auto too_long = [&] {
+    return FileRefused(path, "longer than " + std::to_string(max_bytes) + " bytes, the limit for this file");
+  };
+  if (static_cast<std::uintmax_t>(st.st_size) > max_bytes) throw too_long();
   std::string out;
+  out.reserve(static_cast<std::size_t>(st.st_size));
   char buf[65536];
   for (;;) {
     const ssize_t n = ::read(fd.get(), buf, sizeof buf);
@@ -126,6 +137,7 @@ std::optional<std::string> read_file(const std::filesystem::path& path) {
       throw_errno("cannot read", path);
     }
     if (n == 0) break;
+    if (out.size() + static_cast<std::size_t>(n) > max_bytes) throw too_long();  // it grew since fstat
     out.append(buf, static_cast<std::size_t>(n));
   }
   return out;

@@ -3,9 +3,11 @@
 // the old content or the new one, never a torn mix.
 #include <filesystem>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <system_error>
+#include <utility>
 
 #include "drivers/unique_fd.hpp"
 
@@ -33,8 +35,22 @@ void append_file_durable(const std::filesystem::path& path, std::string_view dat
 // cut. Throws std::system_error naming the path on failure.
 void remove_file_durable(const std::filesystem::path& path);
 
-// Whole file, or nullopt if it does not exist. Throws std::system_error on other read errors.
-[[nodiscard]] std::optional<std::string> read_file(const std::filesystem::path& path);
+// A file that is there but is not read: not a regular file (a FIFO blocks its reader, a device like
+// /dev/zero never ends), or longer than the reader takes. reason() says which, without the path.
+class FileRefused : public std::runtime_error {
+ public:
+  FileRefused(const std::filesystem::path& path, std::string reason)
+      : std::runtime_error(path.string() + ": " + reason), reason_(std::move(reason)) {}
+  [[nodiscard]] const std::string& reason() const noexcept { return reason_; }
+
+ private:
+  std::string reason_;
+};
+
+// Whole file, or nullopt if it does not exist. Throws FileRefused for anything but a regular file and for
+// a file longer than `max_bytes` (so no file makes the reader allocate more than that), std::system_error
+// on other open and read errors.
+[[nodiscard]] std::optional<std::string> read_file(const std::filesystem::path& path, std::size_t max_bytes);
 
 // Removes temp files that a crash between create and rename left behind next to `path`.
 // Returns how many were removed.

@@ -5,12 +5,16 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string_view>
+#include <system_error>
 
 #include <toml++/toml.h>
+
+#include "daemon/atomic_file.hpp"
+#include "daemon/training_store.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -188,7 +192,7 @@ void read_model(Section& s, ModelConfig& m) {
   s.integer("min_new_samples", m.min_new_samples, 1, 100'000'000);
   s.integer("replace_min_samples", m.replace_min_samples, 0, 100'000'000);
   s.number("store_hours", m.store_hours, 0.01, 24.0 * 365.0);
-  s.integer("max_samples", m.max_samples, 100, 50'000'000);
+  s.integer("max_samples", m.max_samples, 100, static_cast<std::int64_t>(kMaxStoreSamples));
   s.number("save_interval", m.save_interval, 1.0, 86400.0);
 }
 
@@ -358,15 +362,17 @@ Config parse_config(std::string_view text, const std::string& source_name,
 }
 
 Config load_config(const std::string& path) {
+  std::optional<std::string> text;
+  try {
+    text = read_file(path, kMaxConfigBytes);
+  } catch (const FileRefused& e) {
+    throw ConfigError(path + ": cannot read config file: " + e.reason());
+  } catch (const std::system_error& e) {
+    throw ConfigError(path + ": cannot read config file: " + e.code().message());
+  }
+  if (!text) throw ConfigError(path + ": cannot open config file: " + std::strerror(ENOENT));
   std::error_code ec;
-  if (std::filesystem::is_directory(path, ec))
-    throw ConfigError(path + ": cannot read config file: is a directory");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot open config file: " + std::strerror(errno));
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw ConfigError(path + ": read error");
-  return parse_config(text.str(), path, std::filesystem::absolute(path, ec).parent_path());
+  return parse_config(*text, path, std::filesystem::absolute(path, ec).parent_path());
 }
 
 std::vector<std::string> restart_required_changes(const Config& a, const Config& b) {

@@ -1,6 +1,7 @@
 #pragma once
 // The daemon's configuration (TOML). Every key has a default; unknown keys, wrong types and out-of-range
 // values are errors of the form "file:line: key: reason", raised before any device is opened.
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <stdexcept>
@@ -96,8 +97,13 @@ struct ConfigError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Parses and validates; throws ConfigError. Relative paths in the file (output.path, model.state_dir,
-// control.socket) are taken from the file's directory, not the daemon's working directory.
+// The longest config file read: the shipped one is under 10 kB, and neither a device that never ends
+// (/dev/zero) nor a file written by mistake makes the daemon allocate more than this.
+inline constexpr std::size_t kMaxConfigBytes = std::size_t{1} << 20;
+
+// Parses and validates; throws ConfigError, also for anything but a regular file (a FIFO would block the
+// reader) and for a file longer than kMaxConfigBytes. Relative paths in the file (output.path,
+// model.state_dir, control.socket) are taken from the file's directory, not the daemon's working directory.
 [[nodiscard]] Config load_config(const std::string& path);
 // Same from text (tests); `source_name` is used in messages, relative paths are taken from `base_dir`
 // (left as written when it is empty).

@@ -10,12 +10,15 @@
 
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <map>
 #include <memory>
 #include <system_error>
+#include <tuple>
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
 #include "daemon/control_protocol.hpp"
@@ -55,15 +58,42 @@ void clear_stale_socket(const std::string& path) {
   if (::unlink(path.c_str()) != 0 && errno != ENOENT) throw_errno("cannot remove stale socket " + path);
 }
 
+// A peer with the daemon's own uid or root: gearpulsectl run by the service's user or an administrator.
+bool peer_is_owner(int fd) noexcept {
+  ucred cred{};
+  socklen_t len = sizeof cred;
+  if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) != 0) return false;
+  return cred.uid == 0 || cred.uid == ::geteuid();
+}
+
 struct Client {
   UniqueFd fd;
   std::string in;
   std::string out;
   bool close_after_flush = false;
-  bool spoke = false;  // has sent something
+  bool owner = false;      // the peer has the daemon's uid or is root
+  bool requested = false;  // has completed a request answered ok
   std::uint32_t events = EPOLLIN | EPOLLRDHUP;
-  std::chrono::steady_clock::time_point last_activity;
+  // The last request answered ok, or the connection's start before the first: only requests renew it.
+  std::chrono::steady_clock::time_point last_request;
 };
+
+// Which client gives its slot to a new connection: one that has completed no request before one that
+// has, then the one whose last request (or start) is oldest. A connection of another user may only take
+// another such connection's slot. Returns -1 when none may go.
+int slot_to_free(const std::map<int, std::unique_ptr<Client>>& clients, bool for_owner) {
+  int victim = -1;
+  const Client* worst = nullptr;
+  for (const auto& [fd, c] : clients) {
+    if (c->owner && !for_owner) continue;
+    const auto rank = [](const Client& x) { return std::tuple(x.owner, x.requested, x.last_request); };
+    if (!worst || rank(*c) < rank(*worst)) {
+      worst = c.get();
+      victim = fd;
+    }
+  }
+  return victim;
+}
 
 }  // namespace
 
@@ -120,7 +150,29 @@ void ControlServer::stop() noexcept {
   thread_.join();
 }
 
+std::string quote_text(std::string_view text) {
+  std::string out = "'";
+  for (const char ch : text) {
+    const auto byte = static_cast<unsigned char>(ch);
+    if (ch == '\'' || ch == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (byte < 0x20 || byte == 0x7f) {
+      char escape[8];
+      std::snprintf(escape, sizeof escape, "\\u%04x", byte);
+      out += escape;
+    } else {
+      out += ch;  // UTF-8 passes; invalid bytes are replaced when the reply is written
+    }
+  }
+  return out + "'";
+}
+
 std::string ControlServer::handle_line(std::string_view line) const {
+  return respond(line).line;
+}
+
+ControlServer::Reply ControlServer::respond(std::string_view line) const {
   nlohmann::json reply;
   try {
     nlohmann::json request;
@@ -148,12 +200,15 @@ std::string ControlServer::handle_line(std::string_view line) const {
     reply = {{"ok", false}, {"error", std::string("internal error: ") + e.what()}};
   }
   reply["v"] = control::kProtocolVersion;
+  const bool ok = reply["ok"] == true;
   // Replacement of invalid UTF-8 keeps a reply valid whatever a handler echoed back.
-  return reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  return {reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), ok};
 }
 
 void ControlServer::run() noexcept {
   std::map<int, std::unique_ptr<Client>> clients;
+  std::size_t others = 0;  // clients whose peer is not the daemon's uid nor root
+  const std::size_t others_max = limits_.max_clients > 1 ? limits_.max_clients - 1 : limits_.max_clients;
   const auto add_fd = [this](int fd, std::uint32_t events) {
     epoll_event ev{};
     ev.events = events;
@@ -172,6 +227,7 @@ void ControlServer::run() noexcept {
       spdlog::debug("control: dropping client fd {}: {}", fd, why);
     }
     ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_DEL, fd, nullptr);
+    if (const auto it = clients.find(fd); it != clients.end() && !it->second->owner) --others;
     clients.erase(fd);
     clients_.store(clients.size(), std::memory_order_relaxed);
   };
@@ -240,18 +296,37 @@ void ControlServer::run() noexcept {
             }
             break;
           }
-          if (clients.size() >= limits_.max_clients) {
-            static constexpr char kBusy[] = "{\"ok\":false,\"error\":\"too many clients\",\"v\":1}\n";
+          const bool owner = peer_is_owner(cfd.get());
+          if (clients.size() >= limits_.max_clients || (!owner && others >= others_max)) {
+            const int victim = slot_to_free(clients, owner);
+            if (victim < 0) {
+              static constexpr char kBusy[] = "{\"ok\":false,\"error\":\"too many clients\",\"v\":1}\n";
+              [[maybe_unused]] const ssize_t w =
+                  ::send(cfd.get(), kBusy, sizeof kBusy - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+              dropped_.fetch_add(1, std::memory_order_relaxed);
+              continue;
+            }
+            static constexpr char kEvicted[] =
+                "{\"ok\":false,\"error\":\"connection closed for a new client: every slot was taken and "
+                "this one had asked least recently\",\"v\":1}\n";
             [[maybe_unused]] const ssize_t w =
-                ::send(cfd.get(), kBusy, sizeof kBusy - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
-            dropped_.fetch_add(1, std::memory_order_relaxed);
-            continue;
+                ::send(victim, kEvicted, sizeof kEvicted - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+            std::uint64_t suppressed = 0;
+            if (accept_limiter.allow("evict", suppressed))
+              spdlog::warn(
+                  "control: all {} connections taken; closing the one that asked least recently "
+                  "to admit a new one{}",
+                  limits_.max_clients,
+                  suppressed ? fmt::format(" ({} more since the last report)", suppressed) : "");
+            drop(victim, "its slot given to a new connection");
           }
           const int key = cfd.get();
           auto c = std::make_unique<Client>();
           c->fd = std::move(cfd);
-          c->last_activity = now;
+          c->owner = owner;
+          c->last_request = now;
           if (!add_fd(key, EPOLLIN | EPOLLRDHUP)) continue;  // unique_ptr closes it
+          others += owner ? 0 : 1;
           clients.emplace(key, std::move(c));
           clients_.store(clients.size(), std::memory_order_relaxed);
         }
@@ -260,7 +335,6 @@ void ControlServer::run() noexcept {
       const auto it = clients.find(fd);
       if (it == clients.end()) continue;
       Client& c = *it->second;
-      c.last_activity = now;
       if (c.close_after_flush || !(events[i].events & (EPOLLIN | EPOLLRDHUP | EPOLLHUP | EPOLLERR))) {
         if (!flush(c)) drop(fd, nullptr);
         continue;
@@ -278,7 +352,6 @@ void ControlServer::run() noexcept {
           if (errno != EAGAIN && errno != EWOULDBLOCK) error = true;
           break;
         }
-        c.spoke = true;
         c.in.append(buf, static_cast<std::size_t>(r));
         // Complete lines are answered in order.
         std::size_t start = 0;
@@ -291,7 +364,12 @@ void ControlServer::run() noexcept {
           }
           if (line.find_first_not_of(" \t") == std::string_view::npos) continue;
           requests_.fetch_add(1, std::memory_order_relaxed);
-          if (!queue(c, handle_line(line))) {
+          Reply reply = respond(line);
+          if (reply.ok) {
+            c.requested = true;
+            c.last_request = now;
+          }
+          if (!queue(c, std::move(reply.line))) {
             overflow = true;
             break;
           }
@@ -321,11 +399,11 @@ void ControlServer::run() noexcept {
       if (eof) c.close_after_flush = true;
       if (!flush(c)) drop(fd, too_long ? "request too long" : nullptr);
     }
-    // Idle clients hold a slot; give it back (sooner if they never asked anything).
+    // Clients that ask nothing hold a slot; give it back (sooner if they never completed a request).
     for (auto it = clients.begin(); it != clients.end();) {
-      const auto idle =
-          std::chrono::duration_cast<std::chrono::milliseconds>(now - it->second->last_activity);
-      if (idle.count() > (it->second->spoke ? limits_.idle_timeout_ms : limits_.first_request_timeout_ms)) {
+      const auto idle = std::chrono::duration_cast<std::chrono::milliseconds>(now - it->second->last_request);
+      if (idle.count() >
+          (it->second->requested ? limits_.idle_timeout_ms : limits_.first_request_timeout_ms)) {
         const int fd = (it++)->first;
         drop(fd, "idle timeout");
       } else {

@@ -3,11 +3,16 @@
 // served by one thread with epoll and non-blocking sockets. Many clients may be connected at once; a
 // client that sends too long a request gets an error reply and is disconnected; a client that does not
 // read its replies is dropped once its output buffer is full, so no client can ever block the daemon.
+// Slots go to clients that ask: only a complete request answered ok counts as activity (stray bytes,
+// blank lines and refused requests do not), and when every slot is taken a new connection takes the slot
+// of one that has never completed a request, else of the one idle longest. One slot is kept for a peer
+// with the daemon's own uid or root (SO_PEERCRED): other users' connections never hold every slot.
 #include <atomic>
 #include <cstddef>
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -24,12 +29,17 @@ struct ControlError : std::runtime_error {
 struct ControlLimits {
   std::size_t max_request_bytes = 4096;
   std::size_t max_output_bytes = 256 * 1024;  // per client: beyond it the client is dropped
+  // Connections at once; with more than one, the last is kept for the daemon's uid or root.
   unsigned max_clients = 32;
-  int idle_timeout_ms = 60'000;  // a connection silent this long is closed
-  // ... and one that has asked nothing yet, this long: connections that never speak held every slot
-  // (max_clients) for a minute, refusing gearpulsectl meanwhile.
+  int idle_timeout_ms = 60'000;  // a connection that asks nothing this long is closed
+  // ... and one that has completed no request yet, this long.
   int first_request_timeout_ms = 10'000;
 };
+
+// Text from a request as an error reply names it: in single quotes, with quotes, backslashes and
+// control characters escaped ('st\u0000atus'), so the whole of it shows: a raw NUL would end the message
+// (a ControlError's what() is a C string), and raw control bytes would reach the user's terminal.
+[[nodiscard]] std::string quote_text(std::string_view text);
 
 class ControlServer {
  public:
@@ -58,6 +68,11 @@ class ControlServer {
   [[nodiscard]] std::string handle_line(std::string_view line) const;
 
  private:
+  struct Reply {
+    std::string line;  // without the newline
+    bool ok = false;   // a request answered ok: activity that keeps the connection's slot
+  };
+  [[nodiscard]] Reply respond(std::string_view line) const;
   void run() noexcept;
 
   std::string path_;

@@ -130,6 +130,7 @@ struct Daemon::Impl {
   std::string status_line();
   void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
   LogLimiter limiter;
+  StateFault no_reader;                  // the pulse output has no reader (a PTY nobody holds open)
   bool gps_connected = false;            // as log_changes() last said
   std::uint64_t gps_failures_seen = 0;   // GPS connection failures log_changes() has looked at
   std::optional<ControlServer> control;  // last: destroyed first (above)
@@ -186,6 +187,23 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
     spdlog::log(routine ? spdlog::level::debug : spdlog::level::info,
                 "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,
                 now.speed * 3.6, now.gear);
+  }
+  // A navigator that should be reading the pulses is not: said when the last reader goes (or none is
+  // there at start) and when one comes, at most once a minute for a reader that opens and closes often.
+  std::uint64_t starts = 0;
+  switch (no_reader.update(now.output_state == "no-reader", std::chrono::steady_clock::now(), starts)) {
+    case StateFault::Say::kStart:
+      spdlog::warn(
+          "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}",
+          config.output.path, now.output_unheard,
+          starts > 1 ? fmt::format(" ({} times since the last report)", starts) : "");
+      break;
+    case StateFault::Say::kEnd:
+      spdlog::info("output: a reader has {} open ({} pulses went unheard in all)", config.output.path,
+                   now.output_unheard);
+      break;
+    case StateFault::Say::kNothing:
+      break;
   }
   if (now.output_state != before.output_state && now.output_state == "write-errors")
     spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
@@ -328,9 +346,17 @@ bool Daemon::Impl::load_state() {
       spdlog::error("training: discarding {}: {}; starting with an empty training store (the file is {})",
                     store_path.string(), problem, where);
       note_state_problem("training.bin discarded: " + problem + " (" + where + ")");
-    } else if (std::filesystem::exists(store_path))
+    } else if (std::filesystem::exists(store_path)) {
       spdlog::info("training: {} stored pairs restored from {}", store.size(), store_path.string());
-    else
+      if (const std::size_t skipped = store.skipped(); skipped > 0) {
+        const std::string text = fmt::format(
+            "training.bin: {} record(s) hold their checksum but no plausible pair; skipped, the other {} "
+            "kept",
+            skipped, store.size());
+        spdlog::warn("training: {}", text);
+        note_state_problem(text);
+      }
+    } else
       spdlog::info("training: no stored pairs yet ({} will hold them)", store_path.string());
   } catch (const std::exception& e) {
     // Set aside as a corrupt store is (a file another user installed with mode 0600, a read error): the
@@ -373,7 +399,10 @@ void Daemon::Impl::recover_journal() noexcept {
   const std::filesystem::path journal = TrainingStore::journal_path(store_path);
   try {
     const TrainingStore::JournalReplay replay = store.replay_journal(store_path);
-    if (!replay.problem.empty()) spdlog::warn("training: {}: {}", journal.string(), replay.problem);
+    if (!replay.problem.empty()) {
+      spdlog::warn("training: {}: {}", journal.string(), replay.problem);
+      note_state_problem(journal.filename().string() + ": " + replay.problem);
+    }
     if (replay.stale)
       spdlog::debug("training: {} predates the last save; nothing to recover", journal.string());
     if (replay.recovered > 0) {
@@ -384,6 +413,7 @@ void Daemon::Impl::recover_journal() noexcept {
   } catch (const std::exception& e) {
     spdlog::error("training: cannot read {}: {}; pairs of the last run since its last save are lost",
                   journal.string(), e.what());
+    note_state_problem(journal.filename().string() + " unreadable: " + e.what());
   }
 }
 
@@ -492,7 +522,8 @@ nlohmann::json Daemon::Impl::status_json() {
   reply["output"] = {{"kind", to_string(config.output.kind)},
                      {"state", p.output_state},
                      {"error", p.output_error},
-                     {"dropped", p.output_dropped}};
+                     {"dropped", p.output_dropped},
+                     {"unheard", p.output_unheard}};
   reply["output"]["pulses_per_km"] = config.output.pulses_per_km;
   if (config.output.kind == OutputKind::kPty) reply["output"]["path"] = config.output.path;
   if (config.output.kind == OutputKind::kGpio)
@@ -588,7 +619,7 @@ nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
                  keep ? " (training pairs kept)" : " and training pairs cleared");
     return {{"reset", true}, {"training_samples", store.size()}};
   }
-  throw ControlError("unknown command '" + cmd + "' (status, gears, retrain, reset-model)");
+  throw ControlError("unknown command " + quote_text(cmd) + " (status, gears, retrain, reset-model)");
 }
 
 std::string Daemon::Impl::status_line() {

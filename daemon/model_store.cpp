@@ -11,7 +11,7 @@ namespace gearpulse::daemon {
 ModelLoad load_model_file(const std::filesystem::path& path) noexcept {
   std::optional<std::string> text;
   try {
-    text = read_file(path);
+    text = read_file(path, kMaxModelBytes);
   } catch (const std::exception& e) {
     return {nullptr, e.what()};
   }
@@ -32,7 +32,7 @@ void save_model_file(const std::filesystem::path& path, const GearModel& model) 
 // version (other spacing, other key order) is not rewritten for that alone.
 bool model_file_holds(const std::filesystem::path& path, const GearModel& model) noexcept {
   try {
-    const std::optional<std::string> text = read_file(path);
+    const std::optional<std::string> text = read_file(path, kMaxModelBytes);
     return text && serialize_model(parse_model(*text)) == serialize_model(model);
   } catch (const std::exception&) {
     return false;

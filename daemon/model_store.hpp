@@ -68,12 +68,17 @@ class ModelHolder {
   std::mutex write_mutex_;
 };
 
+// The longest model.json read: a model of the most gears with its statistics is a few kB, and parsing
+// JSON takes many times its size in memory (a 20 MB file took the daemon to 453 MB).
+inline constexpr std::size_t kMaxModelBytes = std::size_t{1} << 20;
+
 struct ModelLoad {
   ModelPtr model;     // null when absent or rejected
   std::string error;  // why a present file was rejected, for its content or because it cannot be read
 };
 
-// Reads `path`; a missing file gives {null, ""}; a corrupt or unreadable one {null, reason}. Never throws.
+// Reads `path`; a missing file gives {null, ""}; a corrupt or unreadable one, or one that is not a regular
+// file or is longer than kMaxModelBytes, {null, reason}. Never throws.
 [[nodiscard]] ModelLoad load_model_file(const std::filesystem::path& path) noexcept;
 // Atomic write. Throws std::system_error.
 void save_model_file(const std::filesystem::path& path, const GearModel& model);

@@ -79,6 +79,12 @@ class LateOutput final : public PulseOutput {
   [[nodiscard]] std::uint64_t dropped() const noexcept override {
     return current_.load(std::memory_order_acquire)->dropped();
   }
+  [[nodiscard]] bool has_reader() const noexcept override {
+    return current_.load(std::memory_order_acquire)->has_reader();
+  }
+  [[nodiscard]] std::uint64_t unheard() const noexcept override {
+    return current_.load(std::memory_order_acquire)->unheard();
+  }
   [[nodiscard]] std::string describe() const override {
     return current_.load(std::memory_order_acquire)->describe();
   }
@@ -640,6 +646,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     }
     // A reader that has not taken a pulse for kReaderBehind: the count grew within that time.
     s.output_dropped = d.output.dropped();
+    s.output_unheard = d.output.unheard();
     if (const std::uint64_t seen = d.dropped_seen.load(std::memory_order_relaxed); s.output_dropped != seen) {
       d.dropped_seen.store(s.output_dropped, std::memory_order_relaxed);
       d.dropped_at_ns.store(now, std::memory_order_relaxed);
@@ -652,6 +659,8 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       s.output_state = "write-errors";
     else if (reader_behind)
       s.output_state = "reader-behind";
+    else if (!d.output.has_reader())
+      s.output_state = "no-reader";
     else
       s.output_state = d.config.output.kind == OutputKind::kNone ? "off" : "ok";
   }

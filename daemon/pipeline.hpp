@@ -21,9 +21,10 @@ struct PipelineSnapshot {
   int gear = 0;
   std::uint64_t pulses = 0;
   double pulse_frequency = 0.0;      // Hz
-  std::string output_state = "off";  // ok, reader-behind, write-errors, error, off
+  std::string output_state = "off";  // ok, no-reader, reader-behind, write-errors, error, off
   std::string output_error;
   std::uint64_t output_dropped = 0;  // pulses a present reader did not take (PulseOutput::dropped)
+  std::uint64_t output_unheard = 0;  // pulses emitted with no reader there (PulseOutput::unheard)
   // GPS.
   std::string gps_state = "disconnected";  // fix, no-fix, disconnected
   double gps_speed = -1.0;                 // m/s of the last fix, < 0 none

@@ -118,7 +118,7 @@ void TrainingStore::clear() {
 void TrainingStore::empty_locked() noexcept {
   samples_.clear();
   span_s_ = 0.0;
-  new_samples_ = since_save_ = unjournaled_ = 0;
+  new_samples_ = since_save_ = unjournaled_ = skipped_ = 0;
 }
 
 std::vector<Sample> TrainingStore::snapshot() const {
@@ -188,6 +188,11 @@ void TrainingStore::clamp_counts_locked() noexcept {
   unjournaled_ = std::min(unjournaled_, samples_.size());
 }
 
+std::size_t TrainingStore::skipped() const {
+  std::lock_guard lock(mutex_);
+  return skipped_;
+}
+
 std::string TrainingStore::serialize() const {
   std::lock_guard lock(mutex_);
   return serialize_locked();
@@ -226,13 +231,20 @@ std::string TrainingStore::deserialize(std::string_view blob) {
   const std::size_t crc_at = blob.size() - sizeof(std::uint32_t);
   if (get<std::uint32_t>(blob, crc_at) != crc32(blob.substr(0, crc_at))) return "checksum mismatch";
   std::deque<Sample> loaded;
+  std::size_t skipped = 0;
   for (std::size_t i = 0; i < count; ++i) {
     const std::size_t at = kHeaderSize + i * kRecordSize;
     const Sample s = get_record(blob, at);
-    if (!plausible(s)) return "implausible record " + std::to_string(i);
+    // The checksum holds, so the record is where the header says and the others are sound: one bad
+    // pair (written by another program, or corrupted before the checksum was taken) costs only itself.
+    if (!plausible(s)) {
+      ++skipped;
+      continue;
+    }
     loaded.push_back(s);
   }
   std::lock_guard lock(mutex_);
+  skipped_ = skipped;
   samples_ = std::move(loaded);
   span_s_ = 0.0;
   for (std::size_t i = 1; i < samples_.size(); ++i)
@@ -303,7 +315,7 @@ std::string TrainingStore::load(const std::filesystem::path& path) {
     saved_crc_ = 0;
     journal_current_ = false;
   }
-  const auto blob = read_file(path);
+  const auto blob = read_file(path, static_cast<std::size_t>(file_bytes(kMaxStoreSamples)));
   std::string problem = blob ? deserialize(*blob) : std::string();
   std::lock_guard lock(mutex_);
   if (!blob) empty_locked();
@@ -368,7 +380,8 @@ std::size_t TrainingStore::append_journal_io(const std::filesystem::path& path) 
 
 TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem::path& path) {
   JournalReplay replay;
-  const auto blob = read_file(journal_path(path));
+  // A journal holds at most the pairs since the last save, never more than the store does.
+  const auto blob = read_file(journal_path(path), kJournalHeaderSize + kMaxStoreSamples * kJournalRecordSize);
   if (!blob) return replay;
   if (blob->empty()) {
     replay.problem = "empty (nothing to recover)";
@@ -392,24 +405,32 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
     return replay;
   }
   std::size_t at = kJournalHeaderSize;
-  bool implausible = false;  // the record that stopped the replay passed its checksum
+  std::size_t first_skipped = 0;  // 1-based number of the first record skipped
   for (; at + kJournalRecordSize <= blob->size(); at += kJournalRecordSize) {
     const std::string_view record = std::string_view(*blob).substr(at, kRecordSize);
     if (get<std::uint32_t>(*blob, at + kRecordSize) != crc32(record)) break;
     const Sample s = get_record(*blob, at);
+    // A whole record (its checksum holds) that is no pair: the records after it are sound, and kept.
     if (!plausible(s)) {
-      implausible = true;
-      break;
+      if (replay.skipped++ == 0) first_skipped = (at - kJournalHeaderSize) / kJournalRecordSize + 1;
+      continue;
     }
     push_back_locked(s);
     ++replay.recovered;
   }
+  const std::size_t records = (at - kJournalHeaderSize) / kJournalRecordSize;
+  if (replay.skipped > 0)
+    replay.problem = std::to_string(replay.skipped) + " record(s) from record " +
+                     std::to_string(first_skipped) +
+                     " on hold their checksum but no plausible pair (skipped)";
+  const auto also = [&](const std::string& text) {
+    replay.problem += (replay.problem.empty() ? "" : "; ") + text;
+  };
   if (at + kJournalRecordSize <= blob->size())
-    replay.problem = "record " + std::to_string(replay.recovered + 1) +
-                     (implausible ? " is no plausible pair" : " fails its checksum") + "; it and the " +
-                     std::to_string(blob->size() - at) + " bytes from it on are dropped";
+    also("record " + std::to_string(records + 1) + " fails its checksum; it and the " +
+         std::to_string(blob->size() - at) + " bytes from it on are dropped");
   else if (at < blob->size())
-    replay.problem = std::to_string(blob->size() - at) + " bytes at the end are not a whole record (dropped)";
+    also(std::to_string(blob->size() - at) + " bytes at the end are not a whole record (dropped)");
   // The recovered pairs are in no saved file: they count as added since the save, and the journal is
   // rewritten with them (past any torn end) at the next append.
   new_samples_ += replay.recovered;

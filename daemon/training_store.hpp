@@ -17,6 +17,10 @@
 
 namespace gearpulse::daemon {
 
+// The most pairs a store may be configured to keep (model.max_samples): with it, the longest training
+// file and journal a daemon writes, and so the most that is read of either.
+inline constexpr std::size_t kMaxStoreSamples = 50'000'000;
+
 class TrainingStore {
  public:
   // t of stored samples is wall-clock (UNIX) seconds, so ages stay meaningful across reboots.
@@ -48,13 +52,18 @@ class TrainingStore {
 
   // File format: magic, version, record count, records, CRC-32 of all that precedes it.
   [[nodiscard]] std::string serialize() const;
-  // Replaces the content; on a bad blob leaves the store empty and returns the reason (else empty).
+  // Replaces the content; on a bad blob leaves the store empty and returns the reason (else empty). A
+  // record that holds its place and the file's checksum but no plausible pair (a NaN, a negative speed)
+  // is left out and counted in skipped(); the others are kept.
   std::string deserialize(std::string_view blob);
+  // Records left out by the last deserialize() or load() as no plausible pair.
+  [[nodiscard]] std::size_t skipped() const;
   // Atomic save (temp + fsync + rename), then a fresh journal that extends it. Throws
   // std::system_error (when the save itself fails, the previous file and journal still hold the pairs).
   void save(const std::filesystem::path& path);
   // Loads; returns the reason when the file is corrupt (the store is then empty), empty on success or
-  // when the file does not exist. Throws std::system_error on I/O errors.
+  // when the file does not exist. Throws FileRefused for a file that is not regular or is longer than a
+  // store of kMaxStoreSamples pairs, std::system_error on I/O errors.
   std::string load(const std::filesystem::path& path);
 
   // The journal of `path` (journal_path()): magic, version, the checksum of the saved file it extends,
@@ -68,11 +77,13 @@ class TrainingStore {
   std::size_t append_journal(const std::filesystem::path& path);
   struct JournalReplay {
     std::size_t recovered = 0;  // pairs added from the journal
-    std::string problem;        // a journal that is not one, or a torn record at its end (dropped)
+    std::size_t skipped = 0;    // whole records (their checksum holds) that are no plausible pair
+    std::string problem;        // a journal that is not one, a torn record at its end, skipped records
     bool stale = false;         // the journal extends an older save (its pairs are in the file already)
   };
   // After load(): adds the pairs of the journal if it extends the file just loaded (the pairs a power cut
-  // or a crash kept from the next save). Throws std::system_error on I/O errors.
+  // or a crash kept from the next save). Throws FileRefused as load() does, std::system_error on I/O
+  // errors.
   JournalReplay replay_journal(const std::filesystem::path& path);
 
  private:
@@ -97,6 +108,7 @@ class TrainingStore {
   double max_age_s_;
   std::size_t max_samples_;
   std::size_t new_samples_ = 0;
+  std::size_t skipped_ = 0;  // records of the last load that were no plausible pair
   // Journal bookkeeping: pairs at the back of samples_ added since the last save (all in the journal
   // when it is current), and how many of those are not yet in it.
   std::size_t since_save_ = 0;

@@ -97,6 +97,11 @@ PtyOutput::~PtyOutput() {
   if (n > 0 && std::string(target, static_cast<std::size_t>(n)) == slave_name_) ::unlink(link_.c_str());
 }
 
+bool PtyOutput::has_reader() const noexcept {
+  pollfd p{master_.get(), 0, 0};
+  return !(::poll(&p, 1, 0) > 0 && (p.revents & POLLHUP));
+}
+
 void PtyOutput::rise() noexcept {
   pollfd p{master_.get(), 0, 0};
   if (::poll(&p, 1, 0) > 0 && (p.revents & POLLHUP)) {

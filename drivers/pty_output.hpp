@@ -35,13 +35,17 @@ class PtyOutput final : public PulseOutput {
     return errors_.load(std::memory_order_relaxed);
   }
   [[nodiscard]] std::uint64_t dropped() const noexcept override { return overflowed(); }
+  // Whether a process has the slave open now (the master reports no hang-up).
+  [[nodiscard]] bool has_reader() const noexcept override;
   [[nodiscard]] std::string describe() const override;
 
   [[nodiscard]] const std::filesystem::path& link() const noexcept { return link_; }
   [[nodiscard]] const std::string& slave_name() const noexcept { return slave_name_; }
   [[nodiscard]] std::uint64_t written() const noexcept { return written_.load(std::memory_order_relaxed); }
   // Pulses emitted while no reader had the slave open.
-  [[nodiscard]] std::uint64_t unheard() const noexcept { return unheard_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t unheard() const noexcept override {
+    return unheard_.load(std::memory_order_relaxed);
+  }
   // Pulses dropped because a reader that is present did not keep up (its input queue was full, or they
   // had waited in it longer than max_age).
   [[nodiscard]] std::uint64_t overflowed() const noexcept {

@@ -17,6 +17,11 @@ class PulseOutput {
   // Pulses a reader that is there did not take (its queue was full): it has stopped reading, or reads
   // too slowly. A line driven by level (GPIO) has no queue and drops nothing.
   [[nodiscard]] virtual std::uint64_t dropped() const noexcept { return 0; }
+  // False while the device knows that nobody takes its pulses (a PTY that no process holds open). A line
+  // driven by level (GPIO) cannot tell, and says true. Any thread may ask.
+  [[nodiscard]] virtual bool has_reader() const noexcept { return true; }
+  // Pulses emitted while nobody took them (has_reader() false): discarded, not queued for a later reader.
+  [[nodiscard]] virtual std::uint64_t unheard() const noexcept { return 0; }
   // One line for logs and status ("pty /run/gearpulse/pulse -> /dev/pts/3").
   [[nodiscard]] virtual std::string describe() const = 0;
 };

@@ -158,6 +158,7 @@ class Process {
   Process& operator=(const Process&) = delete;
 
   void signal(int sig) const { ::kill(pid_, sig); }
+  [[nodiscard]] pid_t pid() const noexcept { return pid_; }
   // SIGKILL (to the whole group with own_group), as in a crash, and reaps it.
   void kill() {
     if (pid_ <= 0 || exited_) return;

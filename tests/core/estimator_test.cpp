@@ -1,9 +1,11 @@
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <random>
+#include <vector>
 
 #include "core/estimator.hpp"
 #include "core/estimator_internal.hpp"
@@ -102,6 +104,52 @@ TEST_CASE("estimator: auto mode finds gear count and every theta within 0.5 perc
     check_ordered(fit.model);
     CHECK(fit.model.sigma_speed > 0.0);
     CHECK(fit.model.extra.contains("clutch_out"));
+  }
+}
+
+TEST_CASE("estimator: the same drive seen many times gives the ladder it gives once") {
+  // A week of one commute is close to one drive seen again and again: the ladder must not depend on how
+  // often. `times` copies of the drive, each on its clock from 0 as `gearpulse fit` joins logs, or each
+  // `shift` seconds after the one before (distinct records of the same driving).
+  const auto repeated = [](const std::vector<Sample>& drive, int times, double shift) {
+    std::vector<Sample> all;
+    all.reserve(drive.size() * static_cast<std::size_t>(times));
+    for (int i = 0; i < times; ++i)
+      for (Sample s : drive) {
+        s.t += shift * i;
+        all.push_back(s);
+      }
+    return all;
+  };
+  const auto thetas = [](const GearModel& m) {
+    std::vector<double> out;
+    for (const Gear& g : m.gears)
+      out.push_back(g.theta);
+    return out;
+  };
+  struct Case {
+    sim::DrivingStyle style;
+    std::uint64_t seed;
+    int times;
+    double shift;
+  };
+  // Copies on one clock: urban seed 2 at 20 gained a sixth gear (a copied clutch-slip bump passed the
+  // count floors). Copies in sequence: 1000 of a drive of exactly 2400 samples, taken every 150th sample
+  // for model selection, kept 3 of its 5 gears.
+  const Case cases[] = {{sim::DrivingStyle::kUrban, 1, 20, 0.0},
+                        {sim::DrivingStyle::kUrban, 2, 20, 0.0},
+                        {sim::DrivingStyle::kMixed, 1, 1000, 2400.0}};
+  for (const Case& c : cases) {
+    std::vector<Sample> drive = simulate(sim::vehicle_preset("bmw-520i"), c.style, 2400.0, 1, c.seed);
+    drive.resize(std::min<std::size_t>(drive.size(), 2400));
+    const FitResult once = fit_gear_model(drive, {});
+    const FitResult often = fit_gear_model(repeated(drive, c.times, c.shift), {});
+    INFO(sim::style_name(c.style) << " seed " << c.seed << " x" << c.times);
+    REQUIRE(once.model.gears.size() == 5);
+    REQUIRE(often.model.gears.size() == once.model.gears.size());
+    const auto a = thetas(once.model), b = thetas(often.model);
+    for (std::size_t i = 0; i < a.size(); ++i)
+      CHECK(b[i] == Approx(a[i]).epsilon(0.002));
   }
 }
 

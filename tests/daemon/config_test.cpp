@@ -1,8 +1,11 @@
 #include <catch2/catch.hpp>
 
+#include <sys/stat.h>
+
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
 
 #include "daemon/config.hpp"
 #include "tests/test_util.hpp"
@@ -238,6 +241,29 @@ TEST_CASE("config: a directory given as the file is an error naming it") {
     FAIL("no error");
   } catch (const ConfigError& e) {
     CHECK(std::string(e.what()) == dir + ": cannot read config file: is a directory");
+  }
+}
+
+TEST_CASE("config: a device, a FIFO or an overlong file is refused unread, naming it") {
+  // /dev/zero never ends (it was read until bad_alloc); a FIFO blocked the reader until a writer came.
+  const gearpulse::test::TempDir dir;
+  const std::string fifo = (dir / "fifo.toml").string();
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const std::string big = (dir / "big.toml").string();
+  // Valid TOML (one comment) of exactly the bound is read; one byte more is refused for its length.
+  const std::string text = "#" + std::string(gearpulse::daemon::kMaxConfigBytes - 2, 'x') + "\n";
+  gearpulse::test::write_text(big, text);
+  CHECK_NOTHROW(gearpulse::daemon::load_config(big));
+  gearpulse::test::write_text(big, text + "\n");
+  const std::pair<std::string, std::string> cases[] = {
+      {"/dev/zero", "not a regular file"},
+      {fifo, "not a regular file"},
+      {big, "longer than 1048576 bytes"},
+  };
+  for (const auto& [path, reason] : cases) {
+    CAPTURE(path);
+    CHECK_THROWS_WITH(gearpulse::daemon::load_config(path),
+                      Catch::Matchers::StartsWith(path + ": cannot read config file: " + reason));
   }
 }
 

@@ -4,11 +4,16 @@
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <thread>
@@ -247,18 +252,136 @@ TEST_CASE("control: many clients at once") {
   CHECK(good.load() == 160);
 }
 
-TEST_CASE("control: clients beyond the limit are refused with an error") {
+TEST_CASE("control: with every slot taken, the connection that asked least recently makes room") {
   TempDir dir;
-  ControlServer server((dir / "ctl.sock").string(), EchoHandler{}, ControlLimits{.max_clients = 2});
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{}, ControlLimits{.max_clients = 3});
   server.start();
-  LineClient a((dir / "ctl.sock").string()), b((dir / "ctl.sock").string());
+  LineClient a((dir / "ctl.sock").string()), b((dir / "ctl.sock").string()), c((dir / "ctl.sock").string());
   CHECK(ask(a, R"({"cmd":"x"})")["ok"] == true);
   CHECK(ask(b, R"({"cmd":"x"})")["ok"] == true);
-  LineClient c((dir / "ctl.sock").string());
-  const auto line = c.read_line();
+  CHECK(ask(c, R"({"cmd":"x"})")["ok"] == true);
+  // a asks again, with a request refused: that is no activity, a still asked least recently.
+  CHECK(ask(a, R"({"cmd":"boom"})")["ok"] == false);
+  CHECK(ask(b, R"({"cmd":"x"})")["ok"] == true);
+  LineClient d((dir / "ctl.sock").string());
+  CHECK(ask(d, R"({"cmd":"y"})")["echo"] == "y");
+  const auto line = a.read_line();
   REQUIRE(line.has_value());
-  CHECK(json::parse(*line)["error"] == "too many clients");
-  CHECK(c.closed_by_peer());
+  CHECK(json::parse(*line)["error"].get<std::string>().find("closed for a new client") != std::string::npos);
+  CHECK(a.closed_by_peer());
+  CHECK(ask(b, R"({"cmd":"z"})")["echo"] == "z");
+  CHECK(ask(c, R"({"cmd":"z"})")["echo"] == "z");
+  CHECK(server.clients() == 3);
+}
+
+TEST_CASE("control: stray bytes keep no slot: a trickling connection goes before one that asked") {
+  TempDir dir;
+  ControlServer server(
+      (dir / "ctl.sock").string(), EchoHandler{},
+      ControlLimits{.max_clients = 2, .idle_timeout_ms = 60'000, .first_request_timeout_ms = 1'000});
+  server.start();
+  LineClient talker((dir / "ctl.sock").string());
+  CHECK(ask(talker, R"({"cmd":"x"})")["ok"] == true);
+  // Connected after the talker's request, and sending all the time: newlines, a request never finished.
+  LineClient trickler((dir / "ctl.sock").string());
+  REQUIRE(trickler.send_all("\n{\"cmd\":"));
+  LineClient next((dir / "ctl.sock").string());
+  CHECK(ask(next, R"({"cmd":"y"})")["echo"] == "y");
+  CHECK(trickler.closed_by_peer(2'000));
+  CHECK(ask(talker, R"({"cmd":"z"})")["echo"] == "z");
+  // Alone, a trickle of blank lines and bytes does not renew the first-request timeout either.
+  LineClient slow((dir / "ctl.sock").string());
+  const auto start = std::chrono::steady_clock::now();
+  bool closed = false;
+  while (!closed && std::chrono::steady_clock::now() - start < std::chrono::seconds(6)) {
+    closed = !slow.send_all("\n ") || slow.closed_by_peer(100);
+  }
+  CHECK(closed);
+}
+
+namespace {
+
+// Connections of another user (nobody, uid 65534) from a child process: `count` of them, each sending a
+// newline every 50 ms, and a new one every 20 ms after that, all from the moment the child is up until
+// it is killed. Needs root (to change uid); the socket and its directory are opened to every user.
+class OtherUsersFlood {
+ public:
+  OtherUsersFlood(const std::filesystem::path& socket, int count) {
+    ::chmod(socket.parent_path().c_str(), 0755);
+    ::chmod(socket.c_str(), 0666);
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::strncpy(addr.sun_path, socket.c_str(), sizeof addr.sun_path - 1);
+    int ready[2];
+    REQUIRE(::pipe(ready) == 0);
+    pid_ = ::fork();
+    REQUIRE(pid_ >= 0);
+    if (pid_ == 0) {  // async-signal-safe calls only from here
+      ::close(ready[0]);
+      if (::setgid(65534) != 0 || ::setuid(65534) != 0) ::_exit(1);
+      constexpr int kMax = 900;
+      int fds[kMax];
+      int n = 0;
+      const auto connect_one = [&] {
+        if (n == kMax) return;
+        const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+        if (fd >= 0 && ::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0)
+          fds[n++] = fd;
+        else if (fd >= 0)
+          ::close(fd);
+      };
+      for (int i = 0; i < count; ++i)
+        connect_one();
+      [[maybe_unused]] const ssize_t w = ::write(ready[1], "r", 1);
+      for (int tick = 0;; ++tick) {
+        for (int i = 0; i < n; ++i)
+          (void)::send(fds[i], "\n", 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (tick % 2 == 0) connect_one();
+        const timespec pause{0, 25'000'000};
+        ::nanosleep(&pause, nullptr);
+      }
+    }
+    ::close(ready[1]);
+    char byte = 0;
+    REQUIRE(::read(ready[0], &byte, 1) == 1);
+    ::close(ready[0]);
+  }
+  ~OtherUsersFlood() {
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, nullptr, 0);
+  }
+  OtherUsersFlood(const OtherUsersFlood&) = delete;
+  OtherUsersFlood& operator=(const OtherUsersFlood&) = delete;
+
+ private:
+  pid_t pid_ = -1;
+};
+
+}  // namespace
+
+TEST_CASE("control: other users' connections never take the slot kept for the daemon's uid or root") {
+  if (::geteuid() != 0) {
+    std::puts("GEARPULSE_SKIP: needs root to connect as another user");
+    return;
+  }
+  TempDir dir;
+  const auto sock = dir / "ctl.sock";
+  ControlServer server(sock.string(), EchoHandler{}, ControlLimits{.max_clients = 4});
+  server.start();
+  // 40 connections of another user that send newlines and never a request, and more coming.
+  const OtherUsersFlood flood(sock, 40);
+  CHECK(gearpulse::test::wait_for([&] { return server.clients() == 3; }, std::chrono::seconds(5)));
+  // Root asks, on a connection held through the churn: answered every time, never closed for the others.
+  LineClient mine(sock.string());
+  for (int i = 0; i < 5; ++i) {
+    CHECK(ask(mine, R"({"cmd":"status"})")["echo"] == "status");
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  // A second connection of root's takes a slot of theirs, and both of root's are served.
+  LineClient second(sock.string());
+  CHECK(ask(second, R"({"cmd":"status"})")["echo"] == "status");
+  CHECK(ask(mine, R"({"cmd":"status"})")["echo"] == "status");
+  CHECK(server.clients() == 4);
 }
 
 TEST_CASE("control: connections that never ask anything give their slots back soon") {

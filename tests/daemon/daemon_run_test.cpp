@@ -3,15 +3,18 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/ptrace.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <string>
 #include <thread>
 #include <vector>
@@ -24,6 +27,7 @@
 #include "daemon/control_server.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
+#include "daemon/watchdog.hpp"
 #include "tests/drivers/alsa_fifo.hpp"
 #include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -164,6 +168,9 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(odd["error"].get<std::string>().find("keep_samples") != std::string::npos);
   CHECK(ask(dir, R"({"v":1,"cmd":"reset-model","confirm":true})")["ok"] == true);
   CHECK(ask(dir, R"({"v":1,"cmd":"nonsense"})")["ok"] == false);
+  // The command is named whole, escaped, even with a NUL inside (it ended the message there).
+  CHECK(ask(dir, R"({"v":1,"cmd":"st\u0000atus\n'"})")["error"] ==
+        R"(unknown command 'st\u0000atus\u000a\'' (status, gears, retrain, reset-model))");
   CHECK(ask(dir, R"({"v":1,"cmd":"gears"})")["model_state"] == "learning");
   CHECK(ask(dir, R"({"v":1,"cmd":"retrain"})")["ok"] == true);
 
@@ -230,9 +237,26 @@ TEST_CASE("daemon: an output that will not open is retried until it does, withou
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   CHECK(std::filesystem::is_symlink(link));
   status = wait_for_status(dir, daemon);
-  CHECK(status["output"]["state"] == "ok");
+  // Open, but no process has the device open: said in status and once in the log.
+  CHECK(status["output"]["state"] == "no-reader");
+  CHECK(status["output"]["unheard"] == 0);  // no GPS: no pulses yet
   CHECK(status["output"]["error"] == "");
   CHECK(read_text(dir / "log.txt").find("opened on a retry") != std::string::npos);
+  CHECK(log_says(dir, "no process has " + link.string() + " open", std::chrono::seconds(5)));
+  {
+    const gearpulse::UniqueFd reader(::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK));
+    REQUIRE(reader);
+    CHECK(log_says(dir, "a reader has " + link.string() + " open", std::chrono::seconds(5)));
+    CHECK(wait_for_status(dir, daemon)["output"]["state"] == "ok");
+  }
+  CHECK(gearpulse::test::wait_for(
+      [&] { return wait_for_status(dir, daemon)["output"]["state"] == "no-reader"; },
+      std::chrono::seconds(5)));
+  const std::string log = read_text(dir / "log.txt");
+  std::size_t said = 0;
+  for (std::size_t at = 0; (at = log.find("no process has", at)) != std::string::npos; ++at)
+    ++said;
+  CHECK(said == 1);  // the reader's return and second leave within a minute: not said again
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
@@ -310,6 +334,21 @@ TEST_CASE("daemon: a malformed config is refused with file and line before anyth
   write_text(dir / "good.toml", config_for(dir));
   Process good({kDaemon, "--config", (dir / "good.toml").string(), "--check-config"}, dir / "log3.txt");
   CHECK(good.wait() == 0);
+}
+
+TEST_CASE("daemon: a config that never ends or never opens is refused with exit 2, naming it") {
+  TempDir dir;
+  const std::string fifo = (dir / "fifo.toml").string();
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  int n = 0;
+  for (const std::string& path : {std::string("/dev/zero"), fifo}) {
+    CAPTURE(path);
+    const auto log = dir / ("log" + std::to_string(++n) + ".txt");
+    Process check({kDaemon, "--config", path, "--check-config"}, log);
+    CHECK(check.wait(10'000) == 2);
+    CHECK(read_text(log).find("gearpulsed: " + path + ": cannot read config file: not a regular file") !=
+          std::string::npos);
+  }
 }
 
 TEST_CASE("daemon: model.json is loaded at start and survives kill -9") {
@@ -449,6 +488,36 @@ TEST_CASE("daemon: a corrupt model and training store are logged, set aside and 
   CHECK(read_text(dir / "state/model.json.corrupt") == torn_model);
   CHECK(read_text(dir / "state/training.bin.corrupt") == "GPTRAIN\ngarbage");
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
+}
+
+TEST_CASE("daemon: a training store with one pair that is no pair keeps the rest and says so in status") {
+  TempDir dir;
+  std::filesystem::create_directories(dir / "state");
+  gearpulse::daemon::TrainingStore store(1e9, 1'000'000);
+  for (int i = 0; i < 2401; ++i)
+    store.add({1.7e9 + i, 10.0, 100.0});
+  std::string bytes = store.serialize();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::memcpy(bytes.data() + 24 + 1200 * 24 + 8, &nan, sizeof nan);  // record 1200's speed
+  const std::uint32_t crc = gearpulse::daemon::crc32(std::string_view(bytes).substr(0, bytes.size() - 4));
+  std::memcpy(bytes.data() + bytes.size() - 4, &crc, sizeof crc);
+  write_text(dir / "state/training.bin", bytes);
+  write_text(dir / "state/training.bin.journal", "not a journal");  // said in status too
+  // And a model.json over the bound: refused unparsed, set aside.
+  write_text(dir / "state/model.json", std::string(kModel).substr(0, std::string(kModel).size() - 1) +
+                                           ",\"extra\":{\"x\":\"" + std::string(2 << 20, 'x') + "\"}}");
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  const json status = status_of_one_run(dir);
+  INFO(read_text(dir / "log.txt"));
+  REQUIRE(status.is_object());
+  CHECK(status["training_samples"] == 2400);
+  const std::string problems = status["model"]["problems"].dump();
+  CHECK(problems.find("training.bin: 1 record(s) hold their checksum but no plausible pair; skipped") !=
+        std::string::npos);
+  CHECK(problems.find("longer than 1048576 bytes") != std::string::npos);
+  CHECK(problems.find("training.bin.journal: not a training journal (bad magic)") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir / "state/training.bin.corrupt"));
+  CHECK(std::filesystem::exists(dir / "state/model.json.corrupt"));
 }
 
 // A second corruption keeps the first one's evidence; a model.json that cannot be read at all (here a
@@ -706,6 +775,66 @@ TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
   ::close(sock);
 }
 
+TEST_CASE("daemon: a thread that stops turning withholds WATCHDOG=1 until it turns again") {
+  // Every thread but the main one is stopped (ptrace, a thread at a time: the main thread runs on and
+  // judges the others' heartbeats), as a thread stuck in a driver would be.
+  if (::geteuid() != 0) {
+    std::puts("GEARPULSE_SKIP: needs root to stop the daemon's threads with ptrace");
+    return;
+  }
+  TempDir dir;
+  const std::string notify_path = (dir / "notify").string();
+  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, notify_path.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt",
+                 {.env = {"NOTIFY_SOCKET=" + notify_path, "WATCHDOG_USEC=2000000"}});
+  // The WATCHDOG=1 messages that arrive within `ms`.
+  const auto pings_within = [&](int ms) {
+    int pings = 0;
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(ms);
+    while (std::chrono::steady_clock::now() < until) {
+      pollfd pfd{sock, POLLIN, 0};
+      if (::poll(&pfd, 1, 50) <= 0) continue;
+      char buf[4096];
+      const ssize_t n = ::recv(sock, buf, sizeof buf, 0);
+      if (n > 0 && std::string_view(buf, static_cast<std::size_t>(n)).find("WATCHDOG=1") != std::string::npos)
+        ++pings;
+    }
+    return pings;
+  };
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+  CHECK(pings_within(2'000) >= 2);
+  std::vector<pid_t> stopped;
+  for (const auto& task :
+       std::filesystem::directory_iterator("/proc/" + std::to_string(daemon.pid()) + "/task")) {
+    const pid_t tid = std::stoi(task.path().filename().string());
+    if (tid == daemon.pid()) continue;
+    if (::ptrace(PTRACE_SEIZE, tid, nullptr, nullptr) != 0) continue;
+    if (::ptrace(PTRACE_INTERRUPT, tid, nullptr, nullptr) == 0 && ::waitpid(tid, nullptr, __WALL) == tid)
+      stopped.push_back(tid);
+  }
+  REQUIRE(stopped.size() >= 3);  // the tracker, GPS and pulse threads at least
+  // Within the stall limit (5 s) and a tick the pings stop, and stay stopped: longer than the unit's
+  // WatchdogSec (10 s) systemd kills the daemon and, by Restart=on-failure, starts it again.
+  (void)pings_within(static_cast<int>(gearpulse::daemon::kStallNs / 1'000'000) + 1'500);
+  CHECK(pings_within(3'000) == 0);
+  CHECK(daemon.running());
+  for (const pid_t tid : stopped)
+    ::ptrace(PTRACE_DETACH, tid, nullptr, nullptr);
+  CHECK(pings_within(3'000) >= 2);
+  CHECK(log_says(dir, "thread(s) not responding: ", std::chrono::seconds(5)));
+  const std::string unit = read_text(GEARPULSE_SOURCE_DIR "/systemd/gearpulsed.service");
+  CHECK(unit.find("\nWatchdogSec=") != std::string::npos);
+  CHECK(unit.find("\nRestart=on-failure\n") != std::string::npos);
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+  ::close(sock);
+}
+
 TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly without a daemon") {
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
@@ -757,6 +886,14 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
 TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe it leaves") {
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  // The server refuses another user's connection when the daemon's own user (root here) holds every slot.
+  const std::string as_nobody = "/usr/bin/setpriv --reuid=65534 --regid=65534 --clear-groups ";
+  if (::geteuid() != 0 || !std::filesystem::exists("/usr/bin/setpriv") ||
+      std::system((as_nobody + "test -x " + ctl).c_str()) != 0) {
+    std::puts("GEARPULSE_SKIP: needs root and a gearpulsectl that user nobody may run");
+    return;
+  }
+  std::filesystem::permissions(dir.path(), std::filesystem::perms::all);
   const std::string sock = (dir / "ctl.sock").string();
   gearpulse::daemon::ControlServer server(
       sock,
@@ -765,6 +902,7 @@ TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe
       },
       gearpulse::daemon::ControlLimits{.max_clients = 1});
   server.start();
+  std::filesystem::permissions(sock, std::filesystem::perms::all);
   LineClient holder(sock);  // takes the one slot
   REQUIRE(holder.send_all("{\"cmd\":\"status\"}\n"));
   REQUIRE(holder.read_line().has_value());
@@ -772,7 +910,9 @@ TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe
   // socket (EPIPE), and the reason waiting in it is what the user must see.
   for (int i = 0; i < 10; ++i) {
     const auto out = dir / ("busy" + std::to_string(i) + ".txt");
-    Process p({ctl, "--socket", sock, "status"}, out);
+    Process p({"/usr/bin/setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", ctl, "--socket", sock,
+               "status"},
+              out);
     CHECK(p.wait() == 1);
     CHECK(read_text(out) == "gearpulsectl: too many clients\n");
   }

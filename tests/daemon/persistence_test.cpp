@@ -102,7 +102,7 @@ TEST_CASE("daemon: atomic write replaces the content and leaves no temp file") {
   write_file_atomic(file, "second, longer content");
   CHECK(read_text(file) == "second, longer content");
   CHECK(count_entries(dir.path()) == 1);
-  CHECK(read_file(dir / "absent").has_value() == false);
+  CHECK(read_file(dir / "absent", 1).has_value() == false);
 }
 
 TEST_CASE("daemon: atomic write gives a new file the umask's permissions and keeps an old file's") {
@@ -357,8 +357,9 @@ TEST_CASE("daemon: pairs journaled after the last save survive a power cut") {
     // Said as what it is: whole records, the first of them failing its checksum.
     CHECK(flipped.problem == "record 33 fails its checksum; it and the 84 bytes from it on are dropped");
   }
-  SECTION("a record that is not a number ends the replay there, though its checksum holds") {
-    // A pair no fit can use (a NaN speed) is not let into training from the journal either.
+  SECTION("a record that is not a number is skipped, and the records after it are kept") {
+    // A pair no fit can use (a NaN speed) is not let into training from the journal either; its checksum
+    // holds, so the records after it are sound.
     std::string journal = read_text(TrainingStore::journal_path(path));
     const std::size_t at = journal.size() - 3 * 28;  // third record from the end
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -368,12 +369,13 @@ TEST_CASE("daemon: pairs journaled after the last save survive a power cut") {
     write_text(TrainingStore::journal_path(path), journal);
     TrainingStore::JournalReplay implausible;
     const auto after = restarted(path, implausible);
-    CHECK(implausible.recovered == 32);
+    CHECK(implausible.recovered == 34);
+    CHECK(implausible.skipped == 1);
     // Said as what it is: the record holds its checksum, not a pair.
     CHECK(implausible.problem ==
-          "record 33 is no plausible pair; it and the 84 bytes from it on are dropped");
+          "1 record(s) from record 33 on hold their checksum but no plausible pair (skipped)");
     const auto pairs = after->snapshot();
-    CHECK(pairs.size() == 50 + 32);
+    CHECK(pairs.size() == 50 + 34);
     CHECK(std::all_of(pairs.begin(), pairs.end(), [](const Sample& s) { return std::isfinite(s.speed); }));
   }
 }
@@ -555,13 +557,50 @@ TEST_CASE("daemon: training store rejects a torn or corrupt file") {
     std::memcpy(bad.data() + 16, &count, sizeof count);
     CHECK(back.deserialize(with_checksum(bad)).rfind("truncated or padded", 0) == 0);
   }
-  SECTION("a record that is not a number") {
-    std::string bad = good;
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    std::memcpy(bad.data() + 24 + 50 * 24 + 16, &nan, sizeof nan);  // record 50's frequency
-    CHECK(back.deserialize(with_checksum(bad)) == "implausible record 50");
-  }
   CHECK(back.size() == 0);
+}
+
+TEST_CASE("daemon: a record that is no pair though the file's checksum holds is skipped, the rest kept") {
+  // One bad pair cost the whole store (2,401 pairs set aside): the checksum shows every record is where
+  // it belongs, so only the bad one goes.
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 100; ++i)
+    store.add({1.0 + i, 3.0, 40.0 + i});
+  std::string bad = store.serialize();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::memcpy(bad.data() + 24 + 50 * 24 + 16, &nan, sizeof nan);  // record 50's frequency
+  const double negative = -5.0;
+  std::memcpy(bad.data() + 24 + 70 * 24 + 8, &negative, sizeof negative);  // record 70's speed
+  const std::uint32_t crc = crc32(std::string_view(bad).substr(0, bad.size() - 4));
+  std::memcpy(bad.data() + bad.size() - 4, &crc, sizeof crc);
+  TrainingStore back(1e9, 10000);
+  CHECK(back.deserialize(bad).empty());
+  CHECK(back.skipped() == 2);
+  const auto pairs = back.snapshot();
+  REQUIRE(pairs.size() == 98);
+  CHECK(std::all_of(pairs.begin(), pairs.end(), [](const Sample& s) { return std::isfinite(s.freq); }));
+  CHECK(pairs[49].freq == 40.0 + 49);
+  CHECK(pairs[50].freq == 40.0 + 51);
+  CHECK(back.deserialize(store.serialize()).empty());
+  CHECK(back.skipped() == 0);
+}
+
+TEST_CASE("daemon: what is read of the state directory is bounded") {
+  TempDir dir;
+  // A valid model whose extra makes it longer than kMaxModelBytes is refused unparsed.
+  GearModel model = three_gears();
+  model.extra["notes"] = std::string(gearpulse::daemon::kMaxModelBytes, 'x');
+  save_model_file(dir / "model.json", model);
+  const ModelLoad big = load_model_file(dir / "model.json");
+  CHECK_FALSE(big.model);
+  CHECK(big.error.find("longer than 1048576 bytes") != std::string::npos);
+  model.extra["notes"] = std::string(1000, 'x');
+  save_model_file(dir / "model.json", model);
+  CHECK(load_model_file(dir / "model.json").model);
+  // A FIFO in the store's place: refused at once, not waited on.
+  REQUIRE(::mkfifo((dir / "training.bin").c_str(), 0600) == 0);
+  TrainingStore store(1e9, 10000);
+  CHECK_THROWS_AS(store.load(dir / "training.bin"), gearpulse::daemon::FileRefused);
 }
 
 TEST_CASE("daemon: a corrupt model file is reported and ignored") {

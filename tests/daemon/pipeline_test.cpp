@@ -252,6 +252,39 @@ TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer 
   ::close(fd);
 }
 
+TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the output says no-reader") {
+  LiveChain chain(512, 60, 0.5);  // about 30 s of GPS at kSpeed
+  const auto link = chain.dir / "pulse";
+  chain.config.output.kind = gearpulse::daemon::OutputKind::kPty;
+  chain.config.output.path = link.string();
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  REQUIRE(wait_for([&] { return std::filesystem::is_symlink(link); }, 10s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().source == "gps"; }, 20s));
+  // Pulses go out at kSpeed, to nobody.
+  REQUIRE(wait_for([&] { return pipeline.snapshot().output_unheard > 10; }, 10s));
+  const auto alone = pipeline.snapshot();
+  CHECK(alone.output_state == "no-reader");
+  CHECK(alone.output_unheard <= alone.pulses);
+  CHECK(alone.output_dropped == 0);
+  // A reader comes: the state is ok and the count stops (a reader that reads hears every pulse).
+  const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
+  REQUIRE(fd >= 0);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == "ok"; }, 5s));
+  const std::uint64_t unheard = pipeline.snapshot().output_unheard;
+  const std::uint64_t pulses = pipeline.snapshot().pulses;
+  char buf[4096];
+  CHECK(wait_for(
+      [&] {
+        while (::read(fd, buf, sizeof buf) > 0) {
+        }
+        return pipeline.snapshot().pulses > pulses + 10;
+      },
+      10s));
+  CHECK(pipeline.snapshot().output_unheard == unheard);
+  ::close(fd);
+  CHECK(wait_for([&] { return pipeline.snapshot().output_state == "no-reader"; }, 5s));
+}
+
 namespace {
 
 // The pipeline on GPS alone (no sound card: speed follows GPS), gpsd to be started by the test at `port`.

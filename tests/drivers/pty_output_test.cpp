@@ -116,6 +116,27 @@ TEST_CASE("pty: survives the reader closing and reopening and sends no stale pul
   CHECK(out.unheard() == 405);
 }
 
+TEST_CASE("pty: whether a reader has the device open is known from any thread, before any pulse") {
+  TempDir dir;
+  const auto link = dir / "pulse";
+  PtyOutput out(link);
+  const gearpulse::PulseOutput& device = out;  // as the pipeline sees it
+  CHECK_FALSE(device.has_reader());            // nobody yet
+  {
+    Reader reader(link);
+    CHECK(device.has_reader());
+    Reader second(link);
+    reader.close();
+    CHECK(device.has_reader());  // one reader is still there
+  }
+  CHECK_FALSE(device.has_reader());
+  out.rise();
+  CHECK(device.unheard() == 1);
+  const gearpulse::NullPulseOutput none;
+  CHECK(none.has_reader());  // a device that cannot tell claims no fault
+  CHECK(none.unheard() == 0);
+}
+
 TEST_CASE("pty: a reader that does not read never blocks the pulse thread") {
   TempDir dir;
   PtyOutput out(dir / "pulse");
