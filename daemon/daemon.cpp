@@ -55,7 +55,10 @@ nlohmann::json gears_json(const ModelPtr& model) {
 }
 
 Retrainer::Settings retrain_settings(const ModelConfig& m) {
-  return {std::chrono::duration<double>(m.retrain_interval), m.min_new_samples, m.replace_min_samples};
+  return {std::chrono::duration<double>(m.retrain_interval),
+          m.min_new_samples,
+          m.replace_min_samples,
+          {m.learn_cluster_pairs, m.learn_first_refit, m.learn_young_time}};
 }
 
 }  // namespace
@@ -463,6 +466,9 @@ void Daemon::Impl::reload() {
   config.model.retrain_interval = next.model.retrain_interval;
   config.model.min_new_samples = next.model.min_new_samples;
   config.model.replace_min_samples = next.model.replace_min_samples;
+  config.model.learn_cluster_pairs = next.model.learn_cluster_pairs;
+  config.model.learn_first_refit = next.model.learn_first_refit;
+  config.model.learn_young_time = next.model.learn_young_time;
   config.model.store_hours = next.model.store_hours;
   config.model.max_samples = next.model.max_samples;
   config.model.save_interval = next.model.save_interval;
