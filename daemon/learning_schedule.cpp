@@ -9,7 +9,7 @@
 
 namespace gearpulse::daemon {
 
-PairsSummary summarize_pairs(std::span<const Sample> pairs) {
+PairsSummary summarize_pairs(std::span<const Sample> pairs, const GearModel* model) {
   PairsSummary out;
   const auto moving = [](const Sample& s) { return s.has_speed() && s.speed > detail::kMovingSpeed; };
   for (std::size_t k = 1; k < pairs.size(); ++k) {
@@ -19,6 +19,19 @@ PairsSummary summarize_pairs(std::span<const Sample> pairs) {
   }
   const std::vector<double> steady = steady_log_ratios(pairs);
   out.largest_cluster = largest_gear_cluster(steady);
+  if (!model || model->empty()) {
+    out.new_gear_cluster = out.largest_cluster;
+    return out;
+  }
+  out.model_gears = model->gears.size();
+  std::vector<double> off;
+  for (double r : steady) {
+    const bool near = std::any_of(model->gears.begin(), model->gears.end(), [&](const Gear& g) {
+      return std::abs(r - std::log(g.theta)) < 2.0 * kGearWindow;
+    });
+    if (!near) off.push_back(r);
+  }
+  out.new_gear_cluster = largest_gear_cluster(off);
   return out;
 }
 
@@ -50,7 +63,16 @@ bool LearningSchedule::due(const PairsSummary& pairs, bool has_model) const noex
   if (!young(pairs, has_model)) return false;
   const std::optional<double> refit = passed_refit(pairs.moving_time);
   const bool refit_passed = refit && (!last_ || last_->moving_time < *refit);
-  if (has_model) return refit_passed;
+  if (has_model) {
+    // A gear the model lacks shows in fewer pairs than a first gear needs to be clear: the fit takes a gear
+    // beside others on 5 samples. A quarter of cluster_pairs (10 by default) off the model's lines is a
+    // try; after one that did not add the gear, a quarter more. A try against another ladder (or none)
+    // says nothing of this cluster.
+    const std::size_t step = std::max<std::size_t>(settings_.cluster_pairs / 4, 1);
+    const std::size_t tried_new =
+        last_ && last_->model_gears == pairs.model_gears ? last_->new_gear_cluster : 0;
+    return refit_passed || (pairs.new_gear_cluster >= step && pairs.new_gear_cluster >= tried_new + step);
+  }
   if (pairs.largest_cluster < settings_.cluster_pairs) return false;
   return !last_ || refit_passed ||
          pairs.largest_cluster >= last_->largest_cluster + settings_.cluster_pairs / 2;

@@ -1,13 +1,15 @@
 #pragma once
 // When a young model is refitted. A new install learns early, then settles: the first fit as soon as the
 // training pairs show one gear clearly (a cluster of steady pairs), refits after first_refit, 2 x, 4 x ...
-// that time of moving while the model is young, then the retrainer's interval rule. The clock is the
+// that time of moving while the model is young and as soon as they show a gear the model lacks, then the
+// retrainer's interval rule. The clock is the
 // moving time the training pairs cover, so the schedule is the same whether the pairs arrive live or are
 // replayed, and a store cleared by a reset starts it again.
 #include <cstddef>
 #include <optional>
 #include <span>
 
+#include "core/gear_model.hpp"
 #include "core/sample.hpp"
 
 namespace gearpulse::daemon {
@@ -22,11 +24,15 @@ struct LearningSettings {
 struct PairsSummary {
   double moving_time = 0.0;         // s: steps between consecutive pairs both moving, each up to kMaxStep
   std::size_t largest_cluster = 0;  // steady pairs in the densest gear window (largest_gear_cluster)
+  // The same, of the steady pairs off the model's lines (none within a gearbox step, 2 x kGearWindow, of
+  // one of its gears): a gear the model does not have yet. Without a model, largest_cluster.
+  std::size_t new_gear_cluster = 0;
+  std::size_t model_gears = 0;  // gears of the model they were read against
 
   static constexpr double kMaxStep = 10.0;  // s: a longer step is a stop or a gap, not driving
 };
 
-[[nodiscard]] PairsSummary summarize_pairs(std::span<const Sample> pairs);
+[[nodiscard]] PairsSummary summarize_pairs(std::span<const Sample> pairs, const GearModel* model = nullptr);
 
 class LearningSchedule {
  public:
@@ -40,7 +46,9 @@ class LearningSchedule {
   [[nodiscard]] bool young(const PairsSummary& pairs, bool has_model) const noexcept;
   // A fit is due now: without a model, when the densest gear window holds cluster_pairs (again, after a
   // fit that found nothing, once it has grown by half that or a refit time has passed); with a model, when
-  // a refit time has passed since the last fit tried.
+  // a refit time has passed since the last fit tried, or when the densest window off the model's gears
+  // holds a quarter of cluster_pairs (again, after a fit that did not add that gear, once it has grown by
+  // a quarter more).
   [[nodiscard]] bool due(const PairsSummary& pairs, bool has_model) const noexcept;
   // A fit was tried on pairs so summarised.
   void tried(const PairsSummary& pairs) noexcept;

@@ -227,12 +227,13 @@ bool Retrainer::retrain_now() {
 bool Retrainer::schedule_due(std::unique_lock<std::mutex>& lock) {
   lock.unlock();
   std::optional<PairsSummary> pairs;
+  const ModelPtr model = model_.get();
   try {
-    pairs = summarize_pairs(store_.snapshot());  // while young, minutes of pairs: a small copy
+    pairs = summarize_pairs(store_.snapshot(), model.get());  // while young, minutes of pairs: a small copy
   } catch (...) {
     // No memory for the copy: the schedule looks again next time.
   }
-  const bool has_model = model_.trained();
+  const bool has_model = model && !model->empty();
   const std::size_t size = store_.size();
   lock.lock();
   if (!pairs) return false;

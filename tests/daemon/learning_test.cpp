@@ -106,6 +106,29 @@ TEST_CASE("learning: without a model a fit that found nothing is tried again onl
   CHECK_FALSE(off.due({10.0, 100}, false));
 }
 
+TEST_CASE("learning: a young model is refitted as soon as the pairs show a gear it lacks") {
+  const std::vector<double>& th = hatch_thetas();
+  std::vector<Sample> pairs = drive_in_gears({th[1]}, 70.0, 8);
+  const GearModel one = make_estimator_fitter()(pairs);
+  REQUIRE(one.gears.size() == 1);
+  LearningSchedule schedule;
+  PairsSummary s = summarize_pairs(pairs, &one);
+  CHECK(s.model_gears == 1);
+  CHECK(s.new_gear_cluster < 10);  // all of them on the model's line
+  schedule.tried(s);
+  // 3rd gear for 12 s, before the next refit time (120 s of moving).
+  std::vector<Sample> third = drive_in_gears({th[2]}, 12.0, 9, pairs.back().t + 1.0);
+  third.resize(12);  // without the clutch-out seconds
+  pairs.insert(pairs.end(), third.begin(), third.end());
+  s = summarize_pairs(pairs, &one);
+  REQUIRE(s.moving_time < 120.0);
+  CHECK(s.largest_cluster > 40);
+  CHECK(s.new_gear_cluster >= 10);
+  CHECK(schedule.due(s, true));
+  schedule.tried(s);  // a fit that did not add it: tried again once 10 more show
+  CHECK_FALSE(schedule.due(s, true));
+}
+
 TEST_CASE("learning: moving time and the largest gear cluster are read from the pairs") {
   const auto pairs = drive_in_gears({hatch_thetas()[1]}, 90.0, 1);
   const PairsSummary s = summarize_pairs(pairs);
