@@ -8,7 +8,9 @@
 #include <limits>
 #include <numeric>
 #include <optional>
+#include <span>
 
+#include "core/estimator.hpp"
 #include "core/estimator_internal.hpp"
 
 namespace gearpulse::detail {
@@ -19,6 +21,7 @@ constexpr std::size_t kWorkingSamples = 16000;  // model selection runs on a sub
 constexpr int kEmIterations = 120;
 constexpr int kFullDataIterations = 4;
 constexpr std::size_t kClutchBins = 24;
+constexpr std::size_t kMinMovingSamples = 30;  // moving samples a fit needs at least
 
 struct Peak {
   double log_ratio = 0.0;
@@ -315,7 +318,7 @@ std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
       if (dt > 0.0) gaps.push_back(dt);
     }
   }
-  if (gaps.size() < n / 2) {
+  if (gaps.empty() || gaps.size() < n / 2) {
     for (std::size_t k = 0; k < n; ++k)
       if (moving(k)) out.push_back(std::log(all.v[k] / all.s[k]));
     return out;
@@ -601,9 +604,46 @@ Aligned aligned_channels(const MixtureData& all) {
   return out;
 }
 
+struct Window {
+  std::size_t begin = 0;
+  std::size_t count = 0;
+};
+
+// The window of width 2 x kGearWindow over sorted log ratios that holds the most of them.
+Window densest_window(std::span<const double> sorted) {
+  Window best;
+  for (std::size_t b = 0, e = 0; b < sorted.size(); ++b) {
+    while (e < sorted.size() && sorted[e] <= sorted[b] + 2.0 * kGearWindow)
+      ++e;
+    if (e - b > best.count) best = {b, e - b};
+  }
+  return best;
+}
+
+// One gear, for a model still learning: the densest window of steady ratios, fitted alone, if it holds at
+// least half of the steady moving pairs and fewer steady pairs than a fit needs (kMinMovingSamples) lie
+// outside it (more steady driving elsewhere is a gear the ladder should show, or a continuum, as from a
+// CVT below the ratio it holds at cruise), and it passes the physical checks a ladder's gears pass. An
+// empty candidate otherwise.
+Candidate single_cluster(const MixtureData& work, const std::vector<double>& steady, const LadderJudge& judge,
+                         double vmax) {
+  std::vector<double> sorted = steady;
+  std::sort(sorted.begin(), sorted.end());
+  const Window densest = densest_window(sorted);
+  if (densest.count == 0 || 2 * densest.count < sorted.size() ||
+      sorted.size() - densest.count >= kMinMovingSamples)
+    return {};
+  const double centre = sorted[densest.begin + densest.count / 2];
+  MixtureParams p = initial_params(work, {centre}, vmax);
+  const double ll = run_em(work, p, kEmIterations, 1e-6);
+  if (p.gears() != 1 || judge.check(p).offender >= 0) return {};
+  if (std::abs(std::log(p.theta[0]) - centre) > kGearWindow) return {};  // EM left the cluster
+  return {p, ll, bic_of(ll, 1, work.size())};
+}
+
 }  // namespace
 
-GearModel fit_auto(const MixtureData& input, int gears) {
+GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
   const Aligned aligned = aligned_channels(input);
   const MixtureData& all = aligned.data;
   GearModel model;
@@ -616,7 +656,7 @@ GearModel fit_auto(const MixtureData& input, int gears) {
     vmax = std::max(vmax, all.v[k]);
     if (all.v[k] > kMovingSpeed) log_ratios.push_back(std::log(all.v[k] / all.s[k]));
   }
-  if (log_ratios.size() < 30) {
+  if (log_ratios.size() < kMinMovingSamples) {
     model.reason =
         all.size() == 0 ? "no samples with both speed and frequency" : "too few samples while moving";
     return model;
@@ -633,7 +673,7 @@ GearModel fit_auto(const MixtureData& input, int gears) {
         "the speed/frequency ratio hardly ever holds from one sample to the next (no gear engaged)";
     return model;
   }
-  if (steady.size() < 30) steady = log_ratios;
+  if (steady.size() < kMinMovingSamples) steady = log_ratios;
   const MixtureData work = subsample(all, kWorkingSamples);
   const LadderJudge judge(work, all.size(), steady, log_ratios);
   std::vector<double> init =
@@ -674,6 +714,7 @@ GearModel fit_auto(const MixtureData& input, int gears) {
     if (drop < 0) drop = static_cast<int>(std::min_element(p.alpha.begin(), p.alpha.end()) - p.alpha.begin());
     p = without(p, drop);
   }
+  if (best.params.gears() == 0 && single_gear && gears == 0) best = single_cluster(work, steady, judge, vmax);
   if (best.params.gears() == 0) {
     model.reason = last_reason;
     return model;
@@ -700,3 +741,25 @@ GearModel fit_auto(const MixtureData& input, int gears) {
 }
 
 }  // namespace gearpulse::detail
+
+namespace gearpulse {
+
+std::vector<double> steady_log_ratios(std::span<const Sample> samples) {
+  detail::MixtureData data;
+  for (const Sample& s : samples) {
+    if (!s.has_speed() || !s.has_freq() || s.speed < 0.0 || s.freq <= 0.0) continue;
+    data.v.push_back(s.speed);
+    data.s.push_back(s.freq);
+    data.t.push_back(s.t);
+  }
+  bool timed = false;
+  std::vector<double> out = detail::steady_log_ratios(data, timed);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+std::size_t largest_gear_cluster(std::span<const double> sorted_log_ratios) {
+  return detail::densest_window(sorted_log_ratios).count;
+}
+
+}  // namespace gearpulse

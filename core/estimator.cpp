@@ -335,7 +335,7 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     if (!options.ratios.empty()) {
       result.model = detail::fit_paper(fit_data, options.ratios);
     } else {
-      result.model = detail::fit_auto(fit_data, options.gears);
+      result.model = detail::fit_auto(fit_data, options.gears, options.single_gear);
     }
   }
   if (result.model.method.empty()) result.model.method = options.ratios.empty() ? "auto" : "paper";

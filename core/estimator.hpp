@@ -15,6 +15,11 @@ struct FitOptions {
   int gears = 0;               // 0 = choose from the data; N = exactly N gears
   std::vector<double> ratios;  // paper's c_i, top gear down as Table 2 (c1 ~ theta_M/theta_{M-1});
                                // non-empty selects the paper's method with M = ratios.size() + 1
+  // Auto mode with gears = 0: where no ladder of two or more gears passes, accept one gear (a model still
+  // learning that has seen the car in one gear so far), if its window holds at least half of the steady
+  // moving pairs and fewer than 30 steady pairs lie outside it (more steady driving elsewhere is a gear the
+  // ladder should show, or a continuum, as from a CVT below the ratio it holds at cruise).
+  bool single_gear = false;
 };
 
 struct FitResult {
@@ -23,6 +28,17 @@ struct FitResult {
 
 // Samples lacking speed or frequency are ignored. Throws std::invalid_argument for unusable options.
 [[nodiscard]] FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& options);
+
+// Half the width of a window of log(speed / frequency) that never holds two gears: half the smallest
+// step between adjacent gears the fit accepts (a factor of 1.06).
+inline constexpr double kGearWindow = 0.029;
+
+// log(speed / frequency) of the moving samples in gear, ascending: those whose ratio agrees with a time
+// neighbour's (the rule the auto fit reads gear clusters with; shifts and clutch slip give isolated ratios).
+[[nodiscard]] std::vector<double> steady_log_ratios(std::span<const Sample> samples);
+// The most of those ratios (sorted) that lie within one window of width 2 x kGearWindow: the pairs of the
+// clearest single gear.
+[[nodiscard]] std::size_t largest_gear_cluster(std::span<const double> sorted_log_ratios);
 
 // One log read twice: speed over ground from GPS (what the daemon sees live) and the car's own wheel speed
 // (OBD), rows matched by t.

@@ -58,8 +58,9 @@ void interpolate_held(MixtureData& data);
 // Paper mode: M = ratios.size() + 1, ratios top gear down (Table 2's c_i).
 [[nodiscard]] GearModel fit_paper(const MixtureData& data, const std::vector<double>& ratios);
 
-// Auto mode: gears = 0 chooses the count from the data, else exactly that many.
-[[nodiscard]] GearModel fit_auto(const MixtureData& data, int gears);
+// Auto mode: gears = 0 chooses the count from the data, else exactly that many; single_gear as
+// FitOptions::single_gear.
+[[nodiscard]] GearModel fit_auto(const MixtureData& data, int gears, bool single_gear = false);
 
 // Fills a GearModel from fitted parameters: log-likelihood, standard errors of theta from the inverse of
 // the observed information (layout chooses which nuisance parameters are estimated alongside).

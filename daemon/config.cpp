@@ -191,6 +191,9 @@ void read_model(Section& s, ModelConfig& m) {
   s.number("retrain_interval", m.retrain_interval, 1.0, 7.0 * 86400.0);
   s.integer("min_new_samples", m.min_new_samples, 1, 100'000'000);
   s.integer("replace_min_samples", m.replace_min_samples, 0, 100'000'000);
+  s.integer("learn_cluster_pairs", m.learn_cluster_pairs, 10, 100'000);
+  s.number("learn_first_refit", m.learn_first_refit, 10.0, 86400.0);
+  s.number("learn_young_time", m.learn_young_time, 0.0, 7.0 * 86400.0);
   s.number("store_hours", m.store_hours, 0.01, 24.0 * 365.0);
   s.integer("max_samples", m.max_samples, 100, static_cast<std::int64_t>(kMaxStoreSamples));
   s.number("save_interval", m.save_interval, 1.0, 86400.0);

@@ -67,9 +67,15 @@ struct ModelConfig {
   double retrain_interval = 600.0;         // s between retrain attempts
   std::size_t min_new_samples = 600;       // new training pairs needed before a retrain
   std::size_t replace_min_samples = 3600;  // a trained model is replaced only by a fit on this many
-  double store_hours = 50.0;               // hours of driving the stored pairs cover
-  std::size_t max_samples = 1'000'000;     // hard cap on the store, whatever the age
-  double save_interval = 300.0;            // s between periodic saves of the training store
+  // The learning schedule of a young model (daemon/learning_schedule.hpp): the first fit once this many
+  // steady pairs lie in one gear's window, refits after learn_first_refit, 2x, 4x ... s of moving, up to
+  // learn_young_time s of moving (0 = no schedule: the interval rule alone).
+  std::size_t learn_cluster_pairs = 40;
+  double learn_first_refit = 60.0;
+  double learn_young_time = 960.0;
+  double store_hours = 50.0;            // hours of driving the stored pairs cover
+  std::size_t max_samples = 1'000'000;  // hard cap on the store, whatever the age
+  double save_interval = 300.0;         // s between periodic saves of the training store
 };
 
 struct ControlConfig {

@@ -7,6 +7,7 @@
 #include <sys/statvfs.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -22,6 +23,7 @@
 
 #include "daemon/atomic_file.hpp"
 #include "daemon/control_server.hpp"
+#include "daemon/fitter.hpp"
 #include "daemon/log_limiter.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/pipeline.hpp"
@@ -54,8 +56,32 @@ nlohmann::json gears_json(const ModelPtr& model) {
   return gears;
 }
 
+// The gears the model knows, with the training pairs on each one's line at its fit (null when the model
+// does not say) and whether a refit kept it from the model before (docs/cold-start.md).
+nlohmann::json known_gears_json(const ModelPtr& model) {
+  nlohmann::json gears = nlohmann::json::array();
+  if (!model) return gears;
+  const auto revs = model->extra.find("revs");
+  const bool counted = revs != model->extra.end() && revs->is_array() && revs->size() == model->gears.size();
+  const auto kept = model->extra.find(kKeptGears);
+  for (std::size_t i = 0; i < model->gears.size(); ++i) {
+    const Gear& g = model->gears[i];
+    const bool was_kept = kept != model->extra.end() && kept->is_array() &&
+                          std::find(kept->begin(), kept->end(), nlohmann::json(g.theta)) != kept->end();
+    gears.push_back({{"gear", i + 1},
+                     {"theta", g.theta},
+                     {"stderr", g.std_error},
+                     {"pairs", counted ? (*revs)[i].value("samples", nlohmann::json(nullptr)) : nullptr},
+                     {"kept", was_kept}});
+  }
+  return gears;
+}
+
 Retrainer::Settings retrain_settings(const ModelConfig& m) {
-  return {std::chrono::duration<double>(m.retrain_interval), m.min_new_samples, m.replace_min_samples};
+  return {std::chrono::duration<double>(m.retrain_interval),
+          m.min_new_samples,
+          m.replace_min_samples,
+          {m.learn_cluster_pairs, m.learn_first_refit, m.learn_young_time}};
 }
 
 }  // namespace
@@ -493,6 +519,9 @@ void Daemon::Impl::reload() {
   config.model.retrain_interval = next.model.retrain_interval;
   config.model.min_new_samples = next.model.min_new_samples;
   config.model.replace_min_samples = next.model.replace_min_samples;
+  config.model.learn_cluster_pairs = next.model.learn_cluster_pairs;
+  config.model.learn_first_refit = next.model.learn_first_refit;
+  config.model.learn_young_time = next.model.learn_young_time;
   config.model.store_hours = next.model.store_hours;
   config.model.max_samples = next.model.max_samples;
   config.model.save_interval = next.model.save_interval;
@@ -551,6 +580,12 @@ nlohmann::json Daemon::Impl::status_json() {
                     {"last_retrain", number_or_null(r.last_run_wall, r.runs > 0)},
                     {"last_result", r.last_result}};
   if (m && !trained && !m->reason.empty()) reply["model"]["reason"] = m->reason;
+  reply["model"]["known_gears"] = known_gears_json(m);
+  reply["model"]["learning"] = {{"young", r.young},
+                                {"moving_time", r.moving_time},
+                                {"next_refit", number_or_null(r.next_fit, r.next_fit >= 0.0)},
+                                {"cluster_pairs", r.cluster},
+                                {"first_fit_pairs", config.model.learn_cluster_pairs}};
   {
     std::lock_guard lock(state_mutex);
     std::vector<std::string> problems = state_problems;

@@ -8,10 +8,13 @@
 
 #include <ctime>
 #include <exception>
+#include <optional>
 #include <thread>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+
+#include "daemon/fitter.hpp"
 
 namespace gearpulse::daemon {
 namespace {
@@ -26,7 +29,7 @@ double wall_now() {
 // notice, so the fit runs in a thread of its own that only runs when nothing else wants the CPU. Only the
 // fit: that thread holds no lock another thread waits on (the store's copy, the model's installation and
 // its save, the log are done at normal priority, where a busy CPU cannot hold them up for seconds).
-GearModel fit_at_low_priority(const Retrainer::Fitter& fitter, std::span<const Sample> samples) {
+GearModel fit_at_low_priority(const std::function<GearModel()>& fit) {
   GearModel fitted;
   std::exception_ptr failure;
   std::thread worker([&]() noexcept {
@@ -35,7 +38,7 @@ GearModel fit_at_low_priority(const Retrainer::Fitter& fitter, std::span<const S
     sched_param param{};
     (void)pthread_setschedparam(pthread_self(), SCHED_IDLE, &param);  // else nice 19 stands
     try {
-      fitted = fitter(samples);
+      fitted = fit();
     } catch (...) {
       failure = std::current_exception();
     }
@@ -53,7 +56,10 @@ Retrainer::Retrainer(TrainingStore& store, ModelHolder& model, std::filesystem::
       model_(model),
       model_path_(std::move(model_path)),
       fitter_(std::move(fitter)),
-      settings_(settings) {}
+      settings_(settings),
+      schedule_(settings.learning) {
+  status_.young = young_ = settings.learning.young_time > 0.0;
+}
 
 Retrainer::~Retrainer() {
   stop();
@@ -88,6 +94,8 @@ void Retrainer::set_settings(Settings settings) noexcept {
   {
     std::lock_guard lock(mutex_);
     settings_ = settings;
+    schedule_.set_settings(settings.learning);
+    young_ = true;  // the next look decides under the new schedule
   }
   wake_.notify_all();
 }
@@ -123,7 +131,18 @@ bool Retrainer::retrain_now() {
       result = "no training samples yet";
     } else {
       const auto t0 = std::chrono::steady_clock::now();
-      GearModel fitted = fit_at_low_priority(fitter_, samples);
+      // A refit keeps the gears of the model in use that its pairs do not contradict.
+      const ModelPtr before = model_.get();
+      const std::size_t judge_pairs = settings().learning.cluster_pairs;
+      std::size_t kept = 0;
+      GearModel fitted = fit_at_low_priority([&] {
+        GearModel fit = fitter_(samples);
+        if (!before || before->empty() || fit.empty()) return fit;
+        const std::size_t found = fit.gears.size();
+        fit = keep_seen_gears(*before, std::move(fit), samples, judge_pairs);
+        kept = fit.gears.size() - found;
+        return fit;
+      });
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (fitted.empty()) {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
@@ -158,7 +177,8 @@ bool Retrainer::retrain_now() {
         auto next = std::make_shared<const GearModel>(std::move(fitted));
         model_.set(next);
         changed = true;
-        result = fmt::format("fit on {} samples: {} gears in {:.2f} s", samples.size(), gears, secs);
+        result = fmt::format("fit on {} samples: {} gears{} in {:.2f} s", samples.size(), gears,
+                             kept > 0 ? fmt::format(" ({} kept from the model before)", kept) : "", secs);
         // A pair is stamped receive time - gps.latency; a fit that finds its GPS speed describing the
         // engine lag s before that stamp (speed_lag > 0) says the latency is longer than set by about
         // that much. The fit moved the speeds itself; the synthesis pairs them as stamped. Lags under
@@ -204,31 +224,72 @@ bool Retrainer::retrain_now() {
   return changed;
 }
 
+bool Retrainer::schedule_due(std::unique_lock<std::mutex>& lock) {
+  lock.unlock();
+  std::optional<PairsSummary> pairs;
+  const ModelPtr model = model_.get();
+  try {
+    pairs = summarize_pairs(store_.snapshot(), model.get());  // while young, minutes of pairs: a small copy
+  } catch (...) {
+    // No memory for the copy: the schedule looks again next time.
+  }
+  const bool has_model = model && !model->empty();
+  const std::size_t size = store_.size();
+  lock.lock();
+  if (!pairs) return false;
+  looked_ = *pairs;
+  young_ = schedule_.young(*pairs, has_model);
+  if (!young_) settled_size_ = size;
+  status_.young = young_;
+  status_.moving_time = pairs->moving_time;
+  status_.cluster = pairs->largest_cluster;
+  status_.next_fit = young_ ? schedule_.next_refit(pairs->moving_time).value_or(-1.0) : -1.0;
+  return schedule_.due(*pairs, has_model);
+}
+
 void Retrainer::run() noexcept {
+  using Clock = std::chrono::steady_clock;
+  // While young the schedule looks at the store this often: pairs come at about 1 Hz, and its refit
+  // times are a minute of moving and more apart.
+  constexpr auto kLearningLook = std::chrono::seconds(5);
   std::unique_lock lock(mutex_);
   // At start, learn right away rather than after a full interval when there is something to learn from:
   // a restored store and no model yet, or enough pairs the model has not seen (gathered on trips shorter
   // than the interval, which would otherwise never reach it).
   bool first = true;
+  Clock::time_point interval_start = Clock::now();
+  const auto interval_end = [&] {
+    return interval_start + std::chrono::duration_cast<Clock::duration>(settings_.interval);
+  };
   while (!stop_) {
     if (!first && !requested_) {
       // The interval as set now: a reload that shortens it wakes this wait, which then ends at the new
       // deadline rather than the old one.
-      const auto since = std::chrono::steady_clock::now();
+      const auto look = Clock::now() + kLearningLook;
       while (!stop_ && !requested_) {
-        const auto deadline =
-            since + std::chrono::duration_cast<std::chrono::steady_clock::duration>(settings_.interval);
-        if (std::chrono::steady_clock::now() >= deadline) break;
+        const auto deadline = young_ ? std::min(interval_end(), look) : interval_end();
+        if (Clock::now() >= deadline) break;
         wake_.wait_until(lock, deadline);
       }
       if (stop_) break;
     }
     const bool forced = requested_;
     requested_ = false;
-    const std::size_t needed = settings_.min_new_samples;
-    const bool enough = first && !model_.trained() ? store_.size() >= needed : store_.new_samples() >= needed;
+    bool due = false;
+    if (first || Clock::now() >= interval_end()) {
+      interval_start = Clock::now();
+      const std::size_t needed = settings_.min_new_samples;
+      due = first && !model_.trained() ? store_.size() >= needed : store_.new_samples() >= needed;
+    }
     first = false;
-    if (!forced && !enough) continue;
+    if (!young_ && store_.size() < settled_size_) {  // the pairs were cleared: learn as new
+      young_ = true;
+      schedule_.restart();
+    }
+    if (young_ && schedule_due(lock)) due = true;
+    if (stop_) break;
+    if (!forced && !due) continue;
+    if (young_) schedule_.tried(looked_);
     lock.unlock();
     try {
       retrain_now();

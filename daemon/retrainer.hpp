@@ -1,7 +1,9 @@
 #pragma once
 // Periodic retraining in a low-priority thread (nice 19, SCHED_IDLE): fits a new gear model on the
 // training store and swaps it in atomically. Pulses never wait for it; an empty fit (no gear ladder)
-// or a failed one never replaces a good model.
+// or a failed one never replaces a good model, and a refit keeps the gears it lacks that its pairs do not
+// contradict (keep_seen_gears). While the model is young the learning schedule decides when to fit
+// (learning_schedule.hpp), then every interval with min_new_samples new pairs.
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -15,6 +17,7 @@
 
 #include "core/gear_model.hpp"
 #include "core/sample.hpp"
+#include "daemon/learning_schedule.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
 
@@ -39,6 +42,7 @@ class Retrainer {
     // A fit on fewer samples than this (and than the current model's) does not replace a trained model:
     // ten minutes in town must not overwrite a ladder learned over days.
     std::size_t replace_min_samples = 3600;
+    LearningSettings learning{};
   };
 
   struct Status {
@@ -47,6 +51,10 @@ class Retrainer {
     double last_run_wall = 0.0;  // UNIX seconds of the last attempt, 0 = never
     std::string last_result;     // one line for status
     bool busy = false;
+    bool young = false;        // the learning schedule decides the fits
+    double moving_time = 0.0;  // s of moving the training pairs covered at the schedule's last look
+    double next_fit = -1.0;    // s of moving at the schedule's next refit, -1 = none
+    std::size_t cluster = 0;   // steady pairs in the densest gear window at that look
   };
 
   Retrainer(TrainingStore& store, ModelHolder& model, std::filesystem::path model_path, Fitter fitter,
@@ -70,6 +78,9 @@ class Retrainer {
 
  private:
   void run() noexcept;
+  // The schedule's look at the store (under mutex_ when called; released for the copy): whether a fit is
+  // due by it. Sets young_ and the status' schedule fields.
+  bool schedule_due(std::unique_lock<std::mutex>& lock);
 
   TrainingStore& store_;
   ModelHolder& model_;
@@ -81,6 +92,10 @@ class Retrainer {
   Settings settings_;
   Status status_;
   bool no_ladder_ = false;  // the last fit found no gear ladder
+  LearningSchedule schedule_;
+  bool young_ = true;             // the schedule may decide fits: the thread looks at the store often
+  std::size_t settled_size_ = 0;  // store size when the schedule ended; a smaller store starts it again
+  PairsSummary looked_;           // the pairs at the schedule's last look
   bool requested_ = false;
   bool stop_ = false;
   std::thread thread_;

@@ -16,6 +16,7 @@
 #   harness.sh stop WORK         stops everything it started
 # Settings (environment, read by prepare): HS_RATE (48000), HS_PERIOD (1024 frames), HS_PPK (2485),
 # HS_TRAIN_SEED (11), HS_TRAIN_DURATION (2400 s), HS_VEHICLE (bmw-520i), HS_LOG_LEVEL (info),
+# HS_COLD (0; 1: no training drive, the daemon starts from an empty state directory),
 # HS_REALTIME (false: [audio] realtime, SCHED_FIFO threads and locked memory; true needs root or
 # CAP_SYS_NICE and CAP_IPC_LOCK).
 
@@ -87,12 +88,16 @@ hs_free_port() {
 hs_prepare() {
   hs_defaults
   hs_check_tools
-  echo "harness: training drive ($HS_TRAIN_DURATION s of $HS_VEHICLE, seed $HS_TRAIN_SEED), fitted with gearpulse fit"
-  "$HS_DEVTOOLS" simulate --out "$HS_WORK/train" --seed "$HS_TRAIN_SEED" --duration "$HS_TRAIN_DURATION" \
-    --vehicle "$HS_VEHICLE" --no-audio --pulses-per-km "$HS_PPK" >"$HS_WORK/train.log" ||
-    hs_die "training drive failed: $(cat "$HS_WORK/train.log")"
-  "$HS_GEARPULSE" fit --out "$HS_WORK/state/model.json" "$HS_WORK/train/samples.csv" >"$HS_WORK/fit.json" \
-    2>"$HS_WORK/fit.log" || hs_die "gearpulse fit failed: $(cat "$HS_WORK/fit.log")"
+  if [ "${HS_COLD:-0}" = 1 ]; then
+    echo "harness: no training drive: gearpulsed starts from an empty state directory"
+  else
+    echo "harness: training drive ($HS_TRAIN_DURATION s of $HS_VEHICLE, seed $HS_TRAIN_SEED), fitted with gearpulse fit"
+    "$HS_DEVTOOLS" simulate --out "$HS_WORK/train" --seed "$HS_TRAIN_SEED" --duration "$HS_TRAIN_DURATION" \
+      --vehicle "$HS_VEHICLE" --no-audio --pulses-per-km "$HS_PPK" >"$HS_WORK/train.log" ||
+      hs_die "training drive failed: $(cat "$HS_WORK/train.log")"
+    "$HS_GEARPULSE" fit --out "$HS_WORK/state/model.json" "$HS_WORK/train/samples.csv" >"$HS_WORK/fit.json" \
+      2>"$HS_WORK/fit.log" || hs_die "gearpulse fit failed: $(cat "$HS_WORK/fit.log")"
+  fi
   "$HS_DEVTOOLS" simulate --out "$HS_WORK/drive" --rate "$HS_RATE" --vehicle "$HS_VEHICLE" \
     --pulses-per-km "$HS_PPK" "$@" >"$HS_WORK/drive.log" || hs_die "drive simulation failed"
   hs_save_env

@@ -52,6 +52,23 @@ def fmt(v, spec, missing="-"):
     return missing if v is None else format(v, spec)
 
 
+def model_text(s):
+    """The model as status shows it: the known gears' thetas, and the learning schedule while young."""
+    m = s.get("model", {})
+    gears = m.get("known_gears", [])
+    learning = m.get("learning", {})
+    text = "model: " + (" ".join(f"{g.get('theta', 0):.4f}" for g in gears) if gears else "none")
+    if learning.get("young"):
+        text += f"  learning: {learning.get('moving_time', 0):.0f} s moving"
+        if not gears:
+            text += f", steady pairs in one gear {learning.get('cluster_pairs')}/{learning.get('first_fit_pairs')}"
+        elif learning.get("next_refit") is not None:
+            text += f", next refit at {learning['next_refit']:.0f} s"
+    elif gears:
+        text += "  (settled)"
+    return text
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--work", required=True)
@@ -62,6 +79,9 @@ def main():
     ap.add_argument("--poll", type=float, default=0.25)
     ap.add_argument("--until-pid", type=int, required=True, help="the feeder: the drive ends when it exits")
     ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--model", action="store_true",
+                    help="add the model's known gears and learning schedule to each line, and print a line "
+                         "at once whenever the model changes")
     a = ap.parse_args()
 
     work = a.work
@@ -72,6 +92,7 @@ def main():
 
     last_print = -1e9
     last_source = None
+    last_model = None
     seen_gps = False
     first_engine = None   # first status with source engine after GPS was used: (elapsed, gps age)
     outage_polls = {}
@@ -93,12 +114,18 @@ def main():
         seen_gps = seen_gps or source == "gps"
         if source == "engine" and seen_gps and first_engine is None:
             first_engine = (el, gps.get("age"))
-        if not a.quiet and (el - last_print >= a.print_every or source != last_source):
+        model = model_text(s) if a.model else ""
+        if not a.quiet and (el - last_print >= a.print_every or source != last_source or model != last_model):
             last_print = el
-            print(f"  t={el:5.0f}s  source={source:<6} gear={s.get('gear', 0)}  "
-                  f"speed={speed * 3.6:5.1f} km/h (true {at(ts, speeds, el) * 3.6:5.1f})  "
-                  f"gps={gps.get('state', '?'):<12} track={fmt(trk.get('freq'), '5.1f')} Hz "
-                  f"{fmt(trk.get('snr_db'), '4.1f')} dB  pulses={s.get('pulses', 0)}", flush=True)
+            if a.model:
+                print(f"  t={el:5.0f}s  source={source:<6} gear={s.get('gear', 0)}  "
+                      f"speed={speed * 3.6:5.1f} km/h (true {at(ts, speeds, el) * 3.6:5.1f})  {model}", flush=True)
+            else:
+                print(f"  t={el:5.0f}s  source={source:<6} gear={s.get('gear', 0)}  "
+                      f"speed={speed * 3.6:5.1f} km/h (true {at(ts, speeds, el) * 3.6:5.1f})  "
+                      f"gps={gps.get('state', '?'):<12} track={fmt(trk.get('freq'), '5.1f')} Hz "
+                      f"{fmt(trk.get('snr_db'), '4.1f')} dB  pulses={s.get('pulses', 0)}", flush=True)
+        last_model = model
         last_source = source
         time.sleep(max(0.0, a.poll - (time.time() - now)))
 

@@ -156,6 +156,12 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(status["model"]["state"] == "learning");
   CHECK(status["gps"]["state"] != "fix");
   CHECK(status["pulses"] == 0);
+  // A new install: no gear known, the learning schedule waiting for a first gear.
+  CHECK(status["model"]["known_gears"] == json::array());
+  CHECK(status["model"]["learning"]["young"] == true);
+  CHECK(status["model"]["learning"]["moving_time"] == 0.0);
+  CHECK(status["model"]["learning"]["cluster_pairs"] == 0);
+  CHECK(status["model"]["learning"]["first_fit_pairs"] == 40);
 
   // reset-model needs an explicit confirmation.
   const json refused = ask(dir, R"({"v":1,"cmd":"reset-model"})");
@@ -687,6 +693,14 @@ TEST_CASE("daemon: learns a model from a restored training store and saves it") 
   for (std::size_t i = 0; i < vehicle.theta.size(); ++i)
     CHECK(status["gears"][i]["theta"].get<double>() == Approx(vehicle.theta[i]).epsilon(0.02));
   CHECK(status["training_samples"].get<std::size_t>() == pairs);
+  // Learned from a drive longer than the learning schedule: settled, every gear known from pairs of its own.
+  CHECK(status["model"]["learning"]["young"] == false);
+  CHECK(status["model"]["learning"]["next_refit"].is_null());
+  REQUIRE(status["model"]["known_gears"].size() == vehicle.theta.size());
+  for (const json& g : status["model"]["known_gears"]) {
+    CHECK(g["pairs"].get<std::size_t>() > 0);
+    CHECK(g["kept"] == false);
+  }
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
   // Written atomically in the format of `gearpulse fit --out`, and loaded again.

@@ -163,6 +163,24 @@ void print_status(const nlohmann::json& s) {
   if (model.contains("last_result") && model["last_result"].is_string() &&
       !model["last_result"].get<std::string>().empty())
     std::cout << "last retrain " << model["last_result"].get<std::string>() << "\n";
+  if (const auto learning = model.value("learning", nlohmann::json::object());
+      learning.value("young", false)) {
+    std::cout << "learning     " << num(learning.value("moving_time", nlohmann::json()), 0, " s")
+              << " of moving; ";
+    if (model.value("gears", 0) == 0)
+      std::cout << "first fit at " << str(learning, "first_fit_pairs") << " steady pairs in one gear (now "
+                << str(learning, "cluster_pairs") << ")\n";
+    else
+      std::cout << "next refit at " << num(learning.value("next_refit", nlohmann::json()), 0, " s")
+                << " of moving\n";
+  }
+  if (const auto known = model.value("known_gears", nlohmann::json::array()); !known.empty()) {
+    std::cout << "known gears ";
+    for (const auto& g : known)
+      std::cout << " " << num(g.value("theta", nlohmann::json()), 4, "") << " (" << str(g, "pairs")
+                << " pairs" << (g.value("kept", false) ? ", kept" : "") << ")";
+    std::cout << "\n";
+  }
   std::cout << "uptime       " << num(s.value("uptime", nlohmann::json()), 0, " s") << "\n";
   for (const auto& [name, part] : {std::pair{"output", output}, {"gps", gps}, {"audio", audio}}) {
     const std::string err = str(part, "error");

@@ -1,0 +1,312 @@
+// First-drive bench of the cold start: from an empty state, a first 30-minute simulated drive with a 60 s
+// GPS outage every 3 minutes (outage_protocol.hpp: the first 120 s in), replayed as the daemon runs it:
+// the training pairs so far (1 Hz, none in an outage), the learning schedule looked at every 5 s of drive
+// time (daemon/learning_schedule.hpp), at its times a fit with the daemon's fitter, the gears the refit
+// lacks kept by the daemon's rule, and the interval rule (retrain_interval, min_new_samples); the
+// synthesis takes each new model between two steps. Beside it, the same drive with a model fitted
+// beforehand on another 40-minute drive of the same car. Fits are taken to be instant (a fit on minutes of
+// pairs takes milliseconds).
+//
+// Vehicles are drawn by sim::random_vehicle(seed) (4-7 gears, nothing tuned to the presets), mixed
+// driving, the engine cold at the start; observed as the daemon sees them: the frequency at every 0.1 s
+// tracker hop, a 1 Hz GPS fix given at each hop until the next (flagged new once).
+// Per outage: distance error |integral of the output - integral of the true speed| over the 60 s, in m.
+// Targets: a model within 3 minutes of moving; from minute 5, per-outage distance error within 2x the
+// pre-trained one.
+// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose]
+//   --tuning: seeds 1-10 (the seeds the schedule's defaults were chosen on); --report (default): 101-120.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bench/outage_protocol.hpp"
+#include "core/estimator.hpp"
+#include "core/speed_synth.hpp"
+#include "daemon/fitter.hpp"
+#include "daemon/learning_schedule.hpp"
+#include "tools/sim/vehicle_sim.hpp"
+
+using gearpulse::GearModel;
+using gearpulse::Sample;
+namespace sim = gearpulse::sim;
+namespace gd = gearpulse::daemon;
+using namespace gearpulse::bench;
+
+namespace {
+
+constexpr double kDriveLength = 1800.0;      // s
+constexpr double kPretrainLength = 2400.0;   // s, as the demo's training drive
+constexpr double kLookEvery = 5.0;           // s: the retrainer's look at the schedule while young
+constexpr double kRetrainInterval = 600.0;   // s, [model] retrain_interval's default
+constexpr std::size_t kMinNewSamples = 600;  // [model] min_new_samples' default
+constexpr double kColdStart = 0.5;           // the engine's idle 50 % high at the start
+
+struct Outage {
+  double start = 0.0;     // s into the drive
+  double truth = 0.0;     // m driven
+  double error = 0.0;     // m, |output - truth| of the distance
+  std::size_t gears = 0;  // gears of the model in use when the outage began
+  double moving = 0.0;    // s of moving in the pairs when it began
+  double unseen = 0.0;    // share of its time in gear spent in a gear the model lacks (no theta within 1.06)
+  double engaged = 0.0;   // s in gear
+};
+
+struct Run {
+  std::vector<Outage> outages;
+  double first_model_drive = -1.0;   // s into the drive the first model came, -1 = never
+  double first_model_moving = -1.0;  // s of moving then
+  std::size_t fits = 0;
+  std::size_t final_gears = 0;
+};
+
+// The drive stepped through the synthesis; with `pretrained` null the daemon's cold start learns as it goes.
+Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretrained, bool verbose) {
+  sim::ObservationOptions hop;
+  hop.period = 0.1;
+  hop.seed = d.options.seed + 7;
+  const std::vector<sim::Observation> rows = sim::observe(d, hop);
+  gearpulse::SpeedSynthesizer synth(pretrained);
+  const auto fitter = gd::make_estimator_fitter();
+  gd::LearningSchedule schedule;  // the daemon's defaults
+  std::shared_ptr<const GearModel> model = pretrained;
+  std::vector<Sample> pairs;
+  std::size_t new_pairs = 0;
+  double next_look = 0.0, next_interval = kRetrainInterval;
+  Run run;
+  long fix_index = -1;
+  double fix = gearpulse::kMissing;
+  std::optional<Outage> current;
+  double prev_t = 0.0, prev_out = 0.0, prev_true = 0.0;
+  const auto refit = [&](const gd::PairsSummary& summary) {
+    GearModel fitted = fitter(pairs);
+    ++run.fits;
+    new_pairs = 0;
+    if (fitted.empty()) return;
+    if (model)
+      fitted = gd::keep_seen_gears(*model, std::move(fitted), pairs, schedule.settings().cluster_pairs);
+    if (!model && run.first_model_drive < 0.0) {
+      run.first_model_drive = pairs.back().t;
+      run.first_model_moving = summary.moving_time;
+    }
+    model = std::make_shared<const GearModel>(std::move(fitted));
+    synth.set_model(model);
+    if (verbose) {
+      std::printf("  fit at %.0f s (%zu pairs, moving %.0f s):", pairs.back().t, pairs.size(),
+                  summary.moving_time);
+      for (const auto& g : model->gears)
+        std::printf(" %.4f", g.theta);
+      std::printf(" | true:");
+      for (double th : d.vehicle.theta)
+        std::printf(" %.4f", th);
+      std::vector<double> seen(d.vehicle.theta.size() + 1, 0.0);  // s engaged in each gear, GPS present
+      for (const auto& tr : d.truth)
+        if (tr.t <= pairs.back().t && tr.clutch == sim::Clutch::kEngaged && !in_outage(tr.t))
+          seen[static_cast<std::size_t>(tr.gear)] += d.options.dt;
+      std::printf(" | s in each gear so far:");
+      for (std::size_t g = 1; g < seen.size(); ++g)
+        std::printf(" %.0f", seen[g]);
+      std::printf("\n");
+    }
+  };
+  for (const sim::Observation& r : rows) {
+    const double t = r.truth.t;
+    const bool out = in_outage(t);
+    const long index = std::lround(std::floor(t + 1e-6));
+    const bool fresh = !out && index != fix_index;
+    if (fresh) {
+      fix = r.speed;
+      fix_index = index;
+      if (!pretrained && std::isfinite(r.freq)) {
+        pairs.push_back({t, r.speed, r.freq});
+        ++new_pairs;
+      }
+    }
+    const gearpulse::SynthOutput o = synth.step(t, out ? gearpulse::kMissing : fix, r.freq, fresh);
+    if (out && current && r.truth.gear > 0 && r.truth.clutch == sim::Clutch::kEngaged) {
+      const double theta = d.vehicle.theta[static_cast<std::size_t>(r.truth.gear - 1)];
+      const bool known = model && std::any_of(model->gears.begin(), model->gears.end(), [&](const auto& g) {
+                           return std::abs(std::log(g.theta / theta)) < std::log(1.06);
+                         });
+      current->engaged += hop.period;
+      current->unseen += known ? 0.0 : hop.period;
+    }
+    if (out) {
+      if (!current) {
+        current =
+            Outage{t, 0.0, 0.0, model ? model->gears.size() : 0, gd::summarize_pairs(pairs).moving_time};
+        prev_t = t, prev_out = o.speed, prev_true = r.truth.speed;
+      } else {
+        const double dt = t - prev_t;
+        current->truth += 0.5 * dt * (r.truth.speed + prev_true);
+        current->error += 0.5 * dt * (o.speed + prev_out);
+        prev_t = t, prev_out = o.speed, prev_true = r.truth.speed;
+      }
+    } else if (current) {
+      current->error = std::abs(current->error - current->truth);
+      current->unseen = current->engaged > 0.0 ? current->unseen / current->engaged : 0.0;
+      run.outages.push_back(*current);
+      current.reset();
+    }
+    if (pretrained || pairs.empty()) continue;
+    // The retrainer: the schedule while young, the interval rule always.
+    bool due = false;
+    if (t >= next_interval) {
+      next_interval += kRetrainInterval;
+      due = new_pairs >= kMinNewSamples;
+    }
+    if (t >= next_look) {
+      next_look += kLookEvery;
+      const gd::PairsSummary summary = gd::summarize_pairs(pairs, model.get());
+      if (schedule.young(summary, model != nullptr) && schedule.due(summary, model != nullptr)) {
+        schedule.tried(summary);
+        refit(summary);
+        continue;
+      }
+    }
+    if (due) refit(gd::summarize_pairs(pairs, model.get()));
+  }
+  if (current) {
+    current->error = std::abs(current->error - current->truth);
+    current->unseen = current->engaged > 0.0 ? current->unseen / current->engaged : 0.0;
+    run.outages.push_back(*current);
+  }
+  run.final_gears = model ? model->gears.size() : 0;
+  return run;
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (double x : v)
+    s += x;
+  return v.empty() ? std::nan("") : s / static_cast<double>(v.size());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::uint64_t first = 101, last = 120;
+  const char* which = "report";
+  bool verbose = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string_view a = argv[i];
+    if (a == "--tuning") {
+      first = 1, last = 10, which = "tuning";
+    } else if (a == "--report") {
+      first = 101, last = 120, which = "report";
+    } else if (a == "--seeds" && i + 2 < argc) {
+      first = std::strtoull(argv[i + 1], nullptr, 10);
+      last = std::strtoull(argv[i + 2], nullptr, 10);
+      which = "chosen";
+      i += 2;
+    } else if (a == "--verbose") {
+      verbose = true;
+    } else {
+      std::fprintf(stderr, "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose]\n");
+      return 2;
+    }
+  }
+  std::printf(
+      "first drive from an empty state: seeds %llu-%llu (%s set), sim::random_vehicle(seed), mixed, "
+      "%.0f min, 60 s outage every 3 min from minute 2\n",
+      static_cast<unsigned long long>(first), static_cast<unsigned long long>(last), which,
+      kDriveLength / 60.0);
+  std::vector<std::vector<double>> cold_err, pre_err, truth_m;  // per outage index, over seeds
+  std::vector<double> first_moving, first_drive;
+  std::size_t never = 0, late = 0;
+  double cold_after5 = 0.0, pre_after5 = 0.0;
+  std::size_t outages_after5 = 0, within_2x = 0;
+  // Outages from minute 5 split by whether the car spent kUnseenShare or more of their time in gear in a
+  // gear the cold-start model had not learned when they began.
+  constexpr double kUnseenShare = 0.1;
+  double known_cold = 0.0, known_pre = 0.0, unseen_cold = 0.0, unseen_pre = 0.0;
+  std::size_t known_n = 0, unseen_n = 0, known_within = 0;
+  for (std::uint64_t seed = first; seed <= last; ++seed) {
+    const sim::Vehicle car = sim::random_vehicle(seed);
+    sim::DriveOptions options;
+    options.style = sim::DrivingStyle::kMixed;
+    options.duration = kDriveLength;
+    options.dt = 0.1;
+    options.seed = seed;
+    options.cold_start = kColdStart;
+    const sim::Drive first_drive_sim = sim::simulate_drive(car, options);
+    // The model fitted beforehand: another drive of the same car, its 1 Hz pairs.
+    sim::DriveOptions other = options;
+    other.duration = kPretrainLength;
+    other.dt = 1.0;
+    other.seed = seed + 100000;
+    sim::ObservationOptions gps1;
+    gps1.seed = seed + 200000;
+    const auto pre_pairs = sim::to_samples(sim::observe(sim::simulate_drive(car, other), gps1));
+    const auto pre_model = std::make_shared<const GearModel>(gd::make_estimator_fitter()(pre_pairs));
+    const Run cold = drive(first_drive_sim, nullptr, verbose);
+    const Run pre = drive(first_drive_sim, pre_model->empty() ? nullptr : pre_model, false);
+    if (cold.first_model_drive < 0.0) {
+      ++never;
+    } else {
+      first_moving.push_back(cold.first_model_moving / 60.0);
+      first_drive.push_back(cold.first_model_drive / 60.0);
+      late += cold.first_model_moving > 180.0 ? 1 : 0;
+    }
+    std::printf(
+        "seed %3llu %-10s %d gears: first model at %5.2f min driven (%5.2f min moving), %zu fits, "
+        "final %zu gears; pre-trained %zu gears\n",
+        static_cast<unsigned long long>(seed), car.name.c_str(), car.gears(), cold.first_model_drive / 60.0,
+        cold.first_model_moving / 60.0, cold.fits, cold.final_gears, pre_model->gears.size());
+    for (std::size_t k = 0; k < cold.outages.size() && k < pre.outages.size(); ++k) {
+      if (cold_err.size() <= k) cold_err.resize(k + 1), pre_err.resize(k + 1), truth_m.resize(k + 1);
+      cold_err[k].push_back(cold.outages[k].error);
+      pre_err[k].push_back(pre.outages[k].error);
+      truth_m[k].push_back(cold.outages[k].truth);
+      if (cold.outages[k].start >= 300.0) {
+        cold_after5 += cold.outages[k].error;
+        pre_after5 += pre.outages[k].error;
+        ++outages_after5;
+        within_2x += cold.outages[k].error <= 2.0 * pre.outages[k].error + 1.0 ? 1 : 0;  // 1 m: rounding
+        const bool known = cold.outages[k].unseen < kUnseenShare;
+        (known ? known_cold : unseen_cold) += cold.outages[k].error;
+        (known ? known_pre : unseen_pre) += pre.outages[k].error;
+        ++(known ? known_n : unseen_n);
+        known_within += known && cold.outages[k].error <= 2.0 * pre.outages[k].error + 1.0 ? 1 : 0;
+      }
+      if (verbose)
+        std::printf(
+            "    outage at %4.1f min: %4.0f m driven; cold %zu gears %6.1f m (%3.0f%% in a gear it lacks), "
+            "pre-trained %6.1f m\n",
+            cold.outages[k].start / 60.0, cold.outages[k].truth, cold.outages[k].gears, cold.outages[k].error,
+            100.0 * cold.outages[k].unseen, pre.outages[k].error);
+    }
+  }
+  std::printf("\nper outage, mean over seeds (distance error in m, and in %% of the distance driven):\n");
+  std::printf("%8s %10s | %16s | %16s | %6s\n", "minute", "driven m", "cold start", "pre-trained", "ratio");
+  for (std::size_t k = 0; k < cold_err.size(); ++k) {
+    const double c = mean(cold_err[k]), p = mean(pre_err[k]), m = mean(truth_m[k]);
+    std::printf("%8.0f %10.0f | %7.1f (%5.1f%%) | %7.1f (%5.1f%%) | %6.2f\n",
+                (kOutageStart + k * kOutagePeriod) / 60.0, m, c, 100.0 * c / m, p, 100.0 * p / m, c / p);
+  }
+  std::sort(first_moving.begin(), first_moving.end());
+  std::printf(
+      "\nfirst model: median %.2f min moving (%.2f driven), worst %.2f min moving; later than 3 min "
+      "of moving: %zu, never: %zu of %llu drives\n",
+      quantile(first_moving, 0.5), quantile(first_drive, 0.5),
+      first_moving.empty() ? std::nan("") : first_moving.back(), late, never,
+      static_cast<unsigned long long>(last - first + 1));
+  std::printf(
+      "from minute 5: cold-start distance error %.1f m per outage against %.1f m pre-trained (ratio %.2f); "
+      "%zu of %zu outages within 2x the pre-trained (+1 m)\n",
+      cold_after5 / static_cast<double>(outages_after5), pre_after5 / static_cast<double>(outages_after5),
+      cold_after5 / pre_after5, within_2x, outages_after5);
+  std::printf(
+      "  in gears the model knew (under %.0f%% of the time in gear in others): %zu outages, %.1f m against "
+      "%.1f m (ratio %.2f), %zu of %zu within 2x (+1 m)\n",
+      100.0 * kUnseenShare, known_n, known_cold / static_cast<double>(known_n),
+      known_pre / static_cast<double>(known_n), known_cold / known_pre, known_within, known_n);
+  std::printf("  in a gear the model had not learned yet: %zu outages, %.1f m against %.1f m\n", unseen_n,
+              unseen_cold / static_cast<double>(unseen_n), unseen_pre / static_cast<double>(unseen_n));
+  return 0;
+}
