@@ -9,6 +9,7 @@
 #include "core/estimator_internal.hpp"
 #include "core/mixture_likelihood.hpp"
 #include "core/sample_io.hpp"
+#include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 using namespace gearpulse;
@@ -33,7 +34,7 @@ void check_ordered(const GearModel& model) {
 }
 
 std::vector<Sample> read_real(const std::string& relative, TorqueSpeed speed = TorqueSpeed::kAuto) {
-  const std::string path = std::string(GEARPULSE_REAL_DATA_DIR "/") + relative;
+  const std::string path = (test::real_data_dir() / relative).string();
   std::ifstream in(path);
   if (!in) return {};
   ReadOptions options;
@@ -609,10 +610,8 @@ TEST_CASE("estimator: real manual logs give ascending ladders and the automatic 
   const std::vector<Sample> etios = read_etios("drive");
   const auto louisville = read_real("torque-louisville/rpms_chart_from_obd.csv");
   const auto automatic = read_real("torque-automatic/trackLog.csv");
-  if (etios.empty() || louisville.empty() || automatic.empty()) {
-    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-    return;
-  }
+  if (etios.empty() || louisville.empty() || automatic.empty())
+    GEARPULSE_SKIP_TEST("real logs not found under " << test::real_data_dir());
   // The Etios logs pair speed and rpm read about 0.7-1 s apart; only with the channels aligned does first
   // gear (pulling away, where that skew matters most) form a line of its own.
   const FitResult e = fit_gear_model(etios, {});
@@ -663,10 +662,7 @@ TEST_CASE("estimator: the Swift log gives one five-gear ladder, the same from ei
   // A third car, none of the estimator's constants were chosen on: a Maruti Swift (5-speed manual) logged
   // as speed,rpm rows without a time column, integer km/h, rows often repeated.
   const auto swift = read_real("swift-147/147.csv");
-  if (swift.empty()) {
-    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-    return;
-  }
+  if (swift.empty()) GEARPULSE_SKIP_TEST("real logs not found under " << test::real_data_dir());
   const FitResult whole = fit_gear_model(swift, {});
   REQUIRE(whole.model.gears.size() == 5);
   check_ordered(whole.model);
@@ -699,10 +695,7 @@ TEST_CASE("estimator: paper mode on the Etios logs keeps the gear its initialisa
   // started it.
   for (const char* prefix : {"drive", "long"}) {
     const std::vector<Sample> all = read_etios(prefix);
-    if (all.empty()) {
-      WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-      return;
-    }
+    if (all.empty()) GEARPULSE_SKIP_TEST("real logs not found under " << test::real_data_dir());
     INFO(prefix << "*.csv");
     FitOptions paper;
     paper.ratios = {1.25, 1.35, 1.50, 1.7};
@@ -773,12 +766,12 @@ TEST_CASE("estimator: a fit records the idle an engine is held at while the car 
   REQUIRE(r.model.extra.contains("rolling_idle"));
   CHECK(r.model.extra["rolling_idle"]["freq"].get<double>() == Approx(rolling).epsilon(0.02));
   CHECK(r.model.extra["rolling_idle"]["samples"].get<double>() >= 50);
+}
+
+TEST_CASE("estimator: the Etios logs record a rolling idle about a fifth above the standing idle") {
   // The Etios holds its engine about a fifth above its standing idle rolling declutched.
   const auto etios = read_etios("drive");
-  if (etios.empty()) {
-    WARN("Etios logs not found under " GEARPULSE_REAL_DATA_DIR "; that part skipped");
-    return;
-  }
+  if (etios.empty()) GEARPULSE_SKIP_TEST("Etios logs not found under " << test::real_data_dir());
   const FitResult e = fit_gear_model(etios, {});
   REQUIRE(e.model.extra.contains("rolling_idle"));
   const double ratio =

@@ -36,7 +36,6 @@ std::string error_of(const std::string& text) {
   return "(no error)";
 }
 
-const std::filesystem::path kReal = GEARPULSE_REAL_DATA_DIR;
 constexpr double kPiOver100 = 3.14159265358979 / 100.0;
 
 }  // namespace
@@ -78,12 +77,6 @@ TEST_CASE("io: a generic log in km/h or in ms reads, with a warning that says so
   REQUIRE(slow.warnings.size() == 1);
   CHECK(slow.warnings[0] ==
         "log.csv: rows 1000 s apart at the median: the t,speed,freq format takes seconds; is t in ms?");
-  // Every real log reads without one.
-  for (const auto& entry : std::filesystem::recursive_directory_iterator(kReal)) {
-    if (entry.path().extension() != ".csv") continue;
-    std::ifstream in(entry.path(), std::ios::binary);
-    CHECK(read_samples(in, entry.path().string()).warnings.empty());
-  }
 }
 
 TEST_CASE("io: bad rows are skipped and reported with file and line") {
@@ -547,18 +540,17 @@ TEST_CASE("io: written CSV reads back") {
   CHECK_FALSE(log.samples[2].has_freq());
 }
 
-TEST_CASE("io: every real log reads with sensible values") {
-  if (!std::filesystem::exists(kReal)) {
-    WARN("no real logs at " << kReal);
-    return;
-  }
+TEST_CASE("io: every real log reads with sensible values and no unit warning") {
+  const std::filesystem::path real = gearpulse::test::real_data_dir();
+  if (!std::filesystem::exists(real)) GEARPULSE_SKIP_TEST("no real logs at " << real);
   std::size_t files = 0;
-  for (const auto& entry : std::filesystem::recursive_directory_iterator(kReal)) {
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(real)) {
     if (entry.path().extension() != ".csv") continue;
     ++files;
     std::ifstream in(entry.path(), std::ios::binary);
     const SampleLog log = read_samples(in, entry.path().string());
     INFO(entry.path().string());
+    CHECK(log.warnings.empty());  // no log of a known format reads as km/h or milliseconds
     CHECK(log.samples.size() > 100);
     CHECK(log.skipped_count * 50 <= log.samples.size() + log.skipped_count);
     std::size_t moving = 0;
@@ -580,9 +572,11 @@ TEST_CASE("io: mangled logs of every format give samples or a one-line error, no
   // repeated, cut or swapped. Whatever comes out is either samples with sane values in time order or a
   // SampleFileError naming the file on one line: no other exception, no crash (the sanitizer builds run
   // this too).
+  // The real logs' heads, when the logs are here (the test of them above skips otherwise).
+  const std::filesystem::path real = gearpulse::test::real_data_dir();
   std::vector<std::string> heads;
-  if (std::filesystem::exists(kReal)) {
-    for (const auto& entry : std::filesystem::recursive_directory_iterator(kReal)) {
+  if (std::filesystem::exists(real)) {
+    for (const auto& entry : std::filesystem::recursive_directory_iterator(real)) {
       const std::string name = entry.path().filename().string();
       if (entry.path().extension() != ".csv" || (name != "drive1.csv" && name.rfind("drive", 0) == 0) ||
           name.rfind("long", 0) == 0)

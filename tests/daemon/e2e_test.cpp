@@ -133,10 +133,8 @@ double seconds_since(const fs::path& started_file) {
 
 TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the model survives kill -9",
           "[e2e][daemon]") {
-  if (!have_gpsfake()) {
-    WARN("SKIPPED: gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)");
-    return;
-  }
+  if (!have_gpsfake())
+    GEARPULSE_SKIP_TEST("gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)");
   Work work;
   REQUIRE(!work.dir.empty());
   const std::string wd = quote(work.dir.string());

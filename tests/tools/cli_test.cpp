@@ -449,11 +449,9 @@ TEST_CASE("cli: fit --out replaces a model in place: its permissions kept, no te
 }
 
 TEST_CASE("cli: fit of a Torque export with GPS and OBD speed reads the gears from the wheel speed") {
-  const std::string log = GEARPULSE_REAL_DATA_DIR "/torque-louisville/rpms_chart_from_obd.csv";
-  if (!fs::exists(log)) {
-    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-    return;
-  }
+  const std::string log =
+      (gearpulse::test::real_data_dir() / "torque-louisville/rpms_chart_from_obd.csv").string();
+  if (!fs::exists(log)) GEARPULSE_SKIP_TEST("real logs not found under " << gearpulse::test::real_data_dir());
   TempDir dir;
   const Result both = run(dir, "fit " + log);
   REQUIRE(both.status == 0);
