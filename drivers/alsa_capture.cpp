@@ -21,20 +21,20 @@ snd_pcm_t* as_pcm(void* p) noexcept {
   return static_cast<snd_pcm_t*>(p);
 }
 
-snd_pcm_format_t to_alsa(SampleFormat f) noexcept {
+snd_pcm_format_t to_alsa(PcmFormat f) noexcept {
   switch (f) {
-    case SampleFormat::kS16:
+    case PcmFormat::kS16:
       return SND_PCM_FORMAT_S16;
-    case SampleFormat::kS32:
+    case PcmFormat::kS32:
       return SND_PCM_FORMAT_S32;
-    case SampleFormat::kFloat:
+    case PcmFormat::kFloat:
       return SND_PCM_FORMAT_FLOAT;
   }
   return SND_PCM_FORMAT_UNKNOWN;
 }
 
-std::size_t bytes_per_sample(SampleFormat f) noexcept {
-  return f == SampleFormat::kS16 ? 2 : 4;
+std::size_t bytes_per_sample(PcmFormat f) noexcept {
+  return f == PcmFormat::kS16 ? 2 : 4;
 }
 
 void sleep_ns(std::int64_t ns) noexcept {
@@ -47,7 +47,7 @@ void sleep_ns(std::int64_t ns) noexcept {
 struct Negotiated {
   unsigned rate = 0;
   unsigned channels = 0;
-  SampleFormat format = SampleFormat::kS16;
+  PcmFormat format = PcmFormat::kS16;
   unsigned period = 0;
 };
 
@@ -70,9 +70,9 @@ int open_pcm(const AlsaCaptureConfig& c, snd_pcm_t** out, Negotiated& got, std::
   if ((err = ::snd_pcm_hw_params_set_access(pcm, hw, SND_PCM_ACCESS_RW_INTERLEAVED)) < 0)
     return bail("interleaved access refused", err);
   // The preferred format first, then the others.
-  const SampleFormat order[] = {c.format, SampleFormat::kS16, SampleFormat::kS32, SampleFormat::kFloat};
+  const PcmFormat order[] = {c.format, PcmFormat::kS16, PcmFormat::kS32, PcmFormat::kFloat};
   err = -EINVAL;
-  for (const SampleFormat f : order) {
+  for (const PcmFormat f : order) {
     if (::snd_pcm_hw_params_test_format(pcm, hw, to_alsa(f)) == 0) {
       err = ::snd_pcm_hw_params_set_format(pcm, hw, to_alsa(f));
       if (err == 0) {
@@ -142,13 +142,13 @@ const char* to_string(AlsaRecovery recovery) noexcept {
   return "?";
 }
 
-const char* to_string(SampleFormat format) noexcept {
+const char* to_string(PcmFormat format) noexcept {
   switch (format) {
-    case SampleFormat::kS16:
+    case PcmFormat::kS16:
       return "S16";
-    case SampleFormat::kS32:
+    case PcmFormat::kS32:
       return "S32";
-    case SampleFormat::kFloat:
+    case PcmFormat::kFloat:
       return "FLOAT";
   }
   return "?";
@@ -435,11 +435,11 @@ void AlsaCapture::run() noexcept {
         if (config_.channel >= 0 && static_cast<int>(ch) != config_.channel) continue;
         const std::byte* p = raw_.data() + (i * channels_ + ch) * sample_bytes;
         float v;
-        if (format_ == SampleFormat::kS16) {
+        if (format_ == PcmFormat::kS16) {
           std::int16_t s;
           std::memcpy(&s, p, 2);
           v = static_cast<float>(s) / 32768.0f;
-        } else if (format_ == SampleFormat::kS32) {
+        } else if (format_ == PcmFormat::kS32) {
           std::int32_t s;
           std::memcpy(&s, p, 4);
           v = static_cast<float>(static_cast<double>(s) / 2147483648.0);

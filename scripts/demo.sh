@@ -58,10 +58,10 @@ echo "   $(cat "$work/drive.log")"
 
 echo "== run: feeder -> ALSA file plugin (PCM 'replay', 48 kHz) | gpsfake -> gpsd | gearpulsed -> PTY"
 hs_start
-echo "   gearpulsed pid $(hs_pid gearpulsed), gpsd port $HS_PORT, pulses on $HS_PTY, socket $HS_SOCKET"
+echo "   gearpulsed pid $(hs_pid gearpulsed), gpsd port $GEARPULSE_PORT, pulses on $GEARPULSE_PTY, socket $GEARPULSE_SOCKET"
 echo "   gearpulsectl status, every 3 s and at every change of source:"
-/usr/bin/python3 scripts/lib/monitor.py --work "$work" --ctl "$HS_CTL" --ppk "$HS_PPK" --outage "$outage" \
+/usr/bin/python3 scripts/lib/monitor.py --work "$work" --ctl "$GEARPULSE_CTL" --ppk "$GEARPULSE_PPK" --outage "$outage" \
   --until-pid "$(hs_pid feeder)"
 hs_resources
 echo "== final gearpulsectl status"
-"$HS_CTL" --socket "$HS_SOCKET" status || true
+"$GEARPULSE_CTL" --socket "$GEARPULSE_SOCKET" status || true

@@ -17,7 +17,7 @@
 using gearpulse::read_samples;
 using gearpulse::Sample;
 using gearpulse::SampleFileError;
-using gearpulse::SampleFormat;
+using gearpulse::SampleFileFormat;
 using gearpulse::SampleLog;
 
 namespace {
@@ -42,7 +42,7 @@ constexpr double kPiOver100 = 3.14159265358979 / 100.0;
 
 TEST_CASE("io: generic CSV with empty cells and extra columns") {
   const SampleLog log = read_text("t,speed,freq,snr_db\n0,1.5,50,12\n1,,51,\n2,2.5,,3\n");
-  CHECK(log.format == SampleFormat::kGeneric);
+  CHECK(log.format == SampleFileFormat::kGeneric);
   REQUIRE(log.samples.size() == 3);
   CHECK(log.samples[0].speed == Approx(1.5));
   CHECK(log.samples[0].freq == Approx(50));
@@ -53,7 +53,7 @@ TEST_CASE("io: generic CSV with empty cells and extra columns") {
   // Further columns are ignored whatever their names, even those another format is told by.
   const SampleLog named =
       read_text("t,speed,freq,Engine RPM(rpm),ENGINE_RPM (),VEHICLE_SPEED ()\n0,1.5,50,,,\n");
-  CHECK(named.format == SampleFormat::kGeneric);
+  CHECK(named.format == SampleFileFormat::kGeneric);
   REQUIRE(named.samples.size() == 1);
   CHECK(named.samples[0].freq == Approx(50));
 }
@@ -145,7 +145,7 @@ TEST_CASE("io: a corrupt time in the first row or in an OBD log costs that row, 
       text += std::to_string(i == 21 ? 99999 : 10 + i / 2) + ", " + std::to_string(1000 + 10 * i) + ", " +
               std::to_string(20 + i) + ",\n";
     const SampleLog log = read_text(text);
-    CHECK(log.format == SampleFormat::kCarloop);
+    CHECK(log.format == SampleFileFormat::kCarloop);
     CHECK(log.samples.size() == 39);
     CHECK(log.samples.back().t < 40.0);
     one_skip(log, "log.csv:23: time 99999 is ahead of the rows around it");
@@ -230,7 +230,7 @@ TEST_CASE("io: Carloop rows that refresh nothing are dropped and rpm becomes Hz"
                                   "25.000000, 873.250000, 3.000000, 17.9,\r\n"
                                   "27.000000, 1200.000000, 18.000000, 17.6,\r\n"
                                   "27.000000, 1200.000000, 18.000000, 17.6,\r\n");
-  CHECK(log.format == SampleFormat::kCarloop);
+  CHECK(log.format == SampleFileFormat::kCarloop);
   REQUIRE(log.samples.size() == 2);
   CHECK(log.repeated_rows == 3);
   CHECK(log.samples[0].t >= 24.0);
@@ -313,7 +313,7 @@ TEST_CASE("io: Carloop row times are recovered below the counter's one-second st
 
 TEST_CASE("io: speed and rpm logs use the row counter as time") {
   const SampleLog log = read_text("speed,rpm,load\n7,898,44\n7,898,44\n1,917,32\n");
-  CHECK(log.format == SampleFormat::kSpeedRpm);
+  CHECK(log.format == SampleFileFormat::kSpeedRpm);
   REQUIRE(log.samples.size() == 2);
   CHECK(log.samples[0].t == Approx(0));
   CHECK(log.samples[1].t == Approx(2));
@@ -483,7 +483,7 @@ TEST_CASE("io: Torque exports pick GPS or OBD speed and unwrap the clock") {
       "-,59:59.5,-,2100,23,#N/A\n"
       "Thu Jan 11 20:00:00 EST 2018,00:00.5,11,-,24,\n";
   const SampleLog gps = read_text(text);
-  CHECK(gps.format == SampleFormat::kTorque);
+  CHECK(gps.format == SampleFileFormat::kTorque);
   CHECK(gps.speed_column == "GPS Speed (Meters/second)");
   REQUIRE(gps.samples.size() == 3);
   CHECK(gps.samples[0].t == Approx(0));

@@ -140,8 +140,9 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   const std::string wd = quote(work.dir.string());
   // 16 kHz keeps the daemon's CPU low under the sanitizers; the drive starts and ends at rest.
   const double outage_start = 45.0, outage_length = 60.0;
-  const Result prepared = run("HS_RATE=16000 HS_PERIOD=512 bash " + quote(kHarness) + " prepare " + wd + " " +
-                              quote(kBuild) + " --seed 7 --duration 140 --outage 45:60 2>&1");
+  const Result prepared =
+      run("GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512 bash " + quote(kHarness) + " prepare " + wd + " " +
+          quote(kBuild) + " --seed 7 --duration 140 --outage 45:60 2>&1");
   INFO(prepared.out);
   REQUIRE(prepared.status == 0);
   const Result started = work.harness("start " + wd);
