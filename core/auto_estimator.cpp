@@ -68,6 +68,7 @@ std::vector<Peak> density_modes(const std::vector<double>& r, double bandwidth) 
 MixtureData subsample(const MixtureData& all, std::size_t target) {
   if (all.size() <= target) return all;
   MixtureData out;
+  out.parallel = all.parallel;
   const double stride = static_cast<double>(all.size()) / static_cast<double>(target);
   for (std::size_t i = 0; i < target; ++i) {
     const auto k = static_cast<std::size_t>(static_cast<double>(i) * stride);

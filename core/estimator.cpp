@@ -273,6 +273,7 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     throw std::invalid_argument("fit: gears must be 2.." + std::to_string(GearModel::kMaxGears) +
                                 " (or 0 = from the data)");
   detail::MixtureData data;
+  data.parallel = options.parallel;
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());
   data.t.reserve(samples.size());

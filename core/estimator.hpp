@@ -8,13 +8,15 @@
 
 #include "core/gear_model.hpp"
 #include "core/sample.hpp"
+#include "core/slice_runner.hpp"
 
 namespace gearpulse {
 
 struct FitOptions {
-  int gears = 0;               // 0 = choose from the data; N = exactly N gears
-  std::vector<double> ratios;  // paper's c_i, top gear down as Table 2 (c1 ~ theta_M/theta_{M-1});
-                               // non-empty selects the paper's method with M = ratios.size() + 1
+  int gears = 0;                    // 0 = choose from the data; N = exactly N gears
+  std::vector<double> ratios;       // paper's c_i, top gear down as Table 2 (c1 ~ theta_M/theta_{M-1});
+                                    // non-empty selects the paper's method with M = ratios.size() + 1
+  SliceRunner* parallel = nullptr;  // runs the passes over a large log in slices; null: on this thread
 };
 
 struct FitResult {

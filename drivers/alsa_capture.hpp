@@ -18,6 +18,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,7 +26,15 @@
 #include "core/spsc_ring.hpp"
 #include "drivers/audio_source.hpp"
 
+struct _snd_pcm;  // ALSA's snd_pcm_t, kept opaque so users need no ALSA headers
+
 namespace gearpulse {
+
+// Owns an open ALSA PCM: snd_pcm_close when the handle goes.
+struct PcmClose {
+  void operator()(_snd_pcm* pcm) const noexcept;
+};
+using PcmHandle = std::unique_ptr<_snd_pcm, PcmClose>;
 
 // The encoding of one audio sample on the capture device (ALSA's S16_LE, S32_LE and FLOAT_LE).
 enum class PcmFormat : std::uint8_t { kS16, kS32, kFloat };
@@ -131,7 +140,7 @@ class AlsaCapture final : public AudioSource {
 
   AlsaCaptureConfig config_;
   SpscRing<float>& ring_;
-  void* pcm_ = nullptr;  // snd_pcm_t*, kept opaque so users need no ALSA headers
+  PcmHandle pcm_;  // the device while the capture thread does not run (it holds it meanwhile)
   unsigned rate_ = 0;
   unsigned channels_ = 0;
   PcmFormat format_ = PcmFormat::kS16;

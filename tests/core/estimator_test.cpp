@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <random>
 
 #include "core/estimator.hpp"
@@ -903,4 +904,32 @@ TEST_CASE("estimator: an OBD log's ladder is fitted on speed and rpm as of one i
         CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.01));
     }
   }
+}
+
+TEST_CASE("estimator: a large log's passes run on the caller's slice runner, with the same model") {
+  // Core starts no thread: the slices of each pass over a log of kParallelSamples or more go to the
+  // runner in FitOptions, and the model does not depend on who runs them.
+  struct CountingRunner final : SliceRunner {
+    std::size_t passes = 0;
+    std::size_t slices = 0;
+    void run(std::size_t count, const std::function<void(std::size_t)>& task) override {
+      ++passes;
+      for (std::size_t i = count; i-- > 0;)  // backwards: the order must not matter
+        task(i);
+      slices += count;
+    }
+  };
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const auto samples =
+      sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kMixed, 50000.0, 1, 17));
+  REQUIRE(samples.size() >= detail::kParallelSamples);
+  CountingRunner runner;
+  FitOptions options;
+  options.parallel = &runner;
+  const FitResult with_runner = fit_gear_model(samples, options);
+  CHECK(runner.passes > 0);
+  CHECK(runner.slices == 2 * runner.passes);
+  const FitResult alone = fit_gear_model(samples, {});
+  REQUIRE(with_runner.model.gears.size() == car.theta.size());
+  CHECK(serialize_model(with_runner.model) == serialize_model(alone.model));
 }
