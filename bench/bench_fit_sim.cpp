@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <string>
 
+#include "bench/requirements.hpp"
 #include "core/estimator.hpp"
 #include "core/mixture_likelihood.hpp"
 #include "tools/sim/vehicle_sim.hpp"
@@ -100,8 +101,10 @@ std::string explain_miss(const std::string& run, const sim::Vehicle& car, const 
   return why;
 }
 
-void accuracy_table(int seeds) {
-  std::printf("\n== accuracy: 40 min at 1 Hz, sigma_v 0.05 m/s, sigma_s 0.2 Hz, seeds 1..%d\n", seeds);
+void accuracy_table(int first_seed, int seeds, bench::Requirements& required) {
+  const int last_seed = first_seed + seeds - 1;
+  std::printf("\n== accuracy: 40 min at 1 Hz, sigma_v 0.05 m/s, sigma_s 0.2 Hz, seeds %d..%d\n", first_seed,
+              last_seed);
   std::printf("%-10s %-8s %5s | %-28s | %-28s\n", "vehicle", "style", "gears", "auto: found / max err % (ok)",
               "paper: max err % (ok)");
   int auto_ok = 0;
@@ -117,8 +120,9 @@ void accuracy_table(int seeds) {
     for (sim::DrivingStyle style : kStyles) {
       std::string auto_cell;
       std::string paper_cell;
-      for (int seed = 1; seed <= seeds; ++seed) {
-        const auto observed = sim::simulate_observations(car, style, 2400.0, 1, seed);
+      for (int seed = first_seed; seed <= last_seed; ++seed) {
+        const auto observed =
+            sim::simulate_observations(car, style, 2400.0, 1, static_cast<std::uint64_t>(seed));
         const auto samples = sim::to_samples(observed);
         const FitResult fit = fit_gear_model(samples, {});
         char cell[64];
@@ -166,21 +170,27 @@ void accuracy_table(int seeds) {
       paper_ok, total);
   std::printf("CVT: no ladder in %d / %d runs\n", cvt_clean, cvt_total);
   std::printf("(* = wrong count or an error above 0.5 %%)\n");
+  required.report("auto_ok_pct", 100.0 * auto_ok / std::max(total, 1));
+  required.report("auto_right_count_pct", 100.0 * right_count / std::max(total, 1));
+  required.report("paper_ok_pct", 100.0 * paper_ok / std::max(total, 1));
+  required.report("cvt_no_ladder_pct", 100.0 * cvt_clean / std::max(cvt_total, 1));
 }
 
 // Auto mode on vehicles drawn at random, one 40-minute drive at 1 Hz each, the styles in turn.
-void random_vehicles(int count) {
-  std::printf("\n== random vehicles (sim::random_vehicle 5000..%d), 40 min at 1 Hz, styles in turn\n",
-              5000 + count - 1);
+// Vehicle k (from first_vehicle on) is driven with seed 1 + k - 5000.
+void random_vehicles(int first_vehicle, int count, bench::Requirements& required) {
+  std::printf("\n== random vehicles (sim::random_vehicle %d..%d), 40 min at 1 Hz, styles in turn\n",
+              first_vehicle, first_vehicle + count - 1);
   int ok = 0;
   int right_count = 0;
   int used_rarely = 0;
   std::string misses;
   for (int r = 0; r < count; ++r) {
-    const sim::Vehicle car = sim::random_vehicle(5000 + static_cast<std::uint64_t>(r));
+    const int k = first_vehicle + r;
+    const sim::Vehicle car = sim::random_vehicle(static_cast<std::uint64_t>(k));
     const sim::DrivingStyle style = kStyles[r % 4];
     const auto observed =
-        sim::simulate_observations(car, style, 2400.0, 1, 1 + static_cast<std::uint64_t>(r));
+        sim::simulate_observations(car, style, 2400.0, 1, static_cast<std::uint64_t>(1 + k - 5000));
     const Score a = score(car, fit_gear_model(sim::to_samples(observed), {}).model);
     ok += a.ok ? 1 : 0;
     right_count += a.found == car.theta.size() ? 1 : 0;
@@ -194,6 +204,8 @@ void random_vehicles(int count) {
               right_count, count, ok, count);
   std::printf("misses on a gear engaged fewer than 40 times in the drive: %d / %d\n", used_rarely,
               count - ok);
+  required.report("random_right_count_pct", 100.0 * right_count / std::max(count, 1));
+  required.report("random_ok_pct", 100.0 * ok / std::max(count, 1));
 }
 
 // Auto mode on the presets under other logging conditions than the paper's (1 Hz, a u-blox class
@@ -408,6 +420,24 @@ void monte_carlo(int runs) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Options before the positional arguments: --first-seed N (the accuracy table's seeds start at N, 1
+  // by default), --first-vehicle K (the random vehicles start at K, 5000 by default), --require (above).
+  bench::Requirements required;
+  if (!required.parse(argc, argv)) return 2;
+  int first_seed = 1;
+  int first_vehicle = 5000;
+  int shift = 0;
+  for (; 1 + shift + 1 < argc; shift += 2) {
+    const std::string a = argv[1 + shift];
+    if (a == "--first-seed")
+      first_seed = std::atoi(argv[2 + shift]);
+    else if (a == "--first-vehicle")
+      first_vehicle = std::atoi(argv[2 + shift]);
+    else
+      break;
+  }
+  argc -= shift;
+  argv += shift;
   const int seeds = argc > 1 ? std::atoi(argv[1]) : 2;
   const int runs = argc > 2 ? std::atoi(argv[2]) : 50;
   const int random = argc > 3 ? std::atoi(argv[3]) : 40;
@@ -416,10 +446,10 @@ int main(int argc, char** argv) {
       "bench_fit_sim [seeds per cell = %d] [Monte-Carlo runs = %d] [random vehicles = %d] [seeds per logging "
       "condition = %d]\n",
       seeds, runs, random, conditions);
-  if (seeds > 0) accuracy_table(seeds);
-  if (random > 0) random_vehicles(random);
+  if (seeds > 0) accuracy_table(first_seed, seeds, required);
+  if (random > 0) random_vehicles(first_vehicle, random, required);
   if (conditions > 0) logging_conditions(conditions);
   if (conditions > 0) speed_lag_table(conditions);
   if (runs > 0) monte_carlo(runs);
-  return 0;
+  return required.exit_status();
 }

@@ -4,6 +4,7 @@
 #include <ctime>
 
 #include "core/estimator.hpp"
+#include "drivers/thread_slice_runner.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 using namespace gearpulse;
@@ -26,10 +27,13 @@ int main() {
   }
   std::printf("bench_fit_speed: %zu samples (%s, seed %llu), 2 threads\n", samples.size(), car.name.c_str(),
               static_cast<unsigned long long>(seed));
+  ThreadSliceRunner threads;
+  FitOptions options;
+  options.parallel = &threads;
   for (int run = 0; run < 3; ++run) {
     const auto t0 = std::chrono::steady_clock::now();
     const std::clock_t c0 = std::clock();
-    const FitResult fit = fit_gear_model(samples, {});
+    const FitResult fit = fit_gear_model(samples, options);
     const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     // CPU time of both threads: on a loaded machine wall time exceeds it / 2.
     const double cpu = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;

@@ -5,7 +5,7 @@
 //     from the kernel's delivery to the reader (the tty layer passes bytes on from a kworker).
 //  2. Pulse-count exactness over a 10-minute varying speed profile, the scheduler run in simulated time
 //     (edges committed at their instants, and a late caller waking every 5 ms as the thread may).
-// Prints figures; asserts nothing.
+// Prints figures; with --require (bench/requirements.hpp) the exactness figures are held to thresholds.
 #include <fcntl.h>
 #include <poll.h>
 #include <unistd.h>
@@ -22,6 +22,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench/requirements.hpp"
 #include "core/pulse_scheduler.hpp"
 #include "drivers/clock.hpp"
 #include "drivers/pty_output.hpp"
@@ -113,7 +114,14 @@ std::vector<std::pair<std::int64_t, double>> profile(std::uint64_t seed, std::in
   return p;
 }
 
-void exactness(std::uint64_t seed) {
+// The worst count error of the three callers (pulses) and the shortest high and low times on the line.
+struct Exactness {
+  double worst_error = 0.0;
+  double min_high_us = 0.0;
+  double min_low_us = 0.0;
+};
+
+Exactness exactness(std::uint64_t seed) {
   constexpr std::int64_t kEnd = 600LL * 1'000'000'000;  // 10 minutes
   const auto changes = profile(seed, kEnd);
   PulseConfig cfg;  // 2485 pulses/km (the default of the daemon's config)
@@ -185,21 +193,53 @@ void exactness(std::uint64_t seed) {
       static_cast<unsigned long long>(late.pulses()), static_cast<double>(late.pulses()) - expected,
       static_cast<unsigned long long>(writer.pulses()), static_cast<double>(writer.pulses()) - expected,
       static_cast<double>(min_high) / 1e3, static_cast<double>(min_low) / 1e3);
+  Exactness out;
+  for (const std::uint64_t pulses : {exact.pulses(), late.pulses(), writer.pulses()})
+    out.worst_error = std::max(out.worst_error, std::abs(static_cast<double>(pulses) - expected));
+  out.min_high_us = static_cast<double>(min_high) / 1e3;
+  out.min_low_us = static_cast<double>(min_low) / 1e3;
+  return out;
 }
 
 }  // namespace
 
+// bench_pulse [SECONDS per jitter rate] [--quick: no jitter runs] [--first-seed N: exactness seeds N..N+4,
+// 1 by default] [--require ...]
 int main(int argc, char** argv) {
-  const double seconds = argc > 1 ? std::atof(argv[1]) : 3.0;
+  bench::Requirements required;
+  if (!required.parse(argc, argv)) return 2;
+  bool quick = false;
+  std::uint64_t first_seed = 1;
+  double seconds = 3.0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--quick")
+      quick = true;
+    else if (a == "--first-seed" && i + 1 < argc)
+      first_seed = std::strtoull(argv[++i], nullptr, 10);
+    else
+      seconds = std::atof(argv[i]);
+  }
   const bool realtime = ::getenv("GEARPULSE_BENCH_NO_RT") == nullptr;
   std::string tmpl = (std::filesystem::temp_directory_path() / "gearpulse-bench-XXXXXX").string();
   if (!::mkdtemp(tmpl.data())) return 1;
-  std::printf("bench_pulse: PTY rising-edge jitter (reader arrival - scheduled), %.1f s per rate\n", seconds);
-  for (const double rate : {50.0, 200.0, 1000.0})
-    jitter_run(tmpl, rate, seconds, realtime);
+  if (!quick) {
+    std::printf("bench_pulse: PTY rising-edge jitter (reader arrival - scheduled), %.1f s per rate\n",
+                seconds);
+    for (const double rate : {50.0, 200.0, 1000.0})
+      jitter_run(tmpl, rate, seconds, realtime);
+  }
   std::printf("bench_pulse: pulse count over a 10-minute varying profile (simulated time), target +-1\n");
-  for (const std::uint64_t seed : {1, 2, 3, 4, 5})
-    exactness(seed);
+  Exactness worst{0.0, std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+  for (std::uint64_t seed = first_seed; seed < first_seed + 5; ++seed) {
+    const Exactness e = exactness(seed);
+    worst.worst_error = std::max(worst.worst_error, e.worst_error);
+    worst.min_high_us = std::min(worst.min_high_us, e.min_high_us);
+    worst.min_low_us = std::min(worst.min_low_us, e.min_low_us);
+  }
+  required.report("count_error_pulses", worst.worst_error);
+  required.report("min_high_us", worst.min_high_us);
+  required.report("min_low_us", worst.min_low_us);
   std::filesystem::remove_all(tmpl);
-  return 0;
+  return required.exit_status();
 }

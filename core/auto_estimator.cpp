@@ -76,6 +76,7 @@ std::vector<Peak> density_modes(const std::vector<double>& r, double bandwidth) 
 MixtureData subsample(const MixtureData& all, std::size_t target) {
   if (all.size() <= target) return all;
   MixtureData out;
+  out.parallel = all.parallel;
   const double stride = static_cast<double>(all.size()) / static_cast<double>(target);
   const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
   for (std::size_t i = 0; i < target; ++i) {

@@ -296,6 +296,7 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
       if (key(order[j]) == key(order[j - 1])) copy[order[j]] = true;
   }
   detail::MixtureData data;
+  data.parallel = options.parallel;
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());
   data.t.reserve(samples.size());

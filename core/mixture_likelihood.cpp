@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
-#include <thread>
 
 namespace gearpulse::detail {
 namespace {
@@ -11,9 +10,11 @@ namespace {
 constexpr double kLogTwoPi = 1.8378770664093453;
 constexpr double kTiny = 1e-300;
 
-// Runs fn(begin, end, slot) over [0, n) in one or two slices and returns the two slot results.
+// Runs fn(begin, end, slot) over the data's [0, n) in one slice, or in two (one per half, on the data's
+// runner) from kParallelSamples on, and returns the two slot results.
 template <typename Result, typename Fn>
-std::pair<Result, Result> split_two(std::size_t n, Fn&& fn) {
+std::pair<Result, Result> split_two(const MixtureData& data, Fn&& fn) {
+  const std::size_t n = data.size();
   Result a{};
   Result b{};
   if (n < kParallelSamples) {
@@ -21,9 +22,18 @@ std::pair<Result, Result> split_two(std::size_t n, Fn&& fn) {
     return {std::move(a), std::move(b)};
   }
   const std::size_t mid = n / 2;
-  std::thread worker([&] { fn(mid, n, b); });
-  fn(std::size_t{0}, mid, a);
-  worker.join();
+  const auto half = [&](std::size_t i) {
+    if (i == 0)
+      fn(std::size_t{0}, mid, a);
+    else
+      fn(mid, n, b);
+  };
+  if (data.parallel != nullptr) {
+    data.parallel->run(2, half);
+  } else {
+    half(0);
+    half(1);
+  }
   return {std::move(a), std::move(b)};
 }
 
@@ -104,7 +114,7 @@ inline double sample_terms(const MixtureParams& p, const Precomputed& c, double 
 
 double log_likelihood(const MixtureData& data, const MixtureParams& p) {
   const Precomputed c = precompute(p);
-  auto [a, b] = split_two<double>(data.size(), [&](std::size_t begin, std::size_t end, double& out) {
+  auto [a, b] = split_two<double>(data, [&](std::size_t begin, std::size_t end, double& out) {
     std::vector<double> terms(static_cast<std::size_t>(p.gears()) + 2);
     int bin = 0;
     double sum = 0.0;
@@ -125,7 +135,7 @@ double log_likelihood_gradient(const MixtureData& data, const MixtureParams& p, 
     double ll = 0.0;
     Eigen::VectorXd g;
   };
-  auto [x, y] = split_two<Acc>(data.size(), [&](std::size_t begin, std::size_t end, Acc& out) {
+  auto [x, y] = split_two<Acc>(data, [&](std::size_t begin, std::size_t end, Acc& out) {
     out.g = Eigen::VectorXd::Zero(n_par);
     std::vector<double> r(static_cast<std::size_t>(m) + 2);
     int bin = 0;
@@ -236,7 +246,7 @@ Eigen::MatrixXd observed_information(const MixtureData& data, const MixtureParam
   for (int i = 0; i < n_eta; ++i)
     alpha_eta[i] = i < m ? p.alpha[i] : p.beta_stand;
   auto [x, y] =
-      split_two<Eigen::MatrixXd>(data.size(), [&](std::size_t begin, std::size_t end, Eigen::MatrixXd& out) {
+      split_two<Eigen::MatrixXd>(data, [&](std::size_t begin, std::size_t end, Eigen::MatrixXd& out) {
         out = Eigen::MatrixXd::Zero(n_par, n_par);
         std::vector<double> r(static_cast<std::size_t>(m) + 2);
         Eigen::VectorXd gbar(n_par);
@@ -352,7 +362,7 @@ void EStepStats::add(const EStepStats& other) {
 EStepStats e_step(const MixtureData& data, const MixtureParams& p) {
   const Precomputed c = precompute(p);
   const int m = p.gears();
-  auto [x, y] = split_two<EStepStats>(data.size(), [&](std::size_t begin, std::size_t end, EStepStats& out) {
+  auto [x, y] = split_two<EStepStats>(data, [&](std::size_t begin, std::size_t end, EStepStats& out) {
     out.reset(m, p.g_density.size());
     std::vector<double> r(static_cast<std::size_t>(m) + 2);
     int bin = 0;

@@ -10,12 +10,15 @@
 
 #include <Eigen/Dense>
 
+#include "core/slice_runner.hpp"
+
 namespace gearpulse::detail {
 
 struct MixtureData {
-  std::vector<double> v;  // m/s
-  std::vector<double> s;  // Hz
-  std::vector<double> t;  // s, in sample order; may be empty (then no temporal information is used)
+  std::vector<double> v;            // m/s
+  std::vector<double> s;            // Hz
+  std::vector<double> t;            // s, in sample order; may be empty (then no temporal information is used)
+  SliceRunner* parallel = nullptr;  // where the passes below run their slices; null: in turn, here
   [[nodiscard]] std::size_t size() const noexcept { return v.size(); }
 };
 
@@ -34,11 +37,11 @@ struct MixtureParams {
   [[nodiscard]] int gears() const noexcept { return static_cast<int>(theta.size()); }
 };
 
-// From this many samples on, the passes over the data below run in two threads, each over one half (below
-// it a second thread costs more than it saves).
+// From this many samples on, the passes over the data below are split into two slices, one per half, run
+// by data.parallel (below it a second thread costs more than it saves).
 inline constexpr std::size_t kParallelSamples = 40000;
 
-// Sum over samples of ln p(v_k | s_k), eq. (7). Uses up to two threads for large inputs.
+// Sum over samples of ln p(v_k | s_k), eq. (7).
 [[nodiscard]] double log_likelihood(const MixtureData& data, const MixtureParams& p);
 
 // Parameter vector for derivatives: theta_1..theta_M, sigma_s, sigma_v, then (if with_weights) the

@@ -127,6 +127,7 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
 
   // Section 5: drop v < 2 sigma_v (with the initial sigma_v); g uniform over the remaining speed range.
   MixtureData data;
+  data.parallel = all.parallel;
   for (std::size_t k = 0; k < all.size(); ++k) {
     if (all.v[k] >= 2.0 * p.sigma_v) {
       data.v.push_back(all.v[k]);

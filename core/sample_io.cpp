@@ -322,7 +322,7 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   const std::size_t is = *find_column(header, "speed");
   const std::size_t iff = *find_column(header, "freq");
   const std::size_t need = std::max({it, is, iff}) + 1;
-  out.log().format = SampleFormat::kGeneric;
+  out.log().format = SampleFileFormat::kGeneric;
   out.log().speed_column = "speed";
   std::vector<std::string_view> cells;
   std::vector<std::size_t> lines;
@@ -389,10 +389,10 @@ std::vector<double> smooth_row_times(const std::vector<double>& rows, const std:
 // Carloop and `speed,rpm` logs: OBD values held between refreshes. A row whose rpm and speed both equal
 // the previous row's carries nothing new (the logger polls many PIDs round-robin), so it is dropped.
 void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
-              SampleFormat format) {
+              SampleFileFormat format) {
   std::optional<std::size_t> it;
   std::size_t irpm = 0, ispeed = 0;
-  if (format == SampleFormat::kCarloop) {
+  if (format == SampleFileFormat::kCarloop) {
     it = find_column(header, "ENGINE_RUN_TINE ()");  // sic: the logger's own spelling
     if (!it) it = find_column(header, "ENGINE_RUN_TIME ()");
     irpm = *find_column(header, "ENGINE_RPM ()");
@@ -471,7 +471,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     rows.push_back(p.counter);
     kept.push_back(Sample{p.t, p.speed * kKmhToMs, p.rpm / kSecondsPerMinute});
   }
-  if (format == SampleFormat::kCarloop && it && refresh_row.size() >= 2) {
+  if (format == SampleFileFormat::kCarloop && it && refresh_row.size() >= 2) {
     // The counter on a row is the whole second at its last refresh, at most one polling round old: the
     // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
     constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
@@ -549,7 +549,7 @@ void unwrap_clock(std::vector<Row>& rows, LogBuilder& out) {
 
 void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
                  TorqueSpeed choice) {
-  out.log().format = SampleFormat::kTorque;
+  out.log().format = SampleFileFormat::kTorque;
   const std::size_t irpm = *find_column(header, "Engine RPM(rpm)");
   std::optional<std::size_t> itime = find_column(header, "Device Time");
   if (!itime) itime = find_column(header, "GPS Time");
@@ -632,15 +632,15 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
 
 }  // namespace
 
-std::string_view format_name(SampleFormat format) noexcept {
+std::string_view format_name(SampleFileFormat format) noexcept {
   switch (format) {
-    case SampleFormat::kGeneric:
+    case SampleFileFormat::kGeneric:
       return "csv";
-    case SampleFormat::kTorque:
+    case SampleFileFormat::kTorque:
       return "torque";
-    case SampleFormat::kCarloop:
+    case SampleFileFormat::kCarloop:
       return "carloop";
-    case SampleFormat::kSpeedRpm:
+    case SampleFileFormat::kSpeedRpm:
       return "speed-rpm";
   }
   return "unknown";
@@ -713,9 +713,9 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);
   } else if (has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()")) {
-    read_obd(reader, header, out, SampleFormat::kCarloop);
+    read_obd(reader, header, out, SampleFileFormat::kCarloop);
   } else if (header.size() >= 2 && has("speed") && has("rpm")) {
-    read_obd(reader, header, out, SampleFormat::kSpeedRpm);
+    read_obd(reader, header, out, SampleFileFormat::kSpeedRpm);
   } else {
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) + ": unrecognised header " +
                           quoted(reader.line) +
@@ -723,7 +723,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   }
   if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
   SampleLog log = out.finish();
-  if (log.format == SampleFormat::kGeneric) warn_units(log);
+  if (log.format == SampleFileFormat::kGeneric) warn_units(log);
   return log;
 }
 
@@ -731,7 +731,7 @@ std::optional<SampleLog> read_wheel_speed(std::istream& in, const SampleLog& log
   const bool from_gps =
       std::any_of(std::begin(kTorqueSpeeds), std::end(kTorqueSpeeds),
                   [&](const SpeedColumn& c) { return c.gps && log.speed_column == c.header; });
-  if (log.format != SampleFormat::kTorque || !from_gps) return std::nullopt;
+  if (log.format != SampleFileFormat::kTorque || !from_gps) return std::nullopt;
   ReadOptions options;
   options.torque_speed = TorqueSpeed::kObd;
   try {

@@ -19,9 +19,10 @@
 
 namespace gearpulse {
 
-enum class SampleFormat { kGeneric, kTorque, kCarloop, kSpeedRpm };
+// The layout of a driving log file: which one read_samples found (SampleLog::format).
+enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm };
 
-[[nodiscard]] std::string_view format_name(SampleFormat format) noexcept;
+[[nodiscard]] std::string_view format_name(SampleFileFormat format) noexcept;
 
 // Which speed a Torque Pro export gives. kAuto takes the GPS Doppler speed when the file has any (it is
 // what the daemon sees live from gpsd, so a model fitted on it matches the live input), else the OBD
@@ -46,7 +47,7 @@ struct InputRow {
 
 struct SampleLog {
   std::string name;
-  SampleFormat format = SampleFormat::kGeneric;
+  SampleFileFormat format = SampleFileFormat::kGeneric;
   std::string speed_column;  // header of the column the speed came from
   std::vector<Sample> samples;
   std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages

@@ -158,7 +158,7 @@ void read_audio(Section& s, AudioConfig& a) {
   s.number("ring_seconds", a.ring_seconds, 0.1, 60.0);
 }
 
-void read_tracker(Section& s, TrackerConfig& t) {
+void read_tracker(Section& s, TrackerSection& t) {
   s.number("band_low", t.band_low, 1.0, 20000.0);
   s.number("band_high", t.band_high, 1.0, 20000.0);
   s.number("window", t.window, 0.01, 2.0);
@@ -328,7 +328,7 @@ PulseConfig pulse_config_of(const OutputConfig& o) noexcept {
   return p;
 }
 
-gearpulse::TrackerConfig tracker_config_of(const TrackerConfig& t, double sample_rate_hz) noexcept {
+gearpulse::TrackerConfig tracker_config_of(const TrackerSection& t, double sample_rate_hz) noexcept {
   gearpulse::TrackerConfig tc;
   tc.sample_rate_hz = sample_rate_hz;
   tc.window_s = t.window;

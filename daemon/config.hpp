@@ -25,7 +25,9 @@ struct AudioConfig {
   double ring_seconds = 2.0;       // capacity of the capture ring
 };
 
-struct TrackerConfig {
+// The [tracker] section as the file gives it; tracker_config_of makes the core tracker's TrackerConfig of
+// it for the rate the device gave.
+struct TrackerSection {
   double band_low = 50.0;     // Hz
   double band_high = 200.0;   // Hz
   double window = 0.1;        // s, as the paper's 100 ms frames
@@ -59,7 +61,7 @@ struct OutputConfig {
 // The pulse train's settings as the scheduler takes them (fixed width when duty is 0).
 [[nodiscard]] PulseConfig pulse_config_of(const OutputConfig& o) noexcept;
 // The tracker's settings for capture at `sample_rate_hz` (the rate the device gave).
-[[nodiscard]] gearpulse::TrackerConfig tracker_config_of(const TrackerConfig& t,
+[[nodiscard]] gearpulse::TrackerConfig tracker_config_of(const TrackerSection& t,
                                                          double sample_rate_hz) noexcept;
 
 struct ModelConfig {
@@ -89,7 +91,7 @@ struct LogConfig {
 
 struct Config {
   AudioConfig audio;
-  TrackerConfig tracker;
+  TrackerSection tracker;
   GpsConfig gps;
   OutputConfig output;
   ModelConfig model;

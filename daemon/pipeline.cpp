@@ -49,10 +49,10 @@ double wall_now() {
   return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
 }
 
-SampleFormat format_of(const std::string& name) {
-  if (name == "S32_LE") return SampleFormat::kS32;
-  if (name == "FLOAT_LE") return SampleFormat::kFloat;
-  return SampleFormat::kS16;
+PcmFormat format_of(const std::string& name) {
+  if (name == "S32_LE") return PcmFormat::kS32;
+  if (name == "FLOAT_LE") return PcmFormat::kFloat;
+  return PcmFormat::kS16;
 }
 
 // Between tries to open an output device that would not open (a GPIO line still held by another

@@ -55,7 +55,7 @@ struct PipelineSnapshot {
 // Settings that may change on SIGHUP without restarting the threads.
 struct PipelineTunables {
   double gps_latency = GpsConfig{}.latency;
-  double min_snr_db = TrackerConfig{}.min_snr_db;
+  double min_snr_db = TrackerSection{}.min_snr_db;
 };
 
 class Pipeline {

@@ -17,24 +17,20 @@ namespace {
 // No frame for this long (or 4 periods, if longer) from an open device is a stall (AlsaCaptureStats).
 constexpr double kStallS = 2.0;
 
-snd_pcm_t* as_pcm(void* p) noexcept {
-  return static_cast<snd_pcm_t*>(p);
-}
-
-snd_pcm_format_t to_alsa(SampleFormat f) noexcept {
+snd_pcm_format_t to_alsa(PcmFormat f) noexcept {
   switch (f) {
-    case SampleFormat::kS16:
+    case PcmFormat::kS16:
       return SND_PCM_FORMAT_S16;
-    case SampleFormat::kS32:
+    case PcmFormat::kS32:
       return SND_PCM_FORMAT_S32;
-    case SampleFormat::kFloat:
+    case PcmFormat::kFloat:
       return SND_PCM_FORMAT_FLOAT;
   }
   return SND_PCM_FORMAT_UNKNOWN;
 }
 
-std::size_t bytes_per_sample(SampleFormat f) noexcept {
-  return f == SampleFormat::kS16 ? 2 : 4;
+std::size_t bytes_per_sample(PcmFormat f) noexcept {
+  return f == PcmFormat::kS16 ? 2 : 4;
 }
 
 void sleep_ns(std::int64_t ns) noexcept {
@@ -47,21 +43,23 @@ void sleep_ns(std::int64_t ns) noexcept {
 struct Negotiated {
   unsigned rate = 0;
   unsigned channels = 0;
-  SampleFormat format = SampleFormat::kS16;
+  PcmFormat format = PcmFormat::kS16;
   unsigned period = 0;
 };
 
-// Opens and configures the PCM; on failure returns the negative ALSA error and a reason in `why`.
-int open_pcm(const AlsaCaptureConfig& c, snd_pcm_t** out, Negotiated& got, std::string& why) noexcept {
-  snd_pcm_t* pcm = nullptr;
-  int err = ::snd_pcm_open(&pcm, c.device.c_str(), SND_PCM_STREAM_CAPTURE, SND_PCM_NONBLOCK);
+// Opens and configures the PCM into `out`; on failure returns the negative ALSA error and a reason in
+// `why` (a PCM opened on the way is closed: a device left open would be busy for every later attempt).
+int open_pcm(const AlsaCaptureConfig& c, PcmHandle& out, Negotiated& got, std::string& why) noexcept {
+  snd_pcm_t* opened = nullptr;
+  int err = ::snd_pcm_open(&opened, c.device.c_str(), SND_PCM_STREAM_CAPTURE, SND_PCM_NONBLOCK);
   if (err < 0) {
     why = std::string("cannot open: ") + ::snd_strerror(err);
     return err;
   }
+  PcmHandle handle(opened);
+  snd_pcm_t* const pcm = handle.get();
   auto bail = [&](const char* what, int e) {
     why = std::string(what) + ": " + ::snd_strerror(e);
-    ::snd_pcm_close(pcm);
     return e;
   };
   snd_pcm_hw_params_t* hw = nullptr;
@@ -70,9 +68,9 @@ int open_pcm(const AlsaCaptureConfig& c, snd_pcm_t** out, Negotiated& got, std::
   if ((err = ::snd_pcm_hw_params_set_access(pcm, hw, SND_PCM_ACCESS_RW_INTERLEAVED)) < 0)
     return bail("interleaved access refused", err);
   // The preferred format first, then the others.
-  const SampleFormat order[] = {c.format, SampleFormat::kS16, SampleFormat::kS32, SampleFormat::kFloat};
+  const PcmFormat order[] = {c.format, PcmFormat::kS16, PcmFormat::kS32, PcmFormat::kFloat};
   err = -EINVAL;
-  for (const SampleFormat f : order) {
+  for (const PcmFormat f : order) {
     if (::snd_pcm_hw_params_test_format(pcm, hw, to_alsa(f)) == 0) {
       err = ::snd_pcm_hw_params_set_format(pcm, hw, to_alsa(f));
       if (err == 0) {
@@ -108,11 +106,15 @@ int open_pcm(const AlsaCaptureConfig& c, snd_pcm_t** out, Negotiated& got, std::
   got.rate = rate;
   got.channels = channels;
   got.period = static_cast<unsigned>(period);
-  *out = pcm;
+  out = std::move(handle);
   return 0;
 }
 
 }  // namespace
+
+void PcmClose::operator()(snd_pcm_t* pcm) const noexcept {
+  ::snd_pcm_close(pcm);
+}
 
 AlsaRecovery recovery_for(int alsa_error) noexcept {
   switch (alsa_error) {
@@ -142,13 +144,13 @@ const char* to_string(AlsaRecovery recovery) noexcept {
   return "?";
 }
 
-const char* to_string(SampleFormat format) noexcept {
+const char* to_string(PcmFormat format) noexcept {
   switch (format) {
-    case SampleFormat::kS16:
+    case PcmFormat::kS16:
       return "S16";
-    case SampleFormat::kS32:
+    case PcmFormat::kS32:
       return "S32";
-    case SampleFormat::kFloat:
+    case PcmFormat::kFloat:
       return "FLOAT";
   }
   return "?";
@@ -159,12 +161,8 @@ AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
   if (config_.period_frames == 0) throw std::runtime_error("ALSA capture: period_frames must be positive");
   Negotiated got;
   std::string why;
-  snd_pcm_t* pcm = nullptr;
-  if (open_pcm(config_, &pcm, got, why) < 0)
+  if (open_pcm(config_, pcm_, got, why) < 0)
     throw std::runtime_error("ALSA capture '" + config_.device + "': " + why);
-  // Closed on any way out of here but the last line, which hands it to the object (a device left open by
-  // a failed constructor would be busy for every later attempt).
-  std::unique_ptr<snd_pcm_t, decltype(&::snd_pcm_close)> owner(pcm, &::snd_pcm_close);
   rate_ = got.rate;
   channels_ = got.channels;
   format_ = got.format;
@@ -176,12 +174,10 @@ AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
   raw_.resize(static_cast<std::size_t>(period_frames_) * channels_ * bytes_per_sample(format_));
   previous_.resize(raw_.size());
   mono_.resize(period_frames_);
-  pcm_ = owner.release();
 }
 
 AlsaCapture::~AlsaCapture() {
   stop();
-  if (pcm_) ::snd_pcm_close(as_pcm(pcm_));
 }
 
 std::string AlsaCapture::describe() const {
@@ -271,11 +267,13 @@ void AlsaCapture::run() noexcept {
   realtime_ok_.store(rt.fifo);
   fifo_.store(rt.fifo);
   memory_locked_.store(rt.memory_locked);
-  snd_pcm_status_t* status = nullptr;
-  if (::snd_pcm_status_malloc(&status) < 0) {
+  snd_pcm_status_t* status_block = nullptr;
+  if (::snd_pcm_status_malloc(&status_block) < 0) {
     last_error_.store(-ENOMEM);
     return;
   }
+  const std::unique_ptr<snd_pcm_status_t, decltype(&::snd_pcm_status_free)> status(status_block,
+                                                                                   &::snd_pcm_status_free);
   running_.store(true);
 
   const double nominal_npf = 1e9 / rate_;
@@ -294,13 +292,13 @@ void AlsaCapture::run() noexcept {
 
   // Capture time of the first frame of the block of n frames just read: ALSA's timestamp belongs to the
   // hardware position, which is `avail` frames beyond what has been read.
-  auto measure = [&](snd_pcm_t* pcm, snd_pcm_sframes_t n) noexcept -> double {
-    if (::snd_pcm_status(pcm, status) == 0) {
+  auto measure = [&](snd_pcm_t* device, snd_pcm_sframes_t n) noexcept -> double {
+    if (::snd_pcm_status(device, status.get()) == 0) {
       snd_htimestamp_t ts{};
-      ::snd_pcm_status_get_htstamp(status, &ts);
+      ::snd_pcm_status_get_htstamp(status.get(), &ts);
       if (ts.tv_sec != 0 || ts.tv_nsec != 0) {
         const double hw = static_cast<double>(ts.tv_sec) * 1e9 + static_cast<double>(ts.tv_nsec);
-        return hw - static_cast<double>(::snd_pcm_status_get_avail(status) + n) * nominal_npf;
+        return hw - static_cast<double>(::snd_pcm_status_get_avail(status.get()) + n) * nominal_npf;
       }
     }
     return static_cast<double>(monotonic_ns()) - static_cast<double>(n) * nominal_npf;
@@ -314,10 +312,10 @@ void AlsaCapture::run() noexcept {
       sleep_ns(std::min<std::int64_t>(50'000'000, end - monotonic_ns()));
   };
 
-  snd_pcm_t* pcm = as_pcm(pcm_);
+  PcmHandle pcm = std::move(pcm_);  // the thread's while it runs
   auto restart = [&]() noexcept {
-    int err = ::snd_pcm_prepare(pcm);
-    if (err == 0) err = ::snd_pcm_start(pcm);
+    int err = ::snd_pcm_prepare(pcm.get());
+    if (err == 0) err = ::snd_pcm_start(pcm.get());
     return err;
   };
   // Recovery as recovery_for() decides; a failed restart or resume falls through to a reopen.
@@ -332,12 +330,11 @@ void AlsaCapture::run() noexcept {
     } else if (action == AlsaRecovery::kResume) {
       suspends_.fetch_add(1, std::memory_order_relaxed);
       int e;
-      while ((e = ::snd_pcm_resume(pcm)) == -EAGAIN && !stopping())
+      while ((e = ::snd_pcm_resume(pcm.get())) == -EAGAIN && !stopping())
         pause(100'000'000);
       if (e == 0 || restart() == 0) return;
     }
-    ::snd_pcm_close(pcm);
-    pcm = nullptr;
+    pcm.reset();
     streaming_.store(false, std::memory_order_relaxed);
   };
 
@@ -370,31 +367,30 @@ void AlsaCapture::run() noexcept {
       if (stopping()) break;
       Negotiated got;
       std::string why;
-      snd_pcm_t* fresh = nullptr;
-      const int err = open_pcm(config_, &fresh, got, why);
+      PcmHandle fresh;
+      const int err = open_pcm(config_, fresh, got, why);
       if (err < 0 || got.rate != rate_ || got.channels != channels_ || got.format != format_ ||
           got.period != period_frames_) {
-        if (err == 0) ::snd_pcm_close(fresh);
         last_error_.store(err < 0 ? err : -EINVAL, std::memory_order_relaxed);
         backoff = std::min(backoff * 2, backoff_max);
         continue;
       }
-      pcm = fresh;
+      pcm = std::move(fresh);
       if (rt.fifo) fifo_.store(set_fifo(true, config_.rt_priority), std::memory_order_relaxed);
       last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
       streaming_.store(true, std::memory_order_relaxed);
       reopens_.fetch_add(1, std::memory_order_relaxed);
       backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
-      if (const int e = ::snd_pcm_start(pcm); e < 0) recover(e);
+      if (const int e = ::snd_pcm_start(pcm.get()); e < 0) recover(e);
       continue;
     }
-    const int ready = ::snd_pcm_wait(pcm, wait_ms);
+    const int ready = ::snd_pcm_wait(pcm.get(), wait_ms);
     if (ready < 0) {
       recover(ready);
       continue;
     }
     if (ready == 0) continue;  // timeout: look at stop_ again
-    const snd_pcm_sframes_t n = ::snd_pcm_readi(pcm, raw_.data(), period_frames_);
+    const snd_pcm_sframes_t n = ::snd_pcm_readi(pcm.get(), raw_.data(), period_frames_);
     if (n == -EAGAIN || n == 0) {
       pause(static_cast<std::int64_t>(period_ns / 4));  // ready but nothing to read: never spin
       continue;
@@ -403,7 +399,7 @@ void AlsaCapture::run() noexcept {
       recover(static_cast<int>(n));
       continue;
     }
-    const double measured = measure(pcm, n);
+    const double measured = measure(pcm.get(), n);
     frames_.fetch_add(static_cast<std::uint64_t>(n), std::memory_order_relaxed);
     last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
     const std::size_t frames = static_cast<std::size_t>(n);
@@ -435,11 +431,11 @@ void AlsaCapture::run() noexcept {
         if (config_.channel >= 0 && static_cast<int>(ch) != config_.channel) continue;
         const std::byte* p = raw_.data() + (i * channels_ + ch) * sample_bytes;
         float v;
-        if (format_ == SampleFormat::kS16) {
+        if (format_ == PcmFormat::kS16) {
           std::int16_t s;
           std::memcpy(&s, p, 2);
           v = static_cast<float>(s) / 32768.0f;
-        } else if (format_ == SampleFormat::kS32) {
+        } else if (format_ == PcmFormat::kS32) {
           std::int32_t s;
           std::memcpy(&s, p, 4);
           v = static_cast<float>(static_cast<double>(s) / 2147483648.0);
@@ -496,9 +492,8 @@ void AlsaCapture::run() noexcept {
     c += frames;
     hold_to_clock();
   }
-  if (pcm) ::snd_pcm_drop(pcm);
-  pcm_ = pcm;
-  ::snd_pcm_status_free(status);
+  if (pcm) ::snd_pcm_drop(pcm.get());
+  pcm_ = std::move(pcm);
   streaming_.store(false);
   running_.store(false);
 }

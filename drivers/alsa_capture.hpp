@@ -18,6 +18,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,11 +26,20 @@
 #include "core/spsc_ring.hpp"
 #include "drivers/audio_source.hpp"
 
+struct _snd_pcm;  // ALSA's snd_pcm_t, kept opaque so users need no ALSA headers
+
 namespace gearpulse {
 
-enum class SampleFormat : std::uint8_t { kS16, kS32, kFloat };
+// Owns an open ALSA PCM: snd_pcm_close when the handle goes.
+struct PcmClose {
+  void operator()(_snd_pcm* pcm) const noexcept;
+};
+using PcmHandle = std::unique_ptr<_snd_pcm, PcmClose>;
 
-[[nodiscard]] const char* to_string(SampleFormat format) noexcept;
+// The encoding of one audio sample on the capture device (ALSA's S16_LE, S32_LE and FLOAT_LE).
+enum class PcmFormat : std::uint8_t { kS16, kS32, kFloat };
+
+[[nodiscard]] const char* to_string(PcmFormat format) noexcept;
 
 // What the capture does about a negative ALSA return code. By the error, as PipeWire's alsa_recover
 // does: an overrun and a suspend are told apart, a signal is no fault at all, and anything else means
@@ -46,10 +56,10 @@ enum class AlsaRecovery : std::uint8_t {
 
 struct AlsaCaptureConfig {
   std::string device = "default";
-  unsigned rate = 48000;                     // requested; the nearest the device offers is used
-  unsigned channels = 1;                     // requested; the nearest the device offers is used
-  SampleFormat format = SampleFormat::kS16;  // preferred; the others are tried if it is refused
-  int channel = -1;                          // channel to keep, -1 = mean of all channels
+  unsigned rate = 48000;               // requested; the nearest the device offers is used
+  unsigned channels = 1;               // requested; the nearest the device offers is used
+  PcmFormat format = PcmFormat::kS16;  // preferred; the others are tried if it is refused
+  int channel = -1;                    // channel to keep, -1 = mean of all channels
   unsigned period_frames = 1024;
   unsigned periods = 4;   // buffer = periods * period_frames
   bool realtime = false;  // SCHED_FIFO for the capture thread (failure reported)
@@ -104,7 +114,7 @@ class AlsaCapture final : public AudioSource {
 
   [[nodiscard]] unsigned rate() const noexcept override { return rate_; }
   [[nodiscard]] unsigned channels() const noexcept { return channels_; }
-  [[nodiscard]] SampleFormat format() const noexcept { return format_; }
+  [[nodiscard]] PcmFormat format() const noexcept { return format_; }
   [[nodiscard]] unsigned period_frames() const noexcept { return period_frames_; }
   [[nodiscard]] bool frame_time(std::uint64_t index, std::int64_t& t_ns) const noexcept override;
   [[nodiscard]] AlsaCaptureStats stats() const noexcept;
@@ -130,10 +140,10 @@ class AlsaCapture final : public AudioSource {
 
   AlsaCaptureConfig config_;
   SpscRing<float>& ring_;
-  void* pcm_ = nullptr;  // snd_pcm_t*, kept opaque so users need no ALSA headers
+  PcmHandle pcm_;  // the device while the capture thread does not run (it holds it meanwhile)
   unsigned rate_ = 0;
   unsigned channels_ = 0;
-  SampleFormat format_ = SampleFormat::kS16;
+  PcmFormat format_ = PcmFormat::kS16;
   unsigned period_frames_ = 0;
   std::vector<std::byte> raw_;       // one period as read
   std::vector<std::byte> previous_;  // a copy of the period read before it

@@ -28,9 +28,9 @@ RealtimeResult make_realtime(const RealtimeRequest& request) noexcept {
   if (request.lock_memory) {
     // Pages are locked as they are first touched (MCL_ONFAULT), not made resident all at once: every
     // thread's 8 MB stack and every reserved heap page would otherwise be (the demo drive's daemon held
-    // 78 MiB so, 17.5 MiB with MCL_ONFAULT; scripts/measure_daemon.sh with HS_REALTIME=true). What the
-    // real-time loops use is touched before they run: their buffers when allocated, their stacks here. A
-    // kernel without MCL_ONFAULT (before 4.4) locks it all.
+    // 78 MiB so, 17.5 MiB with MCL_ONFAULT; scripts/measure_daemon.sh with GEARPULSE_REALTIME=true).
+    // What the real-time loops use is touched before they run: their buffers when allocated, their
+    // stacks here. A kernel without MCL_ONFAULT (before 4.4) locks it all.
     result.memory_locked =
         ::mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) == 0 || ::mlockall(MCL_CURRENT | MCL_FUTURE) == 0;
     if (result.memory_locked) prefault_stack();

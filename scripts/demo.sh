@@ -59,7 +59,7 @@ trap 'echo; echo "demo: interrupted"; cleanup; exit 130' INT TERM
 hs_init "$work" build
 
 echo "== drive and model"
-HS_COLD=$cold hs_prepare --seed "$seed" --duration "$duration" --outage "$outage"
+GEARPULSE_COLD=$cold hs_prepare --seed "$seed" --duration "$duration" --outage "$outage"
 if [ "$cold" = 1 ]; then
   echo "   no model: the state directory ($work/state) is empty, as on a new install. gearpulsed learns"
   echo "   from GPS + engine pairs as it drives: a first model once one gear shows clearly, refits after"
@@ -74,16 +74,16 @@ echo "   $(cat "$work/drive.log")"
 
 echo "== run: feeder -> ALSA file plugin (PCM 'replay', 48 kHz) | gpsfake -> gpsd | gearpulsed -> PTY"
 hs_start
-echo "   gearpulsed pid $(hs_pid gearpulsed), gpsd port $HS_PORT, pulses on $HS_PTY, socket $HS_SOCKET"
+echo "   gearpulsed pid $(hs_pid gearpulsed), gpsd port $GEARPULSE_PORT, pulses on $GEARPULSE_PTY, socket $GEARPULSE_SOCKET"
 if [ "$cold" = 1 ]; then
   echo "   gearpulsectl status, every 3 s and at every change of source or model:"
-  /usr/bin/python3 scripts/lib/monitor.py --work "$work" --ctl "$HS_CTL" --ppk "$HS_PPK" --outage "$outage" \
+  /usr/bin/python3 scripts/lib/monitor.py --work "$work" --ctl "$GEARPULSE_CTL" --ppk "$GEARPULSE_PPK" --outage "$outage" \
     --until-pid "$(hs_pid feeder)" --model
 else
   echo "   gearpulsectl status, every 3 s and at every change of source:"
-  /usr/bin/python3 scripts/lib/monitor.py --work "$work" --ctl "$HS_CTL" --ppk "$HS_PPK" --outage "$outage" \
+  /usr/bin/python3 scripts/lib/monitor.py --work "$work" --ctl "$GEARPULSE_CTL" --ppk "$GEARPULSE_PPK" --outage "$outage" \
     --until-pid "$(hs_pid feeder)"
 fi
 hs_resources
 echo "== final gearpulsectl status"
-"$HS_CTL" --socket "$HS_SOCKET" status || true
+"$GEARPULSE_CTL" --socket "$GEARPULSE_SOCKET" status || true

@@ -29,7 +29,7 @@ hs_init "$work" "$build"
 hs_prepare "${drive[@]}" >/dev/null
 echo "drive: $(cat "$work/drive.log")"
 hs_start
-echo "capture: ALSA file plugin, $HS_RATE Hz S16 mono, period $HS_PERIOD frames; gpsd via gpsfake; PTY output"
-/usr/bin/python3 scripts/lib/monitor.py --quiet --work "$work" --ctl "$HS_CTL" --ppk "$HS_PPK" \
+echo "capture: ALSA file plugin, $GEARPULSE_RATE Hz S16 mono, period $GEARPULSE_PERIOD frames; gpsd via gpsfake; PTY output"
+/usr/bin/python3 scripts/lib/monitor.py --quiet --work "$work" --ctl "$GEARPULSE_CTL" --ppk "$GEARPULSE_PPK" \
   --outage "$outage" --poll 0.1 --until-pid "$(hs_pid feeder)"
 hs_resources

@@ -6,7 +6,7 @@ SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 export DEBIAN_FRONTEND=noninteractive
 packages=(
-  build-essential cmake pkg-config clang-format
+  build-essential cmake pkg-config clang-format ccache
   libasound2-dev alsa-utils
   libgps-dev gpsd gpsd-clients python3-gps
   libeigen3-dev libnlopt-cxx-dev libspdlog-dev catch2

@@ -1,41 +1,126 @@
 #!/usr/bin/env bash
-# The one test command: installs what is missing, builds with warnings as errors, runs every test,
-# then again under AddressSanitizer+UndefinedBehaviorSanitizer, the threaded parts (the ring, capture,
-# gpsd client, pulse thread, log queue, control server, persistence, the in-process pipeline and the
-# daemon's process) under ThreadSanitizer, and checks formatting. Exit status is non-zero if anything fails.
+# The one test command: installs what is missing, checks formatting, builds with warnings as errors, runs
+# every test and the benches' accuracy checks, then every test again under AddressSanitizer+
+# UndefinedBehaviorSanitizer, and the threaded parts (the ring, capture, gpsd client, pulse thread, log
+# queue, control server, persistence, the in-process pipeline and the daemon's process) under
+# ThreadSanitizer. Exit status is non-zero if anything fails, and if a test skipped that must run here:
+# every test that needs the real logs (../shared/data/real) or a program setup.sh installs runs; only the
+# skips listed in may_skip below are allowed. docs/testing.md says what each stage runs and how long it takes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=$(nproc 2>/dev/null || echo 2)
+logs=$(mktemp -d)
+trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$logs"' EXIT
+export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+export TSAN_OPTIONS=halt_on_error=1
 
 bash scripts/setup.sh
 
-echo "== format check"
+# ccache when installed (setup.sh installs it): a run after a small change recompiles only what changed.
+launcher=()
+if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+# Each stage's wall time, printed as it ends.
+stage_start=$SECONDS
+stage() {
+  echo "== ($((SECONDS - stage_start)) s) $*"
+  stage_start=$SECONDS
+}
+
+# Tests that may skip on this machine (ctest names, an extended regex): the GPIO tests without a GPIO chip,
+# and the tests that need root when not run as root (locked memory, a tmpfs mounted, a gearpulsed that user
+# nobody may run).
+may_skip='^$'
+if ! compgen -G '/dev/gpiochip*' >/dev/null; then may_skip+='|^gpio: '; fi
+if [ "$(id -u)" -ne 0 ]; then
+  may_skip+='|^realtime: locked memory|^daemon: a state_dir without room|^daemon: a state directory it may not'
+fi
+# Under the sanitizers: locking memory (their shadow mappings make it meaningless) and running out of file
+# descriptors (AddressSanitizer's runtime needs them).
+may_skip_sanitized="$may_skip|^realtime: locked memory|^control: out of file descriptors"
+
+# Fails unless every test ctest reported skipped in log $1 matches the extended regex $2.
+require_ran() {
+  local bad
+  bad=$(sed -n 's/^[[:space:]]*[0-9]* - \(.*\) (Skipped)$/\1/p' "$1" | grep -Ev "$2" || true)
+  if [ -n "$bad" ]; then
+    printf '== FAILED: these tests skipped and must run here:\n%s\n' "$bad" >&2
+    exit 1
+  fi
+}
+
+# Test runs are mostly paced audio and real-time waits, so each runs in the background while the next tree
+# builds on the cores it leaves idle. start_tests NAME DIR [ctest arguments] starts ctest on build tree DIR
+# (its output in $logs/NAME.log); finish_tests NAME MAY_SKIP waits for it, prints its output and fails on
+# a failed test or a skip MAY_SKIP does not allow.
+declare -A running
+start_tests() {
+  local name=$1 dir=$2
+  shift 2
+  ctest --test-dir "$dir" --output-on-failure --no-tests=error -j"$jobs" "$@" >"$logs/$name.log" 2>&1 &
+  running[$name]=$!
+}
+finish_tests() {
+  local status=0
+  wait "${running[$1]}" || status=$?
+  cat "$logs/$1.log"
+  if [ "$status" -ne 0 ]; then
+    echo "== FAILED: the $1 tests" >&2
+    exit 1
+  fi
+  require_ran "$logs/$1.log" "$2"
+}
+# The end-to-end drive (a 140 s drive in real time, about 3.5 minutes with its preparation) starts as soon
+# as the programs it runs are built, before the rest of its tree.
+drive='^e2e: pulses match the drive distance'
+drive_targets=(gearpulsed gearpulse gearpulsectl e2e_test)
+
 git ls-files '*.cpp' '*.hpp' | xargs -r clang-format --dry-run --Werror
+stage "format check done"
 
-echo "== release build + tests"
-cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+# -O2 as a release, line tables only (-g1): a quarter less compile time than -g, the same warnings.
+# The package's prefix (/usr) from the start, so that the package test's build changes nothing the tests run.
+cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_INSTALL_PREFIX=/usr \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" "${launcher[@]}" >/dev/null
+cmake --build build -j"$jobs" --target "${drive_targets[@]}"
+start_tests release-drive build -R "$drive"
 cmake --build build -j"$jobs"
-ctest --test-dir build --output-on-failure -j"$jobs"
-bash scripts/test_package.sh build
+stage "release build done"
+start_tests release build -E "$drive"
 
-echo "== ASan+UBSan build + tests"
-# The benchmarks are built (with -Werror) above and not run here: the sanitizer build skips them. -O1 and
-# line tables only (-g1, enough for the sanitizers' file:line reports) build it in about 6 minutes on 2
-# cores instead of about 11 with -O2 -g.
+# The sanitizer trees skip the benchmarks (built with -Werror and run above). -O1 and line tables only (-g1,
+# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g.
 cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
-  -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF >/dev/null
+  -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
+cmake --build build-asan -j"$jobs" --target "${drive_targets[@]}"
+start_tests asan-drive build-asan -R "$drive"
 cmake --build build-asan -j"$jobs"
-ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  ctest --test-dir build-asan --output-on-failure -j"$jobs"
+stage "ASan+UBSan build done (the release tests ran meanwhile)"
+finish_tests release-drive "$may_skip"
+finish_tests release "$may_skip"
+stage "release tests (and the benches' checks) passed"
+# The Debian package: built, installed, checked and purged (tests/ cannot run dpkg beside the other tests).
+bash scripts/test_package.sh build | tee "$logs/package.log"
+if grep -q GEARPULSE_SKIP "$logs/package.log"; then
+  echo "== FAILED: the package test skipped and must run here" >&2
+  exit 1
+fi
+stage "package installed, verified and purged"
+start_tests asan build-asan -E "$drive"
 
-echo "== TSan: the threaded parts"
-# Every test of these files (ctest lists only the cases of the executables built, so the names' prefixes
-# select exactly them): about 2 minutes to build and 1.5 to run on 2 cores, -O1 as the ASan build.
+# ThreadSanitizer: every test of the files of the threaded parts (ctest lists only the cases of the
+# executables built, so the names' prefixes select exactly them).
 cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF >/dev/null
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
+  "${launcher[@]}" >/dev/null
 cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
   log_queue_test control_test persistence_test pipeline_test gearpulsed gearpulsectl daemon_run_test
-TSAN_OPTIONS=halt_on_error=1 ctest --test-dir build-tsan --output-on-failure -j"$jobs" \
-  -R "^(ring|alsa|gpsd|pulse|log queue|control|daemon|pipeline):"
-echo "== all tests passed"
+stage "TSan build done (the ASan+UBSan tests ran meanwhile)"
+finish_tests asan "$may_skip_sanitized"
+stage "ASan+UBSan tests but the drive passed"
+# Beside the ASan drive only: two sanitized runs of the CPU-heavy tests at once would starve the paced ones.
+start_tests tsan build-tsan -R "^(ring|alsa|gpsd|pulse|log queue|control|daemon|pipeline):"
+finish_tests asan-drive "$may_skip_sanitized"
+finish_tests tsan "$may_skip_sanitized"
+stage "ASan+UBSan drive and TSan tests passed"
+echo "== all tests passed in $SECONDS s"

@@ -1,8 +1,8 @@
 #pragma once
-// Helpers shared by the tests: unique temp dirs, shell commands, small text files, free TCP ports,
-// polling for a condition, child processes, a line-oriented Unix socket client, and random corruption
-// of a file's text. Everything that
-// names a path or a port is unique per call, so test executables can run in parallel.
+// Helpers shared by the tests: skipping a test that cannot run, the real driving logs, unique temp dirs,
+// shell commands, small text files, free TCP ports, polling for a condition, child processes, a
+// line-oriented Unix socket client, and random corruption of a file's text. Everything that names a path
+// or a port is unique per call, so test executables can run in parallel.
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -17,6 +17,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -30,7 +31,25 @@
 #include <thread>
 #include <vector>
 
+// Ends the running test case as skipped: it prints GEARPULSE_SKIP and the reason, which ctest reports as
+// "Skipped" (SKIP_REGULAR_EXPRESSION in tests/CMakeLists.txt), and returns from the TEST_CASE. For a test
+// that needs hardware, a privilege, data or a program it cannot have; scripts/test.sh fails when a test
+// skips that must run there (docs/testing.md).
+#define GEARPULSE_SKIP_TEST(reason)     \
+  do {                                  \
+    WARN("GEARPULSE_SKIP: " << reason); \
+    return;                             \
+  } while (false)
+
 namespace gearpulse::test {
+
+// The third-party driving logs (shared/data/real beside the source tree): $GEARPULSE_REAL_DATA_DIR if set,
+// else the directory the build was configured with (the CMake variable of the same name).
+inline std::filesystem::path real_data_dir() {
+  const char* dir = std::getenv("GEARPULSE_REAL_DATA_DIR");
+  return (dir != nullptr && *dir != '\0') ? std::filesystem::path(dir)
+                                          : std::filesystem::path(GEARPULSE_REAL_DATA_DIR);
+}
 
 // A fresh directory under $TMPDIR, removed with everything in it at scope exit.
 class TempDir {

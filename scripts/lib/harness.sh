@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Runs gearpulsed on a simulated drive through the real components: the ALSA `file` plugin reading a
-# FIFO that `gearpulse-devtools feed` fills at real-time pace, a real gpsd started by gpsfake from the drive's
+# FIFO that `gearpulse feed` fills at real-time pace, a real gpsd started by gpsfake from the drive's
 # NMEA log, and the PTY pulse output counted by a reader. Shared by scripts/demo.sh,
 # scripts/measure_daemon.sh and the end-to-end test, so all three drive exactly the same chain.
 #
 # As a library: `source scripts/lib/harness.sh`, then the hs_* functions.
 # As a command (the test uses this; every step keeps its state in the work directory):
-#   harness.sh prepare WORK BUILD [gearpulse-devtools simulate options for the drive...]
+#   harness.sh prepare WORK BUILD [gearpulse simulate options for the drive...]
 #   harness.sh start WORK        feeder, gpsfake, gearpulsed, pulse reader
 #   harness.sh status WORK       `gearpulsectl status --json`
 #   harness.sh pulses WORK       bytes (= pulses) read from the PTY so far
@@ -14,11 +14,12 @@
 #   harness.sh kill-daemon WORK  SIGKILL to gearpulsed (power cut)
 #   harness.sh restart WORK      gearpulsed again (with a fresh feeder and reader)
 #   harness.sh stop WORK         stops everything it started
-# Settings (environment, read by prepare): HS_RATE (48000), HS_PERIOD (1024 frames), HS_PPK (2485),
-# HS_TRAIN_SEED (11), HS_TRAIN_DURATION (2400 s), HS_VEHICLE (bmw-520i), HS_LOG_LEVEL (info),
-# HS_COLD (0; 1: no training drive, the daemon starts from an empty state directory),
-# HS_REALTIME (false: [audio] realtime, SCHED_FIFO threads and locked memory; true needs root or
-# CAP_SYS_NICE and CAP_IPC_LOCK).
+# Settings (environment, read by prepare): GEARPULSE_RATE (48000), GEARPULSE_PERIOD (1024 frames),
+# GEARPULSE_PPK (2485), GEARPULSE_TRAIN_SEED (11), GEARPULSE_TRAIN_DURATION (2400 s), GEARPULSE_VEHICLE
+# (bmw-520i), GEARPULSE_LOG_LEVEL (info), GEARPULSE_COLD (0; 1: no training drive, the daemon starts from
+# an empty state directory), GEARPULSE_REALTIME (false: [audio] realtime, SCHED_FIFO threads
+# and locked memory; true needs root or CAP_SYS_NICE and CAP_IPC_LOCK); read by start: GEARPULSE_GPS_ALIGN
+# (0.9 s).
 
 hs_die() {
   echo "harness: $*" >&2
@@ -27,51 +28,51 @@ hs_die() {
 
 # hs_init WORK [BUILD]: work directory (created) and the build directory holding the binaries.
 hs_init() {
-  HS_WORK=$(realpath -m "$1")
-  mkdir -p "$HS_WORK/pids" "$HS_WORK/state"
+  GEARPULSE_WORK=$(realpath -m "$1")
+  mkdir -p "$GEARPULSE_WORK/pids" "$GEARPULSE_WORK/state"
   if [ -n "${2:-}" ]; then
-    HS_BUILD=$(realpath "$2")
-  elif [ -f "$HS_WORK/harness.env" ]; then
+    GEARPULSE_BUILD=$(realpath "$2")
+  elif [ -f "$GEARPULSE_WORK/harness.env" ]; then
     # shellcheck disable=SC1091
-    source "$HS_WORK/harness.env"
+    source "$GEARPULSE_WORK/harness.env"
   else
-    hs_die "$HS_WORK: not prepared (run: harness.sh prepare WORK BUILD)"
+    hs_die "$GEARPULSE_WORK: not prepared (run: harness.sh prepare WORK BUILD)"
   fi
-  HS_GEARPULSE="$HS_BUILD/tools/gearpulse"
-  HS_DEVTOOLS="$HS_BUILD/tools/gearpulse-devtools"
-  HS_CTL="$HS_BUILD/tools/gearpulsectl"
-  HS_DAEMON="$HS_BUILD/daemon/gearpulsed"
-  HS_SOCKET="$HS_WORK/control.sock"
-  HS_PTY="$HS_WORK/pulse"
-  HS_CONFIG="$HS_WORK/gearpulsed.toml"
+  GEARPULSE_CLI="$GEARPULSE_BUILD/tools/gearpulse"
+  GEARPULSE_DEVTOOLS="$GEARPULSE_BUILD/tools/gearpulse-devtools"
+  GEARPULSE_CTL="$GEARPULSE_BUILD/tools/gearpulsectl"
+  GEARPULSE_DAEMON="$GEARPULSE_BUILD/daemon/gearpulsed"
+  GEARPULSE_SOCKET="$GEARPULSE_WORK/control.sock"
+  GEARPULSE_PTY="$GEARPULSE_WORK/pulse"
+  GEARPULSE_CONFIG="$GEARPULSE_WORK/gearpulsed.toml"
 }
 
 hs_save_env() {
   {
-    echo "HS_BUILD='$HS_BUILD'"
-    echo "HS_RATE='$HS_RATE'"
-    echo "HS_PERIOD='$HS_PERIOD'"
-    echo "HS_PPK='$HS_PPK'"
-    echo "HS_PORT='${HS_PORT:-}'"
-    echo "HS_LOG_LEVEL='$HS_LOG_LEVEL'"
-    echo "HS_REALTIME='$HS_REALTIME'"
-  } >"$HS_WORK/harness.env"
+    echo "GEARPULSE_BUILD='$GEARPULSE_BUILD'"
+    echo "GEARPULSE_RATE='$GEARPULSE_RATE'"
+    echo "GEARPULSE_PERIOD='$GEARPULSE_PERIOD'"
+    echo "GEARPULSE_PPK='$GEARPULSE_PPK'"
+    echo "GEARPULSE_PORT='${GEARPULSE_PORT:-}'"
+    echo "GEARPULSE_LOG_LEVEL='$GEARPULSE_LOG_LEVEL'"
+    echo "GEARPULSE_REALTIME='$GEARPULSE_REALTIME'"
+  } >"$GEARPULSE_WORK/harness.env"
 }
 
 hs_defaults() {
-  HS_RATE=${HS_RATE:-48000}
-  HS_PERIOD=${HS_PERIOD:-1024}
-  HS_PPK=${HS_PPK:-2485}
-  HS_TRAIN_SEED=${HS_TRAIN_SEED:-11}
-  HS_TRAIN_DURATION=${HS_TRAIN_DURATION:-2400}
-  HS_VEHICLE=${HS_VEHICLE:-bmw-520i}
-  HS_LOG_LEVEL=${HS_LOG_LEVEL:-info}
-  HS_REALTIME=${HS_REALTIME:-false}  # [audio] realtime: SCHED_FIFO threads and locked memory
+  GEARPULSE_RATE=${GEARPULSE_RATE:-48000}
+  GEARPULSE_PERIOD=${GEARPULSE_PERIOD:-1024}
+  GEARPULSE_PPK=${GEARPULSE_PPK:-2485}
+  GEARPULSE_TRAIN_SEED=${GEARPULSE_TRAIN_SEED:-11}
+  GEARPULSE_TRAIN_DURATION=${GEARPULSE_TRAIN_DURATION:-2400}
+  GEARPULSE_VEHICLE=${GEARPULSE_VEHICLE:-bmw-520i}
+  GEARPULSE_LOG_LEVEL=${GEARPULSE_LOG_LEVEL:-info}
+  GEARPULSE_REALTIME=${GEARPULSE_REALTIME:-false}  # [audio] realtime: SCHED_FIFO threads and locked memory
 }
 
 hs_check_tools() {
   local b
-  for b in "$HS_GEARPULSE" "$HS_DEVTOOLS" "$HS_CTL" "$HS_DAEMON"; do
+  for b in "$GEARPULSE_CLI" "$GEARPULSE_DEVTOOLS" "$GEARPULSE_CTL" "$GEARPULSE_DAEMON"; do
     [ -x "$b" ] || hs_die "$b is missing: build first (cmake --build build)"
   done
   command -v gpsfake >/dev/null || PATH=/usr/bin:$PATH command -v gpsfake >/dev/null ||
@@ -88,57 +89,57 @@ hs_free_port() {
 hs_prepare() {
   hs_defaults
   hs_check_tools
-  if [ "${HS_COLD:-0}" = 1 ]; then
+  if [ "${GEARPULSE_COLD:-0}" = 1 ]; then
     echo "harness: no training drive: gearpulsed starts from an empty state directory"
   else
-    echo "harness: training drive ($HS_TRAIN_DURATION s of $HS_VEHICLE, seed $HS_TRAIN_SEED), fitted with gearpulse fit"
-    "$HS_DEVTOOLS" simulate --out "$HS_WORK/train" --seed "$HS_TRAIN_SEED" --duration "$HS_TRAIN_DURATION" \
-      --vehicle "$HS_VEHICLE" --no-audio --pulses-per-km "$HS_PPK" >"$HS_WORK/train.log" ||
-      hs_die "training drive failed: $(cat "$HS_WORK/train.log")"
-    "$HS_GEARPULSE" fit --out "$HS_WORK/state/model.json" "$HS_WORK/train/samples.csv" >"$HS_WORK/fit.json" \
-      2>"$HS_WORK/fit.log" || hs_die "gearpulse fit failed: $(cat "$HS_WORK/fit.log")"
+    echo "harness: training drive ($GEARPULSE_TRAIN_DURATION s of $GEARPULSE_VEHICLE, seed $GEARPULSE_TRAIN_SEED), fitted with gearpulse fit"
+    "$GEARPULSE_DEVTOOLS" simulate --out "$GEARPULSE_WORK/train" --seed "$GEARPULSE_TRAIN_SEED" \
+      --duration "$GEARPULSE_TRAIN_DURATION" --vehicle "$GEARPULSE_VEHICLE" --no-audio --pulses-per-km "$GEARPULSE_PPK" \
+      >"$GEARPULSE_WORK/train.log" || hs_die "training drive failed: $(cat "$GEARPULSE_WORK/train.log")"
+    "$GEARPULSE_CLI" fit --out "$GEARPULSE_WORK/state/model.json" "$GEARPULSE_WORK/train/samples.csv" \
+      >"$GEARPULSE_WORK/fit.json" 2>"$GEARPULSE_WORK/fit.log" || hs_die "gearpulse fit failed: $(cat "$GEARPULSE_WORK/fit.log")"
   fi
-  "$HS_DEVTOOLS" simulate --out "$HS_WORK/drive" --rate "$HS_RATE" --vehicle "$HS_VEHICLE" \
-    --pulses-per-km "$HS_PPK" "$@" >"$HS_WORK/drive.log" || hs_die "drive simulation failed"
+  "$GEARPULSE_DEVTOOLS" simulate --out "$GEARPULSE_WORK/drive" --rate "$GEARPULSE_RATE" --vehicle "$GEARPULSE_VEHICLE" \
+    --pulses-per-km "$GEARPULSE_PPK" "$@" >"$GEARPULSE_WORK/drive.log" || hs_die "drive simulation failed"
   hs_save_env
 }
 
 # The ALSA configuration: PCM "replay" captures what the feeder writes into the FIFO.
 hs_write_asound() {
-  rm -f "$HS_WORK/audio.fifo"
-  mkfifo "$HS_WORK/audio.fifo"
-  cat >"$HS_WORK/asound.conf" <<EOF
+  rm -f "$GEARPULSE_WORK/audio.fifo"
+  mkfifo "$GEARPULSE_WORK/audio.fifo"
+  cat >"$GEARPULSE_WORK/asound.conf" <<EOF
 pcm.replay {
   type file
   slave.pcm null
   file "/dev/null"
-  infile "$HS_WORK/audio.fifo"
+  infile "$GEARPULSE_WORK/audio.fifo"
   format raw
 }
 EOF
 }
 
 hs_write_config() {
-  cat >"$HS_CONFIG" <<EOF
+  cat >"$GEARPULSE_CONFIG" <<EOF
 # Generated by scripts/lib/harness.sh for a simulated drive.
 [audio]
 device = "replay"
-rate = $HS_RATE
-period_frames = $HS_PERIOD
-realtime = $HS_REALTIME
+rate = $GEARPULSE_RATE
+period_frames = $GEARPULSE_PERIOD
+realtime = $GEARPULSE_REALTIME
 [gps]
 host = "127.0.0.1"
-port = $HS_PORT
+port = $GEARPULSE_PORT
 [output]
 kind = "pty"
-path = "$HS_PTY"
-pulses_per_km = $HS_PPK
+path = "$GEARPULSE_PTY"
+pulses_per_km = $GEARPULSE_PPK
 [model]
-state_dir = "$HS_WORK/state"
+state_dir = "$GEARPULSE_WORK/state"
 [control]
-socket = "$HS_SOCKET"
+socket = "$GEARPULSE_SOCKET"
 [log]
-level = "$HS_LOG_LEVEL"
+level = "$GEARPULSE_LOG_LEVEL"
 EOF
 }
 
@@ -146,11 +147,11 @@ EOF
 hs_spawn() {
   local name=$1
   shift
-  "$@" >>"$HS_WORK/$name.log" 2>&1 </dev/null &
-  echo $! >"$HS_WORK/pids/$name"
+  "$@" >>"$GEARPULSE_WORK/$name.log" 2>&1 </dev/null &
+  echo $! >"$GEARPULSE_WORK/pids/$name"
 }
 
-hs_pid() { cat "$HS_WORK/pids/$1" 2>/dev/null; }
+hs_pid() { cat "$GEARPULSE_WORK/pids/$1" 2>/dev/null; }
 
 hs_alive() {
   local pid
@@ -158,18 +159,18 @@ hs_alive() {
 }
 
 hs_start_feeder() {
-  hs_spawn feeder "$HS_DEVTOOLS" feed --period "$HS_PERIOD" --rate "$HS_RATE" --channels 1 --format s16 \
-    "$HS_WORK/drive/drive.raw" "$HS_WORK/audio.fifo"
+  hs_spawn feeder "$GEARPULSE_DEVTOOLS" feed --period "$GEARPULSE_PERIOD" --rate "$GEARPULSE_RATE" --channels 1 --format s16 \
+    "$GEARPULSE_WORK/drive/drive.raw" "$GEARPULSE_WORK/audio.fifo"
 }
 
 # gpsfake plays the log at once (-n); the log starts some seconds before the drive's t = 0, which is
-# the epoch stamped 12:00:00 UTC (see gearpulse-devtools simulate --gps-lead). gpsfake finds gpsd's control
+# the epoch stamped 12:00:00 UTC (see gearpulse simulate --gps-lead). gpsfake finds gpsd's control
 # socket by its own PID in $TMPDIR and takes a stale file of a killed run with the same PID for it (then
 # gpsd gets no device): it keeps that socket in the run's directory.
 hs_start_gpsfake() {
-  HS_PORT=$(hs_free_port)
+  GEARPULSE_PORT=$(hs_free_port)
   hs_save_env
-  hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$HS_WORK" gpsfake -q -n -1 -P "$HS_PORT" -c 0.5 "$HS_WORK/drive/drive.nmea"
+  hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$GEARPULSE_WORK" gpsfake -q -n -1 -P "$GEARPULSE_PORT" -c 0.5 "$GEARPULSE_WORK/drive/drive.nmea"
 }
 
 # Blocks until gpsd reports the fix of 11:59:59, one epoch before the drive's t = 0, then waits out the
@@ -181,23 +182,23 @@ hs_wait_gps_t0() {
   deadline=$((t0 + 30))
   # gpsd may not listen yet: try again until the deadline. gpspipe ends by SIGPIPE once grep has its
   # line, so only grep's status counts.
-  until { timeout 10 env PATH="/usr/bin:$PATH" gpspipe -w "127.0.0.1:$HS_PORT" 2>/dev/null || true; } |
+  until { timeout 10 env PATH="/usr/bin:$PATH" gpspipe -w "127.0.0.1:$GEARPULSE_PORT" 2>/dev/null || true; } |
     grep -q -m1 '"class":"TPV".*"time":"[0-9-]*T11:59:59'; do
     [ "$(date +%s)" -lt "$deadline" ] ||
-      hs_die "gpsd did not report the drive's first fixes within 30 s: $(tail -n 3 "$HS_WORK/gpsfake.log")"
-    hs_alive gpsfake || hs_die "gpsfake exited: $(tail -n 3 "$HS_WORK/gpsfake.log")"
+      hs_die "gpsd did not report the drive's first fixes within 30 s: $(tail -n 3 "$GEARPULSE_WORK/gpsfake.log")"
+    hs_alive gpsfake || hs_die "gpsfake exited: $(tail -n 3 "$GEARPULSE_WORK/gpsfake.log")"
     sleep 0.2
   done
-  sleep "${HS_GPS_ALIGN:-0.9}"
-  echo "harness: GPS at the drive's start after $(($(date +%s) - t0)) s" >>"$HS_WORK/harness.log"
+  sleep "${GEARPULSE_GPS_ALIGN:-0.9}"
+  echo "harness: GPS at the drive's start after $(($(date +%s) - t0)) s" >>"$GEARPULSE_WORK/harness.log"
 }
 
 hs_start_daemon() {
   hs_write_config
-  "$HS_DAEMON" --config "$HS_CONFIG" --check-config >/dev/null || hs_die "generated config refused"
-  date +%s.%N >"$HS_WORK/daemon.started"
-  hs_spawn gearpulsed env ALSA_CONFIG_PATH="/usr/share/alsa/alsa.conf:$HS_WORK/asound.conf" \
-    "$HS_DAEMON" --config "$HS_CONFIG"
+  "$GEARPULSE_DAEMON" --config "$GEARPULSE_CONFIG" --check-config >/dev/null || hs_die "generated config refused"
+  date +%s.%N >"$GEARPULSE_WORK/daemon.started"
+  hs_spawn gearpulsed env ALSA_CONFIG_PATH="/usr/share/alsa/alsa.conf:$GEARPULSE_WORK/asound.conf" \
+    "$GEARPULSE_DAEMON" --config "$GEARPULSE_CONFIG"
 }
 
 # Counts pulses: one byte per pulse on the PTY, appended to WORK/pulses.bin (raw mode: no line
@@ -205,24 +206,24 @@ hs_start_daemon() {
 hs_start_reader() {
   local i
   for i in $(seq 100); do
-    [ -e "$HS_PTY" ] && break
-    hs_alive gearpulsed || hs_die "gearpulsed exited: $(tail -n 5 "$HS_WORK/gearpulsed.log")"
+    [ -e "$GEARPULSE_PTY" ] && break
+    hs_alive gearpulsed || hs_die "gearpulsed exited: $(tail -n 5 "$GEARPULSE_WORK/gearpulsed.log")"
     sleep 0.1
   done
-  [ -e "$HS_PTY" ] || hs_die "no PTY at $HS_PTY after 10 s: $(tail -n 3 "$HS_WORK/gearpulsed.log")"
-  stty -F "$HS_PTY" raw -echo 2>/dev/null || true
-  touch "$HS_WORK/pulses.bin"
-  hs_spawn reader sh -c "exec cat \"$HS_PTY\" >>\"$HS_WORK/pulses.bin\""
+  [ -e "$GEARPULSE_PTY" ] || hs_die "no PTY at $GEARPULSE_PTY after 10 s: $(tail -n 3 "$GEARPULSE_WORK/gearpulsed.log")"
+  stty -F "$GEARPULSE_PTY" raw -echo 2>/dev/null || true
+  touch "$GEARPULSE_WORK/pulses.bin"
+  hs_spawn reader sh -c "exec cat \"$GEARPULSE_PTY\" >>\"$GEARPULSE_WORK/pulses.bin\""
 }
 
 hs_wait_socket() {
   local i
   for i in $(seq 100); do
-    "$HS_CTL" --socket "$HS_SOCKET" status --json >/dev/null 2>&1 && return 0
-    hs_alive gearpulsed || hs_die "gearpulsed exited: $(tail -n 5 "$HS_WORK/gearpulsed.log")"
+    "$GEARPULSE_CTL" --socket "$GEARPULSE_SOCKET" status --json >/dev/null 2>&1 && return 0
+    hs_alive gearpulsed || hs_die "gearpulsed exited: $(tail -n 5 "$GEARPULSE_WORK/gearpulsed.log")"
     sleep 0.1
   done
-  hs_die "gearpulsed does not answer on $HS_SOCKET"
+  hs_die "gearpulsed does not answer on $GEARPULSE_SOCKET"
 }
 
 hs_start() {
@@ -259,15 +260,15 @@ hs_resources() {
   peak=$(awk '/^VmPeak/ {print $2}' "/proc/$pid/status")
   lck=$(awk '/^VmLck/ {print $2}' "/proc/$pid/status")
   awk -v u="$utime" -v s="$stime" -v st="$start_ticks" -v up="$uptime" -v hz="$ticks" -v hwm="$hwm" \
-    -v rss="$rss" -v peak="$peak" -v lck="$lck" -v rt="${HS_REALTIME:-false}" 'BEGIN {
+    -v rss="$rss" -v peak="$peak" -v lck="$lck" -v rt="${GEARPULSE_REALTIME:-false}" 'BEGIN {
       wall = up - st / hz
       printf "gearpulsed: VmHWM %.1f MiB, VmRSS %.1f MiB, CPU %.2f %% of one core (user %.2f s + system %.2f s over %.0f s), VmPeak %.0f MiB, VmLck %.0f MiB (realtime = %s)\n",
         hwm / 1024, rss / 1024, 100 * (u + s) / hz / wall, u / hz, s / hz, wall, peak / 1024, lck / 1024, rt }'
 }
 
-hs_status() { "$HS_CTL" --socket "$HS_SOCKET" status --json; }
+hs_status() { "$GEARPULSE_CTL" --socket "$GEARPULSE_SOCKET" status --json; }
 
-hs_pulses() { stat -c %s "$HS_WORK/pulses.bin" 2>/dev/null || echo 0; }
+hs_pulses() { stat -c %s "$GEARPULSE_WORK/pulses.bin" 2>/dev/null || echo 0; }
 
 # hs_stop_one NAME [SIGNAL]: signal, wait up to 5 s, then SIGKILL.
 hs_stop_one() {
@@ -280,7 +281,7 @@ hs_stop_one() {
     sleep 0.1
   done
   kill -KILL "$pid" 2>/dev/null || true
-  rm -f "$HS_WORK/pids/$1"
+  rm -f "$GEARPULSE_WORK/pids/$1"
 }
 
 hs_kill_daemon() {
@@ -288,7 +289,7 @@ hs_kill_daemon() {
   pid=$(hs_pid gearpulsed) || hs_die "gearpulsed is not running"
   kill -KILL "$pid" 2>/dev/null || true
   while kill -0 "$pid" 2>/dev/null; do sleep 0.05; done
-  rm -f "$HS_WORK/pids/gearpulsed"
+  rm -f "$GEARPULSE_WORK/pids/gearpulsed"
 }
 
 # Daemon first (SIGTERM: it saves the model and leaves the output low), then the sources and the reader.
@@ -297,8 +298,8 @@ hs_stop() {
   hs_stop_one gearpulsed TERM
   hs_stop_one feeder
   hs_stop_one gpsfake
-  if [ -n "${HS_PORT:-}" ]; then
-    ipcrm -M "$(printf '0x4770%04X' "$HS_PORT")" 2>/dev/null || true
+  if [ -n "${GEARPULSE_PORT:-}" ]; then
+    ipcrm -M "$(printf '0x4770%04X' "$GEARPULSE_PORT")" 2>/dev/null || true
   fi
   hs_stop_one reader
 }

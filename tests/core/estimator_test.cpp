@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -11,6 +12,7 @@
 #include "core/estimator_internal.hpp"
 #include "core/mixture_likelihood.hpp"
 #include "core/sample_io.hpp"
+#include "tests/test_util.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 using namespace gearpulse;
@@ -35,7 +37,7 @@ void check_ordered(const GearModel& model) {
 }
 
 std::vector<Sample> read_real(const std::string& relative, TorqueSpeed speed = TorqueSpeed::kAuto) {
-  const std::string path = std::string(GEARPULSE_REAL_DATA_DIR "/") + relative;
+  const std::string path = (test::real_data_dir() / relative).string();
   std::ifstream in(path);
   if (!in) return {};
   ReadOptions options;
@@ -657,10 +659,8 @@ TEST_CASE("estimator: real manual logs give ascending ladders and the automatic 
   const std::vector<Sample> etios = read_etios("drive");
   const auto louisville = read_real("torque-louisville/rpms_chart_from_obd.csv");
   const auto automatic = read_real("torque-automatic/trackLog.csv");
-  if (etios.empty() || louisville.empty() || automatic.empty()) {
-    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-    return;
-  }
+  if (etios.empty() || louisville.empty() || automatic.empty())
+    GEARPULSE_SKIP_TEST("real logs not found under " << test::real_data_dir());
   // The Etios logs pair speed and rpm read about 0.7-1 s apart; only with the channels aligned does first
   // gear (pulling away, where that skew matters most) form a line of its own.
   const FitResult e = fit_gear_model(etios, {});
@@ -711,10 +711,7 @@ TEST_CASE("estimator: the Swift log gives one five-gear ladder, the same from ei
   // A third car, none of the estimator's constants were chosen on: a Maruti Swift (5-speed manual) logged
   // as speed,rpm rows without a time column, integer km/h, rows often repeated.
   const auto swift = read_real("swift-147/147.csv");
-  if (swift.empty()) {
-    WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-    return;
-  }
+  if (swift.empty()) GEARPULSE_SKIP_TEST("real logs not found under " << test::real_data_dir());
   const FitResult whole = fit_gear_model(swift, {});
   REQUIRE(whole.model.gears.size() == 5);
   check_ordered(whole.model);
@@ -747,10 +744,7 @@ TEST_CASE("estimator: paper mode on the Etios logs keeps the gear its initialisa
   // started it.
   for (const char* prefix : {"drive", "long"}) {
     const std::vector<Sample> all = read_etios(prefix);
-    if (all.empty()) {
-      WARN("real logs not found under " GEARPULSE_REAL_DATA_DIR ": skipped");
-      return;
-    }
+    if (all.empty()) GEARPULSE_SKIP_TEST("real logs not found under " << test::real_data_dir());
     INFO(prefix << "*.csv");
     FitOptions paper;
     paper.ratios = {1.25, 1.35, 1.50, 1.7};
@@ -821,12 +815,12 @@ TEST_CASE("estimator: a fit records the idle an engine is held at while the car 
   REQUIRE(r.model.extra.contains("rolling_idle"));
   CHECK(r.model.extra["rolling_idle"]["freq"].get<double>() == Approx(rolling).epsilon(0.02));
   CHECK(r.model.extra["rolling_idle"]["samples"].get<double>() >= 50);
+}
+
+TEST_CASE("estimator: the Etios logs record a rolling idle about a fifth above the standing idle") {
   // The Etios holds its engine about a fifth above its standing idle rolling declutched.
   const auto etios = read_etios("drive");
-  if (etios.empty()) {
-    WARN("Etios logs not found under " GEARPULSE_REAL_DATA_DIR "; that part skipped");
-    return;
-  }
+  if (etios.empty()) GEARPULSE_SKIP_TEST("Etios logs not found under " << test::real_data_dir());
   const FitResult e = fit_gear_model(etios, {});
   REQUIRE(e.model.extra.contains("rolling_idle"));
   const double ratio =
@@ -958,4 +952,32 @@ TEST_CASE("estimator: an OBD log's ladder is fitted on speed and rpm as of one i
         CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.01));
     }
   }
+}
+
+TEST_CASE("estimator: a large log's passes run on the caller's slice runner, with the same model") {
+  // Core starts no thread: the slices of each pass over a log of kParallelSamples or more go to the
+  // runner in FitOptions, and the model does not depend on who runs them.
+  struct CountingRunner final : SliceRunner {
+    std::size_t passes = 0;
+    std::size_t slices = 0;
+    void run(std::size_t count, const std::function<void(std::size_t)>& task) override {
+      ++passes;
+      for (std::size_t i = count; i-- > 0;)  // backwards: the order must not matter
+        task(i);
+      slices += count;
+    }
+  };
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  const auto samples =
+      sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kMixed, 50000.0, 1, 17));
+  REQUIRE(samples.size() >= detail::kParallelSamples);
+  CountingRunner runner;
+  FitOptions options;
+  options.parallel = &runner;
+  const FitResult with_runner = fit_gear_model(samples, options);
+  CHECK(runner.passes > 0);
+  CHECK(runner.slices == 2 * runner.passes);
+  const FitResult alone = fit_gear_model(samples, {});
+  REQUIRE(with_runner.model.gears.size() == car.theta.size());
+  CHECK(serialize_model(with_runner.model) == serialize_model(alone.model));
 }

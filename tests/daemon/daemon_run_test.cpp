@@ -449,8 +449,7 @@ TEST_CASE("daemon: a state_dir without room for the training store is said at st
   // A 64 kB file system: needs the right to mount one (root in a container that allows it).
   if (std::system(
           ("mount -t tmpfs -o size=64k tmpfs '" + (dir / "state").string() + "' 2>/dev/null").c_str()) != 0) {
-    std::puts("GEARPULSE_SKIP: cannot mount a small tmpfs here");
-    return;
+    GEARPULSE_SKIP_TEST("cannot mount a small tmpfs here");
   }
   struct Unmount {
     std::string at;
@@ -611,8 +610,7 @@ TEST_CASE("daemon: a state directory it may not search is said at start, and the
   const std::string as_nobody = "/usr/bin/setpriv --reuid=65534 --regid=65534 --clear-groups ";
   if (::geteuid() != 0 || !std::filesystem::exists("/usr/bin/setpriv") ||
       std::system((as_nobody + "test -x " + kDaemon).c_str()) != 0) {
-    std::puts("GEARPULSE_SKIP: needs root and a gearpulsed that user nobody may run");
-    return;
+    GEARPULSE_SKIP_TEST("needs root and a gearpulsed that user nobody may run");
   }
   std::filesystem::permissions(dir.path(), std::filesystem::perms::all);  // nobody makes its socket here
   std::filesystem::create_directories(dir / "state");

@@ -133,17 +133,16 @@ double seconds_since(const fs::path& started_file) {
 
 TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the model survives kill -9",
           "[e2e][daemon]") {
-  if (!have_gpsfake()) {
-    WARN("SKIPPED: gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)");
-    return;
-  }
+  if (!have_gpsfake())
+    GEARPULSE_SKIP_TEST("gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)");
   Work work;
   REQUIRE(!work.dir.empty());
   const std::string wd = quote(work.dir.string());
   // 16 kHz keeps the daemon's CPU low under the sanitizers; the drive starts and ends at rest.
   const double outage_start = 45.0, outage_length = 60.0;
-  const Result prepared = run("HS_RATE=16000 HS_PERIOD=512 bash " + quote(kHarness) + " prepare " + wd + " " +
-                              quote(kBuild) + " --seed 7 --duration 140 --outage 45:60 2>&1");
+  const Result prepared =
+      run("GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512 bash " + quote(kHarness) + " prepare " + wd + " " +
+          quote(kBuild) + " --seed 7 --duration 140 --outage 45:60 2>&1");
   INFO(prepared.out);
   REQUIRE(prepared.status == 0);
   const Result started = work.harness("start " + wd);

@@ -25,7 +25,7 @@
 using namespace std::chrono_literals;
 using gearpulse::AlsaCapture;
 using gearpulse::AlsaCaptureConfig;
-using gearpulse::SampleFormat;
+using gearpulse::PcmFormat;
 using gearpulse::SpscRing;
 using gearpulse::test::FifoFeeder;
 using gearpulse::test::make_paced_pcm;
@@ -107,11 +107,11 @@ TEST_CASE("alsa: unpaced S16 mono frames arrive bit-exact with increasing timest
   SpscRing<float> ring(1 << 16);
   AlsaCaptureConfig cfg;
   cfg.device = "replay";
-  cfg.format = SampleFormat::kS16;
+  cfg.format = PcmFormat::kS16;
   AlsaCapture cap(cfg, ring);
   CHECK(cap.rate() == 48000);
   CHECK(cap.channels() == 1);
-  CHECK(cap.format() == SampleFormat::kS16);
+  CHECK(cap.format() == PcmFormat::kS16);
   std::int64_t t = 0;
   CHECK_FALSE(cap.frame_time(0, t));  // nothing captured yet
   cap.start();
@@ -145,11 +145,11 @@ TEST_CASE("alsa: S32 and FLOAT stereo are converted per channel or mixed") {
     SpscRing<float> ring(1 << 15);
     AlsaCaptureConfig cfg;
     cfg.device = "s32";
-    cfg.format = SampleFormat::kS32;
+    cfg.format = PcmFormat::kS32;
     cfg.channels = 2;
     cfg.channel = 1;  // the right channel only
     AlsaCapture cap(cfg, ring);
-    REQUIRE(cap.format() == SampleFormat::kS32);
+    REQUIRE(cap.format() == PcmFormat::kS32);
     REQUIRE(cap.channels() == 2);
     cap.start();
     const auto got = read_frames(ring, 8192);
@@ -164,11 +164,11 @@ TEST_CASE("alsa: S32 and FLOAT stereo are converted per channel or mixed") {
     SpscRing<float> ring(1 << 15);
     AlsaCaptureConfig cfg;
     cfg.device = "f32";
-    cfg.format = SampleFormat::kFloat;
+    cfg.format = PcmFormat::kFloat;
     cfg.channels = 2;
     cfg.channel = -1;  // mean of both
     AlsaCapture cap(cfg, ring);
-    REQUIRE(cap.format() == SampleFormat::kFloat);
+    REQUIRE(cap.format() == PcmFormat::kFloat);
     cap.start();
     const auto got = read_frames(ring, 8192);
     cap.stop();

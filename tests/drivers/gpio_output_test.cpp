@@ -12,7 +12,7 @@ using gearpulse::GpioOutput;
 namespace {
 bool skip_without_chip() {
   if (gearpulse::gpio_chip_available()) return false;
-  WARN("GEARPULSE_SKIP skipped: no /dev/gpiochip* on this machine (no GPIO hardware, gpio-sim not loaded)");
+  WARN("GEARPULSE_SKIP: no /dev/gpiochip* on this machine (no GPIO hardware, gpio-sim not loaded)");
   return true;
 }
 }  // namespace

@@ -277,13 +277,9 @@ std::map<long, double> rmc_speeds(const std::filesystem::path& path) {
 }  // namespace
 
 TEST_CASE("gpsd: real receiver logs deliver their RMC speeds") {
-  const char* root = std::getenv("GEARPULSE_REAL_DATA");  // default: the shared copy of data/real
-  const std::filesystem::path base =
-      std::filesystem::path(root ? root : GEARPULSE_REAL_DATA_DIR) / "gpsd-nmea";
-  if (!std::filesystem::exists(base / "nl2008u.log")) {
-    WARN("GEARPULSE_SKIP skipped: real gpsd logs not found at " << base);
-    return;
-  }
+  const std::filesystem::path base = gearpulse::test::real_data_dir() / "gpsd-nmea";
+  if (!std::filesystem::exists(base / "nl2008u.log"))
+    GEARPULSE_SKIP_TEST("real gpsd logs not found at " << base);
   for (const char* name : {"nl2008u.log", "bt451.log"}) {
     INFO(name);
     const auto log = base / name;

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "drivers/realtime.hpp"
+#include "tests/test_util.hpp"
 
 #if defined(__has_feature)
 #if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
@@ -63,8 +64,7 @@ int locked_growth_mb() {
 
 TEST_CASE("realtime: locked memory is made resident as it is used, not every mapping at once") {
 #ifdef GEARPULSE_SANITIZER_SHADOW
-  WARN("GEARPULSE_SKIP skipped: a sanitizer's shadow mappings make mlockall meaningless in this build");
-  return;
+  GEARPULSE_SKIP_TEST("a sanitizer's shadow mappings make mlockall meaningless in this build");
 #else
   const pid_t pid = ::fork();
   REQUIRE(pid >= 0);
@@ -73,10 +73,8 @@ TEST_CASE("realtime: locked memory is made resident as it is used, not every map
   REQUIRE(::waitpid(pid, &status, 0) == pid);
   REQUIRE(WIFEXITED(status));
   const int growth = WEXITSTATUS(status);
-  if (growth == kNotLocked) {
-    WARN("GEARPULSE_SKIP skipped: mlockall is not allowed here (needs CAP_IPC_LOCK or RLIMIT_MEMLOCK)");
-    return;
-  }
+  if (growth == kNotLocked)
+    GEARPULSE_SKIP_TEST("mlockall is not allowed here (needs CAP_IPC_LOCK or RLIMIT_MEMLOCK)");
   INFO("resident memory grew by " << growth << " MB when memory was locked");
   // The idle thread's stack (8 MB) and the untouched heap (64 MB) stay out; the caller's stack is touched
   // (a quarter of a MB) so that its real-time loop meets no page fault.

@@ -21,6 +21,8 @@
 
 namespace fs = std::filesystem;
 
+using gearpulse::test::TempDir;
+
 namespace {
 
 const std::string kCli = GEARPULSE_BINARY_DIR "/tools/gearpulse-devtools";
@@ -31,20 +33,6 @@ using Result = gearpulse::test::ShellResult;
 Result run(const std::string& command) {
   return gearpulse::test::run_shell(command + " 2>&1");
 }
-
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    std::string templ = (fs::temp_directory_path() / "gearpulse-sim.XXXXXX").string();
-    if (::mkdtemp(templ.data()) != nullptr) path = templ;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    if (!path.empty()) fs::remove_all(path, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-};
 
 std::string slurp(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -80,15 +68,14 @@ std::uint32_t le32(const std::string& s, std::size_t at) {
 
 TEST_CASE("simulate: writes a drive whose files agree with each other", "[simulate]") {
   TempDir dir;
-  REQUIRE(!dir.path.empty());
-  const Result r = run(kCli + " simulate --out " + dir.path.string() +
+  const Result r = run(kCli + " simulate --out " + dir.path().string() +
                        " --seed 5 --duration 60 --outage 20:15 --rate 8000");
   INFO(r.out);
   REQUIRE(r.status == 0);
   CHECK(r.out.find("km") != std::string::npos);
 
   // truth.csv: header, rows every 0.1 s, the car starts and ends at rest.
-  const auto truth = csv_rows(dir.path / "truth.csv");
+  const auto truth = csv_rows(dir.path() / "truth.csv");
   REQUIRE(truth.size() > 100);
   CHECK(truth[0] == std::vector<std::string>{"t", "speed", "freq", "gear"});
   CHECK(std::stod(truth[1][1]) == Approx(0.0).margin(1e-9));
@@ -103,8 +90,8 @@ TEST_CASE("simulate: writes a drive whose files agree with each other", "[simula
   CHECK(max_speed > 3.0);
 
   // Audio: raw S16 and a WAV with the same samples, length = drive length at the rate.
-  const std::string raw = slurp(dir.path / "drive.raw");
-  const std::string wav = slurp(dir.path / "drive.wav");
+  const std::string raw = slurp(dir.path() / "drive.raw");
+  const std::string wav = slurp(dir.path() / "drive.wav");
   CHECK(static_cast<double>(raw.size()) == Approx(length * 8000 * 2).margin(2 * 8000 * 0.2));
   REQUIRE(wav.size() == raw.size() + 44);
   CHECK(wav.substr(0, 4) == "RIFF");
@@ -113,7 +100,7 @@ TEST_CASE("simulate: writes a drive whose files agree with each other", "[simula
   CHECK(wav.substr(44) == raw);
 
   // samples.csv: 1 Hz, speed blank exactly inside the outage, freq everywhere.
-  const auto samples = csv_rows(dir.path / "samples.csv");
+  const auto samples = csv_rows(dir.path() / "samples.csv");
   REQUIRE(samples.size() > 60);
   CHECK(samples[0] == std::vector<std::string>{"t", "speed", "freq"});
   for (std::size_t i = 1; i < samples.size(); ++i) {
@@ -126,7 +113,7 @@ TEST_CASE("simulate: writes a drive whose files agree with each other", "[simula
 
   // NMEA: two sentences per second from 8 s (the default GPS lead) before t = 0, which is 12:00:00 UTC;
   // void fixes exactly inside the outage.
-  std::ifstream nmea(dir.path / "drive.nmea");
+  std::ifstream nmea(dir.path() / "drive.nmea");
   std::string line;
   int gga = 0, rmc = 0, void_rmc = 0;
   std::string first_rmc;
@@ -147,7 +134,7 @@ TEST_CASE("simulate: writes a drive whose files agree with each other", "[simula
   CHECK(void_rmc == 15);
 
   // drive.env agrees with the truth.
-  const std::string env = slurp(dir.path / "drive.env");
+  const std::string env = slurp(dir.path() / "drive.env");
   const auto at = env.find("distance_m=");
   REQUIRE(at != std::string::npos);
   CHECK(std::stod(env.substr(at + 11)) == Approx(distance).epsilon(1e-3));
@@ -155,24 +142,22 @@ TEST_CASE("simulate: writes a drive whose files agree with each other", "[simula
 
 TEST_CASE("simulate: the same seed gives the same drive and another seed another", "[simulate]") {
   TempDir dir;
-  REQUIRE(!dir.path.empty());
   const auto sim = [&](const std::string& sub, int seed) {
-    return run(kCli + " simulate --out " + (dir.path / sub).string() + " --duration 30 --rate 8000 --seed " +
-               std::to_string(seed))
+    return run(kCli + " simulate --out " + (dir.path() / sub).string() +
+               " --duration 30 --rate 8000 --seed " + std::to_string(seed))
         .status;
   };
   REQUIRE(sim("a", 3) == 0);
   REQUIRE(sim("b", 3) == 0);
   REQUIRE(sim("c", 4) == 0);
-  CHECK(slurp(dir.path / "a" / "drive.raw") == slurp(dir.path / "b" / "drive.raw"));
-  CHECK(slurp(dir.path / "a" / "truth.csv") == slurp(dir.path / "b" / "truth.csv"));
-  CHECK(slurp(dir.path / "a" / "truth.csv") != slurp(dir.path / "c" / "truth.csv"));
+  CHECK(slurp(dir.path() / "a" / "drive.raw") == slurp(dir.path() / "b" / "drive.raw"));
+  CHECK(slurp(dir.path() / "a" / "truth.csv") == slurp(dir.path() / "b" / "truth.csv"));
+  CHECK(slurp(dir.path() / "a" / "truth.csv") != slurp(dir.path() / "c" / "truth.csv"));
 }
 
 TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
   TempDir dir;
-  REQUIRE(!dir.path.empty());
-  const std::string out = " --out " + (dir.path / "x").string();
+  const std::string out = " --out " + (dir.path() / "x").string();
   for (const std::string args :
        {" --outage 20", " --outage a:5", " --outage 10:-3", " --outage 10:1e308", " --vehicle nosuchcar",
         " --style racing", " --duration 2", " --duration 1e308", " --rate 10", " --snr nan", " --tone 1e9",
@@ -183,13 +168,12 @@ TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
     CHECK(r.status == 2);
     CHECK(r.out.find("gearpulse-devtools:") != std::string::npos);
   }
-  CHECK(!fs::exists(dir.path / "x" / "drive.raw"));
+  CHECK(!fs::exists(dir.path() / "x" / "drive.raw"));
 }
 
 TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-time pace", "[feed]") {
   TempDir dir;
-  REQUIRE(!dir.path.empty());
-  const fs::path in = dir.path / "in.raw", fifo = dir.path / "fifo";
+  const fs::path in = dir.path() / "in.raw", fifo = dir.path() / "fifo";
   // 0.5 s at 8 kHz, 3 channels: 4000 frames, not a whole number of 256-frame periods.
   std::string data;
   for (int i = 0; i < 4000 * 3; ++i) {
@@ -228,22 +212,21 @@ TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-
 
 TEST_CASE("feed: a missing input or a bad format is an error", "[feed]") {
   TempDir dir;
-  REQUIRE(!dir.path.empty());
-  Result r = run(kCli + " feed " + (dir.path / "none.raw").string() + " " + (dir.path / "fifo").string());
+  Result r = run(kCli + " feed " + (dir.path() / "none.raw").string() + " " + (dir.path() / "fifo").string());
   CHECK(r.status == 2);
   CHECK(r.out.find("none.raw") != std::string::npos);
-  std::ofstream(dir.path / "odd.raw", std::ios::binary) << "abc";
-  r = run(kCli + " feed " + (dir.path / "odd.raw").string() + " " + (dir.path / "fifo").string());
+  std::ofstream(dir.path() / "odd.raw", std::ios::binary) << "abc";
+  r = run(kCli + " feed " + (dir.path() / "odd.raw").string() + " " + (dir.path() / "fifo").string());
   CHECK(r.status == 2);
   CHECK(r.out.find("odd.raw") != std::string::npos);
-  r = run(kCli + " feed --format s24 " + (dir.path / "odd.raw").string() + " x");
+  r = run(kCli + " feed --format s24 " + (dir.path() / "odd.raw").string() + " x");
   CHECK(r.status == 2);
-  r = run(kCli + " feed " + dir.path.string() + " x");
+  r = run(kCli + " feed " + dir.path().string() + " x");
   CHECK(r.status == 2);
   CHECK(r.out.find("is a directory") != std::string::npos);
   // Sizes that overflow a frame's byte count are refused, not divided by.
   for (const char* size : {" --channels 1073741824", " --channels 536870912", " --period 2147483647"}) {
-    r = run(kCli + " feed --format s32" + size + " " + (dir.path / "odd.raw").string() + " x");
+    r = run(kCli + " feed --format s32" + size + " " + (dir.path() / "odd.raw").string() + " x");
     INFO(size << ": " << r.out);
     CHECK(r.status == 2);
     // The message names the option that is out of range, not all three.

@@ -12,31 +12,18 @@
 #include <string>
 #include <vector>
 
+#include "tests/test_util.hpp"
 #include "tools/sim/lighter_signal.hpp"
 
 namespace sim = gearpulse::sim;
+
+using gearpulse::test::TempDir;
 
 namespace {
 
 const std::string kTool = GEARPULSE_BINARY_DIR "/tools/gearpulse";
 
 // A private temporary directory, removed with its contents.
-struct TempDir {
-  std::filesystem::path path;
-  TempDir() {
-    std::string pattern = (std::filesystem::temp_directory_path() / "gearpulse-track-XXXXXX").string();
-    if (!mkdtemp(pattern.data())) throw std::runtime_error("mkdtemp failed");
-    path = pattern;
-  }
-  ~TempDir() {
-    std::error_code ec;
-    std::filesystem::remove_all(path, ec);
-  }
-  TempDir(const TempDir&) = delete;
-  TempDir& operator=(const TempDir&) = delete;
-  [[nodiscard]] std::string file(const std::string& name) const { return (path / name).string(); }
-};
-
 std::string slurp(const std::string& path) {
   std::ifstream in(path);
   std::stringstream ss;
@@ -57,7 +44,7 @@ struct Result {
 };
 
 Result run(const TempDir& dir, const std::string& args) {
-  const std::string out = dir.file("stdout"), err = dir.file("stderr");
+  const std::string out = (dir / "stdout").string(), err = (dir / "stderr").string();
   const std::string cmd = std::string("'") + kTool + "' track " + args + " >'" + out + "' 2>'" + err + "'";
   const int raw = std::system(cmd.c_str());
   Result r;
@@ -70,7 +57,7 @@ Result run(const TempDir& dir, const std::string& args) {
 std::string make_wav(const TempDir& dir, const std::string& name, const std::vector<float>& x, int channels,
                      int rate) {
   std::string error;
-  const std::string path = dir.file(name);
+  const std::string path = (dir / name).string();
   REQUIRE(sim::write_wav_pcm16(path, x, channels, rate, error));
   return path;
 }
@@ -227,20 +214,20 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
   const sim::FrequencyTrajectory truth = [](double) { return 100.0; };
   const auto good = make_wav(dir, "good.wav", engine(8000.0, 2.0, truth, 6), 1, 8000);
   SECTION("missing file") {
-    check_one_line_error(run(dir, std::string("'") + dir.file("absent.wav") + "'"));
+    check_one_line_error(run(dir, std::string("'") + (dir / "absent.wav").string() + "'"));
   }
   SECTION("empty file") {
-    std::ofstream(dir.file("empty.wav")).close();
-    check_one_line_error(run(dir, std::string("'") + dir.file("empty.wav") + "'"));
+    std::ofstream((dir / "empty.wav").string()).close();
+    check_one_line_error(run(dir, std::string("'") + (dir / "empty.wav").string() + "'"));
   }
   SECTION("not audio at all") {
-    std::ofstream(dir.file("text.wav")) << "t,speed,freq\n1,2,3\n";
-    check_one_line_error(run(dir, std::string("'") + dir.file("text.wav") + "'"));
+    std::ofstream((dir / "text.wav").string()) << "t,speed,freq\n1,2,3\n";
+    check_one_line_error(run(dir, std::string("'") + (dir / "text.wav").string() + "'"));
   }
   SECTION("truncated WAV") {
     const std::string bytes = slurp(good);
-    std::ofstream(dir.file("cut.wav"), std::ios::binary) << bytes.substr(0, bytes.size() / 3);
-    const Result r = run(dir, std::string("'") + dir.file("cut.wav") + "'");
+    std::ofstream((dir / "cut.wav").string(), std::ios::binary) << bytes.substr(0, bytes.size() / 3);
+    const Result r = run(dir, std::string("'") + (dir / "cut.wav").string() + "'");
     check_one_line_error(r);
     CHECK(r.err.find("truncated") != std::string::npos);
   }
@@ -259,8 +246,8 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
   SECTION("non-PCM WAV") {
     std::string bytes = slurp(good);
     bytes[20] = static_cast<char>(0x50);  // format tag 0x0050: MPEG, not PCM
-    std::ofstream(dir.file("mpeg.wav"), std::ios::binary) << bytes;
-    check_one_line_error(run(dir, std::string("'") + dir.file("mpeg.wav") + "'"));
+    std::ofstream((dir / "mpeg.wav").string(), std::ios::binary) << bytes;
+    check_one_line_error(run(dir, std::string("'") + (dir / "mpeg.wav").string() + "'"));
   }
   SECTION("rate too low for the band") {
     const auto wav = make_wav(dir, "low.wav", std::vector<float>(400 * 3, 0.1f), 1, 400);
@@ -321,8 +308,8 @@ TEST_CASE("track: a WAV whose header gives no length is read with a warning") {
     bytes[4 + i] = static_cast<char>(0xFF);
     bytes[data + 4 + i] = static_cast<char>(0xFF);
   }
-  std::ofstream(dir.file("streamed.wav"), std::ios::binary) << bytes;
-  const Result r = run(dir, std::string("'") + dir.file("streamed.wav") + "'");
+  std::ofstream((dir / "streamed.wav").string(), std::ios::binary) << bytes;
+  const Result r = run(dir, std::string("'") + (dir / "streamed.wav").string() + "'");
   CHECK(r.status == 0);
   CHECK(r.out == reference.out);
   CHECK(r.err.find("streamed.wav") != std::string::npos);

@@ -18,6 +18,7 @@
 #include "core/estimator.hpp"
 #include "core/gear_model.hpp"
 #include "daemon/atomic_file.hpp"
+#include "drivers/thread_slice_runner.hpp"
 #include "tools/gearpulse/commands.hpp"
 #include "tools/gearpulse/fit_plot.hpp"
 #include "tools/gearpulse/sample_files.hpp"
@@ -124,7 +125,9 @@ void warn_indistinct_gears(const GearModel& model, const std::string& gears) {
 }
 
 int run_fit(const FitCommand& cmd) {
+  ThreadSliceRunner threads;  // a large log's passes in two threads, one per half
   FitOptions options;
+  options.parallel = &threads;
   options.gears = parse_gears(cmd.gears);
   options.ratios = parse_ratios(cmd.ratios);
   if (!options.ratios.empty() && options.gears != 0 &&

@@ -74,7 +74,7 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
       throw UsageError(e.what());
     }
     const SampleLog& log = logs.back();
-    if (options.torque_speed != TorqueSpeed::kAuto && log.format != SampleFormat::kTorque)
+    if (options.torque_speed != TorqueSpeed::kAuto && log.format != SampleFileFormat::kTorque)
       std::fprintf(
           stderr,
           "gearpulse: warning: %s: --speed applies to Torque Pro exports; this %s log has one speed\n",
