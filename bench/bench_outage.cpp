@@ -16,6 +16,7 @@
 //     freedom) speed and frequency noise, a cold engine. Cadences: the daemon's (frequency every 0.1 s, a 1
 //     Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app every 5 s. Seeds:
 //     tuning 1..N, report 1001..1000+N.
+// With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
 //                     [--trace FILE] [DATA_DIR]
 #include <algorithm>
@@ -32,6 +33,7 @@
 #include <vector>
 
 #include "bench/outage_protocol.hpp"
+#include "bench/requirements.hpp"
 #include "core/estimator.hpp"
 #include "core/imm_speed_synth.hpp"
 #include "core/sample_io.hpp"
@@ -49,7 +51,8 @@ namespace {
 constexpr int kMethods = 5;
 constexpr const char* kMethodNames[kMethods] = {"gearpulse", "IMM cand.", "keep gear", "hold speed",
                                                 "hindsight"};
-std::FILE* g_trace = nullptr;  // --trace FILE: every outage row
+gearpulse::bench::Requirements g_required;  // --require NAME<=VALUE (bench/requirements.hpp)
+std::FILE* g_trace = nullptr;               // --trace FILE: every outage row
 long g_cadence = -1;
 double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the candidate's belief, per row
 std::string g_debug_car;
@@ -184,6 +187,16 @@ void print_header() {
   std::printf("\n");
 }
 
+// Reports the daemon's synthesis' figures of a set as NAME_dist_med_pct, NAME_dist_p95_pct and their
+// differences from keeping the gear (NAME_dist_med_minus_keep, NAME_dist_p95_minus_keep: below 0 is better).
+void report(const std::string& name, const Results& r) {
+  const double med = quantile(r.dist[0], 0.5), p95 = quantile(r.dist[0], 0.95);
+  g_required.report(name + "_dist_med_pct", med);
+  g_required.report(name + "_dist_p95_pct", p95);
+  g_required.report(name + "_dist_med_minus_keep", med - quantile(r.dist[2], 0.5));
+  g_required.report(name + "_dist_p95_minus_keep", p95 - quantile(r.dist[2], 0.95));
+}
+
 void print_line(const std::string& label, const Results& r) {
   std::printf("%-34s %5zu |", label.c_str(), r.dist[0].size());
   for (int m = 0; m < kMethods; ++m)
@@ -247,6 +260,7 @@ void real_logs(const fs::path& root) {
     fold(drives, longs, r);
     fold(longs, drives, r);
     print_line("TUNING Etios (OBD ~1.8 s)", r);
+    report("etios", r);
   }
   const auto louis = read_logs(root / "torque-louisville", "");
   if (!louis.empty()) {
@@ -255,6 +269,7 @@ void real_logs(const fs::path& root) {
     fold(a, b, r);
     fold(b, a, r);
     print_line("REPORT Louisville (1 Hz GPS)", r);
+    report("louisville", r);
   }
   const auto swift = read_logs(root / "swift-147", "");
   for (const double row_s : {1.0, 2.0}) {
@@ -264,6 +279,7 @@ void real_logs(const fs::path& root) {
     fold(a, b, r);
     fold(b, a, r);
     print_line(row_s == 1.0 ? "REPORT Swift (1 s per row)" : "REPORT Swift (2 s per row)", r);
+    report(row_s == 1.0 ? "swift_1s" : "swift_2s", r);
   }
 }
 
@@ -271,15 +287,16 @@ void real_logs(const fs::path& root) {
 
 struct Cadence {
   const char* name;
+  const char* key;     // in the figures' names
   double freq_period;  // s between frequency readings (0 = OBD polling)
   double fix_period;   // s between GPS fixes
   double obd_refresh;  // s, OBD polling round (0 = not OBD)
 };
 constexpr Cadence kCadences[] = {
-    {"daemon 10 Hz/1 Hz", 0.1, 1.0, 0.0},
-    {"1 Hz", 1.0, 1.0, 0.0},
-    {"OBD 2 s", 0.0, 0.0, 2.0},
-    {"phone OBD 5 s", 0.0, 0.0, 5.0},
+    {"daemon 10 Hz/1 Hz", "daemon", 0.1, 1.0, 0.0},
+    {"1 Hz", "1hz", 1.0, 1.0, 0.0},
+    {"OBD 2 s", "obd2s", 0.0, 0.0, 2.0},
+    {"phone OBD 5 s", "obd5s", 0.0, 0.0, 5.0},
 };
 constexpr double kGpsLatency = 0.5;  // s
 constexpr double kSigmaSpeed = 0.1;  // m/s
@@ -356,12 +373,12 @@ GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t see
   return gearpulse::fit_gear_model(samples, {}).model;
 }
 
-void simulated(bool report, int seeds, int randoms) {
-  const std::uint64_t base = report ? 1000 : 0;
+void simulated(bool report_set, int seeds, int randoms) {
+  const std::uint64_t base = report_set ? 1000 : 0;
   std::printf(
       "\nSimulated vehicles, %s seeds %llu..%llu (fit on a 40-min mixed drive, replay 20 min of each "
       "style)\n",
-      report ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
+      report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
       static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)));
   print_header();
   std::vector<sim::Vehicle> cars;
@@ -396,19 +413,21 @@ void simulated(bool report, int seeds, int randoms) {
     for (const char* style : {"mixed", "urban", "jam", "highway"})
       print_line(std::string(c.name) + ", " + style, by_style[k++]);
     print_line(std::string(c.name) + ", ALL", all);
+    report(std::string("sim_") + c.key, all);
   }
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool report = false, real = true, simu = true;
+  if (!g_required.parse(argc, argv)) return 2;
+  bool report_set = false, real = true, simu = true;
   int seeds = 2, randoms = 7;
   fs::path root = GEARPULSE_REAL_DATA_DIR;
   for (int i = 1; i < argc; ++i) {
     const std::string_view a = argv[i];
     if (a == "--set" && i + 1 < argc) {
-      report = std::string_view(argv[++i]) == "report";
+      report_set = std::string_view(argv[++i]) == "report";
     } else if (a == "--seeds" && i + 1 < argc) {
       seeds = std::atoi(argv[++i]);
     } else if (a == "--random" && i + 1 < argc) {
@@ -431,8 +450,12 @@ int main(int argc, char** argv) {
     }
   }
   const auto start = std::chrono::steady_clock::now();
+  if (real && !fs::exists(root / "carloop-etios")) {
+    std::printf("GEARPULSE_SKIP: bench_outage: no real logs under %s\n", root.c_str());
+    return 0;
+  }
   if (real) real_logs(root);
-  if (simu) simulated(report, seeds, randoms);
+  if (simu) simulated(report_set, seeds, randoms);
   std::printf("\n(%.1f s)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
   return 0;
