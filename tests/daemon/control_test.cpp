@@ -323,7 +323,7 @@ TEST_CASE("control: stray bytes keep no slot: a trickling connection goes before
 namespace {
 
 // Connections of another user (nobody, uid 65534) from a child process: `count` of them, each sending a
-// newline every 50 ms, and a new one every 20 ms after that, all from the moment the child is up until
+// newline every 25 ms, and a new one every 50 ms after that, all from the moment the child is up until
 // it is killed. Needs root (to change uid); the socket and its directory are opened to every user.
 class OtherUsersFlood {
  public:
