@@ -376,8 +376,8 @@ bool Daemon::Impl::load_state() {
       spdlog::info("training: {} stored pairs restored from {}", store.size(), store_path.string());
       if (const std::size_t skipped = store.skipped(); skipped > 0) {
         const std::string text = fmt::format(
-            "training.bin: {} record(s) hold their checksum but no plausible pair; skipped, the other {} "
-            "kept",
+            "training.bin: {} record(s) hold their checksum but no plausible pair; skipped ({} pairs "
+            "restored)",
             skipped, store.size());
         spdlog::warn("training: {}", text);
         note_state_problem(text);

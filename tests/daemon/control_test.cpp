@@ -274,6 +274,27 @@ TEST_CASE("control: with every slot taken, the connection that asked least recen
   CHECK(server.clients() == 3);
 }
 
+TEST_CASE("control: every slot held by silent and trickling connections still lets a request in") {
+  // 32 connections (the default limit) that send a newline every 0.2 s, and 32 that say nothing: a
+  // status request on a new connection is answered at once, again and again.
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  std::vector<std::unique_ptr<LineClient>> trickling, silent;
+  for (int i = 0; i < 32; ++i) {
+    trickling.push_back(std::make_unique<LineClient>((dir / "ctl.sock").string()));
+    silent.push_back(std::make_unique<LineClient>((dir / "ctl.sock").string()));
+  }
+  for (int round = 0; round < 5; ++round) {
+    for (auto& c : trickling)
+      (void)c->send_all("\n");
+    LineClient status((dir / "ctl.sock").string());
+    CHECK(ask(status, R"({"cmd":"status"})")["echo"] == "status");
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  CHECK(server.clients() <= 32);
+}
+
 TEST_CASE("control: stray bytes keep no slot: a trickling connection goes before one that asked") {
   TempDir dir;
   ControlServer server(
@@ -302,7 +323,7 @@ TEST_CASE("control: stray bytes keep no slot: a trickling connection goes before
 namespace {
 
 // Connections of another user (nobody, uid 65534) from a child process: `count` of them, each sending a
-// newline every 50 ms, and a new one every 20 ms after that, all from the moment the child is up until
+// newline every 25 ms, and a new one every 50 ms after that, all from the moment the child is up until
 // it is killed. Needs root (to change uid); the socket and its directory are opened to every user.
 class OtherUsersFlood {
  public:
