@@ -49,7 +49,7 @@ require_ran() {
 }
 
 # Test runs are mostly paced audio and real-time waits, so each runs in the background while the next tree
-# builds on the cores it leaves idle. start_tests NAME DIR [ctest arguments] starts ctest on build tree DIR
+# builds on the cores it leaves idle; the builds run at nice 10, so a paced test gets the CPU when it wants. start_tests NAME DIR [ctest arguments] starts ctest on build tree DIR
 # (its output in $logs/NAME.log); finish_tests NAME MAY_SKIP waits for it, prints its output and fails on
 # a failed test or a skip MAY_SKIP does not allow.
 declare -A running
@@ -81,9 +81,9 @@ stage "format check done"
 # The package's prefix (/usr) from the start, so that the package test's build changes nothing the tests run.
 cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_INSTALL_PREFIX=/usr \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" "${launcher[@]}" >/dev/null
-cmake --build build -j"$jobs" --target "${drive_targets[@]}"
+nice -n 10 cmake --build build -j"$jobs" --target "${drive_targets[@]}"
 start_tests release-drive build -R "$drive"
-cmake --build build -j"$jobs"
+nice -n 10 cmake --build build -j"$jobs"
 stage "release build done"
 start_tests release build -E "$drive"
 
@@ -92,9 +92,9 @@ start_tests release build -E "$drive"
 cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
   -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
-cmake --build build-asan -j"$jobs" --target "${drive_targets[@]}"
+nice -n 10 cmake --build build-asan -j"$jobs" --target "${drive_targets[@]}"
 start_tests asan-drive build-asan -R "$drive"
-cmake --build build-asan -j"$jobs"
+nice -n 10 cmake --build build-asan -j"$jobs"
 stage "ASan+UBSan build done (the release tests ran meanwhile)"
 finish_tests release-drive "$may_skip"
 finish_tests release "$may_skip"
@@ -113,7 +113,7 @@ start_tests asan build-asan -E "$drive"
 cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
   "${launcher[@]}" >/dev/null
-cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
+nice -n 10 cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
   log_queue_test control_test persistence_test pipeline_test gearpulsed gearpulsectl daemon_run_test
 stage "TSan build done (the ASan+UBSan tests ran meanwhile)"
 finish_tests asan "$may_skip_sanitized"
