@@ -242,8 +242,8 @@ bool Retrainer::schedule_due(std::unique_lock<std::mutex>& lock) {
   if (!young_) settled_size_ = size;
   status_.young = young_;
   status_.moving_time = pairs->moving_time;
-  status_.cluster = pairs->largest_cluster;
-  status_.next_fit = young_ ? schedule_.next_refit(pairs->moving_time).value_or(-1.0) : -1.0;
+  status_.cluster_pairs = pairs->largest_cluster;
+  status_.next_refit = young_ ? schedule_.next_refit(pairs->moving_time).value_or(-1.0) : -1.0;
   return schedule_.due(*pairs, has_model);
 }
 
@@ -251,7 +251,10 @@ void Retrainer::run() noexcept {
   using Clock = std::chrono::steady_clock;
   // While young the schedule looks at the store this often: pairs come at about 1 Hz, and its refit
   // times are a minute of moving and more apart.
-  constexpr auto kLearningLook = std::chrono::seconds(5);
+  constexpr double kLearningLook = 5.0;  // s
+  // Each look copies the store and reads it once: a store of hours of standing pairs (a car idling with
+  // GPS, a young model all the same) is looked at less often, at most this many pairs a second on average.
+  constexpr double kLookPairsPerSecond = 4000.0;
   std::unique_lock lock(mutex_);
   // At start, learn right away rather than after a full interval when there is something to learn from:
   // a restored store and no model yet, or enough pairs the model has not seen (gathered on trips shorter
@@ -265,7 +268,9 @@ void Retrainer::run() noexcept {
     if (!first && !requested_) {
       // The interval as set now: a reload that shortens it wakes this wait, which then ends at the new
       // deadline rather than the old one.
-      const auto look = Clock::now() + kLearningLook;
+      const double look_s = std::max(kLearningLook, static_cast<double>(store_.size()) / kLookPairsPerSecond);
+      const auto look =
+          Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(look_s));
       while (!stop_ && !requested_) {
         const auto deadline = young_ ? std::min(interval_end(), look) : interval_end();
         if (Clock::now() >= deadline) break;

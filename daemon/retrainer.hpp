@@ -51,10 +51,10 @@ class Retrainer {
     double last_run_wall = 0.0;  // UNIX seconds of the last attempt, 0 = never
     std::string last_result;     // one line for status
     bool busy = false;
-    bool young = false;        // the learning schedule decides the fits
-    double moving_time = 0.0;  // s of moving the training pairs covered at the schedule's last look
-    double next_fit = -1.0;    // s of moving at the schedule's next refit, -1 = none
-    std::size_t cluster = 0;   // steady pairs in the densest gear window at that look
+    bool young = false;             // the learning schedule decides the fits
+    double moving_time = 0.0;       // s of moving the training pairs covered at the schedule's last look
+    double next_refit = -1.0;       // s of moving at the schedule's next refit, -1 = none
+    std::size_t cluster_pairs = 0;  // steady pairs in the densest gear window at that look
   };
 
   Retrainer(TrainingStore& store, ModelHolder& model, std::filesystem::path model_path, Fitter fitter,

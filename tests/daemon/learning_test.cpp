@@ -268,7 +268,7 @@ TEST_CASE("learning: the retrainer's first fit comes as soon as the pairs show o
   const Retrainer::Status s = retrainer.status();
   CHECK(s.young);
   CHECK(s.moving_time == Approx(59.0).margin(3.0));
-  CHECK(s.cluster >= 40);
+  CHECK(s.cluster_pairs >= 40);
   REQUIRE(LearningSchedule().next_refit(s.moving_time).has_value());
-  CHECK(s.next_fit == Approx(*LearningSchedule().next_refit(s.moving_time)));
+  CHECK(s.next_refit == Approx(*LearningSchedule().next_refit(s.moving_time)));
 }
