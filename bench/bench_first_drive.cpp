@@ -2,10 +2,10 @@
 // GPS outage every 3 minutes (outage_protocol.hpp: the first 120 s in), replayed as the daemon runs it:
 // the training pairs so far (1 Hz, none in an outage), the learning schedule looked at every 5 s of drive
 // time (daemon/learning_schedule.hpp), at its times a fit with the daemon's fitter, the gears the refit
-// lacks kept by the daemon's rule, and the interval rule (retrain_interval, min_new_samples); the
-// synthesis takes each new model between two steps. Beside it, the same drive with a model fitted
-// beforehand on another 40-minute drive of the same car. Fits are taken to be instant (a fit on minutes of
-// pairs takes milliseconds).
+// lacks kept and a one-gear model withdrawn by the daemon's rules, and the interval rule (retrain_interval,
+// min_new_samples); the synthesis takes each new model between two steps. Beside it, the same drive with a
+// model fitted beforehand on another 40-minute drive of the same car. Fits are taken to be instant (a fit on
+// minutes of pairs takes milliseconds).
 //
 // Vehicles are drawn by sim::random_vehicle(seed) (4-7 gears, nothing tuned to the presets), mixed
 // driving, the engine cold at the start; observed as the daemon sees them: the frequency at every 0.1 s
@@ -88,6 +88,10 @@ Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretraine
     GearModel fitted = fitter(pairs);
     ++run.fits;
     new_pairs = 0;
+    if (fitted.empty() && model && gd::one_gear_withdrawn(*model, pairs)) {
+      model = nullptr;
+      synth.set_model(nullptr);
+    }
     if (fitted.empty()) return;
     if (model)
       fitted = gd::keep_seen_gears(*model, std::move(fitted), pairs, schedule.settings().cluster_pairs);

@@ -14,6 +14,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/atomic_file.hpp"
 #include "daemon/fitter.hpp"
 
 namespace gearpulse::daemon {
@@ -135,8 +136,10 @@ bool Retrainer::retrain_now() {
       const ModelPtr before = model_.get();
       const std::size_t judge_pairs = settings().learning.cluster_pairs;
       std::size_t kept = 0;
+      bool withdraw = false;
       GearModel fitted = fit_at_low_priority([&] {
         GearModel fit = fitter_(samples);
+        if (before && fit.empty()) withdraw = one_gear_withdrawn(*before, samples);
         if (!before || before->empty() || fit.empty()) return fit;
         const std::size_t found = fit.gears.size();
         fit = keep_seen_gears(*before, std::move(fit), samples, judge_pairs);
@@ -144,7 +147,10 @@ bool Retrainer::retrain_now() {
         return fit;
       });
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      if (fitted.empty()) {
+      if (fitted.empty() && withdraw) {
+        result = withdraw_model(samples.size(), generation);
+        no_ladder = true;
+      } else if (fitted.empty()) {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
                              fitted.reason.empty() ? "no reason given" : fitted.reason);
         // An automatic gives this answer at every retrain: a warning the first time, then a note.
@@ -222,6 +228,25 @@ bool Retrainer::retrain_now() {
   no_ladder_ = no_ladder;
   if (changed) ++status_.accepted;
   return changed;
+}
+
+std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generation) {
+  const auto lock = model_.lock_writes();
+  if (model_.generation() != generation)
+    return fmt::format("fit on {} samples discarded: the model was replaced or reset during the fit", pairs);
+  model_.set(nullptr);
+  std::string result = fmt::format(
+      "fit on {} samples found no gear ladder, and the steady pairs beside the model's one gear are a "
+      "continuum (as from a CVT below its cruise ratio): that gear is withdrawn, pulses follow GPS",
+      pairs);
+  try {
+    remove_file_durable(model_path_);
+    model_.set_file_stamp(std::nullopt);
+  } catch (const std::exception& e) {
+    result += fmt::format("; {} stays until the next fit: {}", model_path_.string(), e.what());
+  }
+  spdlog::warn("retrain: {}", result);
+  return result;
 }
 
 bool Retrainer::schedule_due(std::unique_lock<std::mutex>& lock) {

@@ -21,6 +21,7 @@
 using namespace gearpulse;
 using namespace gearpulse::daemon;
 using gearpulse::test::TempDir;
+using gearpulse::test::write_text;
 
 namespace {
 
@@ -176,6 +177,52 @@ TEST_CASE("learning: ten minutes of a CVT give no one-gear model") {
     INFO("seed " << seed << ": " << m.gears.size() << " gears");
     CHECK(m.empty());
   }
+}
+
+TEST_CASE("learning: a one-gear model of a CVT is withdrawn once its continuum shows, a gearbox's is not") {
+  const sim::Vehicle cvt = sim::vehicle_preset("cvt");
+  GearModel top;
+  top.gears = {{cvt.cvt_theta_max, 0.8, 0.001}};
+  top.samples = 50;
+  GearModel second;
+  second.gears = {{hatch_thetas()[1], 0.8, 0.001}};
+  second.samples = 50;
+  for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+    INFO("seed " << seed);
+    const auto pairs =
+        sim::to_samples(sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, seed));
+    CHECK(one_gear_withdrawn(top, pairs));
+    const auto manual = sim::to_samples(sim::simulate_observations(
+        sim::vehicle_preset("hatch-5"), sim::DrivingStyle::kMixed, 600.0, 1, seed));
+    CHECK_FALSE(one_gear_withdrawn(second, manual));
+  }
+  // Few pairs beside it are no ground either way; a model of two gears is never withdrawn.
+  CHECK_FALSE(one_gear_withdrawn(second, drive_in_gears({hatch_thetas()[1]}, 120.0, 10)));
+  GearModel two = second;
+  two.gears.push_back({hatch_thetas()[2], 0.2, 0.001});
+  CHECK_FALSE(one_gear_withdrawn(
+      two, sim::to_samples(sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, 1))));
+}
+
+TEST_CASE("learning: the retrainer withdraws a one-gear model a refit finds without ground") {
+  TempDir dir;
+  const sim::Vehicle cvt = sim::vehicle_preset("cvt");
+  TrainingStore store(1e9, 100000);
+  for (const Sample& s :
+       sim::to_samples(sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, 2)))
+    store.add(s);
+  ModelHolder model;
+  GearModel top;
+  top.gears = {{cvt.cvt_theta_max, 0.8, 0.001}};
+  top.samples = 40;
+  model.set(std::make_shared<const GearModel>(top));
+  write_text(dir / "model.json", serialize_model(top));
+  Retrainer retrainer(store, model, dir / "model.json", make_estimator_fitter(), {});
+  CHECK_FALSE(retrainer.retrain_now());
+  INFO(retrainer.status().last_result);
+  CHECK_FALSE(model.trained());
+  CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
+  CHECK(retrainer.status().last_result.find("withdrawn") != std::string::npos);
 }
 
 TEST_CASE("learning: a refit keeps a learned gear its pairs do not contradict") {
