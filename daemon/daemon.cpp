@@ -583,8 +583,8 @@ nlohmann::json Daemon::Impl::status_json() {
   reply["model"]["known_gears"] = known_gears_json(m);
   reply["model"]["learning"] = {{"young", r.young},
                                 {"moving_time", r.moving_time},
-                                {"next_refit", number_or_null(r.next_fit, r.next_fit >= 0.0)},
-                                {"cluster_pairs", r.cluster},
+                                {"next_refit", number_or_null(r.next_refit, r.next_refit >= 0.0)},
+                                {"cluster_pairs", r.cluster_pairs},
                                 {"first_fit_pairs", config.model.learn_cluster_pairs}};
   {
     std::lock_guard lock(state_mutex);

@@ -89,4 +89,14 @@ GearModel keep_seen_gears(const GearModel& current, GearModel fitted, std::span<
   return fitted;
 }
 
+bool one_gear_withdrawn(const GearModel& current, std::span<const Sample> pairs) {
+  constexpr std::size_t kFitPairs = 30;  // moving samples the auto fit needs at least
+  if (current.gears.size() != 1) return false;
+  const double line = std::log(current.gears[0].theta);
+  std::vector<double> off;  // ascending, as steady_log_ratios gives them
+  for (double r : steady_log_ratios(pairs))
+    if (std::abs(r - line) >= 2.0 * kGearWindow) off.push_back(r);
+  return off.size() >= kFitPairs && 4 * largest_gear_cluster(off) < off.size();
+}
+
 }  // namespace gearpulse::daemon

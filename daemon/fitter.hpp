@@ -30,4 +30,12 @@ inline constexpr const char* kKeptGears = "kept_gears";
 [[nodiscard]] GearModel keep_seen_gears(const GearModel& current, GearModel fitted,
                                         std::span<const Sample> pairs, std::size_t judge_pairs);
 
+// Whether a model of one gear has lost the ground it was accepted on (FitOptions::single_gear) when a
+// refit finds no ladder: the steady pairs off its line (beyond a gearbox step of it) number at least 30,
+// what a fit needs, and spread as a continuum does, their densest gear window holding under a quarter of
+// them. A CVT holds one ratio at cruise, as sharp a line as a gear's, and drives through the ratios below
+// it (on simulated drives the densest window holds 12-20 % of those pairs); a gearbox's other gears gather
+// theirs in a window each (32 % and more). A model of any other size is never withdrawn.
+[[nodiscard]] bool one_gear_withdrawn(const GearModel& current, std::span<const Sample> pairs);
+
 }  // namespace gearpulse::daemon

@@ -14,6 +14,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "daemon/atomic_file.hpp"
 #include "daemon/fitter.hpp"
 
 namespace gearpulse::daemon {
@@ -135,8 +136,10 @@ bool Retrainer::retrain_now() {
       const ModelPtr before = model_.get();
       const std::size_t judge_pairs = settings().learning.cluster_pairs;
       std::size_t kept = 0;
+      bool withdraw = false;
       GearModel fitted = fit_at_low_priority([&] {
         GearModel fit = fitter_(samples);
+        if (before && fit.empty()) withdraw = one_gear_withdrawn(*before, samples);
         if (!before || before->empty() || fit.empty()) return fit;
         const std::size_t found = fit.gears.size();
         fit = keep_seen_gears(*before, std::move(fit), samples, judge_pairs);
@@ -144,7 +147,10 @@ bool Retrainer::retrain_now() {
         return fit;
       });
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      if (fitted.empty()) {
+      if (fitted.empty() && withdraw) {
+        result = withdraw_model(samples.size(), generation);
+        no_ladder = true;
+      } else if (fitted.empty()) {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
                              fitted.reason.empty() ? "no reason given" : fitted.reason);
         // An automatic gives this answer at every retrain: a warning the first time, then a note.
@@ -224,6 +230,25 @@ bool Retrainer::retrain_now() {
   return changed;
 }
 
+std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generation) {
+  const auto lock = model_.lock_writes();
+  if (model_.generation() != generation)
+    return fmt::format("fit on {} samples discarded: the model was replaced or reset during the fit", pairs);
+  model_.set(nullptr);
+  std::string result = fmt::format(
+      "fit on {} samples found no gear ladder, and the steady pairs beside the model's one gear are a "
+      "continuum (as from a CVT below its cruise ratio): that gear is withdrawn, pulses follow GPS",
+      pairs);
+  try {
+    remove_file_durable(model_path_);
+    model_.set_file_stamp(std::nullopt);
+  } catch (const std::exception& e) {
+    result += fmt::format("; {} stays until the next fit: {}", model_path_.string(), e.what());
+  }
+  spdlog::warn("retrain: {}", result);
+  return result;
+}
+
 bool Retrainer::schedule_due(std::unique_lock<std::mutex>& lock) {
   lock.unlock();
   std::optional<PairsSummary> pairs;
@@ -242,8 +267,8 @@ bool Retrainer::schedule_due(std::unique_lock<std::mutex>& lock) {
   if (!young_) settled_size_ = size;
   status_.young = young_;
   status_.moving_time = pairs->moving_time;
-  status_.cluster = pairs->largest_cluster;
-  status_.next_fit = young_ ? schedule_.next_refit(pairs->moving_time).value_or(-1.0) : -1.0;
+  status_.cluster_pairs = pairs->largest_cluster;
+  status_.next_refit = young_ ? schedule_.next_refit(pairs->moving_time).value_or(-1.0) : -1.0;
   return schedule_.due(*pairs, has_model);
 }
 
@@ -251,7 +276,10 @@ void Retrainer::run() noexcept {
   using Clock = std::chrono::steady_clock;
   // While young the schedule looks at the store this often: pairs come at about 1 Hz, and its refit
   // times are a minute of moving and more apart.
-  constexpr auto kLearningLook = std::chrono::seconds(5);
+  constexpr double kLearningLook = 5.0;  // s
+  // Each look copies the store and reads it once: a store of hours of standing pairs (a car idling with
+  // GPS, a young model all the same) is looked at less often, at most this many pairs a second on average.
+  constexpr double kLookPairsPerSecond = 4000.0;
   std::unique_lock lock(mutex_);
   // At start, learn right away rather than after a full interval when there is something to learn from:
   // a restored store and no model yet, or enough pairs the model has not seen (gathered on trips shorter
@@ -265,7 +293,9 @@ void Retrainer::run() noexcept {
     if (!first && !requested_) {
       // The interval as set now: a reload that shortens it wakes this wait, which then ends at the new
       // deadline rather than the old one.
-      const auto look = Clock::now() + kLearningLook;
+      const double look_s = std::max(kLearningLook, static_cast<double>(store_.size()) / kLookPairsPerSecond);
+      const auto look =
+          Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(look_s));
       while (!stop_ && !requested_) {
         const auto deadline = young_ ? std::min(interval_end(), look) : interval_end();
         if (Clock::now() >= deadline) break;

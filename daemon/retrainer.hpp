@@ -51,10 +51,10 @@ class Retrainer {
     double last_run_wall = 0.0;  // UNIX seconds of the last attempt, 0 = never
     std::string last_result;     // one line for status
     bool busy = false;
-    bool young = false;        // the learning schedule decides the fits
-    double moving_time = 0.0;  // s of moving the training pairs covered at the schedule's last look
-    double next_fit = -1.0;    // s of moving at the schedule's next refit, -1 = none
-    std::size_t cluster = 0;   // steady pairs in the densest gear window at that look
+    bool young = false;             // the learning schedule decides the fits
+    double moving_time = 0.0;       // s of moving the training pairs covered at the schedule's last look
+    double next_refit = -1.0;       // s of moving at the schedule's next refit, -1 = none
+    std::size_t cluster_pairs = 0;  // steady pairs in the densest gear window at that look
   };
 
   Retrainer(TrainingStore& store, ModelHolder& model, std::filesystem::path model_path, Fitter fitter,
@@ -73,7 +73,7 @@ class Retrainer {
   [[nodiscard]] Settings settings() const;
   // Runs one retrain now (what the thread does): the store's copy, the model's installation and its save on
   // the calling thread, the fit itself in a thread of its own at the lowest priority; returns true if the
-  // model changed.
+  // model changed to a new fit.
   bool retrain_now();
 
  private:
@@ -81,6 +81,9 @@ class Retrainer {
   // The schedule's look at the store (under mutex_ when called; released for the copy): whether a fit is
   // due by it. Sets young_ and the status' schedule fields.
   bool schedule_due(std::unique_lock<std::mutex>& lock);
+  // Withdraws a one-gear model a fit on `pairs` pairs found without ground (one_gear_withdrawn), unless
+  // the model changed since `generation`; returns the result line.
+  std::string withdraw_model(std::size_t pairs, std::uint64_t generation);
 
   TrainingStore& store_;
   ModelHolder& model_;

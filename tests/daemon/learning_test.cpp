@@ -21,6 +21,7 @@
 using namespace gearpulse;
 using namespace gearpulse::daemon;
 using gearpulse::test::TempDir;
+using gearpulse::test::write_text;
 
 namespace {
 
@@ -178,6 +179,52 @@ TEST_CASE("learning: ten minutes of a CVT give no one-gear model") {
   }
 }
 
+TEST_CASE("learning: a one-gear model of a CVT is withdrawn once its continuum shows, a gearbox's is not") {
+  const sim::Vehicle cvt = sim::vehicle_preset("cvt");
+  GearModel top;
+  top.gears = {{cvt.cvt_theta_max, 0.8, 0.001}};
+  top.samples = 50;
+  GearModel second;
+  second.gears = {{hatch_thetas()[1], 0.8, 0.001}};
+  second.samples = 50;
+  for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+    INFO("seed " << seed);
+    const auto pairs =
+        sim::to_samples(sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, seed));
+    CHECK(one_gear_withdrawn(top, pairs));
+    const auto manual = sim::to_samples(sim::simulate_observations(
+        sim::vehicle_preset("hatch-5"), sim::DrivingStyle::kMixed, 600.0, 1, seed));
+    CHECK_FALSE(one_gear_withdrawn(second, manual));
+  }
+  // Few pairs beside it are no ground either way; a model of two gears is never withdrawn.
+  CHECK_FALSE(one_gear_withdrawn(second, drive_in_gears({hatch_thetas()[1]}, 120.0, 10)));
+  GearModel two = second;
+  two.gears.push_back({hatch_thetas()[2], 0.2, 0.001});
+  CHECK_FALSE(one_gear_withdrawn(
+      two, sim::to_samples(sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, 1))));
+}
+
+TEST_CASE("learning: the retrainer withdraws a one-gear model a refit finds without ground") {
+  TempDir dir;
+  const sim::Vehicle cvt = sim::vehicle_preset("cvt");
+  TrainingStore store(1e9, 100000);
+  for (const Sample& s :
+       sim::to_samples(sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, 2)))
+    store.add(s);
+  ModelHolder model;
+  GearModel top;
+  top.gears = {{cvt.cvt_theta_max, 0.8, 0.001}};
+  top.samples = 40;
+  model.set(std::make_shared<const GearModel>(top));
+  write_text(dir / "model.json", serialize_model(top));
+  Retrainer retrainer(store, model, dir / "model.json", make_estimator_fitter(), {});
+  CHECK_FALSE(retrainer.retrain_now());
+  INFO(retrainer.status().last_result);
+  CHECK_FALSE(model.trained());
+  CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
+  CHECK(retrainer.status().last_result.find("withdrawn") != std::string::npos);
+}
+
 TEST_CASE("learning: a refit keeps a learned gear its pairs do not contradict") {
   const std::vector<double>& th = hatch_thetas();
   GearModel current;
@@ -268,7 +315,7 @@ TEST_CASE("learning: the retrainer's first fit comes as soon as the pairs show o
   const Retrainer::Status s = retrainer.status();
   CHECK(s.young);
   CHECK(s.moving_time == Approx(59.0).margin(3.0));
-  CHECK(s.cluster >= 40);
+  CHECK(s.cluster_pairs >= 40);
   REQUIRE(LearningSchedule().next_refit(s.moving_time).has_value());
-  CHECK(s.next_fit == Approx(*LearningSchedule().next_refit(s.moving_time)));
+  CHECK(s.next_refit == Approx(*LearningSchedule().next_refit(s.moving_time)));
 }
