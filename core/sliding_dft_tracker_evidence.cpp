@@ -21,10 +21,17 @@ constexpr double kBroadLo = 1.0, kBroadHi = 1e4;
 constexpr int kBroadSteps = 80;
 // Weight of the matched (track-level) SNR against the broad prior for the fundamental.
 constexpr double kMatched = 0.5;
-// Order-to-fundamental SNR ratio r: log-uniform over 0.02 .. 2 (-17 to +3 dB) for the harmonics, up to
-// 0.5 for the half order (a "half order" stronger than the fundamental means the candidate is the
-// engine's 2nd harmonic), or the order absent altogether.
-constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
+// Order-to-fundamental SNR ratio r: log-uniform from 0.05 (-13 dB) up to 2 (+3 dB) for the harmonics, up to
+// 0.5 for the half order, or the order absent altogether. The 2nd harmonic of a four-stroke's firing
+// frequency carries the load's other half: at light load and on the overrun it stands well above the
+// fundamental (a prior capped at +3 dB read such an engine at twice its frequency). Its ratio is read under
+// two priors, the harmonics' and, at a cost of kSecondLoud, log-uniform over 2 .. 30 (+3 to +15 dB), and
+// the better of the two is taken: a 2nd harmonic at the usual level weighs as much as before, a loud one
+// no longer argues against the candidate. A "half order" stronger than the fundamental, or a 3rd harmonic
+// far above it, means the candidate is not the fundamental (it is the engine's 2nd harmonic, or a third of
+// it).
+constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kSecondRatioHi = 30.0, kHalfRatioHi = 0.5;
+constexpr double kSecondLoud = 0.5;
 constexpr int kRatioSteps = 20;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
 constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
@@ -95,6 +102,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
   ladder_.assign(fund_.size(), 0.0);
+  second_.assign(fund_.size(), 0.0);
   half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
@@ -114,6 +122,9 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
         return log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
       };
       ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
+      const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
+                                        [z, rho](double r) { return log_rice(z, rho * r); });
+      second_[at] = with_absent(std::max(log_ratio(kRatioHi), std::log(kSecondLoud) + loud), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
         half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
@@ -146,6 +157,10 @@ double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept 
 
 double HarmonicEvidence::order(double z, double rho_fundamental) const noexcept {
   return lookup(ladder_, z, rho_fundamental);
+}
+
+double HarmonicEvidence::second(double z, double rho_fundamental) const noexcept {
+  return lookup(second_, z, rho_fundamental);
 }
 
 double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
