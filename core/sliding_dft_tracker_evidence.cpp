@@ -25,13 +25,12 @@ constexpr double kMatched = 0.5;
 // 0.5 for the half order, or the order absent altogether. The 2nd harmonic of a four-stroke's firing
 // frequency carries the load's other half: at light load and on the overrun it stands well above the
 // fundamental (a prior capped at +3 dB read such an engine at twice its frequency). Its ratio is read under
-// two priors, the harmonics' and, at a cost of kSecondLoud, log-uniform over 2 .. 30 (+3 to +15 dB), and
-// the better of the two is taken: a 2nd harmonic at the usual level weighs as much as before, a loud one
-// no longer argues against the candidate. A "half order" stronger than the fundamental, or a 3rd harmonic
+// two priors, the harmonics' and log-uniform over 2 .. 30 (+3 to +15 dB), and the better of the two is
+// taken: a 2nd harmonic at the usual level weighs as much as under the first, a loud one no longer argues
+// against the candidate. A "half order" stronger than the fundamental, or a 3rd harmonic
 // far above it, means the candidate is not the fundamental (it is the engine's 2nd harmonic, or a third of
 // it).
 constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kSecondRatioHi = 30.0, kHalfRatioHi = 0.5;
-constexpr double kSecondLoud = 0.5;
 constexpr int kRatioSteps = 20;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
 constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
@@ -124,7 +123,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
       const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
                                         [z, rho](double r) { return log_rice(z, rho * r); });
-      second_[at] = with_absent(std::max(log_ratio(kRatioHi), std::log(kSecondLoud) + loud), kOrderAbsent);
+      second_[at] = with_absent(std::max(log_ratio(kRatioHi), loud), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
         half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
