@@ -432,7 +432,7 @@ struct OrderScore {
   }
   void print(const char* label) {
     close_run();
-    std::printf("%s: coverage %5.1f %% of %zu in-band hops | rmse %6.3f Hz (right hops) | gross %5.2f %% |",
+    std::printf("%s: coverage %5.1f %% of %zu in-band hops | rmse %6.3f Hz (right hops) | gross %5.2f %%",
                 label, Score::pct(tracked, in_band), in_band,
                 right_n ? std::sqrt(sq / static_cast<double>(right_n)) : NAN, Score::pct(gross, tracked));
     for (int i = 0; i < kOtherOrderCount; ++i)
