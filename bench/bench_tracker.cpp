@@ -5,7 +5,7 @@
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
-//   bench_tracker --scenes tuning|report
+//   bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
 //                 [--hop S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
@@ -464,13 +464,17 @@ double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& 
 
 // ---- Scenes: the richer generator over fixed seed sets ----
 
-int scenes(const std::string& set) {
+int scenes(const std::string& set, const TrackerConfig& base) {
   constexpr double kDurationS = 120.0;
   const std::uint64_t first = set == "tuning" ? 101 : 201;
   constexpr int kSeeds = 6;
-  std::printf("scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder)\n",
-              set.c_str(), static_cast<unsigned long long>(first),
-              static_cast<unsigned long long>(first + kSeeds - 1), kDurationS);
+  std::printf(
+      "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), band %g:%g "
+      "Hz, "
+      "window %g s, hop %g s\n",
+      set.c_str(), static_cast<unsigned long long>(first),
+      static_cast<unsigned long long>(first + kSeeds - 1), kDurationS, base.band_lo_hz, base.band_hi_hz,
+      base.window_s, base.hop_s);
   double spent = 0.0, audio = 0.0;
   for (double snr : {10.0, 0.0, -5.0}) {
     OrderScore pooled;
@@ -479,9 +483,11 @@ int scenes(const std::string& set) {
       const auto trajectory = sim::launch_drive_trajectory(kDurationS, seed);
       const sim::LighterSceneConfig cfg = sim::scene_for_seed(seed, snr);
       const std::vector<float> x = sim::make_lighter_scene(cfg, trajectory, kDurationS);
-      TrackerConfig tc;
+      TrackerConfig tc = base;
       SlidingDftTracker tracker(tc);
       OrderScore s;
+      s.band_lo = tc.band_lo_hz;
+      s.band_hi = tc.band_hi_hz;
       s.hop_s = tc.hop_s;
       const bool dump = std::getenv("GEARPULSE_BENCH_DUMP") != nullptr;
       spent += run_tracker(tracker, x, [&](const TrackPoint& p) {
@@ -605,7 +611,7 @@ int main(int argc, char** argv) {
   const auto usage = [] {
     std::fprintf(stderr,
                  "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]\n"
-                 "       bench_tracker --scenes tuning|report\n"
+                 "       bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]\n"
                  "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
                  "                     [--window S] [--hop S] [--dump]\n");
     return 2;
@@ -656,7 +662,7 @@ int main(int argc, char** argv) {
       if (wav.wav.empty() || wav.tacho.empty()) return usage();
       return score_wav(wav);
     }
-    if (!scene_set.empty()) return scenes(scene_set);
+    if (!scene_set.empty()) return scenes(scene_set, wav.config);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_tracker: %s\n", e.what());
     return 2;
