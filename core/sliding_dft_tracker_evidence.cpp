@@ -99,10 +99,10 @@ const HarmonicEvidence& HarmonicEvidence::shared() {
 HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   const double log_tone = std::log(tone_prior), log_no_tone = std::log1p(-tone_prior);
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
-  fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
-  ladder_.assign(fund_.size(), 0.0);
-  second_.assign(fund_.size(), 0.0);
-  half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
+  fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0f);
+  ladder_.assign(fund_.size(), 0.0f);
+  second_.assign(fund_.size(), 0.0f);
+  half_.assign(kHalfTables, std::vector<float>(fund_.size(), 0.0f));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
     const double log_broad =
@@ -111,8 +111,8 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
     for (int i = 0; i <= kRhoSteps; ++i) {
       const double rho = rho_of(i);
       const std::size_t at = static_cast<std::size_t>(i) * cols + static_cast<std::size_t>(j);
-      fund_[at] =
-          log_add(std::log(kMatched) + log_rice(z, rho), std::log1p(-kMatched) + log_broad) - log_background;
+      fund_[at] = static_cast<float>(
+          log_add(std::log(kMatched) + log_rice(z, rho), std::log1p(-kMatched) + log_broad) - log_background);
       const auto with_absent = [&](double log_ratio, double absent) {
         const double engine = log_add(std::log1p(-absent) + log_ratio, std::log(absent) - z);
         return log_add(log_no_tone + engine, log_tone + log_broad) - log_background;
@@ -120,18 +120,19 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       const auto log_ratio = [&](double hi) {
         return log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
       };
-      ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
+      const double usual = log_ratio(kRatioHi);
+      ladder_[at] = static_cast<float>(with_absent(usual, kOrderAbsent));
       const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
                                         [z, rho](double r) { return log_rice(z, rho * r); });
-      second_[at] = with_absent(std::max(log_ratio(kRatioHi), loud), kOrderAbsent);
+      second_[at] = static_cast<float>(with_absent(std::max(usual, loud), kOrderAbsent));
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
-        half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
+        half_[static_cast<std::size_t>(n)][at] = static_cast<float>(with_absent(half_ratio, kHalfAbsent[n]));
     }
   }
 }
 
-double HarmonicEvidence::lookup(const std::vector<double>& table, double z, double rho) const noexcept {
+double HarmonicEvidence::lookup(const std::vector<float>& table, double z, double rho) const noexcept {
   // Beyond the table (a bin louder than ~33 dB over the noise), the ratios are saturated: z and rho are
   // scaled down together, so a loud line is read at the table's edge with its level against the expected
   // one kept, rather than with one of the two clamped (a clean line then read as mismatched to itself).
@@ -145,8 +146,8 @@ double HarmonicEvidence::lookup(const std::vector<double>& table, double z, doub
   const auto j = static_cast<std::size_t>(u), i = static_cast<std::size_t>(r);
   const double a = u - static_cast<double>(j), b = r - static_cast<double>(i);
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
-  const double* row0 = table.data() + i * cols;
-  const double* row1 = row0 + cols;
+  const float* row0 = table.data() + i * cols;
+  const float* row1 = row0 + cols;
   return (1.0 - b) * ((1.0 - a) * row0[j] + a * row0[j + 1]) + b * ((1.0 - a) * row1[j] + a * row1[j + 1]);
 }
 

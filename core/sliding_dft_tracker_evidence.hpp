@@ -16,7 +16,9 @@
 // the noise is not penalised. Some signals have no half order at all: the probability of its absence can be
 // given as learned (half_order()).
 //
-// Everything is tabulated at construction; lookups are noexcept and allocation-free.
+// Everything is tabulated at construction (in single precision: the ratios are read to a few hundredths,
+// and the tables, read at every candidate of every hop, stay small in the cache); lookups are noexcept
+// and allocation-free.
 #include <vector>
 
 namespace gearpulse {
@@ -40,13 +42,13 @@ class HarmonicEvidence {
   [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
 
  private:
-  [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
-  std::vector<double> fund_;    // over (log10 rho, sqrt z)
-  std::vector<double> ladder_;  // 3rd harmonic, over (log10 rho, sqrt z)
-  std::vector<double> second_;  // 2nd harmonic, over (log10 rho, sqrt z)
+  [[nodiscard]] double lookup(const std::vector<float>& table, double z, double rho) const noexcept;
+  std::vector<float> fund_;    // over (log10 rho, sqrt z)
+  std::vector<float> ladder_;  // 3rd harmonic, over (log10 rho, sqrt z)
+  std::vector<float> second_;  // 2nd harmonic, over (log10 rho, sqrt z)
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).
-  std::vector<std::vector<double>> half_;
+  std::vector<std::vector<float>> half_;
 };
 
 }  // namespace gearpulse
