@@ -7,7 +7,7 @@
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
 //   bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
-//                 [--hop S] [--dump]
+//                 [--hop S] [--offset S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
 // vehicle simulator's preset NAME (bmw-520i, hatch-5, close-6, wide-4, van-6, sport-7, compact-4)
 // instead of the built-in drive ("drive").
@@ -16,6 +16,7 @@
 // sets: "tuning" (seeds 101-106, for choosing constants) or "report" (seeds 201-206, for figures only).
 // --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
 // is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
+// --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
 #include <fftw3.h>
 #include <sndfile.h>
 
@@ -552,6 +553,7 @@ double tacho_truth(const std::vector<std::array<double, 2>>& tacho, double t, do
 struct WavOptions {
   std::string wav, tacho;
   double order = 2.0;
+  double offset_s = 0.0;  // tacho time of the recording's first frame
   int channel = -1;
   TrackerConfig config;
   bool dump = false;
@@ -579,7 +581,7 @@ int score_wav(WavOptions o) {
   s.band_hi = o.config.band_hi_hz;
   s.hop_s = o.config.hop_s;
   const double spent = run_tracker(*tracker, mono, [&](const TrackPoint& p) {
-    const double truth = tacho_truth(tacho, p.t, o.order);
+    const double truth = tacho_truth(tacho, p.t + o.offset_s, o.order);
     if (o.dump)
       std::printf("%.3f %.3f %.3f %.1f %d %.3f\n", p.t, truth, p.freq, p.snr_db, p.tracked, p.confidence);
     s.add(p, truth);
@@ -613,7 +615,7 @@ int main(int argc, char** argv) {
                  "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]\n"
                  "       bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]\n"
                  "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
-                 "                     [--window S] [--hop S] [--dump]\n");
+                 "                     [--window S] [--hop S] [--offset S] [--dump]\n");
     return 2;
   };
   for (int i = 1; i < argc; ++i) {
@@ -627,6 +629,8 @@ int main(int argc, char** argv) {
       wav.wav = argv[++i];
     } else if (a == "--tacho" && more) {
       wav.tacho = argv[++i];
+    } else if (a == "--offset" && more) {
+      if (!parse_number(argv[++i], wav.offset_s)) return usage();
     } else if (a == "--order" && more) {
       if (!parse_number(argv[++i], wav.order) || wav.order <= 0) return usage();
     } else if (a == "--channel" && more) {
