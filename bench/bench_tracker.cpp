@@ -5,10 +5,20 @@
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
+//   bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]
+//   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
+//                 [--hop S] [--offset S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
 // vehicle simulator's preset NAME (bmw-520i, hatch-5, close-6, wide-4, van-6, sport-7, compact-4)
 // instead of the built-in drive ("drive").
+// --scenes scores the tracker on LighterScene recordings (a cabin's other lines, a load that moves energy
+// between f and 2 f, automatic gain, clipping, launches) at 10, 0 and -5 dB over one of two fixed seed
+// sets: "tuning" (seeds 101-106, for choosing constants) or "report" (seeds 201-206, for figures only).
+// --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
+// is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
+// --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
 #include <fftw3.h>
+#include <sndfile.h>
 
 #include <algorithm>
 #include <array>
@@ -16,6 +26,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <fstream>
+#include <memory>
 #include <numbers>
 #include <random>
 #include <span>
@@ -26,6 +38,7 @@
 #include "bench/requirements.hpp"
 #include "core/sliding_dft_tracker.hpp"
 #include "tools/sim/lighter_signal.hpp"
+#include "tools/sim/lighter_signal_scene.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 namespace {
@@ -334,6 +347,262 @@ void cpu() {
               kMinutes, kFs, spent, 100.0 * spent / (kMinutes * 60.0), outputs);
 }
 
+// ---- Scoring against a truth that may sit at another order of what the tracker follows ----
+
+// Ratios of estimate to truth that are reported as "at another order".
+constexpr double kOtherOrders[] = {1.0 / 3.0, 0.5, 2.0 / 3.0, 1.5, 2.0, 3.0, 4.0};
+constexpr const char* kOtherOrderNames[] = {"x1/3", "x0.5", "x2/3", "x1.5", "x2", "x3", "x4"};
+constexpr int kOtherOrderCount = static_cast<int>(std::size(kOtherOrders));
+constexpr double kLockLimitS = 0.3;  // longest acceptable lock on another order
+
+// Index into kOtherOrders of the order `est` sits at (within 5 %), or -1.
+int other_order(double est, double truth) {
+  for (int i = 0; i < kOtherOrderCount; ++i)
+    if (right(est, kOtherOrders[i] * truth)) return i;
+  return -1;
+}
+
+struct OrderScore {
+  double band_lo = 50.0, band_hi = 200.0, hop_s = 0.1;
+  std::size_t in_band = 0, tracked = 0, gross = 0, right_n = 0;
+  double sq = 0.0;
+  std::size_t at_order[kOtherOrderCount] = {};
+  double longest_lock_s = 0.0;
+  std::size_t long_locks = 0;  // locks on another order longer than kLockLimitS
+  Calibration calibration;
+  std::size_t valued = 0, valued_right = 0;
+  double confidence_sum = 0.0;
+  // The run of consecutive tracked hops at one other order.
+  int run_order = -1;
+  double run_from = 0.0, run_to = 0.0;
+
+  void close_run() {
+    if (run_order < 0) return;
+    const double length = run_to - run_from + hop_s;
+    longest_lock_s = std::max(longest_lock_s, length);
+    long_locks += length > kLockLimitS + 1e-9;
+    run_order = -1;
+  }
+  void add(const TrackPoint& p, double truth) {
+    if (!(std::isfinite(truth) && truth >= band_lo && truth <= band_hi)) {
+      close_run();
+      return;
+    }
+    ++in_band;
+    if (std::isfinite(p.freq)) {
+      ++valued;
+      valued_right += right(p.freq, truth);
+      confidence_sum += p.confidence;
+      calibration.add(p.confidence, right(p.freq, truth));
+    }
+    const int order = p.tracked ? other_order(p.freq, truth) : -1;
+    if (order != run_order) close_run();
+    if (order >= 0 && run_order < 0) {
+      run_order = order;
+      run_from = p.t;
+    }
+    if (order >= 0) run_to = p.t;
+    if (!p.tracked) return;
+    ++tracked;
+    if (right(p.freq, truth)) {
+      ++right_n;
+      sq += (p.freq - truth) * (p.freq - truth);
+    } else {
+      ++gross;
+    }
+    if (order >= 0) ++at_order[order];
+  }
+  void merge(OrderScore o) {
+    close_run();
+    o.close_run();
+    in_band += o.in_band;
+    tracked += o.tracked;
+    gross += o.gross;
+    right_n += o.right_n;
+    sq += o.sq;
+    for (int i = 0; i < kOtherOrderCount; ++i)
+      at_order[i] += o.at_order[i];
+    longest_lock_s = std::max(longest_lock_s, o.longest_lock_s);
+    long_locks += o.long_locks;
+    for (int b = 0; b < Calibration::kBins; ++b) {
+      calibration.n[b] += o.calibration.n[b];
+      calibration.ok[b] += o.calibration.ok[b];
+    }
+    valued += o.valued;
+    valued_right += o.valued_right;
+    confidence_sum += o.confidence_sum;
+  }
+  void print(const char* label) {
+    close_run();
+    std::printf("%s: coverage %5.1f %% of %zu in-band hops | rmse %6.3f Hz (right hops) | gross %5.2f %%",
+                label, Score::pct(tracked, in_band), in_band,
+                right_n ? std::sqrt(sq / static_cast<double>(right_n)) : NAN, Score::pct(gross, tracked));
+    for (int i = 0; i < kOtherOrderCount; ++i)
+      if (at_order[i]) std::printf(" %s %.2f %%", kOtherOrderNames[i], Score::pct(at_order[i], tracked));
+    std::printf(" | longest lock on another order %.1f s, %zu over %.1f s\n", longest_lock_s, long_locks,
+                kLockLimitS);
+    std::printf("      every estimate: %5.1f %% of in-band hops, %5.1f %% right, mean confidence %.3f\n",
+                Score::pct(valued, in_band), Score::pct(valued_right, valued),
+                valued ? confidence_sum / static_cast<double>(valued) : NAN);
+    calibration.print();
+  }
+};
+
+// Feeds `x` to a tracker in capture-sized blocks; calls `sink` with every output.
+template <class Sink>
+double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& sink) {
+  const std::size_t block = std::min<std::size_t>(4800, tracker.max_push_frames());
+  double spent = 0.0;
+  TrackPoint p;
+  for (std::size_t at = 0; at < x.size(); at += block) {
+    const double before = cpu_seconds();
+    tracker.push(x.subspan(at, std::min(block, x.size() - at)));
+    spent += cpu_seconds() - before;
+    while (tracker.pop(p))
+      sink(p);
+  }
+  return spent;
+}
+
+// ---- Scenes: the richer generator over fixed seed sets ----
+
+int scenes(const std::string& set, const TrackerConfig& base) {
+  constexpr double kDurationS = 120.0;
+  const std::uint64_t first = set == "tuning" ? 101 : 201;
+  constexpr int kSeeds = 6;
+  std::printf(
+      "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), band %g:%g "
+      "Hz, "
+      "window %g s, hop %g s\n",
+      set.c_str(), static_cast<unsigned long long>(first),
+      static_cast<unsigned long long>(first + kSeeds - 1), kDurationS, base.band_lo_hz, base.band_hi_hz,
+      base.window_s, base.hop_s);
+  double spent = 0.0, audio = 0.0;
+  for (double snr : {10.0, 0.0, -5.0}) {
+    OrderScore pooled;
+    for (int i = 0; i < kSeeds; ++i) {
+      const std::uint64_t seed = first + static_cast<std::uint64_t>(i);
+      const auto trajectory = sim::launch_drive_trajectory(kDurationS, seed);
+      const sim::LighterSceneConfig cfg = sim::scene_for_seed(seed, snr);
+      const std::vector<float> x = sim::make_lighter_scene(cfg, trajectory, kDurationS);
+      TrackerConfig tc = base;
+      SlidingDftTracker tracker(tc);
+      OrderScore s;
+      s.band_lo = tc.band_lo_hz;
+      s.band_hi = tc.band_hi_hz;
+      s.hop_s = tc.hop_s;
+      const bool dump = std::getenv("GEARPULSE_BENCH_DUMP") != nullptr;
+      spent += run_tracker(tracker, x, [&](const TrackPoint& p) {
+        if (dump)
+          std::printf("%llu %.2f %.2f %.2f %.1f %d %.3f\n", static_cast<unsigned long long>(seed), p.t,
+                      trajectory(p.t), p.freq, p.snr_db, p.tracked, p.confidence);
+        s.add(p, trajectory(p.t));
+      });
+      audio += kDurationS;
+      char label[64];
+      std::snprintf(label, sizeof label, "  seed %3llu %5.1f dB", static_cast<unsigned long long>(seed), snr);
+      OrderScore shown = s;
+      shown.print(label);
+      pooled.merge(s);
+    }
+    char label[64];
+    std::snprintf(label, sizeof label, "pooled %5.1f dB", snr);
+    pooled.print(label);
+  }
+  std::printf("CPU: %.2f s for %.0f s of 48 kHz audio (%.3f %% of one core)\n", spent, audio,
+              100.0 * spent / audio);
+  return 0;
+}
+
+// ---- A real recording against a tacho log ----
+
+struct SndfileCloser {
+  void operator()(SNDFILE* f) const noexcept { sf_close(f); }
+};
+
+// Tacho samples (t, rpm) in time order; a line that does not parse as two numbers is skipped.
+std::vector<std::array<double, 2>> read_tacho(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open");
+  std::vector<std::array<double, 2>> rows;
+  std::string line;
+  while (std::getline(in, line)) {
+    double t = 0.0, rpm = 0.0;
+    if (std::sscanf(line.c_str(), "%lf,%lf", &t, &rpm) != 2 || !std::isfinite(t)) continue;
+    if (!rows.empty() && t <= rows.back()[0]) throw std::runtime_error(path + ": times must increase");
+    rows.push_back({t, rpm});
+  }
+  if (rows.size() < 2) throw std::runtime_error(path + ": fewer than two t,rpm rows");
+  return rows;
+}
+
+// Truth at t: rpm linearly interpolated between tacho samples at most 1 s apart, / 60 x order; NaN
+// outside the log, across a gap, or with the engine stopped.
+double tacho_truth(const std::vector<std::array<double, 2>>& tacho, double t, double order) {
+  constexpr double kMaxGapS = 1.0;
+  const auto it = std::lower_bound(tacho.begin(), tacho.end(), t,
+                                   [](const std::array<double, 2>& r, double v) { return r[0] < v; });
+  if (it == tacho.begin() || it == tacho.end())
+    return it != tacho.end() && (*it)[0] == t ? (*it)[1] / 60.0 * order : NAN;
+  const auto& b = *it;
+  const auto& a = *(it - 1);
+  if (b[0] - a[0] > kMaxGapS) return NAN;
+  const double rpm = a[1] + (t - a[0]) / (b[0] - a[0]) * (b[1] - a[1]);
+  return rpm > 0.0 ? rpm / 60.0 * order : NAN;
+}
+
+struct WavOptions {
+  std::string wav, tacho;
+  double order = 2.0;
+  double offset_s = 0.0;  // tacho time of the recording's first frame
+  int channel = -1;
+  TrackerConfig config;
+  bool dump = false;
+};
+
+int score_wav(WavOptions o) {
+  const auto tacho = read_tacho(o.tacho);
+  SF_INFO info{};
+  std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.wav.c_str(), SFM_READ, &info));
+  if (!file) throw std::runtime_error(o.wav + ": cannot read audio: " + sf_strerror(nullptr));
+  if (info.frames <= 0 || info.channels <= 0) throw std::runtime_error(o.wav + ": no audio frames");
+  if (o.channel >= info.channels) throw std::runtime_error(o.wav + ": no such channel");
+  std::vector<float> interleaved(static_cast<std::size_t>(info.frames) *
+                                 static_cast<std::size_t>(info.channels));
+  const sf_count_t got = sf_readf_float(file.get(), interleaved.data(), info.frames);
+  std::vector<float> mono(static_cast<std::size_t>(std::max<sf_count_t>(got, 0)));
+  (void)gearpulse::extract_channel(interleaved, info.channels, o.channel, mono);
+  o.config.sample_rate_hz = info.samplerate;
+  o.config.history_s = 0.0;
+  std::string error;
+  auto tracker = SlidingDftTracker::create(o.config, error);
+  if (!tracker) throw std::runtime_error(o.wav + ": " + error);
+  OrderScore s;
+  s.band_lo = o.config.band_lo_hz;
+  s.band_hi = o.config.band_hi_hz;
+  s.hop_s = o.config.hop_s;
+  const double spent = run_tracker(*tracker, mono, [&](const TrackPoint& p) {
+    const double truth = tacho_truth(tacho, p.t + o.offset_s, o.order);
+    if (o.dump)
+      std::printf("%.3f %.3f %.3f %.1f %d %.3f\n", p.t, truth, p.freq, p.snr_db, p.tracked, p.confidence);
+    s.add(p, truth);
+  });
+  const double seconds = static_cast<double>(mono.size()) / info.samplerate;
+  std::printf("%s (%.1f s at %d Hz, channel %s) against %s x %g / 60, band %g:%g Hz, window %g s, hop %g s\n",
+              o.wav.c_str(), seconds, info.samplerate,
+              o.channel < 0 ? "mix" : std::to_string(o.channel).c_str(), o.tacho.c_str(), o.order,
+              o.config.band_lo_hz, o.config.band_hi_hz, o.config.window_s, o.config.hop_s);
+  s.print("recording");
+  std::printf("CPU: %.2f s (%.3f %% of one core)\n", spent, 100.0 * spent / std::max(seconds, 1e-9));
+  return 0;
+}
+
+bool parse_number(const char* text, double& out) {
+  char* end = nullptr;
+  out = std::strtod(text, &end);
+  return end != text && *end == '\0' && std::isfinite(out);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -343,9 +612,45 @@ int main(int argc, char** argv) {
   std::string vehicle = "drive";
   bool with_cpu = true;
   bool quick = false;
+  std::string scene_set;
+  WavOptions wav;
+  const auto usage = [] {
+    std::fprintf(stderr,
+                 "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
+                 "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
+                 "       bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]\n"
+                 "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
+                 "                     [--window S] [--hop S] [--offset S] [--dump]\n");
+    return 2;
+  };
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--seed" && i + 1 < argc) {
+    const bool more = i + 1 < argc;
+    double number = 0.0;
+    if (a == "--scenes" && more) {
+      scene_set = argv[++i];
+      if (scene_set != "tuning" && scene_set != "report") return usage();
+    } else if (a == "--wav" && more) {
+      wav.wav = argv[++i];
+    } else if (a == "--tacho" && more) {
+      wav.tacho = argv[++i];
+    } else if (a == "--offset" && more) {
+      if (!parse_number(argv[++i], wav.offset_s)) return usage();
+    } else if (a == "--order" && more) {
+      if (!parse_number(argv[++i], wav.order) || wav.order <= 0) return usage();
+    } else if (a == "--channel" && more) {
+      if (!parse_number(argv[++i], number) || number < 0 || number != std::floor(number)) return usage();
+      wav.channel = static_cast<int>(number);
+    } else if (a == "--window" && more) {
+      if (!parse_number(argv[++i], wav.config.window_s)) return usage();
+    } else if (a == "--hop" && more) {
+      if (!parse_number(argv[++i], wav.config.hop_s)) return usage();
+    } else if (a == "--band" && more) {
+      if (std::sscanf(argv[++i], "%lf:%lf", &wav.config.band_lo_hz, &wav.config.band_hi_hz) != 2)
+        return usage();
+    } else if (a == "--dump") {
+      wav.dump = true;
+    } else if (a == "--seed" && i + 1 < argc) {
       char* end = nullptr;
       const long long v = std::strtoll(argv[++i], &end, 10);
       if (*end != '\0' || v < 0) {
@@ -360,11 +665,18 @@ int main(int argc, char** argv) {
     } else if (a == "--quick") {
       quick = true;
     } else {
-      std::fprintf(stderr,
-                   "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick] "
-                   "[--require NAME<=VALUE|NAME>=VALUE]...\n");
-      return 2;
+      return usage();
     }
+  }
+  try {
+    if (!wav.wav.empty() || !wav.tacho.empty()) {
+      if (wav.wav.empty() || wav.tacho.empty()) return usage();
+      return score_wav(wav);
+    }
+    if (!scene_set.empty()) return scenes(scene_set, wav.config);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_tracker: %s\n", e.what());
+    return 2;
   }
   if (vehicle != "drive") {
     try {

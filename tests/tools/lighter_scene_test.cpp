@@ -1,0 +1,97 @@
+// LighterScene: reproducible per seed, the load moves energy between f and 2f, the automatic gain holds
+// the level, and the card clips.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <numbers>
+#include <vector>
+
+#include "tools/sim/lighter_signal_scene.hpp"
+
+namespace sim = gearpulse::sim;
+
+namespace {
+
+// The engine's line alone: every other component off, no noise, no gain, no clipping.
+sim::LighterSceneConfig engine_only() {
+  sim::LighterSceneConfig c;
+  c.half_order = c.order_1_5 = c.harmonic3 = 0.0;
+  c.harmonic2 = 1.0;
+  c.load_swing = 0.6;
+  c.load_slew_hz_per_s = 5.0;  // a 30 Hz/s ramp is far past full load (or none)
+  c.spike_amplitude = c.alternator = c.body = c.fan = c.pump = c.mains = 0.0;
+  c.snr_db = INFINITY;
+  c.agc_s = 0.0;
+  c.clip = 1e9;
+  return c;
+}
+
+// Amplitude of order `order` of a line whose frequency is f0 + slope t, over [from, to] s (demodulated
+// with the line's own phase, which the generator integrates from t = 0).
+double order_amplitude(const std::vector<float>& x, double fs, double f0, double slope, double order,
+                       double from, double to) {
+  std::complex<double> acc = 0.0;
+  std::size_t n = 0;
+  for (auto i = static_cast<std::size_t>(from * fs); i < static_cast<std::size_t>(to * fs); ++i, ++n) {
+    const double t = static_cast<double>(i) / fs;
+    const double phase = 2.0 * std::numbers::pi * order * (f0 * t + 0.5 * slope * t * t);
+    acc += static_cast<double>(x[i]) * std::polar(1.0, -phase);
+  }
+  return 2.0 * std::abs(acc) / static_cast<double>(n);
+}
+
+}  // namespace
+
+TEST_CASE("lighter scene: the same seed gives the same recording, another seed another") {
+  const auto truth = sim::launch_drive_trajectory(5.0, 3);
+  const auto a = sim::make_lighter_scene(sim::scene_for_seed(3, 0.0), truth, 5.0);
+  const auto b = sim::make_lighter_scene(sim::scene_for_seed(3, 0.0), truth, 5.0);
+  const auto c = sim::make_lighter_scene(sim::scene_for_seed(4, 0.0), truth, 5.0);
+  CHECK(a == b);
+  CHECK(a != c);
+}
+
+TEST_CASE("lighter scene: the 2nd harmonic leads on the overrun, the fundamental under load") {
+  const double fs = 48000.0;
+  const sim::LighterSceneConfig c = engine_only();
+  for (const double slope : {-30.0, 30.0}) {
+    INFO("slope " << slope << " Hz/s");
+    const double f0 = slope < 0 ? 150.0 : 60.0;
+    const auto x = sim::make_lighter_scene(
+        c, [&](double t) { return f0 + slope * t; }, 3.0);
+    const double a1 = order_amplitude(x, fs, f0, slope, 1.0, 1.0, 3.0);
+    const double a2 = order_amplitude(x, fs, f0, slope, 2.0, 1.0, 3.0);
+    // No load: fundamental 1 - 0.6, 2nd harmonic 1 + 0.6 (12 dB over); full load the other way round.
+    if (slope < 0) {
+      CHECK(a1 == Approx(0.4 * c.amplitude).epsilon(0.05));
+      CHECK(a2 == Approx(1.6 * c.amplitude).epsilon(0.05));
+    } else {
+      CHECK(a1 == Approx(1.6 * c.amplitude).epsilon(0.05));
+      CHECK(a2 == Approx(0.4 * c.amplitude).epsilon(0.05));
+    }
+  }
+}
+
+TEST_CASE("lighter scene: the automatic gain holds the level whatever the input's, and the card clips") {
+  const auto truth = [](double) { return 100.0; };
+  sim::LighterSceneConfig c = sim::scene_for_seed(5, 10.0);
+  c.clip = 1.0;
+  std::vector<double> rms;
+  for (const double scale : {1.0, 10.0}) {
+    c.amplitude = 0.01 * scale;
+    const auto x = sim::make_lighter_scene(c, truth, 8.0);
+    double sum = 0.0;
+    const std::size_t from = x.size() / 2;  // past the gain's settling
+    for (std::size_t i = from; i < x.size(); ++i)
+      sum += static_cast<double>(x[i]) * x[i];
+    rms.push_back(std::sqrt(sum / static_cast<double>(x.size() - from)));
+  }
+  CHECK(rms[1] == Approx(rms[0]).epsilon(0.1));
+  c.clip = 0.05;
+  const auto clipped = sim::make_lighter_scene(c, truth, 2.0);
+  const float peak = *std::max_element(clipped.begin(), clipped.end(),
+                                       [](float a, float b) { return std::abs(a) < std::abs(b); });
+  CHECK(std::abs(peak) == Approx(0.05).epsilon(1e-6));
+}

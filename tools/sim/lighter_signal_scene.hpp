@@ -1,0 +1,105 @@
+#pragma once
+// Synthetic lighter-voltage recordings closer to a real car than LighterSignal's: besides the engine's
+// ripple they hold what a sound card on a lighter socket also picks up in a cabin.
+//
+// The engine's line f(t) (the tracked fundamental: the firing frequency, twice the crank rate on a
+// four-cylinder) comes with
+//   - half and one-and-a-half orders (0.5 f, 1.5 f) and a 3rd harmonic;
+//   - energy that moves between f and 2 f with the load: under load (accelerating) the fundamental
+//     leads, on the overrun (engine braking) and at light load the 2nd harmonic stands up to 12 dB over it;
+//   - ignition spikes at the firing rate;
+//   - alternator whine at a non-integer pulley order of the crank (2.5-3 x crank);
+// and, independent of the revs,
+//   - a strong body/cabin resonance (20-40 Hz, noise through a resonator);
+//   - a PWM fan's line and its 2nd harmonic, switched on and off; a fuel pump's line with a slow wobble;
+//   - mains hum from a charger (50 or 60 Hz and its 2nd and 3rd harmonics);
+//   - white noise at a given SNR (fundamental power at mean load over the noise power in [noise_lo_hz,
+//     noise_hi_hz]);
+//   - a USB card's automatic gain (the level follows the signal's envelope over agc_s) and clipping.
+// Seeded and reproducible; scene_for_seed() draws every level and frequency from its seed.
+#include <cstdint>
+#include <limits>
+#include <random>
+#include <span>
+#include <vector>
+
+#include "tools/sim/lighter_signal.hpp"
+
+namespace gearpulse::sim {
+
+struct LighterSceneConfig {
+  double sample_rate_hz = 48000.0;
+  double amplitude = 0.01;  // fundamental amplitude at mean load (0.5); the others are relative to it
+  int cylinders = 4;        // crank rate = 2 f / cylinders
+  double half_order = 0.3;  // 0.5 f
+  double order_1_5 = 0.2;   // 1.5 f
+  double harmonic2 = 1.0;   // 2 f at mean load
+  double harmonic3 = 0.2;
+  // Load moves energy between f and 2 f: the fundamental's amplitude is (1 + swing (2 load - 1)), the 2nd
+  // harmonic's harmonic2 (1 - swing (2 load - 1)).
+  double load_swing = 0.6;
+  double load_slew_hz_per_s = 30.0;  // engine acceleration that means full load (f's slope)
+  double spike_amplitude = 2.0;
+  double spike_decay_s = 2e-4;
+  double alternator_ratio = 2.7;  // alternator line at this multiple of the crank rate
+  double alternator = 0.3;
+  double body_hz = 30.0;  // body/cabin resonance
+  double body_q = 6.0;
+  double body = 3.0;  // its RMS over the fundamental's
+  double fan_hz = 118.0;
+  double fan = 0.7;
+  double fan_on_s = 15.0;  // mean time on, and off
+  double pump_hz = 153.0;
+  double pump = 0.4;
+  double mains_hz = 50.0;
+  double mains = 0.5;
+  double snr_db = 0.0;
+  double noise_lo_hz = 50.0;
+  double noise_hi_hz = 200.0;
+  // Automatic gain: the output's envelope is held near agc_level (full scale 1.0) with this time
+  // constant; 0 = no automatic gain (the output keeps the generator's scale).
+  double agc_s = 1.5;
+  double agc_level = 0.1;
+  double clip = 0.25;  // symmetric clipping after the gain (the card's full scale is 1.0)
+  std::uint64_t seed = 1;
+};
+
+// A scene whose levels and frequencies are drawn from `seed` (within the ranges in the header comment),
+// at the given SNR and sample rate.
+[[nodiscard]] LighterSceneConfig scene_for_seed(std::uint64_t seed, double snr_db,
+                                                double sample_rate_hz = 48000.0);
+
+class LighterScene {
+ public:
+  LighterScene(const LighterSceneConfig& config, FrequencyTrajectory trajectory);
+  // Writes the next out.size() samples.
+  void generate(std::span<float> out);
+  // Load in [0, 1] at the latest sample written (for tests: where 2 f leads).
+  [[nodiscard]] double load() const noexcept { return load_; }
+
+ private:
+  LighterSceneConfig config_;
+  FrequencyTrajectory trajectory_;
+  std::mt19937_64 rng_;
+  std::normal_distribution<double> gauss_{0.0, 1.0};
+  double noise_rms_ = 0.0;
+  double body_a1_ = 0.0, body_a2_ = 0.0, body_gain_ = 0.0, body_y1_ = 0.0, body_y2_ = 0.0;
+  double phase_ = 0.0, spike_phase_ = 0.0, spike_env_ = 0.0, alt_phase_ = 0.0;
+  double fan_phase_ = 0.0, pump_phase_ = 0.0, mains_phase_ = 0.0;
+  double last_f_ = std::numeric_limits<double>::quiet_NaN();
+  double slope_ = 0.0, load_ = 0.5, load_drift_ = 0.0;
+  bool fan_running_ = false;
+  double fan_next_s_ = 0.0;
+  double envelope_ = 0.0, gain_ = 1.0;
+  std::uint64_t n_ = 0;
+};
+
+[[nodiscard]] std::vector<float> make_lighter_scene(const LighterSceneConfig& config,
+                                                    const FrequencyTrajectory& trajectory, double duration_s);
+
+// A drive of a four-cylinder for the scene, as its firing frequency: idle at 750-900 rpm (25-30 Hz,
+// below the 50-200 Hz band), launches at up to 1,500 rpm/s (50 Hz/s), shifts, cruising, engine braking
+// back to idle, rev blips, and stops with the engine off. Seeded; sampled at 100 Hz.
+[[nodiscard]] FrequencyTrajectory launch_drive_trajectory(double duration_s, std::uint64_t seed);
+
+}  // namespace gearpulse::sim
