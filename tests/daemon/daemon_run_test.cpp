@@ -839,7 +839,7 @@ TEST_CASE("daemon: a thread that stops turning withholds WATCHDOG=1 until it tur
     ::ptrace(PTRACE_DETACH, tid, nullptr, nullptr);
   CHECK(pings_within(3'000) >= 2);
   CHECK(log_says(dir, "thread(s) not responding: ", std::chrono::seconds(5)));
-  const std::string unit = read_text(GEARPULSE_SOURCE_DIR "/systemd/gearpulsed.service");
+  const std::string unit = read_text(GEARPULSE_SOURCE_DIR "/systemd/gearpulsed.service.in");
   CHECK(unit.find("\nWatchdogSec=") != std::string::npos);
   CHECK(unit.find("\nRestart=on-failure\n") != std::string::npos);
   daemon.signal(SIGTERM);
