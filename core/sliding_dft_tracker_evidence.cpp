@@ -21,16 +21,10 @@ constexpr double kBroadLo = 1.0, kBroadHi = 1e4;
 constexpr int kBroadSteps = 80;
 // Weight of the matched (track-level) SNR against the broad prior for the fundamental.
 constexpr double kMatched = 0.5;
-// Order-to-fundamental SNR ratio r: log-uniform from 0.05 (-13 dB) up to 2 (+3 dB) for the harmonics, up to
-// 0.5 for the half order, or the order absent altogether. The 2nd harmonic of a four-stroke's firing
-// frequency carries the load's other half: at light load and on the overrun it stands well above the
-// fundamental (a prior capped at +3 dB read such an engine at twice its frequency). Its ratio is read under
-// two priors, the harmonics' and log-uniform over 2 .. 30 (+3 to +15 dB), and the better of the two is
-// taken: a 2nd harmonic at the usual level weighs as much as under the first, a loud one no longer argues
-// against the candidate. A "half order" stronger than the fundamental, or a 3rd harmonic
-// far above it, means the candidate is not the fundamental (it is the engine's 2nd harmonic, or a third of
-// it).
-constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kSecondRatioHi = 30.0, kHalfRatioHi = 0.5;
+// Order-to-fundamental SNR ratio r: log-uniform over 0.02 .. 2 (-17 to +3 dB) for the harmonics, up to
+// 0.5 for the half order (a "half order" stronger than the fundamental means the candidate is the
+// engine's 2nd harmonic), or the order absent altogether.
+constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 constexpr int kRatioSteps = 20;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
 constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
@@ -99,10 +93,9 @@ const HarmonicEvidence& HarmonicEvidence::shared() {
 HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   const double log_tone = std::log(tone_prior), log_no_tone = std::log1p(-tone_prior);
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
-  fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0f);
-  ladder_.assign(fund_.size(), 0.0f);
-  second_.assign(fund_.size(), 0.0f);
-  half_.assign(kHalfTables, std::vector<float>(fund_.size(), 0.0f));
+  fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
+  ladder_.assign(fund_.size(), 0.0);
+  half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
     const double log_broad =
@@ -111,8 +104,8 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
     for (int i = 0; i <= kRhoSteps; ++i) {
       const double rho = rho_of(i);
       const std::size_t at = static_cast<std::size_t>(i) * cols + static_cast<std::size_t>(j);
-      fund_[at] = static_cast<float>(
-          log_add(std::log(kMatched) + log_rice(z, rho), std::log1p(-kMatched) + log_broad) - log_background);
+      fund_[at] =
+          log_add(std::log(kMatched) + log_rice(z, rho), std::log1p(-kMatched) + log_broad) - log_background;
       const auto with_absent = [&](double log_ratio, double absent) {
         const double engine = log_add(std::log1p(-absent) + log_ratio, std::log(absent) - z);
         return log_add(log_no_tone + engine, log_tone + log_broad) - log_background;
@@ -120,19 +113,15 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       const auto log_ratio = [&](double hi) {
         return log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
       };
-      const double usual = log_ratio(kRatioHi);
-      ladder_[at] = static_cast<float>(with_absent(usual, kOrderAbsent));
-      const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
-                                        [z, rho](double r) { return log_rice(z, rho * r); });
-      second_[at] = static_cast<float>(with_absent(std::max(usual, loud), kOrderAbsent));
+      ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
-        half_[static_cast<std::size_t>(n)][at] = static_cast<float>(with_absent(half_ratio, kHalfAbsent[n]));
+        half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
     }
   }
 }
 
-double HarmonicEvidence::lookup(const std::vector<float>& table, double z, double rho) const noexcept {
+double HarmonicEvidence::lookup(const std::vector<double>& table, double z, double rho) const noexcept {
   // Beyond the table (a bin louder than ~33 dB over the noise), the ratios are saturated: z and rho are
   // scaled down together, so a loud line is read at the table's edge with its level against the expected
   // one kept, rather than with one of the two clamped (a clean line then read as mismatched to itself).
@@ -146,8 +135,8 @@ double HarmonicEvidence::lookup(const std::vector<float>& table, double z, doubl
   const auto j = static_cast<std::size_t>(u), i = static_cast<std::size_t>(r);
   const double a = u - static_cast<double>(j), b = r - static_cast<double>(i);
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
-  const float* row0 = table.data() + i * cols;
-  const float* row1 = row0 + cols;
+  const double* row0 = table.data() + i * cols;
+  const double* row1 = row0 + cols;
   return (1.0 - b) * ((1.0 - a) * row0[j] + a * row0[j + 1]) + b * ((1.0 - a) * row1[j] + a * row1[j + 1]);
 }
 
@@ -157,10 +146,6 @@ double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept 
 
 double HarmonicEvidence::order(double z, double rho_fundamental) const noexcept {
   return lookup(ladder_, z, rho_fundamental);
-}
-
-double HarmonicEvidence::second(double z, double rho_fundamental) const noexcept {
-  return lookup(second_, z, rho_fundamental);
 }
 
 double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {

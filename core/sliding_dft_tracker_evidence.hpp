@@ -10,15 +10,12 @@
 // the ratio of one bin is bounded by about 1 / tone_prior: a loud line proves no more than that
 // something is there. The fundamental's SNR is expected near the track's recent level (a matched test,
 // the longer integration a steady engine allows) or anywhere over a broad range (acquisition, level
-// changes). The other orders (f/2, 2f, 3f) are expected at a ratio r of the fundamental's SNR, r
-// unknown over one to three decades (the 2nd harmonic may stand well above the fundamental), or absent: a
-// loud line whose harmonics are all missing is unlikely to be the engine; a weak one whose harmonics drown in
-// the noise is not penalised. Some signals have no half order at all: the probability of its absence can be
-// given as learned (half_order()).
+// changes). The other orders (f/2, 2f, 3f) are expected at a fraction r of the fundamental's SNR, r
+// unknown over two decades, or absent: a loud line whose harmonics are all missing is unlikely to be
+// the engine; a weak one whose harmonics drown in the noise is not penalised. Some signals have no half
+// order at all: the probability of its absence can be given as learned (half_order()).
 //
-// Everything is tabulated at construction (in single precision: the ratios are read to a few hundredths,
-// and the tables, read at every candidate of every hop, stay small in the cache); lookups are noexcept
-// and allocation-free.
+// Everything is tabulated at construction; lookups are noexcept and allocation-free.
 #include <vector>
 
 namespace gearpulse {
@@ -33,22 +30,20 @@ class HarmonicEvidence {
   // Log likelihood ratio (engine fundamental over noise-or-tone) of a bin with normalised power z, when
   // the track's recent fundamental SNR is rho_track (per bin, linear).
   [[nodiscard]] double fundamental(double z, double rho_track) const noexcept;
-  // Log likelihood ratio of the 3rd harmonic's bin, given the per-bin SNR of the candidate's fundamental.
+  // Log likelihood ratio of a harmonic's bin (2f, 3f), given the per-bin SNR of the candidate's
+  // fundamental.
   [[nodiscard]] double order(double z, double rho_fundamental) const noexcept;
-  // The same for the 2nd harmonic's bin, which may stand up to 15 dB over the fundamental (light load).
-  [[nodiscard]] double second(double z, double rho_fundamental) const noexcept;
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
   [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
 
  private:
-  [[nodiscard]] double lookup(const std::vector<float>& table, double z, double rho) const noexcept;
-  std::vector<float> fund_;    // over (log10 rho, sqrt z)
-  std::vector<float> ladder_;  // 3rd harmonic, over (log10 rho, sqrt z)
-  std::vector<float> second_;  // 2nd harmonic, over (log10 rho, sqrt z)
+  [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
+  std::vector<double> fund_;    // over (log10 rho, sqrt z)
+  std::vector<double> ladder_;  // over (log10 rho, sqrt z)
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).
-  std::vector<std::vector<float>> half_;
+  std::vector<std::vector<double>> half_;
 };
 
 }  // namespace gearpulse
