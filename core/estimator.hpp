@@ -13,9 +13,9 @@
 namespace gearpulse {
 
 struct FitOptions {
-  int gears = 0;                    // 0 = choose from the data; N = exactly N gears
-  std::vector<double> ratios;       // paper's c_i, top gear down as Table 2 (c1 ~ theta_M/theta_{M-1});
-                                    // non-empty selects the paper's method with M = ratios.size() + 1
+  int gears = 0;               // 0 = choose from the data; N = exactly N gears
+  std::vector<double> ratios;  // paper's c_i, top gear down as Table 2 (c1 ~ theta_M/theta_{M-1});
+                               // non-empty selects the paper's method with M = ratios.size() + 1
   // Auto mode with gears = 0: where no ladder of two or more gears passes, accept one gear (a model still
   // learning that has seen the car in one gear so far), if its window holds at least half of the steady
   // moving pairs and fewer than 30 steady pairs lie outside it (more steady driving elsewhere is a gear the
