@@ -72,7 +72,7 @@ finish_tests() {
 # The end-to-end drive (a 140 s drive in real time, about 3.5 minutes with its preparation) starts as soon
 # as the programs it runs are built, before the rest of its tree.
 drive='^e2e: pulses match the drive distance'
-drive_targets=(gearpulsed gearpulse gearpulsectl e2e_test)
+drive_targets=(gearpulsed gearpulse gearpulse-devtools gearpulsectl e2e_test)
 
 git ls-files '*.cpp' '*.hpp' | xargs -r clang-format --dry-run --Werror
 stage "format check done"
