@@ -10,7 +10,7 @@
 //
 // Sets (never choose a design on the report set):
 //   real logs: the Etios (Carloop OBD) is the tuning car; Louisville (Torque, 1 Hz GPS) and the Swift are
-//     report cars. Each car: fit on some drives, replay the others (two folds).
+//     report cars. Each car: fit on some drives, replay the others (two folds). A run prints one set only.
 //   simulated: the 7 manual presets and random vehicles (sim::random_vehicle), every style, made harder than
 //     the road: skip downshifts under braking, GPS speed 0.5 s late, heavy-tailed (Student t, 3 degrees of
 //     freedom) speed and frequency noise, a cold engine. Cadences: the daemon's (frequency every 0.1 s, a 1
@@ -155,20 +155,6 @@ void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Res
                    imm.mode_probability(o_imm.gear), r.gear, o.speed * kMsToKmh);
   }
   if (was_out) close_outage();
-  if (std::getenv("GEARPULSE_BENCH_HABITS")) {
-    const auto& h = imm.habits();
-    std::fprintf(
-        stderr,
-        "habits: accel_sd %.2f coast %.2f/%.2f idle %.1f/%.2f revs %.2f/%.2f engage %.2f launch %.3f share",
-        h.accel_sd, h.coast_accel, h.coast_sd, h.idle, h.idle_sd, std::exp(h.revs_mean), h.revs_sd,
-        h.engage_rate, h.launch_rate);
-    for (double x : h.shift_share)
-      std::fprintf(stderr, " %.2f", x);
-    std::fprintf(stderr, " bite %.2f launch_accel %.2f leave", h.bite_rate, h.launch_accel);
-    for (std::size_t g = 1; g <= model.gears.size(); ++g)
-      std::fprintf(stderr, " %.3f", h.leave_rate[g]);
-    std::fprintf(stderr, "\n");
-  }
 }
 
 void print_header() {
@@ -250,17 +236,23 @@ std::pair<std::vector<std::vector<Sample>>, std::vector<std::vector<Sample>>> ha
   return {{{all.begin(), all.begin() + half}}, {{all.begin() + half, all.end()}}};
 }
 
-void real_logs(const fs::path& root) {
-  std::printf("\nReal logs (fit on some drives of a car, replay its others)\n");
+// The tuning set's car (the Etios) or the report set's (Louisville, the Swift), never both in one run: the
+// figures a design is chosen on are not printed beside those that report it.
+void real_logs(const fs::path& root, bool report_set) {
+  std::printf("\nReal logs, %s set (fit on some drives of a car, replay its others)\n",
+              report_set ? "REPORT" : "TUNING");
   print_header();
-  const auto drives = read_logs(root / "carloop-etios", "drive");
-  const auto longs = read_logs(root / "carloop-etios", "long");
-  if (!drives.empty() && !longs.empty()) {
-    Results r;
-    fold(drives, longs, r);
-    fold(longs, drives, r);
-    print_line("TUNING Etios (OBD ~1.8 s)", r);
-    report("etios", r);
+  if (!report_set) {
+    const auto drives = read_logs(root / "carloop-etios", "drive");
+    const auto longs = read_logs(root / "carloop-etios", "long");
+    if (!drives.empty() && !longs.empty()) {
+      Results r;
+      fold(drives, longs, r);
+      fold(longs, drives, r);
+      print_line("TUNING Etios (OBD ~1.8 s)", r);
+      report("etios", r);
+    }
+    return;
   }
   const auto louis = read_logs(root / "torque-louisville", "");
   if (!louis.empty()) {
@@ -450,11 +442,11 @@ int main(int argc, char** argv) {
     }
   }
   const auto start = std::chrono::steady_clock::now();
-  if (real && !fs::exists(root / "carloop-etios")) {
+  if (real && !fs::exists(root / (report_set ? "torque-louisville" : "carloop-etios"))) {
     std::printf("GEARPULSE_SKIP: bench_outage: no real logs under %s\n", root.c_str());
     return 0;
   }
-  if (real) real_logs(root);
+  if (real) real_logs(root, report_set);
   if (simu) simulated(report_set, seeds, randoms);
   std::printf("\n(%.1f s)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());

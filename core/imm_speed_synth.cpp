@@ -46,7 +46,7 @@ bool ImmSpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noex
 
 void ImmSpeedSynthesizer::reset() noexcept {
   filter_.reset();
-  started_ = informed_ = gps_present_ = false;
+  started_ = informed_ = false;
   t_ = 0.0;
   fix_speed_ = held_speed_ = -1.0;
   last_ = {};
@@ -56,10 +56,6 @@ double ImmSpeedSynthesizer::mode_probability(int mode) const noexcept {
   if (mode < 0 || mode > gears_) return 0.0;
   if (mode == 0) return filter_.probability(0) + filter_.probability(filter_.launch());
   return filter_.probability(mode);
-}
-
-double ImmSpeedSynthesizer::speed_spread() const noexcept {
-  return gps_present_ || gears_ == 0 ? 0.0 : filter_.speed_sd();
 }
 
 SynthOutput ImmSpeedSynthesizer::hold_step(double t, double gps) const noexcept {
@@ -102,7 +98,6 @@ SynthOutput ImmSpeedSynthesizer::step(double t, double gps_speed, double freq, b
   }
   if (!std::isfinite(freq) || freq <= 0.0 || freq > 1e4) freq = kNan;
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0 && gps_speed < kMaxSpeed;
-  gps_present_ = have_gps;
   if (have_gps) {
     held_speed_ = gps_speed;
     held_t_ = t;

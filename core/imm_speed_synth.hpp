@@ -5,10 +5,10 @@
 // It turns a causal stream of (time, GPS speed or none, engine frequency or none) into the
 // speed the pulse output carries. While GPS is present it outputs the GPS speed, tracks the engaged mode
 // and learns the driver's habits; through a GPS outage it outputs the mean speed of the mode filter's
-// belief (ModeFilter: declutched or gear 1..M, each with its speed track), which minimises the expected
-// error of the distance a navigator integrates from it. Without a gear ladder (no model yet, an automatic
-// or CVT) the frequency says nothing of the speed: an outage holds the last GPS speed for kHoldTime (a
-// tunnel's speed is most likely the speed going in), then comes down to rest at the coasting deceleration.
+// belief (ModeFilter: declutched, gear 1..M or moving off, each with its speed track), which minimises the
+// expected error of the distance a navigator integrates from it. Without a gear ladder (no model yet, an
+// automatic or CVT) the frequency says nothing of the speed: an outage holds the last GPS speed for kHoldTime
+// (a tunnel's speed is most likely the speed going in), then comes down to rest at the coasting deceleration.
 // No look-ahead: every output depends only on past input, and not on the rate of the steps.
 //
 // Real-time use: step() is noexcept and never allocates. set_model() copies the model's few numbers into
@@ -53,8 +53,6 @@ class ImmSpeedSynthesizer {
   [[nodiscard]] const SynthOutput& last() const noexcept { return last_; }
   // Current belief in a mode: 0 = no gear engaged, 1..gears = that gear (0 for gears the model lacks).
   [[nodiscard]] double mode_probability(int mode) const noexcept;
-  // Spread (sd, m/s) of the belief's speed; 0 while GPS is present.
-  [[nodiscard]] double speed_spread() const noexcept;
   // Learned idle frequency (Hz), NaN until known.
   [[nodiscard]] double idle_freq() const noexcept { return learner_.habits().idle; }
   [[nodiscard]] const DrivingHabits& habits() const noexcept { return learner_.habits(); }
@@ -70,7 +68,6 @@ class ImmSpeedSynthesizer {
   HabitLearner learner_;
   bool started_ = false;
   bool informed_ = false;  // a GPS fix or a frequency reading has been seen since reset()
-  bool gps_present_ = false;
   double t_ = 0.0;
   double fix_speed_ = -1.0, fix_t_ = 0.0;    // the last fix measured, for the acceleration learned
   double held_speed_ = -1.0, held_t_ = 0.0;  // last GPS speed and its time, for hold_step (-1 = none yet)

@@ -77,15 +77,15 @@ void ModeFilter::set_ladder(const GearLadder& ladder) noexcept {
   track[ladder.gears + 1] = track_[launch()];
   ModeArray best{};  // the largest belief carried into each new gear, whose track it takes
   for (int g = 1; g <= ladder_.gears; ++g) {
+    if (ladder.gears == 0) {  // no ladder: every gear's belief goes to the clutch
+      prob[0] += prob_[g];
+      continue;
+    }
     int nearest = 1;
     for (int k = 1; k <= ladder.gears; ++k)
       if (std::abs(std::log(ladder.theta[k] / ladder_.theta[g])) <
           std::abs(std::log(ladder.theta[nearest] / ladder_.theta[g])))
         nearest = k;
-    if (ladder.gears == 0) {
-      prob[0] += prob_[g];
-      continue;
-    }
     const auto n = static_cast<std::size_t>(nearest);
     prob[n] += prob_[g];
     if (prob_[g] >= best[n]) best[n] = prob_[g], track[n] = track_[g];
@@ -378,17 +378,6 @@ double ModeFilter::mean_speed() const noexcept {
   for (int m = 0; m < modes(); ++m)
     v += prob_[m] * track_[m].v, total += prob_[m];
   return total > 0.0 ? std::max(v / total, 0.0) : 0.0;
-}
-
-double ModeFilter::speed_sd() const noexcept {
-  const double mean = mean_speed();
-  double var = 0.0, total = 0.0;
-  for (int m = 0; m < modes(); ++m) {
-    const double d = track_[m].v - mean;
-    var += prob_[m] * (track_[m].pvv + d * d);
-    total += prob_[m];
-  }
-  return total > 0.0 ? std::sqrt(var / total) : 0.0;
 }
 
 }  // namespace gearpulse

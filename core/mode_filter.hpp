@@ -13,10 +13,11 @@
 // second, at the bite rate); the transition matrix over a step is exp(Q dt). Measurements: GPS speed (all
 // modes); in gear i the engine frequency is v / theta_i (paper eq. (3)) with the fit's sigma_s (eq. (1)),
 // theta's own standard error and a 1 % driveline slip; declutched the frequency says nothing of the speed and
-// is spread as idle or anywhere below the revs seen. Both have a small outlier share (tracker glitches, GPS
-// multipath). Readings of the revs closer than the evidence time apart are not independent (the tracker's
-// window, the engine's slow wander): a step of dt weighs its frequency evidence by dt / evidence time, at
-// most 1.
+// is spread as idle or anywhere below the revs seen; moving off, the revs are above idle and the engine turns
+// faster than first gear would at the car's speed. The frequency has a small outlier share (a tracker hop on
+// another line); GPS updates every mode in full. Readings of the revs closer than the evidence time apart are
+// not independent (the tracker's window, the engine's slow wander): a step of dt weighs its frequency
+// evidence by dt / evidence time, at most 1.
 //
 // Real-time use: step() is noexcept and never allocates; everything lives in fixed arrays.
 #include <array>
@@ -60,10 +61,8 @@ class ModeFilter {
   [[nodiscard]] int launch() const noexcept { return ladder_.gears + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= ladder_.gears; }
   [[nodiscard]] int most_probable() const noexcept;
-  // The belief's mean speed (what minimises the expected error of the distance integrated from it) and its
-  // standard deviation over modes and within them.
+  // The belief's mean speed: what minimises the expected error of the distance integrated from it.
   [[nodiscard]] double mean_speed() const noexcept;
-  [[nodiscard]] double speed_sd() const noexcept;
 
  private:
   using Matrix = std::array<ModeArray, kMaxModes>;
