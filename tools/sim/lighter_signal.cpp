@@ -89,6 +89,33 @@ FrequencyTrajectory trajectory_from_samples(std::vector<double> freq, double rat
   };
 }
 
+TrajectoryWriter::TrajectoryWriter(double duration_s, double rate_hz)
+    : rate_(rate_hz), steps_(static_cast<std::size_t>(std::ceil(duration_s * rate_hz)) + 2) {
+  f_.reserve(steps_);
+}
+
+void TrajectoryWriter::push(double value) {
+  if (!full()) f_.push_back(value);
+}
+
+void TrajectoryWriter::hold(double value, double seconds) {
+  for (int i = 0; i < static_cast<int>(seconds * rate_) && !full(); ++i)
+    f_.push_back(value);
+}
+
+void TrajectoryWriter::ramp(double from, double to, double seconds, bool smooth) {
+  const int n = std::max(1, static_cast<int>(seconds * rate_));
+  for (int i = 1; i <= n && !full(); ++i) {
+    double w = static_cast<double>(i) / n;
+    if (smooth) w = 0.5 - 0.5 * std::cos(std::numbers::pi * w);
+    f_.push_back(from + w * (to - from));
+  }
+}
+
+FrequencyTrajectory TrajectoryWriter::finish() && {
+  return trajectory_from_samples(std::move(f_), rate_);
+}
+
 FrequencyTrajectory drive_trajectory(double duration_s, std::uint64_t seed) {
   constexpr double kRate = 100.0;
   constexpr double kIdle = 40.0;  // below the 50-200 Hz band
@@ -96,50 +123,36 @@ FrequencyTrajectory drive_trajectory(double duration_s, std::uint64_t seed) {
   const auto uniform = [&rng](double lo, double hi) {
     return std::uniform_real_distribution<double>(lo, hi)(rng);
   };
-  const auto steps = static_cast<std::size_t>(std::ceil(duration_s * kRate)) + 2;
-  std::vector<double> f;
-  f.reserve(steps);
+  TrajectoryWriter f(duration_s, kRate);
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  const auto hold = [&](double value, double seconds) {
-    for (int i = 0; i < static_cast<int>(seconds * kRate) && f.size() < steps; ++i)
-      f.push_back(value);
-  };
-  const auto ramp = [&](double from, double to, double seconds, bool smooth) {
-    const int n = std::max(1, static_cast<int>(seconds * kRate));
-    for (int i = 1; i <= n && f.size() < steps; ++i) {
-      double w = static_cast<double>(i) / n;
-      if (smooth) w = 0.5 - 0.5 * std::cos(std::numbers::pi * w);
-      f.push_back(from + w * (to - from));
-    }
-  };
-  hold(nan, 1.0);
-  while (f.size() < steps) {
-    hold(kIdle, 1.5);
-    ramp(kIdle, 58.0, 0.8, true);  // clutch engages
+  f.hold(nan, 1.0);
+  while (!f.full()) {
+    f.hold(kIdle, 1.5);
+    f.ramp(kIdle, 58.0, 0.8, true);  // clutch engages
     double cur = 58.0;
     const int gears = static_cast<int>(uniform(3.0, 5.99));
-    for (int g = 0; g < gears && f.size() < steps; ++g) {
+    for (int g = 0; g < gears && !f.full(); ++g) {
       const double top = uniform(120.0, 185.0);
-      ramp(cur, top, (top - cur) / uniform(12.0, 30.0), false);
+      f.ramp(cur, top, (top - cur) / uniform(12.0, 30.0), false);
       cur = top;
       if (g + 1 < gears) {
         const double next = cur * uniform(0.6, 0.72);
-        ramp(cur, next, 0.5, true);
+        f.ramp(cur, next, 0.5, true);
         cur = next;
       }
     }
     // Cruise with a slow wobble.
     const double cruise_s = uniform(4.0, 10.0);
     const double wobble = uniform(1.0, 4.0);
-    for (int i = 0; i < static_cast<int>(cruise_s * kRate) && f.size() < steps; ++i)
-      f.push_back(cur + wobble * std::sin(std::numbers::pi * i / kRate / 2.0));
-    cur = f.empty() ? cur : f.back();
-    ramp(cur, 55.0, (cur - 55.0) / uniform(8.0, 20.0), false);
-    ramp(55.0, kIdle, 0.6, true);
-    hold(kIdle, 1.5);
-    hold(nan, uniform(2.0, 3.5));  // engine off
+    for (int i = 0; i < static_cast<int>(cruise_s * kRate) && !f.full(); ++i)
+      f.push(cur + wobble * std::sin(std::numbers::pi * i / kRate / 2.0));
+    cur = f.empty() ? cur : f.last();
+    f.ramp(cur, 55.0, (cur - 55.0) / uniform(8.0, 20.0), false);
+    f.ramp(55.0, kIdle, 0.6, true);
+    f.hold(kIdle, 1.5);
+    f.hold(nan, uniform(2.0, 3.5));  // engine off
   }
-  return trajectory_from_samples(std::move(f), kRate);
+  return std::move(f).finish();
 }
 
 bool write_wav_pcm16(const std::string& path, std::span<const float> interleaved, int channels,

@@ -64,6 +64,27 @@ class LighterSignal {
 // Trajectory from samples of f at `rate_hz` (linear interpolation; NaN samples = engine off).
 [[nodiscard]] FrequencyTrajectory trajectory_from_samples(std::vector<double> freq, double rate_hz);
 
+// Writes a trajectory's samples at `rate_hz` up to `duration_s` (and two samples more): values held, ramps
+// (linear, or a raised cosine when smooth) and single samples; whatever would run past the end is dropped.
+// The drive-like trajectories below are written through it.
+class TrajectoryWriter {
+ public:
+  TrajectoryWriter(double duration_s, double rate_hz);
+  [[nodiscard]] bool full() const noexcept { return f_.size() >= steps_; }
+  [[nodiscard]] double rate() const noexcept { return rate_; }
+  [[nodiscard]] bool empty() const noexcept { return f_.empty(); }
+  [[nodiscard]] double last() const { return f_.back(); }
+  void push(double value);
+  void hold(double value, double seconds);
+  void ramp(double from, double to, double seconds, bool smooth);
+  [[nodiscard]] FrequencyTrajectory finish() &&;
+
+ private:
+  double rate_;
+  std::size_t steps_;
+  std::vector<double> f_;
+};
+
 // A drive of `duration_s` seconds: idle below the band, accelerations through the gears with shifts
 // (frequency drops of 30-40 % within 0.3 s), cruising, decelerations and stops with the engine off.
 // Seeded; returns a trajectory sampled at 100 Hz.

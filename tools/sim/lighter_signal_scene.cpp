@@ -155,60 +155,46 @@ FrequencyTrajectory launch_drive_trajectory(double duration_s, std::uint64_t see
   constexpr double kRate = 100.0;
   std::mt19937_64 rng(seed);
   const auto u = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
-  const auto steps = static_cast<std::size_t>(std::ceil(duration_s * kRate)) + 2;
-  std::vector<double> f;
-  f.reserve(steps);
+  TrajectoryWriter f(duration_s, kRate);
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  const auto hold = [&](double value, double seconds) {
-    for (int i = 0; i < static_cast<int>(seconds * kRate) && f.size() < steps; ++i)
-      f.push_back(value);
-  };
-  const auto ramp = [&](double from, double to, double seconds, bool smooth) {
-    const int n = std::max(1, static_cast<int>(seconds * kRate));
-    for (int i = 1; i <= n && f.size() < steps; ++i) {
-      double w = static_cast<double>(i) / n;
-      if (smooth) w = 0.5 - 0.5 * std::cos(std::numbers::pi * w);
-      f.push_back(from + w * (to - from));
-    }
-  };
   const double idle = u(25.0, 30.0);  // 750-900 rpm
-  hold(nan, 1.0);
-  while (f.size() < steps) {
-    hold(idle, u(1.5, 3.0));
+  f.hold(nan, 1.0);
+  while (!f.full()) {
+    f.hold(idle, u(1.5, 3.0));
     // Launch: up to 1,500 rpm/s (50 Hz/s) in first gear, slower in each gear after.
     double cur = idle;
     double rate = u(35.0, 50.0);
     const int gears = static_cast<int>(u(2.0, 5.99));
-    for (int g = 0; g < gears && f.size() < steps; ++g) {
+    for (int g = 0; g < gears && !f.full(); ++g) {
       const double top = u(110.0, 195.0);
-      ramp(cur, top, (top - cur) / rate, false);
+      f.ramp(cur, top, (top - cur) / rate, false);
       cur = top;
       rate *= u(0.45, 0.7);
       if (g + 1 < gears) {
         const double next = cur * u(0.6, 0.72);
-        ramp(cur, next, u(0.25, 0.5), true);
+        f.ramp(cur, next, u(0.25, 0.5), true);
         cur = next;
       }
     }
     const double cruise_s = u(3.0, 10.0);
     const double wobble = u(1.0, 4.0);
     const double base = cur;
-    for (int i = 0; i < static_cast<int>(cruise_s * kRate) && f.size() < steps; ++i)
-      f.push_back(base + wobble * std::sin(std::numbers::pi * i / kRate / 2.0));
-    cur = f.back();
+    for (int i = 0; i < static_cast<int>(cruise_s * kRate) && !f.full(); ++i)
+      f.push(base + wobble * std::sin(std::numbers::pi * i / kRate / 2.0));
+    cur = f.last();
     if (u(0.0, 1.0) < 0.5) {  // a blip on a downshift
       const double peak = std::min(200.0, cur * u(1.2, 1.4));
-      ramp(cur, peak, 0.3, true);
-      ramp(peak, cur * 1.1, 0.4, true);
+      f.ramp(cur, peak, 0.3, true);
+      f.ramp(peak, cur * 1.1, 0.4, true);
       cur *= 1.1;
     }
     // Engine braking back to idle.
-    ramp(cur, 35.0, (cur - 35.0) / u(8.0, 20.0), false);
-    ramp(35.0, idle, 0.6, true);
-    hold(idle, u(1.0, 3.0));
-    if (u(0.0, 1.0) < 0.5) hold(nan, u(1.5, 3.0));  // engine off
+    f.ramp(cur, 35.0, (cur - 35.0) / u(8.0, 20.0), false);
+    f.ramp(35.0, idle, 0.6, true);
+    f.hold(idle, u(1.0, 3.0));
+    if (u(0.0, 1.0) < 0.5) f.hold(nan, u(1.5, 3.0));  // engine off
   }
-  return trajectory_from_samples(std::move(f), kRate);
+  return std::move(f).finish();
 }
 
 }  // namespace gearpulse::sim
