@@ -107,22 +107,22 @@ if grep -q GEARPULSE_SKIP "$logs/package.log"; then
 fi
 stage "package installed, verified and purged"
 start_tests asan build-asan -E "$drive"
+# The sanitized tests run with no build beside them: their pipeline tests wait on paced audio and gpsd,
+# and beside the ASan drive and a TSan build one found no training pair within its 20 s (9.6 s alone).
+finish_tests asan "$may_skip_sanitized"
+stage "ASan+UBSan tests but the drive passed"
+finish_tests asan-drive "$may_skip_sanitized"
+stage "ASan+UBSan drive passed"
 
 # ThreadSanitizer: every test of the files of the threaded parts (ctest lists only the cases of the
 # executables built, so the names' prefixes select exactly them).
 cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
   "${launcher[@]}" >/dev/null
-nice -n 10 cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
+cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
   log_queue_test control_test persistence_test pipeline_test gearpulsed gearpulsectl daemon_run_test
-stage "TSan build done (the ASan+UBSan tests ran meanwhile)"
-finish_tests asan "$may_skip_sanitized"
-stage "ASan+UBSan tests but the drive passed"
-# After the ASan drive: the TSan pipeline tests wait on paced audio too, and beside a sanitized daemon
-# playing the drive one missed its deadline (no training pair within 20 s; 9.6 s alone).
-finish_tests asan-drive "$may_skip_sanitized"
-stage "ASan+UBSan drive passed"
+stage "TSan build done"
 start_tests tsan build-tsan -R "^(ring|alsa|gpsd|pulse|log queue|control|daemon|pipeline):"
 finish_tests tsan "$may_skip_sanitized"
-stage "ASan+UBSan drive and TSan tests passed"
+stage "TSan tests passed"
 echo "== all tests passed in $SECONDS s"
