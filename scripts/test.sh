@@ -48,10 +48,9 @@ require_ran() {
   fi
 }
 
-# Test runs are mostly paced audio and real-time waits, so each runs in the background while the next tree
-# builds on the cores it leaves idle; the builds run at nice 10, so a paced test gets the CPU when it wants. start_tests NAME DIR [ctest arguments] starts ctest on build tree DIR
-# (its output in $logs/NAME.log); finish_tests NAME MAY_SKIP waits for it, prints its output and fails on
-# a failed test or a skip MAY_SKIP does not allow.
+# start_tests NAME DIR [ctest arguments] starts ctest on build tree DIR (its output in $logs/NAME.log);
+# finish_tests NAME MAY_SKIP waits for it, prints its output and fails on a failed test or a skip MAY_SKIP
+# does not allow.
 declare -A running
 start_tests() {
   local name=$1 dir=$2
@@ -69,10 +68,6 @@ finish_tests() {
   fi
   require_ran "$logs/$1.log" "$2"
 }
-# The end-to-end drive (a 140 s drive in real time, about 3.5 minutes with its preparation) starts as soon
-# as the programs it runs are built, before the rest of its tree.
-drive='^e2e: pulses match the drive distance'
-drive_targets=(gearpulsed gearpulse gearpulse-devtools gearpulsectl e2e_test)
 
 git ls-files '*.cpp' '*.hpp' | xargs -r clang-format --dry-run --Werror
 stage "format check done"
@@ -81,22 +76,11 @@ stage "format check done"
 # The package's prefix (/usr) from the start, so that the package test's build changes nothing the tests run.
 cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_INSTALL_PREFIX=/usr \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" "${launcher[@]}" >/dev/null
-nice -n 10 cmake --build build -j"$jobs" --target "${drive_targets[@]}"
-start_tests release-drive build -R "$drive"
-nice -n 10 cmake --build build -j"$jobs"
+cmake --build build -j"$jobs"
 stage "release build done"
-start_tests release build -E "$drive"
-
-# The sanitizer trees skip the benchmarks (built with -Werror and run above). -O1 and line tables only (-g1,
-# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g.
-cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
-  -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
-nice -n 10 cmake --build build-asan -j"$jobs" --target "${drive_targets[@]}"
-start_tests asan-drive build-asan -R "$drive"
-nice -n 10 cmake --build build-asan -j"$jobs"
-stage "ASan+UBSan build done (the release tests ran meanwhile)"
-finish_tests release-drive "$may_skip"
+# Each tree's tests run with no build beside them: the pipeline and end-to-end tests wait on paced audio
+# and gpsd, and beside a build they missed their deadlines (a fix or a training pair within 20 s).
+start_tests release build
 finish_tests release "$may_skip"
 stage "release tests (and the benches' checks) passed"
 # The Debian package: built, installed, checked and purged (tests/ cannot run dpkg beside the other tests).
@@ -106,13 +90,17 @@ if grep -q GEARPULSE_SKIP "$logs/package.log"; then
   exit 1
 fi
 stage "package installed, verified and purged"
-start_tests asan build-asan -E "$drive"
-# The sanitized tests run with no build beside them: their pipeline tests wait on paced audio and gpsd,
-# and beside the ASan drive and a TSan build one found no training pair within its 20 s (9.6 s alone).
+
+# The sanitizer trees skip the benchmarks (built with -Werror and run above). -O1 and line tables only (-g1,
+# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g.
+cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
+  -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
+cmake --build build-asan -j"$jobs"
+stage "ASan+UBSan build done"
+start_tests asan build-asan
 finish_tests asan "$may_skip_sanitized"
-stage "ASan+UBSan tests but the drive passed"
-finish_tests asan-drive "$may_skip_sanitized"
-stage "ASan+UBSan drive passed"
+stage "ASan+UBSan tests passed"
 
 # ThreadSanitizer: every test of the files of the threaded parts (ctest lists only the cases of the
 # executables built, so the names' prefixes select exactly them).
