@@ -56,6 +56,7 @@ std::FILE* g_trace = nullptr;               // --trace FILE: every outage row
 long g_cadence = -1;
 double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the candidate's belief, per row
 std::string g_debug_car;
+bool g_fits = false;                    // --fits: the fitted beside the true thetas of every simulated car
 int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
@@ -387,6 +388,15 @@ void simulated(bool report_set, int seeds, int randoms) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
         const GearModel model = fit_model(car, c, seed * 31 + 3);
         if (model.gears.empty()) continue;
+        if (g_fits) {
+          std::fprintf(stderr, "%s seed %llu true:", car.name.c_str(), static_cast<unsigned long long>(seed));
+          for (const double th : car.theta)
+            std::fprintf(stderr, " %.4f", th);
+          std::fprintf(stderr, " | fit:");
+          for (const auto& g : model.gears)
+            std::fprintf(stderr, " %.4f", g.theta);
+          std::fprintf(stderr, "\n");
+        }
         int k = 0;
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
                                               sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
@@ -433,6 +443,8 @@ int main(int argc, char** argv) {
       g_debug_style = std::atoi(argv[++i]);
       g_debug_from = std::atof(argv[++i]);
       g_debug_to = std::atof(argv[++i]);
+    } else if (a == "--fits") {
+      g_fits = true;
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {

@@ -209,6 +209,7 @@ void HabitLearner::update() noexcept {
   h.launch_rate = launches_ / standing_time_;
   h.bite_rate = bites_ / launch_time_;
   h.launch_accel = std::max(launch_accel_.mean, 0.0);
+  h.launch_sd = std::sqrt(launch_accel_.var());
 }
 
 }  // namespace gearpulse

@@ -41,6 +41,7 @@ struct DrivingHabits {
   double launch_rate = 0.05;                      // 1/s: declutched and standing -> moving off
   double bite_rate = 0.7;     // 1/s: moving off -> the clutch has bitten (first or second gear)
   double launch_accel = 1.5;  // m/s^2: mean acceleration moving off
+  double launch_sd = 0.8;     // m/s^2: its spread
 };
 
 // Learns DrivingHabits from steps whose mode and speed are known (GPS present, the filter sure of the mode).

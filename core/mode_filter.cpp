@@ -213,7 +213,7 @@ void ModeFilter::transition_matrix(double dt, const DrivingHabits& habits) noexc
 
 ModeFilter::Acceleration ModeFilter::acceleration(int mode, const DrivingHabits& habits) const noexcept {
   if (mode == 0) return {habits.coast_accel, habits.coast_sd};
-  if (mode == launch()) return {habits.launch_accel, habits.coast_sd};
+  if (mode == launch()) return {habits.launch_accel, habits.launch_sd};
   return {0.0, habits.accel_sd};
 }
 
@@ -267,8 +267,10 @@ double ModeFilter::update_freq(SpeedTrack& x, int mode, double freq, double weig
     const double caught = ladder_.theta[1] * freq;
     const double sd = std::sqrt(x.pvv + kSlip * kSlip * caught * caught + 0.01);
     const double slipping = 0.5 * std::erfc(-(caught - x.v) / (sd * std::sqrt(2.0)));
-    // The estimate is held inside that bound (the constrained filter's projection).
+    // The estimate is held inside that bound (the constrained filter's projection), and is no surer than
+    // the bound alone makes it: a speed anywhere from standing to caught up (a uniform's variance).
     if (x.v > caught) x.v = caught, x.pvv = std::min(x.pvv, caught * caught);
+    x.pvv = std::max(x.pvv, caught * caught / 12.0);
     return weight * (std::log(std::max(p, kFreqOutlier / high)) + std::log(std::max(slipping, 1e-12)));
   }
   if (mode == 0) {
@@ -305,65 +307,80 @@ void ModeFilter::step(double dt, double gps, double freq, const DrivingHabits& h
   dt = std::max(dt, 0.0);
   const int n = modes();
   transition_matrix(dt, habits);
-  std::array<SpeedTrack, kMaxModes> mixed{};
-  ModeArray prior{}, log_l{};
+  // Generalised pseudo-Bayes of order 2: every pair (mode i before, mode j now) is predicted and updated on
+  // its own, and the pairs into j are merged by their first two moments only after the readings have
+  // weighed them. A merge before the update (the IMM's) would give a mode that many hypotheses flow into one
+  // broad track, whose every reading then counts against it.
+  std::array<SpeedTrack, kMaxModes> next{};
+  ModeArray weight{};
+  std::array<SpeedTrack, kMaxModes> post{};
+  ModeArray log_w{};
+  double best = -INFINITY;
   for (int j = 0; j < n; ++j) {
-    double c = 0.0;
-    for (int i = 0; i < n; ++i)
-      c += trans_[i][j] * prob_[i];
-    prior[j] = c;
-    SpeedTrack& x = mixed[j];
-    if (!(c > 0.0)) {
-      x = track_[j];
-      continue;
-    }
     // A change of mode ends what the pedals did: the speed carries over, the acceleration is drawn anew
     // from the new mode's own distribution.
     const Acceleration fresh = acceleration(j, habits);
-    const auto entering = [&](int i) {
-      if (i == j) return track_[i];
+    double top = -INFINITY;
+    for (int i = 0; i < n; ++i) {
+      const double p = trans_[i][j] * prob_[i];
+      log_w[i] = -INFINITY;
+      if (!(p > kMinProb * kMinProb)) continue;
       const SpeedTrack& from = track_[i];
-      return SpeedTrack{from.v, fresh.mean, from.pvv, 0.0, fresh.sd * fresh.sd};
-    };
-    x = SpeedTrack{0.0, 0.0, 0.0, 0.0, 0.0};
-    for (int i = 0; i < n; ++i) {
-      const double w = trans_[i][j] * prob_[i] / c;
-      const SpeedTrack e = entering(i);
-      x.v += w * e.v;
-      x.a += w * e.a;
+      SpeedTrack x = i == j ? from : SpeedTrack{from.v, fresh.mean, from.pvv, 0.0, fresh.sd * fresh.sd};
+      predict(x, j, dt, habits);
+      double l = 0.0;
+      if (std::isfinite(gps)) l += update_gps(x, gps);
+      if (std::isfinite(freq) && freq > 0.0 && evidence > 0.0) l += update_freq(x, j, freq, evidence, habits);
+      if (!std::isfinite(l)) continue;
+      post[i] = x;
+      log_w[i] = std::log(p) + l;
+      top = std::max(top, log_w[i]);
     }
-    for (int i = 0; i < n; ++i) {
-      const double w = trans_[i][j] * prob_[i] / c;
-      const SpeedTrack e = entering(i);
-      const double dv = e.v - x.v, da = e.a - x.a;
-      x.pvv += w * (e.pvv + dv * dv);
-      x.pva += w * (e.pva + dv * da);
-      x.paa += w * (e.paa + da * da);
+    if (!std::isfinite(top)) {  // nothing flows into j
+      weight[j] = -INFINITY;
+      next[j] = track_[j];
+      continue;
     }
-  }
-  double best = -INFINITY;
-  for (int j = 0; j < n; ++j) {
-    SpeedTrack& x = mixed[j];
-    predict(x, j, dt, habits);
-    double l = 0.0;
-    if (std::isfinite(gps)) l += update_gps(x, gps);
-    if (std::isfinite(freq) && freq > 0.0 && evidence > 0.0) l += update_freq(x, j, freq, evidence, habits);
-    log_l[j] = l;
-    if (prior[j] > 0.0) best = std::max(best, l);
+    double total = 0.0;
+    SpeedTrack m{0.0, 0.0, 0.0, 0.0, 0.0};
+    for (int i = 0; i < n; ++i) {
+      if (!std::isfinite(log_w[i])) continue;
+      const double w = std::exp(log_w[i] - top);
+      total += w;
+      m.v += w * post[i].v;
+      m.a += w * post[i].a;
+    }
+    m.v /= total;
+    m.a /= total;
+    for (int i = 0; i < n; ++i) {
+      if (!std::isfinite(log_w[i])) continue;
+      const double w = std::exp(log_w[i] - top) / total;
+      const double dv = post[i].v - m.v, da = post[i].a - m.a;
+      m.pvv += w * (post[i].pvv + dv * dv);
+      m.pva += w * (post[i].pva + dv * da);
+      m.paa += w * (post[i].paa + da * da);
+    }
+    next[j] = m;
+    weight[j] = top + std::log(total);
+    best = std::max(best, weight[j]);
   }
   double total = 0.0;
+  ModeArray prob{};
   for (int j = 0; j < n; ++j) {
-    prob_[j] = prior[j] > 0.0 && std::isfinite(log_l[j]) ? prior[j] * std::exp(log_l[j] - best) : 0.0;
-    total += prob_[j];
+    prob[j] = std::isfinite(best) && std::isfinite(weight[j]) ? std::exp(weight[j] - best) : 0.0;
+    total += prob[j];
   }
   if (!(total > 0.0) || !std::isfinite(total)) {  // nothing explains the readings: keep the prior
-    for (int j = 0; j < n; ++j)
-      prob_[j] = prior[j];
+    for (int j = 0; j < n; ++j) {
+      prob[j] = 0.0;
+      for (int i = 0; i < n; ++i)
+        prob[j] += trans_[i][j] * prob_[i];
+    }
     total = 1.0;
   }
   for (int j = 0; j < n; ++j)
-    prob_[j] = std::max(prob_[j] / total, kMinProb);
-  track_ = mixed;
+    prob_[j] = std::max(prob[j] / total, kMinProb);
+  track_ = next;
 }
 
 int ModeFilter::most_probable() const noexcept {
