@@ -101,6 +101,24 @@ double truth_distance_m(const fs::path& truth_csv) {
   return d;
 }
 
+// The true distance (m) driven between drive times a and b, from truth.csv.
+double truth_distance_between(const fs::path& truth_csv, double a, double b) {
+  std::ifstream in(truth_csv);
+  std::string line;
+  std::getline(in, line);  // header t,speed,freq,gear
+  double d = 0.0, t0 = 0.0, v0 = 0.0;
+  bool first = true;
+  while (std::getline(in, line)) {
+    double t = 0.0, v = 0.0;
+    if (std::sscanf(line.c_str(), "%lf,%lf", &t, &v) != 2) continue;
+    if (!first && t > a && t0 < b) d += 0.5 * (v + v0) * (std::min(t, b) - std::max(t0, a));
+    first = false;
+    t0 = t;
+    v0 = v;
+  }
+  return d;
+}
+
 // The true speed (m/s) at drive time t, from truth.csv (the row at or before t).
 double truth_speed_at(const fs::path& truth_csv, double t) {
   std::ifstream in(truth_csv);
@@ -122,6 +140,91 @@ std::vector<double> thetas(const json& status) {
   for (const json& g : status["gears"])
     out.push_back(g.value("theta", NAN));
   return out;
+}
+
+// GPS fixes of an NMEA log as gpsd would report them: (drive time, speed m/s) of every valid RMC, the
+// drive's t = 0 stamped 12:00:00 UTC (gearpulse simulate).
+std::vector<std::pair<double, double>> nmea_fixes(const fs::path& nmea) {
+  std::vector<std::pair<double, double>> fixes;
+  std::ifstream in(nmea);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("$GPRMC,", 0) != 0) continue;
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');)
+      f.push_back(cell);
+    if (f.size() < 8 || f[2] != "A" || f[1].size() < 6 || f[7].empty()) continue;
+    const double hms = std::stod(f[1]);
+    const double tod = std::floor(hms / 10000.0) * 3600.0 +
+                       std::floor(std::fmod(hms, 10000.0) / 100.0) * 60.0 + std::fmod(hms, 100.0);
+    constexpr double kKnot = 1852.0 / 3600.0;
+    fixes.emplace_back(tod - 12.0 * 3600.0, std::stod(f[7]) * kKnot);
+  }
+  return fixes;
+}
+
+// What `gearpulse replay` makes of the daemon's inputs: the engine frequency `gearpulse track` reads from
+// the drive's audio with the daemon's tracker settings, every fix held for the daemon's GPS timeout as
+// the daemon holds it. Returns the distance (m) the replay synthesized from the first row GPS was lost to
+// the first row it was back after `after` (drive time), and those rows' times; a distance of -1 if there
+// is none.
+struct Outage {
+  double distance = -1.0, from = 0.0, to = 0.0;
+};
+Outage replay_outage(const fs::path& work, double after, double gps_timeout) {
+  const fs::path drive = work / "drive";
+  const Result track =
+      run(quote(kBuild + "/tools/gearpulse") + " track " + quote((drive / "drive.wav").string()));
+  if (track.status != 0) return {};
+  const auto fixes = nmea_fixes(drive / "drive.nmea");
+  const fs::path merged = work / "replay-input.csv";
+  {
+    std::ofstream out(merged);
+    out << "t,speed,freq\n";
+    std::stringstream rows(track.out);
+    std::string line;
+    std::getline(rows, line);  // t,freq,snr_db
+    std::size_t next = 0;
+    double fix_t = -1e9, fix_v = 0.0;
+    while (std::getline(rows, line)) {
+      std::stringstream cells(line);
+      std::string t_cell, f_cell;
+      std::getline(cells, t_cell, ',');
+      std::getline(cells, f_cell, ',');
+      const double t = std::stod(t_cell);
+      while (next < fixes.size() && fixes[next].first <= t + 1e-9)
+        fix_t = fixes[next].first, fix_v = fixes[next].second, ++next;
+      out << t_cell << ',';
+      if (t - fix_t <= gps_timeout) out << fix_v;
+      out << ',' << f_cell << '\n';
+    }
+  }
+  const Result replay = run(quote(kBuild + "/tools/gearpulse") + " replay --model " +
+                            quote((work / "state" / "model.json").string()) + " " + quote(merged.string()));
+  if (replay.status != 0) return {};
+  std::stringstream rows(replay.out);
+  std::string line;
+  std::getline(rows, line);  // t,speed,gear,source
+  Outage outage{0.0};
+  double last_t = 0.0, last_v = 0.0;
+  bool out_now = false, seen = false;
+  while (std::getline(rows, line)) {
+    double t = 0.0, v = 0.0;
+    int gear = 0;
+    char source[16] = {};
+    if (std::sscanf(line.c_str(), "%lf,%lf,%d,%15s", &t, &v, &gear, source) != 4) continue;
+    if (out_now) outage.distance += last_v * (t - last_t);
+    const bool gps = std::string(source) == "gps";
+    if (t > after && !gps && !seen) out_now = seen = true, outage.from = t;
+    if (out_now && gps) {
+      outage.to = t;
+      return outage;
+    }
+    last_t = t;
+    last_v = v;
+  }
+  return {};
 }
 
 double seconds_since(const fs::path& started_file) {
@@ -152,6 +255,10 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   // Poll the status while the drive plays (the feeder exits at the end of the audio).
   std::vector<std::pair<double, std::string>> outage_polls;  // (drive time, source)
   int gps_after_outage = 0;
+  // The pulse count where the daemon lost GPS and where it had it back, and the time between the polls
+  // that bracket each edge.
+  double pulses_lost = -1.0, pulses_back = -1.0, edge_gap = 0.0, last_poll = 0.0;
+  double lost_at = 0.0, back_at = 0.0;
   const pid_t feeder = work.pid("feeder");
   REQUIRE(feeder > 0);
   while (::kill(feeder, 0) == 0) {
@@ -159,12 +266,18 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
     const double t = seconds_since(work.dir / "daemon.started");
     if (s.is_object()) {
       const std::string source = s.value("source", "?");
+      const double pulses = s.value("pulses", 0.0);
+      if (t > outage_start - 5.0 && pulses_lost < 0.0 && source != "gps")
+        pulses_lost = pulses, lost_at = t, edge_gap = std::max(edge_gap, t - last_poll);
+      if (pulses_lost >= 0.0 && pulses_back < 0.0 && source == "gps")
+        pulses_back = pulses, back_at = t, edge_gap = std::max(edge_gap, t - last_poll);
+      last_poll = t;
       // Leave the GPS timeout and a second of slack at both edges of the outage.
       if (t > outage_start + 4.0 && t < outage_start + outage_length - 2.0)
         outage_polls.emplace_back(t, source);
       if (t > outage_start + outage_length + 8.0 && source == "gps") ++gps_after_outage;
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // let the reader drain the PTY
 
@@ -177,6 +290,31 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   INFO("daemon log:\n" << slurp(work.dir / "gearpulsed.log").substr(0, 4000));
   REQUIRE(distance > 500.0);
   CHECK(std::abs(counted - expected) <= 0.03 * expected);
+
+  // Live and replay run the same synthesis on the same inputs: the outage distance the daemon's pulses
+  // carry and the one `gearpulse replay` synthesizes from the drive's audio and fixes err alike, each
+  // against the distance the car drove in its own outage (gpsfake's clock runs apart from the audio's by a
+  // second or two, so the daemon's outage starts and ends elsewhere in the drive than the log's). Within
+  // 1 %, beside what the car covers between two polls at the daemon's edges and the tracker's lag.
+  constexpr double kGpsTimeout = 1.5;  // s, the default gps.timeout the harness keeps
+  const Outage replayed = replay_outage(work.dir, outage_start - 5.0, kGpsTimeout);
+  const fs::path truth = work.dir / "drive" / "truth.csv";
+  const double live = (pulses_back - pulses_lost) / kPulsesPerKm * 1000.0;
+  const double live_truth = truth_distance_between(truth, lost_at, back_at);
+  const double replay_truth = truth_distance_between(truth, replayed.from, replayed.to);
+  constexpr double kLag = 0.3;  // s: the daemon's clock against the audio's, a tracker hop or two
+  const double edges = (edge_gap + kLag) * (truth_speed_at(truth, lost_at) + truth_speed_at(truth, back_at));
+  const double live_error = live / live_truth - 1.0, replay_error = replayed.distance / replay_truth - 1.0;
+  std::printf(
+      "e2e outage: daemon %.1f m over %.1f-%.1f s (driven %.1f m, %+.2f %%), replay %.1f m over %.1f-%.1f s "
+      "(driven %.1f m, %+.2f %%)\n",
+      live, lost_at, back_at, live_truth, 100.0 * live_error, replayed.distance, replayed.from, replayed.to,
+      replay_truth, 100.0 * replay_error);
+  REQUIRE(pulses_lost >= 0.0);
+  REQUIRE(pulses_back > pulses_lost);
+  REQUIRE(replayed.distance > 100.0);
+  REQUIRE(live_truth > 100.0);
+  CHECK(std::abs(live_error - replay_error) <= 0.01 + edges / live_truth);
 
   // Inside the outage the speed comes from the engine while the car moves (declutched moments and a stop
   // at a light read as coast), never from GPS.
