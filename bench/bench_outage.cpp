@@ -121,7 +121,8 @@ void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Res
       std::fprintf(stderr, "t %.1f %s truth %.1f g %d f %.1f | out %.1f p:", r.t - t0, out ? "OUT" : "gps",
                    r.truth, r.gear, r.freq, o_imm.speed);
       for (int m = 0; m < flt.modes(); ++m)
-        std::fprintf(stderr, " %.2f(%.1f)", flt.probability(m), flt.track(m).v);
+        std::fprintf(stderr, " %.2f(%.1f~%.1f)", flt.probability(m), flt.track(m).v,
+                     std::sqrt(flt.track(m).pvv));
       std::fprintf(stderr, "\n");
     }
     if (std::isfinite(r.freq)) last_freq = r.freq;
