@@ -18,7 +18,8 @@
 //     tuning 1..N, report 1001..1000+N.
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
-//                     [--trace FILE] [DATA_DIR]
+//                     [--trace FILE] [--fits] [DATA_DIR]
+// --fits prints each simulated vehicle's fitted thetas beside the true ones on stderr.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -57,6 +58,7 @@ long g_cadence = -1;
 double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the candidate's belief, per row
 std::string g_debug_car;
 int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
+bool g_fits = false;                    // --fits: each fitted ladder beside the true one, on stderr
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -386,6 +388,16 @@ void simulated(bool report_set, int seeds, int randoms) {
       for (int s = 1; s <= seeds; ++s) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
         const GearModel model = fit_model(car, c, seed * 31 + 3);
+        if (g_fits) {
+          std::fprintf(stderr, "%s %s seed %llu fit", c.key, car.name.c_str(),
+                       static_cast<unsigned long long>(seed));
+          for (const auto& g : model.gears)
+            std::fprintf(stderr, " %.4f", g.theta);
+          std::fprintf(stderr, " | true");
+          for (double th : car.theta)
+            std::fprintf(stderr, " %.4f", th);
+          std::fprintf(stderr, "\n");
+        }
         if (model.gears.empty()) continue;
         int k = 0;
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
@@ -433,6 +445,8 @@ int main(int argc, char** argv) {
       g_debug_style = std::atoi(argv[++i]);
       g_debug_from = std::atof(argv[++i]);
       g_debug_to = std::atof(argv[++i]);
+    } else if (a == "--fits") {
+      g_fits = true;
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {
