@@ -18,8 +18,9 @@
 //     tuning 1..N, report 1001..1000+N.
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
-//                     [--trace FILE] [--fits] [DATA_DIR]
-// --fits prints each simulated vehicle's fitted thetas beside the true ones on stderr.
+//                     [--trace FILE] [--fits] [--fit-minutes M] [DATA_DIR]
+// --fits prints each simulated vehicle's fitted thetas beside the true ones on stderr; --fit-minutes fits
+// the simulated vehicles' models on a mixed drive of M minutes instead of 40.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -59,6 +60,7 @@ double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the 
 std::string g_debug_car;
 int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
 bool g_fits = false;                    // --fits: each fitted ladder beside the true one, on stderr
+double g_fit_minutes = 40.0;            // --fit-minutes M: the length of the drive the model is fitted on
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -356,9 +358,10 @@ sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double dur
   return sim::simulate_drive(car, d);
 }
 
-// The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a 40-minute mixed drive.
+// The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a mixed drive of
+// g_fit_minutes (40 unless --fit-minutes).
 GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t seed) {
-  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 2400.0, seed);
+  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 60.0 * g_fit_minutes, seed);
   Cadence fit = c;
   if (fit.obd_refresh == 0.0) fit.freq_period = 1.0, fit.fix_period = 1.0;
   std::vector<Sample> samples;
@@ -370,10 +373,10 @@ GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t see
 void simulated(bool report_set, int seeds, int randoms) {
   const std::uint64_t base = report_set ? 1000 : 0;
   std::printf(
-      "\nSimulated vehicles, %s seeds %llu..%llu (fit on a 40-min mixed drive, replay 20 min of each "
+      "\nSimulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
       "style)\n",
       report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
-      static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)));
+      static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), g_fit_minutes);
   print_header();
   std::vector<sim::Vehicle> cars;
   for (const sim::Vehicle& v : sim::vehicle_presets())
@@ -447,6 +450,8 @@ int main(int argc, char** argv) {
       g_debug_to = std::atof(argv[++i]);
     } else if (a == "--fits") {
       g_fits = true;
+    } else if (a == "--fit-minutes" && i + 1 < argc) {
+      g_fit_minutes = std::atof(argv[++i]);
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {
