@@ -18,7 +18,9 @@
 //     tuning 1..N, report 1001..1000+N.
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
-//                     [--trace FILE] [DATA_DIR]
+//                     [--trace FILE] [--fits] [--fit-minutes M] [DATA_DIR]
+// --fits prints each simulated vehicle's fitted thetas beside the true ones on stderr; --fit-minutes fits
+// the simulated vehicles' models on a mixed drive of M minutes instead of 40.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -56,8 +58,9 @@ std::FILE* g_trace = nullptr;               // --trace FILE: every outage row
 long g_cadence = -1;
 double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the candidate's belief, per row
 std::string g_debug_car;
-bool g_fits = false;                    // --fits: the fitted beside the true thetas of every simulated car
 int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
+bool g_fits = false;                    // --fits: each fitted ladder beside the true one, on stderr
+double g_fit_minutes = 40.0;            // --fit-minutes M: the length of the drive the model is fitted on
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -356,9 +359,10 @@ sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double dur
   return sim::simulate_drive(car, d);
 }
 
-// The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a 40-minute mixed drive.
+// The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a mixed drive of
+// g_fit_minutes (40 unless --fit-minutes).
 GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t seed) {
-  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 2400.0, seed);
+  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 60.0 * g_fit_minutes, seed);
   Cadence fit = c;
   if (fit.obd_refresh == 0.0) fit.freq_period = 1.0, fit.fix_period = 1.0;
   std::vector<Sample> samples;
@@ -370,10 +374,10 @@ GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t see
 void simulated(bool report_set, int seeds, int randoms) {
   const std::uint64_t base = report_set ? 1000 : 0;
   std::printf(
-      "\nSimulated vehicles, %s seeds %llu..%llu (fit on a 40-min mixed drive, replay 20 min of each "
+      "\nSimulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
       "style)\n",
       report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
-      static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)));
+      static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), g_fit_minutes);
   print_header();
   std::vector<sim::Vehicle> cars;
   for (const sim::Vehicle& v : sim::vehicle_presets())
@@ -388,16 +392,17 @@ void simulated(bool report_set, int seeds, int randoms) {
       for (int s = 1; s <= seeds; ++s) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
         const GearModel model = fit_model(car, c, seed * 31 + 3);
-        if (model.gears.empty()) continue;
         if (g_fits) {
-          std::fprintf(stderr, "%s seed %llu true:", car.name.c_str(), static_cast<unsigned long long>(seed));
-          for (const double th : car.theta)
-            std::fprintf(stderr, " %.4f", th);
-          std::fprintf(stderr, " | fit:");
+          std::fprintf(stderr, "%s %s seed %llu fit", c.key, car.name.c_str(),
+                       static_cast<unsigned long long>(seed));
           for (const auto& g : model.gears)
             std::fprintf(stderr, " %.4f", g.theta);
+          std::fprintf(stderr, " | true");
+          for (double th : car.theta)
+            std::fprintf(stderr, " %.4f", th);
           std::fprintf(stderr, "\n");
         }
+        if (model.gears.empty()) continue;
         int k = 0;
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
                                               sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
@@ -446,6 +451,8 @@ int main(int argc, char** argv) {
       g_debug_to = std::atof(argv[++i]);
     } else if (a == "--fits") {
       g_fits = true;
+    } else if (a == "--fit-minutes" && i + 1 < argc) {
+      g_fit_minutes = std::atof(argv[++i]);
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {
