@@ -207,6 +207,8 @@ struct SlidingDftTracker::Impl {
   double tone_keep = 1.0;                              // per hop
   double drift_hz_per_s = 0.0;                         // recent rate of change of the tracked line
   double last_freq = kNaN;                             // previous hop's estimate while confident, else NaN
+  double anchor_freq = kNaN;                           // latest tracked estimate, NaN after a reset
+  int anchor_age = 0;                                  // hops since it
   int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
   double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
 
@@ -278,6 +280,7 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double residual_noise_level(double f, const Fit& fit) noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
   void emit(const TrackPoint& p) noexcept;
+  [[nodiscard]] double mass_near(double f) const noexcept;
 };
 
 SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate_hz) {
@@ -785,6 +788,8 @@ void SlidingDftTracker::Impl::reset_track() noexcept {
   rho_track = kDefaultRho;
   drift_hz_per_s = 0.0;
   last_freq = kNaN;
+  anchor_freq = kNaN;
+  anchor_age = 0;
 }
 
 // Prior of this hop from the previous posterior: a continuing line moves within a steady, a slew or a
@@ -805,13 +810,27 @@ void SlidingDftTracker::Impl::predict() noexcept {
   // The steady and slew gates move with the track's recent drift (a ramping engine stays in its gate).
   const auto shift = static_cast<int>(std::lround(drift_hz_per_s * cfg.hop_s / df));
   const double stay = 1.0 - p_stop - p_jump;
-  const double anywhere = (p_jump * present + p_start * post_absent) / n;
+  // The engine found again after the track lost it (a window smeared by a shift, a few drowned hops) is
+  // where the latest tracked estimate could have ramped to since, at the slew, unless it stopped or was
+  // found elsewhere meanwhile (the stop and jump rates). Without this a line found again after a lost hop
+  // was as likely anywhere, and a loud 2nd harmonic there took the track for a hop at twice the engine.
+  double near_share = 0.0;
+  int near_lo = 0, near_hi = -1;
+  if (std::isfinite(anchor_freq)) {
+    const double dt = (anchor_age + 1) * cfg.hop_s;
+    const double reach = cfg.max_slew_hz_per_s * dt + std::max(kRightFraction * anchor_freq, lobe * df);
+    near_lo = std::max(0, static_cast<int>(std::ceil((anchor_freq - reach) / df)) - s_lo);
+    near_hi = std::min(n - 1, static_cast<int>(std::floor((anchor_freq + reach) / df)) - s_lo);
+    if (near_hi >= near_lo) near_share = std::exp(-(kJumpRate + kStopRate) * dt);
+  }
+  const double anywhere = (p_jump * present + (1.0 - near_share) * p_start * post_absent) / n;
+  const double near = near_hi >= near_lo ? near_share * p_start * post_absent / (near_hi - near_lo + 1) : 0.0;
   // loglik is free here: write the prior into it, then into post.
   for (int i = 0; i < n; ++i)
     loglik[static_cast<std::size_t>(i)] =
         stay * (kSteadyShare * box(i - shift, gate_steady) + kSlewShare * box(i - shift, gate_slew) +
                 (1.0 - kSteadyShare - kSlewShare) * box(i, gate_shift)) +
-        anywhere;
+        anywhere + (i >= near_lo && i <= near_hi ? near : 0.0);
   post_absent = p_stop * present + (1.0 - p_start) * post_absent;
   std::copy(loglik.begin(), loglik.end(), post.begin());
 }
@@ -870,6 +889,18 @@ double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
   return m * m;
 }
 
+// Posterior probability that the engine's fundamental is within 5 % (or one resolution bin) of f.
+double SlidingDftTracker::Impl::mass_near(double f) const noexcept {
+  if (!std::isfinite(f)) return 0.0;
+  double mass = 0.0;
+  const double reach = std::max(kRightFraction * f, lobe * df);
+  const int lo = std::max(s_lo, static_cast<int>(std::ceil((f - reach) / df)));
+  const int hi = std::min(k_hi, static_cast<int>(std::floor((f + reach) / df)));
+  for (int k = lo; k <= hi; ++k)
+    mass += post[static_cast<std::size_t>(k - s_lo)];
+  return std::clamp(mass, 0.0, 1.0);
+}
+
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   TrackPoint out;
   out.t = time_of(static_cast<double>(centre));
@@ -910,13 +941,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // Probability that the engine's fundamental is on the estimated line: within one resolution bin of the
   // estimate (the posterior of a line spreads over its main lobe, the refined estimate does not), or 5 %
   // where that is wider.
-  double right = 0.0;
-  const double reach = std::max(kRightFraction * ev.freq, lobe * df);
-  const int lo = std::max(s_lo, static_cast<int>(std::ceil((ev.freq - reach) / df)));
-  const int hi = std::min(k_hi, static_cast<int>(std::floor((ev.freq + reach) / df)));
-  for (int k = lo; k <= hi; ++k)
-    right += post[static_cast<std::size_t>(k - s_lo)];
-  right = std::clamp(right, 0.0, 1.0);
+  const double right = mass_near(ev.freq);
   // A line sweeping through the window (mid gear-shift) smears its power over two resolution bins, and
   // the track may hold on to where the line was, on the smear's shoulder. A stronger fundamental peak
   // between one and two resolution bins away says so (sqrt z has unit-order noise, as for the shoulder
@@ -933,6 +958,12 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     out.freq = ev.freq;
     out.confidence = reported;
     out.tracked = reported >= kTrackedConfidence;
+  }
+  if (reported >= kTrackedConfidence) {
+    anchor_freq = ev.freq;
+    anchor_age = 0;
+  } else {
+    ++anchor_age;
   }
   // The track's drift, from consecutive confident estimates that continue each other.
   const bool confident = right >= kTrackedConfidence;
