@@ -868,7 +868,9 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
         if (!near_tone[b])
-          l += o == 0 ? evidence.half_order(z_at(b), rho, half_absent) : evidence.order(z_at(b), rho);
+          l += o == 0   ? evidence.half_order(z_at(b), rho, half_absent)
+               : o == 2 ? evidence.second(z_at(b), rho)
+                        : evidence.order(z_at(b), rho);
       }
     }
     out[static_cast<std::size_t>(k - s_lo)] = temper * l;
