@@ -1,6 +1,7 @@
 #include "core/sliding_dft_tracker.hpp"
 
 #include "core/sliding_dft_tracker_evidence.hpp"
+#include "core/track_outputs.hpp"
 
 #include <fftw3.h>
 
@@ -212,12 +213,7 @@ struct SlidingDftTracker::Impl {
   int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
   double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
 
-  // Output queue and hop history (fixed rings).
-  std::vector<TrackPoint> queue;
-  std::size_t q_head = 0, q_size = 0;
-  std::vector<TrackPoint> history;
-  std::size_t h_head = 0, h_size = 0;
-  std::uint64_t dropped = 0;
+  TrackOutputs outputs;
 
   struct Evidence {
     double freq = kNaN;
@@ -279,11 +275,14 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double sweep_mismatch(double f) const noexcept;
   [[nodiscard]] double residual_noise_level(double f, const Fit& fit) noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
-  void emit(const TrackPoint& p) noexcept;
   [[nodiscard]] double mass_near(double f) const noexcept;
 };
 
-SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate_hz) {
+SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
+    : cfg(c),
+      fs(c.sample_rate_hz),
+      outputs(256, std::max<std::size_t>(
+                       8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)) {
   const double top = 3.0 * cfg.band_hi_hz;  // highest scored harmonic
   decim = std::max(1, static_cast<int>(std::floor(fs / (kDecimationMargin * top))));
   fd = fs / decim;
@@ -380,10 +379,6 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate
   p_start = 1.0 - std::exp(-kStartRate * dt);
   p_jump = 1.0 - std::exp(-kJumpRate * dt);
   reset_track();
-
-  queue.resize(256);
-  history.resize(std::max<std::size_t>(
-      8, static_cast<std::size_t>(std::ceil(cfg.history_s / std::max(cfg.hop_s, 1e-3))) + 2));
 }
 
 // Decimates, detrends and tapers the window centred on input frame `centre`, then fills the power
@@ -1069,21 +1064,6 @@ void SlidingDftTracker::Impl::local_maxima(int radius) noexcept {
   }
 }
 
-void SlidingDftTracker::Impl::emit(const TrackPoint& p) noexcept {
-  if (q_size == queue.size()) {
-    q_head = (q_head + 1) % queue.size();
-    --q_size;
-    ++dropped;
-  }
-  queue[(q_head + q_size) % queue.size()] = p;
-  ++q_size;
-  history[(h_head + h_size) % history.size()] = p;
-  if (h_size == history.size())
-    h_head = (h_head + 1) % history.size();
-  else
-    ++h_size;
-}
-
 // ---- public ----
 
 std::string SlidingDftTracker::validate(const TrackerConfig& c) {
@@ -1155,8 +1135,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   std::fill(s.tone_time.begin(), s.tone_time.end(), 0.0);
   s.half_present = 1.0;  // the half order is the source's: learned again from the new stream
   s.log_noise = kNaN;
-  s.q_head = s.q_size = 0;
-  s.h_head = s.h_size = 0;
+  s.outputs.clear();
 }
 
 void SlidingDftTracker::retime(double t_next) noexcept {
@@ -1183,7 +1162,7 @@ void SlidingDftTracker::push(std::span<const float> frames) noexcept {
     while (i < frames.size() && s.n_in < needed)
       s.write_frame(frames[i++]);
     if (s.n_in >= needed) {
-      s.emit(s.process_hop(s.next_centre));
+      s.outputs.emit(s.process_hop(s.next_centre));
       s.next_centre += static_cast<std::uint64_t>(s.hop_frames);
     }
   }
@@ -1191,11 +1170,7 @@ void SlidingDftTracker::push(std::span<const float> frames) noexcept {
 
 bool SlidingDftTracker::pop(TrackPoint& out) noexcept {
   Impl& s = *impl_;
-  if (s.q_size == 0) return false;
-  out = s.queue[s.q_head];
-  s.q_head = (s.q_head + 1) % s.queue.size();
-  --s.q_size;
-  return true;
+  return s.outputs.pop(out);
 }
 
 TrackPoint SlidingDftTracker::at(double t) noexcept {
@@ -1215,8 +1190,8 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   // the best candidate within the slew gate around it, and inherits its confidence.
   TrackPoint prior;
   double prior_dt = 1e9;
-  for (std::size_t k = 0; k < s.h_size; ++k) {
-    const TrackPoint& h = s.history[(s.h_head + k) % s.history.size()];
+  for (std::size_t k = 0; k < s.outputs.held(); ++k) {
+    const TrackPoint& h = s.outputs.recent(k);
     if (std::isfinite(h.freq) && std::abs(h.t - out.t) < prior_dt) {
       prior_dt = std::abs(h.t - out.t);
       prior = h;
@@ -1248,8 +1223,8 @@ TrackPoint SlidingDftTracker::nearest(double t) const noexcept {
   TrackPoint best;
   best.t = t;
   double best_dt = 0.5 * s.cfg.hop_s + 1e-9;
-  for (std::size_t k = 0; k < s.h_size; ++k) {
-    const TrackPoint& h = s.history[(s.h_head + k) % s.history.size()];
+  for (std::size_t k = 0; k < s.outputs.held(); ++k) {
+    const TrackPoint& h = s.outputs.recent(k);
     if (std::abs(h.t - t) <= best_dt) {
       best_dt = std::abs(h.t - t);
       best = h;
@@ -1272,16 +1247,17 @@ double SlidingDftTracker::decimated_rate_hz() const noexcept {
   return impl_->fd;
 }
 std::size_t SlidingDftTracker::queue_capacity() const noexcept {
-  return impl_->queue.size();
+  return impl_->outputs.queue_capacity();
 }
 std::size_t SlidingDftTracker::max_push_frames() const noexcept {
-  return std::max<std::size_t>(1, impl_->queue.size() / 2 * static_cast<std::size_t>(impl_->hop_frames));
+  return std::max<std::size_t>(
+      1, impl_->outputs.queue_capacity() / 2 * static_cast<std::size_t>(impl_->hop_frames));
 }
 std::size_t SlidingDftTracker::history_size() const noexcept {
-  return impl_->history.size();
+  return impl_->outputs.history_capacity();
 }
 std::uint64_t SlidingDftTracker::dropped_outputs() const noexcept {
-  return impl_->dropped;
+  return impl_->outputs.dropped();
 }
 
 }  // namespace gearpulse
