@@ -1,6 +1,7 @@
 #include "core/sliding_dft_tracker.hpp"
 
 #include "core/sliding_dft_tracker_evidence.hpp"
+#include "core/track_model.hpp"
 #include "core/track_outputs.hpp"
 
 #include <fftw3.h>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -23,22 +25,10 @@ constexpr double kPi = std::numbers::pi;
 // Orders of the engine component scored and refined: half-order, fundamental, 2nd and 3rd harmonic.
 constexpr int kOrders = 4;
 constexpr double kOrder[kOrders] = {0.5, 1.0, 2.0, 3.0};
-// Track model: a hidden Markov chain over candidate fundamentals (fine bins from half the band's lower
-// edge, so that an idling engine is followed below the band and its 2nd harmonic is not taken for it)
-// plus an "absent" state. Per second: the engine stops, starts, or its line is lost and found elsewhere.
-constexpr double kStopRate = 0.05;
-constexpr double kStartRate = 0.5;
-constexpr double kJumpRate = 0.02;
-// A continuing line moves within one of three gates per hop: steady (cruise: a few Hz/s), the slew of
-// an accelerating engine, or a gear shift; shares of each.
-constexpr double kSteadyHzPerS = 5.0;
-constexpr double kSteadyShare = 0.5, kSlewShare = 0.4;  // the rest: shift
 // Per-bin SNR of the fundamental assumed before a track gives its level (-5 dB in 50-200 Hz with a
 // 100 ms Hann window), and the memory of the track's level (per hop).
 constexpr double kDefaultRho = 3.0;
 constexpr double kRhoMemory = 0.7;
-// Memory (per hop) of the track's drift, which moves the steady and slew gates.
-constexpr double kDriftMemory = 0.7;
 // Time over which a fixed tone is learned (s): far longer than any steady stretch of a moving engine
 // the track does not cover.
 constexpr double kToneMemoryS = 20.0;
@@ -71,7 +61,6 @@ constexpr double kPredictionHz = 2.0;
 // 0.8 or more: the engine speed and the training pairs are built on it, so it must be right nearly every
 // time; the probability itself is reported as the confidence.
 constexpr double kTrackedConfidence = 0.8;
-constexpr double kRightFraction = 0.05;
 // at() keeps to the nearest hop output within this time.
 constexpr double kCoastS = 0.5;
 // Anti-alias filter: decimated rate at least this multiple of the highest scored harmonic.
@@ -192,9 +181,10 @@ struct SlidingDftTracker::Impl {
   double half_keep = 1.0;     // per hop
   int lobe = 1;               // fine bins per resolution bin (1 / window)
 
-  // Track state: posterior over the states s_lo..k_hi and "absent", after the latest hop.
-  std::vector<double> post, loglik, cumsum;
-  double post_absent = 0.5;
+  // The track over hops: candidates are the fine bins s_lo..k_hi (from half the band's lower edge, so
+  // that an idling engine is followed below the band and its 2nd harmonic is not taken for it).
+  std::optional<TrackModel> track;
+  std::vector<double> at_loglik;  // at()'s candidates, apart from the track's
   double rho_track = kDefaultRho;
   // Mean normalised power per fine bin over the last tens of seconds (1 on noise): a fan or pump line
   // that stays put while the engine moves. Bins near a confident track are not learned, so a cruising
@@ -205,13 +195,7 @@ struct SlidingDftTracker::Impl {
   // Per fine bin, this hop: the normalised power, and its maximum within two resolution bins (with the
   // block maxima that give it in one pass).
   std::vector<double> z_here, z_around, z_pre, z_suf;
-  double tone_keep = 1.0;                              // per hop
-  double drift_hz_per_s = 0.0;                         // recent rate of change of the tracked line
-  double last_freq = kNaN;                             // previous hop's estimate while confident, else NaN
-  double anchor_freq = kNaN;                           // latest tracked estimate, NaN after a reset
-  int anchor_age = 0;                                  // hops since it
-  int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
-  double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
+  double tone_keep = 1.0;  // per hop
 
   TrackOutputs outputs;
 
@@ -248,7 +232,6 @@ struct SlidingDftTracker::Impl {
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
   void mark_tones() noexcept;
   void reset_track() noexcept;
-  void predict() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
   [[nodiscard]] Evidence refine(double f0, double predicted = kNaN) noexcept;
@@ -275,7 +258,6 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double sweep_mismatch(double f) const noexcept;
   [[nodiscard]] double residual_noise_level(double f, const Fit& fit) noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
-  [[nodiscard]] double mass_near(double f) const noexcept;
 };
 
 SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
@@ -364,20 +346,11 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   noise_hi = std::min(static_cast<int>(bins) - 2, static_cast<int>(std::ceil(harmonic_limit_hz / df)));
   s_lo = std::max(noise_lo, static_cast<int>(std::ceil(0.5 * cfg.band_lo_hz / df)));
   const auto states = static_cast<std::size_t>(k_hi - s_lo + 1);
-  post.assign(states, 0.0);
-  loglik.assign(states, 0.0);
-  cumsum.assign(states + 1, 0.0);
+  at_loglik.assign(states, 0.0);
   temper = std::min(1.0, cfg.hop_s / cfg.window_s);
   half_keep = std::exp(-cfg.hop_s / kHalfMemoryS);
   lobe = std::max(1, nfft / n_win);
-  const double dt = cfg.hop_s;
-  gate_steady = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df)) + 1;
-  gate_slew = static_cast<int>(std::ceil((cfg.max_slew_hz_per_s * dt) / df)) + 2;
-  gate_shift =
-      static_cast<int>(std::ceil((std::max(cfg.max_slew_hz_per_s, cfg.shift_slew_hz_per_s) * dt) / df)) + 2;
-  p_stop = 1.0 - std::exp(-kStopRate * dt);
-  p_start = 1.0 - std::exp(-kStartRate * dt);
-  p_jump = 1.0 - std::exp(-kJumpRate * dt);
+  track.emplace(cfg, s_lo, k_hi, df, lobe);
   reset_track();
 }
 
@@ -778,56 +751,8 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
 }
 
 void SlidingDftTracker::Impl::reset_track() noexcept {
-  post_absent = 0.5;
-  std::fill(post.begin(), post.end(), 0.5 / static_cast<double>(post.size()));
+  track->reset();
   rho_track = kDefaultRho;
-  drift_hz_per_s = 0.0;
-  last_freq = kNaN;
-  anchor_freq = kNaN;
-  anchor_age = 0;
-}
-
-// Prior of this hop from the previous posterior: a continuing line moves within a steady, a slew or a
-// shift gate (box kernels by prefix sums); the engine may stop, start, or be found anywhere.
-void SlidingDftTracker::Impl::predict() noexcept {
-  const auto n = static_cast<int>(post.size());
-  cumsum[0] = 0.0;
-  for (int i = 0; i < n; ++i)
-    cumsum[static_cast<std::size_t>(i) + 1] =
-        cumsum[static_cast<std::size_t>(i)] + post[static_cast<std::size_t>(i)];
-  const double present = cumsum[static_cast<std::size_t>(n)];
-  const auto box = [&](int i, int g) {
-    const int lo = std::max(0, i - g), hi = std::min(n - 1, i + g);
-    if (lo > hi) return 0.0;
-    return (cumsum[static_cast<std::size_t>(hi) + 1] - cumsum[static_cast<std::size_t>(lo)]) /
-           (2.0 * g + 1.0);
-  };
-  // The steady and slew gates move with the track's recent drift (a ramping engine stays in its gate).
-  const auto shift = static_cast<int>(std::lround(drift_hz_per_s * cfg.hop_s / df));
-  const double stay = 1.0 - p_stop - p_jump;
-  // The engine found again after the track lost it (a window smeared by a shift, a few drowned hops) is
-  // where the latest tracked estimate could have ramped to since, at the slew, unless it stopped or was
-  // found elsewhere meanwhile (the stop and jump rates). Without this a line found again after a lost hop
-  // was as likely anywhere, and a loud 2nd harmonic there took the track for a hop at twice the engine.
-  double near_share = 0.0;
-  int near_lo = 0, near_hi = -1;
-  if (std::isfinite(anchor_freq)) {
-    const double dt = (anchor_age + 1) * cfg.hop_s;
-    const double reach = cfg.max_slew_hz_per_s * dt + std::max(kRightFraction * anchor_freq, lobe * df);
-    near_lo = std::max(0, static_cast<int>(std::ceil((anchor_freq - reach) / df)) - s_lo);
-    near_hi = std::min(n - 1, static_cast<int>(std::floor((anchor_freq + reach) / df)) - s_lo);
-    if (near_hi >= near_lo) near_share = std::exp(-(kJumpRate + kStopRate) * dt);
-  }
-  const double anywhere = (p_jump * present + (1.0 - near_share) * p_start * post_absent) / n;
-  const double near = near_hi >= near_lo ? near_share * p_start * post_absent / (near_hi - near_lo + 1) : 0.0;
-  // loglik is free here: write the prior into it, then into post.
-  for (int i = 0; i < n; ++i)
-    loglik[static_cast<std::size_t>(i)] =
-        stay * (kSteadyShare * box(i - shift, gate_steady) + kSlewShare * box(i - shift, gate_slew) +
-                (1.0 - kSteadyShare - kSlewShare) * box(i, gate_shift)) +
-        anywhere + (i >= near_lo && i <= near_hi ? near : 0.0);
-  post_absent = p_stop * present + (1.0 - p_start) * post_absent;
-  std::copy(loglik.begin(), loglik.end(), post.begin());
 }
 
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
@@ -886,18 +811,6 @@ double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
   return m * m;
 }
 
-// Posterior probability that the engine's fundamental is within 5 % (or one resolution bin) of f.
-double SlidingDftTracker::Impl::mass_near(double f) const noexcept {
-  if (!std::isfinite(f)) return 0.0;
-  double mass = 0.0;
-  const double reach = std::max(kRightFraction * f, lobe * df);
-  const int lo = std::max(s_lo, static_cast<int>(std::ceil((f - reach) / df)));
-  const int hi = std::min(k_hi, static_cast<int>(std::floor((f + reach) / df)));
-  for (int k = lo; k <= hi; ++k)
-    mass += post[static_cast<std::size_t>(k - s_lo)];
-  return std::clamp(mass, 0.0, 1.0);
-}
-
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   TrackPoint out;
   out.t = time_of(static_cast<double>(centre));
@@ -905,26 +818,17 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     reset_track();
     return out;
   }
-  predict();
+  track->predict();
   mark_tones();
-  candidate_likelihoods(loglik);
-  const double top = std::max(0.0, *std::max_element(loglik.begin(), loglik.end()));
-  double total = post_absent * std::exp(-top);
-  for (std::size_t i = 0; i < post.size(); ++i) {
-    post[i] *= std::exp(loglik[i] - top);
-    total += post[i];
-  }
-  if (!(total > 0.0) || !std::isfinite(total)) {
+  candidate_likelihoods(track->evidence());
+  if (!track->update()) {
     reset_track();
     return out;
   }
-  post_absent *= std::exp(-top) / total;
-  for (double& p : post)
-    p /= total;
-  const auto best = static_cast<int>(std::max_element(post.begin(), post.end()) - post.begin()) + s_lo;
+  const int best = track->mode_bin();
   // The line's sub-bin position: near the track's prediction when that lies on the posterior's line (a
   // hop whose line is drowned must not jump to a noise peak within the lobe), else near the mode.
-  const double predicted = std::isfinite(last_freq) ? last_freq + drift_hz_per_s * cfg.hop_s : kNaN;
+  const double predicted = track->predicted();
   const bool on_line = std::isfinite(predicted) && std::abs(predicted - best * df) <= lobe * df;
   const double f_mode = harmonic_peak_near(best, lobe) * df;
   Evidence ev = refine(f_mode, predicted);
@@ -938,7 +842,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // Probability that the engine's fundamental is on the estimated line: within one resolution bin of the
   // estimate (the posterior of a line spreads over its main lobe, the refined estimate does not), or 5 %
   // where that is wider.
-  const double right = mass_near(ev.freq);
+  const double right = track->mass_near(ev.freq);
   // A line sweeping through the window (mid gear-shift) smears its power over two resolution bins, and
   // the track may hold on to where the line was, on the smear's shoulder. A stronger fundamental peak
   // between one and two resolution bins away says so (sqrt z has unit-order noise, as for the shoulder
@@ -956,20 +860,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     out.confidence = reported;
     out.tracked = reported >= kTrackedConfidence;
   }
-  if (reported >= kTrackedConfidence) {
-    anchor_freq = ev.freq;
-    anchor_age = 0;
-  } else {
-    ++anchor_age;
-  }
-  // The track's drift, from consecutive confident estimates that continue each other.
-  const bool confident = right >= kTrackedConfidence;
-  if (confident && std::isfinite(last_freq) &&
-      std::abs(ev.freq - last_freq) <= cfg.max_slew_hz_per_s * cfg.hop_s + 2.0 * df)
-    drift_hz_per_s = kDriftMemory * drift_hz_per_s + (1.0 - kDriftMemory) * (ev.freq - last_freq) / cfg.hop_s;
-  else
-    drift_hz_per_s *= kDriftMemory;
-  last_freq = confident ? ev.freq : kNaN;
+  track->observe(ev.freq, right, reported >= kTrackedConfidence);
   // The track's fundamental level, for the matched test of the next hops.
   if (right >= kTrackedConfidence)
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * std::max(ev.snr[1] - 1.0, 1.0);
@@ -1202,10 +1093,11 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   const int lo = std::max(s.s_lo, static_cast<int>(std::floor((prior.freq - gate) / s.df)));
   const int hi = std::min(s.k_hi, static_cast<int>(std::ceil((prior.freq + gate) / s.df)));
   if (lo > hi) return out;
-  s.candidate_likelihoods(s.cumsum);  // scratch: the track state stays as the hops left it
+  s.candidate_likelihoods(s.at_loglik);  // the track state stays as the hops left it
   int best = lo;
   for (int k = lo; k <= hi; ++k)
-    if (s.cumsum[static_cast<std::size_t>(k - s.s_lo)] > s.cumsum[static_cast<std::size_t>(best - s.s_lo)])
+    if (s.at_loglik[static_cast<std::size_t>(k - s.s_lo)] >
+        s.at_loglik[static_cast<std::size_t>(best - s.s_lo)])
       best = k;
   const Impl::Evidence ev = s.refine(s.harmonic_peak_near(best, s.lobe) * s.df);
   out.snr_db = ev.snr_db;
