@@ -1,6 +1,7 @@
 #include "core/sliding_dft_tracker.hpp"
 
 #include "core/sliding_dft_tracker_evidence.hpp"
+#include "core/tone_map.hpp"
 #include "core/track_model.hpp"
 #include "core/track_outputs.hpp"
 
@@ -29,20 +30,9 @@ constexpr double kOrder[kOrders] = {0.5, 1.0, 2.0, 3.0};
 // 100 ms Hann window), and the memory of the track's level (per hop).
 constexpr double kDefaultRho = 3.0;
 constexpr double kRhoMemory = 0.7;
-// Time over which a fixed tone is learned (s): far longer than any steady stretch of a moving engine
-// the track does not cover.
-constexpr double kToneMemoryS = 20.0;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
-constexpr double kToneFitLevel = 4.0;
-// Share of the tone memory in which a bin near a candidate estimate's orders must have stood above
-// kToneFitLevel before it is learned as a tone while the track is not confident, and that a bin read loud
-// must have before the reading counts in full (about 2 s of a line present at every hop; see learn_tones).
-constexpr double kTonePersist = 0.1;
+constexpr double kToneFitLevel = ToneMap::kFitLevel;
 constexpr double kToneCandidate = 0.05;  // probability from which the estimate's line is a candidate
-// A bin this far below the strongest within two resolution bins of it is on a louder line's skirt, not a
-// line of its own: a Hann window's first sidelobe is 31 dB down, its main lobe 15 dB down 1.5 bins out.
-constexpr double kToneSkirt = 100.0;
-constexpr double kToneQuickWindows = 5.0;  // a line is loud that would be a tone within this many windows
 // The estimate holds its line's peak when its power is within 3 dB of the peak's, or within the noise of it
 // (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
 constexpr double kToneCandidateMismatch = 2.0;
@@ -186,16 +176,7 @@ struct SlidingDftTracker::Impl {
   std::optional<TrackModel> track;
   std::vector<double> at_loglik;  // at()'s candidates, apart from the track's
   double rho_track = kDefaultRho;
-  // Mean normalised power per fine bin over the last tens of seconds (1 on noise): a fan or pump line
-  // that stays put while the engine moves. Bins near a confident track are not learned, so a cruising
-  // engine does not become a "tone".
-  std::vector<double> tone;
-  std::vector<double> tone_time;  // per fine bin: share of the tone memory spent above kToneFitLevel
-  std::vector<char> near_tone;    // within one resolution bin of a learned tone (per fine bin, this hop)
-  // Per fine bin, this hop: the normalised power, and its maximum within two resolution bins (with the
-  // block maxima that give it in one pass).
-  std::vector<double> z_here, z_around, z_pre, z_suf;
-  double tone_keep = 1.0;  // per hop
+  std::optional<ToneMap> tones;  // fixed tones of other equipment, counted as background
 
   TrackOutputs outputs;
 
@@ -225,12 +206,10 @@ struct SlidingDftTracker::Impl {
   // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
   // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot).
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
-    return power[k] / (noise[k] * std::max(1.0, tone[k] - 1.0));
+    return power[k] / (noise[k] * tones->background(k));
   }
   void learn_tones(double freq, double right) noexcept;
-  void local_maxima(int radius) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
-  void mark_tones() noexcept;
   void reset_track() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
@@ -330,14 +309,6 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   std::fill(resid_in.get(), resid_in.get() + nfft, 0.0);
   power.assign(bins, 0.0);
   noise.assign(bins, 0.0);
-  tone.assign(bins, 1.0);
-  tone_time.assign(bins, 0.0);
-  near_tone.assign(bins, 0);
-  z_here.assign(bins, 0.0);
-  z_around.assign(bins, 0.0);
-  z_pre.assign(bins, 0.0);
-  z_suf.assign(bins, 0.0);
-  tone_keep = std::exp(-cfg.hop_s / kToneMemoryS);
   block_scratch.assign(bins, 0.0);
 
   k_lo = static_cast<int>(std::ceil(cfg.band_lo_hz / df));
@@ -351,6 +322,7 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   half_keep = std::exp(-cfg.hop_s / kHalfMemoryS);
   lobe = std::max(1, nfft / n_win);
   track.emplace(cfg, s_lo, k_hi, df, lobe);
+  tones.emplace(bins, noise_lo, noise_hi, lobe, df, cfg.hop_s);
   reset_track();
 }
 
@@ -651,8 +623,8 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     double strongest = kToneFitLevel;
     const auto c = static_cast<int>(std::lround(f0 / df));
     for (int k = std::max(noise_lo, c - 2 * lobe); k <= std::min(noise_hi, c + 2 * lobe); ++k)
-      if (tone[static_cast<std::size_t>(k)] > strongest) {
-        strongest = tone[static_cast<std::size_t>(k)];
+      if (tones->mean(static_cast<std::size_t>(k)) > strongest) {
+        strongest = tones->mean(static_cast<std::size_t>(k));
         nuisance_hz = k * df;
       }
   }
@@ -757,14 +729,6 @@ void SlidingDftTracker::Impl::reset_track() noexcept {
 
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
 // normalised power at each of its orders.
-void SlidingDftTracker::Impl::mark_tones() noexcept {
-  std::fill(near_tone.begin(), near_tone.end(), 0);
-  const auto n = static_cast<int>(near_tone.size());
-  for (int k = noise_lo; k <= noise_hi; ++k)
-    if (tone[static_cast<std::size_t>(k)] >= kToneFitLevel)
-      for (int j = std::max(0, k - lobe); j <= std::min(n - 1, k + lobe); ++j)
-        near_tone[static_cast<std::size_t>(j)] = 1;
-}
 
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
   const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
@@ -774,11 +738,11 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
     // resolution bin is penalised by the amplitude mismatch (sqrt z has unit-order noise).
     double peak = z1;
     for (int j = std::max(0, k - lobe); j <= std::min(nfft / 2, k + lobe); ++j)
-      if (!near_tone[static_cast<std::size_t>(j)]) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
+      if (!tones->near(static_cast<std::size_t>(j))) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
     const double mismatch = std::sqrt(peak) - std::sqrt(z1);
     // A bin within a resolution bin of a learned tone says nothing either way: the engine may or may
     // not be under the tone or its shoulders.
-    const bool on_tone = near_tone[static_cast<std::size_t>(k)];
+    const bool on_tone = tones->near(static_cast<std::size_t>(k));
     double l = on_tone ? 0.0 : evidence.fundamental(z1, rho_track) - mismatch * mismatch;
     if (cfg.require_harmonics) {
       const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
@@ -787,7 +751,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
         const double pos = kOrder[o] * k;
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
-        if (!near_tone[b])
+        if (!tones->near(b))
           l += o == 0   ? evidence.half_order(z_at(b), rho, half_absent)
                : o == 2 ? evidence.second(z_at(b), rho)
                         : evidence.order(z_at(b), rho);
@@ -805,7 +769,7 @@ double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
   const double z_est = z_at(static_cast<std::size_t>(kc));
   double z_peak = z_est;
   for (int k = std::max(s_lo, kc - 2 * lobe); k <= std::min(nfft / 2 - 1, kc + 2 * lobe); ++k)
-    if (std::abs(k - kc) > lobe && !near_tone[static_cast<std::size_t>(k)])
+    if (std::abs(k - kc) > lobe && !tones->near(static_cast<std::size_t>(k)))
       z_peak = std::max(z_peak, z_at(static_cast<std::size_t>(k)));
   const double m = std::sqrt(z_peak) - std::sqrt(z_est);
   return m * m;
@@ -819,7 +783,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     return out;
   }
   track->predict();
-  mark_tones();
+  tones->mark();
   candidate_likelihoods(track->evidence());
   if (!track->update()) {
     reset_track();
@@ -870,7 +834,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // This signal's half order, from hops that can tell: a confident estimate with a loud fundamental.
   if (right >= kHalfObserveRight && ev.available[0] && ev.snr[1] >= kHalfObserveRho) {
     const auto b = static_cast<std::size_t>(std::lround(0.5 * ev.freq / df));
-    if (b < near_tone.size() && !near_tone[b])
+    if (b < tones->bins() && !tones->near(b))
       half_present = half_keep * half_present + (1.0 - half_keep) * (ev.snr[0] >= kToneFitLevel ? 1.0 : 0.0);
   }
   return out;
@@ -904,55 +868,10 @@ void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
       }
       // Only a line loud enough to become a tone within a few windows needs the grace: fainter ones are
       // learned over many, as before (a fan next to a faint engine line is learned as soon).
-      const bool loud = own * kToneQuickWindows * (1.0 - tone_keep) >= kToneFitLevel - 1.0;
-      candidate = holds && ladder && loud;
+      candidate = holds && ladder && tones->loud(own);
     }
   }
-  local_maxima(2 * lobe);
-  for (int k = noise_lo; k <= noise_hi; ++k) {
-    bool near = false;
-    for (int o = 0; o < kOrders && !near && std::isfinite(freq); ++o)
-      near = std::abs(k * df - kOrder[o] * freq) <= 2.0 * lobe * df;
-    if (on_track && near) continue;
-    const auto i = static_cast<std::size_t>(k);
-    // The skirt of a loud line (30 dB and more over the noise spreads its leakage over several resolution
-    // bins) moves with that line: it is not a tone of its own, and learned as one it blanked the band.
-    const double z = z_here[i] * kToneSkirt >= z_around[i] ? z_here[i] : std::min(z_here[i], 1.0);
-    tone_time[i] = tone_keep * tone_time[i] + (z >= kToneFitLevel ? 1.0 - tone_keep : 0.0);
-    // The orders of a candidate not yet confident are learned only once they have persisted: a loud window
-    // moves a bin's mean power past the fit level at once, and a clean engine line (40 dB over the noise)
-    // not yet tracked at its first window was taken for a tone at its second and never acquired.
-    if (candidate && near && tone_time[i] < kTonePersist) continue;
-    // So is any loud reading: a loud line sweeping past (an order the estimate does not cover, an engine
-    // not yet tracked) stays in a bin a few windows, a tone stays for good. Until it has persisted it may
-    // raise the bin's mean to half the fit level (nothing is left out for it yet, and a tone that stays is
-    // learned soon after); fainter readings are learned over many windows anyway.
-    const bool loud = z * kToneQuickWindows * (1.0 - tone_keep) >= kToneFitLevel - 1.0;
-    const double next = std::max(1.0, tone_keep * tone[i] + (1.0 - tone_keep) * std::min(z, 1e3));
-    tone[i] =
-        loud && tone_time[i] < kTonePersist ? std::min(next, std::max(tone[i], 0.5 * kToneFitLevel)) : next;
-  }
-}
-
-// z_around[k] = the largest normalised power within `radius` fine bins of k (noise_lo..noise_hi), in one
-// pass over blocks of the window's width (van Herk / Gil-Werman): a window spans at most two blocks.
-void SlidingDftTracker::Impl::local_maxima(int radius) noexcept {
-  const int n = noise_hi - noise_lo + 1;
-  const int w = 2 * radius + 1;
-  const auto at = [this](int j) { return static_cast<std::size_t>(noise_lo + j); };
-  for (int j = 0; j < n; ++j)
-    z_here[at(j)] = power[at(j)] / noise[at(j)];
-  for (int j = 0; j < n; ++j)
-    z_pre[at(j)] = j % w == 0 ? z_here[at(j)] : std::max(z_pre[at(j - 1)], z_here[at(j)]);
-  for (int j = n - 1; j >= 0; --j)
-    z_suf[at(j)] = j == n - 1 || (j + 1) % w == 0 ? z_here[at(j)] : std::max(z_suf[at(j + 1)], z_here[at(j)]);
-  for (int j = 0; j < n; ++j) {
-    const int a = std::max(0, j - radius);
-    const int b = std::min(n - 1, j + radius);
-    // Within one block only when clipped by an end of the range: the part from its start or to its end.
-    z_around[at(j)] =
-        a / w == b / w ? (a % w == 0 ? z_pre[at(b)] : z_suf[at(a)]) : std::max(z_suf[at(a)], z_pre[at(b)]);
-  }
+  tones->learn(power.data(), noise.data(), freq, kOrder, on_track, candidate);
 }
 
 // ---- public ----
@@ -1022,8 +941,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   const auto first_hop = (s.half_span + s.hop_frames - 1) / s.hop_frames;
   s.next_centre = static_cast<std::uint64_t>(first_hop * s.hop_frames);
   s.reset_track();
-  std::fill(s.tone.begin(), s.tone.end(), 1.0);
-  std::fill(s.tone_time.begin(), s.tone_time.end(), 0.0);
+  s.tones->reset();
   s.half_present = 1.0;  // the half order is the source's: learned again from the new stream
   s.log_noise = kNaN;
   s.outputs.clear();
