@@ -1,5 +1,6 @@
 #include "core/sliding_dft_tracker.hpp"
 
+#include "core/decimating_input.hpp"
 #include "core/sliding_dft_tracker_evidence.hpp"
 #include "core/tone_map.hpp"
 #include "core/track_model.hpp"
@@ -53,9 +54,6 @@ constexpr double kPredictionHz = 2.0;
 constexpr double kTrackedConfidence = 0.8;
 // at() keeps to the nearest hop output within this time.
 constexpr double kCoastS = 0.5;
-// Anti-alias filter: decimated rate at least this multiple of the highest scored harmonic.
-constexpr double kDecimationMargin = 2.4;
-constexpr double kStopbandDb = 70.0;
 constexpr int kZeroPad = 8;
 constexpr int kNoiseBlock = 192;  // fine bins per noise-floor block
 
@@ -83,16 +81,6 @@ struct FftwPlan {
     }
   }
 };
-
-double bessel_i0(double x) {
-  double sum = 1.0, term = 1.0;
-  for (int k = 1; k < 50; ++k) {
-    term *= (x / (2.0 * k)) * (x / (2.0 * k));
-    sum += term;
-    if (term < 1e-17 * sum) break;
-  }
-  return sum;
-}
 
 std::size_t next_pow2(std::size_t n) {
   std::size_t p = 1;
@@ -131,10 +119,9 @@ std::size_t extract_channel(std::span<const float> interleaved, int channels, in
 struct SlidingDftTracker::Impl {
   TrackerConfig cfg;
   double fs = 0.0;
-  int decim = 1;
+  DecimatingInput input;           // the input frames and the decimator that reads windows from them
   double fd = 0.0;                 // decimated rate
   double harmonic_limit_hz = 0.0;  // highest frequency the decimated signal represents faithfully
-  std::vector<double> fir;         // odd length, linear phase, unit DC gain
   int n_win = 0;                   // decimated samples per window (odd)
   int nfft = 0;
   double df = 0.0;             // fine bin width (Hz)
@@ -143,12 +130,7 @@ struct SlidingDftTracker::Impl {
   std::int64_t half_span = 0;  // input frames from a window centre to its first/last used frame
   std::int64_t hop_frames = 1;
 
-  // Input ring, written twice (i and i + size) so any span up to `ring_size` frames is contiguous.
-  std::size_t ring_size = 0;
-  std::vector<float> ring;
-  std::uint64_t n_in = 0;        // frames received (including skipped ones)
-  std::uint64_t valid_from = 0;  // first frame after the latest hole
-  double t0 = 0.0;               // time of frame 0
+  double t0 = 0.0;  // time of frame 0
   std::uint64_t next_centre = 0;
 
   // Per-hop scratch (sized at construction).
@@ -194,13 +176,6 @@ struct SlidingDftTracker::Impl {
   explicit Impl(const TrackerConfig& c);
 
   [[nodiscard]] double time_of(double frame) const noexcept { return t0 + frame / fs; }
-  void write_frame(float x) noexcept {
-    if (!std::isfinite(x)) x = 0.0f;  // a glitch must not poison every window that sees it
-    const std::size_t i = static_cast<std::size_t>(n_in) & (ring_size - 1);
-    ring[i] = x;
-    ring[i + ring_size] = x;
-    ++n_in;
-  }
   bool analyse(std::uint64_t centre) noexcept;
   [[nodiscard]] double noise_at(double fine_bin) const noexcept;
   // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
@@ -242,37 +217,11 @@ struct SlidingDftTracker::Impl {
 SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
     : cfg(c),
       fs(c.sample_rate_hz),
+      input(c.sample_rate_hz, 3.0 * c.band_hi_hz),  // up to the highest scored harmonic
       outputs(256, std::max<std::size_t>(
                        8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)) {
-  const double top = 3.0 * cfg.band_hi_hz;  // highest scored harmonic
-  decim = std::max(1, static_cast<int>(std::floor(fs / (kDecimationMargin * top))));
-  fd = fs / decim;
-  if (decim > 1) {
-    // Kaiser-windowed sinc: passband up to `top`, stopband from fd - top (what would alias below top).
-    const double transition = fd - 2.0 * top;
-    const double beta = 0.1102 * (kStopbandDb - 8.7);
-    int len = static_cast<int>(std::ceil((kStopbandDb - 8.0) / (2.285 * 2.0 * kPi * transition / fs))) + 1;
-    if (len % 2 == 0) ++len;
-    const double fc = 0.5 * fd / fs;  // cycles per input sample
-    fir.resize(static_cast<std::size_t>(len));
-    const int mid = len / 2;
-    double sum = 0.0;
-    for (int i = 0; i < len; ++i) {
-      const double m = i - mid;
-      const double sinc = m == 0 ? 2.0 * fc : std::sin(2.0 * kPi * fc * m) / (kPi * m);
-      const double r = m / mid;
-      const double kaiser = bessel_i0(beta * std::sqrt(std::max(0.0, 1.0 - r * r))) / bessel_i0(beta);
-      fir[static_cast<std::size_t>(i)] = sinc * kaiser;
-      sum += fir[static_cast<std::size_t>(i)];
-    }
-    for (double& h : fir)
-      h /= sum;
-    harmonic_limit_hz = top;
-  } else {
-    fir.assign(1, 1.0);
-    harmonic_limit_hz = 0.45 * fs;
-  }
-
+  fd = input.rate_hz();
+  harmonic_limit_hz = input.limit_hz();
   n_win = static_cast<int>(std::lround(cfg.window_s * fd));
   if (n_win % 2 == 0) ++n_win;
   nfft = static_cast<int>(next_pow2(static_cast<std::size_t>(kZeroPad * n_win)));
@@ -284,13 +233,13 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
     sum_w += w;
     sum_w2 += w * w;
   }
-  half_span = static_cast<std::int64_t>((n_win - 1) / 2) * decim + static_cast<std::int64_t>(fir.size() / 2);
+  half_span = static_cast<std::int64_t>((n_win - 1) / 2) * input.factor() +
+              static_cast<std::int64_t>(input.taps() / 2);
   hop_frames = std::max<std::int64_t>(1, std::llround(cfg.hop_s * fs));
 
   const auto history_frames = static_cast<std::size_t>(std::ceil(cfg.history_s * fs));
-  ring_size = next_pow2(history_frames + 2 * static_cast<std::size_t>(half_span) +
-                        static_cast<std::size_t>(hop_frames) + 16);
-  ring.assign(2 * ring_size, 0.0f);
+  input.reserve(history_frames + 2 * static_cast<std::size_t>(half_span) +
+                static_cast<std::size_t>(hop_frames) + 16);
 
   dec.resize(static_cast<std::size_t>(n_win));
   raw.resize(static_cast<std::size_t>(n_win));
@@ -330,14 +279,10 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
 // spectrum and the noise floor. False on a silent window.
 bool SlidingDftTracker::Impl::analyse(std::uint64_t centre) noexcept {
   const int mid = (n_win - 1) / 2;
-  const std::size_t taps = fir.size();
   const std::uint64_t first = centre - static_cast<std::uint64_t>(half_span);
+  const auto decim = static_cast<std::uint64_t>(input.factor());
   for (int j = 0; j < n_win; ++j) {
-    const std::uint64_t start = first + static_cast<std::uint64_t>(j) * static_cast<std::uint64_t>(decim);
-    const float* x = ring.data() + (static_cast<std::size_t>(start) & (ring_size - 1));
-    double acc = 0.0;
-    for (std::size_t k = 0; k < taps; ++k)
-      acc += fir[k] * static_cast<double>(x[k]);
+    const double acc = input.sample(first + static_cast<std::uint64_t>(j) * decim);
     dec[static_cast<std::size_t>(j)] = acc;
     raw[static_cast<std::size_t>(j)] = acc;
   }
@@ -778,7 +723,7 @@ double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   TrackPoint out;
   out.t = time_of(static_cast<double>(centre));
-  if (centre < valid_from + static_cast<std::uint64_t>(half_span) || !analyse(centre)) {
+  if (centre < input.valid_from() + static_cast<std::uint64_t>(half_span) || !analyse(centre)) {
     reset_track();
     return out;
   }
@@ -936,8 +881,7 @@ SlidingDftTracker::~SlidingDftTracker() = default;
 void SlidingDftTracker::start(double t0) noexcept {
   Impl& s = *impl_;
   s.t0 = t0;
-  s.n_in = 0;
-  s.valid_from = 0;
+  s.input.clear();
   const auto first_hop = (s.half_span + s.hop_frames - 1) / s.hop_frames;
   s.next_centre = static_cast<std::uint64_t>(first_hop * s.hop_frames);
   s.reset_track();
@@ -948,18 +892,17 @@ void SlidingDftTracker::start(double t0) noexcept {
 }
 
 void SlidingDftTracker::retime(double t_next) noexcept {
-  impl_->t0 = t_next - static_cast<double>(impl_->n_in) / impl_->fs;
+  impl_->t0 = t_next - static_cast<double>(impl_->input.received()) / impl_->fs;
 }
 
 void SlidingDftTracker::skip(std::uint64_t frames) noexcept {
   Impl& s = *impl_;
   if (frames == 0) return;
-  s.n_in += frames;
-  s.valid_from = s.n_in;
+  s.input.skip(frames);
   s.reset_track();
   // Hops whose windows overlap the hole give no output; resume on the hop grid after it.
   const auto h = static_cast<std::uint64_t>(s.hop_frames);
-  const std::uint64_t min_centre = s.valid_from + static_cast<std::uint64_t>(s.half_span);
+  const std::uint64_t min_centre = s.input.valid_from() + static_cast<std::uint64_t>(s.half_span);
   if (s.next_centre < min_centre) s.next_centre = (min_centre + h - 1) / h * h;
 }
 
@@ -968,9 +911,9 @@ void SlidingDftTracker::push(std::span<const float> frames) noexcept {
   std::size_t i = 0;
   while (i < frames.size()) {
     const std::uint64_t needed = s.next_centre + static_cast<std::uint64_t>(s.half_span) + 1;
-    while (i < frames.size() && s.n_in < needed)
-      s.write_frame(frames[i++]);
-    if (s.n_in >= needed) {
+    while (i < frames.size() && s.input.received() < needed)
+      s.input.write(frames[i++]);
+    if (s.input.received() >= needed) {
       s.outputs.emit(s.process_hop(s.next_centre));
       s.next_centre += static_cast<std::uint64_t>(s.hop_frames);
     }
@@ -990,9 +933,10 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   if (!std::isfinite(pos)) return out;
   const double c = std::round(pos);
   const auto hs = static_cast<double>(s.half_span);
-  const double oldest = std::max(static_cast<double>(s.valid_from),
-                                 static_cast<double>(s.n_in) - static_cast<double>(s.ring_size) + 1.0);
-  if (c - hs < oldest || c + hs >= static_cast<double>(s.n_in)) return out;
+  const auto received = static_cast<double>(s.input.received());
+  const double oldest = std::max(static_cast<double>(s.input.valid_from()),
+                                 received - static_cast<double>(s.input.capacity()) + 1.0);
+  if (c - hs < oldest || c + hs >= received) return out;
   const auto centre = static_cast<std::uint64_t>(c);
   out.t = s.time_of(c);
   // Prior: the nearest hop output with an estimate, within the coast time; this window's estimate is
@@ -1045,8 +989,8 @@ TrackPoint SlidingDftTracker::nearest(double t) const noexcept {
 
 double SlidingDftTracker::latest_time() const noexcept {
   const Impl& s = *impl_;
-  const auto last = static_cast<std::int64_t>(s.n_in) - 1 - s.half_span;
-  if (last < static_cast<std::int64_t>(s.valid_from) + s.half_span) return kNaN;
+  const auto last = static_cast<std::int64_t>(s.input.received()) - 1 - s.half_span;
+  if (last < static_cast<std::int64_t>(s.input.valid_from()) + s.half_span) return kNaN;
   return s.time_of(static_cast<double>(last));
 }
 
