@@ -1,6 +1,7 @@
 #include "core/sliding_dft_tracker.hpp"
 
 #include "core/decimating_input.hpp"
+#include "core/sinusoid_fit.hpp"
 #include "core/sliding_dft_tracker_evidence.hpp"
 #include "core/tone_map.hpp"
 #include "core/track_model.hpp"
@@ -192,17 +193,12 @@ struct SlidingDftTracker::Impl {
   // Fundamental power over the band's noise power (the generator's definition), in dB. `learn`: the
   // window is the next hop's, whose noise level joins the average.
   [[nodiscard]] double snr_db(const Evidence& ev, bool learn) noexcept;
-  void dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
-            std::complex<double>& ddx) const noexcept;
   // Least-squares model of a window: level, slope, a sinusoid per order and one for a learned fixed tone
   // next to the fundamental (slot kOrders), which would otherwise pull the fit.
   static constexpr int kSlots = kOrders + 1;
-  struct Fit {
-    static constexpr int kMaxCols = 2 + 2 * kSlots;
-    double coef[kMaxCols] = {};
-    int order_col[kSlots] = {-1, -1, -1, -1, -1};
-    int cols = 0;
-  };
+  static_assert(kSlots == SinusoidFit::kMaxSines);
+  using Fit = SinusoidFit::Result;
+  SinusoidFit sines{1, 1.0};
   double nuisance_hz = kNaN;  // the learned tone fitted along, for the current refine()
   double log_noise = kNaN;    // log of the band's noise variance per sample, averaged over hops
   [[nodiscard]] double slot_hz(int o, double f) const noexcept {
@@ -225,6 +221,7 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   n_win = static_cast<int>(std::lround(cfg.window_s * fd));
   if (n_win % 2 == 0) ++n_win;
   nfft = static_cast<int>(next_pow2(static_cast<std::size_t>(kZeroPad * n_win)));
+  sines = SinusoidFit(n_win, fd);
   df = fd / nfft;
   window.resize(static_cast<std::size_t>(n_win));
   for (int i = 0; i < n_win; ++i) {
@@ -392,39 +389,15 @@ double SlidingDftTracker::Impl::harmonic_peak_near(int k, int reach) const noexc
   return best + (den < 0.0 ? std::clamp(0.5 * (a - c) / den, -0.5, 0.5) : 0.0);
 }
 
-// DTFT of the tapered window and its first two derivatives in omega (radians per decimated sample),
-// with the time origin at the window centre.
-void SlidingDftTracker::Impl::dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
-                                   std::complex<double>& ddx) const noexcept {
-  const int mid = (n_win - 1) / 2;
-  const std::complex<double> step = std::polar(1.0, -omega);
-  std::complex<double> e = std::polar(1.0, omega * mid);  // e^{-j omega m} at m = -mid
-  x = dx = ddx = 0.0;
-  for (int j = 0; j < n_win; ++j) {
-    const double m = j - mid;
-    const std::complex<double> v = dec[static_cast<std::size_t>(j)] * e;
-    x += v;
-    dx += std::complex<double>(0.0, -m) * v;
-    ddx += -m * m * v;
-    e *= step;
-  }
-}
-
 // Energy of the window explained by a harmonic model at fundamental f: level, slope and a sinusoid at
 // every order the decimated signal holds, fitted jointly by least squares (so the orders do not leak
 // into each other as they would through a window). Its maximum over f is the ML estimate of f for a
 // harmonic signal in white noise. Optionally returns the fitted fundamental's squared amplitude.
 double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit) const noexcept {
-  constexpr int kMaxCols = Fit::kMaxCols;
-  double gram[kMaxCols][kMaxCols] = {};
-  double rhs[kMaxCols] = {};
-  std::complex<double> rot[kSlots], phasor[kSlots];
-  int order_col[kSlots];
-  int cols = 2;
-  const int mid = (n_win - 1) / 2;
+  double freq[kSlots];
   const double resolution = fd / n_win;
   for (int o = 0; o < kSlots; ++o) {
-    order_col[o] = -1;
+    freq[o] = kNaN;
     const double fo = slot_hz(o, f);
     if (o == kOrders) {
       // Two sinusoids closer than half a resolution bin cannot be told apart in one window.
@@ -435,66 +408,9 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit
       continue;
     }
     if (fo > harmonic_limit_hz || fo / df < noise_lo) continue;
-    order_col[o] = cols;
-    cols += 2;
-    const double w = 2.0 * kPi * fo / fd;
-    rot[o] = std::polar(1.0, w);
-    phasor[o] = std::polar(1.0, -w * mid);
+    freq[o] = fo;
   }
-  double v[kMaxCols];
-  for (int j = 0; j < n_win; ++j) {
-    v[0] = 1.0;
-    v[1] = static_cast<double>(j - mid) / std::max(1, mid);
-    for (int o = 0; o < kSlots; ++o) {
-      if (order_col[o] < 0) continue;
-      v[order_col[o]] = phasor[o].real();
-      v[order_col[o] + 1] = phasor[o].imag();
-      phasor[o] *= rot[o];
-    }
-    const double y = raw[static_cast<std::size_t>(j)];
-    for (int a = 0; a < cols; ++a) {
-      rhs[a] += v[a] * y;
-      for (int b = 0; b <= a; ++b)
-        gram[a][b] += v[a] * v[b];
-    }
-  }
-  // Cholesky solve (lower triangle); a degenerate model explains nothing.
-  double l[kMaxCols][kMaxCols] = {};
-  for (int a = 0; a < cols; ++a) {
-    for (int b = 0; b <= a; ++b) {
-      double sum = gram[a][b];
-      for (int k = 0; k < b; ++k)
-        sum -= l[a][k] * l[b][k];
-      if (a == b) {
-        if (!(sum > 1e-9 * gram[a][a])) return 0.0;
-        l[a][a] = std::sqrt(sum);
-      } else {
-        l[a][b] = sum / l[b][b];
-      }
-    }
-  }
-  double z[kMaxCols], x[kMaxCols];
-  for (int a = 0; a < cols; ++a) {
-    double sum = rhs[a];
-    for (int k = 0; k < a; ++k)
-      sum -= l[a][k] * z[k];
-    z[a] = sum / l[a][a];
-  }
-  double explained = 0.0;
-  for (int a = 0; a < cols; ++a)
-    explained += z[a] * z[a];
-  if (fit) {
-    for (int a = cols - 1; a >= 0; --a) {
-      double sum = z[a];
-      for (int k = a + 1; k < cols; ++k)
-        sum -= l[k][a] * x[k];
-      x[a] = sum / l[a][a];
-    }
-    fit->cols = cols;
-    std::copy(x, x + cols, fit->coef);
-    std::copy(order_col, order_col + kSlots, fit->order_col);
-  }
-  return explained;
+  return sines.fit(raw.data(), freq, fit);
 }
 
 // Noise variance per decimated sample inside the band: the fitted harmonic model is subtracted from the
@@ -502,26 +418,11 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit
 // does not hold, such as a fan) taken as an exponential variable's (median = mean x ln 2).
 double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) noexcept {
   if (fit.cols == 0) return noise_at(f / df) / sum_w2;
-  const int mid = (n_win - 1) / 2;
-  std::complex<double> rot[kSlots], phasor[kSlots];
-  for (int o = 0; o < kSlots; ++o) {
-    if (fit.order_col[o] < 0) continue;
-    const double w = 2.0 * kPi * slot_hz(o, f) / fd;
-    rot[o] = std::polar(1.0, w);
-    phasor[o] = std::polar(1.0, -w * mid);
-  }
+  double freq[kSlots];
+  for (int o = 0; o < kSlots; ++o)
+    freq[o] = fit.col[o] >= 0 ? slot_hz(o, f) : kNaN;
   double* in = resid_in.get();
-  for (int j = 0; j < n_win; ++j) {
-    double model = fit.coef[0] + fit.coef[1] * static_cast<double>(j - mid) / std::max(1, mid);
-    for (int o = 0; o < kSlots; ++o) {
-      const int col = fit.order_col[o];
-      if (col < 0) continue;
-      model += fit.coef[col] * phasor[o].real() + fit.coef[col + 1] * phasor[o].imag();
-      phasor[o] *= rot[o];
-    }
-    const auto i = static_cast<std::size_t>(j);
-    in[i] = (raw[i] - model) * window[i];
-  }
+  sines.residual(raw.data(), freq, fit, window.data(), in);
   fftw_execute_dft_r2c(plan.p, in, resid_out.get());
   // The band's fine bins; the median by selection in the (now free) scratch of the noise floor.
   const int lo = std::max(noise_lo, k_lo), hi = std::max(lo, k_hi);
@@ -531,7 +432,7 @@ double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) n
     // The fit notches the residual around every fitted frequency; those bins are not noise.
     bool notched = false;
     for (int o = 0; o < kSlots && !notched; ++o)
-      notched = fit.order_col[o] >= 0 && std::abs(k * df - slot_hz(o, f)) <= lobe * df;
+      notched = fit.col[o] >= 0 && std::abs(k * df - slot_hz(o, f)) <= lobe * df;
     if (notched) continue;
     const fftw_complex& v = resid_out.get()[static_cast<std::size_t>(k)];
     scratch[n++] = v[0] * v[0] + v[1] * v[1];
@@ -648,7 +549,7 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
   for (int o = 0; o < kOrders; ++o) {
     const double fo = kOrder[o] * f;
     if (fo > harmonic_limit_hz || fo / df < noise_lo) continue;
-    dtft(2.0 * kPi * fo / fd, x, dx, ddx);
+    sines.dtft(dec.data(), 2.0 * kPi * fo / fd, x, dx, ddx);
     ev.available[o] = true;
     ev.snr[o] = std::norm(x) / noise_at(fo / df);
     if (o != 1) {
@@ -660,7 +561,7 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
   // The window's noise level, from the residual of the harmonic fit (the engine's own lines and their
   // leakage removed), and the fitted fundamental's power, for the SNR (see snr_db()).
   ev.noise_level = residual_noise_level(f, fit);
-  const int col = fit.order_col[1];
+  const int col = fit.col[1];
   ev.fundamental_amp2 =
       col >= 0 && fit.cols > 0 ? fit.coef[col] * fit.coef[col] + fit.coef[col + 1] * fit.coef[col + 1] : 0.0;
   ev.snr_db = snr_db(ev, false);
