@@ -6,6 +6,7 @@
 #include "core/tone_map.hpp"
 #include "core/track_model.hpp"
 #include "core/track_outputs.hpp"
+#include "core/window_spectrum.hpp"
 
 #include <fftw3.h>
 
@@ -13,7 +14,6 @@
 #include <cmath>
 #include <complex>
 #include <cstdio>
-#include <mutex>
 #include <numbers>
 #include <optional>
 #include <stdexcept>
@@ -56,32 +56,6 @@ constexpr double kTrackedConfidence = 0.8;
 // at() keeps to the nearest hop output within this time.
 constexpr double kCoastS = 0.5;
 constexpr int kZeroPad = 8;
-constexpr int kNoiseBlock = 192;  // fine bins per noise-floor block
-
-struct FftwFree {
-  void operator()(void* p) const noexcept { fftw_free(p); }
-};
-
-// The FFTW planner is not thread-safe; trackers may be built on several threads.
-std::mutex& planner_mutex() {
-  static std::mutex m;
-  return m;
-}
-
-// A plan, destroyed (under the planner's lock) with its owner, also when the owner's constructor throws
-// after making it.
-struct FftwPlan {
-  fftw_plan p = nullptr;
-  FftwPlan() noexcept = default;
-  FftwPlan(const FftwPlan&) = delete;
-  FftwPlan& operator=(const FftwPlan&) = delete;
-  ~FftwPlan() {
-    if (p) {
-      const std::lock_guard lock(planner_mutex());
-      fftw_destroy_plan(p);
-    }
-  }
-};
 
 std::size_t next_pow2(std::size_t n) {
   std::size_t p = 1;
@@ -126,8 +100,6 @@ struct SlidingDftTracker::Impl {
   int n_win = 0;                   // decimated samples per window (odd)
   int nfft = 0;
   double df = 0.0;             // fine bin width (Hz)
-  std::vector<double> window;  // Hann
-  double sum_w = 0.0, sum_w2 = 0.0;
   std::int64_t half_span = 0;  // input frames from a window centre to its first/last used frame
   std::int64_t hop_frames = 1;
 
@@ -135,19 +107,12 @@ struct SlidingDftTracker::Impl {
   std::uint64_t next_centre = 0;
 
   // Per-hop scratch (sized at construction).
-  std::vector<double> dec;  // decimated window, detrended and tapered
-  std::vector<double> raw;  // decimated window as filtered (for the least-squares fit)
-  std::unique_ptr<double, FftwFree> fft_in;
-  std::unique_ptr<fftw_complex, FftwFree> fft_out;
-  FftwPlan plan;
-  std::vector<double> power;
-  std::vector<double> noise;  // per fine bin
-  std::vector<double> block_scratch;
-  std::unique_ptr<double, FftwFree> resid_in;  // residual of the harmonic fit (for the noise level)
-  std::unique_ptr<fftw_complex, FftwFree> resid_out;
-  int k_lo = 0, k_hi = 0;          // band, fine bins
-  int s_lo = 0;                    // lowest state, fine bin (half the band's lower edge)
-  int noise_lo = 1, noise_hi = 1;  // fine bins used for the noise floor
+  std::vector<double> dec;                 // decimated window, detrended and tapered
+  std::vector<double> raw;                 // decimated window as filtered (for the least-squares fit)
+  std::optional<WindowSpectrum> spectrum;  // the window's power and noise floor per fine bin
+  int k_lo = 0, k_hi = 0;                  // band, fine bins
+  int s_lo = 0;                            // lowest state, fine bin (half the band's lower edge)
+  int noise_lo = 1, noise_hi = 1;          // fine bins used for the noise floor
   const HarmonicEvidence& evidence = HarmonicEvidence::shared();
   double temper = 1.0;        // overlapping windows are not independent evidence
   double half_present = 1.0;  // share of clear confident hops that showed a half order (see kHalfMemoryS)
@@ -175,6 +140,8 @@ struct SlidingDftTracker::Impl {
   };
 
   explicit Impl(const TrackerConfig& c);
+  [[nodiscard]] const std::vector<double>& power() const noexcept { return spectrum->power(); }
+  [[nodiscard]] const std::vector<double>& noise() const noexcept { return spectrum->noise(); }
 
   [[nodiscard]] double time_of(double frame) const noexcept { return t0 + frame / fs; }
   bool analyse(std::uint64_t centre) noexcept;
@@ -182,7 +149,7 @@ struct SlidingDftTracker::Impl {
   // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
   // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot).
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
-    return power[k] / (noise[k] * tones->background(k));
+    return power()[k] / (noise()[k] * tones->background(k));
   }
   void learn_tones(double freq, double right) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
@@ -223,13 +190,6 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   nfft = static_cast<int>(next_pow2(static_cast<std::size_t>(kZeroPad * n_win)));
   sines = SinusoidFit(n_win, fd);
   df = fd / nfft;
-  window.resize(static_cast<std::size_t>(n_win));
-  for (int i = 0; i < n_win; ++i) {
-    const double w = 0.5 - 0.5 * std::cos(2.0 * kPi * (i + 1) / (n_win + 1));
-    window[static_cast<std::size_t>(i)] = w;
-    sum_w += w;
-    sum_w2 += w * w;
-  }
   half_span = static_cast<std::int64_t>((n_win - 1) / 2) * input.factor() +
               static_cast<std::int64_t>(input.taps() / 2);
   hop_frames = std::max<std::int64_t>(1, std::llround(cfg.hop_s * fs));
@@ -241,27 +201,12 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   dec.resize(static_cast<std::size_t>(n_win));
   raw.resize(static_cast<std::size_t>(n_win));
   const auto bins = static_cast<std::size_t>(nfft / 2 + 1);
-  fft_in.reset(static_cast<double*>(fftw_malloc(sizeof(double) * static_cast<std::size_t>(nfft))));
-  fft_out.reset(static_cast<fftw_complex*>(fftw_malloc(sizeof(fftw_complex) * bins)));
-  resid_in.reset(static_cast<double*>(fftw_malloc(sizeof(double) * static_cast<std::size_t>(nfft))));
-  resid_out.reset(static_cast<fftw_complex*>(fftw_malloc(sizeof(fftw_complex) * bins)));
-  if (!fft_in || !fft_out || !resid_in || !resid_out) throw std::bad_alloc();
-  {
-    const std::lock_guard lock(planner_mutex());
-    plan.p = fftw_plan_dft_r2c_1d(nfft, fft_in.get(), fft_out.get(), FFTW_ESTIMATE);
-  }
-  if (!plan.p) throw std::runtime_error("SlidingDftTracker: FFTW could not make a plan");
-  std::fill(fft_in.get(), fft_in.get() + nfft, 0.0);
-  std::fill(resid_in.get(), resid_in.get() + nfft, 0.0);
-  power.assign(bins, 0.0);
-  noise.assign(bins, 0.0);
-  block_scratch.assign(bins, 0.0);
-
   k_lo = static_cast<int>(std::ceil(cfg.band_lo_hz / df));
   k_hi = static_cast<int>(std::floor(cfg.band_hi_hz / df));
   noise_lo = std::max(1, static_cast<int>(std::floor(0.5 * cfg.band_lo_hz / df)));
   noise_hi = std::min(static_cast<int>(bins) - 2, static_cast<int>(std::ceil(harmonic_limit_hz / df)));
   s_lo = std::max(noise_lo, static_cast<int>(std::ceil(0.5 * cfg.band_lo_hz / df)));
+  spectrum.emplace(n_win, nfft, noise_lo, noise_hi);
   const auto states = static_cast<std::size_t>(k_hi - s_lo + 1);
   at_loglik.assign(states, 0.0);
   temper = std::min(1.0, cfg.hop_s / cfg.window_s);
@@ -275,7 +220,6 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
 // Decimates, detrends and tapers the window centred on input frame `centre`, then fills the power
 // spectrum and the noise floor. False on a silent window.
 bool SlidingDftTracker::Impl::analyse(std::uint64_t centre) noexcept {
-  const int mid = (n_win - 1) / 2;
   const std::uint64_t first = centre - static_cast<std::uint64_t>(half_span);
   const auto decim = static_cast<std::uint64_t>(input.factor());
   for (int j = 0; j < n_win; ++j) {
@@ -283,80 +227,24 @@ bool SlidingDftTracker::Impl::analyse(std::uint64_t centre) noexcept {
     dec[static_cast<std::size_t>(j)] = acc;
     raw[static_cast<std::size_t>(j)] = acc;
   }
-  // Least-squares line removal: the supply level and its slow drift are not the ripple.
-  double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-  for (int j = 0; j < n_win; ++j) {
-    const double m = j - mid;
-    s0 += dec[static_cast<std::size_t>(j)];
-    s1 += m * dec[static_cast<std::size_t>(j)];
-    s2 += m * m;
-  }
-  const double mean = s0 / n_win;
-  const double slope = s2 > 0 ? s1 / s2 : 0.0;
-  double energy = 0.0, level = 0.0;
-  for (int j = 0; j < n_win; ++j) {
-    const auto i = static_cast<std::size_t>(j);
-    level = std::max(level, std::abs(dec[i]));
-    const double v = (dec[i] - mean - slope * (j - mid)) * window[i];
-    dec[i] = v;
-    fft_in.get()[i] = v;
-    energy += v * v;
-  }
-  if (!(energy > 1e-20 * std::max(1.0, level * level * n_win)) || !std::isfinite(energy)) return false;
-  fftw_execute_dft_r2c(plan.p, fft_in.get(), fft_out.get());
-  const int bins = nfft / 2 + 1;
-  for (int k = 0; k < bins; ++k) {
-    const auto i = static_cast<std::size_t>(k);
-    power[i] = fft_out.get()[i][0] * fft_out.get()[i][0] + fft_out.get()[i][1] * fft_out.get()[i][1];
-  }
-  // Noise floor: lower quartile per block of fine bins (robust to the lines of the engine and of other
-  // equipment), as the mean of an exponential variable (q25 / ln(4/3)), interpolated linearly between block
-  // centres (coloured noise).
-  const int span = noise_hi - noise_lo + 1;
-  const int blocks = std::max(1, span / kNoiseBlock);
-  const double block_len = static_cast<double>(span) / blocks;
-  double prev_centre = 0.0, prev_level = 0.0;
-  for (int b = 0; b < blocks; ++b) {
-    const int lo = noise_lo + static_cast<int>(std::lround(b * block_len));
-    const int hi = noise_lo + static_cast<int>(std::lround((b + 1) * block_len));
-    const auto n = static_cast<std::size_t>(hi - lo);
-    std::copy(power.begin() + lo, power.begin() + hi, block_scratch.begin());
-    std::nth_element(block_scratch.begin(), block_scratch.begin() + static_cast<std::ptrdiff_t>(n / 4),
-                     block_scratch.begin() + static_cast<std::ptrdiff_t>(n));
-    const double level_b = std::max(block_scratch[n / 4] / std::log(4.0 / 3.0), 1e-300);
-    const double centre_b = 0.5 * (lo + hi);
-    if (b == 0) {
-      for (int k = 0; k <= static_cast<int>(centre_b); ++k)
-        noise[static_cast<std::size_t>(k)] = level_b;
-    } else {
-      for (int k = static_cast<int>(prev_centre) + 1; k <= static_cast<int>(centre_b); ++k) {
-        const double a = (k - prev_centre) / (centre_b - prev_centre);
-        noise[static_cast<std::size_t>(k)] = prev_level + a * (level_b - prev_level);
-      }
-    }
-    prev_centre = centre_b;
-    prev_level = level_b;
-  }
-  for (int k = static_cast<int>(prev_centre) + 1; k < bins; ++k)
-    noise[static_cast<std::size_t>(k)] = prev_level;
-  return true;
+  return spectrum->analyse(dec.data());
 }
 
 double SlidingDftTracker::Impl::noise_at(double fine_bin) const noexcept {
   const auto k = static_cast<std::size_t>(std::clamp<long>(std::lround(fine_bin), 0, nfft / 2));
-  return noise[k];
+  return noise()[k];
 }
 
 // Fine bin of the largest power within `reach` bins of k.
 double SlidingDftTracker::Impl::peak_near(int k, int reach) const noexcept {
   int best = k;
   for (int i = std::max(1, k - reach); i <= std::min(nfft / 2 - 1, k + reach); ++i)
-    if (power[static_cast<std::size_t>(i)] > power[static_cast<std::size_t>(best)]) best = i;
+    if (power()[static_cast<std::size_t>(i)] > power()[static_cast<std::size_t>(best)]) best = i;
   if (best <= 0 || best >= nfft / 2) return best;
   // Gaussian interpolation: exact for the main lobe of a Gaussian window, close for Hann.
-  const double a = std::log(std::max(power[static_cast<std::size_t>(best - 1)], 1e-300));
-  const double b = std::log(std::max(power[static_cast<std::size_t>(best)], 1e-300));
-  const double c = std::log(std::max(power[static_cast<std::size_t>(best + 1)], 1e-300));
+  const double a = std::log(std::max(power()[static_cast<std::size_t>(best - 1)], 1e-300));
+  const double b = std::log(std::max(power()[static_cast<std::size_t>(best)], 1e-300));
+  const double c = std::log(std::max(power()[static_cast<std::size_t>(best + 1)], 1e-300));
   const double den = a - 2.0 * b + c;
   double delta = den < 0.0 ? 0.5 * (a - c) / den : 0.0;
   delta = std::clamp(delta, -0.5, 0.5);
@@ -417,16 +305,16 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit
 // window, the rest tapered and transformed, and the median of its band bins (robust to lines the model
 // does not hold, such as a fan) taken as an exponential variable's (median = mean x ln 2).
 double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) noexcept {
+  const double sum_w2 = spectrum->taper_energy();
   if (fit.cols == 0) return noise_at(f / df) / sum_w2;
   double freq[kSlots];
   for (int o = 0; o < kSlots; ++o)
     freq[o] = fit.col[o] >= 0 ? slot_hz(o, f) : kNaN;
-  double* in = resid_in.get();
-  sines.residual(raw.data(), freq, fit, window.data(), in);
-  fftw_execute_dft_r2c(plan.p, in, resid_out.get());
+  sines.residual(raw.data(), freq, fit, spectrum->taper().data(), spectrum->residual());
+  const fftw_complex* resid = spectrum->transform_residual();
   // The band's fine bins; the median by selection in the (now free) scratch of the noise floor.
   const int lo = std::max(noise_lo, k_lo), hi = std::max(lo, k_hi);
-  double* scratch = block_scratch.data();
+  double* scratch = spectrum->scratch();
   std::size_t n = 0;
   for (int k = lo; k <= hi; ++k) {
     // The fit notches the residual around every fitted frequency; those bins are not noise.
@@ -434,7 +322,7 @@ double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) n
     for (int o = 0; o < kSlots && !notched; ++o)
       notched = fit.col[o] >= 0 && std::abs(k * df - slot_hz(o, f)) <= lobe * df;
     if (notched) continue;
-    const fftw_complex& v = resid_out.get()[static_cast<std::size_t>(k)];
+    const fftw_complex& v = resid[static_cast<std::size_t>(k)];
     scratch[n++] = v[0] * v[0] + v[1] * v[1];
   }
   if (n < 8) return noise_at(f / df) / sum_w2;
@@ -492,14 +380,14 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     }
     int best = static_cast<int>(std::lround(centre));
     for (int k = std::max(1, best - reach); k <= std::min(nfft / 2 - 1, best + reach); ++k)
-      if (power[static_cast<std::size_t>(k)] > power[static_cast<std::size_t>(best)]) best = k;
-    const bool strong = power[static_cast<std::size_t>(best)] > 4.0 * noise_at(best);
+      if (power()[static_cast<std::size_t>(k)] > power()[static_cast<std::size_t>(best)]) best = k;
+    const bool strong = power()[static_cast<std::size_t>(best)] > 4.0 * noise_at(best);
     use[o] = !(strong && std::abs(best - centre) * df > 0.4 * bin);
   }
   // Log likelihood of f: the explained energy over twice the noise variance per sample, plus (on a
   // continuing track) a Gaussian prior around the track's prediction, which holds a hop whose line is
   // drowned in noise near where the engine must be instead of on a noise peak.
-  const double inv_2s2 = sum_w2 / (2.0 * noise_at(f0 / df));
+  const double inv_2s2 = spectrum->taper_energy() / (2.0 * noise_at(f0 / df));
   const bool with_prior = std::isfinite(predicted) && std::abs(predicted - f0) <= 2.5 * kPredictionHz;
   const auto objective = [&](double f) {
     const double dp = with_prior ? (f - predicted) / kPredictionHz : 0.0;
@@ -699,7 +587,7 @@ void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
     const int kc = static_cast<int>(std::lround(freq / df));
     if (kc >= 1 && kc < nfft / 2) {
       const auto z = [this](int j) {
-        return power[static_cast<std::size_t>(j)] / noise[static_cast<std::size_t>(j)];
+        return power()[static_cast<std::size_t>(j)] / noise()[static_cast<std::size_t>(j)];
       };
       const double own = z(kc);
       double peak = own;
@@ -717,7 +605,7 @@ void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
       candidate = holds && ladder && tones->loud(own);
     }
   }
-  tones->learn(power.data(), noise.data(), freq, kOrder, on_track, candidate);
+  tones->learn(power().data(), noise().data(), freq, kOrder, on_track, candidate);
 }
 
 // ---- public ----
