@@ -1,6 +1,12 @@
 #include "core/sliding_dft_tracker.hpp"
 
+#include "core/decimating_input.hpp"
+#include "core/sinusoid_fit.hpp"
 #include "core/sliding_dft_tracker_evidence.hpp"
+#include "core/tone_map.hpp"
+#include "core/track_model.hpp"
+#include "core/track_outputs.hpp"
+#include "core/window_spectrum.hpp"
 
 #include <fftw3.h>
 
@@ -8,8 +14,8 @@
 #include <cmath>
 #include <complex>
 #include <cstdio>
-#include <mutex>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -22,36 +28,13 @@ constexpr double kPi = std::numbers::pi;
 // Orders of the engine component scored and refined: half-order, fundamental, 2nd and 3rd harmonic.
 constexpr int kOrders = 4;
 constexpr double kOrder[kOrders] = {0.5, 1.0, 2.0, 3.0};
-// Track model: a hidden Markov chain over candidate fundamentals (fine bins from half the band's lower
-// edge, so that an idling engine is followed below the band and its 2nd harmonic is not taken for it)
-// plus an "absent" state. Per second: the engine stops, starts, or its line is lost and found elsewhere.
-constexpr double kStopRate = 0.05;
-constexpr double kStartRate = 0.5;
-constexpr double kJumpRate = 0.02;
-// A continuing line moves within one of three gates per hop: steady (cruise: a few Hz/s), the slew of
-// an accelerating engine, or a gear shift; shares of each.
-constexpr double kSteadyHzPerS = 5.0;
-constexpr double kSteadyShare = 0.5, kSlewShare = 0.4;  // the rest: shift
 // Per-bin SNR of the fundamental assumed before a track gives its level (-5 dB in 50-200 Hz with a
 // 100 ms Hann window), and the memory of the track's level (per hop).
 constexpr double kDefaultRho = 3.0;
 constexpr double kRhoMemory = 0.7;
-// Memory (per hop) of the track's drift, which moves the steady and slew gates.
-constexpr double kDriftMemory = 0.7;
-// Time over which a fixed tone is learned (s): far longer than any steady stretch of a moving engine
-// the track does not cover.
-constexpr double kToneMemoryS = 20.0;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
-constexpr double kToneFitLevel = 4.0;
-// Share of the tone memory in which a bin near a candidate estimate's orders must have stood above
-// kToneFitLevel before it is learned as a tone while the track is not confident, and that a bin read loud
-// must have before the reading counts in full (about 2 s of a line present at every hop; see learn_tones).
-constexpr double kTonePersist = 0.1;
+constexpr double kToneFitLevel = ToneMap::kFitLevel;
 constexpr double kToneCandidate = 0.05;  // probability from which the estimate's line is a candidate
-// A bin this far below the strongest within two resolution bins of it is on a louder line's skirt, not a
-// line of its own: a Hann window's first sidelobe is 31 dB down, its main lobe 15 dB down 1.5 bins out.
-constexpr double kToneSkirt = 100.0;
-constexpr double kToneQuickWindows = 5.0;  // a line is loud that would be a tone within this many windows
 // The estimate holds its line's peak when its power is within 3 dB of the peak's, or within the noise of it
 // (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
 constexpr double kToneCandidateMismatch = 2.0;
@@ -70,49 +53,9 @@ constexpr double kPredictionHz = 2.0;
 // 0.8 or more: the engine speed and the training pairs are built on it, so it must be right nearly every
 // time; the probability itself is reported as the confidence.
 constexpr double kTrackedConfidence = 0.8;
-constexpr double kRightFraction = 0.05;
 // at() keeps to the nearest hop output within this time.
 constexpr double kCoastS = 0.5;
-// Anti-alias filter: decimated rate at least this multiple of the highest scored harmonic.
-constexpr double kDecimationMargin = 2.4;
-constexpr double kStopbandDb = 70.0;
 constexpr int kZeroPad = 8;
-constexpr int kNoiseBlock = 192;  // fine bins per noise-floor block
-
-struct FftwFree {
-  void operator()(void* p) const noexcept { fftw_free(p); }
-};
-
-// The FFTW planner is not thread-safe; trackers may be built on several threads.
-std::mutex& planner_mutex() {
-  static std::mutex m;
-  return m;
-}
-
-// A plan, destroyed (under the planner's lock) with its owner, also when the owner's constructor throws
-// after making it.
-struct FftwPlan {
-  fftw_plan p = nullptr;
-  FftwPlan() noexcept = default;
-  FftwPlan(const FftwPlan&) = delete;
-  FftwPlan& operator=(const FftwPlan&) = delete;
-  ~FftwPlan() {
-    if (p) {
-      const std::lock_guard lock(planner_mutex());
-      fftw_destroy_plan(p);
-    }
-  }
-};
-
-double bessel_i0(double x) {
-  double sum = 1.0, term = 1.0;
-  for (int k = 1; k < 50; ++k) {
-    term *= (x / (2.0 * k)) * (x / (2.0 * k));
-    sum += term;
-    if (term < 1e-17 * sum) break;
-  }
-  return sum;
-}
 
 std::size_t next_pow2(std::size_t n) {
   std::size_t p = 1;
@@ -151,71 +94,39 @@ std::size_t extract_channel(std::span<const float> interleaved, int channels, in
 struct SlidingDftTracker::Impl {
   TrackerConfig cfg;
   double fs = 0.0;
-  int decim = 1;
+  DecimatingInput input;           // the input frames and the decimator that reads windows from them
   double fd = 0.0;                 // decimated rate
   double harmonic_limit_hz = 0.0;  // highest frequency the decimated signal represents faithfully
-  std::vector<double> fir;         // odd length, linear phase, unit DC gain
   int n_win = 0;                   // decimated samples per window (odd)
   int nfft = 0;
   double df = 0.0;             // fine bin width (Hz)
-  std::vector<double> window;  // Hann
-  double sum_w = 0.0, sum_w2 = 0.0;
   std::int64_t half_span = 0;  // input frames from a window centre to its first/last used frame
   std::int64_t hop_frames = 1;
 
-  // Input ring, written twice (i and i + size) so any span up to `ring_size` frames is contiguous.
-  std::size_t ring_size = 0;
-  std::vector<float> ring;
-  std::uint64_t n_in = 0;        // frames received (including skipped ones)
-  std::uint64_t valid_from = 0;  // first frame after the latest hole
-  double t0 = 0.0;               // time of frame 0
+  double t0 = 0.0;  // time of frame 0
   std::uint64_t next_centre = 0;
 
   // Per-hop scratch (sized at construction).
-  std::vector<double> dec;  // decimated window, detrended and tapered
-  std::vector<double> raw;  // decimated window as filtered (for the least-squares fit)
-  std::unique_ptr<double, FftwFree> fft_in;
-  std::unique_ptr<fftw_complex, FftwFree> fft_out;
-  FftwPlan plan;
-  std::vector<double> power;
-  std::vector<double> noise;  // per fine bin
-  std::vector<double> block_scratch;
-  std::unique_ptr<double, FftwFree> resid_in;  // residual of the harmonic fit (for the noise level)
-  std::unique_ptr<fftw_complex, FftwFree> resid_out;
-  int k_lo = 0, k_hi = 0;          // band, fine bins
-  int s_lo = 0;                    // lowest state, fine bin (half the band's lower edge)
-  int noise_lo = 1, noise_hi = 1;  // fine bins used for the noise floor
+  std::vector<double> dec;                 // decimated window, detrended and tapered
+  std::vector<double> raw;                 // decimated window as filtered (for the least-squares fit)
+  std::optional<WindowSpectrum> spectrum;  // the window's power and noise floor per fine bin
+  int k_lo = 0, k_hi = 0;                  // band, fine bins
+  int s_lo = 0;                            // lowest state, fine bin (half the band's lower edge)
+  int noise_lo = 1, noise_hi = 1;          // fine bins used for the noise floor
   const HarmonicEvidence& evidence = HarmonicEvidence::shared();
   double temper = 1.0;        // overlapping windows are not independent evidence
   double half_present = 1.0;  // share of clear confident hops that showed a half order (see kHalfMemoryS)
   double half_keep = 1.0;     // per hop
   int lobe = 1;               // fine bins per resolution bin (1 / window)
 
-  // Track state: posterior over the states s_lo..k_hi and "absent", after the latest hop.
-  std::vector<double> post, loglik, cumsum;
-  double post_absent = 0.5;
+  // The track over hops: candidates are the fine bins s_lo..k_hi (from half the band's lower edge, so
+  // that an idling engine is followed below the band and its 2nd harmonic is not taken for it).
+  std::optional<TrackModel> track;
+  std::vector<double> at_loglik;  // at()'s candidates, apart from the track's
   double rho_track = kDefaultRho;
-  // Mean normalised power per fine bin over the last tens of seconds (1 on noise): a fan or pump line
-  // that stays put while the engine moves. Bins near a confident track are not learned, so a cruising
-  // engine does not become a "tone".
-  std::vector<double> tone;
-  std::vector<double> tone_time;  // per fine bin: share of the tone memory spent above kToneFitLevel
-  std::vector<char> near_tone;    // within one resolution bin of a learned tone (per fine bin, this hop)
-  // Per fine bin, this hop: the normalised power, and its maximum within two resolution bins (with the
-  // block maxima that give it in one pass).
-  std::vector<double> z_here, z_around, z_pre, z_suf;
-  double tone_keep = 1.0;                              // per hop
-  double drift_hz_per_s = 0.0;                         // recent rate of change of the tracked line
-  double last_freq = kNaN;                             // previous hop's estimate while confident, else NaN
-  int gate_steady = 1, gate_slew = 1, gate_shift = 1;  // fine bins per hop
-  double p_stop = 0.0, p_start = 0.0, p_jump = 0.0;    // per hop
+  std::optional<ToneMap> tones;  // fixed tones of other equipment, counted as background
 
-  // Output queue and hop history (fixed rings).
-  std::vector<TrackPoint> queue;
-  std::size_t q_head = 0, q_size = 0;
-  std::vector<TrackPoint> history;
-  std::size_t h_head = 0, h_size = 0;
-  std::uint64_t dropped = 0;
+  TrackOutputs outputs;
 
   struct Evidence {
     double freq = kNaN;
@@ -229,45 +140,32 @@ struct SlidingDftTracker::Impl {
   };
 
   explicit Impl(const TrackerConfig& c);
+  [[nodiscard]] const std::vector<double>& power() const noexcept { return spectrum->power(); }
+  [[nodiscard]] const std::vector<double>& noise() const noexcept { return spectrum->noise(); }
 
   [[nodiscard]] double time_of(double frame) const noexcept { return t0 + frame / fs; }
-  void write_frame(float x) noexcept {
-    if (!std::isfinite(x)) x = 0.0f;  // a glitch must not poison every window that sees it
-    const std::size_t i = static_cast<std::size_t>(n_in) & (ring_size - 1);
-    ring[i] = x;
-    ring[i + ring_size] = x;
-    ++n_in;
-  }
   bool analyse(std::uint64_t centre) noexcept;
   [[nodiscard]] double noise_at(double fine_bin) const noexcept;
   // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
   // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot).
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
-    return power[k] / (noise[k] * std::max(1.0, tone[k] - 1.0));
+    return power()[k] / (noise()[k] * tones->background(k));
   }
   void learn_tones(double freq, double right) noexcept;
-  void local_maxima(int radius) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
-  void mark_tones() noexcept;
   void reset_track() noexcept;
-  void predict() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
   [[nodiscard]] Evidence refine(double f0, double predicted = kNaN) noexcept;
   // Fundamental power over the band's noise power (the generator's definition), in dB. `learn`: the
   // window is the next hop's, whose noise level joins the average.
   [[nodiscard]] double snr_db(const Evidence& ev, bool learn) noexcept;
-  void dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
-            std::complex<double>& ddx) const noexcept;
   // Least-squares model of a window: level, slope, a sinusoid per order and one for a learned fixed tone
   // next to the fundamental (slot kOrders), which would otherwise pull the fit.
   static constexpr int kSlots = kOrders + 1;
-  struct Fit {
-    static constexpr int kMaxCols = 2 + 2 * kSlots;
-    double coef[kMaxCols] = {};
-    int order_col[kSlots] = {-1, -1, -1, -1, -1};
-    int cols = 0;
-  };
+  static_assert(kSlots == SinusoidFit::kMaxSines);
+  using Fit = SinusoidFit::Result;
+  SinusoidFit sines{1, 1.0};
   double nuisance_hz = kNaN;  // the learned tone fitted along, for the current refine()
   double log_noise = kNaN;    // log of the band's noise variance per sample, averaged over hops
   [[nodiscard]] double slot_hz(int o, double f) const noexcept {
@@ -277,201 +175,76 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double sweep_mismatch(double f) const noexcept;
   [[nodiscard]] double residual_noise_level(double f, const Fit& fit) noexcept;
   TrackPoint process_hop(std::uint64_t centre) noexcept;
-  void emit(const TrackPoint& p) noexcept;
 };
 
-SlidingDftTracker::Impl::Impl(const TrackerConfig& c) : cfg(c), fs(c.sample_rate_hz) {
-  const double top = 3.0 * cfg.band_hi_hz;  // highest scored harmonic
-  decim = std::max(1, static_cast<int>(std::floor(fs / (kDecimationMargin * top))));
-  fd = fs / decim;
-  if (decim > 1) {
-    // Kaiser-windowed sinc: passband up to `top`, stopband from fd - top (what would alias below top).
-    const double transition = fd - 2.0 * top;
-    const double beta = 0.1102 * (kStopbandDb - 8.7);
-    int len = static_cast<int>(std::ceil((kStopbandDb - 8.0) / (2.285 * 2.0 * kPi * transition / fs))) + 1;
-    if (len % 2 == 0) ++len;
-    const double fc = 0.5 * fd / fs;  // cycles per input sample
-    fir.resize(static_cast<std::size_t>(len));
-    const int mid = len / 2;
-    double sum = 0.0;
-    for (int i = 0; i < len; ++i) {
-      const double m = i - mid;
-      const double sinc = m == 0 ? 2.0 * fc : std::sin(2.0 * kPi * fc * m) / (kPi * m);
-      const double r = m / mid;
-      const double kaiser = bessel_i0(beta * std::sqrt(std::max(0.0, 1.0 - r * r))) / bessel_i0(beta);
-      fir[static_cast<std::size_t>(i)] = sinc * kaiser;
-      sum += fir[static_cast<std::size_t>(i)];
-    }
-    for (double& h : fir)
-      h /= sum;
-    harmonic_limit_hz = top;
-  } else {
-    fir.assign(1, 1.0);
-    harmonic_limit_hz = 0.45 * fs;
-  }
-
+SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
+    : cfg(c),
+      fs(c.sample_rate_hz),
+      input(c.sample_rate_hz, 3.0 * c.band_hi_hz),  // up to the highest scored harmonic
+      outputs(256, std::max<std::size_t>(
+                       8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)) {
+  fd = input.rate_hz();
+  harmonic_limit_hz = input.limit_hz();
   n_win = static_cast<int>(std::lround(cfg.window_s * fd));
   if (n_win % 2 == 0) ++n_win;
   nfft = static_cast<int>(next_pow2(static_cast<std::size_t>(kZeroPad * n_win)));
+  sines = SinusoidFit(n_win, fd);
   df = fd / nfft;
-  window.resize(static_cast<std::size_t>(n_win));
-  for (int i = 0; i < n_win; ++i) {
-    const double w = 0.5 - 0.5 * std::cos(2.0 * kPi * (i + 1) / (n_win + 1));
-    window[static_cast<std::size_t>(i)] = w;
-    sum_w += w;
-    sum_w2 += w * w;
-  }
-  half_span = static_cast<std::int64_t>((n_win - 1) / 2) * decim + static_cast<std::int64_t>(fir.size() / 2);
+  half_span = static_cast<std::int64_t>((n_win - 1) / 2) * input.factor() +
+              static_cast<std::int64_t>(input.taps() / 2);
   hop_frames = std::max<std::int64_t>(1, std::llround(cfg.hop_s * fs));
 
   const auto history_frames = static_cast<std::size_t>(std::ceil(cfg.history_s * fs));
-  ring_size = next_pow2(history_frames + 2 * static_cast<std::size_t>(half_span) +
-                        static_cast<std::size_t>(hop_frames) + 16);
-  ring.assign(2 * ring_size, 0.0f);
+  input.reserve(history_frames + 2 * static_cast<std::size_t>(half_span) +
+                static_cast<std::size_t>(hop_frames) + 16);
 
   dec.resize(static_cast<std::size_t>(n_win));
   raw.resize(static_cast<std::size_t>(n_win));
   const auto bins = static_cast<std::size_t>(nfft / 2 + 1);
-  fft_in.reset(static_cast<double*>(fftw_malloc(sizeof(double) * static_cast<std::size_t>(nfft))));
-  fft_out.reset(static_cast<fftw_complex*>(fftw_malloc(sizeof(fftw_complex) * bins)));
-  resid_in.reset(static_cast<double*>(fftw_malloc(sizeof(double) * static_cast<std::size_t>(nfft))));
-  resid_out.reset(static_cast<fftw_complex*>(fftw_malloc(sizeof(fftw_complex) * bins)));
-  if (!fft_in || !fft_out || !resid_in || !resid_out) throw std::bad_alloc();
-  {
-    const std::lock_guard lock(planner_mutex());
-    plan.p = fftw_plan_dft_r2c_1d(nfft, fft_in.get(), fft_out.get(), FFTW_ESTIMATE);
-  }
-  if (!plan.p) throw std::runtime_error("SlidingDftTracker: FFTW could not make a plan");
-  std::fill(fft_in.get(), fft_in.get() + nfft, 0.0);
-  std::fill(resid_in.get(), resid_in.get() + nfft, 0.0);
-  power.assign(bins, 0.0);
-  noise.assign(bins, 0.0);
-  tone.assign(bins, 1.0);
-  tone_time.assign(bins, 0.0);
-  near_tone.assign(bins, 0);
-  z_here.assign(bins, 0.0);
-  z_around.assign(bins, 0.0);
-  z_pre.assign(bins, 0.0);
-  z_suf.assign(bins, 0.0);
-  tone_keep = std::exp(-cfg.hop_s / kToneMemoryS);
-  block_scratch.assign(bins, 0.0);
-
   k_lo = static_cast<int>(std::ceil(cfg.band_lo_hz / df));
   k_hi = static_cast<int>(std::floor(cfg.band_hi_hz / df));
   noise_lo = std::max(1, static_cast<int>(std::floor(0.5 * cfg.band_lo_hz / df)));
   noise_hi = std::min(static_cast<int>(bins) - 2, static_cast<int>(std::ceil(harmonic_limit_hz / df)));
   s_lo = std::max(noise_lo, static_cast<int>(std::ceil(0.5 * cfg.band_lo_hz / df)));
+  spectrum.emplace(n_win, nfft, noise_lo, noise_hi);
   const auto states = static_cast<std::size_t>(k_hi - s_lo + 1);
-  post.assign(states, 0.0);
-  loglik.assign(states, 0.0);
-  cumsum.assign(states + 1, 0.0);
+  at_loglik.assign(states, 0.0);
   temper = std::min(1.0, cfg.hop_s / cfg.window_s);
   half_keep = std::exp(-cfg.hop_s / kHalfMemoryS);
   lobe = std::max(1, nfft / n_win);
-  const double dt = cfg.hop_s;
-  gate_steady = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df)) + 1;
-  gate_slew = static_cast<int>(std::ceil((cfg.max_slew_hz_per_s * dt) / df)) + 2;
-  gate_shift =
-      static_cast<int>(std::ceil((std::max(cfg.max_slew_hz_per_s, cfg.shift_slew_hz_per_s) * dt) / df)) + 2;
-  p_stop = 1.0 - std::exp(-kStopRate * dt);
-  p_start = 1.0 - std::exp(-kStartRate * dt);
-  p_jump = 1.0 - std::exp(-kJumpRate * dt);
+  track.emplace(cfg, s_lo, k_hi, df, lobe);
+  tones.emplace(bins, noise_lo, noise_hi, lobe, df, cfg.hop_s);
   reset_track();
-
-  queue.resize(256);
-  history.resize(std::max<std::size_t>(
-      8, static_cast<std::size_t>(std::ceil(cfg.history_s / std::max(cfg.hop_s, 1e-3))) + 2));
 }
 
 // Decimates, detrends and tapers the window centred on input frame `centre`, then fills the power
 // spectrum and the noise floor. False on a silent window.
 bool SlidingDftTracker::Impl::analyse(std::uint64_t centre) noexcept {
-  const int mid = (n_win - 1) / 2;
-  const std::size_t taps = fir.size();
   const std::uint64_t first = centre - static_cast<std::uint64_t>(half_span);
+  const auto decim = static_cast<std::uint64_t>(input.factor());
   for (int j = 0; j < n_win; ++j) {
-    const std::uint64_t start = first + static_cast<std::uint64_t>(j) * static_cast<std::uint64_t>(decim);
-    const float* x = ring.data() + (static_cast<std::size_t>(start) & (ring_size - 1));
-    double acc = 0.0;
-    for (std::size_t k = 0; k < taps; ++k)
-      acc += fir[k] * static_cast<double>(x[k]);
+    const double acc = input.sample(first + static_cast<std::uint64_t>(j) * decim);
     dec[static_cast<std::size_t>(j)] = acc;
     raw[static_cast<std::size_t>(j)] = acc;
   }
-  // Least-squares line removal: the supply level and its slow drift are not the ripple.
-  double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-  for (int j = 0; j < n_win; ++j) {
-    const double m = j - mid;
-    s0 += dec[static_cast<std::size_t>(j)];
-    s1 += m * dec[static_cast<std::size_t>(j)];
-    s2 += m * m;
-  }
-  const double mean = s0 / n_win;
-  const double slope = s2 > 0 ? s1 / s2 : 0.0;
-  double energy = 0.0, level = 0.0;
-  for (int j = 0; j < n_win; ++j) {
-    const auto i = static_cast<std::size_t>(j);
-    level = std::max(level, std::abs(dec[i]));
-    const double v = (dec[i] - mean - slope * (j - mid)) * window[i];
-    dec[i] = v;
-    fft_in.get()[i] = v;
-    energy += v * v;
-  }
-  if (!(energy > 1e-20 * std::max(1.0, level * level * n_win)) || !std::isfinite(energy)) return false;
-  fftw_execute_dft_r2c(plan.p, fft_in.get(), fft_out.get());
-  const int bins = nfft / 2 + 1;
-  for (int k = 0; k < bins; ++k) {
-    const auto i = static_cast<std::size_t>(k);
-    power[i] = fft_out.get()[i][0] * fft_out.get()[i][0] + fft_out.get()[i][1] * fft_out.get()[i][1];
-  }
-  // Noise floor: lower quartile per block of fine bins (robust to the lines of the engine and of other
-  // equipment), as the mean of an exponential variable (q25 / ln(4/3)), interpolated linearly between block
-  // centres (coloured noise).
-  const int span = noise_hi - noise_lo + 1;
-  const int blocks = std::max(1, span / kNoiseBlock);
-  const double block_len = static_cast<double>(span) / blocks;
-  double prev_centre = 0.0, prev_level = 0.0;
-  for (int b = 0; b < blocks; ++b) {
-    const int lo = noise_lo + static_cast<int>(std::lround(b * block_len));
-    const int hi = noise_lo + static_cast<int>(std::lround((b + 1) * block_len));
-    const auto n = static_cast<std::size_t>(hi - lo);
-    std::copy(power.begin() + lo, power.begin() + hi, block_scratch.begin());
-    std::nth_element(block_scratch.begin(), block_scratch.begin() + static_cast<std::ptrdiff_t>(n / 4),
-                     block_scratch.begin() + static_cast<std::ptrdiff_t>(n));
-    const double level_b = std::max(block_scratch[n / 4] / std::log(4.0 / 3.0), 1e-300);
-    const double centre_b = 0.5 * (lo + hi);
-    if (b == 0) {
-      for (int k = 0; k <= static_cast<int>(centre_b); ++k)
-        noise[static_cast<std::size_t>(k)] = level_b;
-    } else {
-      for (int k = static_cast<int>(prev_centre) + 1; k <= static_cast<int>(centre_b); ++k) {
-        const double a = (k - prev_centre) / (centre_b - prev_centre);
-        noise[static_cast<std::size_t>(k)] = prev_level + a * (level_b - prev_level);
-      }
-    }
-    prev_centre = centre_b;
-    prev_level = level_b;
-  }
-  for (int k = static_cast<int>(prev_centre) + 1; k < bins; ++k)
-    noise[static_cast<std::size_t>(k)] = prev_level;
-  return true;
+  return spectrum->analyse(dec.data());
 }
 
 double SlidingDftTracker::Impl::noise_at(double fine_bin) const noexcept {
   const auto k = static_cast<std::size_t>(std::clamp<long>(std::lround(fine_bin), 0, nfft / 2));
-  return noise[k];
+  return noise()[k];
 }
 
 // Fine bin of the largest power within `reach` bins of k.
 double SlidingDftTracker::Impl::peak_near(int k, int reach) const noexcept {
   int best = k;
   for (int i = std::max(1, k - reach); i <= std::min(nfft / 2 - 1, k + reach); ++i)
-    if (power[static_cast<std::size_t>(i)] > power[static_cast<std::size_t>(best)]) best = i;
+    if (power()[static_cast<std::size_t>(i)] > power()[static_cast<std::size_t>(best)]) best = i;
   if (best <= 0 || best >= nfft / 2) return best;
   // Gaussian interpolation: exact for the main lobe of a Gaussian window, close for Hann.
-  const double a = std::log(std::max(power[static_cast<std::size_t>(best - 1)], 1e-300));
-  const double b = std::log(std::max(power[static_cast<std::size_t>(best)], 1e-300));
-  const double c = std::log(std::max(power[static_cast<std::size_t>(best + 1)], 1e-300));
+  const double a = std::log(std::max(power()[static_cast<std::size_t>(best - 1)], 1e-300));
+  const double b = std::log(std::max(power()[static_cast<std::size_t>(best)], 1e-300));
+  const double c = std::log(std::max(power()[static_cast<std::size_t>(best + 1)], 1e-300));
   const double den = a - 2.0 * b + c;
   double delta = den < 0.0 ? 0.5 * (a - c) / den : 0.0;
   delta = std::clamp(delta, -0.5, 0.5);
@@ -504,39 +277,15 @@ double SlidingDftTracker::Impl::harmonic_peak_near(int k, int reach) const noexc
   return best + (den < 0.0 ? std::clamp(0.5 * (a - c) / den, -0.5, 0.5) : 0.0);
 }
 
-// DTFT of the tapered window and its first two derivatives in omega (radians per decimated sample),
-// with the time origin at the window centre.
-void SlidingDftTracker::Impl::dtft(double omega, std::complex<double>& x, std::complex<double>& dx,
-                                   std::complex<double>& ddx) const noexcept {
-  const int mid = (n_win - 1) / 2;
-  const std::complex<double> step = std::polar(1.0, -omega);
-  std::complex<double> e = std::polar(1.0, omega * mid);  // e^{-j omega m} at m = -mid
-  x = dx = ddx = 0.0;
-  for (int j = 0; j < n_win; ++j) {
-    const double m = j - mid;
-    const std::complex<double> v = dec[static_cast<std::size_t>(j)] * e;
-    x += v;
-    dx += std::complex<double>(0.0, -m) * v;
-    ddx += -m * m * v;
-    e *= step;
-  }
-}
-
 // Energy of the window explained by a harmonic model at fundamental f: level, slope and a sinusoid at
 // every order the decimated signal holds, fitted jointly by least squares (so the orders do not leak
 // into each other as they would through a window). Its maximum over f is the ML estimate of f for a
 // harmonic signal in white noise. Optionally returns the fitted fundamental's squared amplitude.
 double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit) const noexcept {
-  constexpr int kMaxCols = Fit::kMaxCols;
-  double gram[kMaxCols][kMaxCols] = {};
-  double rhs[kMaxCols] = {};
-  std::complex<double> rot[kSlots], phasor[kSlots];
-  int order_col[kSlots];
-  int cols = 2;
-  const int mid = (n_win - 1) / 2;
+  double freq[kSlots];
   const double resolution = fd / n_win;
   for (int o = 0; o < kSlots; ++o) {
-    order_col[o] = -1;
+    freq[o] = kNaN;
     const double fo = slot_hz(o, f);
     if (o == kOrders) {
       // Two sinusoids closer than half a resolution bin cannot be told apart in one window.
@@ -547,105 +296,33 @@ double SlidingDftTracker::Impl::harmonic_fit(double f, const bool* use, Fit* fit
       continue;
     }
     if (fo > harmonic_limit_hz || fo / df < noise_lo) continue;
-    order_col[o] = cols;
-    cols += 2;
-    const double w = 2.0 * kPi * fo / fd;
-    rot[o] = std::polar(1.0, w);
-    phasor[o] = std::polar(1.0, -w * mid);
+    freq[o] = fo;
   }
-  double v[kMaxCols];
-  for (int j = 0; j < n_win; ++j) {
-    v[0] = 1.0;
-    v[1] = static_cast<double>(j - mid) / std::max(1, mid);
-    for (int o = 0; o < kSlots; ++o) {
-      if (order_col[o] < 0) continue;
-      v[order_col[o]] = phasor[o].real();
-      v[order_col[o] + 1] = phasor[o].imag();
-      phasor[o] *= rot[o];
-    }
-    const double y = raw[static_cast<std::size_t>(j)];
-    for (int a = 0; a < cols; ++a) {
-      rhs[a] += v[a] * y;
-      for (int b = 0; b <= a; ++b)
-        gram[a][b] += v[a] * v[b];
-    }
-  }
-  // Cholesky solve (lower triangle); a degenerate model explains nothing.
-  double l[kMaxCols][kMaxCols] = {};
-  for (int a = 0; a < cols; ++a) {
-    for (int b = 0; b <= a; ++b) {
-      double sum = gram[a][b];
-      for (int k = 0; k < b; ++k)
-        sum -= l[a][k] * l[b][k];
-      if (a == b) {
-        if (!(sum > 1e-9 * gram[a][a])) return 0.0;
-        l[a][a] = std::sqrt(sum);
-      } else {
-        l[a][b] = sum / l[b][b];
-      }
-    }
-  }
-  double z[kMaxCols], x[kMaxCols];
-  for (int a = 0; a < cols; ++a) {
-    double sum = rhs[a];
-    for (int k = 0; k < a; ++k)
-      sum -= l[a][k] * z[k];
-    z[a] = sum / l[a][a];
-  }
-  double explained = 0.0;
-  for (int a = 0; a < cols; ++a)
-    explained += z[a] * z[a];
-  if (fit) {
-    for (int a = cols - 1; a >= 0; --a) {
-      double sum = z[a];
-      for (int k = a + 1; k < cols; ++k)
-        sum -= l[k][a] * x[k];
-      x[a] = sum / l[a][a];
-    }
-    fit->cols = cols;
-    std::copy(x, x + cols, fit->coef);
-    std::copy(order_col, order_col + kSlots, fit->order_col);
-  }
-  return explained;
+  return sines.fit(raw.data(), freq, fit);
 }
 
 // Noise variance per decimated sample inside the band: the fitted harmonic model is subtracted from the
 // window, the rest tapered and transformed, and the median of its band bins (robust to lines the model
 // does not hold, such as a fan) taken as an exponential variable's (median = mean x ln 2).
 double SlidingDftTracker::Impl::residual_noise_level(double f, const Fit& fit) noexcept {
+  const double sum_w2 = spectrum->taper_energy();
   if (fit.cols == 0) return noise_at(f / df) / sum_w2;
-  const int mid = (n_win - 1) / 2;
-  std::complex<double> rot[kSlots], phasor[kSlots];
-  for (int o = 0; o < kSlots; ++o) {
-    if (fit.order_col[o] < 0) continue;
-    const double w = 2.0 * kPi * slot_hz(o, f) / fd;
-    rot[o] = std::polar(1.0, w);
-    phasor[o] = std::polar(1.0, -w * mid);
-  }
-  double* in = resid_in.get();
-  for (int j = 0; j < n_win; ++j) {
-    double model = fit.coef[0] + fit.coef[1] * static_cast<double>(j - mid) / std::max(1, mid);
-    for (int o = 0; o < kSlots; ++o) {
-      const int col = fit.order_col[o];
-      if (col < 0) continue;
-      model += fit.coef[col] * phasor[o].real() + fit.coef[col + 1] * phasor[o].imag();
-      phasor[o] *= rot[o];
-    }
-    const auto i = static_cast<std::size_t>(j);
-    in[i] = (raw[i] - model) * window[i];
-  }
-  fftw_execute_dft_r2c(plan.p, in, resid_out.get());
+  double freq[kSlots];
+  for (int o = 0; o < kSlots; ++o)
+    freq[o] = fit.col[o] >= 0 ? slot_hz(o, f) : kNaN;
+  sines.residual(raw.data(), freq, fit, spectrum->taper().data(), spectrum->residual());
+  const fftw_complex* resid = spectrum->transform_residual();
   // The band's fine bins; the median by selection in the (now free) scratch of the noise floor.
   const int lo = std::max(noise_lo, k_lo), hi = std::max(lo, k_hi);
-  double* scratch = block_scratch.data();
+  double* scratch = spectrum->scratch();
   std::size_t n = 0;
   for (int k = lo; k <= hi; ++k) {
     // The fit notches the residual around every fitted frequency; those bins are not noise.
     bool notched = false;
     for (int o = 0; o < kSlots && !notched; ++o)
-      notched = fit.order_col[o] >= 0 && std::abs(k * df - slot_hz(o, f)) <= lobe * df;
+      notched = fit.col[o] >= 0 && std::abs(k * df - slot_hz(o, f)) <= lobe * df;
     if (notched) continue;
-    const fftw_complex& v = resid_out.get()[static_cast<std::size_t>(k)];
+    const fftw_complex& v = resid[static_cast<std::size_t>(k)];
     scratch[n++] = v[0] * v[0] + v[1] * v[1];
   }
   if (n < 8) return noise_at(f / df) / sum_w2;
@@ -680,8 +357,8 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     double strongest = kToneFitLevel;
     const auto c = static_cast<int>(std::lround(f0 / df));
     for (int k = std::max(noise_lo, c - 2 * lobe); k <= std::min(noise_hi, c + 2 * lobe); ++k)
-      if (tone[static_cast<std::size_t>(k)] > strongest) {
-        strongest = tone[static_cast<std::size_t>(k)];
+      if (tones->mean(static_cast<std::size_t>(k)) > strongest) {
+        strongest = tones->mean(static_cast<std::size_t>(k));
         nuisance_hz = k * df;
       }
   }
@@ -703,14 +380,14 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     }
     int best = static_cast<int>(std::lround(centre));
     for (int k = std::max(1, best - reach); k <= std::min(nfft / 2 - 1, best + reach); ++k)
-      if (power[static_cast<std::size_t>(k)] > power[static_cast<std::size_t>(best)]) best = k;
-    const bool strong = power[static_cast<std::size_t>(best)] > 4.0 * noise_at(best);
+      if (power()[static_cast<std::size_t>(k)] > power()[static_cast<std::size_t>(best)]) best = k;
+    const bool strong = power()[static_cast<std::size_t>(best)] > 4.0 * noise_at(best);
     use[o] = !(strong && std::abs(best - centre) * df > 0.4 * bin);
   }
   // Log likelihood of f: the explained energy over twice the noise variance per sample, plus (on a
   // continuing track) a Gaussian prior around the track's prediction, which holds a hop whose line is
   // drowned in noise near where the engine must be instead of on a noise peak.
-  const double inv_2s2 = sum_w2 / (2.0 * noise_at(f0 / df));
+  const double inv_2s2 = spectrum->taper_energy() / (2.0 * noise_at(f0 / df));
   const bool with_prior = std::isfinite(predicted) && std::abs(predicted - f0) <= 2.5 * kPredictionHz;
   const auto objective = [&](double f) {
     const double dp = with_prior ? (f - predicted) / kPredictionHz : 0.0;
@@ -760,7 +437,7 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
   for (int o = 0; o < kOrders; ++o) {
     const double fo = kOrder[o] * f;
     if (fo > harmonic_limit_hz || fo / df < noise_lo) continue;
-    dtft(2.0 * kPi * fo / fd, x, dx, ddx);
+    sines.dtft(dec.data(), 2.0 * kPi * fo / fd, x, dx, ddx);
     ev.available[o] = true;
     ev.snr[o] = std::norm(x) / noise_at(fo / df);
     if (o != 1) {
@@ -772,7 +449,7 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
   // The window's noise level, from the residual of the harmonic fit (the engine's own lines and their
   // leakage removed), and the fitted fundamental's power, for the SNR (see snr_db()).
   ev.noise_level = residual_noise_level(f, fit);
-  const int col = fit.order_col[1];
+  const int col = fit.col[1];
   ev.fundamental_amp2 =
       col >= 0 && fit.cols > 0 ? fit.coef[col] * fit.coef[col] + fit.coef[col + 1] * fit.coef[col + 1] : 0.0;
   ev.snr_db = snr_db(ev, false);
@@ -780,52 +457,12 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
 }
 
 void SlidingDftTracker::Impl::reset_track() noexcept {
-  post_absent = 0.5;
-  std::fill(post.begin(), post.end(), 0.5 / static_cast<double>(post.size()));
+  track->reset();
   rho_track = kDefaultRho;
-  drift_hz_per_s = 0.0;
-  last_freq = kNaN;
-}
-
-// Prior of this hop from the previous posterior: a continuing line moves within a steady, a slew or a
-// shift gate (box kernels by prefix sums); the engine may stop, start, or be found anywhere.
-void SlidingDftTracker::Impl::predict() noexcept {
-  const auto n = static_cast<int>(post.size());
-  cumsum[0] = 0.0;
-  for (int i = 0; i < n; ++i)
-    cumsum[static_cast<std::size_t>(i) + 1] =
-        cumsum[static_cast<std::size_t>(i)] + post[static_cast<std::size_t>(i)];
-  const double present = cumsum[static_cast<std::size_t>(n)];
-  const auto box = [&](int i, int g) {
-    const int lo = std::max(0, i - g), hi = std::min(n - 1, i + g);
-    if (lo > hi) return 0.0;
-    return (cumsum[static_cast<std::size_t>(hi) + 1] - cumsum[static_cast<std::size_t>(lo)]) /
-           (2.0 * g + 1.0);
-  };
-  // The steady and slew gates move with the track's recent drift (a ramping engine stays in its gate).
-  const auto shift = static_cast<int>(std::lround(drift_hz_per_s * cfg.hop_s / df));
-  const double stay = 1.0 - p_stop - p_jump;
-  const double anywhere = (p_jump * present + p_start * post_absent) / n;
-  // loglik is free here: write the prior into it, then into post.
-  for (int i = 0; i < n; ++i)
-    loglik[static_cast<std::size_t>(i)] =
-        stay * (kSteadyShare * box(i - shift, gate_steady) + kSlewShare * box(i - shift, gate_slew) +
-                (1.0 - kSteadyShare - kSlewShare) * box(i, gate_shift)) +
-        anywhere;
-  post_absent = p_stop * present + (1.0 - p_start) * post_absent;
-  std::copy(loglik.begin(), loglik.end(), post.begin());
 }
 
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
 // normalised power at each of its orders.
-void SlidingDftTracker::Impl::mark_tones() noexcept {
-  std::fill(near_tone.begin(), near_tone.end(), 0);
-  const auto n = static_cast<int>(near_tone.size());
-  for (int k = noise_lo; k <= noise_hi; ++k)
-    if (tone[static_cast<std::size_t>(k)] >= kToneFitLevel)
-      for (int j = std::max(0, k - lobe); j <= std::min(n - 1, k + lobe); ++j)
-        near_tone[static_cast<std::size_t>(j)] = 1;
-}
 
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
   const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
@@ -835,11 +472,11 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
     // resolution bin is penalised by the amplitude mismatch (sqrt z has unit-order noise).
     double peak = z1;
     for (int j = std::max(0, k - lobe); j <= std::min(nfft / 2, k + lobe); ++j)
-      if (!near_tone[static_cast<std::size_t>(j)]) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
+      if (!tones->near(static_cast<std::size_t>(j))) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
     const double mismatch = std::sqrt(peak) - std::sqrt(z1);
     // A bin within a resolution bin of a learned tone says nothing either way: the engine may or may
     // not be under the tone or its shoulders.
-    const bool on_tone = near_tone[static_cast<std::size_t>(k)];
+    const bool on_tone = tones->near(static_cast<std::size_t>(k));
     double l = on_tone ? 0.0 : evidence.fundamental(z1, rho_track) - mismatch * mismatch;
     if (cfg.require_harmonics) {
       const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
@@ -848,8 +485,10 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
         const double pos = kOrder[o] * k;
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
-        if (!near_tone[b])
-          l += o == 0 ? evidence.half_order(z_at(b), rho, half_absent) : evidence.order(z_at(b), rho);
+        if (!tones->near(b))
+          l += o == 0   ? evidence.half_order(z_at(b), rho, half_absent)
+               : o == 2 ? evidence.second(z_at(b), rho)
+                        : evidence.order(z_at(b), rho);
       }
     }
     out[static_cast<std::size_t>(k - s_lo)] = temper * l;
@@ -864,7 +503,7 @@ double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
   const double z_est = z_at(static_cast<std::size_t>(kc));
   double z_peak = z_est;
   for (int k = std::max(s_lo, kc - 2 * lobe); k <= std::min(nfft / 2 - 1, kc + 2 * lobe); ++k)
-    if (std::abs(k - kc) > lobe && !near_tone[static_cast<std::size_t>(k)])
+    if (std::abs(k - kc) > lobe && !tones->near(static_cast<std::size_t>(k)))
       z_peak = std::max(z_peak, z_at(static_cast<std::size_t>(k)));
   const double m = std::sqrt(z_peak) - std::sqrt(z_est);
   return m * m;
@@ -873,30 +512,21 @@ double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   TrackPoint out;
   out.t = time_of(static_cast<double>(centre));
-  if (centre < valid_from + static_cast<std::uint64_t>(half_span) || !analyse(centre)) {
+  if (centre < input.valid_from() + static_cast<std::uint64_t>(half_span) || !analyse(centre)) {
     reset_track();
     return out;
   }
-  predict();
-  mark_tones();
-  candidate_likelihoods(loglik);
-  const double top = std::max(0.0, *std::max_element(loglik.begin(), loglik.end()));
-  double total = post_absent * std::exp(-top);
-  for (std::size_t i = 0; i < post.size(); ++i) {
-    post[i] *= std::exp(loglik[i] - top);
-    total += post[i];
-  }
-  if (!(total > 0.0) || !std::isfinite(total)) {
+  track->predict();
+  tones->mark();
+  candidate_likelihoods(track->evidence());
+  if (!track->update()) {
     reset_track();
     return out;
   }
-  post_absent *= std::exp(-top) / total;
-  for (double& p : post)
-    p /= total;
-  const auto best = static_cast<int>(std::max_element(post.begin(), post.end()) - post.begin()) + s_lo;
+  const int best = track->mode_bin();
   // The line's sub-bin position: near the track's prediction when that lies on the posterior's line (a
   // hop whose line is drowned must not jump to a noise peak within the lobe), else near the mode.
-  const double predicted = std::isfinite(last_freq) ? last_freq + drift_hz_per_s * cfg.hop_s : kNaN;
+  const double predicted = track->predicted();
   const bool on_line = std::isfinite(predicted) && std::abs(predicted - best * df) <= lobe * df;
   const double f_mode = harmonic_peak_near(best, lobe) * df;
   Evidence ev = refine(f_mode, predicted);
@@ -910,13 +540,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // Probability that the engine's fundamental is on the estimated line: within one resolution bin of the
   // estimate (the posterior of a line spreads over its main lobe, the refined estimate does not), or 5 %
   // where that is wider.
-  double right = 0.0;
-  const double reach = std::max(kRightFraction * ev.freq, lobe * df);
-  const int lo = std::max(s_lo, static_cast<int>(std::ceil((ev.freq - reach) / df)));
-  const int hi = std::min(k_hi, static_cast<int>(std::floor((ev.freq + reach) / df)));
-  for (int k = lo; k <= hi; ++k)
-    right += post[static_cast<std::size_t>(k - s_lo)];
-  right = std::clamp(right, 0.0, 1.0);
+  const double right = track->mass_near(ev.freq);
   // A line sweeping through the window (mid gear-shift) smears its power over two resolution bins, and
   // the track may hold on to where the line was, on the smear's shoulder. A stronger fundamental peak
   // between one and two resolution bins away says so (sqrt z has unit-order noise, as for the shoulder
@@ -934,14 +558,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     out.confidence = reported;
     out.tracked = reported >= kTrackedConfidence;
   }
-  // The track's drift, from consecutive confident estimates that continue each other.
-  const bool confident = right >= kTrackedConfidence;
-  if (confident && std::isfinite(last_freq) &&
-      std::abs(ev.freq - last_freq) <= cfg.max_slew_hz_per_s * cfg.hop_s + 2.0 * df)
-    drift_hz_per_s = kDriftMemory * drift_hz_per_s + (1.0 - kDriftMemory) * (ev.freq - last_freq) / cfg.hop_s;
-  else
-    drift_hz_per_s *= kDriftMemory;
-  last_freq = confident ? ev.freq : kNaN;
+  track->observe(ev.freq, right, reported >= kTrackedConfidence);
   // The track's fundamental level, for the matched test of the next hops.
   if (right >= kTrackedConfidence)
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * std::max(ev.snr[1] - 1.0, 1.0);
@@ -951,7 +568,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   // This signal's half order, from hops that can tell: a confident estimate with a loud fundamental.
   if (right >= kHalfObserveRight && ev.available[0] && ev.snr[1] >= kHalfObserveRho) {
     const auto b = static_cast<std::size_t>(std::lround(0.5 * ev.freq / df));
-    if (b < near_tone.size() && !near_tone[b])
+    if (b < tones->bins() && !tones->near(b))
       half_present = half_keep * half_present + (1.0 - half_keep) * (ev.snr[0] >= kToneFitLevel ? 1.0 : 0.0);
   }
   return out;
@@ -970,7 +587,7 @@ void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
     const int kc = static_cast<int>(std::lround(freq / df));
     if (kc >= 1 && kc < nfft / 2) {
       const auto z = [this](int j) {
-        return power[static_cast<std::size_t>(j)] / noise[static_cast<std::size_t>(j)];
+        return power()[static_cast<std::size_t>(j)] / noise()[static_cast<std::size_t>(j)];
       };
       const double own = z(kc);
       double peak = own;
@@ -985,70 +602,10 @@ void SlidingDftTracker::Impl::learn_tones(double freq, double right) noexcept {
       }
       // Only a line loud enough to become a tone within a few windows needs the grace: fainter ones are
       // learned over many, as before (a fan next to a faint engine line is learned as soon).
-      const bool loud = own * kToneQuickWindows * (1.0 - tone_keep) >= kToneFitLevel - 1.0;
-      candidate = holds && ladder && loud;
+      candidate = holds && ladder && tones->loud(own);
     }
   }
-  local_maxima(2 * lobe);
-  for (int k = noise_lo; k <= noise_hi; ++k) {
-    bool near = false;
-    for (int o = 0; o < kOrders && !near && std::isfinite(freq); ++o)
-      near = std::abs(k * df - kOrder[o] * freq) <= 2.0 * lobe * df;
-    if (on_track && near) continue;
-    const auto i = static_cast<std::size_t>(k);
-    // The skirt of a loud line (30 dB and more over the noise spreads its leakage over several resolution
-    // bins) moves with that line: it is not a tone of its own, and learned as one it blanked the band.
-    const double z = z_here[i] * kToneSkirt >= z_around[i] ? z_here[i] : std::min(z_here[i], 1.0);
-    tone_time[i] = tone_keep * tone_time[i] + (z >= kToneFitLevel ? 1.0 - tone_keep : 0.0);
-    // The orders of a candidate not yet confident are learned only once they have persisted: a loud window
-    // moves a bin's mean power past the fit level at once, and a clean engine line (40 dB over the noise)
-    // not yet tracked at its first window was taken for a tone at its second and never acquired.
-    if (candidate && near && tone_time[i] < kTonePersist) continue;
-    // So is any loud reading: a loud line sweeping past (an order the estimate does not cover, an engine
-    // not yet tracked) stays in a bin a few windows, a tone stays for good. Until it has persisted it may
-    // raise the bin's mean to half the fit level (nothing is left out for it yet, and a tone that stays is
-    // learned soon after); fainter readings are learned over many windows anyway.
-    const bool loud = z * kToneQuickWindows * (1.0 - tone_keep) >= kToneFitLevel - 1.0;
-    const double next = std::max(1.0, tone_keep * tone[i] + (1.0 - tone_keep) * std::min(z, 1e3));
-    tone[i] =
-        loud && tone_time[i] < kTonePersist ? std::min(next, std::max(tone[i], 0.5 * kToneFitLevel)) : next;
-  }
-}
-
-// z_around[k] = the largest normalised power within `radius` fine bins of k (noise_lo..noise_hi), in one
-// pass over blocks of the window's width (van Herk / Gil-Werman): a window spans at most two blocks.
-void SlidingDftTracker::Impl::local_maxima(int radius) noexcept {
-  const int n = noise_hi - noise_lo + 1;
-  const int w = 2 * radius + 1;
-  const auto at = [this](int j) { return static_cast<std::size_t>(noise_lo + j); };
-  for (int j = 0; j < n; ++j)
-    z_here[at(j)] = power[at(j)] / noise[at(j)];
-  for (int j = 0; j < n; ++j)
-    z_pre[at(j)] = j % w == 0 ? z_here[at(j)] : std::max(z_pre[at(j - 1)], z_here[at(j)]);
-  for (int j = n - 1; j >= 0; --j)
-    z_suf[at(j)] = j == n - 1 || (j + 1) % w == 0 ? z_here[at(j)] : std::max(z_suf[at(j + 1)], z_here[at(j)]);
-  for (int j = 0; j < n; ++j) {
-    const int a = std::max(0, j - radius);
-    const int b = std::min(n - 1, j + radius);
-    // Within one block only when clipped by an end of the range: the part from its start or to its end.
-    z_around[at(j)] =
-        a / w == b / w ? (a % w == 0 ? z_pre[at(b)] : z_suf[at(a)]) : std::max(z_suf[at(a)], z_pre[at(b)]);
-  }
-}
-
-void SlidingDftTracker::Impl::emit(const TrackPoint& p) noexcept {
-  if (q_size == queue.size()) {
-    q_head = (q_head + 1) % queue.size();
-    --q_size;
-    ++dropped;
-  }
-  queue[(q_head + q_size) % queue.size()] = p;
-  ++q_size;
-  history[(h_head + h_size) % history.size()] = p;
-  if (h_size == history.size())
-    h_head = (h_head + 1) % history.size();
-  else
-    ++h_size;
+  tones->learn(power().data(), noise().data(), freq, kOrder, on_track, candidate);
 }
 
 // ---- public ----
@@ -1113,32 +670,28 @@ SlidingDftTracker::~SlidingDftTracker() = default;
 void SlidingDftTracker::start(double t0) noexcept {
   Impl& s = *impl_;
   s.t0 = t0;
-  s.n_in = 0;
-  s.valid_from = 0;
+  s.input.clear();
   const auto first_hop = (s.half_span + s.hop_frames - 1) / s.hop_frames;
   s.next_centre = static_cast<std::uint64_t>(first_hop * s.hop_frames);
   s.reset_track();
-  std::fill(s.tone.begin(), s.tone.end(), 1.0);
-  std::fill(s.tone_time.begin(), s.tone_time.end(), 0.0);
+  s.tones->reset();
   s.half_present = 1.0;  // the half order is the source's: learned again from the new stream
   s.log_noise = kNaN;
-  s.q_head = s.q_size = 0;
-  s.h_head = s.h_size = 0;
+  s.outputs.clear();
 }
 
 void SlidingDftTracker::retime(double t_next) noexcept {
-  impl_->t0 = t_next - static_cast<double>(impl_->n_in) / impl_->fs;
+  impl_->t0 = t_next - static_cast<double>(impl_->input.received()) / impl_->fs;
 }
 
 void SlidingDftTracker::skip(std::uint64_t frames) noexcept {
   Impl& s = *impl_;
   if (frames == 0) return;
-  s.n_in += frames;
-  s.valid_from = s.n_in;
+  s.input.skip(frames);
   s.reset_track();
   // Hops whose windows overlap the hole give no output; resume on the hop grid after it.
   const auto h = static_cast<std::uint64_t>(s.hop_frames);
-  const std::uint64_t min_centre = s.valid_from + static_cast<std::uint64_t>(s.half_span);
+  const std::uint64_t min_centre = s.input.valid_from() + static_cast<std::uint64_t>(s.half_span);
   if (s.next_centre < min_centre) s.next_centre = (min_centre + h - 1) / h * h;
 }
 
@@ -1147,10 +700,10 @@ void SlidingDftTracker::push(std::span<const float> frames) noexcept {
   std::size_t i = 0;
   while (i < frames.size()) {
     const std::uint64_t needed = s.next_centre + static_cast<std::uint64_t>(s.half_span) + 1;
-    while (i < frames.size() && s.n_in < needed)
-      s.write_frame(frames[i++]);
-    if (s.n_in >= needed) {
-      s.emit(s.process_hop(s.next_centre));
+    while (i < frames.size() && s.input.received() < needed)
+      s.input.write(frames[i++]);
+    if (s.input.received() >= needed) {
+      s.outputs.emit(s.process_hop(s.next_centre));
       s.next_centre += static_cast<std::uint64_t>(s.hop_frames);
     }
   }
@@ -1158,11 +711,7 @@ void SlidingDftTracker::push(std::span<const float> frames) noexcept {
 
 bool SlidingDftTracker::pop(TrackPoint& out) noexcept {
   Impl& s = *impl_;
-  if (s.q_size == 0) return false;
-  out = s.queue[s.q_head];
-  s.q_head = (s.q_head + 1) % s.queue.size();
-  --s.q_size;
-  return true;
+  return s.outputs.pop(out);
 }
 
 TrackPoint SlidingDftTracker::at(double t) noexcept {
@@ -1173,17 +722,18 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   if (!std::isfinite(pos)) return out;
   const double c = std::round(pos);
   const auto hs = static_cast<double>(s.half_span);
-  const double oldest = std::max(static_cast<double>(s.valid_from),
-                                 static_cast<double>(s.n_in) - static_cast<double>(s.ring_size) + 1.0);
-  if (c - hs < oldest || c + hs >= static_cast<double>(s.n_in)) return out;
+  const auto received = static_cast<double>(s.input.received());
+  const double oldest = std::max(static_cast<double>(s.input.valid_from()),
+                                 received - static_cast<double>(s.input.capacity()) + 1.0);
+  if (c - hs < oldest || c + hs >= received) return out;
   const auto centre = static_cast<std::uint64_t>(c);
   out.t = s.time_of(c);
   // Prior: the nearest hop output with an estimate, within the coast time; this window's estimate is
   // the best candidate within the slew gate around it, and inherits its confidence.
   TrackPoint prior;
   double prior_dt = 1e9;
-  for (std::size_t k = 0; k < s.h_size; ++k) {
-    const TrackPoint& h = s.history[(s.h_head + k) % s.history.size()];
+  for (std::size_t k = 0; k < s.outputs.held(); ++k) {
+    const TrackPoint& h = s.outputs.recent(k);
     if (std::isfinite(h.freq) && std::abs(h.t - out.t) < prior_dt) {
       prior_dt = std::abs(h.t - out.t);
       prior = h;
@@ -1194,10 +744,11 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   const int lo = std::max(s.s_lo, static_cast<int>(std::floor((prior.freq - gate) / s.df)));
   const int hi = std::min(s.k_hi, static_cast<int>(std::ceil((prior.freq + gate) / s.df)));
   if (lo > hi) return out;
-  s.candidate_likelihoods(s.cumsum);  // scratch: the track state stays as the hops left it
+  s.candidate_likelihoods(s.at_loglik);  // the track state stays as the hops left it
   int best = lo;
   for (int k = lo; k <= hi; ++k)
-    if (s.cumsum[static_cast<std::size_t>(k - s.s_lo)] > s.cumsum[static_cast<std::size_t>(best - s.s_lo)])
+    if (s.at_loglik[static_cast<std::size_t>(k - s.s_lo)] >
+        s.at_loglik[static_cast<std::size_t>(best - s.s_lo)])
       best = k;
   const Impl::Evidence ev = s.refine(s.harmonic_peak_near(best, s.lobe) * s.df);
   out.snr_db = ev.snr_db;
@@ -1215,8 +766,8 @@ TrackPoint SlidingDftTracker::nearest(double t) const noexcept {
   TrackPoint best;
   best.t = t;
   double best_dt = 0.5 * s.cfg.hop_s + 1e-9;
-  for (std::size_t k = 0; k < s.h_size; ++k) {
-    const TrackPoint& h = s.history[(s.h_head + k) % s.history.size()];
+  for (std::size_t k = 0; k < s.outputs.held(); ++k) {
+    const TrackPoint& h = s.outputs.recent(k);
     if (std::abs(h.t - t) <= best_dt) {
       best_dt = std::abs(h.t - t);
       best = h;
@@ -1227,8 +778,8 @@ TrackPoint SlidingDftTracker::nearest(double t) const noexcept {
 
 double SlidingDftTracker::latest_time() const noexcept {
   const Impl& s = *impl_;
-  const auto last = static_cast<std::int64_t>(s.n_in) - 1 - s.half_span;
-  if (last < static_cast<std::int64_t>(s.valid_from) + s.half_span) return kNaN;
+  const auto last = static_cast<std::int64_t>(s.input.received()) - 1 - s.half_span;
+  if (last < static_cast<std::int64_t>(s.input.valid_from()) + s.half_span) return kNaN;
   return s.time_of(static_cast<double>(last));
 }
 
@@ -1239,16 +790,17 @@ double SlidingDftTracker::decimated_rate_hz() const noexcept {
   return impl_->fd;
 }
 std::size_t SlidingDftTracker::queue_capacity() const noexcept {
-  return impl_->queue.size();
+  return impl_->outputs.queue_capacity();
 }
 std::size_t SlidingDftTracker::max_push_frames() const noexcept {
-  return std::max<std::size_t>(1, impl_->queue.size() / 2 * static_cast<std::size_t>(impl_->hop_frames));
+  return std::max<std::size_t>(
+      1, impl_->outputs.queue_capacity() / 2 * static_cast<std::size_t>(impl_->hop_frames));
 }
 std::size_t SlidingDftTracker::history_size() const noexcept {
-  return impl_->history.size();
+  return impl_->outputs.history_capacity();
 }
 std::uint64_t SlidingDftTracker::dropped_outputs() const noexcept {
-  return impl_->dropped;
+  return impl_->outputs.dropped();
 }
 
 }  // namespace gearpulse

@@ -11,9 +11,9 @@
 // something is there. The fundamental's SNR is expected near the track's recent level (a matched test,
 // the longer integration a steady engine allows) or anywhere over a broad range (acquisition, level
 // changes). The other orders (f/2, 2f, 3f) are expected at a fraction r of the fundamental's SNR, r
-// unknown over two decades, or absent: a loud line whose harmonics are all missing is unlikely to be
-// the engine; a weak one whose harmonics drown in the noise is not penalised. Some signals have no half
-// order at all: the probability of its absence can be given as learned (half_order()).
+// unknown over two decades (the 2nd harmonic's up to +15 dB), or absent: a loud line whose harmonics are all
+// missing is unlikely to be the engine; a weak one whose harmonics drown in the noise is not penalised. Some
+// signals have no half order at all: the probability of its absence can be given as learned (half_order()).
 //
 // Everything is tabulated at construction; lookups are noexcept and allocation-free.
 #include <vector>
@@ -33,6 +33,9 @@ class HarmonicEvidence {
   // Log likelihood ratio of a harmonic's bin (2f, 3f), given the per-bin SNR of the candidate's
   // fundamental.
   [[nodiscard]] double order(double z, double rho_fundamental) const noexcept;
+  // The same for the 2nd harmonic's bin, which may stand up to 15 dB over the fundamental (light load,
+  // overrun).
+  [[nodiscard]] double second(double z, double rho_fundamental) const noexcept;
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
   [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
@@ -41,6 +44,7 @@ class HarmonicEvidence {
   [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
   std::vector<double> fund_;    // over (log10 rho, sqrt z)
   std::vector<double> ladder_;  // over (log10 rho, sqrt z)
+  std::vector<double> second_;  // over (log10 rho, sqrt z)
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).
   std::vector<std::vector<double>> half_;

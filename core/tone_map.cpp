@@ -1,0 +1,103 @@
+#include "core/tone_map.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace gearpulse {
+namespace {
+
+// Time over which a fixed tone is learned (s): far longer than any steady stretch of a moving engine
+// the track does not cover.
+constexpr double kMemoryS = 20.0;
+// Share of the memory in which a bin near a candidate estimate's orders must have stood above kFitLevel
+// before it is learned as a tone while the track is not confident, and that a bin read loud must have
+// before the reading counts in full (about 2 s of a line present at every hop; see learn()).
+constexpr double kPersist = 0.1;
+// A bin this far below the strongest within two resolution bins of it is on a louder line's skirt, not a
+// line of its own: a Hann window's first sidelobe is 31 dB down, its main lobe 15 dB down 1.5 bins out.
+constexpr double kSkirt = 100.0;
+constexpr double kQuickWindows = 5.0;  // a line is loud that would be a tone within this many windows
+
+}  // namespace
+
+ToneMap::ToneMap(std::size_t bins, int first, int last, int lobe, double df_hz, double hop_s)
+    : first_(first),
+      last_(last),
+      lobe_(lobe),
+      df_(df_hz),
+      keep_(std::exp(-hop_s / kMemoryS)),
+      tone_(bins, 1.0),
+      time_(bins, 0.0),
+      near_(bins, 0),
+      z_here_(bins, 0.0),
+      z_around_(bins, 0.0),
+      z_pre_(bins, 0.0),
+      z_suf_(bins, 0.0) {}
+
+void ToneMap::reset() noexcept {
+  std::fill(tone_.begin(), tone_.end(), 1.0);
+  std::fill(time_.begin(), time_.end(), 0.0);
+}
+
+void ToneMap::mark() noexcept {
+  std::fill(near_.begin(), near_.end(), 0);
+  const auto n = static_cast<int>(near_.size());
+  for (int k = first_; k <= last_; ++k)
+    if (tone_[static_cast<std::size_t>(k)] >= kFitLevel)
+      for (int j = std::max(0, k - lobe_); j <= std::min(n - 1, k + lobe_); ++j)
+        near_[static_cast<std::size_t>(j)] = 1;
+}
+
+bool ToneMap::loud(double z) const noexcept {
+  return z * kQuickWindows * (1.0 - keep_) >= kFitLevel - 1.0;
+}
+
+void ToneMap::learn(const double* power, const double* noise, double freq_hz, std::span<const double> orders,
+                    bool on_track, bool candidate) noexcept {
+  local_maxima(power, noise, 2 * lobe_);
+  for (int k = first_; k <= last_; ++k) {
+    bool near = false;
+    for (std::size_t o = 0; o < orders.size() && !near && std::isfinite(freq_hz); ++o)
+      near = std::abs(k * df_ - orders[o] * freq_hz) <= 2.0 * lobe_ * df_;
+    if (on_track && near) continue;
+    const auto i = static_cast<std::size_t>(k);
+    // The skirt of a loud line (30 dB and more over the noise spreads its leakage over several resolution
+    // bins) moves with that line: it is not a tone of its own, and learned as one it blanked the band.
+    const double z = z_here_[i] * kSkirt >= z_around_[i] ? z_here_[i] : std::min(z_here_[i], 1.0);
+    time_[i] = keep_ * time_[i] + (z >= kFitLevel ? 1.0 - keep_ : 0.0);
+    // The orders of a candidate not yet confident are learned only once they have persisted: a loud window
+    // moves a bin's mean power past the fit level at once, and a clean engine line (40 dB over the noise)
+    // not yet tracked at its first window was taken for a tone at its second and never acquired.
+    if (candidate && near && time_[i] < kPersist) continue;
+    // So is any loud reading: a loud line sweeping past (an order the estimate does not cover, an engine
+    // not yet tracked) stays in a bin a few windows, a tone stays for good. Until it has persisted it may
+    // raise the bin's mean to half the fit level (nothing is left out for it yet, and a tone that stays is
+    // learned soon after); fainter readings are learned over many windows anyway.
+    const double next = std::max(1.0, keep_ * tone_[i] + (1.0 - keep_) * std::min(z, 1e3));
+    tone_[i] = loud(z) && time_[i] < kPersist ? std::min(next, std::max(tone_[i], 0.5 * kFitLevel)) : next;
+  }
+}
+
+// z_around_[k] = the largest normalised power within `radius` fine bins of k (first..last), in one pass
+// over blocks of the window's width (van Herk / Gil-Werman): a window spans at most two blocks.
+void ToneMap::local_maxima(const double* power, const double* noise, int radius) noexcept {
+  const int n = last_ - first_ + 1;
+  const int w = 2 * radius + 1;
+  const auto at = [this](int j) { return static_cast<std::size_t>(first_ + j); };
+  for (int j = 0; j < n; ++j)
+    z_here_[at(j)] = power[at(j)] / noise[at(j)];
+  for (int j = 0; j < n; ++j)
+    z_pre_[at(j)] = j % w == 0 ? z_here_[at(j)] : std::max(z_pre_[at(j - 1)], z_here_[at(j)]);
+  for (int j = n - 1; j >= 0; --j)
+    z_suf_[at(j)] =
+        j == n - 1 || (j + 1) % w == 0 ? z_here_[at(j)] : std::max(z_suf_[at(j + 1)], z_here_[at(j)]);
+  for (int j = 0; j < n; ++j) {
+    const int a = std::max(0, j - radius);
+    const int b = std::min(n - 1, j + radius);
+    // Within one block only when clipped by an end of the range: the part from its start or to its end.
+    z_around_[at(j)] = a / w == b / w ? (a % w == 0 ? z_pre_[at(b)] : z_suf_[at(a)])
+                                      : std::max(z_suf_[at(a)], z_pre_[at(b)]);
+  }
+}
+
+}  // namespace gearpulse

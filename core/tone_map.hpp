@@ -1,0 +1,56 @@
+#pragma once
+// Fixed tones of other equipment (a fan's or a pump's line) that the engine-frequency tracker counts as
+// background: per fine spectral bin, the mean normalised power (1 on noise) over the last tens of
+// seconds. A line that stays put while the engine moves raises its bin's mean; the bins near the
+// track's orders are not learned while the track holds them, so a cruising engine does not become a
+// tone. Sized at construction; nothing allocates, locks or throws afterwards.
+#include <algorithm>
+#include <cstddef>
+#include <span>
+#include <vector>
+
+namespace gearpulse {
+
+class ToneMap {
+ public:
+  // Mean normalised power from which a learned tone counts (and is fitted along with the engine's orders).
+  static constexpr double kFitLevel = 4.0;
+
+  // bins: fine bins of the spectrum; learned over first..last; lobe fine bins to a resolution bin of
+  // df_hz x lobe Hz; one window every hop_s.
+  ToneMap(std::size_t bins, int first, int last, int lobe, double df_hz, double hop_s);
+
+  void reset() noexcept;
+  [[nodiscard]] std::size_t bins() const noexcept { return tone_.size(); }
+  // The bin's mean normalised power.
+  [[nodiscard]] double mean(std::size_t k) const noexcept { return tone_[k]; }
+  // What a reading of the bin is divided by: the tone's level where it stands above the noise on average
+  // (a moving engine raises a bin's mean a little, not a lot), else 1.
+  [[nodiscard]] double background(std::size_t k) const noexcept { return std::max(1.0, tone_[k] - 1.0); }
+  // Within one resolution bin of a learned tone, as marked by mark() for this hop.
+  [[nodiscard]] bool near(std::size_t k) const noexcept { return near_[k] != 0; }
+  void mark() noexcept;
+  // A reading this loud (normalised power) would make a tone within a few windows.
+  [[nodiscard]] bool loud(double z) const noexcept;
+  // Learns from this window's spectrum (power and noise floor per fine bin). The bins within two
+  // resolution bins of the estimate's orders (`orders` x freq_hz; none when freq_hz is NaN) are left out
+  // while the estimate is probably the engine (`on_track`) and, while it is a `candidate` not yet
+  // confident, until they have persisted.
+  void learn(const double* power, const double* noise, double freq_hz, std::span<const double> orders,
+             bool on_track, bool candidate) noexcept;
+
+ private:
+  void local_maxima(const double* power, const double* noise, int radius) noexcept;
+
+  int first_, last_, lobe_;
+  double df_;
+  double keep_;               // per hop
+  std::vector<double> tone_;  // mean normalised power
+  std::vector<double> time_;  // share of the memory spent above kFitLevel
+  std::vector<char> near_;    // within one resolution bin of a learned tone (this hop)
+  // This hop: the normalised power, and its maximum within two resolution bins (with the block maxima
+  // that give it in one pass).
+  std::vector<double> z_here_, z_around_, z_pre_, z_suf_;
+};
+
+}  // namespace gearpulse

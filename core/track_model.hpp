@@ -1,0 +1,56 @@
+#pragma once
+// The engine-frequency tracker's model of the track over hops: a hidden Markov chain over candidate
+// fundamentals (fine spectral bins) plus an "engine absent" state, filtered forward with each hop's
+// evidence, and the track's continuity (the drift of a confident line and the latest tracked estimate).
+//
+// Per hop: predict() spreads the previous posterior (a continuing line moves within a steady, a slew or a
+// shift gate that follows the track's drift; the engine stops, starts or is found elsewhere; a line found
+// again after the track lost it is found near the latest tracked estimate), the caller writes every
+// state's log likelihood ratio into evidence(), update() applies it, and observe() tells the model what
+// the hop reported. Sized at construction; nothing allocates, locks or throws afterwards.
+#include <vector>
+
+#include "core/sliding_dft_tracker.hpp"
+
+namespace gearpulse {
+
+class TrackModel {
+ public:
+  // States: fine bins first_bin..last_bin of width df_hz (Hz), lobe fine bins to a resolution bin.
+  TrackModel(const TrackerConfig& config, int first_bin, int last_bin, double df_hz, int lobe);
+
+  void reset() noexcept;
+  void predict() noexcept;
+  // Per state (first_bin + i): this hop's log likelihood ratio, written by the caller before update().
+  [[nodiscard]] std::vector<double>& evidence() noexcept { return loglik_; }
+  // Bayes update with evidence(); false (the model reset) when it is degenerate.
+  bool update() noexcept;
+
+  [[nodiscard]] int mode_bin() const noexcept;
+  // Posterior probability that the engine's fundamental is within 5 % (or one resolution bin) of f.
+  [[nodiscard]] double mass_near(double f) const noexcept;
+  // Where the line continues this hop (the previous confident estimate plus its drift), NaN when the
+  // previous hop was not confident.
+  [[nodiscard]] double predicted() const noexcept;
+  // The hop's estimate f, the posterior near it (`right`) and whether it was reported as tracked.
+  void observe(double f, double right, bool tracked) noexcept;
+
+  [[nodiscard]] int first_bin() const noexcept { return first_; }
+  [[nodiscard]] int last_bin() const noexcept { return last_; }
+
+ private:
+  double hop_s_, max_slew_;
+  int first_, last_;
+  double df_;
+  int lobe_;
+  int gate_steady_ = 1, gate_slew_ = 1, gate_shift_ = 1;  // fine bins per hop
+  double p_stop_ = 0.0, p_start_ = 0.0, p_jump_ = 0.0;    // per hop
+  std::vector<double> post_, loglik_, cumsum_;
+  double post_absent_ = 0.5;
+  double drift_hz_per_s_ = 0.0;  // recent rate of change of the tracked line
+  double last_freq_ = 0.0;       // previous hop's estimate while confident, else NaN
+  double anchor_freq_ = 0.0;     // latest tracked estimate, NaN after a reset
+  int anchor_age_ = 0;           // hops since it
+};
+
+}  // namespace gearpulse
