@@ -8,11 +8,10 @@
 namespace gearpulse {
 namespace {
 
-constexpr double kMinProb = 1e-9;          // keeps every mode recoverable
-constexpr double kNegligible = 1e-2;       // belief, relative to the leading mode, worth a history of its own
-constexpr double kClutchTrackShare = 0.5;  // the same for the clutch led by a gear (outage, short steps)
-constexpr double kInitialSpeedVar = 1.0;   // (m/s)^2: a cold start is most likely near standstill
-constexpr double kMaxSpeedVar = 25.0;      // (m/s)^2: a coasting guess is never "anything at all"
+constexpr double kMinProb = 1e-9;         // keeps every mode recoverable
+constexpr double kNegligible = 1e-2;      // belief, relative to the leading mode, worth a history of its own
+constexpr double kInitialSpeedVar = 1.0;  // (m/s)^2: a cold start is most likely near standstill
+constexpr double kMaxSpeedVar = 25.0;     // (m/s)^2: a coasting guess is never "anything at all"
 constexpr double kLostGearLogEvidence = -3.0;  // a gear when the frequency is lost (about e^-3 per second)
 constexpr double kDefaultClutchShare =
     0.15;                                // declutched share when the model gives none (cf. beta, eq. (6))
@@ -486,7 +485,7 @@ double SpeedSynthesizer::downshift_factor(int gear, double freq, bool long_step)
   const bool own = gear_down_count_[gear] >= kMinShifts;
   const double mean = own ? gear_down_mean_[gear] : down_mean_, var = own ? gear_down_var_[gear] : down_var_;
   if (!own && down_count_ < kMinShifts) {
-    if (long_step && revs_sd_[gear] > 0.0 && freq > 0.0)
+    if (long_step && tuning_.downshift_band > 0.0 && revs_sd_[gear] > 0.0 && freq > 0.0)
       return std::exp(std::clamp(-revs_z(gear, freq), -3.0, 3.0));
     return 1.0 / shift_urge(freq);
   }
@@ -580,9 +579,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // the belief back for most of the outage. At the tracker's short steps the declutch shows on several
     // readings and the clutch's own rate holds it (measured: counted there too, it cost the 10 Hz figures,
     // presets 2.23 -> 2.59 km/h p95).
-    constexpr double kDeclutchTime = 0.5;  // s: the clutch out in a shift
     double clutch = base * kToClutch;
-    const double caught = long_step ? up * std::min(1.0, kDeclutchTime / dt) : 0.0;
+    const double caught = long_step ? up * std::min(1.0, tuning_.declutch_time / dt) : 0.0;
     clutch += caught;
     caught_share = clutch > 0.0 ? caught / clutch : 0.0;
     // Leaving a gear is never given a hazard beyond the cost of a second of free revs, which the clutch
@@ -590,8 +588,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // second than the clutch explaining nothing. A hard launch revved out in first gear, far past this
     // driver's upshift revs and first gear's time, was lost to the clutch while the car still pulled, and
     // with it the speed (11 km/h in first gear at a true 27 in fourth, for half a minute).
-    if (const double sum = clutch + up + down; sum > kFreeRevsCost) {
-      const double k = kFreeRevsCost / sum;
+    if (const double sum = clutch + up + down; sum > tuning_.leave_cap) {
+      const double k = tuning_.leave_cap / sum;
       clutch *= k;
       up *= k;
       down *= k;
@@ -656,7 +654,8 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
     mean = std::min(
         (coast_count_ * coast_mean_ + kCoastPrior * tuning_.coast_accel) / (coast_count_ + kCoastPrior), 0.0);
     // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
-    const double stopping = std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0);
+    const double stopping =
+        tuning_.stop_speed > 0.0 ? std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0) : 0.0;
     mean = std::min(mean, mean + stopping * (tuning_.stop_accel - mean));
     sigma = tuning_.coast_sigma;
   } else if (to == launch_mode()) {
@@ -698,7 +697,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) {
     // Rolling, revs climbing fast cost the clutch up to as much again as free revs (climb_, filter_step).
-    const double climb = x.v > kMovingOffSpeed ? climb_ * kFreeRevsCost : 0.0;
+    const double climb = x.v > kMovingOffSpeed ? tuning_.climb_cost * climb_ * kFreeRevsCost : 0.0;
     return weight * (log_declutched(freq, x.v) - climb);
   }
   if (mode == launch_mode()) {
@@ -744,7 +743,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // braking at no more than one jump's cost and outlived the shift one gear low. A longer step's
   // prediction already carries that uncertainty (a fifth of the stationary spread or more from a tenth of
   // accel_time on).
-  if (short_step && z2 > kDeadZone * kDeadZone && innovation > 0.0)
+  if (short_step && tuning_.jump_reopen > 0.0 && z2 > kDeadZone * kDeadZone && innovation > 0.0)
     x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
   return -jump_cost(z2) - 0.5 * (entering ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
          weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);
@@ -875,7 +874,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // Only out of the move-off, whose clutch has been slipping: a car rolling declutched that engages a
       // gear within one short step has gained nothing, and with the gap as its spread any gear would fit
       // (fifth gear's reading at 42 km/h taken up from a roll at 7 km/h as the launch's first gear bit).
-      if (short_step && is_gear(j) && i == launch_mode() && std::isfinite(freq)) {
+      if (short_step && tuning_.bite_gap > 0.0 && is_gear(j) && i == launch_mode() && std::isfinite(freq)) {
         const double gap = theta_[j] * freq - x.v;
         if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
       }
@@ -964,7 +963,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   // ladder one gear low. At longer steps a declutch and a re-engagement can both fall between two
   // readings, and a coasting history is a real alternative.
   const bool clutch_follows_gear =
-      short_step && !have_gps && is_gear(mode_) && prob_[0] < kClutchTrackShare * prob_[mode_];
+      short_step && !have_gps && is_gear(mode_) && prob_[0] < tuning_.clutch_track_share * prob_[mode_];
   for (int j = 0; j < modes; ++j)
     if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_)) ||
                        (j == 0 && clutch_follows_gear))) {

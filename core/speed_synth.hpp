@@ -126,6 +126,29 @@ struct SynthTuning {
   // often than the belief says. Kept below 2/3, where a first gear creeping near idle, whose belief second
   // gear shares by a third, would be output as second.
   double output_quantile = 0.6;
+  // Rules of the filter that bench_outage's --ablate switches off one at a time (each line: the rule, and
+  // the value at which it is absent).
+  // Rolling declutched, revs climbing faster than 0.2 a second at the tracker's hops are an engine pulling
+  // the car: at 0.4 a second they cost the clutch this share of a second of free revs on top (0: none).
+  double climb_cost = 1.0;
+  // s: the clutch is out this long in a shift; between readings further apart than the tracker's hops, a
+  // reading falls inside an upshift's declutch with this share of the step (0: never).
+  double declutch_time = 0.5;
+  // At the tracker's hops through an outage the clutch keeps no speed history of its own while it holds
+  // less than this share of the leading gear's belief (0: it always keeps its own).
+  double clutch_track_share = 0.5;
+  // 1/s: the most a gear's hazard of being left may reach, the cost of a second of free revs (infinity:
+  // no cap).
+  double leave_cap = 4.5;
+  // 1: at the tracker's hops, a clutch biting after a move-off takes the gap up to the gear's reading as
+  // its speed's spread (0: the move-off's own spread).
+  double bite_gap = 1.0;
+  // 1: at the tracker's hops, a gear's reading beyond the dead zone upward reopens the acceleration's
+  // spread (0: it never does).
+  double jump_reopen = 1.0;
+  // 1: between readings further apart than the tracker's hops, before downshifts were seen, a gear's revs
+  // band (extra.revs) stands in for the downshift revs (0: the revs run in gear at large do).
+  double downshift_band = 1.0;
 };
 
 class SpeedSynthesizer {
