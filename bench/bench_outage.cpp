@@ -515,6 +515,12 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(declutch_time),    GEARPULSE_FIELD(clutch_track_share),
     GEARPULSE_FIELD(leave_cap),        GEARPULSE_FIELD(bite_gap),
     GEARPULSE_FIELD(jump_reopen),      GEARPULSE_FIELD(downshift_band),
+    GEARPULSE_FIELD(dwell_by_use),     GEARPULSE_FIELD(warm_floor),
+    GEARPULSE_FIELD(rolling_idle),     GEARPULSE_FIELD(gear_shift_points),
+    GEARPULSE_FIELD(entry_whole),      GEARPULSE_FIELD(idle_on_move),
+    GEARPULSE_FIELD(pull_transfer),    GEARPULSE_FIELD(gps_accel_clip),
+    GEARPULSE_FIELD(lost_gear_cost),   GEARPULSE_FIELD(launch_fade),
+    GEARPULSE_FIELD(rest_output),
 };
 #undef GEARPULSE_FIELD
 
@@ -570,6 +576,17 @@ constexpr Rule kRules[] = {
     {"bite gap: biting clutch's spread", "bite_gap=0"},
     {"jump reopen: acceleration reopened", "jump_reopen=0"},
     {"downshift band: gear's revs band", "downshift_band=0"},
+    {"dwell by use: rarely used gears left sooner", "dwell_by_use=0"},
+    {"warm floor: idle down to the fit's warm idle", "warm_floor=0"},
+    {"rolling idle: declutched revs held on the move", "rolling_idle=0"},
+    {"per-gear shift revs", "gear_shift_points=0"},
+    {"entry whole: entering a gear counts whole", "entry_whole=0"},
+    {"idle learned on the move", "idle_on_move=0"},
+    {"pull transfer: acceleration scaled at a shift", "pull_transfer=0"},
+    {"GPS acceleration clip", "gps_accel_clip=0"},
+    {"lost gear cost: a gear fades without revs", "lost_gear_cost=0"},
+    {"launch fade: no move-off at speed", "launch_fade=0"},
+    {"rest output: slow declutched output is 0", "rest_output=0"},
 };
 
 std::string figure(double med, double p95) {

@@ -149,6 +149,30 @@ struct SynthTuning {
   // 1: between readings further apart than the tracker's hops, before downshifts were seen, a gear's revs
   // band (extra.revs) stands in for the downshift revs (0: the revs run in gear at large do).
   double downshift_band = 1.0;
+  // 1: a gear's leave rate scales with how little it is used (a first gear is left soon) (0: every gear
+  // is left at 1 / gear_dwell).
+  double dwell_by_use = 1.0;
+  // 1: revs between the idle learned last and the fit's warm idle are idle (a warming engine) (0: only
+  // the idle learned).
+  double warm_floor = 1.0;
+  // 1: the rolling idle learned under GPS holds declutched revs on the move (0: the standing idle does).
+  double rolling_idle = 1.0;
+  // 1: once a gear was seen left a few times, its own shift revs count (0: those of all gears).
+  double gear_shift_points = 1.0;
+  // 1: entering a gear, the reading's fit counts whole, once (0: weighted by the step like any other).
+  double entry_whole = 1.0;
+  // 1: declutched on the move at idle revs, the idle is learned too (0: only standing).
+  double idle_on_move = 1.0;
+  // 1: a shift carries the pull's acceleration into the new gear as theta_old / theta_new (0: whole).
+  double pull_transfer = 1.0;
+  // 1: a GPS fix beyond the dead zone teaches the acceleration no more than the dead zone's worth (0: all).
+  double gps_accel_clip = 1.0;
+  // 1/s: log-cost of being in a gear while the frequency is lost (0: a lost reading says nothing).
+  double lost_gear_cost = 3.0;
+  // 1: moving off grows less plausible as the car gains speed (0: as plausible at any speed).
+  double launch_fade = 1.0;
+  // 1: declutched slower than stationary_speed, the output is 0 (0: the belief's speed, however slow).
+  double rest_output = 1.0;
 };
 
 class SpeedSynthesizer {
