@@ -517,10 +517,9 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(jump_reopen),      GEARPULSE_FIELD(downshift_band),
     GEARPULSE_FIELD(dwell_by_use),     GEARPULSE_FIELD(warm_floor),
     GEARPULSE_FIELD(rolling_idle),     GEARPULSE_FIELD(gear_shift_points),
-    GEARPULSE_FIELD(entry_whole),      GEARPULSE_FIELD(idle_on_move),
-    GEARPULSE_FIELD(pull_transfer),    GEARPULSE_FIELD(gps_accel_clip),
-    GEARPULSE_FIELD(lost_gear_cost),   GEARPULSE_FIELD(launch_fade),
-    GEARPULSE_FIELD(rest_output),
+    GEARPULSE_FIELD(idle_on_move),     GEARPULSE_FIELD(pull_transfer),
+    GEARPULSE_FIELD(gps_accel_clip),   GEARPULSE_FIELD(lost_gear_cost),
+    GEARPULSE_FIELD(launch_fade),      GEARPULSE_FIELD(rest_output),
 };
 #undef GEARPULSE_FIELD
 
@@ -580,7 +579,6 @@ constexpr Rule kRules[] = {
     {"warm floor: idle down to the fit's warm idle", "warm_floor=0"},
     {"rolling idle: declutched revs held on the move", "rolling_idle=0"},
     {"per-gear shift revs", "gear_shift_points=0"},
-    {"entry whole: entering a gear counts whole", "entry_whole=0"},
     {"idle learned on the move", "idle_on_move=0"},
     {"pull transfer: acceleration scaled at a shift", "pull_transfer=0"},
     {"GPS acceleration clip", "gps_accel_clip=0"},

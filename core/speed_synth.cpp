@@ -687,7 +687,7 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 }
 
 // Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
-double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight, bool entering,
+double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
                                       bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
     if (is_gear(mode)) return -weight * tuning_.lost_gear_cost;
@@ -731,10 +731,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   keep_covariance(x);
   // A reading its gear explains within the dead zone costs in proportion to the time it covers (weight),
   // however often it comes; a jump the track cannot follow costs its squared excess once (the track then
-  // follows): an event, counted once at any sample rate. Entering the gear is an event too: how well the
-  // speed it was entered at matches the history is counted whole, once, at any rate (weighted by a tenth
-  // of a second, a first gear entered 5 km/h below a declutched car's speed cost next to nothing, since
-  // its revs turn that into a spread no wider than the second gear's at the right speed).
+  // follows): an event, counted once at any sample rate. A gear just entered is scored as one held.
   const double z2 = innovation * innovation / s;
   // A departure beyond the dead zone upward at a short step is a manoeuvre (a clutch biting, a hard launch
   // in first gear): the acceleration is open again, so the next readings find the new one and a ramp is
@@ -746,8 +743,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // accel_time on).
   if (short_step && tuning_.jump_reopen > 0.0 && z2 > kDeadZone * kDeadZone && innovation > 0.0)
     x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
-  return -jump_cost(z2) -
-         0.5 * (entering && tuning_.entry_whole > 0.0 ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
+  return -jump_cost(z2) - 0.5 * weight * std::min(z2, kDeadZone * kDeadZone) +
          weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);
 }
 
@@ -899,7 +895,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
         x.pvv *= 1.0 - k;
         keep_covariance(x);
       }
-      double evidence = log_evidence(x, j, freq, weight, i != j, short_step);
+      double evidence = log_evidence(x, j, freq, weight, short_step);
       // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
       // reading, scores its revs on their way down from the gear's line (log_declutching) where that
       // explains them better than free revs.

@@ -19,7 +19,7 @@
 // gear is scored by its innovation in its own units: within a dead zone of ordinary jitter it costs per
 // second of time, beyond it the jump costs once, however often step() is called (at steps much shorter than
 // an acceleration lasts, such a jump upward also reopens the acceleration, so that a ramp the history did not
-// expect is paid once too); entering a gear is an event whose innovation counts whole; being declutched or
+// expect is paid once too), and a gear just entered is scored as one held; being declutched or
 // moving off is scored per second, and so is how usual the revs are in a gear for this driver (the fit's revs
 // per gear, model extra.revs): steady revs that several gears explain go, over time, to the gear this driver
 // runs them in, and a shift is the likelier the nearer it brings the revs to the new gear's band. The idle
@@ -159,8 +159,6 @@ struct SynthTuning {
   double rolling_idle = 1.0;
   // 1: once a gear was seen left a few times, its own shift revs count (0: those of all gears).
   double gear_shift_points = 1.0;
-  // 1: entering a gear, the reading's fit counts whole, once (0: weighted by the step like any other).
-  double entry_whole = 1.0;
   // 1: declutched on the move at idle revs, the idle is learned too (0: only standing).
   double idle_on_move = 1.0;
   // 1: a shift carries the pull's acceleration into the new gear as theta_old / theta_new (0: whole).
@@ -224,7 +222,7 @@ class SpeedSynthesizer {
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
                         double& caught_share) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
-  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight, bool entering,
+  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
                                     bool short_step) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq, bool gps_new) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
