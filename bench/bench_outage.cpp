@@ -593,10 +593,18 @@ std::string figure(double med, double p95) {
   return b;
 }
 
+// A change of a figure: "0" when it is exactly unchanged, else signed to two decimals (+0.00 is a rise
+// below 0.005).
 std::string change(double med, double p95) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%+.2f / %+.2f", med, p95);
-  return b;
+  const auto one = [](double d) {
+    char b[20];
+    if (d == 0.0)
+      std::snprintf(b, sizeof b, "0");
+    else
+      std::snprintf(b, sizeof b, "%+.2f", d);
+    return std::string(b);
+  };
+  return one(med) + " / " + one(p95);
 }
 
 // Runs the workload with `base` and once per rule with that rule absent; one markdown row per rule: the
@@ -633,7 +641,7 @@ void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::ve
     std::printf("| %s | `%s` |", rule.name, rule.neutral);
     for (std::size_t l = 0; l < f.size(); ++l) {
       const double dm = f[l].first - defaults[l].first, dp = f[l].second - defaults[l].second;
-      worse += (dm > 0.005 ? 1 : 0) + (dp > 0.005 ? 1 : 0);
+      worse += (dm > 0.0 ? 1 : 0) + (dp > 0.0 ? 1 : 0);
       std::printf(" %s |", change(dm, dp).c_str());
     }
     std::printf(" %d of %zu |\n", worse, 2 * f.size());
