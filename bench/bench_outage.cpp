@@ -17,11 +17,18 @@
 //     Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app every 5 s. Seeds:
 //     tuning 1..N, report 1001..1000+N.
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
+// --synth KEY=VALUE sets a SynthTuning field of the daemon's synthesis for the run (repeatable; VALUE a
+// number, "inf", or another field's name). --ablate runs the set once as tuned and once per rule of the
+// synthesis with that rule absent (kRules: the setting that switches it off), and prints one row per rule:
+// the per-outage distance error, median / p95, on every real car and cadence of the set, and its change;
+// --rule SETTING (repeatable) keeps only the rules switched off by that setting. --fits prints each
+// simulated vehicle's fitted thetas beside the true ones on stderr; --fit-minutes fits the simulated
+// vehicles' models on a mixed drive of M minutes instead of 40.
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
-//                     [--trace FILE] [--fits] [--fit-minutes M] [DATA_DIR]
-// --fits prints each simulated vehicle's fitted thetas beside the true ones on stderr; --fit-minutes fits
-// the simulated vehicles' models on a mixed drive of M minutes instead of 40.
+//                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
+//                     [--fit-minutes M] [DATA_DIR]
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -61,6 +68,7 @@ std::string g_debug_car;
 int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
 bool g_fits = false;                    // --fits: each fitted ladder beside the true one, on stderr
 double g_fit_minutes = 40.0;            // --fit-minutes M: the length of the drive the model is fitted on
+bool g_candidate = true;                // the candidate IMM filter runs beside the daemon's synthesis
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -84,10 +92,11 @@ struct Results {
 
 // Replays rows with outages; a row repeating an OBD logger's held rpm in an outage brings nothing (as
 // `gearpulse replay` does).
-void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Results& res) {
+void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>& shared,
+            const gearpulse::SynthTuning& tuning, bool live, Results& res) {
   if (rows.empty()) return;
-  const auto shared = std::make_shared<const GearModel>(model);
-  gearpulse::SpeedSynthesizer synth(shared);
+  const GearModel& model = *shared;
+  gearpulse::SpeedSynthesizer synth(shared, tuning);
   gearpulse::ImmSpeedSynthesizer imm(shared);
   gearpulse::ImmLogReplayer imm_replayer(imm);
   const double t0 = rows.front().t;
@@ -110,7 +119,8 @@ void replay(const std::vector<Row>& rows, const GearModel& model, bool live, Res
     const double gps = out ? gearpulse::kMissing : r.gps;
     // Live, as the daemon steps at every hop; a log, as `gearpulse replay` does.
     o = live ? synth.step(r.t, gps, r.freq, r.gps_new) : replayer.step({r.t, gps, r.freq});
-    o_imm = live ? imm.step(r.t, gps, r.freq, r.gps_new) : imm_replayer.step({r.t, gps, r.freq});
+    if (g_candidate)
+      o_imm = live ? imm.step(r.t, gps, r.freq, r.gps_new) : imm_replayer.step({r.t, gps, r.freq});
     if (g_debug_from < g_debug_to && r.t - t0 >= g_debug_from && r.t - t0 <= g_debug_to) {
       const auto& flt = imm.filter();
       if (r.t - t0 - g_debug_from < 0.15) {
@@ -199,6 +209,73 @@ void print_line(const std::string& label, const Results& r) {
   std::fflush(stdout);
 }
 
+// ---- the workload: every replay of a run, built once ----
+// Fits and simulated drives do not depend on the synthesis' tuning, so --ablate replays the same cases
+// under every tuning it compares.
+
+constexpr const char* kStyleNames[4] = {"mixed", "urban", "jam", "highway"};
+
+struct Line {
+  std::string title;    // printed with the header before the line, if not empty
+  std::string label;    // a simulated cadence's name (its lines: ", mixed" ... ", ALL")
+  std::string key;      // figure names: KEY_dist_med_pct ...
+  bool styles = false;  // simulated: one line per style before the ALL line
+};
+
+struct Case {
+  std::size_t line = 0;
+  int style = 0;
+  std::string car;  // for --trace and --debug
+  std::vector<Row> rows;
+  std::shared_ptr<const GearModel> model;
+  bool live = false;  // stepped at every row as the daemon does, else as `gearpulse replay` does
+};
+
+struct Workload {
+  std::vector<Line> lines;
+  std::vector<Case> cases;
+};
+
+struct Outcome {
+  std::vector<Results> all;                    // per line
+  std::vector<std::array<Results, 4>> styles;  // per line and style (simulated lines)
+};
+
+Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning) {
+  Outcome o;
+  o.all.resize(w.lines.size());
+  o.styles.resize(w.lines.size());
+  for (const Case& c : w.cases) {
+    Results r;
+    if (g_trace != nullptr) std::fprintf(g_trace, "# %s %d\n", c.car.c_str(), c.style);
+    const double debug_to = g_debug_to;
+    if (c.car != g_debug_car || c.style != g_debug_style) g_debug_to = 0.0;
+    replay(c.rows, c.model, tuning, c.live, r);
+    g_debug_to = debug_to;
+    o.styles[c.line][static_cast<std::size_t>(c.style)].append(r);
+    o.all[c.line].append(r);
+  }
+  return o;
+}
+
+void print_outcome(const Workload& w, const Outcome& o) {
+  for (std::size_t l = 0; l < w.lines.size(); ++l) {
+    const Line& line = w.lines[l];
+    if (!line.title.empty()) {
+      std::printf("\n%s\n", line.title.c_str());
+      print_header();
+    }
+    if (line.styles) {
+      for (std::size_t s = 0; s < 4; ++s)
+        print_line(line.label + ", " + kStyleNames[s], o.styles[l][s]);
+      print_line(line.label + ", ALL", o.all[l]);
+    } else {
+      print_line(line.label, o.all[l]);
+    }
+    report(line.key, o.all[l]);
+  }
+}
+
 // ---- real logs ----
 
 std::vector<std::vector<Sample>> read_logs(const fs::path& dir, const std::string& prefix) {
@@ -224,13 +301,13 @@ std::vector<Row> rows_of(const std::vector<Sample>& samples) {
 }
 
 void fold(const std::vector<std::vector<Sample>>& train, const std::vector<std::vector<Sample>>& test,
-          Results& res) {
+          Workload& w) {
   std::vector<Sample> pooled;
   for (const auto& l : train)
     pooled.insert(pooled.end(), l.begin(), l.end());
-  const GearModel model = gearpulse::fit_gear_model(pooled, {}).model;
+  const auto model = std::make_shared<const GearModel>(gearpulse::fit_gear_model(pooled, {}).model);
   for (const auto& l : test)
-    replay(rows_of(l), model, false, res);
+    w.cases.push_back({w.lines.size() - 1, 0, w.lines.back().key, rows_of(l), model, false});
 }
 
 std::pair<std::vector<std::vector<Sample>>, std::vector<std::vector<Sample>>> halves(std::vector<Sample> all,
@@ -243,40 +320,40 @@ std::pair<std::vector<std::vector<Sample>>, std::vector<std::vector<Sample>>> ha
 
 // The tuning set's car (the Etios) or the report set's (Louisville, the Swift), never both in one run: the
 // figures a design is chosen on are not printed beside those that report it.
-void real_logs(const fs::path& root, bool report_set) {
-  std::printf("\nReal logs, %s set (fit on some drives of a car, replay its others)\n",
-              report_set ? "REPORT" : "TUNING");
-  print_header();
+void real_logs(const fs::path& root, bool report_set, Workload& w) {
+  std::string title = std::string("Real logs, ") + (report_set ? "REPORT" : "TUNING") +
+                      " set (fit on some drives of a car, replay its others)";
+  const auto add_line = [&](const char* label, const char* key) {
+    w.lines.push_back({title, label, key, false});
+    title.clear();
+  };
   if (!report_set) {
     const auto drives = read_logs(root / "carloop-etios", "drive");
     const auto longs = read_logs(root / "carloop-etios", "long");
     if (!drives.empty() && !longs.empty()) {
-      Results r;
-      fold(drives, longs, r);
-      fold(longs, drives, r);
-      print_line("TUNING Etios (OBD ~1.8 s)", r);
-      report("etios", r);
+      add_line("TUNING Etios (OBD ~1.8 s)", "etios");
+      fold(drives, longs, w);
+      fold(longs, drives, w);
     }
     return;
   }
   const auto louis = read_logs(root / "torque-louisville", "");
   if (!louis.empty()) {
     const auto [a, b] = halves(louis.front(), 1.0);
-    Results r;
-    fold(a, b, r);
-    fold(b, a, r);
-    print_line("REPORT Louisville (1 Hz GPS)", r);
-    report("louisville", r);
+    add_line("REPORT Louisville (1 Hz GPS)", "louisville");
+    fold(a, b, w);
+    fold(b, a, w);
   }
   const auto swift = read_logs(root / "swift-147", "");
   for (const double row_s : {1.0, 2.0}) {
     if (swift.empty()) break;
     const auto [a, b] = halves(swift.front(), row_s);
-    Results r;
-    fold(a, b, r);
-    fold(b, a, r);
-    print_line(row_s == 1.0 ? "REPORT Swift (1 s per row)" : "REPORT Swift (2 s per row)", r);
-    report(row_s == 1.0 ? "swift_1s" : "swift_2s", r);
+    if (row_s == 1.0)
+      add_line("REPORT Swift (1 s per row)", "swift_1s");
+    else
+      add_line("REPORT Swift (2 s per row)", "swift_2s");
+    fold(a, b, w);
+    fold(b, a, w);
   }
 }
 
@@ -371,57 +448,211 @@ GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t see
   return gearpulse::fit_gear_model(samples, {}).model;
 }
 
-void simulated(bool report_set, int seeds, int randoms) {
+void simulated(bool report_set, int seeds, int randoms, Workload& w) {
   const std::uint64_t base = report_set ? 1000 : 0;
-  std::printf(
-      "\nSimulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
-      "style)\n",
-      report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
-      static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), g_fit_minutes);
-  print_header();
+  char title[200];
+  std::snprintf(title, sizeof title,
+                "Simulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
+                "style)",
+                report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
+                static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), g_fit_minutes);
   std::vector<sim::Vehicle> cars;
   for (const sim::Vehicle& v : sim::vehicle_presets())
     if (!v.is_cvt()) cars.push_back(v);
   for (int k = 1; k <= randoms; ++k)
     cars.push_back(sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
+  bool first = true;
   for (const Cadence& c : kCadences) {
     if (g_cadence >= 0 && &c - kCadences != g_cadence) continue;
-    Results all;
-    Results by_style[4];
+    w.lines.push_back({first ? title : "", c.name, std::string("sim_") + c.key, true});
+    first = false;
     for (const sim::Vehicle& car : cars)
       for (int s = 1; s <= seeds; ++s) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
-        const GearModel model = fit_model(car, c, seed * 31 + 3);
+        const auto model = std::make_shared<const GearModel>(fit_model(car, c, seed * 31 + 3));
         if (g_fits) {
           std::fprintf(stderr, "%s %s seed %llu fit", c.key, car.name.c_str(),
                        static_cast<unsigned long long>(seed));
-          for (const auto& g : model.gears)
+          for (const auto& g : model->gears)
             std::fprintf(stderr, " %.4f", g.theta);
           std::fprintf(stderr, " | true");
           for (double th : car.theta)
             std::fprintf(stderr, " %.4f", th);
           std::fprintf(stderr, "\n");
         }
-        if (model.gears.empty()) continue;
+        if (model->gears.empty()) continue;
         int k = 0;
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
                                               sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
-          Results r;
-          if (g_trace != nullptr) std::fprintf(g_trace, "# %s %d\n", car.name.c_str(), k);
-          const double debug_to = g_debug_to;
-          if (car.name != g_debug_car || k != g_debug_style) g_debug_to = 0.0;
-          replay(observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k), model,
-                 c.obd_refresh == 0.0, r);
-          g_debug_to = debug_to;
-          by_style[k++].append(r);
-          all.append(r);
+          w.cases.push_back({w.lines.size() - 1, k, car.name,
+                             observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k),
+                             model, c.obd_refresh == 0.0});
+          ++k;
         }
       }
-    int k = 0;
-    for (const char* style : {"mixed", "urban", "jam", "highway"})
-      print_line(std::string(c.name) + ", " + style, by_style[k++]);
-    print_line(std::string(c.name) + ", ALL", all);
-    report(std::string("sim_") + c.key, all);
+  }
+}
+
+// ---- the synthesis' tuning: --synth KEY=VALUE and --ablate ----
+
+struct Field {
+  const char* name;
+  double gearpulse::SynthTuning::*member;
+};
+#define GEARPULSE_FIELD(name)            \
+  Field {                                \
+#name, &gearpulse::SynthTuning::name \
+  }
+constexpr Field kFields[] = {
+    GEARPULSE_FIELD(accel_sigma),      GEARPULSE_FIELD(accel_time),
+    GEARPULSE_FIELD(coast_accel),      GEARPULSE_FIELD(coast_sigma),
+    GEARPULSE_FIELD(coast_time),       GEARPULSE_FIELD(stop_speed),
+    GEARPULSE_FIELD(stop_accel),       GEARPULSE_FIELD(launch_accel),
+    GEARPULSE_FIELD(launch_sigma),     GEARPULSE_FIELD(gear_dwell),
+    GEARPULSE_FIELD(engage_rate),      GEARPULSE_FIELD(launch_rate),
+    GEARPULSE_FIELD(bite_rate),        GEARPULSE_FIELD(launch_second),
+    GEARPULSE_FIELD(skip_share),       GEARPULSE_FIELD(evidence_time),
+    GEARPULSE_FIELD(idle_weight),      GEARPULSE_FIELD(lugging_first),
+    GEARPULSE_FIELD(lugging_other),    GEARPULSE_FIELD(launch_gear_time),
+    GEARPULSE_FIELD(revs_habit),       GEARPULSE_FIELD(shift_comfort),
+    GEARPULSE_FIELD(min_speed_sigma),  GEARPULSE_FIELD(min_freq_rel),
+    GEARPULSE_FIELD(stationary_speed), GEARPULSE_FIELD(max_gap),
+    GEARPULSE_FIELD(hold_time),        GEARPULSE_FIELD(hedge_share),
+    GEARPULSE_FIELD(output_quantile),  GEARPULSE_FIELD(climb_cost),
+    GEARPULSE_FIELD(declutch_time),    GEARPULSE_FIELD(clutch_track_share),
+    GEARPULSE_FIELD(leave_cap),        GEARPULSE_FIELD(bite_gap),
+    GEARPULSE_FIELD(jump_reopen),      GEARPULSE_FIELD(downshift_band),
+    GEARPULSE_FIELD(dwell_by_use),     GEARPULSE_FIELD(warm_floor),
+    GEARPULSE_FIELD(rolling_idle),     GEARPULSE_FIELD(gear_shift_points),
+    GEARPULSE_FIELD(idle_on_move),     GEARPULSE_FIELD(pull_transfer),
+    GEARPULSE_FIELD(gps_accel_clip),   GEARPULSE_FIELD(lost_gear_cost),
+    GEARPULSE_FIELD(launch_fade),      GEARPULSE_FIELD(rest_output),
+};
+#undef GEARPULSE_FIELD
+
+const Field* field_named(std::string_view name) {
+  for (const Field& f : kFields)
+    if (name == f.name) return &f;
+  return nullptr;
+}
+
+// Applies "KEY=VALUE[,KEY=VALUE...]": VALUE is a number ("inf" too) or another field's name (its value).
+bool apply_settings(gearpulse::SynthTuning& t, std::string_view settings) {
+  while (!settings.empty()) {
+    const std::size_t comma = settings.find(',');
+    const std::string_view one = settings.substr(0, comma);
+    settings = comma == std::string_view::npos ? std::string_view{} : settings.substr(comma + 1);
+    const std::size_t eq = one.find('=');
+    const Field* key = eq == std::string_view::npos ? nullptr : field_named(one.substr(0, eq));
+    if (key == nullptr) return false;
+    const std::string value(one.substr(eq + 1));
+    if (const Field* other = field_named(value)) {
+      t.*(key->member) = t.*(other->member);
+      continue;
+    }
+    char* end = nullptr;
+    const double v = std::strtod(value.c_str(), &end);
+    if (value.empty() || *end != '\0') return false;
+    t.*(key->member) = v;
+  }
+  return true;
+}
+
+// The rules of the daemon's synthesis, each with the setting at which it is absent. Physical quantities
+// (accelerations, rates, noise floors) are not rules and are not switched off.
+struct Rule {
+  const char* name;
+  const char* neutral;
+};
+constexpr Rule kRules[] = {
+    {"hedge: output leans toward the contenders' speed", "hedge_share=0"},
+    {"quantile: output mode above the belief's median", "output_quantile=0.5"},
+    {"revs habit: steady revs scored by the gear's band", "revs_habit=0"},
+    {"shift comfort: shifts toward the new gear's band", "shift_comfort=0"},
+    {"lugging: no gear at idle revs", "lugging_first=1,lugging_other=1"},
+    {"creeping: first gear exempt from lugging", "lugging_first=lugging_other"},
+    {"launch gear: first gear left the sooner", "launch_gear_time=inf"},
+    {"stop: slow declutched car brakes to rest", "stop_speed=0"},
+    {"skip shifts", "skip_share=0"},
+    {"second-gear launches", "launch_second=0"},
+    {"climb: climbing revs cost the clutch", "climb_cost=0"},
+    {"declutch caught within a long step", "declutch_time=0"},
+    {"clutch follows the gear at hops", "clutch_track_share=0"},
+    {"leave cap: gear hazard capped", "leave_cap=inf"},
+    {"bite gap: biting clutch's spread", "bite_gap=0"},
+    {"jump reopen: acceleration reopened", "jump_reopen=0"},
+    {"downshift band: gear's revs band", "downshift_band=0"},
+    {"dwell by use: rarely used gears left sooner", "dwell_by_use=0"},
+    {"warm floor: idle down to the fit's warm idle", "warm_floor=0"},
+    {"rolling idle: declutched revs held on the move", "rolling_idle=0"},
+    {"per-gear shift revs", "gear_shift_points=0"},
+    {"idle learned on the move", "idle_on_move=0"},
+    {"pull transfer: acceleration scaled at a shift", "pull_transfer=0"},
+    {"GPS acceleration clip", "gps_accel_clip=0"},
+    {"lost gear cost: a gear fades without revs", "lost_gear_cost=0"},
+    {"launch fade: no move-off at speed", "launch_fade=0"},
+    {"rest output: slow declutched output is 0", "rest_output=0"},
+};
+
+std::string figure(double med, double p95) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.2f / %.2f", med, p95);
+  return b;
+}
+
+// A change of a figure: "0" when it is exactly unchanged, else signed to two decimals (+0.00 is a rise
+// below 0.005).
+std::string change(double med, double p95) {
+  const auto one = [](double d) {
+    char b[20];
+    if (d == 0.0)
+      std::snprintf(b, sizeof b, "0");
+    else
+      std::snprintf(b, sizeof b, "%+.2f", d);
+    return std::string(b);
+  };
+  return one(med) + " / " + one(p95);
+}
+
+// Runs the workload with `base` and once per rule with that rule absent; one markdown row per rule: the
+// daemon's synthesis' per-outage distance error (median / p95, %) on every line of the set and its change
+// against `base`, and how many of those figures grew.
+void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::vector<std::string>& only) {
+  const auto summary = [&](const Outcome& o) {
+    std::vector<std::pair<double, double>> f;
+    for (const Results& r : o.all)
+      f.emplace_back(quantile(r.dist[0], 0.5), quantile(r.dist[0], 0.95));
+    return f;
+  };
+  std::printf(
+      "\nAblation: per-outage distance error of the daemon's synthesis, median / p95 %%\n\n| rule | absent "
+      "at |");
+  for (const Line& l : w.lines)
+    std::printf(" %s |", l.label.c_str());
+  std::printf(" figures worse |\n|---|---|");
+  for (std::size_t l = 0; l < w.lines.size(); ++l)
+    std::printf("---|");
+  std::printf("---|\n");
+  const auto defaults = summary(evaluate(w, base));
+  std::printf("| defaults | |");
+  for (const auto& [med, p95] : defaults)
+    std::printf(" %s |", figure(med, p95).c_str());
+  std::printf(" |\n");
+  std::fflush(stdout);
+  for (const Rule& rule : kRules) {
+    if (!only.empty() && std::find(only.begin(), only.end(), rule.neutral) == only.end()) continue;
+    gearpulse::SynthTuning t = base;
+    if (!apply_settings(t, rule.neutral)) continue;
+    const auto f = summary(evaluate(w, t));
+    int worse = 0;
+    std::printf("| %s | `%s` |", rule.name, rule.neutral);
+    for (std::size_t l = 0; l < f.size(); ++l) {
+      const double dm = f[l].first - defaults[l].first, dp = f[l].second - defaults[l].second;
+      worse += (dm > 0.0 ? 1 : 0) + (dp > 0.0 ? 1 : 0);
+      std::printf(" %s |", change(dm, dp).c_str());
+    }
+    std::printf(" %d of %zu |\n", worse, 2 * f.size());
+    std::fflush(stdout);
   }
 }
 
@@ -429,8 +660,10 @@ void simulated(bool report_set, int seeds, int randoms) {
 
 int main(int argc, char** argv) {
   if (!g_required.parse(argc, argv)) return 2;
-  bool report_set = false, real = true, simu = true;
+  bool report_set = false, real = true, simu = true, ablation = false;
   int seeds = 2, randoms = 7;
+  gearpulse::SynthTuning tuning;
+  std::vector<std::string> only;
   fs::path root = GEARPULSE_REAL_DATA_DIR;
   for (int i = 1; i < argc; ++i) {
     const std::string_view a = argv[i];
@@ -449,6 +682,15 @@ int main(int argc, char** argv) {
       g_debug_style = std::atoi(argv[++i]);
       g_debug_from = std::atof(argv[++i]);
       g_debug_to = std::atof(argv[++i]);
+    } else if (a == "--synth" && i + 1 < argc) {
+      if (!apply_settings(tuning, argv[++i])) {
+        std::fprintf(stderr, "--synth wants KEY=VALUE, KEY a SynthTuning field: %s\n", argv[i]);
+        return 2;
+      }
+    } else if (a == "--ablate") {
+      ablation = true;
+    } else if (a == "--rule" && i + 1 < argc) {
+      only.emplace_back(argv[++i]);
     } else if (a == "--fits") {
       g_fits = true;
     } else if (a == "--fit-minutes" && i + 1 < argc) {
@@ -466,9 +708,16 @@ int main(int argc, char** argv) {
     std::printf("GEARPULSE_SKIP: bench_outage: no real logs under %s\n", root.c_str());
     return 0;
   }
-  if (real) real_logs(root, report_set);
-  if (simu) simulated(report_set, seeds, randoms);
+  Workload w;
+  if (real) real_logs(root, report_set, w);
+  if (simu) simulated(report_set, seeds, randoms, w);
+  if (ablation) {
+    g_candidate = false;
+    ablate(w, tuning, only);
+  } else {
+    print_outcome(w, evaluate(w, tuning));
+  }
   std::printf("\n(%.1f s)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-  return 0;
+  return ablation ? 0 : g_required.exit_status();
 }

@@ -8,12 +8,10 @@
 namespace gearpulse {
 namespace {
 
-constexpr double kMinProb = 1e-9;          // keeps every mode recoverable
-constexpr double kNegligible = 1e-2;       // belief, relative to the leading mode, worth a history of its own
-constexpr double kClutchTrackShare = 0.5;  // the same for the clutch led by a gear (outage, short steps)
-constexpr double kInitialSpeedVar = 1.0;   // (m/s)^2: a cold start is most likely near standstill
-constexpr double kMaxSpeedVar = 25.0;      // (m/s)^2: a coasting guess is never "anything at all"
-constexpr double kLostGearLogEvidence = -3.0;  // a gear when the frequency is lost (about e^-3 per second)
+constexpr double kMinProb = 1e-9;         // keeps every mode recoverable
+constexpr double kNegligible = 1e-2;      // belief, relative to the leading mode, worth a history of its own
+constexpr double kInitialSpeedVar = 1.0;  // (m/s)^2: a cold start is most likely near standstill
+constexpr double kMaxSpeedVar = 25.0;     // (m/s)^2: a coasting guess is never "anything at all"
 constexpr double kDefaultClutchShare =
     0.15;                                // declutched share when the model gives none (cf. beta, eq. (6))
 constexpr double kMinGearShare = 0.02;   // no gear is ever ruled out by its training weight
@@ -131,8 +129,8 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   for (int j = 1; j <= gears_; ++j) {
     constexpr double kMaxRateFactor = 5.0;
     const double typical = (1.0 - clutch) / gears_;
-    leave_rate_[j] =
-        std::clamp(typical / weight_[j], 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
+    const double by_use = tuning_.dwell_by_use > 0.0 ? typical / weight_[j] : 1.0;
+    leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   load_habits(model);
@@ -334,7 +332,8 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
   const double free_share = speed > kMovingOffSpeed ? 1.0 - tuning_.idle_weight : kStandingFree;
   // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
   // still cold) and the warm idle the fit saw are the idle now.
-  const double floor = std::isfinite(warm_idle_) ? std::min(warm_idle_, idle_mean_) : idle_mean_;
+  const double floor =
+      std::isfinite(warm_idle_) && tuning_.warm_floor > 0.0 ? std::min(warm_idle_, idle_mean_) : idle_mean_;
   // Rolling, many engines are held above their standing idle (the rolling idle, learned under GPS).
   const double top = speed > kMovingOffSpeed ? rolling_idle() : idle_mean_;
   const double z = freq > top ? (freq - top) / idle_sd() : freq < floor ? (floor - freq) / idle_sd() : 0.0;
@@ -376,7 +375,7 @@ double SpeedSynthesizer::launch_plausibility(double speed) const noexcept {
   const double slow = -0.5 * kLaunchRevs * kLaunchRevs;
   const double fast = -kFreeRevsCost + std::log(1.0 - tuning_.idle_weight) - 1.0;
   const double share = std::clamp((speed - kMovingOffSpeed) / (3.0 * kMovingOffSpeed), 0.0, 1.0);
-  return share * (fast - slow);
+  return tuning_.launch_fade > 0.0 ? share * (fast - slow) : 0.0;
 }
 
 // Score of the frequency while the clutch slips moving off at `speed`: revs held above idle.
@@ -391,7 +390,8 @@ double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
 // there (a throttle kicker, an idle-up against stalling), with revs that stay flat while the car slows.
 // Learned under GPS (see learn()); the standing idle until seen for kRollKnown seconds.
 double SpeedSynthesizer::rolling_idle() const noexcept {
-  return roll_time_ >= kRollKnown ? std::max(idle_mean_, roll_mean_) : idle_mean_;
+  return roll_time_ >= kRollKnown && tuning_.rolling_idle > 0.0 ? std::max(idle_mean_, roll_mean_)
+                                                                : idle_mean_;
 }
 
 // Relative chance of driving in `gear` with the engine at `freq`: near idle (standing or rolling) a driver
@@ -466,7 +466,7 @@ double SpeedSynthesizer::upshift_factor(int gear, double freq) const noexcept {
   if (!std::isfinite(freq)) return 1.0;
   // This gear's own upshift revs once seen a few times (a driver shifts out of first lower than out of
   // fourth), else those of all gears.
-  const bool own = gear_up_count_[gear] >= kMinShifts;
+  const bool own = tuning_.gear_shift_points > 0.0 && gear_up_count_[gear] >= kMinShifts;
   const double mean = own ? gear_up_mean_[gear] : up_mean_, var = own ? gear_up_var_[gear] : up_var_;
   if (!own && up_count_ < kMinShifts) return shift_urge(freq);
   const double sd = std::max(std::sqrt(var), 0.08 * mean);
@@ -483,10 +483,10 @@ double SpeedSynthesizer::upshift_factor(int gear, double freq) const noexcept {
 // where it moved the simulated figures both ways and the daemon's path stays as measured.
 double SpeedSynthesizer::downshift_factor(int gear, double freq, bool long_step) const noexcept {
   if (!std::isfinite(freq)) return 1.0;
-  const bool own = gear_down_count_[gear] >= kMinShifts;
+  const bool own = tuning_.gear_shift_points > 0.0 && gear_down_count_[gear] >= kMinShifts;
   const double mean = own ? gear_down_mean_[gear] : down_mean_, var = own ? gear_down_var_[gear] : down_var_;
   if (!own && down_count_ < kMinShifts) {
-    if (long_step && revs_sd_[gear] > 0.0 && freq > 0.0)
+    if (long_step && tuning_.downshift_band > 0.0 && revs_sd_[gear] > 0.0 && freq > 0.0)
       return std::exp(std::clamp(-revs_z(gear, freq), -3.0, 3.0));
     return 1.0 / shift_urge(freq);
   }
@@ -580,9 +580,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // the belief back for most of the outage. At the tracker's short steps the declutch shows on several
     // readings and the clutch's own rate holds it (measured: counted there too, it cost the 10 Hz figures,
     // presets 2.23 -> 2.59 km/h p95).
-    constexpr double kDeclutchTime = 0.5;  // s: the clutch out in a shift
     double clutch = base * kToClutch;
-    const double caught = long_step ? up * std::min(1.0, kDeclutchTime / dt) : 0.0;
+    const double caught = long_step ? up * std::min(1.0, tuning_.declutch_time / dt) : 0.0;
     clutch += caught;
     caught_share = clutch > 0.0 ? caught / clutch : 0.0;
     // Leaving a gear is never given a hazard beyond the cost of a second of free revs, which the clutch
@@ -590,8 +589,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // second than the clutch explaining nothing. A hard launch revved out in first gear, far past this
     // driver's upshift revs and first gear's time, was lost to the clutch while the car still pulled, and
     // with it the speed (11 km/h in first gear at a true 27 in fourth, for half a minute).
-    if (const double sum = clutch + up + down; sum > kFreeRevsCost) {
-      const double k = kFreeRevsCost / sum;
+    if (const double sum = clutch + up + down; sum > tuning_.leave_cap) {
+      const double k = tuning_.leave_cap / sum;
       clutch *= k;
       up *= k;
       down *= k;
@@ -656,7 +655,8 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
     mean = std::min(
         (coast_count_ * coast_mean_ + kCoastPrior * tuning_.coast_accel) / (coast_count_ + kCoastPrior), 0.0);
     // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
-    const double stopping = std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0);
+    const double stopping =
+        tuning_.stop_speed > 0.0 ? std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0) : 0.0;
     mean = std::min(mean, mean + stopping * (tuning_.stop_accel - mean));
     sigma = tuning_.coast_sigma;
   } else if (to == launch_mode()) {
@@ -687,18 +687,18 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 }
 
 // Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
-double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight, bool entering,
+double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
                                       bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
-    if (is_gear(mode)) return weight * kLostGearLogEvidence;
+    if (is_gear(mode)) return -weight * tuning_.lost_gear_cost;
     // Moving off is told by the revs: without them it is as unsupported as a gear, and at speed not a
     // launch at all, so its acceleration cannot carry the speed away while the frequency is lost.
-    return mode == launch_mode() ? weight * (kLostGearLogEvidence + launch_plausibility(x.v)) : 0.0;
+    return mode == launch_mode() ? weight * (-tuning_.lost_gear_cost + launch_plausibility(x.v)) : 0.0;
   }
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) {
     // Rolling, revs climbing fast cost the clutch up to as much again as free revs (climb_, filter_step).
-    const double climb = x.v > kMovingOffSpeed ? climb_ * kFreeRevsCost : 0.0;
+    const double climb = x.v > kMovingOffSpeed ? tuning_.climb_cost * climb_ * kFreeRevsCost : 0.0;
     return weight * (log_declutched(freq, x.v) - climb);
   }
   if (mode == launch_mode()) {
@@ -731,10 +731,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   keep_covariance(x);
   // A reading its gear explains within the dead zone costs in proportion to the time it covers (weight),
   // however often it comes; a jump the track cannot follow costs its squared excess once (the track then
-  // follows): an event, counted once at any sample rate. Entering the gear is an event too: how well the
-  // speed it was entered at matches the history is counted whole, once, at any rate (weighted by a tenth
-  // of a second, a first gear entered 5 km/h below a declutched car's speed cost next to nothing, since
-  // its revs turn that into a spread no wider than the second gear's at the right speed).
+  // follows): an event, counted once at any sample rate. A gear just entered is scored as one held.
   const double z2 = innovation * innovation / s;
   // A departure beyond the dead zone upward at a short step is a manoeuvre (a clutch biting, a hard launch
   // in first gear): the acceleration is open again, so the next readings find the new one and a ramp is
@@ -744,9 +741,9 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // braking at no more than one jump's cost and outlived the shift one gear low. A longer step's
   // prediction already carries that uncertainty (a fifth of the stationary spread or more from a tenth of
   // accel_time on).
-  if (short_step && z2 > kDeadZone * kDeadZone && innovation > 0.0)
+  if (short_step && tuning_.jump_reopen > 0.0 && z2 > kDeadZone * kDeadZone && innovation > 0.0)
     x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
-  return -jump_cost(z2) - 0.5 * (entering ? 1.0 : weight) * std::min(z2, kDeadZone * kDeadZone) +
+  return -jump_cost(z2) - 0.5 * weight * std::min(z2, kDeadZone * kDeadZone) +
          weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);
 }
 
@@ -784,8 +781,8 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq, bool gps_new) n
   // Declutched on the move the engine idles too; a reading there at or below the idle learned so far
   // follows a warming engine down when the car no longer stops (a cold start's high idle otherwise stays,
   // and a car coasting at warm idle looks in gear).
-  const bool idling_moving =
-      was_moving && mode_ == 0 && prob_[0] > kSureGear && idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
+  const bool idling_moving = tuning_.idle_on_move > 0.0 && was_moving && mode_ == 0 && prob_[0] > kSureGear &&
+                             idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
   // Rolling declutched above the standing idle (gear_model.hpp's rolling_idle rule, as the fit applies it
   // to a log): revs that no gear explains, flat while GPS shows the car slowing, are the rolling idle. Not a
   // shift's revs (they move), nor a slipping clutch's (the car gains speed, or creeps).
@@ -866,7 +863,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // launch read in second gained enough to fit second's reading of the revs, kept a history of its own
       // at 1.7 times the speed of a car creeping in first, and took the belief back 8 s later).
       const int pulling = moving_off || i == launch_mode() ? 1 : i;  // the gear whose pull x.a is
-      if (is_gear(pulling) && is_gear(j) && j != pulling && x.a > 0.0) x.a *= theta_[pulling] / theta_[j];
+      if (tuning_.pull_transfer > 0.0 && is_gear(pulling) && is_gear(j) && j != pulling && x.a > 0.0)
+        x.a *= theta_[pulling] / theta_[j];
       predict(x, moving_off ? launch_mode() : j, dt);
       // A slipping clutch says only that the car is no faster than first gear turns the revs into: when
       // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the
@@ -875,7 +873,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // Only out of the move-off, whose clutch has been slipping: a car rolling declutched that engages a
       // gear within one short step has gained nothing, and with the gap as its spread any gear would fit
       // (fifth gear's reading at 42 km/h taken up from a roll at 7 km/h as the launch's first gear bit).
-      if (short_step && is_gear(j) && i == launch_mode() && std::isfinite(freq)) {
+      if (short_step && tuning_.bite_gap > 0.0 && is_gear(j) && i == launch_mode() && std::isfinite(freq)) {
         const double gap = theta_[j] * freq - x.v;
         if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
       }
@@ -890,13 +888,14 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
         // The speed follows a jump; the acceleration learns from no more of it than ordinary jitter.
         const double dead = kDeadZone * kDeadZone;
         x.v += k * innovation;
-        x.a += x.pva / (x.pvv + gps_var) * innovation * (z2 > dead ? std::sqrt(dead / z2) : 1.0);
+        x.a += x.pva / (x.pvv + gps_var) * innovation *
+               (z2 > dead && tuning_.gps_accel_clip > 0.0 ? std::sqrt(dead / z2) : 1.0);
         x.paa -= x.pva * x.pva / (x.pvv + gps_var);
         x.pva *= 1.0 - k;
         x.pvv *= 1.0 - k;
         keep_covariance(x);
       }
-      double evidence = log_evidence(x, j, freq, weight, i != j, short_step);
+      double evidence = log_evidence(x, j, freq, weight, short_step);
       // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
       // reading, scores its revs on their way down from the gear's line (log_declutching) where that
       // explains them better than free revs.
@@ -964,7 +963,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   // ladder one gear low. At longer steps a declutch and a re-engagement can both fall between two
   // readings, and a coasting history is a real alternative.
   const bool clutch_follows_gear =
-      short_step && !have_gps && is_gear(mode_) && prob_[0] < kClutchTrackShare * prob_[mode_];
+      short_step && !have_gps && is_gear(mode_) && prob_[0] < tuning_.clutch_track_share * prob_[mode_];
   for (int j = 0; j < modes; ++j)
     if (j != mode_ && (prob_[j] < kNegligible * prob_[mode_] || (j == launch_mode() && is_gear(mode_)) ||
                        (j == 0 && clutch_follows_gear))) {
@@ -983,7 +982,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   for (int j = 0; j < modes; ++j) {
     track_speed[j] = track_[j].v;
     const double v = std::max(track_[j].v, 0.0);
-    mode_speed[j] = is_gear(j) || v >= tuning_.stationary_speed ? v : 0.0;
+    mode_speed[j] = is_gear(j) || v >= tuning_.stationary_speed || tuning_.rest_output <= 0.0 ? v : 0.0;
   }
   const auto n = static_cast<std::size_t>(modes);
   int out = belief_quantile_mode({prob_.data(), n}, {track_speed.data(), n}, tuning_.output_quantile);
@@ -993,7 +992,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   if (is_gear(out)) return {speed, out, SpeedSource::kEngine};
   // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
   // trickle pulses.
-  return {speed < tuning_.stationary_speed ? 0.0 : speed, 0, SpeedSource::kCoast};
+  return {speed < tuning_.stationary_speed && tuning_.rest_output > 0.0 ? 0.0 : speed, 0,
+          SpeedSource::kCoast};
 }
 
 SynthOutput SpeedSynthesizer::hold_step(double t, double gps) noexcept {

@@ -19,7 +19,7 @@
 // gear is scored by its innovation in its own units: within a dead zone of ordinary jitter it costs per
 // second of time, beyond it the jump costs once, however often step() is called (at steps much shorter than
 // an acceleration lasts, such a jump upward also reopens the acceleration, so that a ramp the history did not
-// expect is paid once too); entering a gear is an event whose innovation counts whole; being declutched or
+// expect is paid once too), and a gear just entered is scored as one held; being declutched or
 // moving off is scored per second, and so is how usual the revs are in a gear for this driver (the fit's revs
 // per gear, model extra.revs): steady revs that several gears explain go, over time, to the gear this driver
 // runs them in, and a shift is the likelier the nearer it brings the revs to the new gear's band. The idle
@@ -126,6 +126,51 @@ struct SynthTuning {
   // often than the belief says. Kept below 2/3, where a first gear creeping near idle, whose belief second
   // gear shares by a third, would be output as second.
   double output_quantile = 0.6;
+  // Rules of the filter that bench_outage's --ablate switches off one at a time (each line: the rule, and
+  // the value at which it is absent).
+  // Rolling declutched, revs climbing faster than 0.2 a second at the tracker's hops are an engine pulling
+  // the car: at 0.4 a second they cost the clutch this share of a second of free revs on top (0: none).
+  double climb_cost = 1.0;
+  // s: the clutch is out this long in a shift; between readings further apart than the tracker's hops, a
+  // reading falls inside an upshift's declutch with this share of the step (0: never).
+  double declutch_time = 0.5;
+  // At the tracker's hops through an outage the clutch keeps no speed history of its own while it holds
+  // less than this share of the leading gear's belief (0: it always keeps its own).
+  double clutch_track_share = 0.5;
+  // 1/s: the most a gear's hazard of being left may reach, the cost of a second of free revs (infinity:
+  // no cap).
+  double leave_cap = 4.5;
+  // 1: at the tracker's hops, a clutch biting after a move-off takes the gap up to the gear's reading as
+  // its speed's spread (0: the move-off's own spread).
+  double bite_gap = 1.0;
+  // 1: at the tracker's hops, a gear's reading beyond the dead zone upward reopens the acceleration's
+  // spread (0: it never does).
+  double jump_reopen = 1.0;
+  // 1: between readings further apart than the tracker's hops, before downshifts were seen, a gear's revs
+  // band (extra.revs) stands in for the downshift revs (0: the revs run in gear at large do).
+  double downshift_band = 1.0;
+  // 1: a gear's leave rate scales with how little it is used (a first gear is left soon) (0: every gear
+  // is left at 1 / gear_dwell).
+  double dwell_by_use = 1.0;
+  // 1: revs between the idle learned last and the fit's warm idle are idle (a warming engine) (0: only
+  // the idle learned).
+  double warm_floor = 1.0;
+  // 1: the rolling idle learned under GPS holds declutched revs on the move (0: the standing idle does).
+  double rolling_idle = 1.0;
+  // 1: once a gear was seen left a few times, its own shift revs count (0: those of all gears).
+  double gear_shift_points = 1.0;
+  // 1: declutched on the move at idle revs, the idle is learned too (0: only standing).
+  double idle_on_move = 1.0;
+  // 1: a shift carries the pull's acceleration into the new gear as theta_old / theta_new (0: whole).
+  double pull_transfer = 1.0;
+  // 1: a GPS fix beyond the dead zone teaches the acceleration no more than the dead zone's worth (0: all).
+  double gps_accel_clip = 1.0;
+  // 1/s: log-cost of being in a gear while the frequency is lost (0: a lost reading says nothing).
+  double lost_gear_cost = 3.0;
+  // 1: moving off grows less plausible as the car gains speed (0: as plausible at any speed).
+  double launch_fade = 1.0;
+  // 1: declutched slower than stationary_speed, the output is 0 (0: the belief's speed, however slow).
+  double rest_output = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -177,7 +222,7 @@ class SpeedSynthesizer {
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
                         double& caught_share) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
-  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight, bool entering,
+  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
                                     bool short_step) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq, bool gps_new) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
