@@ -21,7 +21,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 #include "daemon/control_server.hpp"
 #include "daemon/fitter.hpp"
 #include "daemon/log_limiter.hpp"
@@ -42,24 +42,19 @@ using Clock = std::chrono::steady_clock;
 // few hundred bytes and one sync per interval.
 constexpr std::chrono::seconds kJournalInterval{10};
 
-// JSON null for "not available" rather than a magic number.
-nlohmann::json number_or_null(double v, bool available) {
-  return available && std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
-
-nlohmann::json gears_json(const ModelPtr& model) {
-  nlohmann::json gears = nlohmann::json::array();
+std::vector<control::GearRow> gear_rows(const ModelPtr& model) {
+  std::vector<control::GearRow> gears;
   if (!model) return gears;
   int index = 1;
   for (const Gear& g : model->gears)
-    gears.push_back({{"gear", index++}, {"theta", g.theta}, {"stderr", g.std_error}, {"weight", g.weight}});
+    gears.push_back({.gear = index++, .theta = g.theta, .std_error = g.std_error, .weight = g.weight});
   return gears;
 }
 
 // The gears the model knows, with the training pairs on each one's line at its fit (null when the model
 // does not say) and whether a refit kept it from the model before (docs/cold-start.md).
-nlohmann::json known_gears_json(const ModelPtr& model) {
-  nlohmann::json gears = nlohmann::json::array();
+std::vector<control::KnownGear> known_gears(const ModelPtr& model) {
+  std::vector<control::KnownGear> gears;
   if (!model) return gears;
   const auto revs = model->extra.find("revs");
   const bool counted = revs != model->extra.end() && revs->is_array() && revs->size() == model->gears.size();
@@ -68,13 +63,17 @@ nlohmann::json known_gears_json(const ModelPtr& model) {
     const Gear& g = model->gears[i];
     const bool was_kept = kept != model->extra.end() && kept->is_array() &&
                           std::find(kept->begin(), kept->end(), nlohmann::json(g.theta)) != kept->end();
-    gears.push_back({{"gear", i + 1},
-                     {"theta", g.theta},
-                     {"stderr", g.std_error},
-                     {"pairs", counted ? (*revs)[i].value("samples", nlohmann::json(nullptr)) : nullptr},
-                     {"kept", was_kept}});
+    gears.push_back({.gear = static_cast<int>(i + 1),
+                     .theta = g.theta,
+                     .std_error = g.std_error,
+                     .pairs = counted ? (*revs)[i].value("samples", nlohmann::json(nullptr)) : nullptr,
+                     .kept = was_kept});
   }
   return gears;
+}
+
+control::ModelState model_state(const ModelPtr& model) {
+  return model && !model->empty() ? control::ModelState::kTrained : control::ModelState::kLearning;
 }
 
 Retrainer::Settings retrain_settings(const ModelConfig& m) {
@@ -151,7 +150,8 @@ struct Daemon::Impl {
   void recover_journal() noexcept;
   FaultSpell journal_fault;  // journal appends failing (said once per spell); under state_mutex
   void reload();
-  nlohmann::json handle(const nlohmann::json& request);
+  nlohmann::json handle(const nlohmann::json& json_request);
+  void reset_model(bool keep_samples);  // throws ControlError
   nlohmann::json status_json();
   std::string status_line();
   void log_changes(const PipelineSnapshot& before, const PipelineSnapshot& now);
@@ -535,126 +535,129 @@ nlohmann::json Daemon::Impl::status_json() {
   const PipelineSnapshot p = pipeline ? pipeline->snapshot() : PipelineSnapshot{};
   const ModelPtr m = model.get();
   const Retrainer::Status r = retrainer.status();
-  const bool trained = m && !m->empty();
-  nlohmann::json reply = {
-      {"speed", p.speed},
-      {"speed_kmh", p.speed * 3.6},
-      {"source", p.source},
-      {"gear", p.gear},
-      {"pulses", p.pulses},
-      {"pulse_frequency", p.pulse_frequency},
-      {"gears", gears_json(m)},
-      {"model_state", trained ? "trained" : "learning"},
-      {"training_samples", store.size()},
-      {"uptime", std::chrono::duration<double>(Clock::now() - started).count()},
-  };
-  reply["output"] = {{"kind", to_string(config.output.kind)},
-                     {"state", p.output_state},
-                     {"error", p.output_error},
-                     {"dropped", p.output_dropped},
-                     {"unheard", p.output_unheard}};
-  reply["output"]["pulses_per_km"] = config.output.pulses_per_km;
-  if (config.output.kind == OutputKind::kPty) reply["output"]["path"] = config.output.path;
+  using control::number_if;
+  control::StatusReply reply;
+  reply.speed = p.speed;
+  reply.speed_kmh = p.speed * 3.6;
+  reply.source = p.source;
+  reply.gear = p.gear;
+  reply.pulses = p.pulses;
+  reply.pulse_frequency = p.pulse_frequency;
+  reply.gears = gear_rows(m);
+  reply.model_state = model_state(m);
+  reply.training_samples = store.size();
+  reply.uptime = std::chrono::duration<double>(Clock::now() - started).count();
+  reply.output = {.kind = to_string(config.output.kind),
+                  .state = p.output_state,
+                  .error = p.output_error,
+                  .dropped = p.output_dropped,
+                  .unheard = p.output_unheard,
+                  .pulses_per_km = config.output.pulses_per_km,
+                  .path = std::nullopt};
+  if (config.output.kind == OutputKind::kPty) reply.output.path = config.output.path;
   if (config.output.kind == OutputKind::kGpio)
-    reply["output"]["path"] = fmt::format("{}:{}", config.output.chip, config.output.line);
-  reply["gps"] = {{"state", p.gps_state},
-                  {"speed", number_or_null(p.gps_speed, p.gps_speed >= 0)},
-                  {"mode", p.gps_mode},
-                  {"age", number_or_null(p.gps_age, p.gps_age >= 0)},
-                  {"reconnects", p.gps_reconnects},
-                  {"implausible", p.gps_implausible},
-                  {"server", fmt::format("{}:{}", config.gps.host, config.gps.port)},
-                  {"error", p.gps_error}};
-  reply["audio"] = {{"state", p.audio_state}, {"device", config.audio.device}, {"rate", config.audio.rate},
-                    {"xruns", p.xruns},       {"ring_drops", p.ring_drops},    {"error", p.audio_error}};
-  reply["tracker"] = {{"freq", number_or_null(p.tracker_freq, p.tracker_freq >= 0)},
-                      {"snr_db", number_or_null(p.tracker_snr_db, p.tracker_freq >= 0)},
-                      {"confident", p.tracker_confident}};
-  reply["model"] = {{"state", trained ? "trained" : "learning"},
-                    {"gears", m ? m->gears.size() : 0},
-                    {"fit_samples", m ? m->samples : 0},
-                    {"training_samples", store.size()},
-                    {"new_samples", store.new_samples()},
-                    {"retrain_runs", r.runs},
-                    {"retrain_busy", r.busy},
-                    {"last_retrain", number_or_null(r.last_run_wall, r.runs > 0)},
-                    {"last_result", r.last_result}};
-  if (m && !trained && !m->reason.empty()) reply["model"]["reason"] = m->reason;
-  reply["model"]["known_gears"] = known_gears_json(m);
-  reply["model"]["learning"] = {{"young", r.young},
-                                {"moving_time", r.moving_time},
-                                {"next_refit", number_or_null(r.next_refit, r.next_refit >= 0.0)},
-                                {"cluster_pairs", r.cluster_pairs},
-                                {"first_fit_pairs", config.model.learn_cluster_pairs}};
+    reply.output.path = fmt::format("{}:{}", config.output.chip, config.output.line);
+  reply.gps = {.state = p.gps_state,
+               .speed = number_if(p.gps_speed, p.gps_speed >= 0),
+               .mode = p.gps_mode,
+               .age = number_if(p.gps_age, p.gps_age >= 0),
+               .reconnects = p.gps_reconnects,
+               .implausible = p.gps_implausible,
+               .server = fmt::format("{}:{}", config.gps.host, config.gps.port),
+               .error = p.gps_error};
+  reply.audio = {.state = p.audio_state,
+                 .device = config.audio.device,
+                 .rate = config.audio.rate,
+                 .xruns = p.xruns,
+                 .ring_drops = p.ring_drops,
+                 .error = p.audio_error};
+  reply.tracker = {.freq = number_if(p.tracker_freq, p.tracker_freq >= 0),
+                   .snr_db = number_if(p.tracker_snr_db, p.tracker_freq >= 0),
+                   .confident = p.tracker_confident};
+  reply.model = {.state = model_state(m),
+                 .gears = m ? m->gears.size() : 0,
+                 .fit_samples = m ? m->samples : 0,
+                 .training_samples = store.size(),
+                 .new_samples = store.new_samples(),
+                 .retrain_runs = r.runs,
+                 .retrain_busy = r.busy,
+                 .last_retrain = number_if(r.last_run_wall, r.runs > 0),
+                 .last_result = r.last_result,
+                 .reason = std::nullopt,
+                 .known_gears = known_gears(m),
+                 .learning = {.young = r.young,
+                              .moving_time = r.moving_time,
+                              .next_refit = number_if(r.next_refit, r.next_refit >= 0.0),
+                              .cluster_pairs = r.cluster_pairs,
+                              .first_fit_pairs = config.model.learn_cluster_pairs},
+                 .problems = {}};
+  if (m && m->empty() && !m->reason.empty()) reply.model.reason = m->reason;
   {
     std::lock_guard lock(state_mutex);
-    std::vector<std::string> problems = state_problems;
-    if (save_fault.failing()) problems.push_back(save_fault.what());
-    if (journal_fault.failing()) problems.push_back(journal_fault.what());
-    reply["model"]["problems"] = problems;  // the state directory's: files set aside, failed saves
-    reply["config"] = {
-        {"file", config_path}, {"reload_error", reload_error}, {"restart_pending", restart_pending}};
+    // The state directory's: files set aside, failed saves.
+    reply.model.problems = state_problems;
+    if (save_fault.failing()) reply.model.problems.push_back(save_fault.what());
+    if (journal_fault.failing()) reply.model.problems.push_back(journal_fault.what());
+    reply.config = {.file = config_path, .reload_error = reload_error, .restart_pending = restart_pending};
   }
-  reply["threads"] = {{"stalled", p.stalled}, {"missing", p.missing}};
-  reply["clients"] = control ? control->clients() : 0;
-  return reply;
+  reply.threads = {.stalled = p.stalled, .missing = p.missing};
+  reply.clients = control ? control->clients() : 0;
+  return control::to_json(reply);
 }
 
-nlohmann::json Daemon::Impl::handle(const nlohmann::json& request) {
-  const std::string cmd = request["cmd"].get<std::string>();
-  if (cmd == "status") return status_json();
-  if (cmd == "gears") {
-    const ModelPtr m = model.get();
-    return {{"gears", gears_json(m)},
-            {"model_state", m && !m->empty() ? "trained" : "learning"},
-            {"model", m ? model_to_json(*m) : nlohmann::json(nullptr)},
-            {"training_samples", store.size()}};
+nlohmann::json Daemon::Impl::handle(const nlohmann::json& json_request) {
+  const control::Request request = control::parse_request(json_request);
+  switch (request.command) {
+    case control::Command::kStatus:
+      return status_json();
+    case control::Command::kGears: {
+      const ModelPtr m = model.get();
+      return control::to_json(control::GearsReply{.gears = gear_rows(m),
+                                                  .model_state = model_state(m),
+                                                  .model = m ? model_to_json(*m) : nlohmann::json(nullptr),
+                                                  .training_samples = store.size()});
+    }
+    case control::Command::kRetrain:
+      retrainer.request();
+      spdlog::info("control: retrain requested ({} training pairs)", store.size());
+      return control::to_json(control::RetrainReply{.queued = true, .training_samples = store.size()});
+    case control::Command::kResetModel:
+      reset_model(request.keep_samples);
+      return control::to_json(control::ResetReply{.reset = true, .training_samples = store.size()});
   }
-  if (cmd == "retrain") {
-    retrainer.request();
-    spdlog::info("control: retrain requested ({} training pairs)", store.size());
-    return {{"queued", true}, {"training_samples", store.size()}};
+  throw ControlError("unknown command");
+}
+
+void Daemon::Impl::reset_model(bool keep) {
+  {
+    // A fit running now finds the generation changed and discards its result.
+    const auto lock = model.lock_writes();
+    model.set(nullptr);
+    try {
+      remove_file_durable(model_path);
+      model.set_file_stamp(std::nullopt);
+    } catch (const std::exception& e) {
+      throw ControlError(e.what());
+    }
   }
-  if (cmd == "reset-model") {
-    const auto it = request.find("confirm");
-    if (it == request.end() || !it->is_boolean() || !it->get<bool>())
-      throw ControlError("reset-model forgets the learned gears; send \"confirm\": true to do it");
-    const auto keep_it = request.find("keep_samples");
-    if (keep_it != request.end() && !keep_it->is_boolean())
-      throw ControlError("reset-model: \"keep_samples\" is true or false");
-    const bool keep = keep_it != request.end() && keep_it->get<bool>();
-    {
-      // A fit running now finds the generation changed and discards its result.
-      const auto lock = model.lock_writes();
-      model.set(nullptr);
+  if (!keep) {
+    store.clear();
+    // The file that cannot be replaced still holds the cleared pairs, and the next start would bring
+    // them back: it goes (with its journal), or the reply says it stays.
+    if (!save_store("reset-model")) {
       try {
-        remove_file_durable(model_path);
-        model.set_file_stamp(std::nullopt);
+        remove_file_durable(TrainingStore::journal_path(store_path));
+        remove_file_durable(store_path);
       } catch (const std::exception& e) {
-        throw ControlError(e.what());
+        throw ControlError(fmt::format(
+            "the model is forgotten, but the training pairs cannot be cleared from {} ({}): they come "
+            "back at the next start",
+            store_path.string(), e.what()));
       }
     }
-    if (!keep) {
-      store.clear();
-      // The file that cannot be replaced still holds the cleared pairs, and the next start would bring
-      // them back: it goes (with its journal), or the reply says it stays.
-      if (!save_store("reset-model")) {
-        try {
-          remove_file_durable(TrainingStore::journal_path(store_path));
-          remove_file_durable(store_path);
-        } catch (const std::exception& e) {
-          throw ControlError(fmt::format(
-              "the model is forgotten, but the training pairs cannot be cleared from {} ({}): they come "
-              "back at the next start",
-              store_path.string(), e.what()));
-        }
-      }
-    }
-    spdlog::warn("control: model reset{}; pulses follow GPS while the model is learning again",
-                 keep ? " (training pairs kept)" : " and training pairs cleared");
-    return {{"reset", true}, {"training_samples", store.size()}};
   }
-  throw ControlError("unknown command " + quote_text(cmd) + " (status, gears, retrain, reset-model)");
+  spdlog::warn("control: model reset{}; pulses follow GPS while the model is learning again",
+               keep ? " (training pairs kept)" : " and training pairs cleared");
 }
 
 std::string Daemon::Impl::status_line() {
