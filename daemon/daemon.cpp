@@ -168,18 +168,18 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
   const std::string server = fmt::format("{}:{}", config.gps.host, config.gps.port);
   // From the connection itself, not from a change between two snapshots: the first connection is often
   // made before the first snapshot is taken.
-  if (const bool up = now.gps_state != "disconnected"; up != gps_connected) {
+  if (const bool up = now.gps_state != GpsState::kDisconnected; up != gps_connected) {
     gps_connected = up;
     if (up) spdlog::info("gps: connected to gpsd at {}", server);
   }
   if (now.gps_state != before.gps_state) {
     std::uint64_t suppressed = 0;
-    if (now.gps_state == "fix") {
+    if (now.gps_state == GpsState::kFix) {
       // The fault is over: the next one is reported at once.
       limiter.reset("gps");
       limiter.reset("gps-no-fix");
       spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
-    } else if (now.gps_state == "no-fix" && limiter.allow("gps-no-fix", suppressed)) {
+    } else if (now.gps_state == GpsState::kNoFix && limiter.allow("gps-no-fix", suppressed)) {
       // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
       // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
       const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
@@ -198,7 +198,8 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
           suppressed ? fmt::format(" ({} since the last report)", suppressed) : "");
   }
   // One count per failed attempt (the backoff spaces them), not per turn of this loop.
-  if (now.gps_state == "disconnected" && !now.gps_error.empty() && now.gps_failures != gps_failures_seen) {
+  if (now.gps_state == GpsState::kDisconnected && !now.gps_error.empty() &&
+      now.gps_failures != gps_failures_seen) {
     gps_failures_seen = now.gps_failures;
     std::uint64_t suppressed = 0;
     if (limiter.allow("gps", suppressed))
@@ -208,16 +209,17 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
   }
   if (now.source != before.source) {
     // Into and out of GPS is news; engine <-> coast inside an outage is every declutch (two per shift).
-    const bool routine = (before.source == "engine" || before.source == "coast") &&
-                         (now.source == "engine" || now.source == "coast");
+    const auto outage = [](SpeedSource s) { return s == SpeedSource::kEngine || s == SpeedSource::kCoast; };
+    const bool routine = outage(before.source) && outage(now.source);
     spdlog::log(routine ? spdlog::level::debug : spdlog::level::info,
-                "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", before.source, now.source,
-                now.speed * 3.6, now.gear);
+                "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", source_name(before.source),
+                source_name(now.source), now.speed * 3.6, now.gear);
   }
   // A navigator that should be reading the pulses is not: said when the last reader goes (or none is
   // there at start) and when one comes, at most once a minute for a reader that opens and closes often.
   std::uint64_t starts = 0;
-  switch (no_reader.update(now.output_state == "no-reader", std::chrono::steady_clock::now(), starts)) {
+  switch (no_reader.update(now.output_state == OutputState::kNoReader, std::chrono::steady_clock::now(),
+                           starts)) {
     case StateFault::Say::kStart:
       spdlog::warn(
           "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}",
@@ -231,7 +233,7 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
     case StateFault::Say::kNothing:
       break;
   }
-  if (now.output_state != before.output_state && now.output_state == "write-errors")
+  if (now.output_state != before.output_state && now.output_state == OutputState::kWriteErrors)
     spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
                  config.output.path);
   if (now.output_dropped > before.output_dropped) {
@@ -241,7 +243,8 @@ void Daemon::Impl::log_changes(const PipelineSnapshot& before, const PipelineSna
           "output: the reader of {} is not reading: {} pulse(s) dropped (total {}); pulses that wait in "
           "its queue over 2 s are dropped rather than delivered late",
           config.output.path, now.output_dropped - before.output_dropped, now.output_dropped);
-  } else if (before.output_state == "reader-behind" && now.output_state != "reader-behind") {
+  } else if (before.output_state == OutputState::kReaderBehind &&
+             now.output_state != OutputState::kReaderBehind) {
     limiter.reset("output-dropped");
     spdlog::info("output: the reader of {} keeps up again", config.output.path);
   }
@@ -539,7 +542,7 @@ nlohmann::json Daemon::Impl::status_json() {
   control::StatusReply reply;
   reply.speed = p.speed;
   reply.speed_kmh = p.speed * 3.6;
-  reply.source = p.source;
+  reply.source = source_name(p.source);
   reply.gear = p.gear;
   reply.pulses = p.pulses;
   reply.pulse_frequency = p.pulse_frequency;
@@ -548,7 +551,7 @@ nlohmann::json Daemon::Impl::status_json() {
   reply.training_samples = store.size();
   reply.uptime = std::chrono::duration<double>(Clock::now() - started).count();
   reply.output = {.kind = to_string(config.output.kind),
-                  .state = p.output_state,
+                  .state = std::string(to_string(p.output_state)),
                   .error = p.output_error,
                   .dropped = p.output_dropped,
                   .unheard = p.output_unheard,
@@ -557,7 +560,7 @@ nlohmann::json Daemon::Impl::status_json() {
   if (config.output.kind == OutputKind::kPty) reply.output.path = config.output.path;
   if (config.output.kind == OutputKind::kGpio)
     reply.output.path = fmt::format("{}:{}", config.output.chip, config.output.line);
-  reply.gps = {.state = p.gps_state,
+  reply.gps = {.state = std::string(to_string(p.gps_state)),
                .speed = number_if(p.gps_speed, p.gps_speed >= 0),
                .mode = p.gps_mode,
                .age = number_if(p.gps_age, p.gps_age >= 0),
@@ -565,7 +568,7 @@ nlohmann::json Daemon::Impl::status_json() {
                .implausible = p.gps_implausible,
                .server = fmt::format("{}:{}", config.gps.host, config.gps.port),
                .error = p.gps_error};
-  reply.audio = {.state = p.audio_state,
+  reply.audio = {.state = std::string(to_string(p.audio_state)),
                  .device = config.audio.device,
                  .rate = config.audio.rate,
                  .xruns = p.xruns,
@@ -663,10 +666,10 @@ void Daemon::Impl::reset_model(bool keep) {
 std::string Daemon::Impl::status_line() {
   const PipelineSnapshot p = pipeline ? pipeline->snapshot() : PipelineSnapshot{};
   const ModelPtr m = model.get();
-  return fmt::format("{:.1f} km/h from {}, gear {}, model {}, gps {}, audio {}", p.speed * 3.6, p.source,
-                     p.gear,
+  return fmt::format("{:.1f} km/h from {}, gear {}, model {}, gps {}, audio {}", p.speed * 3.6,
+                     source_name(p.source), p.gear,
                      m && !m->empty() ? fmt::format("{} gears", m->gears.size()) : std::string("learning"),
-                     p.gps_state, p.audio_state);
+                     to_string(p.gps_state), to_string(p.audio_state));
 }
 
 Daemon::Daemon(Config config, std::string config_path, Retrainer::Fitter fitter)

@@ -627,7 +627,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   const Impl& d = *impl_;
   PipelineSnapshot s;
   s.speed = d.speed.load(std::memory_order_relaxed);
-  s.source = std::string(source_name(d.source.load(std::memory_order_relaxed)));
+  s.source = d.source.load(std::memory_order_relaxed);
   s.gear = d.gear.load(std::memory_order_relaxed);
   // Heartbeats of the threads that should be running, for the watchdog.
   std::vector<ThreadBeat> beats;
@@ -654,15 +654,15 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     const std::int64_t dropped_at = d.dropped_at_ns.load(std::memory_order_relaxed);
     const bool reader_behind = dropped_at > 0 && now - dropped_at < kReaderBehind.count();
     if (!s.output_error.empty())
-      s.output_state = "error";
+      s.output_state = OutputState::kError;
     else if (d.output.errors() > 0)
-      s.output_state = "write-errors";
+      s.output_state = OutputState::kWriteErrors;
     else if (reader_behind)
-      s.output_state = "reader-behind";
+      s.output_state = OutputState::kReaderBehind;
     else if (!d.output.has_reader())
-      s.output_state = "no-reader";
+      s.output_state = OutputState::kNoReader;
     else
-      s.output_state = d.config.output.kind == OutputKind::kNone ? "off" : "ok";
+      s.output_state = d.config.output.kind == OutputKind::kNone ? OutputState::kOff : OutputState::kOk;
   }
   if (d.gps) {
     beats.push_back({"gps", d.gps->heartbeat_ns()});
@@ -671,9 +671,9 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     s.gps_error = g.last_error;
     const auto r = d.gps->latest();
     if (g.state != GpsdState::kConnected)
-      s.gps_state = "disconnected";
+      s.gps_state = GpsState::kDisconnected;
     else
-      s.gps_state = d.gps->has_gps(now) ? "fix" : "no-fix";
+      s.gps_state = d.gps->has_gps(now) ? GpsState::kFix : GpsState::kNoFix;
     if (r) s.gps_mode = r->mode;
     // Age and speed of the last usable fix, also through an outage (how long GPS has been gone). A fix
     // the pipeline thread has not taken yet is already the state's: the speed comes with it.
@@ -691,19 +691,22 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     s.gps_implausible = g.implausible;
     s.gps_last_implausible = g.last_implausible;
     // Its errors are about the connection: once connected again they are history.
-    if (s.gps_state != "disconnected") s.gps_error.clear();
+    if (s.gps_state != GpsState::kDisconnected) s.gps_error.clear();
   }
   {
     std::lock_guard lock(d.audio_mutex);
     if (d.capture) {
       const AlsaCaptureStats a = d.capture->stats();
-      s.audio_state = !a.streaming ? "recovering" : a.frozen ? "frozen" : a.stalled ? "stalled" : "running";
+      s.audio_state = !a.streaming ? AudioState::kRecovering
+                      : a.frozen   ? AudioState::kFrozen
+                      : a.stalled  ? AudioState::kStalled
+                                   : AudioState::kRunning;
       s.xruns = a.xruns;
       s.audio_error = a.last_error != 0 && !a.streaming
                           ? fmt::format("ALSA error {}: {}", a.last_error, ::snd_strerror(a.last_error))
                           : "";
     } else {
-      s.audio_state = "retrying";
+      s.audio_state = AudioState::kRetrying;
       s.audio_error = d.audio_error;
     }
   }
