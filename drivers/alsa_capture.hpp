@@ -20,10 +20,10 @@
 #include <cstdint>
 #include <memory>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "core/spsc_ring.hpp"
+#include "drivers/device_thread.hpp"
 
 struct _snd_pcm;  // ALSA's snd_pcm_t, kept opaque so users need no ALSA headers
 
@@ -150,17 +150,15 @@ class AlsaCapture final {
   std::vector<std::byte> raw_;       // one period as read
   std::vector<std::byte> previous_;  // a copy of the period read before it
   std::vector<float> mono_;          // one period converted
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<bool> running_{false};
   std::atomic<bool> streaming_{false};
   AnchorSlot anchors_[kAnchors];
   std::atomic<std::uint64_t> anchor_count_{0};
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
       clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
-  std::atomic<bool> realtime_ok_{false}, fifo_{false}, memory_locked_{false}, frozen_{false};
+  std::atomic<bool> fifo_{false}, frozen_{false};
   std::atomic<std::int64_t> last_frames_ns_{0};  // monotonic time of the last frames read (or of the start)
+  DeviceThread thread_;                          // last: stopped before the members it uses go
 };
 
 }  // namespace gearpulse
