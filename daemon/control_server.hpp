@@ -25,7 +25,7 @@ namespace gearpulse::daemon {
 using control::ControlError;
 
 struct ControlLimits {
-  std::size_t max_request_bytes = 4096;
+  std::size_t max_request_bytes = control::kMaxRequestBytes;
   std::size_t max_output_bytes = 256 * 1024;  // per client: beyond it the client is dropped
   // Connections at once; with more than one, the last is kept for the daemon's uid or root.
   unsigned max_clients = 32;
