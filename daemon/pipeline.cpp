@@ -127,7 +127,21 @@ struct Pipeline::Impl {
 
   void open_output();
   void open_output_device();
+  // The tracker thread's state between two turns of its loop.
+  struct Tracking {
+    SynthesisStage synthesis;
+    ModelPtr model;                              // the one the synthesis uses
+    std::unique_ptr<SlidingDftTracker> tracker;  // while audio is open
+    std::vector<float> block;                    // one read of the ring
+    FixPairer fixes{kPairWait};
+    std::int64_t last_rx = 0;     // receive time of the last GPS report looked at
+    double last_points_at = 0.0;  // CLOCK_MONOTONIC s when the tracker last gave points
+  };
   bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
+  void adopt_model(Tracking& k);
+  bool track_audio(Tracking& k, double now);
+  void step(Tracking& k, double t, double freq, double snr, bool tracked);
+  void pair_fixes(Tracking& k, double now);
   void tracker_loop() noexcept;
 };
 
@@ -218,124 +232,128 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
   return false;
 }
 
+// Publishes one step of the synthesis: to the pulse thread and to the snapshot.
+void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked) {
+  // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
+  // disagreement between the sound card's clock and the GPS cannot hide a good fix).
+  const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
+  const SynthesisStage::Step s =
+      k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed));
+  track_freq.store(tracked ? freq : kNan, std::memory_order_relaxed);
+  track_snr.store(snr, std::memory_order_relaxed);
+  track_confident.store(s.confident, std::memory_order_relaxed);
+  if (pulses) pulses->set_speed(s.out.speed);
+  speed.store(s.out.speed, std::memory_order_relaxed);
+  gear.store(s.out.gear, std::memory_order_relaxed);
+  source.store(s.out.source, std::memory_order_relaxed);
+}
+
+// A retrained model takes over between two steps.
+void Pipeline::Impl::adopt_model(Tracking& k) {
+  auto m = model.get();
+  if (m == k.model) return;
+  k.model = std::move(m);
+  if (!k.synthesis.set_model(k.model))
+    faults.report("model", spdlog::level::err,
+                  "synthesis: cannot use the new model (" + std::to_string(k.model->gears.size()) +
+                      " gears is more than it supports); keeping the previous one");
+}
+
+// Reads what the ring holds (at most 64 blocks) into the tracker and steps the synthesis at each point
+// it gives. True if it gave any.
+bool Pipeline::Impl::track_audio(Tracking& k, double now) {
+  bool got_points = false;
+  SlidingDftTracker& tracker = *k.tracker;
+  for (int burst = 0; burst < 64; ++burst) {
+    const AudioBlock b = audio.read(std::span<float>(k.block));
+    if (b.frames == 0) break;
+    if (b.first) {
+      tracker.start(b.t0);
+    } else if (b.timed) {
+      // A hole before the block is marked so no window spans it, then the clock is re-anchored (small
+      // differences are drift corrections).
+      if (b.hole > 0) {
+        tracker.skip(b.hole);
+        if (b.hole_lost)
+          faults.report("audio-hole", spdlog::level::warn,
+                        "audio: " + std::to_string(b.hole) +
+                            " frames lost before the ring (overrun, device restart or a stalled source); "
+                            "tracking resumes after the hole");
+      }
+      tracker.retime(b.t0);
+    }
+    // Pushed in pieces of at most half the tracker's output queue of hops, drained after each: a backlog
+    // read in one pass (a stall) or a long period at short hops holds more hops than the queue, whose
+    // oldest would be dropped.
+    const std::size_t piece = tracker.max_push_frames();
+    for (std::size_t at = 0; at < b.frames; at += piece) {
+      tracker.push(std::span<const float>(k.block.data() + at, std::min(piece, b.frames - at)));
+      TrackPoint p;
+      while (tracker.pop(p)) {
+        got_points = true;
+        k.last_points_at = now;
+        step(k, p.t, p.freq, p.snr_db, p.tracked);
+      }
+    }
+    if (b.frames < k.block.size()) break;
+  }
+  ring_drops.store(audio.ring_dropped(), std::memory_order_relaxed);
+  return got_points;
+}
+
+// Training pairs: each new usable GPS fix waits in the FixPairer for the window centred on its time.
+void Pipeline::Impl::pair_fixes(Tracking& k, double now) {
+  if (gps) {
+    if (const auto rep = gps->latest(); rep && rep->rx_ns != k.last_rx) {
+      k.last_rx = rep->rx_ns;
+      if (rep->usable()) {
+        last_fix_speed.store(rep->speed, std::memory_order_relaxed);
+        last_fix_ns.store(rep->rx_ns, std::memory_order_relaxed);
+        const double t_fix = rep->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
+        (void)k.fixes.add({t_fix, wall_now() - (now - t_fix), rep->speed});
+      }
+    }
+  }
+  if (k.fixes.waiting() == 0) return;
+  for (const PendingFix& f : k.fixes.take_due(now, k.tracker ? k.tracker->latest_time() : kNan)) {
+    const TrackPoint p = k.tracker->at(f.t);
+    const auto pair =
+        training_pair(f, p.freq, p.snr_db, p.tracked, min_snr_db.load(std::memory_order_relaxed));
+    if (pair && !pairs.try_push(*pair)) pairs_lost.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
 // The live data flow, one turn every hop or kTrackerPoll: audio front end -> tracker -> synthesis ->
 // pulse thread, and GPS fixes -> fix pairer -> training pairs for the main thread.
 void Pipeline::Impl::tracker_loop() noexcept {
-  SynthesisStage synthesis;
-  ModelPtr current_model = model.get();
-  synthesis.set_model(current_model);
-  std::unique_ptr<SlidingDftTracker> tracker;
-  std::vector<float> block;
-  FixPairer fixes(kPairWait);
-  std::int64_t last_rx = 0;
+  Tracking k;
+  k.model = model.get();
+  k.synthesis.set_model(k.model);
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
   // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
   // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
   // period and more), and a step stamped "now" would run ahead of every point still to come.
   const double no_audio_step_s = 2.0 * config.tracker.hop + config.tracker.window;
   double audio_stall_s = no_audio_step_s;
-  double last_points_at = 0.0;  // CLOCK_MONOTONIC s when the tracker last gave points
-
-  const auto step = [&](double t, double freq, double snr, bool tracked) {
-    // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
-    // disagreement between the sound card's clock and the GPS cannot hide a good fix).
-    const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
-    const SynthesisStage::Step s =
-        synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed));
-    track_freq.store(tracked ? freq : kNan, std::memory_order_relaxed);
-    track_snr.store(snr, std::memory_order_relaxed);
-    track_confident.store(s.confident, std::memory_order_relaxed);
-    if (pulses) pulses->set_speed(s.out.speed);
-    speed.store(s.out.speed, std::memory_order_relaxed);
-    gear.store(s.out.gear, std::memory_order_relaxed);
-    source.store(s.out.source, std::memory_order_relaxed);
-  };
 
   while (!stop.load(std::memory_order_relaxed)) {
     const std::int64_t now_ns = monotonic_ns();
     tracker_beat.store(now_ns, std::memory_order_relaxed);
     const double now = now_ns * 1e-9;
-
-    // A retrained model takes over between two steps.
-    if (auto m = model.get(); m != current_model) {
-      current_model = std::move(m);
-      if (!synthesis.set_model(current_model))
-        faults.report("model", spdlog::level::err,
-                      "synthesis: cannot use the new model (" + std::to_string(current_model->gears.size()) +
-                          " gears is more than it supports); keeping the previous one");
-    }
-
-    if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(tracker)) {
-      block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
+    adopt_model(k);
+    if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(k.tracker)) {
+      k.block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
       // Audio arrives a period at a time: only a wait longer than two of them is a stall.
       audio_stall_s = no_audio_step_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
-      last_points_at = now;
+      k.last_points_at = now;
     }
-
-    bool got_points = false;
-    if (tracker) {
-      for (int burst = 0; burst < 64; ++burst) {
-        const AudioBlock b = audio.read(std::span<float>(block));
-        if (b.frames == 0) break;
-        if (b.first) {
-          tracker->start(b.t0);
-        } else if (b.timed) {
-          // A hole before the block is marked so no window spans it, then the clock is re-anchored (small
-          // differences are drift corrections).
-          if (b.hole > 0) {
-            tracker->skip(b.hole);
-            if (b.hole_lost)
-              faults.report("audio-hole", spdlog::level::warn,
-                            "audio: " + std::to_string(b.hole) +
-                                " frames lost before the ring (overrun, device restart or a stalled source); "
-                                "tracking resumes after the hole");
-          }
-          tracker->retime(b.t0);
-        }
-        // Pushed in pieces of at most half the tracker's output queue of hops, drained after each: a
-        // backlog read in one pass (a stall) or a long period at short hops holds more hops than the
-        // queue, whose oldest would be dropped.
-        const std::size_t piece = tracker->max_push_frames();
-        for (std::size_t at = 0; at < b.frames; at += piece) {
-          tracker->push(std::span<const float>(block.data() + at, std::min(piece, b.frames - at)));
-          TrackPoint p;
-          while (tracker->pop(p)) {
-            got_points = true;
-            last_points_at = now;
-            step(p.t, p.freq, p.snr_db, p.tracked);
-          }
-        }
-        if (b.frames < block.size()) break;
-      }
-      ring_drops.store(audio.ring_dropped(), std::memory_order_relaxed);
-    }
+    const bool got_points = k.tracker && track_audio(k, now);
     // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
-    const bool audio_silent = !tracker || now - last_points_at > audio_stall_s;
-    if (!got_points && audio_silent && now - synthesis.last_step_time() > no_audio_step_s)
-      step(now - config.tracker.window / 2.0, kNan, kNan, false);
-
-    // Training pairs: each new GPS fix waits for the window centred on its time.
-    if (gps) {
-      if (const auto rep = gps->latest(); rep && rep->rx_ns != last_rx) {
-        last_rx = rep->rx_ns;
-        if (rep->usable()) {
-          last_fix_speed.store(rep->speed, std::memory_order_relaxed);
-          last_fix_ns.store(rep->rx_ns, std::memory_order_relaxed);
-          const double t_fix = rep->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
-          (void)fixes.add({t_fix, wall_now() - (now - t_fix), rep->speed});
-        }
-      }
-    }
-    if (fixes.waiting() > 0) {
-      for (const PendingFix& f : fixes.take_due(now, tracker ? tracker->latest_time() : kNan)) {
-        const TrackPoint p = tracker->at(f.t);
-        const auto pair =
-            training_pair(f, p.freq, p.snr_db, p.tracked, min_snr_db.load(std::memory_order_relaxed));
-        if (pair && !pairs.try_push(*pair)) pairs_lost.fetch_add(1, std::memory_order_relaxed);
-      }
-    }
-
-    if (tracker) faults.audio(audio.stats(), std::chrono::steady_clock::now());
+    const bool audio_silent = !k.tracker || now - k.last_points_at > audio_stall_s;
+    if (!got_points && audio_silent && now - k.synthesis.last_step_time() > no_audio_step_s)
+      step(k, now - config.tracker.window / 2.0, kNan, kNan, false);
+    pair_fixes(k, now);
+    if (k.tracker) faults.audio(audio.stats(), std::chrono::steady_clock::now());
     if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
   }
   audio.close();

@@ -49,8 +49,8 @@ StatusReply full_status() {
 }  // namespace
 
 TEST_CASE("control: a status reply is written with the fields and types of docs/interfaces.md") {
-  // The reply as the daemon wrote it field by field before the protocol had types: the wire must not
-  // change by a byte.
+  // The status reply as docs/interfaces.md lists it, written out field by field: the structs give it
+  // byte for byte.
   const json expected = {
       {"speed", 12.5},
       {"speed_kmh", 45.0},
