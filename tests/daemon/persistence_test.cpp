@@ -23,8 +23,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/estimator.hpp"
 #include "common/atomic_file.hpp"
+#include "core/estimator.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/retrainer.hpp"
 #include "daemon/training_store.hpp"

@@ -15,9 +15,9 @@
 
 #include <CLI/CLI.hpp>
 
+#include "common/atomic_file.hpp"
 #include "core/estimator.hpp"
 #include "core/gear_model.hpp"
-#include "common/atomic_file.hpp"
 #include "drivers/thread_slice_runner.hpp"
 #include "tools/gearpulse/commands.hpp"
 #include "tools/gearpulse/fit_plot.hpp"
