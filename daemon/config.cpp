@@ -13,7 +13,7 @@
 
 #include <toml++/toml.h>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 #include "daemon/training_store.hpp"
 
 namespace gearpulse::daemon {

@@ -21,7 +21,6 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include "daemon/control_protocol.hpp"
 #include "daemon/log_limiter.hpp"
 
 namespace gearpulse::daemon {
@@ -150,24 +149,6 @@ void ControlServer::stop() noexcept {
   thread_.join();
 }
 
-std::string quote_text(std::string_view text) {
-  std::string out = "'";
-  for (const char ch : text) {
-    const auto byte = static_cast<unsigned char>(ch);
-    if (ch == '\'' || ch == '\\') {
-      out += '\\';
-      out += ch;
-    } else if (byte < 0x20 || byte == 0x7f) {
-      char escape[8];
-      std::snprintf(escape, sizeof escape, "\\u%04x", byte);
-      out += escape;
-    } else {
-      out += ch;  // UTF-8 passes; invalid bytes are replaced when the reply is written
-    }
-  }
-  return out + "'";
-}
-
 std::string ControlServer::handle_line(std::string_view line) const {
   return respond(line).line;
 }
@@ -181,26 +162,14 @@ ControlServer::Reply ControlServer::respond(std::string_view line) const {
     } catch (const nlohmann::json::exception&) {
       throw ControlError("request is not valid JSON");
     }
-    if (!request.is_object()) throw ControlError("request must be a JSON object");
-    if (request.contains("v")) {
-      const auto& v = request["v"];
-      if (!v.is_number_integer()) throw ControlError("\"v\" must be an integer protocol version");
-      if (v.get<long long>() > control::kProtocolVersion || v.get<long long>() < 1)
-        throw ControlError("unsupported protocol version " + v.dump() + " (this daemon speaks " +
-                           std::to_string(control::kProtocolVersion) + ")");
-    }
-    if (!request.contains("cmd") || !request["cmd"].is_string())
-      throw ControlError("missing string field \"cmd\"");
-    reply = handler_(request);
-    if (!reply.is_object()) reply = nlohmann::json::object();
-    if (!reply.contains("ok")) reply["ok"] = true;
+    control::check_request_envelope(request);
+    reply = control::seal_reply(handler_(request));
   } catch (const ControlError& e) {
-    reply = {{"ok", false}, {"error", e.what()}};
+    reply = control::error_reply(e.what());
   } catch (const std::exception& e) {
-    reply = {{"ok", false}, {"error", std::string("internal error: ") + e.what()}};
+    reply = control::error_reply(std::string("internal error: ") + e.what());
   }
-  reply["v"] = control::kProtocolVersion;
-  const bool ok = reply["ok"] == true;
+  const bool ok = control::reply_ok(reply);
   // Replacement of invalid UTF-8 keeps a reply valid whatever a handler echoed back.
   return {reply.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace), ok};
 }
@@ -388,12 +357,9 @@ void ControlServer::run() noexcept {
       if (too_long) {
         c.in.clear();
         c.close_after_flush = true;
-        queue(c,
-              nlohmann::json({{"v", control::kProtocolVersion},
-                              {"ok", false},
-                              {"error", "request longer than " + std::to_string(limits_.max_request_bytes) +
-                                            " bytes; closing the connection"}})
-                  .dump());
+        queue(c, control::error_reply("request longer than " + std::to_string(limits_.max_request_bytes) +
+                                      " bytes; closing the connection")
+                     .dump());
       }
       // A peer that shut down its sending side still gets the replies it asked for.
       if (eof) c.close_after_flush = true;

@@ -1,5 +1,5 @@
 #pragma once
-// The control socket: a Unix stream socket (mode 0660) speaking JSON lines (control_protocol.hpp),
+// The control socket: a Unix stream socket (mode 0660) speaking JSON lines (common/control_protocol.hpp),
 // served by one thread with epoll and non-blocking sockets. Many clients may be connected at once; a
 // client that sends too long a request gets an error reply and is disconnected; a client that does not
 // read its replies is dropped once its output buffer is full, so no client can ever block the daemon.
@@ -10,24 +10,22 @@
 #include <atomic>
 #include <cstddef>
 #include <functional>
-#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <thread>
 
 #include <nlohmann/json.hpp>
 
+#include "common/control_protocol.hpp"
 #include "drivers/unique_fd.hpp"
 
 namespace gearpulse::daemon {
 
 // Thrown by a handler to answer {"ok":false,"error":what()}.
-struct ControlError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
+using control::ControlError;
 
 struct ControlLimits {
-  std::size_t max_request_bytes = 4096;
+  std::size_t max_request_bytes = control::kMaxRequestBytes;
   std::size_t max_output_bytes = 256 * 1024;  // per client: beyond it the client is dropped
   // Connections at once; with more than one, the last is kept for the daemon's uid or root.
   unsigned max_clients = 32;
@@ -36,10 +34,7 @@ struct ControlLimits {
   int first_request_timeout_ms = 10'000;
 };
 
-// Text from a request as an error reply names it: in single quotes, with quotes, backslashes and
-// control characters escaped ('st\u0000atus'), so the whole of it shows: a raw NUL would end the message
-// (a ControlError's what() is a C string), and raw control bytes would reach the user's terminal.
-[[nodiscard]] std::string quote_text(std::string_view text);
+using control::quote_text;
 
 class ControlServer {
  public:

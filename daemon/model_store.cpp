@@ -4,7 +4,7 @@
 
 #include <optional>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 
 namespace gearpulse::daemon {
 

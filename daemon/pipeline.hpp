@@ -8,26 +8,28 @@
 #include <string>
 #include <vector>
 
+#include "core/speed_synth.hpp"
 #include "daemon/config.hpp"
 #include "daemon/model_store.hpp"
+#include "daemon/pipeline_state.hpp"
 #include "daemon/training_store.hpp"
 
 namespace gearpulse::daemon {
 
 struct PipelineSnapshot {
   // Synthesis / output.
-  double speed = 0.0;           // m/s carried by the pulse train
-  std::string source = "none";  // gps, engine, coast, none
+  double speed = 0.0;  // m/s carried by the pulse train
+  SpeedSource source = SpeedSource::kNone;
   int gear = 0;
   std::uint64_t pulses = 0;
-  double pulse_frequency = 0.0;      // Hz
-  std::string output_state = "off";  // ok, no-reader, reader-behind, write-errors, error, off
+  double pulse_frequency = 0.0;  // Hz
+  OutputState output_state = OutputState::kOff;
   std::string output_error;
   std::uint64_t output_dropped = 0;  // pulses a present reader did not take (PulseOutput::dropped)
   std::uint64_t output_unheard = 0;  // pulses emitted with no reader there (PulseOutput::unheard)
   // GPS.
-  std::string gps_state = "disconnected";  // fix, no-fix, disconnected
-  double gps_speed = -1.0;                 // m/s of the last fix, < 0 none
+  GpsState gps_state = GpsState::kDisconnected;
+  double gps_speed = -1.0;  // m/s of the last fix, < 0 none
   int gps_mode = 0;
   double gps_age = -1.0;  // s since the last usable fix, < 0 never
   std::uint64_t gps_reconnects = 0;
@@ -36,8 +38,7 @@ struct PipelineSnapshot {
   double gps_last_implausible = 0.0;  // m/s, the last refused speed
   std::string gps_error;
   // Audio and tracker.
-  // running, frozen (periods repeat), stalled (no frames), recovering, retrying, stopped
-  std::string audio_state = "stopped";
+  AudioState audio_state = AudioState::kStopped;
   std::string audio_error;
   std::uint64_t xruns = 0;
   std::uint64_t ring_drops = 0;

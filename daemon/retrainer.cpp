@@ -14,7 +14,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 #include "daemon/fitter.hpp"
 
 namespace gearpulse::daemon {

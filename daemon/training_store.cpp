@@ -6,7 +6,7 @@
 #include <cstring>
 #include <exception>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 
 namespace gearpulse::daemon {
 namespace {

@@ -186,14 +186,11 @@ std::string AlsaCapture::describe() const {
 }
 
 void AlsaCapture::start() {
-  if (thread_.joinable()) return;
-  stop_.store(false);
-  thread_ = std::thread([this] { run(); });
+  thread_.start([this] { run(); });
 }
 
 void AlsaCapture::stop() {
-  stop_.store(true);
-  if (thread_.joinable()) thread_.join();
+  thread_.stop();
 }
 
 AlsaCaptureStats AlsaCapture::stats() const noexcept {
@@ -208,10 +205,10 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.repeated = repeated_.load(std::memory_order_relaxed);
   s.frozen = frozen_.load(std::memory_order_relaxed);
   s.last_error = last_error_.load(std::memory_order_relaxed);
-  s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
+  s.realtime_ok = thread_.realtime_ok();
   s.fifo = fifo_.load(std::memory_order_relaxed);
-  s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
-  s.running = running_.load(std::memory_order_relaxed);
+  s.memory_locked = thread_.memory_locked();
+  s.running = thread_.running();
   s.streaming = streaming_.load(std::memory_order_relaxed);
   if (const std::int64_t last = last_frames_ns_.load(std::memory_order_relaxed); s.streaming && last > 0) {
     const double period_s = static_cast<double>(period_frames_) / static_cast<double>(rate_);
@@ -263,10 +260,9 @@ bool AlsaCapture::frame_time(std::uint64_t index, std::int64_t& t_ns) const noex
 }
 
 void AlsaCapture::run() noexcept {
-  const RealtimeResult rt = make_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
-  realtime_ok_.store(rt.fifo);
+  const RealtimeResult rt =
+      thread_.enter_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
   fifo_.store(rt.fifo);
-  memory_locked_.store(rt.memory_locked);
   snd_pcm_status_t* status_block = nullptr;
   if (::snd_pcm_status_malloc(&status_block) < 0) {
     last_error_.store(-ENOMEM);
@@ -274,7 +270,7 @@ void AlsaCapture::run() noexcept {
   }
   const std::unique_ptr<snd_pcm_status_t, decltype(&::snd_pcm_status_free)> status(status_block,
                                                                                    &::snd_pcm_status_free);
-  running_.store(true);
+  thread_.set_running(true);
 
   const double nominal_npf = 1e9 / rate_;
   const double period_ns = nominal_npf * period_frames_;
@@ -304,7 +300,7 @@ void AlsaCapture::run() noexcept {
     return static_cast<double>(monotonic_ns()) - static_cast<double>(n) * nominal_npf;
   };
 
-  auto stopping = [this] { return stop_.load(std::memory_order_relaxed); };
+  auto stopping = [this] { return thread_.stopping(); };
   // Sleeps in short steps so stop() is never kept waiting by a long backoff.
   auto pause = [&](std::int64_t ns) noexcept {
     const std::int64_t end = monotonic_ns() + ns;
@@ -495,7 +491,7 @@ void AlsaCapture::run() noexcept {
   if (pcm) ::snd_pcm_drop(pcm.get());
   pcm_ = std::move(pcm);
   streaming_.store(false);
-  running_.store(false);
+  thread_.set_running(false);
 }
 
 }  // namespace gearpulse

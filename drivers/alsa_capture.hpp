@@ -20,11 +20,10 @@
 #include <cstdint>
 #include <memory>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "core/spsc_ring.hpp"
-#include "drivers/audio_source.hpp"
+#include "drivers/device_thread.hpp"
 
 struct _snd_pcm;  // ALSA's snd_pcm_t, kept opaque so users need no ALSA headers
 
@@ -99,24 +98,27 @@ struct AlsaCaptureStats {
   double silent_s = 0.0;
 };
 
-class AlsaCapture final : public AudioSource {
+class AlsaCapture final {
  public:
   // Opens and configures the PCM now, so a bad name or a refused format fails here with a one-line
   // std::runtime_error ("ALSA capture 'foo': cannot open: No such file or directory"). `ring` is
   // borrowed and must outlive this object; this object is its only producer.
   AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring);
-  ~AlsaCapture() override;  // stop()
+  ~AlsaCapture();  // stop()
   AlsaCapture(const AlsaCapture&) = delete;
   AlsaCapture& operator=(const AlsaCapture&) = delete;
 
-  void start() override;  // starts the capture thread (idempotent)
-  void stop() override;   // joins within about wait_timeout
+  void start();  // starts the capture thread (idempotent)
+  void stop();   // joins within about wait_timeout
 
-  [[nodiscard]] unsigned rate() const noexcept override { return rate_; }
+  [[nodiscard]] unsigned rate() const noexcept { return rate_; }  // frames per second after negotiation
   [[nodiscard]] unsigned channels() const noexcept { return channels_; }
   [[nodiscard]] PcmFormat format() const noexcept { return format_; }
   [[nodiscard]] unsigned period_frames() const noexcept { return period_frames_; }
-  [[nodiscard]] bool frame_time(std::uint64_t index, std::int64_t& t_ns) const noexcept override;
+  // CLOCK_MONOTONIC ns at which ring frame `index` (the consumer's count of frames read, from 0) was
+  // captured. False (and t_ns untouched) if no anchor covers it: nothing captured yet, or the frame is so
+  // old that its anchor left the history. Frames not pushed yet are extrapolated from the newest anchor.
+  [[nodiscard]] bool frame_time(std::uint64_t index, std::int64_t& t_ns) const noexcept;
   [[nodiscard]] AlsaCaptureStats stats() const noexcept;
   [[nodiscard]] std::string describe() const;  // "hw:0 48000 Hz S16 2 ch, period 1024"
 
@@ -148,17 +150,15 @@ class AlsaCapture final : public AudioSource {
   std::vector<std::byte> raw_;       // one period as read
   std::vector<std::byte> previous_;  // a copy of the period read before it
   std::vector<float> mono_;          // one period converted
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<bool> running_{false};
   std::atomic<bool> streaming_{false};
   AnchorSlot anchors_[kAnchors];
   std::atomic<std::uint64_t> anchor_count_{0};
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
       clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
-  std::atomic<bool> realtime_ok_{false}, fifo_{false}, memory_locked_{false}, frozen_{false};
+  std::atomic<bool> fifo_{false}, frozen_{false};
   std::atomic<std::int64_t> last_frames_ns_{0};  // monotonic time of the last frames read (or of the start)
+  DeviceThread thread_;                          // last: stopped before the members it uses go
 };
 
 }  // namespace gearpulse

@@ -7,13 +7,14 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
 
 #include "core/gps_speed_gate.hpp"
-#include "drivers/gps_source.hpp"
+#include "drivers/gps_report.hpp"
 
 namespace gearpulse {
 
@@ -43,19 +44,24 @@ struct GpsdStatus {
 
 [[nodiscard]] const char* to_string(GpsdState state) noexcept;
 
-class GpsdClient final : public GpsSource {
+class GpsdClient final {
  public:
+  using Callback = std::function<void(const GpsReport&)>;
   // `on_report` (optional) runs on the client thread for every published report; keep it short.
   explicit GpsdClient(GpsdConfig config, Callback on_report = {});
-  ~GpsdClient() override;  // stop()
+  ~GpsdClient();  // stop()
   GpsdClient(const GpsdClient&) = delete;
   GpsdClient& operator=(const GpsdClient&) = delete;
 
   void start();  // starts the thread (idempotent); never throws for an absent gpsd: it keeps trying
   void stop();   // joins the thread within ~100 ms
 
-  [[nodiscard]] std::optional<GpsReport> latest() const override;
-  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const override;
+  // The newest report, if any arrived yet.
+  [[nodiscard]] std::optional<GpsReport> latest() const;
+  // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
+  // and its freshness judged on that one report).
+  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const;
+  [[nodiscard]] bool has_gps(std::int64_t now_ns) const { return fresh(now_ns).has_value(); }
   [[nodiscard]] GpsdStatus status() const;
   // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
   // turn of its loop, at least every 100 ms while connected and every kBeatNs while backing off, so an

@@ -27,17 +27,15 @@ PulseThread::~PulseThread() {
 }
 
 void PulseThread::start() {
-  if (thread_.joinable()) return;
+  if (thread_.started()) return;
   validate(config_.pulse);  // fail here, not on the real-time thread
-  stop_.store(false);
   const std::int64_t t0 = monotonic_ns();
   heartbeat_ns_.store(t0, std::memory_order_relaxed);
-  thread_ = std::thread([this, t0] { run(t0); });
+  thread_.start([this, t0] { run(t0); });
 }
 
 void PulseThread::stop() {
-  stop_.store(true);
-  if (thread_.joinable()) thread_.join();
+  thread_.stop();
 }
 
 PulseThreadStatus PulseThread::status() const noexcept {
@@ -45,18 +43,16 @@ PulseThreadStatus PulseThread::status() const noexcept {
   s.pulses = pulses_.load(std::memory_order_relaxed);
   s.late_edges = late_edges_.load(std::memory_order_relaxed);
   s.max_late_ns = max_late_ns_.load(std::memory_order_relaxed);
-  s.realtime_ok = realtime_ok_.load(std::memory_order_relaxed);
-  s.memory_locked = memory_locked_.load(std::memory_order_relaxed);
-  s.running = running_.load(std::memory_order_relaxed);
+  s.realtime_ok = thread_.realtime_ok();
+  s.memory_locked = thread_.memory_locked();
+  s.running = thread_.running();
   s.heartbeat_ns = heartbeat_ns_.load(std::memory_order_relaxed);
   return s;
 }
 
 void PulseThread::run(std::int64_t t0_ns) noexcept {
-  const RealtimeResult rt = make_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
-  realtime_ok_.store(rt.fifo);
-  memory_locked_.store(rt.memory_locked);
-  running_.store(true);
+  thread_.enter_realtime({config_.realtime, config_.rt_priority, config_.lock_memory});
+  thread_.set_running(true);
 
   PulseScheduler sched(config_.pulse, t0_ns);  // validated in start(): cannot throw here
   const std::int64_t poll_ns = std::max<std::int64_t>(
@@ -91,7 +87,7 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
     }
   };
 
-  while (!stop_.load(std::memory_order_relaxed)) {
+  while (!thread_.stopping()) {
     std::int64_t now = monotonic_ns();
     heartbeat_ns_.store(now, std::memory_order_relaxed);
     // Edges due under the old speed first: a change is only known from the moment it is seen.
@@ -107,7 +103,7 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
     sleep_until(wake);
   }
   if (high) output_.fall();  // leave the line low
-  running_.store(false);
+  thread_.set_running(false);
 }
 
 }  // namespace gearpulse

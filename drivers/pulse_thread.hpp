@@ -7,9 +7,9 @@
 #include <chrono>
 #include <cstdint>
 #include <span>
-#include <thread>
 
 #include "core/pulse_scheduler.hpp"
+#include "drivers/device_thread.hpp"
 #include "drivers/pulse_output.hpp"
 
 namespace gearpulse {
@@ -64,17 +64,13 @@ class PulseThread {
   PulseOutput& output_;
   const PulseThreadConfig config_;
   std::span<RiseRecord> rise_log_;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<bool> running_{false};
   std::atomic<std::int64_t> heartbeat_ns_{0};
   std::atomic<double> target_{0.0};
   std::atomic<std::uint64_t> pulses_{0};
   std::atomic<std::uint64_t> late_edges_{0};
   std::atomic<std::int64_t> max_late_ns_{0};
   std::atomic<std::size_t> logged_{0};
-  std::atomic<bool> realtime_ok_{false};
-  std::atomic<bool> memory_locked_{false};
+  DeviceThread thread_;  // last: stopped before the members it uses go
 };
 
 }  // namespace gearpulse

@@ -108,9 +108,10 @@ cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
   "${launcher[@]}" >/dev/null
 cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
-  log_queue_test control_test persistence_test pipeline_test gearpulsed gearpulsectl daemon_run_test
+  log_queue_test control_test persistence_test pipeline_test audio_front_end_test gearpulsed gearpulsectl \
+  daemon_run_test
 stage "TSan build done"
-start_tests tsan build-tsan -R "^(ring|alsa|gpsd|pulse|log queue|control|daemon|pipeline):"
+start_tests tsan build-tsan -R "^(ring|alsa|audio|gpsd|pulse|log queue|control|daemon|pipeline):"
 finish_tests tsan "$may_skip_sanitized"
 stage "TSan tests passed"
 echo "== all tests passed in $SECONDS s"

@@ -13,7 +13,7 @@
 #include <memory>
 #include <string>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
 #include "tests/test_util.hpp"
@@ -67,7 +67,7 @@ extern "C" int fdatasync(int fd) {
   return real(fd);
 }
 
-using gearpulse::daemon::DirectorySyncError;
+using gearpulse::DirectorySyncError;
 using gearpulse::daemon::TrainingStore;
 using gearpulse::test::read_text;
 using gearpulse::test::TempDir;
@@ -118,11 +118,11 @@ TEST_CASE("state: a model renamed into place whose directory cannot be synced is
 TEST_CASE("state: a file whose data cannot be synced is not renamed into place") {
   TempDir dir;
   const auto path = dir / "model.json";
-  gearpulse::daemon::write_file_atomic(path, "the old model");
+  gearpulse::write_file_atomic(path, "the old model");
   {
     const FailingFileSync failing;
     try {
-      gearpulse::daemon::write_file_atomic(path, "the new model");
+      gearpulse::write_file_atomic(path, "the new model");
       FAIL("no error");
     } catch (const DirectorySyncError&) {
       FAIL("renamed into place before its data was synced");
@@ -150,7 +150,7 @@ TEST_CASE("state: a journal append that cannot be synced fails and keeps its pai
   {
     const FailingFileSync failing;
     try {
-      gearpulse::daemon::append_file_durable(dir / "log", "second line\n");
+      gearpulse::append_file_durable(dir / "log", "second line\n");
       FAIL("no error");
     } catch (const std::system_error& e) {
       CHECK(std::string(e.what()).find("cannot fsync " + (dir / "log").string()) == 0);
@@ -173,7 +173,7 @@ TEST_CASE("state: a file removed from a directory that cannot be synced is an er
   {
     const FailingDirectorySync failing;
     try {
-      gearpulse::daemon::remove_file_durable(path);
+      gearpulse::remove_file_durable(path);
       FAIL("no error");
     } catch (const std::system_error& e) {
       CHECK(std::string(e.what()).find("cannot fsync directory") != std::string::npos);

@@ -23,8 +23,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/atomic_file.hpp"
 #include "core/estimator.hpp"
-#include "daemon/atomic_file.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/retrainer.hpp"
 #include "daemon/training_store.hpp"
@@ -600,7 +600,7 @@ TEST_CASE("daemon: what is read of the state directory is bounded") {
   // A FIFO in the store's place: refused at once, not waited on.
   REQUIRE(::mkfifo((dir / "training.bin").c_str(), 0600) == 0);
   TrainingStore store(1e9, 10000);
-  CHECK_THROWS_AS(store.load(dir / "training.bin"), gearpulse::daemon::FileRefused);
+  CHECK_THROWS_AS(store.load(dir / "training.bin"), gearpulse::FileRefused);
 }
 
 TEST_CASE("daemon: a corrupt model file is reported and ignored") {
@@ -871,13 +871,13 @@ TEST_CASE("daemon: a fit begun before a model reset is discarded, not installed 
 TEST_CASE("daemon: a removed file stays removed (durable remove), and removing an absent one is no error") {
   TempDir dir;
   const auto path = dir / "model.json";
-  gearpulse::daemon::write_file_atomic(path, "{}");
+  gearpulse::write_file_atomic(path, "{}");
   REQUIRE(std::filesystem::exists(path));
-  gearpulse::daemon::remove_file_durable(path);
+  gearpulse::remove_file_durable(path);
   CHECK_FALSE(std::filesystem::exists(path));
-  CHECK_NOTHROW(gearpulse::daemon::remove_file_durable(path));
+  CHECK_NOTHROW(gearpulse::remove_file_durable(path));
   std::filesystem::create_directory(dir / "sub");
-  CHECK_THROWS_AS(gearpulse::daemon::remove_file_durable(dir / "sub"), std::system_error);  // not a file
+  CHECK_THROWS_AS(gearpulse::remove_file_durable(dir / "sub"), std::system_error);  // not a file
 }
 
 TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {

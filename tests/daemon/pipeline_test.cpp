@@ -21,6 +21,10 @@
 #include "tools/sim/nmea.hpp"
 
 using namespace std::chrono_literals;
+using gearpulse::SpeedSource;
+using gearpulse::daemon::AudioState;
+using gearpulse::daemon::GpsState;
+using gearpulse::daemon::OutputState;
 using gearpulse::test::FifoFeeder;
 using gearpulse::test::GpsFake;
 using gearpulse::test::TempDir;
@@ -108,7 +112,7 @@ struct LiveChain {
   gearpulse::daemon::Pipeline& start() {
     pipeline = std::make_unique<gearpulse::daemon::Pipeline>(config, model, store);
     pipeline->start();
-    REQUIRE(wait_for([&] { return pipeline->snapshot().audio_state == "running"; }, 10s));
+    REQUIRE(wait_for([&] { return pipeline->snapshot().audio_state == AudioState::kRunning; }, 10s));
     feeder.go();
     return *pipeline;
   }
@@ -131,18 +135,18 @@ TEST_CASE(
   REQUIRE(wait_for(
       [&] {
         const auto s = pipeline.snapshot();
-        return s.source == "gps" && s.gear == 1 && near(s.tracker_freq, kTone, kWander + 0.5);
+        return s.source == SpeedSource::kGps && s.gear == 1 && near(s.tracker_freq, kTone, kWander + 0.5);
       },
       20s));
   // gpsfake ends with its log: GPS is lost, the ripple goes on.
-  REQUIRE(wait_for([&] { return pipeline.snapshot().source != "gps"; }, 30s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().source != SpeedSource::kGps; }, 30s));
   // Every look at the outage's first 5 s finds the engine carrying the speed in gear.
   int looks = 0, on_engine = 0, right_speed = 0;
   const auto end = std::chrono::steady_clock::now() + 5s;
   while (std::chrono::steady_clock::now() < end) {
     const auto s = pipeline.snapshot();
     ++looks;
-    on_engine += s.source == "engine" && s.gear == 1;
+    on_engine += s.source == SpeedSource::kEngine && s.gear == 1;
     right_speed += near(s.speed, kSpeed, kSpeedTol);
     std::this_thread::sleep_for(20ms);
   }
@@ -189,7 +193,7 @@ TEST_CASE(
   LiveChain chain(kPeriod, 90, 0.5, gone);  // about 45 s of GPS
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return pipeline.drain_pairs() > 0; }, 20s));
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "frozen"; }, 15s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kFrozen; }, 15s));
   // Fixes already waiting for their window may still be paired; after that, none.
   std::this_thread::sleep_for(3s);
   pipeline.drain_pairs();
@@ -198,13 +202,13 @@ TEST_CASE(
     std::this_thread::sleep_for(100ms);
     while_frozen += pipeline.drain_pairs();
     const auto s = pipeline.snapshot();
-    CHECK(s.audio_state == "frozen");
+    CHECK(s.audio_state == AudioState::kFrozen);
     CHECK(s.tracker_freq < 0.0);  // nothing tracked
-    CHECK(s.source == "gps");
+    CHECK(s.source == SpeedSource::kGps);
   }
   CHECK(while_frozen == 0);
   // The writer is back: the audio runs and pairs come again.
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kRunning; }, 20s));
   CHECK(wait_for([&] { return pipeline.drain_pairs() > 0; }, 10s));
 }
 
@@ -216,9 +220,9 @@ TEST_CASE("pipeline: audio that stops coming (the device open, no frames) is sta
   LiveChain chain(kPeriod, 60, 0.5, held);  // about 30 s of GPS
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return pipeline.snapshot().tracker_freq > 0.0; }, 10s));
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "stalled"; }, 10s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kStalled; }, 10s));
   CHECK(pipeline.snapshot().tracker_freq < 0.0);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "running"; }, 15s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kRunning; }, 15s));
   CHECK(wait_for([&] { return pipeline.snapshot().tracker_freq > 0.0; }, 10s));
 }
 
@@ -235,9 +239,9 @@ TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer 
   REQUIRE(wait_for([&] { return std::filesystem::is_symlink(link); }, 10s));
   const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);  // opened, never read
   REQUIRE(fd >= 0);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().source == "gps"; }, 20s));
-  CHECK(pipeline.snapshot().output_state == "ok");
-  REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == "reader-behind"; }, 15s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().source == SpeedSource::kGps; }, 20s));
+  CHECK(pipeline.snapshot().output_state == OutputState::kOk);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kReaderBehind; }, 15s));
   CHECK(pipeline.snapshot().output_dropped > 0);
   // The reader reads again: within the 5 s the state lasts after the last dropped pulse, it is ok.
   char buf[4096];
@@ -245,7 +249,7 @@ TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer 
       [&] {
         while (::read(fd, buf, sizeof buf) > 0) {
         }
-        return pipeline.snapshot().output_state == "ok";
+        return pipeline.snapshot().output_state == OutputState::kOk;
       },
       10s);
   CHECK(ok);
@@ -259,17 +263,17 @@ TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the ou
   chain.config.output.path = link.string();
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return std::filesystem::is_symlink(link); }, 10s));
-  REQUIRE(wait_for([&] { return pipeline.snapshot().source == "gps"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().source == SpeedSource::kGps; }, 20s));
   // Pulses go out at kSpeed, to nobody.
   REQUIRE(wait_for([&] { return pipeline.snapshot().output_unheard > 10; }, 10s));
   const auto alone = pipeline.snapshot();
-  CHECK(alone.output_state == "no-reader");
+  CHECK(alone.output_state == OutputState::kNoReader);
   CHECK(alone.output_unheard <= alone.pulses);
   CHECK(alone.output_dropped == 0);
   // A reader comes: the state is ok and the count stops (a reader that reads hears every pulse).
   const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
   REQUIRE(fd >= 0);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == "ok"; }, 5s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kOk; }, 5s));
   const std::uint64_t unheard = pipeline.snapshot().output_unheard;
   const std::uint64_t pulses = pipeline.snapshot().pulses;
   char buf[4096];
@@ -282,7 +286,7 @@ TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the ou
       10s));
   CHECK(pipeline.snapshot().output_unheard == unheard);
   ::close(fd);
-  CHECK(wait_for([&] { return pipeline.snapshot().output_state == "no-reader"; }, 5s));
+  CHECK(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kNoReader; }, 5s));
 }
 
 namespace {
@@ -340,7 +344,7 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
   chain.config.audio.format = "S16_LE";
   chain.config.audio.period_frames = 512;
   gearpulse::daemon::Pipeline& pipeline = chain.start();
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == "recovering"; }, 10s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kRecovering; }, 10s));
   // Lost and back several times a second: said at most once each way, not at every time.
   constexpr std::string_view kLost = "audio: capture from unplugged interrupted (ALSA error ";
   constexpr std::string_view kBack = "audio: capture from unplugged resumed";
@@ -353,7 +357,7 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
   for (int i = 0; i < 10; ++i) {
     std::this_thread::sleep_for(50ms);
     const auto s = pipeline.snapshot();
-    CHECK(s.audio_state == "recovering");
+    CHECK(s.audio_state == AudioState::kRecovering);
     CHECK_FALSE(s.audio_error.empty());
   }
   std::filesystem::remove(sink);
@@ -362,7 +366,7 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
   REQUIRE(wait_for(
       [&] {
         const auto s = pipeline.snapshot();
-        return s.audio_state == "running" && near(s.tracker_freq, kTone, kWander + 0.5);
+        return s.audio_state == AudioState::kRunning && near(s.tracker_freq, kTone, kWander + 0.5);
       },
       20s));
   CHECK(pipeline.snapshot().audio_error.empty());
@@ -379,16 +383,16 @@ TEST_CASE("pipeline: gpsd starting late is no reconnect and leaves no error; a r
   REQUIRE(wait_for([&] { return !pipeline.snapshot().gps_error.empty(); }, 10s));  // gpsd absent
   const std::vector<double> speeds(40, 12.5);
   auto fake = chain.gpsd(speeds, 0.1);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
   auto s = pipeline.snapshot();
   CHECK(s.gps_error.empty());
   CHECK(s.gps_reconnects == 0);
   CHECK(near(s.gps_speed, 12.5, 0.01));
   fake->kill();
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "disconnected"; }, 10s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kDisconnected; }, 10s));
   CHECK_FALSE(pipeline.snapshot().gps_error.empty());
   fake = chain.gpsd(speeds, 0.1);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
   s = pipeline.snapshot();
   CHECK(s.gps_error.empty());
   CHECK(s.gps_reconnects == 1);
@@ -401,15 +405,15 @@ TEST_CASE("pipeline: a receiver that goes quiet is no fix after gps.timeout and 
   chain.config.gps.timeout = 1.0;
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   auto fake = chain.gpsd(std::vector<double>(40, 9.0), 0.1);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
   fake->pause();
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state != "fix"; }, 5s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state != GpsState::kFix; }, 5s));
   const auto quiet = pipeline.snapshot();
-  CHECK(quiet.gps_state == "no-fix");
+  CHECK(quiet.gps_state == GpsState::kNoFix);
   CHECK(quiet.gps_age >= 1.0);
   CHECK(near(quiet.gps_speed, 9.0, 0.01));
   fake->resume();
-  CHECK(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 10s));
+  CHECK(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 10s));
 }
 
 // Through an outage gpsd goes on reporting, without a fix: the status keeps the speed of the last fix and
@@ -420,11 +424,11 @@ TEST_CASE("pipeline: through a GPS outage the status keeps the last fix's speed 
   std::vector<double> speeds(10, 14.0);
   speeds.resize(50, std::nan(""));  // 8 s without a fix at 0.2 s per epoch
   auto fake = chain.gpsd(speeds, 0.2);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == "fix"; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
   REQUIRE(wait_for([&] { return pipeline.snapshot().gps_mode == 1; }, 10s));  // reports without a fix
   REQUIRE(wait_for([&] { return pipeline.snapshot().gps_age > 2.0; }, 5s));
   const auto s = pipeline.snapshot();
-  CHECK(s.gps_state == "no-fix");
+  CHECK(s.gps_state == GpsState::kNoFix);
   CHECK(s.gps_mode == 1);
   CHECK(near(s.gps_speed, 14.0, 0.01));
 }

@@ -12,7 +12,7 @@
 #include <string>
 #include <system_error>
 
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 #include "tests/test_util.hpp"
 
 namespace {
@@ -37,7 +37,7 @@ extern "C" int flock(int fd, int operation) {
   return real(fd, operation);
 }
 
-using gearpulse::daemon::DirectoryLock;
+using gearpulse::DirectoryLock;
 using gearpulse::test::TempDir;
 
 TEST_CASE("state: a directory lock where the file system has no locks is an error, not a second daemon") {

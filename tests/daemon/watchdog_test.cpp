@@ -15,6 +15,7 @@
 #include "drivers/clock.hpp"
 #include "tests/test_util.hpp"
 
+using gearpulse::daemon::GpsState;
 using gearpulse::daemon::kStallNs;
 using gearpulse::daemon::stalled_threads;
 using gearpulse::daemon::ThreadBeat;
@@ -113,7 +114,7 @@ TEST_CASE("watchdog: the pipeline watches the GPS thread and an absent gpsd is n
   REQUIRE(wait_for([&] { return !pipeline.snapshot().gps_error.empty(); }, 20s));
   const std::int64_t now = gearpulse::monotonic_ns();
   const auto live = pipeline.snapshot(now);
-  CHECK(live.gps_state == "disconnected");
+  CHECK(live.gps_state == GpsState::kDisconnected);
   CHECK(live.stalled.empty());
   // Seen from beyond the stall limit every thread's last beat is stale, the GPS thread's included: it
   // is one of the threads the watchdog waits for.

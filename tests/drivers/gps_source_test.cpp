@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <limits>
 
-#include "drivers/gps_source.hpp"
+#include "drivers/gps_report.hpp"
 
 using gearpulse::FixNovelty;
 using gearpulse::GpsReport;

@@ -15,9 +15,9 @@
 
 #include <CLI/CLI.hpp>
 
+#include "common/atomic_file.hpp"
 #include "core/estimator.hpp"
 #include "core/gear_model.hpp"
-#include "daemon/atomic_file.hpp"
 #include "drivers/thread_slice_runner.hpp"
 #include "tools/gearpulse/commands.hpp"
 #include "tools/gearpulse/fit_plot.hpp"
@@ -96,8 +96,8 @@ void write_file_atomically(const std::string& path, const std::string& text) {
     target = link.is_absolute() ? link : target.parent_path() / link;
   }
   try {
-    daemon::write_file_atomic(target, text);
-  } catch (const daemon::DirectorySyncError& e) {
+    gearpulse::write_file_atomic(target, text);
+  } catch (const gearpulse::DirectorySyncError& e) {
     // In place, but a power cut may still bring back what was there before.
     std::fprintf(stderr, "gearpulse: warning: %s: written, but its directory could not be synced: %s\n",
                  path.c_str(), e.code().message().c_str());

@@ -17,8 +17,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "common/control_protocol.hpp"
 #include "core/json_depth.hpp"
-#include "daemon/control_protocol.hpp"
 #include "drivers/unique_fd.hpp"
 #include "gearpulse_version.hpp"
 
@@ -106,103 +106,88 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
   }
 }
 
-std::string num(const nlohmann::json& v, int decimals, const char* unit = "") {
-  if (!v.is_number()) return "-";
+namespace control = gearpulse::control;
+
+std::string num(std::optional<double> v, int decimals, const char* unit = "") {
+  if (!v) return "-";
   char text[64];
-  std::snprintf(text, sizeof text, "%.*f%s", decimals, v.get<double>(), unit);
+  std::snprintf(text, sizeof text, "%.*f%s", decimals, *v, unit);
   return text;
 }
 
-std::string str(const nlohmann::json& obj, const char* key) {
-  const auto it = obj.find(key);
-  if (it == obj.end() || it->is_null()) return "-";
-  if (it->is_string()) return it->get<std::string>();
-  return it->dump();
+// A number as the JSON reply writes it.
+std::string text(const nlohmann::json& v) {
+  if (v.is_null()) return "-";
+  if (v.is_string()) return v.get<std::string>();
+  return v.dump();
 }
 
-void print_gears(const nlohmann::json& gears) {
-  if (!gears.is_array() || gears.empty()) {
+void print_gears(const std::vector<control::GearRow>& gears) {
+  if (gears.empty()) {
     std::cout << "  (no gears learned yet)\n";
     return;
   }
   std::cout << "  gear  theta (m/s)/Hz   stderr       weight  km/h at 100 Hz\n";
-  for (const auto& g : gears) {
-    const double theta = g.value("theta", 0.0);
+  for (const control::GearRow& g : gears) {
     char row[160];
     // Speed at 100 Hz of the tracked component (a ripple's frequency is some multiple of the crank's, which
     // the daemon never needs to know, so no km/h per 1000 rpm).
-    std::snprintf(row, sizeof row, "  %4d  %14.5f  %10.6f  %8.3f  %8.1f\n", g.value("gear", 0), theta,
-                  g.value("stderr", 0.0), g.value("weight", 0.0), theta * 100.0 * 3.6);
+    std::snprintf(row, sizeof row, "  %4d  %14.5f  %10.6f  %8.3f  %8.1f\n", g.gear, g.theta, g.std_error,
+                  g.weight, g.theta * 100.0 * 3.6);
     std::cout << row;
   }
 }
 
-void print_status(const nlohmann::json& s) {
-  const auto obj = [&](const char* key) { return s.contains(key) ? s[key] : nlohmann::json::object(); };
-  const auto gps = obj("gps"), audio = obj("audio"), tracker = obj("tracker"), model = obj("model"),
-             output = obj("output");
-  std::cout << "speed        " << num(s.value("speed", nlohmann::json()), 2, " m/s") << "  ("
-            << num(s.value("speed_kmh", nlohmann::json()), 1, " km/h") << ")\n"
-            << "source       " << str(s, "source") << "\n"
-            << "gear         " << (s.value("gear", 0) > 0 ? std::to_string(s.value("gear", 0)) : "-") << "\n"
-            << "pulses       " << str(s, "pulses") << "  at "
-            << num(s.value("pulse_frequency", nlohmann::json()), 1, " Hz") << "  output "
-            << str(output, "kind") << " " << str(output, "state") << "\n"
-            << "gps          " << str(gps, "state") << "  speed "
-            << num(gps.value("speed", nlohmann::json()), 2, " m/s") << "  age "
-            << num(gps.value("age", nlohmann::json()), 1, " s") << "  (" << str(gps, "server") << ")\n"
-            << "audio        " << str(audio, "state") << "  " << str(audio, "device") << " @ "
-            << str(audio, "rate") << " Hz  xruns " << str(audio, "xruns") << "  ring drops "
-            << str(audio, "ring_drops") << "\n"
-            << "tracker      " << num(tracker.value("freq", nlohmann::json()), 2, " Hz") << "  SNR "
-            << num(tracker.value("snr_db", nlohmann::json()), 1, " dB")
-            << (tracker.value("confident", false) ? "  confident" : "") << "\n"
-            << "model        " << str(model, "state") << "  " << str(model, "gears") << " gears, "
-            << str(model, "training_samples") << " training pairs (" << str(model, "new_samples")
-            << " new)\n";
-  if (model.contains("last_result") && model["last_result"].is_string() &&
-      !model["last_result"].get<std::string>().empty())
-    std::cout << "last retrain " << model["last_result"].get<std::string>() << "\n";
-  if (const auto learning = model.value("learning", nlohmann::json::object());
-      learning.value("young", false)) {
-    std::cout << "learning     " << num(learning.value("moving_time", nlohmann::json()), 0, " s")
-              << " of moving; ";
-    if (model.value("gears", 0) == 0)
-      std::cout << "first fit at " << str(learning, "first_fit_pairs") << " steady pairs in one gear (now "
-                << str(learning, "cluster_pairs") << ")\n";
+void print_status(const control::StatusReply& s) {
+  const auto& gps = s.gps;
+  const auto& audio = s.audio;
+  const auto& model = s.model;
+  std::cout << "speed        " << num(s.speed, 2, " m/s") << "  (" << num(s.speed_kmh, 1, " km/h") << ")\n"
+            << "source       " << s.source << "\n"
+            << "gear         " << (s.gear > 0 ? std::to_string(s.gear) : "-") << "\n"
+            << "pulses       " << s.pulses << "  at " << num(s.pulse_frequency, 1, " Hz") << "  output "
+            << s.output.kind << " " << s.output.state << "\n"
+            << "gps          " << gps.state << "  speed " << num(gps.speed, 2, " m/s") << "  age "
+            << num(gps.age, 1, " s") << "  (" << gps.server << ")\n"
+            << "audio        " << audio.state << "  " << audio.device << " @ " << audio.rate << " Hz  xruns "
+            << audio.xruns << "  ring drops " << audio.ring_drops << "\n"
+            << "tracker      " << num(s.tracker.freq, 2, " Hz") << "  SNR " << num(s.tracker.snr_db, 1, " dB")
+            << (s.tracker.confident ? "  confident" : "") << "\n"
+            << "model        " << control::to_string(model.state) << "  " << model.gears << " gears, "
+            << model.training_samples << " training pairs (" << model.new_samples << " new)\n";
+  if (!model.last_result.empty()) std::cout << "last retrain " << model.last_result << "\n";
+  if (const auto& learning = model.learning; learning.young) {
+    std::cout << "learning     " << num(learning.moving_time, 0, " s") << " of moving; ";
+    if (model.gears == 0)
+      std::cout << "first fit at " << learning.first_fit_pairs << " steady pairs in one gear (now "
+                << learning.cluster_pairs << ")\n";
     else
-      std::cout << "next refit at " << num(learning.value("next_refit", nlohmann::json()), 0, " s")
-                << " of moving\n";
+      std::cout << "next refit at " << num(learning.next_refit, 0, " s") << " of moving\n";
   }
-  if (const auto known = model.value("known_gears", nlohmann::json::array()); !known.empty()) {
+  if (!model.known_gears.empty()) {
     std::cout << "known gears ";
-    for (const auto& g : known)
-      std::cout << " " << num(g.value("theta", nlohmann::json()), 4, "") << " (" << str(g, "pairs")
-                << " pairs" << (g.value("kept", false) ? ", kept" : "") << ")";
+    for (const control::KnownGear& g : model.known_gears)
+      std::cout << " " << num(g.theta, 4, "") << " (" << text(g.pairs) << " pairs" << (g.kept ? ", kept" : "")
+                << ")";
     std::cout << "\n";
   }
-  std::cout << "uptime       " << num(s.value("uptime", nlohmann::json()), 0, " s") << "\n";
-  for (const auto& [name, part] : {std::pair{"output", output}, {"gps", gps}, {"audio", audio}}) {
-    const std::string err = str(part, "error");
-    if (err != "-" && !err.empty()) std::cout << "! " << name << ": " << err << "\n";
-  }
+  std::cout << "uptime       " << num(s.uptime, 0, " s") << "\n";
+  for (const auto& [name, error] :
+       {std::pair{"output", s.output.error}, {"gps", gps.error}, {"audio", audio.error}})
+    if (!error.empty()) std::cout << "! " << name << ": " << error << "\n";
   // The state directory's problems (a file set aside, a save that fails) and the configuration's (a
   // reload refused, settings waiting for a restart): shown as the others, not only in the JSON.
-  if (model.contains("problems") && model["problems"].is_array())
-    for (const auto& p : model["problems"])
-      if (p.is_string()) std::cout << "! model: " << p.get<std::string>() << "\n";
-  const auto config = obj("config");
-  const std::string reload_error = str(config, "reload_error");
-  if (reload_error != "-" && !reload_error.empty()) std::cout << "! config: " << reload_error << "\n";
-  if (config.contains("restart_pending") && config["restart_pending"].is_array() &&
-      !config["restart_pending"].empty()) {
+  for (const std::string& p : model.problems)
+    std::cout << "! model: " << p << "\n";
+  if (!s.config.reload_error.empty()) std::cout << "! config: " << s.config.reload_error << "\n";
+  if (!s.config.restart_pending.empty()) {
     std::string keys;
-    for (const auto& k : config["restart_pending"])
-      if (k.is_string()) keys += (keys.empty() ? "" : ", ") + k.get<std::string>();
+    for (const std::string& k : s.config.restart_pending)
+      keys += (keys.empty() ? "" : ", ") + k;
     std::cout << "! config: changed, applied at the next restart: " << keys << "\n";
   }
   std::cout << "gears\n";
-  print_gears(s.value("gears", nlohmann::json::array()));
+  print_gears(s.gears);
 }
 
 }  // namespace
@@ -217,10 +202,14 @@ int main(int argc, char** argv) {
   app.add_flag("--json", json, "print the daemon's raw JSON reply");
   app.set_version_flag("--version", std::string("gearpulsectl ") + gearpulse::kVersion);
   app.require_subcommand(1);
-  app.add_subcommand("status", "speed, source, gear, pulses, GPS, audio, tracker and model");
-  app.add_subcommand("gears", "the learned gear scales");
-  app.add_subcommand("retrain", "fit a new model from the training pairs now");
-  auto* reset = app.add_subcommand("reset-model", "forget the learned model (needs --confirm)");
+  using control::Command;
+  app.add_subcommand(std::string(to_string(Command::kStatus)),
+                     "speed, source, gear, pulses, GPS, audio, tracker and model");
+  app.add_subcommand(std::string(to_string(Command::kGears)), "the learned gear scales");
+  app.add_subcommand(std::string(to_string(Command::kRetrain)),
+                     "fit a new model from the training pairs now");
+  auto* reset = app.add_subcommand(std::string(to_string(Command::kResetModel)),
+                                   "forget the learned model (needs --confirm)");
   reset->add_flag("--confirm", confirm, "really forget the model");
   reset->add_flag("--keep-samples", keep_samples, "keep the stored training pairs");
   for (auto* sub : app.get_subcommands({})) {
@@ -258,16 +247,14 @@ int main(int argc, char** argv) {
     std::cerr << "gearpulsectl: " << e.what() << "\n";
     return 2;
   }
-  const std::string command = app.get_subcommands().front()->get_name();
-  nlohmann::json request = {{"v", gearpulse::control::kProtocolVersion}, {"cmd", command}};
-  if (command == "reset-model") {
-    if (!confirm) {
-      std::cerr << "gearpulsectl: reset-model forgets every learned gear; add --confirm to do it\n";
-      return 2;
-    }
-    request["confirm"] = true;
-    if (keep_samples) request["keep_samples"] = true;
+  // Each subcommand is named after the protocol's command word.
+  const auto command = control::command_from_string(app.get_subcommands().front()->get_name());
+  if (!command) return 2;
+  if (*command == control::Command::kResetModel && !confirm) {
+    std::cerr << "gearpulsectl: reset-model forgets every learned gear; add --confirm to do it\n";
+    return 2;
   }
+  const control::Request request{.command = *command, .confirm = confirm, .keep_samples = keep_samples};
   // The reply is printed whole or not at all: a reply of another shape found halfway through the status
   // must not leave half a status on stdout above the error.
   std::ostringstream printed;
@@ -279,24 +266,34 @@ int main(int argc, char** argv) {
     Capture& operator=(const Capture&) = delete;
   };
   try {
-    const nlohmann::json reply = ask_daemon(socket, request);
+    const nlohmann::json reply = ask_daemon(socket, control::to_json(request));
     std::optional<Capture> capture(std::in_place, printed);
-    const bool ok = reply.value("ok", false);
+    const bool ok = control::reply_ok(reply);
     if (json) {
       std::cout << reply.dump(2) << "\n";
     } else if (!ok) {
-      std::cerr << "gearpulsectl: " << reply.value("error", std::string("request failed")) << "\n";
-    } else if (command == "status") {
-      print_status(reply);
-    } else if (command == "gears") {
-      std::cout << "model " << str(reply, "model_state") << ", " << str(reply, "training_samples")
-                << " training pairs\n";
-      print_gears(reply.value("gears", nlohmann::json::array()));
-    } else if (command == "retrain") {
-      std::cout << "retrain queued on " << str(reply, "training_samples")
-                << " training pairs; see 'gearpulsectl status' for the result\n";
+      std::cerr << "gearpulsectl: " << control::reply_error(reply) << "\n";
     } else {
-      std::cout << "model reset; " << str(reply, "training_samples") << " training pairs kept\n";
+      switch (*command) {
+        case control::Command::kStatus:
+          print_status(control::status_from_json(reply));
+          break;
+        case control::Command::kGears: {
+          const control::GearsReply gears = control::gears_from_json(reply);
+          std::cout << "model " << control::to_string(gears.model_state) << ", " << gears.training_samples
+                    << " training pairs\n";
+          print_gears(gears.gears);
+          break;
+        }
+        case control::Command::kRetrain:
+          std::cout << "retrain queued on " << control::retrain_from_json(reply).training_samples
+                    << " training pairs; see 'gearpulsectl status' for the result\n";
+          break;
+        case control::Command::kResetModel:
+          std::cout << "model reset; " << control::reset_from_json(reply).training_samples
+                    << " training pairs kept\n";
+          break;
+      }
     }
     capture.reset();
     std::cout << printed.str() << std::flush;
@@ -309,6 +306,10 @@ int main(int argc, char** argv) {
   } catch (const Failure& f) {
     std::cerr << "gearpulsectl: " << f.message << "\n";
     return f.status;
+  } catch (const control::ReplyError& e) {
+    // Valid JSON of another shape: not a gearpulsed of this protocol (or a broken one).
+    std::cerr << "gearpulsectl: unexpected reply from " << socket << " (" << e.what() << ")\n";
+    return 1;
   } catch (const nlohmann::json::exception& e) {
     // Valid JSON of another shape: not a gearpulsed of this protocol (or a broken one).
     std::cerr << "gearpulsectl: unexpected reply from " << socket << " (" << e.what() << ")\n";

@@ -1,9 +1,7 @@
 #pragma once
-// Where GPS speed comes from: gpsd in the daemon, a scripted source in tests. (Not to be confused with
-// core's SpeedSource, which says where a synthesized speed came from.)
+// GPS reports as the gpsd client publishes them, and which of them carry a fix not measured before.
 #include <cmath>
 #include <cstdint>
-#include <functional>
 #include <limits>
 #include <optional>
 
@@ -48,18 +46,6 @@ class FixNovelty {
   double fix_time_ = 0.0;
   double speed_ = 0.0;
   std::int64_t rx_ns_ = 0;
-};
-
-class GpsSource {
- public:
-  using Callback = std::function<void(const GpsReport&)>;
-  virtual ~GpsSource() = default;
-  // The newest report, if any arrived yet.
-  [[nodiscard]] virtual std::optional<GpsReport> latest() const = 0;
-  // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
-  // and its freshness judged on that one report).
-  [[nodiscard]] virtual std::optional<GpsReport> fresh(std::int64_t now_ns) const = 0;
-  [[nodiscard]] bool has_gps(std::int64_t now_ns) const { return fresh(now_ns).has_value(); }
 };
 
 }  // namespace gearpulse

@@ -1,4 +1,4 @@
-#include "daemon/atomic_file.hpp"
+#include "common/atomic_file.hpp"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -12,7 +12,7 @@
 #include <system_error>
 #include <vector>
 
-namespace gearpulse::daemon {
+namespace gearpulse {
 namespace {
 
 // Temp names are "<name>.tmp.XXXXXX": recognisable, so leftovers can be found and ignored.
@@ -172,4 +172,4 @@ DirectoryLock::DirectoryLock(const std::filesystem::path& dir) {
   }
 }
 
-}  // namespace gearpulse::daemon
+}  // namespace gearpulse

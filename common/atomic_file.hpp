@@ -11,7 +11,7 @@
 
 #include "drivers/unique_fd.hpp"
 
-namespace gearpulse::daemon {
+namespace gearpulse {
 
 // The new file is in place (readers see it) but its directory could not be synced: a power cut may still
 // bring back the old one. Callers that track what the file holds must count it as written.
@@ -74,4 +74,4 @@ class DirectoryLock {
   bool held_ = false;
 };
 
-}  // namespace gearpulse::daemon
+}  // namespace gearpulse

@@ -1,0 +1,116 @@
+#include "daemon/change_reporter.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <string>
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+namespace gearpulse::daemon {
+
+void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot& now) {
+  const std::string server = fmt::format("{}:{}", config_.gps.host, config_.gps.port);
+  // From the connection itself, not from a change between two snapshots: the first connection is often
+  // made before the first snapshot is taken.
+  if (const bool up = now.gps_state != GpsState::kDisconnected; up != gps_connected_) {
+    gps_connected_ = up;
+    if (up) spdlog::info("gps: connected to gpsd at {}", server);
+  }
+  if (now.gps_state != before.gps_state) {
+    std::uint64_t suppressed = 0;
+    if (now.gps_state == GpsState::kFix) {
+      // The fault is over: the next one is reported at once.
+      limiter_.reset("gps");
+      limiter_.reset("gps-no-fix");
+      spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
+    } else if (now.gps_state == GpsState::kNoFix && limiter_.allow("gps-no-fix", suppressed)) {
+      // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
+      // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
+      const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
+      spdlog::warn("gps: no usable fix from gpsd at {} {}{}", server, gone,
+                   suppressed ? fmt::format(" ({} more times since the last report)", suppressed) : "");
+    }
+  }
+  // A receiver's glitch refused: said at once, then at most once a minute with how many more.
+  if (now.gps_implausible > before.gps_implausible) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("gps-implausible", suppressed))
+      spdlog::warn(
+          "gps: a speed of {:.0f} km/h from gpsd at {} ignored (no car reaches it, or not that fast); "
+          "{} such reports so far{}",
+          now.gps_last_implausible * 3.6, server, now.gps_implausible,
+          suppressed ? fmt::format(" ({} since the last report)", suppressed) : "");
+  }
+  // One count per failed attempt (the backoff spaces them), not per turn of this loop.
+  if (now.gps_state == GpsState::kDisconnected && !now.gps_error.empty() &&
+      now.gps_failures != gps_failures_seen_) {
+    gps_failures_seen_ = now.gps_failures;
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("gps", suppressed))
+      spdlog::warn(
+          "gps: {}; reconnecting with backoff{}", now.gps_error,
+          suppressed ? fmt::format(" ({} more failed attempts since the last report)", suppressed) : "");
+  }
+  if (now.source != before.source) {
+    // Into and out of GPS is news; engine <-> coast inside an outage is every declutch (two per shift).
+    const auto outage = [](SpeedSource s) { return s == SpeedSource::kEngine || s == SpeedSource::kCoast; };
+    const bool routine = outage(before.source) && outage(now.source);
+    spdlog::log(routine ? spdlog::level::debug : spdlog::level::info,
+                "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", source_name(before.source),
+                source_name(now.source), now.speed * 3.6, now.gear);
+  }
+  // A navigator that should be reading the pulses is not: said when the last reader goes (or none is
+  // there at start) and when one comes, at most once a minute for a reader that opens and closes often.
+  std::uint64_t starts = 0;
+  switch (no_reader_.update(now.output_state == OutputState::kNoReader, std::chrono::steady_clock::now(),
+                            starts)) {
+    case StateFault::Say::kStart:
+      spdlog::warn(
+          "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}",
+          config_.output.path, now.output_unheard,
+          starts > 1 ? fmt::format(" ({} times since the last report)", starts) : "");
+      break;
+    case StateFault::Say::kEnd:
+      spdlog::info("output: a reader has {} open ({} pulses went unheard in all)", config_.output.path,
+                   now.output_unheard);
+      break;
+    case StateFault::Say::kNothing:
+      break;
+  }
+  if (now.output_state != before.output_state && now.output_state == OutputState::kWriteErrors)
+    spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
+                 config_.output.path);
+  if (now.output_dropped > before.output_dropped) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("output-dropped", suppressed))
+      spdlog::warn(
+          "output: the reader of {} is not reading: {} pulse(s) dropped (total {}); pulses that wait in "
+          "its queue over 2 s are dropped rather than delivered late",
+          config_.output.path, now.output_dropped - before.output_dropped, now.output_dropped);
+  } else if (before.output_state == OutputState::kReaderBehind &&
+             now.output_state != OutputState::kReaderBehind) {
+    limiter_.reset("output-dropped");
+    spdlog::info("output: the reader of {} keeps up again", config_.output.path);
+  }
+  if (now.xruns > before.xruns) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("xrun", suppressed))
+      spdlog::warn("audio: {} overrun(s) on {} (total {}); the capture recovered", now.xruns - before.xruns,
+                   config_.audio.device, now.xruns);
+  }
+  if (now.ring_drops > before.ring_drops) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("ring", suppressed))
+      spdlog::warn("audio: the tracker fell behind, {} frames dropped at the ring (total {})",
+                   now.ring_drops - before.ring_drops, now.ring_drops);
+  }
+  if (now.pairs_lost > before.pairs_lost) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("pairs", suppressed))
+      spdlog::warn("training: {} pair(s) lost waiting for the main thread (total {})",
+                   now.pairs_lost - before.pairs_lost, now.pairs_lost);
+  }
+}
+
+}  // namespace gearpulse::daemon

@@ -1,0 +1,26 @@
+#pragma once
+// The journal's account of the pipeline: one line per change of state between two snapshots (GPS lost
+// or back, a speed source switch, an output without a reader), and repeated faults at most once a
+// minute, so a log read at 2 a.m. tells what happened and when. Used by the main thread only.
+#include <cstdint>
+
+#include "daemon/config.hpp"
+#include "daemon/log_limiter.hpp"
+#include "daemon/pipeline.hpp"
+
+namespace gearpulse::daemon {
+
+class ChangeReporter {
+ public:
+  explicit ChangeReporter(const Config& config) : config_(config) {}
+  void log(const PipelineSnapshot& before, const PipelineSnapshot& now);
+
+ private:
+  const Config& config_;  // the device names the lines give
+  LogLimiter limiter_;
+  StateFault no_reader_;                 // the pulse output has no reader (a PTY nobody holds open)
+  bool gps_connected_ = false;           // as the last line said
+  std::uint64_t gps_failures_seen_ = 0;  // GPS connection failures looked at
+};
+
+}  // namespace gearpulse::daemon

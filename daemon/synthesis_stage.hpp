@@ -1,0 +1,47 @@
+#pragma once
+// The synthesis step of the live chain: the speed the pulses carry from the tracker's estimate and the
+// newest GPS fix, stepped at every hop. The one place the daemon names its synthesizer (the same
+// SpeedSynthesizer `gearpulse replay` runs): another synthesizer is put in here.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "core/speed_synth.hpp"
+#include "daemon/model_store.hpp"
+#include "drivers/gps_report.hpp"
+
+namespace gearpulse::daemon {
+
+class SynthesisStage {
+ public:
+  struct Step {
+    SynthOutput out;         // speed, gear and source
+    bool confident = false;  // the frequency was used: tracked, finite and at least the SNR threshold
+  };
+
+  // The model from the next step on; false when the synthesizer cannot take it (it keeps the previous).
+  bool set_model(const ModelPtr& model) { return synth_.set_model(model); }
+
+  // One step at `t` (s, CLOCK_MONOTONIC; a step never goes back before the last) with the tracker's
+  // estimate and the newest fresh GPS fix, if any. Each fix is measured once, however often it is given
+  // (gpsd may report one fix more than once); a hop below `min_snr_db` reads as no frequency.
+  Step step(double t, double freq, double snr_db, bool tracked, const std::optional<GpsReport>& fix,
+            double min_snr_db) {
+    constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+    const double gps_speed = fix ? fix->speed : kNan;
+    const bool gps_new = fix && fixes_.is_new(*fix);
+    const bool confident = tracked && std::isfinite(freq) && snr_db >= min_snr_db;
+    last_t_ = std::max(t, last_t_);
+    return {synth_.step(last_t_, gps_speed, confident ? freq : kNan, gps_new), confident};
+  }
+
+  [[nodiscard]] double last_step_time() const noexcept { return last_t_; }
+
+ private:
+  SpeedSynthesizer synth_;
+  FixNovelty fixes_;
+  double last_t_ = 0.0;
+};
+
+}  // namespace gearpulse::daemon

@@ -1,0 +1,48 @@
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <limits>
+#include <optional>
+
+#include "daemon/synthesis_stage.hpp"
+
+using gearpulse::GpsReport;
+using gearpulse::SpeedSource;
+using gearpulse::daemon::SynthesisStage;
+
+namespace {
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+
+GpsReport fix(double speed, double fix_time) {
+  GpsReport r;
+  r.rx_ns = static_cast<std::int64_t>(fix_time * 1e9);
+  r.speed = speed;
+  r.mode = 3;
+  r.fix_time = fix_time;
+  return r;
+}
+
+}  // namespace
+
+TEST_CASE("synthesis: a frequency is used only when tracked, finite and at least the SNR threshold") {
+  SynthesisStage stage;
+  CHECK(stage.step(1.0, 90.0, 5.0, true, std::nullopt, -10.0).confident);
+  CHECK_FALSE(stage.step(1.1, 90.0, 5.0, false, std::nullopt, -10.0).confident);
+  CHECK_FALSE(stage.step(1.2, kNan, 5.0, true, std::nullopt, -10.0).confident);
+  CHECK_FALSE(stage.step(1.3, 90.0, -11.0, true, std::nullopt, -10.0).confident);
+  CHECK(stage.step(1.4, 90.0, -10.0, true, std::nullopt, -10.0).confident);
+}
+
+TEST_CASE("synthesis: with a fresh fix the speed is GPS's, and steps never go back in time") {
+  SynthesisStage stage;
+  SynthesisStage::Step s{};
+  for (int i = 0; i < 20; ++i)
+    s = stage.step(10.0 + 0.1 * i, kNan, kNan, false, fix(12.0, 1000.0 + 0.1 * i), -10.0);
+  CHECK(s.out.source == SpeedSource::kGps);
+  CHECK(std::abs(s.out.speed - 12.0) < 0.5);
+  const double last = stage.last_step_time();
+  CHECK(last == Approx(11.9));
+  (void)stage.step(5.0, kNan, kNan, false, std::nullopt, -10.0);  // a point stamped before the last step
+  CHECK(stage.last_step_time() == last);
+}
