@@ -123,6 +123,7 @@ GEARPULSE_FIELDS(ThreadStatus) void fields(R& r, F&& f) {
 GEARPULSE_FIELDS(StatusReply) void fields(R& r, F&& f) {
   f("speed", r.speed);
   f("speed_kmh", r.speed_kmh);
+  f("speed_sd", r.speed_sd);
   f("source", r.source);
   f("gear", r.gear);
   f("pulses", r.pulses);

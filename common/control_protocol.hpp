@@ -186,6 +186,7 @@ struct ThreadStatus {
 struct StatusReply {
   double speed = 0.0;  // m/s
   double speed_kmh = 0.0;
+  double speed_sd = 0.0;  // m/s: the synthesis' spread about `speed` through an outage, 0 on GPS
   std::string source;
   int gear = 0;
   std::uint64_t pulses = 0;

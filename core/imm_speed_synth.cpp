@@ -115,7 +115,9 @@ SynthOutput ImmSpeedSynthesizer::step(double t, double gps_speed, double freq, b
   const int top = filter_.most_probable();
   const int gear = filter_.is_gear(top) ? top : 0;
   if (have_gps) return last_ = {gps_speed, gear, SpeedSource::kGps};
-  return last_ = {filter_.mean_speed(), gear, gear > 0 ? SpeedSource::kEngine : SpeedSource::kCoast};
+  const double speed = filter_.mean_speed();
+  return last_ = {speed, gear, gear > 0 ? SpeedSource::kEngine : SpeedSource::kCoast,
+                  filter_.speed_spread(speed)};
 }
 
 }  // namespace gearpulse

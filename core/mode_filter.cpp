@@ -397,4 +397,13 @@ double ModeFilter::mean_speed() const noexcept {
   return total > 0.0 ? std::max(v / total, 0.0) : 0.0;
 }
 
+double ModeFilter::speed_spread(double about) const noexcept {
+  double s = 0.0, total = 0.0;
+  for (int m = 0; m < modes(); ++m) {
+    const double d = track_[m].v - about;
+    s += prob_[m] * (std::max(track_[m].pvv, 0.0) + d * d), total += prob_[m];
+  }
+  return total > 0.0 ? std::sqrt(s / total) : 0.0;
+}
+
 }  // namespace gearpulse

@@ -63,6 +63,8 @@ class ModeFilter {
   [[nodiscard]] int most_probable() const noexcept;
   // The belief's mean speed: what minimises the expected error of the distance integrated from it.
   [[nodiscard]] double mean_speed() const noexcept;
+  // The belief's spread (m/s) about a speed: each mode's own uncertainty and its distance from it.
+  [[nodiscard]] double speed_spread(double about) const noexcept;
 
  private:
   using Matrix = std::array<ModeArray, kMaxModes>;

@@ -989,11 +989,18 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   if (out < 0) out = mode_;
   const double speed = (1.0 - tuning_.hedge_share) * std::max(track_[out].v, 0.0) +
                        tuning_.hedge_share * contended_speed({prob_.data(), n}, {mode_speed.data(), n});
-  if (is_gear(out)) return {speed, out, SpeedSource::kEngine};
+  double spread = 0.0, total = 0.0;
+  for (int j = 0; j < modes; ++j) {
+    const double d = mode_speed[j] - speed;
+    spread += prob_[j] * (std::max(track_[j].pvv, 0.0) + d * d);
+    total += prob_[j];
+  }
+  const double sd = total > 0.0 ? std::sqrt(spread / total) : 0.0;
+  if (is_gear(out)) return {speed, out, SpeedSource::kEngine, sd};
   // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
   // trickle pulses.
-  return {speed < tuning_.stationary_speed && tuning_.rest_output > 0.0 ? 0.0 : speed, 0,
-          SpeedSource::kCoast};
+  return {speed < tuning_.stationary_speed && tuning_.rest_output > 0.0 ? 0.0 : speed, 0, SpeedSource::kCoast,
+          sd};
 }
 
 SynthOutput SpeedSynthesizer::hold_step(double t, double gps) noexcept {

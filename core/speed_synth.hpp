@@ -68,6 +68,9 @@ struct SynthOutput {
   double speed = 0.0;  // m/s, >= 0; what the pulse output carries
   int gear = 0;        // 1 = lowest; 0 = none/unknown (clutch out, standing, no model)
   SpeedSource source = SpeedSource::kNone;
+  // m/s: the belief's spread about `speed` through an outage (each mode's speed uncertainty and how far the
+  // modes' speeds lie from it, weighed by their belief); 0 while GPS gives the speed or nothing is known.
+  double speed_sd = 0.0;
 };
 
 // Driving-physics constants (not from the paper): how road cars accelerate, how drivers shift and move

@@ -55,6 +55,7 @@ control::StatusReply status_reply(const StatusInputs& in) {
   control::StatusReply reply;
   reply.speed = p.speed;
   reply.speed_kmh = p.speed * 3.6;
+  reply.speed_sd = p.speed_sd;
   reply.source = source_name(p.source);
   reply.gear = p.gear;
   reply.pulses = p.pulses;

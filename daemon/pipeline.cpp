@@ -110,6 +110,7 @@ struct Pipeline::Impl {
   // Published by the tracker thread.
   std::atomic<std::int64_t> tracker_beat{0};
   std::atomic<double> speed{0.0};
+  std::atomic<double> speed_sd{0.0};
   std::atomic<int> gear{0};
   std::atomic<SpeedSource> source{SpeedSource::kNone};
   std::atomic<double> track_freq{kNan};
@@ -244,6 +245,7 @@ void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool t
   track_confident.store(s.confident, std::memory_order_relaxed);
   if (pulses) pulses->set_speed(s.out.speed);
   speed.store(s.out.speed, std::memory_order_relaxed);
+  speed_sd.store(s.out.speed_sd, std::memory_order_relaxed);
   gear.store(s.out.gear, std::memory_order_relaxed);
   source.store(s.out.source, std::memory_order_relaxed);
 }
@@ -444,6 +446,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   const Impl& d = *impl_;
   PipelineSnapshot s;
   s.speed = d.speed.load(std::memory_order_relaxed);
+  s.speed_sd = d.speed_sd.load(std::memory_order_relaxed);
   s.source = d.source.load(std::memory_order_relaxed);
   s.gear = d.gear.load(std::memory_order_relaxed);
   // Heartbeats of the threads that should be running, for the watchdog.

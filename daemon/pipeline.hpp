@@ -18,7 +18,8 @@ namespace gearpulse::daemon {
 
 struct PipelineSnapshot {
   // Synthesis / output.
-  double speed = 0.0;  // m/s carried by the pulse train
+  double speed = 0.0;     // m/s carried by the pulse train
+  double speed_sd = 0.0;  // m/s, the synthesis' spread about it through an outage (0 on GPS)
   SpeedSource source = SpeedSource::kNone;
   int gear = 0;
   std::uint64_t pulses = 0;

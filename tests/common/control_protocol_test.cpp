@@ -16,6 +16,7 @@ StatusReply full_status() {
   StatusReply s;
   s.speed = 12.5;
   s.speed_kmh = 45.0;
+  s.speed_sd = 0.75;
   s.source = "engine";
   s.gear = 3;
   s.pulses = 123456789012ULL;
@@ -54,6 +55,7 @@ TEST_CASE("control: a status reply is written with the fields and types of docs/
   const json expected = {
       {"speed", 12.5},
       {"speed_kmh", 45.0},
+      {"speed_sd", 0.75},
       {"source", "engine"},
       {"gear", 3},
       {"pulses", 123456789012ULL},

@@ -203,6 +203,27 @@ TEST_CASE("synth: keeps the gear and follows the frequency through an outage") {
   }
 }
 
+TEST_CASE("synth: the belief's spread is none under GPS, small in a gear, larger coasting declutched") {
+  SpeedSynthesizer synth(model_of(kHatch));
+  // GPS lost at 30 s cruising in 3rd; braking in gear, then declutched at idle and braking to a stop.
+  const auto rows = script(
+      0.0, {{0, 0.0, 8}, {1, 1.8, 3}, {2, 1.2, 8}, {3, 0.3, 15}, {3, -1.0, 5}, {0, -1.5, 10}, {0, 0.0, 20}},
+      kHatch);
+  const auto out = replay(synth, rows, 30.0);
+  for (std::size_t i = 0; i < 30; ++i)
+    CHECK(out[i].speed_sd == 0.0);
+  const std::size_t declutch = 8 + 3 + 8 + 15 + 5;
+  double in_gear = 0.0, coasting = 0.0;
+  for (std::size_t i = 32; i < declutch; ++i)
+    in_gear = std::max(in_gear, out[i].speed_sd);
+  for (std::size_t i = declutch + 1; i < declutch + 4; ++i)
+    coasting = std::max(coasting, out[i].speed_sd);
+  INFO("spread in gear " << in_gear << " m/s, coasting " << coasting << " m/s");
+  CHECK(in_gear > 0.0);
+  CHECK(in_gear < 0.5);
+  CHECK(coasting > 2.0 * in_gear);
+}
+
 TEST_CASE("synth: follows up- and downshifts inside an outage") {
   SpeedSynthesizer synth(model_of(kHatch));
   // Outage from 20 s: 2nd -> 3rd -> 4th while accelerating, then back down to 3rd while slowing.

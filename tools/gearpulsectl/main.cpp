@@ -142,7 +142,8 @@ void print_status(const control::StatusReply& s) {
   const auto& gps = s.gps;
   const auto& audio = s.audio;
   const auto& model = s.model;
-  std::cout << "speed        " << num(s.speed, 2, " m/s") << "  (" << num(s.speed_kmh, 1, " km/h") << ")\n"
+  std::cout << "speed        " << num(s.speed, 2, " m/s") << "  (" << num(s.speed_kmh, 1, " km/h") << ")"
+            << (s.speed_sd > 0.0 ? "  +/- " + num(s.speed_sd * 3.6, 1, " km/h") : std::string()) << "\n"
             << "source       " << s.source << "\n"
             << "gear         " << (s.gear > 0 ? std::to_string(s.gear) : "-") << "\n"
             << "pulses       " << s.pulses << "  at " << num(s.pulse_frequency, 1, " Hz") << "  output "
