@@ -229,3 +229,20 @@ TEST_CASE("systemd unit: systemd-analyze verify finds nothing to say about the i
   CHECK(r.status == 0);
   CHECK(r.out.empty());
 }
+
+// systemd as PID 1 of a PID and mount namespace of its own, with only this unit (systemd_namespace.sh):
+// the unit as systemd runs it, sandbox and all, on the release binary.
+TEST_CASE("systemd unit: under systemd in a namespace it starts, is restarted, and a bad config is not") {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GEARPULSE_SKIP_TEST("the unit's sandbox is checked on the release binary, not under a sanitizer's runtime");
+#endif
+  const auto r =
+      run_shell("sh '" GEARPULSE_SOURCE_DIR "/tests/daemon/systemd_namespace.sh' '" + kUnitPath + "' '" +
+                kDaemon + "' '" GEARPULSE_SOURCE_DIR "/systemd/gearpulse.sysusers.conf' 2>&1");
+  INFO(r.out);
+  if (const auto at = r.out.find("GEARPULSE_SKIP: "); at != std::string::npos)
+    GEARPULSE_SKIP_TEST(r.out.substr(at + 16));
+  CHECK(r.status == 0);
+  for (const char* check : {"started", "kill-9", "watchdog", "reload", "stop", "bad-config"})
+    CHECK(r.out.find(std::string("check ") + check + ": ok") != std::string::npos);
+}
