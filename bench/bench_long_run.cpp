@@ -459,13 +459,17 @@ int main(int argc, char** argv) {
       std::this_thread::sleep_for(std::chrono::seconds(1));
       const double s = clock.sim_now();
       const std::size_t h = std::min(hours.size() - 1, static_cast<std::size_t>(s / 3600.0));
+      // Counted before the status is asked for: the daemon's side of that connection is closed a moment
+      // after this side's.
+      const double rss = rss_mb();
+      const long fds = open_fds(), tasks = threads();
       const nlohmann::json now = ask_status(socket);
       {
         std::lock_guard lock(hours_mutex);
         Hour& hr = hours[h];
-        hr.rss_peak = std::max(hr.rss_peak, rss_mb());
-        hr.fds.push_back(open_fds());
-        hr.threads.push_back(threads());
+        hr.rss_peak = std::max(hr.rss_peak, rss);
+        hr.fds.push_back(fds);
+        hr.threads.push_back(tasks);
         hr.pairs_peak = std::max(hr.pairs_peak, now.is_object() ? now.value("training_samples", 0.0) : 0.0);
       }
       const bool over = s >= tl.length();
