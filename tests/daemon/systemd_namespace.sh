@@ -14,6 +14,7 @@
 # GEARPULSE_SKIP and exits 0 when it cannot run (not root, no unshare, no systemd).
 # Inside the namespace everything the unit writes goes to tmpfs: /run, /tmp, /var/tmp, /var/lib, a copy
 # of /etc, the daemon's and the config's directories. systemd makes its cgroups in the host's hierarchy.
+# shellcheck disable=SC2317 # the checks' functions are called through check() and the trap
 set -u
 
 if [ "${1:-}" = "--inside" ]; then
@@ -62,10 +63,10 @@ unshare --pid --mount --fork --mount-proc true 2>/dev/null || skip "cannot make 
 
 daemon_path=$(sed -n 's/^ExecStart=\([^ ]*\) .*/\1/p' "$unit")
 config_path=$(sed -n 's/^ExecStart=[^ ]* --config \([^ ]*\).*/\1/p' "$unit")
-[ -n "$daemon_path" ] && [ -n "$config_path" ] || {
+if [ -z "$daemon_path" ] || [ -z "$config_path" ]; then
   echo "check unit: FAILED (no ExecStart=DAEMON --config FILE in $unit)"
   exit 1
-}
+fi
 
 work=$(mktemp -d)
 sd=""
