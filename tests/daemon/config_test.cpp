@@ -148,7 +148,7 @@ TEST_CASE("config: relations between keys are checked") {
   CHECK(error_of("[output]\nmin_frequency = 5\nmax_frequency = 2\n")
             .starts_with("test.toml:3: output.max_frequency:"));
   // A train that never stops at standstill is one the pulse scheduler refuses at start: refused here, so
-  // --check-config (ExecStartPre) catches it instead of a daemon that exits at every restart.
+  // --check-config and the daemon's start catch it (exit 2, which the unit does not restart on).
   CHECK(error_of("[output]\nmin_frequency = 0\n").starts_with("test.toml:2: output.min_frequency:"));
   // A relation broken by the one key the file sets is reported at that key, by its line and name, not
   // against the other key of the pair, which the file does not set.
