@@ -21,7 +21,7 @@ namespace gearpulse::daemon {
 // What a status reply is made of, gathered by the daemon when it is asked.
 struct StatusInputs {
   const Config& config;
-  const std::string& config_path;
+  std::string config_path;
   PipelineSnapshot pipeline;
   ModelPtr model;
   Retrainer::Status retrainer;
