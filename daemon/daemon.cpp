@@ -110,12 +110,11 @@ void Daemon::Impl::reload() {
   const auto restart = restart_required_changes(config, next);
   for (const auto& key : restart)
     spdlog::warn("reload: {} changed; this takes effect only after a restart", key);
-  {
-    std::lock_guard lock(reload_mutex);
-    reload_error.clear();
-    restart_pending = restart;
-  }
-  // What was applied now replaces the running values; the rest stays as the threads use it.
+  // What was applied now replaces the running values (under the lock: the control thread reads them for
+  // status); the rest stays as the threads use it.
+  std::lock_guard lock(reload_mutex);
+  reload_error.clear();
+  restart_pending = restart;
   config.log = next.log;
   config.model.retrain_interval = next.model.retrain_interval;
   config.model.min_new_samples = next.model.min_new_samples;
@@ -133,7 +132,17 @@ void Daemon::Impl::reload() {
 }
 
 control::StatusReply Daemon::Impl::status() {
-  StatusInputs in{.config = config,
+  // What a reload applies, the main thread changes under the lock.
+  Config running;
+  std::string reload_said;
+  std::vector<std::string> pending;
+  {
+    std::lock_guard lock(reload_mutex);
+    running = config;
+    reload_said = reload_error;
+    pending = restart_pending;
+  }
+  StatusInputs in{.config = running,
                   .config_path = config_path,
                   .pipeline = pipeline ? pipeline->snapshot() : PipelineSnapshot{},
                   .model = model.get(),
@@ -141,15 +150,10 @@ control::StatusReply Daemon::Impl::status() {
                   .training_samples = store.size(),
                   .new_samples = store.new_samples(),
                   .problems = state.problems(),
-                  .reload_error = {},
-                  .restart_pending = {},
+                  .reload_error = std::move(reload_said),
+                  .restart_pending = std::move(pending),
                   .clients = control ? control->clients() : 0,
                   .uptime = std::chrono::duration<double>(Clock::now() - started).count()};
-  {
-    std::lock_guard lock(reload_mutex);
-    in.reload_error = reload_error;
-    in.restart_pending = restart_pending;
-  }
   return status_reply(in);
 }
 
