@@ -83,25 +83,8 @@ struct Work {
   }
 };
 
-// The true distance of the drive, trapezoidal over truth.csv (the simulator's truth, not the daemon's).
-double truth_distance_m(const fs::path& truth_csv) {
-  std::ifstream in(truth_csv);
-  std::string line;
-  std::getline(in, line);  // header t,speed,freq,gear
-  double d = 0.0, t0 = 0.0, v0 = 0.0;
-  bool first = true;
-  while (std::getline(in, line)) {
-    double t = 0.0, v = 0.0;
-    if (std::sscanf(line.c_str(), "%lf,%lf", &t, &v) != 2) continue;
-    if (!first) d += 0.5 * (v + v0) * (t - t0);
-    first = false;
-    t0 = t;
-    v0 = v;
-  }
-  return d;
-}
-
-// The true distance (m) driven between drive times a and b, from truth.csv.
+// The true distance (m) driven between drive times a and b, trapezoidal over truth.csv (the simulator's
+// truth, not the daemon's).
 double truth_distance_between(const fs::path& truth_csv, double a, double b) {
   std::ifstream in(truth_csv);
   std::string line;
@@ -117,6 +100,11 @@ double truth_distance_between(const fs::path& truth_csv, double a, double b) {
     v0 = v;
   }
   return d;
+}
+
+// The true distance of the whole drive.
+double truth_distance_m(const fs::path& truth_csv) {
+  return truth_distance_between(truth_csv, -INFINITY, INFINITY);
 }
 
 // The true speed (m/s) at drive time t, from truth.csv (the row at or before t).
