@@ -377,7 +377,8 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
 
 // The status a user reads after gpsd comes up late and after it restarts: the connection's old error is
 // gone once connected, and only connections after the first count as reconnects.
-TEST_CASE("pipeline: gpsd starting late is no reconnect and leaves no error; a restart is one reconnect") {
+TEST_CASE(
+    "pipeline: gpsd starting late is no reconnect and leaves no error, and a restart is one reconnect") {
   GpsOnly chain;
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return !pipeline.snapshot().gps_error.empty(); }, 10s));  // gpsd absent
