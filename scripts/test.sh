@@ -51,14 +51,14 @@ require_ran() {
   fi
 }
 
-# start_tests NAME DIR [ctest arguments] starts ctest on build tree DIR (its output in $logs/NAME.log);
-# finish_tests NAME MAY_SKIP waits for it, prints its output and fails on a failed test or a skip MAY_SKIP
-# does not allow.
+# start_tests NAME DIR JOBS [ctest arguments] starts ctest on build tree DIR with JOBS tests at once (its
+# output in $logs/NAME.log); finish_tests NAME MAY_SKIP waits for it, prints its output and fails on a
+# failed test or a skip MAY_SKIP does not allow.
 declare -A running
 start_tests() {
-  local name=$1 dir=$2
-  shift 2
-  ctest --test-dir "$dir" --output-on-failure --no-tests=error -j"$jobs" "$@" >"$logs/$name.log" 2>&1 &
+  local name=$1 dir=$2 parallel=$3
+  shift 3
+  ctest --test-dir "$dir" --output-on-failure --no-tests=error -j"$parallel" "$@" >"$logs/$name.log" 2>&1 &
   running[$name]=$!
 }
 finish_tests() {
@@ -72,6 +72,13 @@ finish_tests() {
   require_ran "$logs/$1.log" "$2"
 }
 
+# The paced tests (ctest label "paced": the end-to-end drive, the pipeline's, the long run) spend minutes
+# waiting on audio and fixes paced in real time and use a few percent of a core. They run all at once
+# beside the work that needs the cores (the other tests, then the sanitizer builds), which run at the
+# lowest CPU priority so that a paced test is served as soon as its audio or fix arrives.
+paced_jobs=4
+busy=(nice -n 19)
+
 git ls-files '*.cpp' '*.hpp' | xargs -r clang-format --dry-run --Werror
 stage "format check done"
 
@@ -81,11 +88,31 @@ cmake -S . -B build -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCM
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" "${launcher[@]}" >/dev/null
 cmake --build build -j"$jobs"
 stage "release build done"
-# Each tree's tests run with no build beside them: the pipeline and end-to-end tests wait on paced audio
-# and gpsd, and beside a build they missed their deadlines (a fix or a training pair within 20 s).
-start_tests release build
+start_tests release-paced build "$paced_jobs" -L paced
+start_tests release build "$jobs" -LE paced
 finish_tests release "$may_skip"
-stage "release tests (and the benches' checks) passed"
+stage "release tests but the paced ones (and the benches' checks) passed"
+
+# The sanitizer trees skip the benchmarks (built with -Werror and run above). -O1 and line tables only (-g1,
+# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g. Built while the
+# release tree's paced tests run.
+cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
+  -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
+"${busy[@]}" cmake --build build-asan -j"$jobs"
+stage "ASan+UBSan build done"
+# ThreadSanitizer: the files of the threaded parts (ctest lists only the cases of the executables built,
+# so the names' prefixes select exactly them).
+cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
+  "${launcher[@]}" >/dev/null
+"${busy[@]}" cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test \
+  pulse_thread_test log_queue_test control_test persistence_test pipeline_test audio_front_end_test gearpulsed \
+  gearpulsectl daemon_run_test
+stage "TSan build done"
+finish_tests release-paced "$may_skip"
+stage "release tree's paced tests passed"
+
 # The Debian package: built, installed, checked and purged (tests/ cannot run dpkg beside the other tests).
 bash scripts/test_package.sh build | tee "$logs/package.log"
 if grep -q GEARPULSE_SKIP "$logs/package.log"; then
@@ -94,29 +121,17 @@ if grep -q GEARPULSE_SKIP "$logs/package.log"; then
 fi
 stage "package installed, verified and purged"
 
-# The sanitizer trees skip the benchmarks (built with -Werror and run above). -O1 and line tables only (-g1,
-# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g.
-cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
-  -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
-cmake --build build-asan -j"$jobs"
-stage "ASan+UBSan build done"
 # The three-minute drive in real time runs in the release tree only: under the sanitizers its daemon runs
 # the same code the pipeline and daemon tests drive through the same ALSA, gpsd and PTY paths.
-start_tests asan build-asan -E "^e2e: pulses match"
+tsan_tests="^(ring|alsa|audio|gpsd|pulse|log queue|control|daemon|pipeline):"
+start_tests asan-paced build-asan "$paced_jobs" -L paced -E "^e2e: pulses match"
+start_tests asan build-asan "$jobs" -LE paced
 finish_tests asan "$may_skip_sanitized"
+finish_tests asan-paced "$may_skip_sanitized"
 stage "ASan+UBSan tests passed"
-
-# ThreadSanitizer: every test of the files of the threaded parts (ctest lists only the cases of the
-# executables built, so the names' prefixes select exactly them).
-cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
-  "${launcher[@]}" >/dev/null
-cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test pulse_thread_test \
-  log_queue_test control_test persistence_test pipeline_test audio_front_end_test gearpulsed gearpulsectl \
-  daemon_run_test
-stage "TSan build done"
-start_tests tsan build-tsan -R "^(ring|alsa|audio|gpsd|pulse|log queue|control|daemon|pipeline):"
+start_tests tsan-paced build-tsan "$paced_jobs" -L paced -R "$tsan_tests"
+start_tests tsan build-tsan "$jobs" -LE paced -R "$tsan_tests"
 finish_tests tsan "$may_skip_sanitized"
+finish_tests tsan-paced "$may_skip_sanitized"
 stage "TSan tests passed"
 echo "== all tests passed in $SECONDS s"
