@@ -351,6 +351,25 @@ TEST_CASE("synth: step never allocates") {
   }
   CHECK(g_allocations.load() == before);
   static_assert(noexcept(synth.step(0.0, 0.0, 0.0)));
+  // Nor does a ladder that gains a gear measured under GPS (the model lacks the car's third gear), or a
+  // model swapped in beside it.
+  std::vector<double> lacking = vehicle.theta;
+  lacking.erase(lacking.begin() + 2);
+  SpeedSynthesizer young(model_of(lacking));
+  auto young_replacement = std::make_shared<GearModel>(*model_of(lacking, 1.01));
+  young_replacement->extra = replacement->extra;
+  young_replacement->extra["revs"].erase(2);
+  int in_seen_gear = 0;
+  const long young_before = g_allocations.load();
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const auto& s = samples[i];
+    const bool outage = (i / 60) % 2 == 1;
+    const SynthOutput out = young.step(s.t, outage ? kMissing : s.speed, s.freq);
+    in_seen_gear += out.source == SpeedSource::kEngine && out.gear == 0 ? 1 : 0;
+    if (i == samples.size() / 2) young.set_model(young_replacement);
+  }
+  CHECK(g_allocations.load() == young_before);
+  CHECK(in_seen_gear > 0);
 }
 
 TEST_CASE("synth: a step it cannot take after a swap to a shorter ladder names no gear the ladder lacks") {
