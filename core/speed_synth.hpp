@@ -208,7 +208,8 @@ class SpeedSynthesizer {
   // fix held the speed to a value up to a second old and pulled it back at every hop).
   SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true) noexcept;
 
-  // Forget all state except the model (e.g. after the engine was off).
+  // Forget all state except the model and the gears measured under GPS that it lacks (e.g. after the
+  // engine was off).
   void reset() noexcept;
 
   [[nodiscard]] const SynthOutput& last() const noexcept { return last_; }
