@@ -527,6 +527,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(idle_on_move),     GEARPULSE_FIELD(pull_transfer),
     GEARPULSE_FIELD(gps_accel_clip),   GEARPULSE_FIELD(lost_gear_cost),
     GEARPULSE_FIELD(launch_fade),      GEARPULSE_FIELD(rest_output),
+    GEARPULSE_FIELD(seen_gear_fixes),
 };
 #undef GEARPULSE_FIELD
 
@@ -592,6 +593,7 @@ constexpr Rule kRules[] = {
     {"lost gear cost: a gear fades without revs", "lost_gear_cost=0"},
     {"launch fade: no move-off at speed", "launch_fade=0"},
     {"rest output: slow declutched output is 0", "rest_output=0"},
+    {"seen gears: a steady ratio off the model is a gear", "seen_gear_fixes=inf"},
 };
 
 std::string figure(double med, double p95) {

@@ -5,6 +5,8 @@
 #include <limits>
 #include <numbers>
 
+#include "core/estimator.hpp"
+
 namespace gearpulse {
 namespace {
 
@@ -18,6 +20,16 @@ constexpr double kMinGearShare = 0.02;   // no gear is ever ruled out by its tra
 constexpr double kStandingVar = 0.01;    // (m/s)^2: a car at rest is at rest
 constexpr double kMovingOffSpeed = 2.0;  // m/s: below this a declutched car may be moving off
 constexpr double kRollKnown = 3.0;       // s of rolling declutched seen before its idle counts (rolling_idle)
+
+// The model's thetas in `buf` (empty without a model).
+std::span<const double> thetas_of(const GearModel* model,
+                                  std::array<double, GearModel::kMaxGears>& buf) noexcept {
+  std::size_t n = 0;
+  if (model != nullptr)
+    for (; n < model->gears.size() && n < buf.size(); ++n)
+      buf[n] = model->gears[n].theta;
+  return {buf.data(), n};
+}
 
 // Running mean and variance with a bounded memory (in samples).
 void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
@@ -102,7 +114,7 @@ void SpeedSynthesizer::keep_covariance(Track& x) noexcept {
 }
 
 SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const SynthTuning& tuning)
-    : tuning_(tuning) {
+    : tuning_(tuning), seen_(tuning.seen_gear_fixes) {
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
   load_model(model_.get());
   reset();
@@ -111,13 +123,19 @@ SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const
 void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   gears_ = model ? static_cast<int>(model->gears.size()) : 0;
   theta_.fill(0.0);
+  theta_se_.fill(0.0);
+  model_gear_.fill(0);
   weight_.fill(0.0);
-  double total = 0.0;
   for (int j = 1; j <= gears_; ++j) {
-    theta_[j] = model->gears[static_cast<std::size_t>(j - 1)].theta;
-    weight_[j] = std::max(model->gears[static_cast<std::size_t>(j - 1)].weight, kMinGearShare);
-    total += weight_[j];
+    const Gear& g = model->gears[static_cast<std::size_t>(j - 1)];
+    theta_[j] = g.theta;  // its standard error stays 0: a fit's is well under the 1 % floor on a reading
+    weight_[j] = std::max(g.weight, kMinGearShare);
+    model_gear_[j] = j;
   }
+  insert_seen_gears();
+  double total = 0.0;
+  for (int j = 1; j <= gears_; ++j)
+    total += weight_[j];
   const double clutch = model && model->outlier_weight > 0.0 ? std::clamp(model->outlier_weight, 0.05, 0.5)
                                                              : kDefaultClutchShare;
   for (int j = 1; j <= gears_; ++j)
@@ -135,6 +153,35 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   load_habits(model);
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
+}
+
+// The gears seen under GPS that the model lacks (seen_) join its ladder in theta order, each used for its
+// share of the steady fixes seen, while there is room and the model has a ladder at all.
+void SpeedSynthesizer::insert_seen_gears() noexcept {
+  if (gears_ == 0) return;
+  std::array<SeenGears::Gear, SeenGears::kCapacity> seen{};
+  const int n = seen_.seen(seen);
+  for (int k = 0; k < n && gears_ < kMaxGears; ++k) {
+    const SeenGears::Gear& g = seen[static_cast<std::size_t>(k)];
+    int at = gears_ + 1;  // ladder position it takes
+    bool known = false;
+    for (int j = 1; j <= gears_; ++j) {
+      known = known || std::abs(std::log(g.theta / theta_[j])) < 2.0 * kGearWindow;
+      if (at > gears_ && g.theta < theta_[j]) at = j;
+    }
+    if (known) continue;
+    for (int j = gears_; j >= at; --j) {
+      theta_[j + 1] = theta_[j];
+      theta_se_[j + 1] = theta_se_[j];
+      weight_[j + 1] = weight_[j];
+      model_gear_[j + 1] = model_gear_[j];
+    }
+    theta_[at] = g.theta;
+    theta_se_[at] = g.std_error;
+    weight_[at] = std::max(g.share, kMinGearShare);
+    model_gear_[at] = 0;
+    ++gears_;
+  }
 }
 
 // What the fit saw of this engine and driver beyond the ratios: the warm idle (also the idle until GPS shows
@@ -176,7 +223,7 @@ void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
     }
   }
   const auto revs = extra.find("revs");
-  if (revs == extra.end() || !revs->is_array() || revs->size() != static_cast<std::size_t>(gears_)) return;
+  if (revs == extra.end() || !revs->is_array() || revs->size() != model->gears.size()) return;
   // Each gear's revs are shrunk toward those of all gears by a prior worth kPriorSamples samples: a gear
   // seen on a few samples (a short log, a first gear) says little, and one seen on none says what the
   // driver's revs say at large, rather than leaving the gears that were seen to outscore it.
@@ -184,7 +231,8 @@ void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
   ModeArray mean{}, var{}, count{};
   double total = 0.0, pooled_mean = 0.0;
   for (int j = 1; j <= gears_; ++j) {
-    const nlohmann::json& r = (*revs)[static_cast<std::size_t>(j - 1)];
+    if (model_gear_[j] == 0) continue;  // a gear seen under GPS: the driver's revs at large (below)
+    const nlohmann::json& r = (*revs)[static_cast<std::size_t>(model_gear_[j] - 1)];
     const double m = number(r, "mean_log"), sd = number(r, "sd_log"), n = number(r, "samples");
     if (!std::isfinite(m) || !std::isfinite(sd) || sd < 0.0 || !std::isfinite(n) || !(n > 0.0)) continue;
     mean[j] = m;
@@ -231,12 +279,45 @@ void SpeedSynthesizer::reset() noexcept {
 
 bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
+  model_ = std::move(model);
+  std::array<double, kMaxGears> thetas{};
+  seen_.forget_learned(thetas_of(model_.get(), thetas));
+  change_ladder(true);
+  return true;
+}
+
+// A gear seen under GPS that the model lacks (seen_) joins the ladder or leaves it.
+void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
+  if (gears_ == 0 || model_ == nullptr) return;
+  constexpr double kIdleSds = 3.0;  // revs within this many sds of the idle are idling
+  const double idle_ceiling = idle_count_ > 0.0 ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
+  std::array<double, kMaxGears> thetas{};
+  if (seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas))) change_ladder(false);
+}
+
+// Loads the ladder of the model in use and the gears seen that it lacks, carrying the belief over from the
+// ladder before. new_model: the model changed (else only the gears seen did, and every gear of the old
+// ladder is still in the new one, or has left it).
+void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
   const int old_gears = gears_;
   const ModeArray old_theta = theta_, old_prob = prob_, old_age = age_;
   const TrackArray old_track = track_;
-  model_ = std::move(model);
   load_model(model_.get());
-  if (gears_ != old_gears) {
+  if (!new_model) {
+    // The same gears keep what was learned of them (their shift revs) under their new numbers.
+    std::array<int, kModes> to{};  // new number of each old gear, 0 = gone
+    for (int i = 1; i <= old_gears; ++i)
+      for (int j = 1; j <= gears_; ++j)
+        if (theta_[j] == old_theta[i]) to[i] = j;
+    for (ModeArray* a : {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_,
+                         &gear_down_count_}) {
+      const ModeArray old = *a;
+      a->fill(0.0);
+      for (int i = 1; i <= old_gears; ++i)
+        if (to[i] > 0) (*a)[to[i]] = old[i];
+    }
+    sure_gear_ = sure_gear_ > 0 && sure_gear_ <= old_gears ? to[sure_gear_] : 0;
+  } else if (gears_ != old_gears) {
     // Shift revs learned per gear belong to the old ladder.
     for (ModeArray* a : {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_,
                          &gear_down_count_})
@@ -277,14 +358,15 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   }
   normalise();
   mode_ = map_mode();
-  // The last output (what step() repeats for a step it cannot take) names a gear of the new ladder.
-  if (last_.gear > gears_) last_.gear = is_gear(mode_) ? mode_ : 0;
-  return true;
+  // The last output (what step() repeats for a step it cannot take) names a gear of the new model.
+  if (last_.gear > (model_ ? static_cast<int>(model_->gears.size()) : 0)) last_.gear = model_gear(mode_);
 }
 
 double SpeedSynthesizer::mode_probability(int mode) const noexcept {
   if (mode == 0) return prob_[0] + (gears_ > 0 ? prob_[static_cast<std::size_t>(launch_mode())] : 0.0);
-  return mode >= 1 && mode <= gears_ ? prob_[static_cast<std::size_t>(mode)] : 0.0;
+  for (int j = 1; j <= gears_ && mode > 0; ++j)
+    if (model_gear_[j] == mode) return prob_[j];
+  return 0.0;
 }
 
 double SpeedSynthesizer::idle_freq() const noexcept {
@@ -718,7 +800,9 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   // In gear: freq = v / theta (eq. (3)); a Kalman update on h = 1 / theta.
   const double h = 1.0 / theta_[mode];
   const double sf = freq_sigma(freq);
-  const double r = sf * sf;
+  // The gear's theta is known to its standard error: the reading of a gear seen in few fixes is trusted less.
+  const double se = freq * theta_se_[mode] / theta_[mode];
+  const double r = sf * sf + se * se;
   const double s = h * h * x.pvv + r;
   const double innovation = freq - h * x.v;
   const double kv = x.pvv * h / s, ka = x.pva * h / s;
@@ -973,7 +1057,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   if (have_gps) {
     learn(dt, gps, freq, gps_new);
     learn_shift(freq);
-    return {gps, gps >= tuning_.stationary_speed && is_gear(mode_) ? mode_ : 0, SpeedSource::kGps};
+    return {gps, gps >= tuning_.stationary_speed ? model_gear(mode_) : 0, SpeedSource::kGps};
   }
   roll_span_ = -1.0;  // a flat stretch of revs is one GPS saw whole
   // Each mode's speed as its history has it (which orders the belief for the output's mode) and as the
@@ -996,7 +1080,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
     total += prob_[j];
   }
   const double sd = total > 0.0 ? std::sqrt(spread / total) : 0.0;
-  if (is_gear(out)) return {speed, out, SpeedSource::kEngine, sd};
+  if (is_gear(out)) return {speed, model_gear(out), SpeedSource::kEngine, sd};
   // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
   // trickle pulses.
   return {speed < tuning_.stationary_speed && tuning_.rest_output > 0.0 ? 0.0 : speed, 0, SpeedSource::kCoast,
@@ -1042,6 +1126,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     out = hold_step(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN());
   } else {
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
+    if (have_gps && gps_new) observe_gear(gps_speed, freq);
   }
   last_ = out;
   return out;

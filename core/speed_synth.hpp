@@ -30,6 +30,11 @@
 // little above its median (the most probable one while it holds 0.6 of it), leaning halfway toward the
 // contenders' speed. No look-ahead: every output depends only on past input.
 //
+// The filter runs on the model's gears and on the gears it has measured under GPS that the model lacks: a
+// steady ratio of GPS speed to revs off every gear of the model (seen_gears.hpp), carried, with its standard
+// error in the gear's reading, until a model has that gear; such a gear has no number in the model, and an
+// output in it says gear 0.
+//
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
 #include <array>
@@ -40,6 +45,7 @@
 
 #include "core/gear_model.hpp"
 #include "core/sample.hpp"
+#include "core/seen_gears.hpp"
 
 namespace gearpulse {
 
@@ -174,6 +180,12 @@ struct SynthTuning {
   double launch_fade = 1.0;
   // 1: declutched slower than stationary_speed, the output is 0 (0: the belief's speed, however slow).
   double rest_output = 1.0;
+  // Steady fixes in a row (GPS speed and revs agreeing on one ratio at a steady speed, seen_gears.hpp) at a
+  // ratio off every gear of the model before the synthesis carries that ratio as a gear the model lacks
+  // (inf: never). A young model lacks the gears not yet driven, a fit may drop a rarely used gear. Two such
+  // fixes after a first are a gear held for two readings' time at one speed: no shift or clutch biting
+  // holds the revs at a gear's ratio that long.
+  double seen_gear_fixes = 2.0;
 };
 
 class SpeedSynthesizer {
@@ -196,12 +208,13 @@ class SpeedSynthesizer {
   // fix held the speed to a value up to a second old and pulled it back at every hop).
   SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true) noexcept;
 
-  // Forget all state except the model (e.g. after the engine was off).
+  // Forget all state except the model and the gears measured under GPS that it lacks (e.g. after the
+  // engine was off).
   void reset() noexcept;
 
   [[nodiscard]] const SynthOutput& last() const noexcept { return last_; }
-  // Current belief in a mode: 0 = no gear engaged (declutched or moving off), 1..gears = that gear (0 for
-  // gears the model lacks).
+  // Current belief in a mode: 0 = no gear engaged (declutched or moving off), 1..gears = that gear of the
+  // model (0 for gears the model lacks).
   [[nodiscard]] double mode_probability(int mode) const noexcept;
   // Learned idle frequency (Hz), NaN until GPS has seen the car standing with the engine tracked.
   [[nodiscard]] double idle_freq() const noexcept;
@@ -219,6 +232,11 @@ class SpeedSynthesizer {
 
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
+  void insert_seen_gears() noexcept;
+  void change_ladder(bool new_model) noexcept;
+  void observe_gear(double gps, double freq) noexcept;
+  // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
+  [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }
   void load_habits(const GearModel* model) noexcept;
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
@@ -250,7 +268,12 @@ class SpeedSynthesizer {
   SynthTuning tuning_;
   std::shared_ptr<const GearModel> model_;
   int gears_ = 0;
+  // The ladder the filter runs on: the model's gears and the gears seen under GPS that it lacks
+  // (seen_), ascending; per gear its theta, the standard error of it and its number in the model.
   ModeArray theta_{};
+  ModeArray theta_se_{};
+  std::array<int, kModes> model_gear_{};
+  SeenGears seen_;
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
   double sigma_v_ = 0.0;

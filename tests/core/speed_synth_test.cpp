@@ -351,6 +351,25 @@ TEST_CASE("synth: step never allocates") {
   }
   CHECK(g_allocations.load() == before);
   static_assert(noexcept(synth.step(0.0, 0.0, 0.0)));
+  // Nor does a ladder that gains a gear measured under GPS (the model lacks the car's third gear), or a
+  // model swapped in beside it.
+  std::vector<double> lacking = vehicle.theta;
+  lacking.erase(lacking.begin() + 2);
+  SpeedSynthesizer young(model_of(lacking));
+  auto young_replacement = std::make_shared<GearModel>(*model_of(lacking, 1.01));
+  young_replacement->extra = replacement->extra;
+  young_replacement->extra["revs"].erase(2);
+  int in_seen_gear = 0;
+  const long young_before = g_allocations.load();
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const auto& s = samples[i];
+    const bool outage = (i / 60) % 2 == 1;
+    const SynthOutput out = young.step(s.t, outage ? kMissing : s.speed, s.freq);
+    in_seen_gear += out.source == SpeedSource::kEngine && out.gear == 0 ? 1 : 0;
+    if (i == samples.size() / 2) young.set_model(young_replacement);
+  }
+  CHECK(g_allocations.load() == young_before);
+  CHECK(in_seen_gear > 0);
 }
 
 TEST_CASE("synth: a step it cannot take after a swap to a shorter ladder names no gear the ladder lacks") {
@@ -1120,4 +1139,71 @@ TEST_CASE("synth: a quick move-off straight into second gear is seen under GPS a
     CHECK(out[i].gear == 2);
     CHECK(out[i].speed == Approx(rows[i].speed).margin(1.0 * kKmh));
   }
+}
+
+TEST_CASE("synth: an outage in a gear the model lacks follows the ratio GPS showed in it") {
+  // The model lacks fourth gear (a young model, or a fit that missed it). The car moves off, climbs to
+  // fourth and cruises in it with GPS, then GPS is lost while it stays in fourth.
+  const std::vector<double> lacking = {kHatch[0], kHatch[1], kHatch[2], kHatch[4]};
+  std::vector<Row> rows;
+  for (int k = 0; k < 20; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  const double drive_from = 20.0, outage_from = 80.0;
+  for (Row r : script(0.0,
+                      {{1, 1.5, 3},
+                       {0, -0.2, 1},
+                       {2, 1.2, 4},
+                       {0, -0.2, 1},
+                       {3, 1.0, 5},
+                       {0, -0.2, 1},
+                       {4, 0.5, 4},
+                       {4, 0.0, 41},
+                       {4, 0.3, 15},
+                       {4, -0.3, 15}},
+                      kHatch)) {
+    r.t += drive_from;
+    rows.push_back(r);
+  }
+  const auto distance = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model_of(lacking), tuning);
+    const auto out = replay(synth, rows, outage_from);
+    double synthesized = 0.0, driven = 0.0;
+    for (std::size_t i = 1; i < rows.size(); ++i) {
+      if (rows[i].t <= outage_from) continue;
+      INFO("t = " << rows[i].t << ": truth " << rows[i].speed * 3.6 << " km/h, synthesized "
+                  << out[i].speed * 3.6 << " in gear " << out[i].gear);
+      const double dt = rows[i].t - rows[i - 1].t;
+      synthesized += out[i].speed * dt;
+      driven += rows[i].speed * dt;
+    }
+    // The outage runs on a gear the model does not number.
+    CHECK(out.back().source == SpeedSource::kEngine);
+    CHECK(out.back().gear == 0);
+    return synthesized / driven - 1.0;
+  };
+  CHECK(std::abs(distance({})) < 0.01);
+  // Without the gear measured under GPS, the outage takes one of the model's.
+  gearpulse::SynthTuning without;
+  without.seen_gear_fixes = std::numeric_limits<double>::infinity();
+  SpeedSynthesizer blind(model_of(lacking), without);
+  const auto out = replay(blind, rows, outage_from);
+  CHECK(std::abs(out.back().speed / rows.back().speed - 1.0) > 0.1);
+}
+
+TEST_CASE("synth: a gear measured under GPS gives way to the model's own once a model has it") {
+  const std::vector<double> lacking = {kHatch[0], kHatch[1], kHatch[2], kHatch[4]};
+  SpeedSynthesizer synth(model_of(lacking));
+  replay(synth, script(16.0, {{4, 0.0, 30}}, kHatch), 1e9);
+  // The belief is in a gear, and in none of the model's.
+  double in_model = 0.0;
+  for (int g = 1; g <= 4; ++g)
+    in_model += synth.mode_probability(g);
+  CHECK(synth.mode_probability(0) < 0.1);
+  CHECK(in_model < 0.1);
+  CHECK(synth.last().gear == 0);
+  REQUIRE(synth.set_model(model_of(kHatch)));
+  for (double t = 30.0; t < 35.0; t += 1.0)
+    synth.step(t, 16.0, 16.0 / kHatch[3]);
+  CHECK(synth.last().gear == 4);
+  CHECK(synth.mode_probability(4) > 0.9);
 }
