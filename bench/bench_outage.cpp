@@ -513,8 +513,20 @@ void fold(const std::vector<std::vector<Sample>>& train, const std::vector<std::
   for (const auto& l : train)
     pooled.insert(pooled.end(), l.begin(), l.end());
   const auto model = std::make_shared<const GearModel>(gearpulse::fit_gear_model(pooled, {}).model);
-  for (const auto& l : test)
-    w.cases.push_back({w.lines.size() - 1, 0, w.lines.back().key, rows_of(l), model, false, {}, 0});
+  // Each replayed log is named KEY#N (N counts the line's logs), for --worst and --debug.
+  for (const auto& l : test) {
+    std::size_t n = 0;
+    for (const Case& c : w.cases)
+      n += c.line == w.lines.size() - 1 ? 1 : 0;
+    w.cases.push_back({w.lines.size() - 1,
+                       0,
+                       w.lines.back().key + "#" + std::to_string(n),
+                       rows_of(l),
+                       model,
+                       false,
+                       {},
+                       0});
+  }
 }
 
 std::pair<std::vector<std::vector<Sample>>, std::vector<std::vector<Sample>>> halves(std::vector<Sample> all,
@@ -734,6 +746,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(idle_on_move),     GEARPULSE_FIELD(pull_transfer),
     GEARPULSE_FIELD(gps_accel_clip),   GEARPULSE_FIELD(lost_gear_cost),
     GEARPULSE_FIELD(launch_fade),      GEARPULSE_FIELD(rest_output),
+    GEARPULSE_FIELD(idle_braking),
 };
 #undef GEARPULSE_FIELD
 
@@ -799,6 +812,7 @@ constexpr Rule kRules[] = {
     {"lost gear cost: a gear fades without revs", "lost_gear_cost=0"},
     {"launch fade: no move-off at speed", "launch_fade=0"},
     {"rest output: slow declutched output is 0", "rest_output=0"},
+    {"idle braking: declutched at idle brakes as learned", "idle_braking=0"},
 };
 
 std::string figure(double med, double p95) {
