@@ -23,10 +23,15 @@
 // the per-outage distance error, median / p95, on every real car and cadence of the set, and its change;
 // --rule SETTING (repeatable) keeps only the rules switched off by that setting. --fits prints each
 // simulated vehicle's fitted thetas beside the true ones on stderr; --fit-minutes fits the simulated
-// vehicles' models on a mixed drive of M minutes instead of 40.
+// vehicles' models on a mixed drive of M minutes instead of 40. --worst PCT lists every outage of the
+// daemon's synthesis erring beyond PCT % with its failure mode (outage_cause) and, per line, each mode's
+// share of the error. --debug CAR STYLE FROM TO prints both filters' beliefs per row from FROM to TO s of
+// that drive (CAR a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3
+// highway).
+//
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
-//                     [--fit-minutes M] [DATA_DIR]
+//                     [--fit-minutes M] [--worst PCT] [--debug CAR STYLE FROM TO] [DATA_DIR]
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -69,6 +74,7 @@ int g_debug_style = -1;                 // --cadence K: only the K-th simulated 
 bool g_fits = false;                    // --fits: each fitted ladder beside the true one, on stderr
 double g_fit_minutes = 40.0;            // --fit-minutes M: the length of the drive the model is fitted on
 bool g_candidate = true;                // the candidate IMM filter runs beside the daemon's synthesis
+double g_worst = 0.0;                   // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -79,21 +85,157 @@ struct Row {
   int gear = -1;  // the true gear where known (simulated drives; 0 = clutch out), for the trace
 };
 
+// One outage of the daemon's synthesis erring beyond --worst: where it was and what went wrong.
+struct WorstOutage {
+  std::string line, car;
+  int style = 0;
+  double start = 0.0;                  // s from the drive's start
+  double err = 0.0, signed_err = 0.0;  // %, |distance error| and its sign (+: too far)
+  double keep = 0.0, hindsight = 0.0;  // % of the baselines
+  std::string cause, detail;
+};
+
 struct Results {
   std::vector<double> dist[kMethods];   // per outage, %
   std::vector<double> speed[kMethods];  // per sample, km/h
+  std::vector<std::string> cause;       // per outage (--worst), the failure mode of the daemon's synthesis
+  std::vector<WorstOutage> worst;       // with --worst, the outages beyond it
   void append(const Results& o) {
     for (int m = 0; m < kMethods; ++m) {
       dist[m].insert(dist[m].end(), o.dist[m].begin(), o.dist[m].end());
       speed[m].insert(speed[m].end(), o.speed[m].begin(), o.speed[m].end());
     }
+    cause.insert(cause.end(), o.cause.begin(), o.cause.end());
+    worst.insert(worst.end(), o.worst.begin(), o.worst.end());
   }
 };
 
+// What the daemon's synthesis did at one row of an outage, for --worst.
+struct Step {
+  double speed = 0.0;
+  int gear = 0;
+};
+
+// The model's gear (index + 1) whose theta lies within `tolerance` of `theta` in ratio, 0 if none.
+int gear_near(const GearModel& m, double theta, double tolerance) {
+  int best = 0;
+  double err = tolerance;
+  for (std::size_t i = 0; i < m.gears.size(); ++i) {
+    const double e = std::abs(std::log(m.gears[i].theta / theta));
+    if (e < err) best = static_cast<int>(i) + 1, err = e;
+  }
+  return best;
+}
+
+// The failure mode of one outage (rows [begin, end) of a drive, `steps` the synthesis' output per row):
+// the moment the error sets in (the first row from which the output stays more than 15 % and 1.5 m/s off
+// the truth for 3 s, most rows of it) and what the car did around it. Returns {mode, detail}.
+std::pair<std::string, std::string> outage_cause(const std::vector<Row>& rows, const std::vector<Step>& steps,
+                                                 std::size_t begin, std::size_t end, const GearModel& model,
+                                                 const std::vector<double>& true_theta) {
+  constexpr double kHold = 3.0;  // s the error must last
+  const auto off = [&](std::size_t i) {
+    const double e = std::abs(steps[i].speed - rows[i].truth);
+    return e > std::max(1.5, 0.15 * rows[i].truth);
+  };
+  std::size_t onset = end;
+  for (std::size_t i = begin; i < end && onset == end; ++i) {
+    if (!off(i)) continue;
+    std::size_t n = 0, bad = 0, j = i;
+    for (; j < end && rows[j].t - rows[i].t < kHold; ++j, ++n)
+      bad += off(j) ? 1 : 0;
+    if (bad >= 0.8 * static_cast<double>(n) && (j < end || n > 0)) onset = i;
+  }
+  const double t0 = rows[begin].t;
+  if (onset == end) return {"no lasting error (many small ones)", ""};
+  const double t_on = rows[onset].t;
+  const bool sim = rows[begin].gear >= 0;
+  char detail[160];
+  std::snprintf(detail, sizeof detail, "%sfrom +%.1f s: out %.1f (g%d) truth %.1f km/h (g%d)",
+                t_on - t0 < kHold ? "at outage start, " : "", t_on - t0, steps[onset].speed * kMsToKmh,
+                steps[onset].gear, rows[onset].truth * kMsToKmh, rows[onset].gear);
+  // The window around the onset: 5 s before it (reaching back before the outage) to 1 s after.
+  std::size_t w0 = onset;
+  while (w0 > 0 && rows[w0 - 1].t >= t_on - 5.0)
+    --w0;
+  std::size_t w1 = onset;
+  while (w1 + 1 < rows.size() && rows[w1 + 1].t <= t_on + 1.0)
+    ++w1;
+  double min_truth = rows[onset].truth, declutched = 0.0;
+  int jumps = 0, skip = 0;
+  for (std::size_t i = w0; i <= w1; ++i) {
+    min_truth = std::min(min_truth, rows[i].truth);
+    const double dt = i + 1 < rows.size() ? std::min(rows[i + 1].t - rows[i].t, 5.0) : 0.0;
+    if (rows[i].gear == 0 && rows[i].truth > 1.0) declutched += dt;
+  }
+  // Gears engaged through the window (clutch-out rows skipped): shifts and skips.
+  int last_gear = 0;
+  for (std::size_t i = w0; i <= w1; ++i) {
+    if (rows[i].gear <= 0) continue;
+    if (last_gear > 0 && rows[i].gear != last_gear) {
+      ++jumps;
+      if (std::abs(rows[i].gear - last_gear) >= 2) ++skip;
+    }
+    last_gear = rows[i].gear;
+  }
+  bool launched = false;  // the car stood within 10 s before the onset and moves at it
+  for (std::size_t i = onset; i > 0 && rows[i].t >= t_on - 10.0; --i)
+    if (rows[i].truth < 0.3 && rows[onset].truth > 1.0) launched = true;
+  // Braking: from 3 s before the onset to 2 s after it the truth lost more than 2 m/s, or it stands in the
+  // window.
+  double fastest = 0.0;
+  bool braking = min_truth < 0.3 && !launched;
+  for (std::size_t i = onset; i > 0 && rows[i].t >= t_on - 3.0; --i)
+    fastest = std::max(fastest, rows[i].truth);
+  for (std::size_t i = onset; i < rows.size() && rows[i].t <= t_on + 2.0; ++i)
+    braking = braking || rows[i].truth < fastest - 2.0;
+  const bool too_fast = steps[onset].speed > rows[onset].truth;
+  const int g_out = steps[onset].gear;
+  if (sim) {
+    // The fit: the true gear at the onset (or the last engaged) has no gear of the model, or the output's
+    // gear is none of the car's.
+    int g_true = rows[onset].gear;
+    for (std::size_t i = onset; g_true <= 0 && i > w0; --i)
+      g_true = rows[i - 1].gear;
+    constexpr double kTolerance = 0.04;
+    const int g_model = g_true > 0 && static_cast<std::size_t>(g_true) <= true_theta.size()
+                            ? gear_near(model, true_theta[static_cast<std::size_t>(g_true - 1)], kTolerance)
+                            : -1;
+    if (g_model == 0) return {"fit lacks the engaged gear", detail};
+    if (g_out > 0) {
+      bool real_gear = false;
+      for (const double th : true_theta)
+        real_gear =
+            real_gear ||
+            std::abs(std::log(model.gears[static_cast<std::size_t>(g_out - 1)].theta / th)) < kTolerance;
+      if (!real_gear) return {"fit invented the output's gear", detail};
+    }
+    if (braking && too_fast && g_out == 0) return {"braking declutched: deceleration lost", detail};
+    if (launched) return {"launch", detail};
+    if (braking) return {"braking: other", detail};
+    const int g_now = rows[onset].gear > 0 ? g_model : 0;  // the model's gear engaged at the onset, 0: none
+    if (g_out > 0 && g_now > 0 && g_out != g_now) {
+      if (skip > 0) return {"wrong gear after a skip shift", detail};
+      if (jumps > 0) return {"wrong gear after a shift", detail};
+      return {"wrong gear, steady driving", detail};
+    }
+    if (g_out == 0 && g_now > 0) return {"in gear, read as declutched", detail};
+    if (declutched >= 1.5 || g_now == 0) return {"declutched: speed drifted", detail};
+    return {"other", detail};
+  }
+  if (braking && too_fast) return {"braking (real log)", detail};
+  if (launched) return {"launch (real log)", detail};
+  return {"moving (real log)", detail};
+}
+
 // Replays rows with outages; a row repeating an OBD logger's held rpm in an outage brings nothing (as
 // `gearpulse replay` does).
+// `where` names the case for --worst (line, car) and `true_theta` is the simulated car's ladder (empty for a
+// real log).
 void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>& shared,
-            const gearpulse::SynthTuning& tuning, bool live, Results& res) {
+            const gearpulse::SynthTuning& tuning, bool live, Results& res,
+            const std::array<std::string, 2>& where = {}, int style = 0,
+            const std::vector<double>& true_theta = {}) {
   if (rows.empty()) return;
   const GearModel& model = *shared;
   gearpulse::SpeedSynthesizer synth(shared, tuning);
@@ -107,10 +249,22 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
   bool was_out = false;
   gearpulse::SynthOutput o, o_imm;
   gearpulse::LogReplayer replayer(synth);
-  const auto close_outage = [&] {
-    if (dist[kMethods] >= kMinDistance)
+  std::vector<Step> steps(g_worst > 0.0 ? rows.size() : 0);
+  std::size_t out_begin = 0;  // first row of the current outage
+  const auto close_outage = [&](std::size_t out_end) {
+    if (dist[kMethods] >= kMinDistance) {
       for (int m = 0; m < kMethods; ++m)
         res.dist[m].push_back(100.0 * std::abs(dist[m] - dist[kMethods]) / dist[kMethods]);
+      if (g_worst > 0.0) {
+        auto [cause, detail] = outage_cause(rows, steps, out_begin, out_end, model, true_theta);
+        const double err = res.dist[0].back();
+        res.cause.push_back(cause);
+        if (err > g_worst)
+          res.worst.push_back({where[0], where[1], style, rows[out_begin].t - t0, err,
+                               100.0 * (dist[0] - dist[kMethods]) / dist[kMethods], res.dist[2].back(),
+                               res.dist[4].back(), std::move(cause), std::move(detail)});
+      }
+    }
     std::fill(std::begin(dist), std::end(dist), 0.0);
   };
   for (std::size_t i = 0; i < rows.size(); ++i) {
@@ -136,11 +290,16 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
       for (int m = 0; m < flt.modes(); ++m)
         std::fprintf(stderr, " %.2f(%.1f~%.1f)", flt.probability(m), flt.track(m).v,
                      std::sqrt(flt.track(m).pvv));
+      // The daemon's synthesis: its output and its belief (0 = no gear, then gears 1..M).
+      std::fprintf(stderr, " || synth %.1f g%d p:", o.speed, o.gear);
+      for (int m = 0; m <= static_cast<int>(model.gears.size()); ++m)
+        std::fprintf(stderr, " %.2f", synth.mode_probability(m));
       std::fprintf(stderr, "\n");
     }
     if (std::isfinite(r.freq)) last_freq = r.freq;
+    if (!steps.empty()) steps[i] = {o.speed, o.gear};
     if (!out) {
-      if (was_out) close_outage();
+      if (was_out) close_outage(i);
       was_out = false;
       if (std::isfinite(gps)) {
         last_gps = gps;
@@ -148,6 +307,7 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
       }
       continue;
     }
+    if (!was_out) out_begin = i;
     was_out = true;
     const double f = last_freq;
     value[0] = o.speed;
@@ -169,7 +329,7 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
                    f, o_imm.gear, o_imm.speed * kMsToKmh, value[2] * kMsToKmh, value[4] * kMsToKmh,
                    imm.mode_probability(o_imm.gear), r.gear, o.speed * kMsToKmh);
   }
-  if (was_out) close_outage();
+  if (was_out) close_outage(rows.size());
 }
 
 void print_header() {
@@ -228,7 +388,9 @@ struct Case {
   std::string car;  // for --trace and --debug
   std::vector<Row> rows;
   std::shared_ptr<const GearModel> model;
-  bool live = false;  // stepped at every row as the daemon does, else as `gearpulse replay` does
+  bool live = false;               // stepped at every row as the daemon does, else as `gearpulse replay` does
+  std::vector<double> true_theta;  // the simulated car's ladder (--worst), empty for a real log
+  int seed = 0;                    // the simulated drive's seed (1..N, 1001..), 0 for a real log
 };
 
 struct Workload {
@@ -249,8 +411,10 @@ Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning) {
     Results r;
     if (g_trace != nullptr) std::fprintf(g_trace, "# %s %d\n", c.car.c_str(), c.style);
     const double debug_to = g_debug_to;
-    if (c.car != g_debug_car || c.style != g_debug_style) g_debug_to = 0.0;
-    replay(c.rows, c.model, tuning, c.live, r);
+    // A simulated case is named CAR/sSEED; --debug CAR takes every seed of the car.
+    const std::string name = c.seed > 0 ? c.car + "/s" + std::to_string(c.seed) : c.car;
+    if ((c.car != g_debug_car && name != g_debug_car) || c.style != g_debug_style) g_debug_to = 0.0;
+    replay(c.rows, c.model, tuning, c.live, r, {w.lines[c.line].label, name}, c.style, c.true_theta);
     g_debug_to = debug_to;
     o.styles[c.line][static_cast<std::size_t>(c.style)].append(r);
     o.all[c.line].append(r);
@@ -273,6 +437,49 @@ void print_outcome(const Workload& w, const Outcome& o) {
       print_line(line.label, o.all[l]);
     }
     report(line.key, o.all[l]);
+  }
+}
+
+// --worst: every outage of the daemon's synthesis beyond g_worst %, worst first, with its failure mode;
+// then per line, per failure mode: its outages, those beyond g_worst and beyond the line's p95, and the p95
+// the line would have were that mode's outages as good as the hindsight gear.
+void print_worst(const Workload& w, const Outcome& o) {
+  for (std::size_t l = 0; l < w.lines.size(); ++l) {
+    const Results& r = o.all[l];
+    if (r.cause.size() != r.dist[0].size() || r.dist[0].empty()) continue;
+    std::vector<WorstOutage> worst = r.worst;
+    std::sort(worst.begin(), worst.end(), [](const auto& a, const auto& b) { return a.err > b.err; });
+    const double p95 = quantile(r.dist[0], 0.95);
+    std::printf("\n%s: %zu outages, p95 %.2f %%, %zu beyond %g %% (error, keep gear, hindsight %%)\n",
+                w.lines[l].label.c_str(), r.dist[0].size(), p95, worst.size(), g_worst);
+    for (const WorstOutage& x : worst)
+      std::printf("  %+7.1f %6.1f %5.1f  %-16s %-8s t %6.0f  %-36s %s\n", x.signed_err, x.keep, x.hindsight,
+                  x.car.c_str(), kStyleNames[x.style], x.start, x.cause.c_str(), x.detail.c_str());
+    std::vector<std::string> causes = r.cause;
+    std::sort(causes.begin(), causes.end());
+    causes.erase(std::unique(causes.begin(), causes.end()), causes.end());
+    // The error beyond the target (5 %), summed over the outages: each mode's share of it.
+    constexpr double kTarget = 5.0;
+    double excess = 0.0;
+    for (const double e : r.dist[0])
+      excess += std::max(e - kTarget, 0.0);
+    std::printf("  %-44s %5s %6s %5s %13s %13s\n", "failure mode", "outs", ">worst", ">p95", "% err > 5 %",
+                "p95 if fixed");
+    for (const std::string& c : causes) {
+      int n = 0, beyond = 0, above = 0;
+      double mine = 0.0;
+      std::vector<double> fixed = r.dist[0];
+      for (std::size_t k = 0; k < r.cause.size(); ++k) {
+        if (r.cause[k] != c) continue;
+        ++n;
+        beyond += r.dist[0][k] > g_worst ? 1 : 0;
+        above += r.dist[0][k] > p95 ? 1 : 0;
+        mine += std::max(r.dist[0][k] - kTarget, 0.0);
+        fixed[k] = r.dist[4][k];
+      }
+      std::printf("  %-44s %5d %6d %5d %13.1f %13.2f\n", c.c_str(), n, beyond, above,
+                  excess > 0.0 ? 100.0 * mine / excess : 0.0, quantile(fixed, 0.95));
+    }
   }
 }
 
@@ -306,8 +513,20 @@ void fold(const std::vector<std::vector<Sample>>& train, const std::vector<std::
   for (const auto& l : train)
     pooled.insert(pooled.end(), l.begin(), l.end());
   const auto model = std::make_shared<const GearModel>(gearpulse::fit_gear_model(pooled, {}).model);
-  for (const auto& l : test)
-    w.cases.push_back({w.lines.size() - 1, 0, w.lines.back().key, rows_of(l), model, false});
+  // Each replayed log is named KEY#N (N counts the line's logs), for --worst and --debug.
+  for (const auto& l : test) {
+    std::size_t n = 0;
+    for (const Case& c : w.cases)
+      n += c.line == w.lines.size() - 1 ? 1 : 0;
+    w.cases.push_back({w.lines.size() - 1,
+                       0,
+                       w.lines.back().key + "#" + std::to_string(n),
+                       rows_of(l),
+                       model,
+                       false,
+                       {},
+                       0});
+  }
 }
 
 std::pair<std::vector<std::vector<Sample>>, std::vector<std::vector<Sample>>> halves(std::vector<Sample> all,
@@ -486,7 +705,7 @@ void simulated(bool report_set, int seeds, int randoms, Workload& w) {
                                               sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
           w.cases.push_back({w.lines.size() - 1, k, car.name,
                              observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k),
-                             model, c.obd_refresh == 0.0});
+                             model, c.obd_refresh == 0.0, car.theta, static_cast<int>(seed)});
           ++k;
         }
       }
@@ -527,7 +746,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(idle_on_move),     GEARPULSE_FIELD(pull_transfer),
     GEARPULSE_FIELD(gps_accel_clip),   GEARPULSE_FIELD(lost_gear_cost),
     GEARPULSE_FIELD(launch_fade),      GEARPULSE_FIELD(rest_output),
-    GEARPULSE_FIELD(seen_gear_fixes),
+    GEARPULSE_FIELD(seen_gear_fixes),  GEARPULSE_FIELD(idle_braking),
 };
 #undef GEARPULSE_FIELD
 
@@ -594,6 +813,7 @@ constexpr Rule kRules[] = {
     {"launch fade: no move-off at speed", "launch_fade=0"},
     {"rest output: slow declutched output is 0", "rest_output=0"},
     {"seen gears: a steady ratio off the model is a gear", "seen_gear_fixes=inf"},
+    {"idle braking: declutched at idle brakes as learned", "idle_braking=0"},
 };
 
 std::string figure(double med, double p95) {
@@ -693,6 +913,8 @@ int main(int argc, char** argv) {
       ablation = true;
     } else if (a == "--rule" && i + 1 < argc) {
       only.emplace_back(argv[++i]);
+    } else if (a == "--worst" && i + 1 < argc) {
+      g_worst = std::atof(argv[++i]);
     } else if (a == "--fits") {
       g_fits = true;
     } else if (a == "--fit-minutes" && i + 1 < argc) {
@@ -717,7 +939,9 @@ int main(int argc, char** argv) {
     g_candidate = false;
     ablate(w, tuning, only);
   } else {
-    print_outcome(w, evaluate(w, tuning));
+    const Outcome o = evaluate(w, tuning);
+    print_outcome(w, o);
+    if (g_worst > 0.0) print_worst(w, o);
   }
   std::printf("\n(%.1f s)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());

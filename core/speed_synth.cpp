@@ -736,6 +736,16 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
     constexpr double kCoastPrior = 10.0;  // fixes
     mean = std::min(
         (coast_count_ * coast_mean_ + kCoastPrior * tuning_.coast_accel) / (coast_count_ + kCoastPrior), 0.0);
+    // With the engine at idle the clutch is not out for a shift (the free revs of a shift fall from one
+    // gear's line toward the next's, or are blipped): the driver rolls or brakes to a stop, and how hard is
+    // his habit. The car slows at the deceleration GPS showed in that state, shrunk toward the one
+    // declutched at large by a prior worth a few fixes.
+    if (at_idle_ && tuning_.idle_braking > 0.0) {
+      constexpr double kIdleCoastPrior = 3.0;  // s of fixes
+      mean = std::min((idle_coast_count_ * idle_coast_mean_ + kIdleCoastPrior * mean) /
+                          (idle_coast_count_ + kIdleCoastPrior),
+                      0.0);
+    }
     // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
     const double stopping =
         tuning_.stop_speed > 0.0 ? std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0) : 0.0;
@@ -848,6 +858,14 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq, bool gps_new) n
       const double a = std::clamp((gps - last_gps_) / fix_dt, -4.0, 1.0);
       coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
       coast_mean_ += (a - coast_mean_) / coast_count_;
+      // At idle, from fixes at least half a second apart (over less, the change of speed is mostly the
+      // receiver's noise, and clipped unevenly above it taught a braking no car did), each counting for
+      // the share of a second it covers (idle_coast_count_ is in seconds).
+      if (at_idle_ && fix_dt >= 0.5) {
+        const double w = std::min(fix_dt, 1.0);
+        idle_coast_count_ = std::min(idle_coast_count_ + w, kCoastMemory);
+        idle_coast_mean_ += w * (a - idle_coast_mean_) / idle_coast_count_;
+      }
     }
     last_gps_ = gps;
     last_fix_t_ = t_;
@@ -910,6 +928,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
   score_revs_habit(freq);
+  // The engine at idle: no further above the idle it is held at rolling than a driver lugs a gear (lugging).
+  at_idle_ = std::isfinite(freq) && idle_count_ > 0.0 && freq < rolling_idle() + 2.5 * idle_sd();
   // How fast the revs climb, from kFreeRise (0) to twice it (1): only at the tracker's short steps, where
   // one reading to the next is shorter than a shift, so the climb is the engine's and not a shift's
   // between two readings. A driver who shifts every second or so otherwise had each gear outweigh the

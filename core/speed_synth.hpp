@@ -186,6 +186,10 @@ struct SynthTuning {
   // fixes after a first are a gear held for two readings' time at one speed: no shift or clutch biting
   // holds the revs at a gear's ratio that long.
   double seen_gear_fixes = 2.0;
+  // 1: declutched on the move with the engine at idle (not in a shift), the car slows at the deceleration
+  // GPS showed in that state, a driver's habit of braking to a stop or rolling (0: at the deceleration
+  // learned declutched at large, shifts included, whatever the revs).
+  double idle_braking = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -298,6 +302,9 @@ class SpeedSynthesizer {
   ModeArray revs_mean_{}, revs_sd_{}, revs_habit_{};
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
   double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
+  // The same with the engine at idle (idle_braking), and whether this step's frequency is at idle.
+  double idle_coast_mean_ = 0.0, idle_coast_count_ = 0.0;
+  bool at_idle_ = false;
   // Engine frequency rolling declutched above the standing idle (rolling_idle()): its mean, the s seen,
   // and the current flat stretch (s, -1 = none; its first frequency and GPS speed).
   double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;

@@ -1207,3 +1207,55 @@ TEST_CASE("synth: a gear measured under GPS gives way to the model's own once a 
   CHECK(synth.last().gear == 4);
   CHECK(synth.mode_probability(4) > 0.9);
 }
+
+TEST_CASE("synth: declutched at idle in an outage the car slows as GPS showed it braking to stops") {
+  // Stands at the light (the idle is learned), then four times: moves off and climbs to third, the clutch
+  // out for a second at each upshift (revs between the gears' lines, the speed kept), and brakes to a stop
+  // with the clutch out and the engine at idle, at 1.5 m/s^2. GPS is lost as the last drive reaches third
+  // gear: the last stop is braked in the outage as the others were under GPS, not coasted as the car
+  // coasts through its shifts.
+  std::vector<Row> rows;
+  double t = 0.0, v = 0.0;
+  const auto add = [&](int gear, double accel, int seconds, double freq) {
+    for (int k = 0; k < seconds; ++k, t += 1.0) {
+      v = std::max(0.0, v + accel);
+      rows.push_back({t, v, gear > 0 ? v / kHatch[static_cast<std::size_t>(gear - 1)] : freq, gear});
+    }
+  };
+  add(0, 0.0, 20, kIdle);
+  std::size_t third = 0;
+  for (int k = 0; k < 4; ++k) {
+    add(1, 1.8, 3, 0.0);
+    add(0, 0.0, 1, 0.5 * (v / kHatch[0] + v / kHatch[1]));
+    add(2, 1.2, 4, 0.0);
+    add(0, 0.0, 1, 0.5 * (v / kHatch[1] + v / kHatch[2]));
+    third = rows.size();
+    add(3, 0.3, 5, 0.0);
+    add(0, -1.5, 8, kIdle);
+    add(0, 0.0, 10, kIdle);
+  }
+  const std::size_t declutch = third + 5;
+  // Distance over the stop, synthesized against driven (relative error), and the s from the declutch to
+  // the output's rest.
+  const auto run = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model_of(kHatch), tuning);
+    const auto out = replay(synth, rows, rows[third].t);
+    double synthesized = 0.0, driven = 0.0, rest = -1.0;
+    for (std::size_t i = declutch; i < rows.size(); ++i) {
+      synthesized += out[i].speed;
+      driven += rows[i].speed;
+      if (rest < 0.0 && out[i].speed == 0.0) rest = rows[i].t - rows[declutch].t;
+    }
+    return std::pair{synthesized / driven - 1.0, rest};
+  };
+  const auto [braked, braked_rest] = run({});
+  gearpulse::SynthTuning coasting;
+  coasting.idle_braking = 0.0;
+  const auto [coasted, coasted_rest] = run(coasting);
+  INFO("distance over the stop: " << 100.0 * braked << " % off braked as learned (at rest after "
+                                  << braked_rest << " s), " << 100.0 * coasted << " % coasted ("
+                                  << coasted_rest << " s)");
+  CHECK(std::abs(braked) < 0.75 * std::abs(coasted));
+  CHECK(braked_rest > 0.0);
+  CHECK((coasted_rest < 0.0 || braked_rest < coasted_rest));
+}
