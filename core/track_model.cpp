@@ -99,18 +99,20 @@ void TrackModel::predict() noexcept {
   std::copy(loglik_.begin(), loglik_.end(), post_.begin());
 }
 
-bool TrackModel::update() noexcept {
+bool TrackModel::update(double hidden) noexcept {
+  hidden = std::clamp(hidden, 0.0, 1.0);
   const double top = std::max(0.0, *std::max_element(loglik_.begin(), loglik_.end()));
-  double total = post_absent_ * std::exp(-top);
+  const double blank = std::exp(-top);  // likelihood ratio 1 (a window that says nothing), scaled
+  double total = post_absent_ * blank;
   for (std::size_t i = 0; i < post_.size(); ++i) {
-    post_[i] *= std::exp(loglik_[i] - top);
+    post_[i] *= (1.0 - hidden) * std::exp(loglik_[i] - top) + hidden * blank;
     total += post_[i];
   }
   if (!(total > 0.0) || !std::isfinite(total)) {
     reset();
     return false;
   }
-  post_absent_ *= std::exp(-top) / total;
+  post_absent_ *= blank / total;
   for (double& p : post_)
     p /= total;
   return true;
