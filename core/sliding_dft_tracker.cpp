@@ -35,8 +35,8 @@ constexpr double kRhoMemory = 0.7;
 // A window hides the engine's line (a gear shift's smear, a line masked by another or faded below the
 // evidence's level prior) with this probability when the line stands at the default level; a louder line
 // is hidden less often, by the square of its per-bin SNR over the default (a loud line that vanishes has
-// stopped or moved, and the track lets it go as fast as without the allowance). Without it a track at
-// -5 dB passed to "engine absent" on the many windows where its line faded and restarted anywhere, often
+// stopped or moved, and the track lets it go as fast as without the allowance). Otherwise a track at
+// -5 dB passes to "engine absent" on the many windows where its line fades and restarts anywhere, often
 // on twice the engine. Chosen on the generated scenes' tuning set (see docs/tracker.md).
 constexpr double kHiddenShare = 0.3;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
