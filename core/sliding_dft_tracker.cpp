@@ -38,7 +38,7 @@ constexpr double kRhoMemory = 0.7;
 // stopped or moved, and the track lets it go as fast as without the allowance). Otherwise a track at
 // -5 dB passes to "engine absent" on the many windows where its line fades and restarts anywhere, often
 // on twice the engine. Chosen on the generated scenes' tuning set (see docs/tracker.md).
-constexpr double kHiddenShare = 0.45;
+constexpr double kHiddenShare = 0.3;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
 constexpr double kToneFitLevel = ToneMap::kFitLevel;
 constexpr double kToneCandidate = 0.05;  // probability from which the estimate's line is a candidate
