@@ -28,6 +28,7 @@ constexpr double kConfident = 0.8;
 TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin, double df_hz, int lobe)
     : hop_s_(config.hop_s),
       max_slew_(config.max_slew_hz_per_s),
+      temper_(std::min(1.0, config.hop_s / config.window_s)),
       first_(first_bin),
       last_(last_bin),
       df_(df_hz),
@@ -99,18 +100,26 @@ void TrackModel::predict() noexcept {
   std::copy(loglik_.begin(), loglik_.end(), post_.begin());
 }
 
-bool TrackModel::update() noexcept {
-  const double top = std::max(0.0, *std::max_element(loglik_.begin(), loglik_.end()));
-  double total = post_absent_ * std::exp(-top);
+bool TrackModel::update(double hidden) noexcept {
+  hidden = std::clamp(hidden, 0.0, 1.0);
+  // Logs in the window's terms (the hop's ratio over the temper), less the largest ratio `top`; a window
+  // that says nothing has ratio 1 (log 0).
+  const double top = std::max(0.0, *std::max_element(loglik_.begin(), loglik_.end())) / temper_;
+  const double log_shown = std::log1p(-hidden);
+  const double log_blank = (hidden > 0.0 ? std::log(hidden) : -INFINITY) - top;
+  double total = post_absent_ * std::exp(-temper_ * top);
   for (std::size_t i = 0; i < post_.size(); ++i) {
-    post_[i] *= std::exp(loglik_[i] - top);
+    const double a = log_shown + loglik_[i] / temper_ - top;
+    const double m = std::max(a, log_blank);
+    const double log_window = m + std::log1p(std::exp(std::min(a, log_blank) - m));
+    post_[i] *= std::exp(temper_ * log_window);
     total += post_[i];
   }
   if (!(total > 0.0) || !std::isfinite(total)) {
     reset();
     return false;
   }
-  post_absent_ *= std::exp(-top) / total;
+  post_absent_ *= std::exp(-temper_ * top) / total;
   for (double& p : post_)
     p /= total;
   return true;

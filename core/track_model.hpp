@@ -6,8 +6,9 @@
 // Per hop: predict() spreads the previous posterior (a continuing line moves within a steady, a slew or a
 // shift gate that follows the track's drift; the engine stops, starts or is found elsewhere; a line found
 // again after the track lost it is found near the latest tracked estimate), the caller writes every
-// state's log likelihood ratio into evidence(), update() applies it, and observe() tells the model what
-// the hop reported. Sized at construction; nothing allocates, locks or throws afterwards.
+// state's log likelihood ratio into evidence(), update() applies it (allowing for a window that hides the
+// line), and observe() tells the model what the hop reported. Sized at construction; nothing allocates, locks
+// or throws afterwards.
 #include <vector>
 
 #include "core/sliding_dft_tracker.hpp"
@@ -22,9 +23,16 @@ class TrackModel {
   void reset() noexcept;
   void predict() noexcept;
   // Per state (first_bin + i): this hop's log likelihood ratio, written by the caller before update().
+  // Windows that overlap (a hop shorter than the window) are not independent evidence: a hop's ratio is
+  // the window's raised to hop / window (the temper).
   [[nodiscard]] std::vector<double>& evidence() noexcept { return loglik_; }
-  // Bayes update with evidence(); false (the model reset) when it is degenerate.
-  bool update() noexcept;
+  // Bayes update with evidence(), when the window hides the engine's line with probability `hidden` (a
+  // gear shift's smear, a line masked by another or faded below the evidence's level prior): a hidden
+  // window says nothing about where the engine is, so each state's likelihood ratio is the mixture
+  // (1 - hidden) e^E + hidden for the window's E (tempered as the evidence is). One window then takes at
+  // most ln(1 / hidden) from a line the track has followed. False (the model reset) when the posterior
+  // is degenerate.
+  bool update(double hidden) noexcept;
 
   [[nodiscard]] int mode_bin() const noexcept;
   // Posterior probability that the engine's fundamental is within 5 % (or one resolution bin) of f.
@@ -40,6 +48,7 @@ class TrackModel {
 
  private:
   double hop_s_, max_slew_;
+  double temper_ = 1.0;  // hop / window, at most 1
   int first_, last_;
   double df_;
   int lobe_;
