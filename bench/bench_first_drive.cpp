@@ -92,7 +92,13 @@ Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretraine
       model = nullptr;
       synth.set_model(nullptr);
     }
-    if (fitted.empty()) return;
+    if (fitted.empty()) {
+      if (verbose)
+        std::printf("  no ladder at %.0f s (%zu pairs, moving %.0f s; model in use: %zu gears): %s\n",
+                    pairs.back().t, pairs.size(), summary.moving_time, model ? model->gears.size() : 0,
+                    fitted.reason.c_str());
+      return;
+    }
     if (model)
       fitted = gd::keep_seen_gears(*model, std::move(fitted), pairs, schedule.settings().cluster_pairs);
     if (!model && run.first_model_drive < 0.0) {

@@ -218,14 +218,19 @@ class LadderJudge {
         return {smaller, "no valley between gear clusters (a continuum, as from a CVT or clutch slip)"};
     }
     // A gear drives the engine above idle over a range of engine speeds: through it, engine speed rises
-    // with road speed up to the next shift. A cluster whose samples stay within half an idle speed above
-    // idle (nine in ten of them), or within a narrow band, is a slipping clutch holding the engine at a
-    // set speed while the car crawls (a jam) or the engine idling while the car rolls. A low gear also
-    // used at a crawl still reaches well above idle on every launch.
+    // with road speed up to the next shift. A cluster of crawl speeds whose samples stay within half an
+    // idle speed above idle (nine in ten of them), or within a narrow band, is a slipping clutch holding
+    // the engine at a set speed while the car crawls (a jam) slower than first gear carries it at those
+    // revs. A low gear also used at a crawl still reaches well above idle on every launch. First gear at
+    // idle moves a car at 1.3-2.6 m/s (overall ratios of 12-16:1, tyres of 1.9-2 m, idle at 600-1000 rpm),
+    // so under 4 m/s at 1.5 idles: a cluster whose median speed is faster is no crawl, but a gear cruised
+    // at low revs, as a young drive shows a gear held at one speed while a cold engine still idles high.
+    constexpr double kCrawlSpeed = 4.0;  // m/s
     if (idle_freq_ > 0.0) {
       for (int i = 0; i < m; ++i) {
         const FreqSpread f = freq_spread(p, i);
-        if (f.median < 1.5 * idle_freq_ && (f.p90 < 1.5 * idle_freq_ || f.p90 < 1.12 * f.p10))
+        if (f.speed_median < kCrawlSpeed && f.median < 1.5 * idle_freq_ &&
+            (f.p90 < 1.5 * idle_freq_ || f.p90 < 1.12 * f.p10))
           return {i, "a cluster at idle frequency (clutch slip)"};
       }
     }
@@ -261,24 +266,29 @@ class LadderJudge {
   }
 
   struct FreqSpread {
-    double p10 = 0.0;
+    double p10 = 0.0;  // Hz
     double median = 0.0;
     double p90 = 0.0;
+    double speed_median = 0.0;  // m/s
   };
 
   FreqSpread freq_spread(const MixtureParams& p, int gear) const {
     // Samples close to the gear line (within 3 of its standard deviations) stand for the component.
     std::vector<double> freqs;
+    std::vector<double> speeds;
     const double var = p.theta[gear] * p.theta[gear] * p.sigma_s * p.sigma_s + p.sigma_v * p.sigma_v;
     const double limit = 3.0 * std::sqrt(var);
     for (std::size_t k = 0; k < work_.size(); ++k) {
-      if (work_.v[k] > 0.3 && std::abs(work_.v[k] - p.theta[gear] * work_.s[k]) < limit)
+      if (work_.v[k] > 0.3 && std::abs(work_.v[k] - p.theta[gear] * work_.s[k]) < limit) {
         freqs.push_back(work_.s[k]);
+        speeds.push_back(work_.v[k]);
+      }
     }
     if (freqs.empty()) return {};
     std::sort(freqs.begin(), freqs.end());
     const std::size_t n = freqs.size() - 1;
-    return {freqs[n / 10], freqs[n / 2], freqs[n - n / 10]};
+    std::nth_element(speeds.begin(), speeds.begin() + static_cast<std::ptrdiff_t>(n / 2), speeds.end());
+    return {freqs[n / 10], freqs[n / 2], freqs[n - n / 10], speeds[n / 2]};
   }
 
   const MixtureData& work_;

@@ -168,6 +168,66 @@ TEST_CASE("learning: a few minutes in 2nd and 3rd only fit 2 gears with their th
   }
 }
 
+TEST_CASE("learning: a gear cruised at low revs while a cold engine idles high is a gear, not a slip") {
+  // A first drive: 40 s standing with the engine idling 40 % high (cold), then 2nd gear through its revs
+  // in turn with 4th held at one cruise (revs in a narrow band, 1.4 times that idle, at 8-9 m/s): the
+  // cruise is no crawl, and the fit gives both gears.
+  const double second = hatch_thetas()[1], fourth = hatch_thetas()[3];
+  std::mt19937 rng(3);
+  std::normal_distribution<double> speed_noise(0.0, 0.05), freq_noise(0.0, 0.2);
+  constexpr double kColdIdle = 1.4 * 13.3;
+  std::vector<Sample> pairs;
+  double t = 0.0;
+  for (; t < 40.0; t += 1.0)
+    pairs.push_back({t, 0.0, kColdIdle + freq_noise(rng)});
+  for (int turn = 0; turn < 4; ++turn) {
+    for (double end = t + 30.0; t < end; t += 1.0) {
+      const double f = 20.0 + 20.0 * 0.5 * (1.0 + std::sin(0.2 * t));
+      pairs.push_back({t, second * f + speed_noise(rng), f + freq_noise(rng)});
+    }
+    for (double end = t + 45.0; t < end; t += 1.0) {
+      const double f = 1.4 * kColdIdle * (1.0 + 0.015 * std::sin(0.1 * t));
+      pairs.push_back({t, fourth * f + speed_noise(rng), f + freq_noise(rng)});
+    }
+  }
+  REQUIRE(fourth * 1.4 * kColdIdle > 8.0);
+  const GearModel m = make_estimator_fitter()(pairs);
+  INFO(m.reason);
+  REQUIRE(m.gears.size() == 2);
+  CHECK(m.gears[0].theta == Approx(second).epsilon(0.01));
+  CHECK(m.gears[1].theta == Approx(fourth).epsilon(0.01));
+}
+
+TEST_CASE("learning: a crawl on a slipping clutch at idle revs gives no gear") {
+  // 2nd and 4th gear through their revs in turn with a crawl at 1.2-1.8 m/s, the engine held at 1.15 idles
+  // on a slipping clutch: the crawl is no gear of the fit.
+  const double second = hatch_thetas()[1], fourth = hatch_thetas()[3];
+  std::mt19937 rng(4);
+  std::normal_distribution<double> speed_noise(0.0, 0.05), freq_noise(0.0, 0.2);
+  constexpr double kIdle = 13.3;
+  std::vector<Sample> pairs;
+  double t = 0.0;
+  for (; t < 40.0; t += 1.0)
+    pairs.push_back({t, 0.0, kIdle + freq_noise(rng)});
+  for (int turn = 0; turn < 4; ++turn) {
+    for (const double theta : {second, fourth}) {
+      for (double end = t + 30.0; t < end; t += 1.0) {
+        const double f = 20.0 + 20.0 * 0.5 * (1.0 + std::sin(0.2 * t));
+        pairs.push_back({t, theta * f + speed_noise(rng), f + freq_noise(rng)});
+      }
+    }
+    for (double end = t + 30.0; t < end; t += 1.0)
+      pairs.push_back({t, 1.5 + 0.3 * std::sin(0.3 * t) + speed_noise(rng), 1.15 * kIdle + freq_noise(rng)});
+  }
+  const double crawl = 1.5 / (1.15 * kIdle);
+  REQUIRE(std::abs(std::log(crawl / second)) > 0.3);
+  const GearModel m = make_estimator_fitter()(pairs);
+  INFO(m.reason);
+  REQUIRE(m.gears.size() == 2);
+  CHECK(m.gears[0].theta == Approx(second).epsilon(0.01));
+  CHECK(m.gears[1].theta == Approx(fourth).epsilon(0.01));
+}
+
 TEST_CASE("learning: ten minutes of a CVT give no one-gear model") {
   // It holds one ratio at cruise, a line as sharp as a gear's; the continuum below it tells it apart.
   const sim::Vehicle cvt = sim::vehicle_preset("cvt");
