@@ -51,14 +51,24 @@ require_ran() {
   fi
 }
 
+# The paced tests (ctest label "paced": the end-to-end drive, the pipeline's, the long run) spend minutes
+# waiting on audio and fixes paced in real time and use a few percent of a core. They run all at once
+# beside the work that needs the cores (the other tests, the sanitizer builds), which runs at the lowest CPU
+# priority so that a paced test is served as soon as its audio or fix arrives (run at the same priority,
+# a sanitized pipeline test once missed its outage's first seconds).
+paced_jobs=4
+busy=(nice -n 19)
+
 # start_tests NAME DIR JOBS [ctest arguments] starts ctest on build tree DIR with JOBS tests at once (its
-# output in $logs/NAME.log); finish_tests NAME MAY_SKIP waits for it, prints its output and fails on a
-# failed test or a skip MAY_SKIP does not allow.
+# output in $logs/NAME.log), at the lowest CPU priority unless NAME ends in "-paced" (below); finish_tests
+# NAME MAY_SKIP waits for it, prints its output and fails on a failed test or a skip MAY_SKIP does not allow.
 declare -A running
 start_tests() {
-  local name=$1 dir=$2 parallel=$3
+  local name=$1 dir=$2 parallel=$3 runner=()
   shift 3
-  ctest --test-dir "$dir" --output-on-failure --no-tests=error -j"$parallel" "$@" >"$logs/$name.log" 2>&1 &
+  if [[ $name != *-paced ]]; then runner=("${busy[@]}"); fi
+  "${runner[@]}" ctest --test-dir "$dir" --output-on-failure --no-tests=error -j"$parallel" "$@" \
+    >"$logs/$name.log" 2>&1 &
   running[$name]=$!
 }
 finish_tests() {
@@ -71,13 +81,6 @@ finish_tests() {
   fi
   require_ran "$logs/$1.log" "$2"
 }
-
-# The paced tests (ctest label "paced": the end-to-end drive, the pipeline's, the long run) spend minutes
-# waiting on audio and fixes paced in real time and use a few percent of a core. They run all at once
-# beside the work that needs the cores (the other tests, then the sanitizer builds), which run at the
-# lowest CPU priority so that a paced test is served as soon as its audio or fix arrives.
-paced_jobs=4
-busy=(nice -n 19)
 
 git ls-files '*.cpp' '*.hpp' | xargs -r clang-format --dry-run --Werror
 stage "format check done"
