@@ -161,6 +161,49 @@ std::optional<IdleEstimate> estimate_rolling_idle(const MixtureData& data, const
   return out;
 }
 
+std::optional<DecelEstimate> estimate_idle_braking(const MixtureData& data, const GearModel& model,
+                                                   const IdleEstimate& idle,
+                                                   const std::optional<IdleEstimate>& rolling) {
+  if (data.t.size() != data.size()) return std::nullopt;
+  const double base = rolling ? std::max(idle.freq, rolling->freq) : idle.freq;
+  const double ceiling = base + idle_braking::kBandSds * idle_spread(idle.freq, idle.sd);
+  const auto at_idle = [&](std::size_t k) { return data.s[k] > 0.0 && data.s[k] < ceiling; };
+  // Each pair runs from one sample to the first at least kMinGap later (a log sampled faster than that, as
+  // at 10 Hz, gives pairs of several rows), the next pair from where it ended, all rows between at idle
+  // revs. Declutched means no one gear's line holds both ends: braking at idle revs, the speed crosses
+  // every gear's line at idle in turn (one sample may lie on one), while in gear the two stay on its line.
+  double sum = 0.0, seconds = 0.0;
+  std::size_t pairs = 0;
+  std::optional<std::size_t> from;
+  for (std::size_t k = 0; k < data.size(); ++k) {
+    const bool in_state = at_idle(k);
+    if (!in_state || (from && (data.t[k] < data.t[*from] || data.t[k] - data.t[*from] > kMaxDecelGap))) {
+      from.reset();
+      if (!in_state) continue;
+    }
+    if (!from) {
+      if (data.v[k] > kMovingSpeed) from = k;
+      continue;
+    }
+    const double dt = data.t[k] - data.t[*from];
+    if (dt < idle_braking::kMinGap) continue;
+    const auto line_from = gear_on_line(model, data.v[*from], data.s[*from]);
+    const bool declutched = !line_from || line_from != gear_on_line(model, data.v[k], data.s[k]);
+    if (declutched) {
+      // Clipped as under GPS: no car brakes harder than 4 m/s^2 in a habit, nor gains speed declutched.
+      const double a = std::clamp((data.v[k] - data.v[*from]) / dt, -4.0, 1.0);
+      const double w = std::min(dt, 1.0);
+      sum += w * a;
+      seconds += w;
+      ++pairs;
+    }
+    from.reset();
+    if (data.v[k] > kMovingSpeed) from = k;
+  }
+  if (pairs == 0) return std::nullopt;
+  return DecelEstimate{sum / seconds, seconds, pairs};
+}
+
 GearModel finish_model(const MixtureData& data, const MixtureParams& p, const std::string& method,
                        const GradientLayout& layout) {
   GearModel model;
@@ -365,8 +408,13 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     result.model.extra["revs"] = std::move(revs);
     // The revs the engine is held at while the car rolls declutched, above its standing idle.
     if (idle) {
-      if (const auto rolling = detail::estimate_rolling_idle(data, result.model, *idle, kMinIdleSamples))
+      const auto rolling = detail::estimate_rolling_idle(data, result.model, *idle, kMinIdleSamples);
+      if (rolling)
         result.model.extra["rolling_idle"] = {{"freq", rolling->freq}, {"samples", rolling->samples}};
+      // How hard this driver slows declutched with the engine at idle: the synthesis' prior for it.
+      if (const auto braking = detail::estimate_idle_braking(data, result.model, *idle, rolling))
+        result.model.extra["idle_braking"] = {
+            {"accel", braking->accel}, {"seconds", braking->seconds}, {"samples", braking->samples}};
     }
   }
   return result;

@@ -44,6 +44,22 @@ struct GearRevs {
                                                                 const IdleEstimate& idle,
                                                                 std::size_t min_samples);
 
+// The deceleration declutched at idle on the move (idle_braking in gear_model.hpp): the mean of the change of
+// speed over successive pairs of samples kMinGap to kMaxDecelGap apart, the first faster than kMovingSpeed,
+// both and all rows between with revs in the idle band (above `rolling`'s frequency when it is higher than
+// the standing idle's), not both on one gear's line; each pair counts for the share of a second it covers,
+// as under GPS.
+struct DecelEstimate {
+  double accel = 0.0;       // m/s^2
+  double seconds = 0.0;     // s: the pairs' weight
+  std::size_t samples = 0;  // pairs
+};
+inline constexpr double kMaxDecelGap = 3.0;  // s: a pair further apart may span a stop and a start
+[[nodiscard]] std::optional<DecelEstimate> estimate_idle_braking(const MixtureData& data,
+                                                                 const GearModel& model,
+                                                                 const IdleEstimate& idle,
+                                                                 const std::optional<IdleEstimate>& rolling);
+
 // OBD loggers poll speed and rpm at different instants and repeat each value until its next poll: the
 // log then pairs a fresh value of one with a held value of the other. holds_values tells such a log (most
 // moving rows bring one new value of the two); interpolate_held replaces every held value by the straight

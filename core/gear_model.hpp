@@ -45,6 +45,16 @@ inline constexpr double kFlat = 0.05;     // relative
 inline constexpr double kCeiling = 1.6;   // x the standing idle
 }  // namespace rolling_idle
 
+// Braking declutched at idle (extra.idle_braking): declutched on the move with the engine at idle, the
+// driver rolls or brakes to a stop. The fit (over a log) and the speed synthesis (under GPS, live) tell the
+// state by one rule: revs below the rolling idle (or the standing one) plus kBandSds idle spreads, and
+// measure its deceleration between speeds at least kMinGap apart (over less, the change of speed is mostly
+// the receiver's noise).
+namespace idle_braking {
+inline constexpr double kBandSds = 2.5;  // no further above the idle than a driver lugs a gear
+inline constexpr double kMinGap = 0.5;   // s
+}  // namespace idle_braking
+
 // Spread of the idle frequency, bounded to 3-10 % of it so that a cold start's high idle or a single blip
 // cannot make it cover the whole driving range (nor a perfectly steady idle make it vanish).
 [[nodiscard]] inline double idle_spread(double idle, double sd) noexcept {

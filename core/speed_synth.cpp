@@ -222,6 +222,16 @@ void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
       roll_time_ = kRollKnown;
     }
   }
+  // How hard this driver slowed declutched at idle in the fit's logs, until GPS shows it in this drive: worth
+  // the seconds the fit saw, up to idle_braking_prior, so that the drive's own fixes soon outweigh it.
+  if (const auto braking = extra.find("idle_braking");
+      braking != extra.end() && idle_coast_count_ <= 0.0 && tuning_.idle_braking_prior > 0.0) {
+    const double a = number(*braking, "accel"), seconds = number(*braking, "seconds");
+    if (std::isfinite(a) && std::isfinite(seconds) && seconds > 0.0) {
+      idle_coast_mean_ = std::clamp(a, -4.0, 1.0);
+      idle_coast_count_ = std::min(seconds, tuning_.idle_braking_prior);
+    }
+  }
   const auto revs = extra.find("revs");
   if (revs == extra.end() || !revs->is_array() || revs->size() != model->gears.size()) return;
   // Each gear's revs are shrunk toward those of all gears by a prior worth kPriorSamples samples: a gear
@@ -861,7 +871,7 @@ void SpeedSynthesizer::learn(double dt, double gps, double freq, bool gps_new) n
       // At idle, from fixes at least half a second apart (over less, the change of speed is mostly the
       // receiver's noise, and clipped unevenly above it taught a braking no car did), each counting for
       // the share of a second it covers (idle_coast_count_ is in seconds).
-      if (at_idle_ && fix_dt >= 0.5) {
+      if (at_idle_ && fix_dt >= idle_braking::kMinGap) {
         const double w = std::min(fix_dt, 1.0);
         idle_coast_count_ = std::min(idle_coast_count_ + w, kCoastMemory);
         idle_coast_mean_ += w * (a - idle_coast_mean_) / idle_coast_count_;
@@ -929,7 +939,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
   score_revs_habit(freq);
   // The engine at idle: no further above the idle it is held at rolling than a driver lugs a gear (lugging).
-  at_idle_ = std::isfinite(freq) && idle_count_ > 0.0 && freq < rolling_idle() + 2.5 * idle_sd();
+  at_idle_ =
+      std::isfinite(freq) && idle_count_ > 0.0 && freq < rolling_idle() + idle_braking::kBandSds * idle_sd();
   // How fast the revs climb, from kFreeRise (0) to twice it (1): only at the tracker's short steps, where
   // one reading to the next is shorter than a shift, so the climb is the engine's and not a shift's
   // between two readings. A driver who shifts every second or so otherwise had each gear outweigh the

@@ -190,6 +190,10 @@ struct SynthTuning {
   // GPS showed in that state, a driver's habit of braking to a stop or rolling (0: at the deceleration
   // learned declutched at large, shifts included, whatever the revs).
   double idle_braking = 1.0;
+  // s of fixes at most that the fit's deceleration declutched at idle (the model's extra.idle_braking) is
+  // worth before GPS shows this drive's (0: none; the drive starts from the deceleration declutched at
+  // large).
+  double idle_braking_prior = 3.0;
 };
 
 class SpeedSynthesizer {

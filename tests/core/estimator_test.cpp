@@ -817,6 +817,35 @@ TEST_CASE("estimator: a fit records the idle an engine is held at while the car 
   CHECK(r.model.extra["rolling_idle"]["samples"].get<double>() >= 50);
 }
 
+TEST_CASE("estimator: a fit records how hard the car slows declutched at idle on the move") {
+  const sim::Vehicle car = sim::vehicle_preset("hatch-5");
+  auto samples = sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kUrban, 1200.0, 1, 3));
+  // The same drive with five stops braked from 12 m/s at 1.5 m/s^2 with the clutch out and the engine at
+  // its idle (1 Hz, each after a gap of 10 s), and five rolls at 3 m/s^2 with the revs free at twice the
+  // idle, which are no idle braking.
+  double t = samples.back().t;
+  for (int stop = 0; stop < 5; ++stop) {
+    t += 10.0;
+    for (int k = 1; k <= 8; ++k)
+      samples.push_back({t += 1.0, 12.0 - 1.5 * k, car.idle_freq * (1.0 + 0.01 * ((k % 3) - 1))});
+    t += 10.0;
+    for (int k = 1; k <= 4; ++k)
+      samples.push_back({t += 1.0, 20.0 - 3.0 * k, 2.0 * car.idle_freq});
+  }
+  const FitResult r = fit_gear_model(samples, {});
+  REQUIRE(r.model.extra.contains("idle_braking"));
+  const nlohmann::json& braking = r.model.extra["idle_braking"];
+  INFO(braking.dump());
+  CHECK(braking["accel"].get<double>() == Approx(-1.5).margin(0.15));
+  CHECK(braking["seconds"].get<double>() >= 40.0);
+  CHECK(braking["samples"].get<double>() >= 40.0);
+  // Without a single sample at rest there is no idle, hence no idle braking.
+  std::vector<Sample> moving;
+  for (const Sample& s : samples)
+    if (s.speed > 1.0) moving.push_back(s);
+  CHECK_FALSE(fit_gear_model(moving, {}).model.extra.contains("idle_braking"));
+}
+
 TEST_CASE("estimator: the Etios logs record a rolling idle about a fifth above the standing idle") {
   // The Etios holds its engine about a fifth above its standing idle rolling declutched.
   const auto etios = read_etios("drive");

@@ -1259,3 +1259,51 @@ TEST_CASE("synth: declutched at idle in an outage the car slows as GPS showed it
   CHECK(braked_rest > 0.0);
   CHECK((coasted_rest < 0.0 || braked_rest < coasted_rest));
 }
+
+TEST_CASE("synth: the fit's idle braking brakes an outage's first stop before GPS showed one") {
+  // The drive of the test above, once: stands at the light, moves off and climbs to third, and brakes to a
+  // stop with the clutch out and the engine at idle, at 1.5 m/s^2. GPS is lost as the car reaches third
+  // gear, before it ever rolled declutched at idle under GPS: only the model's extra.idle_braking (what
+  // the fit saw of this driver's stops) tells that the car brakes rather than coasting as through shifts.
+  std::vector<Row> rows;
+  double t = 0.0, v = 0.0;
+  const auto add = [&](int gear, double accel, int seconds, double freq) {
+    for (int k = 0; k < seconds; ++k, t += 1.0) {
+      v = std::max(0.0, v + accel);
+      rows.push_back({t, v, gear > 0 ? v / kHatch[static_cast<std::size_t>(gear - 1)] : freq, gear});
+    }
+  };
+  add(0, 0.0, 20, kIdle);
+  add(1, 1.8, 3, 0.0);
+  add(0, 0.0, 1, 0.5 * (v / kHatch[0] + v / kHatch[1]));
+  add(2, 1.2, 4, 0.0);
+  add(0, 0.0, 1, 0.5 * (v / kHatch[1] + v / kHatch[2]));
+  const std::size_t third = rows.size();
+  add(3, 0.3, 5, 0.0);
+  const std::size_t declutch = rows.size();
+  add(0, -1.5, 8, kIdle);
+  add(0, 0.0, 10, kIdle);
+  // Distance over the stop, synthesized against driven (relative error), and the s from the declutch to
+  // the output's rest.
+  const auto run = [&](const std::shared_ptr<const GearModel>& model) {
+    SpeedSynthesizer synth(model);
+    const auto out = replay(synth, rows, rows[third].t);
+    double synthesized = 0.0, driven = 0.0, rest = -1.0;
+    for (std::size_t i = declutch; i < rows.size(); ++i) {
+      synthesized += out[i].speed;
+      driven += rows[i].speed;
+      if (rest < 0.0 && out[i].speed == 0.0) rest = rows[i].t - rows[declutch].t;
+    }
+    return std::pair{synthesized / driven - 1.0, rest};
+  };
+  auto fitted = std::make_shared<GearModel>(*model_of(kHatch));
+  fitted->extra["idle_braking"] = {{"accel", -1.5}, {"seconds", 120.0}, {"samples", 120}};
+  const auto [braked, braked_rest] = run(fitted);
+  const auto [coasted, coasted_rest] = run(model_of(kHatch));
+  INFO("distance over the stop: " << 100.0 * braked << " % off with the fit's idle braking (at rest after "
+                                  << braked_rest << " s), " << 100.0 * coasted << " % without ("
+                                  << coasted_rest << " s)");
+  CHECK(std::abs(braked) < 0.75 * std::abs(coasted));
+  CHECK(braked_rest > 0.0);
+  CHECK((coasted_rest < 0.0 || braked_rest < coasted_rest));
+}
