@@ -190,6 +190,12 @@ struct SynthTuning {
   // GPS showed in that state, a driver's habit of braking to a stop or rolling (0: at the deceleration
   // learned declutched at large, shifts included, whatever the revs).
   double idle_braking = 1.0;
+  // m/s: the most first gear carries a car at idle (overall ratios of 12-16:1, tyres of 1.9-2 m, idle at
+  // 600-1000 rpm: 1.3-2.6 m/s). A model whose lowest gear carries it faster at the warm idle lacks first
+  // gear (a young model has not seen the launch gears steady): a move-off's clutch then bites in a gear
+  // below the ladder, and its speed is not given the spread up to a gear's reading as it would be were
+  // that gear first (bite_gap) (inf: the lowest gear is always first).
+  double first_gear_idle_speed = 2.6;
 };
 
 class SpeedSynthesizer {
@@ -257,6 +263,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double rolling_idle() const noexcept;
+  [[nodiscard]] bool lacks_first_gear() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   void score_revs_habit(double freq) noexcept;
   [[nodiscard]] double revs_z(int gear, double freq) const noexcept;
