@@ -747,7 +747,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(gps_accel_clip),     GEARPULSE_FIELD(lost_gear_cost),
     GEARPULSE_FIELD(launch_fade),        GEARPULSE_FIELD(rest_output),
     GEARPULSE_FIELD(seen_gear_fixes),    GEARPULSE_FIELD(idle_braking),
-    GEARPULSE_FIELD(idle_braking_prior),
+    GEARPULSE_FIELD(idle_braking_prior), GEARPULSE_FIELD(first_gear_idle_speed),
 };
 #undef GEARPULSE_FIELD
 
@@ -816,6 +816,7 @@ constexpr Rule kRules[] = {
     {"seen gears: a steady ratio off the model is a gear", "seen_gear_fixes=inf"},
     {"idle braking: declutched at idle brakes as learned", "idle_braking=0"},
     {"idle braking prior: the fit's idle braking", "idle_braking_prior=0"},
+    {"first gear at idle: a ladder too tall at idle lacks first", "first_gear_idle_speed=inf"},
 };
 
 std::string figure(double med, double p95) {

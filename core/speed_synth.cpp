@@ -467,7 +467,7 @@ double SpeedSynthesizer::launch_plausibility(double speed) const noexcept {
   const double slow = -0.5 * kLaunchRevs * kLaunchRevs;
   const double fast = -kFreeRevsCost + std::log(1.0 - tuning_.idle_weight) - 1.0;
   const double share = std::clamp((speed - kMovingOffSpeed) / (3.0 * kMovingOffSpeed), 0.0, 1.0);
-  return tuning_.launch_fade > 0.0 ? share * (fast - slow) : 0.0;
+  return tuning_.launch_fade > 0.0 && !lacks_first_gear() ? share * (fast - slow) : 0.0;
 }
 
 // Score of the frequency while the clutch slips moving off at `speed`: revs held above idle.
@@ -484,6 +484,16 @@ double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
 double SpeedSynthesizer::rolling_idle() const noexcept {
   return roll_time_ >= kRollKnown && tuning_.rolling_idle > 0.0 ? std::max(idle_mean_, roll_mean_)
                                                                 : idle_mean_;
+}
+
+// The ladder's lowest gear carries the car at the warm idle (the lower of the idle learned and the fit's)
+// faster than any first gear does (first_gear_idle_speed): the ladder lacks first gear. False while no
+// idle is known.
+bool SpeedSynthesizer::lacks_first_gear() const noexcept {
+  if (gears_ < 1) return false;
+  double idle = std::isfinite(warm_idle_) ? warm_idle_ : std::numeric_limits<double>::infinity();
+  if (idle_count_ > 0.0) idle = std::min(idle, idle_mean_);
+  return std::isfinite(idle) && theta_[1] * idle > tuning_.first_gear_idle_speed;
 }
 
 // Relative chance of driving in `gear` with the engine at `freq`: near idle (standing or rolling) a driver
@@ -952,6 +962,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
     const double rise = (freq - prev_freq_) / (prev_freq_ * dt);
     climb_ = std::clamp((rise - kFreeRise) / kFreeRise, 0.0, 1.0);
   }
+  const bool lacks_first = lacks_first_gear();
   for (int i = 0; i < modes; ++i) {
     double caught = 0.0;  // share of the way into the clutch that is an upshift's declutch caught mid-way
     transitions_from(i, dt, shift_freq, track_[i].v, row_, caught);
@@ -988,7 +999,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // Only out of the move-off, whose clutch has been slipping: a car rolling declutched that engages a
       // gear within one short step has gained nothing, and with the gap as its spread any gear would fit
       // (fifth gear's reading at 42 km/h taken up from a roll at 7 km/h as the launch's first gear bit).
-      if (short_step && tuning_.bite_gap > 0.0 && is_gear(j) && i == launch_mode() && std::isfinite(freq)) {
+      if (short_step && tuning_.bite_gap > 0.0 && is_gear(j) && i == launch_mode() && std::isfinite(freq) &&
+          !lacks_first) {
         const double gap = theta_[j] * freq - x.v;
         if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
       }

@@ -194,6 +194,13 @@ struct SynthTuning {
   // worth before GPS shows this drive's (0: none; the drive starts from the deceleration declutched at
   // large).
   double idle_braking_prior = 3.0;
+  // m/s: the most first gear carries a car at idle (overall ratios of 12-16:1, tyres of 1.9-2 m, idle at
+  // 600-1000 rpm: 1.3-2.6 m/s). A model whose lowest gear carries it faster at the warm idle lacks first
+  // gear (a young model has not seen the launch gears steady): a move-off's clutch then bites in a gear
+  // below the ladder, so its speed is not given the spread up to a gear's reading as it would be were
+  // that gear first (bite_gap), and moving off stands for driving below the ladder, as plausible at speed
+  // as at a walking pace (launch_fade does not apply) (inf: the lowest gear is always first).
+  double first_gear_idle_speed = 2.6;
 };
 
 class SpeedSynthesizer {
@@ -261,6 +268,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept;
   [[nodiscard]] double rolling_idle() const noexcept;
+  [[nodiscard]] bool lacks_first_gear() const noexcept;
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
   void score_revs_habit(double freq) noexcept;
   [[nodiscard]] double revs_z(int gear, double freq) const noexcept;

@@ -1307,3 +1307,37 @@ TEST_CASE("synth: the fit's idle braking brakes an outage's first stop before GP
   CHECK(braked_rest > 0.0);
   CHECK((coasted_rest < 0.0 || braked_rest < coasted_rest));
 }
+
+TEST_CASE("synth: a launch below a ladder that lacks first gear is not read in the ladder's lowest gear") {
+  // A young model has third to fifth gear, not the launch gears: its lowest carries the car at idle at
+  // 4.6 m/s, faster than any first gear does. At the tracker's hops, GPS shows the car standing at idle,
+  // then is lost; the car moves off, the clutch slipping for 1.5 s, then pulls in first gear.
+  const std::vector<double> young = {kHatch[2], kHatch[3], kHatch[4]};
+  struct Hop {
+    double t, speed, freq;
+  };
+  std::vector<Hop> hops;
+  constexpr double kDt = 0.1, kLaunch = 20.0, kSlip = 1.5, kEnd = 24.0, kAccel = 1.5;
+  for (double t = 0.0; t < kEnd; t += kDt) {
+    const double v = t < kLaunch ? 0.0 : kAccel * (t - kLaunch);
+    const double freq = t < kLaunch ? kIdle : t < kLaunch + kSlip ? 1.6 * kIdle : v / kHatch[0];
+    hops.push_back({t, v, freq});
+  }
+  const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model_of(young), tuning);
+    double synthesized = 0.0, driven = 0.0;
+    for (const Hop& h : hops) {
+      const SynthOutput o = synth.step(h.t, h.t < 15.0 ? h.speed : kMissing, h.freq);
+      if (h.t >= kLaunch) synthesized += o.speed * kDt, driven += h.speed * kDt;
+    }
+    return std::abs(synthesized - driven);
+  };
+  const double bounded = distance_error({});
+  gearpulse::SynthTuning lowest_first;
+  lowest_first.first_gear_idle_speed = std::numeric_limits<double>::infinity();
+  const double unbounded = distance_error(lowest_first);
+  INFO("distance error over the 4 s of the launch: " << bounded << " m with first gear judged lacking, "
+                                                     << unbounded
+                                                     << " m with the lowest gear taken for first");
+  CHECK(bounded < 0.8 * unbounded);
+}
