@@ -32,59 +32,6 @@ std::span<const double> thetas_of(const GearModel* model,
 
 }  // namespace
 
-double contended_speed(std::span<const double> prob, std::span<const double> speed) noexcept {
-  double sum = 0.0, weights = 0.0;
-  for (std::size_t j = 0; j < prob.size() && j < speed.size(); ++j) {
-    const double w = prob[j] * prob[j];
-    sum += w * speed[j];
-    weights += w;
-  }
-  return weights > 0.0 ? sum / weights : 0.0;
-}
-
-int belief_quantile_mode(std::span<const double> prob, std::span<const double> speed, double q) noexcept {
-  constexpr std::size_t kMost = 16;
-  const std::size_t n = std::min({prob.size(), speed.size(), kMost});
-  if (n == 0) return -1;
-  std::size_t lead = 0;
-  double total = 0.0;
-  for (std::size_t j = 0; j < n; ++j) {
-    total += prob[j];
-    if (prob[j] > prob[lead]) lead = j;
-  }
-  if (!(total > 0.0)) return static_cast<int>(lead);
-  if (prob[lead] >= std::max(q, 1.0 - q) * total) return static_cast<int>(lead);
-  std::array<std::size_t, kMost> order{};
-  for (std::size_t j = 0; j < n; ++j)
-    order[j] = j;
-  // Slowest first; among equal speeds the most probable first, so that it names its group.
-  std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(n), [&](std::size_t a, std::size_t b) {
-    return speed[a] < speed[b] || (speed[a] == speed[b] && prob[a] > prob[b]);
-  });
-  double below = 0.0;
-  std::size_t group = 0;  // first (most probable) member of the current group of equal speeds
-  for (std::size_t k = 0; k < n; ++k) {
-    if (k == 0 || speed[order[k]] != speed[order[group]]) group = k;
-    below += prob[order[k]];
-    if (below >= q * total) return static_cast<int>(order[group]);
-  }
-  return static_cast<int>(order[group]);
-}
-
-std::string_view source_name(SpeedSource source) noexcept {
-  switch (source) {
-    case SpeedSource::kGps:
-      return "gps";
-    case SpeedSource::kEngine:
-      return "engine";
-    case SpeedSource::kCoast:
-      return "coast";
-    case SpeedSource::kNone:
-      break;
-  }
-  return "none";
-}
-
 // Keeps a track's covariance a covariance. The speed variance is capped at kMaxSpeedVar by scaling the
 // speed axis (its covariance with the acceleration shrinks with it, as conditioning would), and rounding
 // in the updates may never leave a negative variance or a correlation beyond 1: from such a matrix the
@@ -187,7 +134,7 @@ void SpeedSynthesizer::reset() noexcept {
   t_ = 0.0;
   mode_ = 0;
   habits_.forget_last_fix();
-  held_speed_ = -1.0;
+  output_.forget_gps();
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   habits_.end_flat_stretch();
   last_ = {};
@@ -779,39 +726,15 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
     return {gps, gps >= tuning_.stationary_speed ? model_gear(mode_) : 0, SpeedSource::kGps};
   }
   habits_.end_flat_stretch();  // a flat stretch of revs is one GPS saw whole
-  // Each mode's speed as its history has it (which orders the belief for the output's mode) and as the
-  // output counts it: a declutched or moving-off history slower than walking pace is at rest.
-  ModeArray track_speed{}, mode_speed{};
+  // Through an outage the output policy chooses the speed from the belief in the modes and their tracks.
+  ModeArray speed{}, speed_var{};
   for (int j = 0; j < modes; ++j) {
-    track_speed[j] = track_[j].v;
-    const double v = std::max(track_[j].v, 0.0);
-    mode_speed[j] = is_gear(j) || v >= tuning_.stationary_speed || tuning_.rest_output <= 0.0 ? v : 0.0;
+    speed[j] = track_[j].v;
+    speed_var[j] = track_[j].pvv;
   }
   const auto n = static_cast<std::size_t>(modes);
-  int out = belief_quantile_mode({prob_.data(), n}, {track_speed.data(), n}, tuning_.output_quantile);
-  if (out < 0) out = mode_;
-  const double speed = (1.0 - tuning_.hedge_share) * std::max(track_[out].v, 0.0) +
-                       tuning_.hedge_share * contended_speed({prob_.data(), n}, {mode_speed.data(), n});
-  double spread = 0.0, total = 0.0;
-  for (int j = 0; j < modes; ++j) {
-    const double d = mode_speed[j] - speed;
-    spread += prob_[j] * (std::max(track_[j].pvv, 0.0) + d * d);
-    total += prob_[j];
-  }
-  const double sd = total > 0.0 ? std::sqrt(spread / total) : 0.0;
-  if (is_gear(out)) return {speed, model_gear(out), SpeedSource::kEngine, sd};
-  // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
-  // trickle pulses.
-  return {speed < tuning_.stationary_speed && tuning_.rest_output > 0.0 ? 0.0 : speed, 0, SpeedSource::kCoast,
-          sd};
-}
-
-SynthOutput SpeedSynthesizer::hold_step(double t, double gps) noexcept {
-  if (std::isfinite(gps)) return {gps, 0, SpeedSource::kGps};
-  if (held_speed_ < 0.0) return {0.0, 0, SpeedSource::kNone};
-  const double coasted = std::max(0.0, t - held_t_ - tuning_.hold_time);
-  const double v = std::max(0.0, held_speed_ + tuning_.coast_accel * coasted);
-  return {v < tuning_.stationary_speed ? 0.0 : v, 0, SpeedSource::kCoast};
+  return SynthOutputPolicy::outage({prob_.data(), n}, {speed.data(), n}, {speed_var.data(), n}, gears_,
+                                   {model_gear_.data(), n}, mode_, tuning_);
 }
 
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new) noexcept {
@@ -832,8 +755,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
   if (have_gps) {
-    held_speed_ = gps_speed;  // for an outage without a ladder (hold_step), whenever the ladder went
-    held_t_ = t;
+    output_.note_gps(t, gps_speed);  // for an outage without a ladder, whenever the ladder went
   }
 
   // Before the first fix or frequency reading nothing is known: no speed, not a guess.
@@ -842,7 +764,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   if (!informed_) {
     out = {0.0, 0, SpeedSource::kNone};
   } else if (gears_ == 0) {
-    out = hold_step(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN());
+    out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
   } else {
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
     if (have_gps && gps_new) observe_gear(gps_speed, freq);

@@ -47,38 +47,9 @@
 #include "core/sample.hpp"
 #include "core/seen_gears.hpp"
 #include "core/synth_habits.hpp"
+#include "core/synth_output.hpp"
 
 namespace gearpulse {
-
-enum class SpeedSource : std::uint8_t { kNone, kGps, kEngine, kCoast };
-
-// "none", "gps", "engine", "coast" (the `source` column of `gearpulse replay`).
-[[nodiscard]] std::string_view source_name(SpeedSource source) noexcept;
-
-// The speed a split belief's contenders point to: each speed weighted by the square of its probability.
-// Between two modes this is the speed of least expected |error|^1.5, between the median's |error| and
-// the mean's error^2: a contender holding a fifth of the belief moves it a seventeenth of the way to its
-// own speed, one holding 0.4 against 0.6 a third of the way, so a mode that clearly leads keeps its speed.
-// `prob` and `speed` have the same size; 0 if no mode holds any belief.
-[[nodiscard]] double contended_speed(std::span<const double> prob, std::span<const double> speed) noexcept;
-
-// The mode at quantile `q` of a belief ordered by speed: the first mode, slowest first, at which the belief
-// in it and in every slower mode reaches q. Modes of equal speed (a negligible mode carries the leader's
-// history) count as one, named by the most probable of them. A mode holding at least max(q, 1 - q) is its
-// own quantile. q = 0.5 is the median, whose speed errs least in mean absolute terms where the belief is
-// right about its odds; a higher q leans toward the faster modes. `prob` and `speed` have the same size,
-// at most 16 modes; -1 if there are none.
-[[nodiscard]] int belief_quantile_mode(std::span<const double> prob, std::span<const double> speed,
-                                       double q) noexcept;
-
-struct SynthOutput {
-  double speed = 0.0;  // m/s, >= 0; what the pulse output carries
-  int gear = 0;        // 1 = lowest; 0 = none/unknown (clutch out, standing, no model)
-  SpeedSource source = SpeedSource::kNone;
-  // m/s: the belief's spread about `speed` through an outage (each mode's speed uncertainty and how far the
-  // modes' speeds lie from it, weighed by their belief); 0 while GPS gives the speed or nothing is known.
-  double speed_sd = 0.0;
-};
 
 // Driving-physics constants (not from the paper): how road cars accelerate, how drivers shift and move
 // off. They are deliberately generic, not fitted to any one log; what differs between cars and drivers
@@ -238,7 +209,7 @@ class SpeedSynthesizer {
  private:
   static constexpr int kModes = kMaxGears + 2;  // 0 = declutched, 1..gears, gears + 1 = moving off
   using ModeArray = std::array<double, kModes>;
-  static_assert(kModes == SynthHabits::kSlots);
+  static_assert(kModes == SynthHabits::kSlots && kModes <= SynthOutputPolicy::kMaxModes);
 
   // Speed (m/s) and acceleration (m/s^2) with their covariance.
   struct Track {
@@ -309,12 +280,11 @@ class SpeedSynthesizer {
   SynthHabits habits_;  // what this engine and driver do: learned under GPS, seeded by the fit
   // This step's log-score of the frequency in each gear by the revs this driver runs it at.
   ModeArray revs_habit_{};
-  bool at_idle_ = false;                     // this step's frequency is at idle
-  double held_speed_ = -1.0, held_t_ = 0.0;  // last GPS speed and its time, for hold_step (-1 = none yet)
-  double prev_freq_ = 0.0;  // frequency of the previous step (NaN if lost): the revs a shift left
-  double climb_ = 0.0;      // how fast the revs climb this step, 0..1 (filter_step)
+  bool at_idle_ = false;      // this step's frequency is at idle
+  double prev_freq_ = 0.0;    // frequency of the previous step (NaN if lost): the revs a shift left
+  double climb_ = 0.0;        // how fast the revs climb this step, 0..1 (filter_step)
+  SynthOutputPolicy output_;  // how the output is chosen from the belief, and held without a ladder
   SynthOutput last_{};
-  SynthOutput hold_step(double t, double gps) noexcept;
 };
 
 // Steps a synthesizer over the samples of a log, in order, as `gearpulse replay` and the benches do: a
