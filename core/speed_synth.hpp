@@ -35,6 +35,9 @@
 // error in the gear's reading, until a model has that gear; such a gear has no number in the model, and an
 // output in it says gear 0.
 //
+// This file is the mode filter; what it learns of the engine and driver is SynthHabits (synth_habits.hpp),
+// and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
+//
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
 #include <array>
