@@ -19,7 +19,6 @@ constexpr double kDefaultClutchShare =
 constexpr double kMinGearShare = 0.02;   // no gear is ever ruled out by its training weight
 constexpr double kStandingVar = 0.01;    // (m/s)^2: a car at rest is at rest
 constexpr double kMovingOffSpeed = 2.0;  // m/s: below this a declutched car may be moving off
-constexpr double kRollKnown = 3.0;       // s of rolling declutched seen before its idle counts (rolling_idle)
 
 // The model's thetas in `buf` (empty without a model).
 std::span<const double> thetas_of(const GearModel* model,
@@ -31,71 +30,7 @@ std::span<const double> thetas_of(const GearModel* model,
   return {buf.data(), n};
 }
 
-// Running mean and variance with a bounded memory (in samples).
-void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
-  count = std::min(count + 1.0, memory);
-  const double k = 1.0 / count;
-  const double d = x - mean;
-  mean += k * d;
-  var += k * (d * d * (1.0 - k) - var);
-}
-
-constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift points are trusted
-
 }  // namespace
-
-double contended_speed(std::span<const double> prob, std::span<const double> speed) noexcept {
-  double sum = 0.0, weights = 0.0;
-  for (std::size_t j = 0; j < prob.size() && j < speed.size(); ++j) {
-    const double w = prob[j] * prob[j];
-    sum += w * speed[j];
-    weights += w;
-  }
-  return weights > 0.0 ? sum / weights : 0.0;
-}
-
-int belief_quantile_mode(std::span<const double> prob, std::span<const double> speed, double q) noexcept {
-  constexpr std::size_t kMost = 16;
-  const std::size_t n = std::min({prob.size(), speed.size(), kMost});
-  if (n == 0) return -1;
-  std::size_t lead = 0;
-  double total = 0.0;
-  for (std::size_t j = 0; j < n; ++j) {
-    total += prob[j];
-    if (prob[j] > prob[lead]) lead = j;
-  }
-  if (!(total > 0.0)) return static_cast<int>(lead);
-  if (prob[lead] >= std::max(q, 1.0 - q) * total) return static_cast<int>(lead);
-  std::array<std::size_t, kMost> order{};
-  for (std::size_t j = 0; j < n; ++j)
-    order[j] = j;
-  // Slowest first; among equal speeds the most probable first, so that it names its group.
-  std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(n), [&](std::size_t a, std::size_t b) {
-    return speed[a] < speed[b] || (speed[a] == speed[b] && prob[a] > prob[b]);
-  });
-  double below = 0.0;
-  std::size_t group = 0;  // first (most probable) member of the current group of equal speeds
-  for (std::size_t k = 0; k < n; ++k) {
-    if (k == 0 || speed[order[k]] != speed[order[group]]) group = k;
-    below += prob[order[k]];
-    if (below >= q * total) return static_cast<int>(order[group]);
-  }
-  return static_cast<int>(order[group]);
-}
-
-std::string_view source_name(SpeedSource source) noexcept {
-  switch (source) {
-    case SpeedSource::kGps:
-      return "gps";
-    case SpeedSource::kEngine:
-      return "engine";
-    case SpeedSource::kCoast:
-      return "coast";
-    case SpeedSource::kNone:
-      break;
-  }
-  return "none";
-}
 
 // Keeps a track's covariance a covariance. The speed variance is capped at kMaxSpeedVar by scaling the
 // speed axis (its covariance with the acceleration shrinks with it, as conditioning would), and rounding
@@ -151,7 +86,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
-  load_habits(model);
+  habits_.load(model, model_gear_, gears_, tuning_);
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
 }
 
@@ -184,88 +119,6 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
   }
 }
 
-// What the fit saw of this engine and driver beyond the ratios: the warm idle (also the idle until GPS shows
-// this car standing, for a start on the move), and the revs run in each gear. Anything missing or
-// malformed is left unknown (a hand-edited or older model.json still loads).
-void SpeedSynthesizer::load_habits(const GearModel* model) noexcept {
-  warm_idle_ = std::numeric_limits<double>::quiet_NaN();
-  revs_mean_.fill(0.0);
-  revs_sd_.fill(0.0);
-  if (model == nullptr) return;
-  const nlohmann::json& extra = model->extra;
-  if (!extra.is_object()) return;
-  const auto number = [](const nlohmann::json& j, const char* key) {
-    if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
-    const auto it = j.find(key);
-    return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
-  };
-  if (const auto idle = extra.find("idle"); idle != extra.end()) {
-    const double f = number(*idle, "freq"), sd = number(*idle, "sd");
-    if (std::isfinite(f) && f > 0.0) {
-      warm_idle_ = f;
-      if (idle_count_ <= 0.0 && std::isfinite(sd) && sd >= 0.0) {
-        constexpr double kPriorSamples = 5.0;  // GPS standing overrules the prior within seconds
-        idle_mean_ = f;
-        idle_var_ = sd * sd;
-        idle_count_ = kPriorSamples;
-      }
-    }
-  }
-  // The rolling idle the fit saw, until GPS shows this car rolling (a prior worth a few samples, as the
-  // idle's).
-  if (const auto rolling = extra.find("rolling_idle"); rolling != extra.end() && roll_time_ <= 0.0) {
-    const double f = number(*rolling, "freq");
-    if (std::isfinite(f) && f > 0.0) {
-      constexpr double kPriorSamples = 5.0;
-      roll_mean_ = f;
-      roll_count_ = kPriorSamples;
-      roll_time_ = kRollKnown;
-    }
-  }
-  // How hard this driver slowed declutched at idle in the fit's logs, until GPS shows it in this drive: worth
-  // the seconds the fit saw, up to idle_braking_prior, so that the drive's own fixes soon outweigh it.
-  if (const auto braking = extra.find("idle_braking");
-      braking != extra.end() && idle_coast_count_ <= 0.0 && tuning_.idle_braking_prior > 0.0) {
-    const double a = number(*braking, "accel"), seconds = number(*braking, "seconds");
-    if (std::isfinite(a) && std::isfinite(seconds) && seconds > 0.0) {
-      idle_coast_mean_ = std::clamp(a, -4.0, 1.0);
-      idle_coast_count_ = std::min(seconds, tuning_.idle_braking_prior);
-    }
-  }
-  const auto revs = extra.find("revs");
-  if (revs == extra.end() || !revs->is_array() || revs->size() != model->gears.size()) return;
-  // Each gear's revs are shrunk toward those of all gears by a prior worth kPriorSamples samples: a gear
-  // seen on a few samples (a short log, a first gear) says little, and one seen on none says what the
-  // driver's revs say at large, rather than leaving the gears that were seen to outscore it.
-  constexpr double kPriorSamples = 20.0;
-  ModeArray mean{}, var{}, count{};
-  double total = 0.0, pooled_mean = 0.0;
-  for (int j = 1; j <= gears_; ++j) {
-    if (model_gear_[j] == 0) continue;  // a gear seen under GPS: the driver's revs at large (below)
-    const nlohmann::json& r = (*revs)[static_cast<std::size_t>(model_gear_[j] - 1)];
-    const double m = number(r, "mean_log"), sd = number(r, "sd_log"), n = number(r, "samples");
-    if (!std::isfinite(m) || !std::isfinite(sd) || sd < 0.0 || !std::isfinite(n) || !(n > 0.0)) continue;
-    mean[j] = m;
-    var[j] = sd * sd;
-    count[j] = std::min(n, 1e9);
-    total += count[j];
-    pooled_mean += count[j] * m;
-  }
-  if (!(total > 0.0)) return;
-  pooled_mean /= total;
-  double pooled_var = 0.0;
-  for (int j = 1; j <= gears_; ++j)
-    pooled_var += count[j] * (var[j] + (mean[j] - pooled_mean) * (mean[j] - pooled_mean));
-  pooled_var /= total;
-  constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
-  for (int j = 1; j <= gears_; ++j) {
-    const double n = count[j];
-    revs_mean_[j] = (n * mean[j] + kPriorSamples * pooled_mean) / (n + kPriorSamples);
-    const double v = (n * var[j] + kPriorSamples * pooled_var) / (n + kPriorSamples);
-    revs_sd_[j] = std::max(std::sqrt(v), kMinRevsSd);
-  }
-}
-
 void SpeedSynthesizer::reset() noexcept {
   // A cold start is most likely a car at rest, out of gear: until the first evidence the belief says so,
   // rather than "in the most used gear at zero speed".
@@ -280,10 +133,10 @@ void SpeedSynthesizer::reset() noexcept {
   informed_ = false;
   t_ = 0.0;
   mode_ = 0;
-  last_gps_ = -1.0;
-  held_speed_ = -1.0;
+  habits_.forget_last_fix();
+  output_.forget_gps();
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
-  roll_span_ = -1.0;
+  habits_.end_flat_stretch();
   last_ = {};
 }
 
@@ -300,7 +153,7 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
 void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
   if (gears_ == 0 || model_ == nullptr) return;
   constexpr double kIdleSds = 3.0;  // revs within this many sds of the idle are idling
-  const double idle_ceiling = idle_count_ > 0.0 ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
+  const double idle_ceiling = habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
   std::array<double, kMaxGears> thetas{};
   if (seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas))) change_ladder(false);
 }
@@ -319,19 +172,9 @@ void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
     for (int i = 1; i <= old_gears; ++i)
       for (int j = 1; j <= gears_; ++j)
         if (theta_[j] == old_theta[i]) to[i] = j;
-    for (ModeArray* a : {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_,
-                         &gear_down_count_}) {
-      const ModeArray old = *a;
-      a->fill(0.0);
-      for (int i = 1; i <= old_gears; ++i)
-        if (to[i] > 0) (*a)[to[i]] = old[i];
-    }
-    sure_gear_ = sure_gear_ > 0 && sure_gear_ <= old_gears ? to[sure_gear_] : 0;
+    habits_.renumber_gears(to, old_gears);
   } else if (gears_ != old_gears) {
-    // Shift revs learned per gear belong to the old ladder.
-    for (ModeArray* a : {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_,
-                         &gear_down_count_})
-      a->fill(0.0);
+    habits_.forget_gear_shifts();  // shift revs learned per gear belong to the old ladder
   }
   // Carry the belief over: each old gear hands its probability to the new gear with the nearest theta
   // (in ratio) with its track, so a retrained model of the same car continues where it was.
@@ -380,16 +223,11 @@ double SpeedSynthesizer::mode_probability(int mode) const noexcept {
 }
 
 double SpeedSynthesizer::idle_freq() const noexcept {
-  return idle_count_ > 0.0 ? idle_mean_ : std::numeric_limits<double>::quiet_NaN();
+  return habits_.idle_freq();
 }
 
 double SpeedSynthesizer::freq_sigma(double freq) const noexcept {
   return std::max(sigma_s_, tuning_.min_freq_rel * freq);
-}
-
-// Spread of the idle frequency learned (bounded: idle_spread).
-double SpeedSynthesizer::idle_sd() const noexcept {
-  return idle_spread(idle_mean_, std::sqrt(idle_var_));
 }
 
 // The modes are scored by how well each explains the frequency in units of its own spread (a gear: the
@@ -417,17 +255,18 @@ constexpr double jump_cost(double z2) noexcept {
 // at standstill, section 3.1) or runs free anywhere in its range.
 double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcept {
   const double free = -kFreeRevsCost;
-  if (idle_count_ <= 0.0) return free;
+  if (!habits_.idle_known()) return free;
   // Revs running free are a shift in progress; with the car at rest they are rare (a blip), and revs held
   // above idle there mean moving off.
   constexpr double kStandingFree = 0.05;
   const double free_share = speed > kMovingOffSpeed ? 1.0 - tuning_.idle_weight : kStandingFree;
   // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
   // still cold) and the warm idle the fit saw are the idle now.
-  const double floor =
-      std::isfinite(warm_idle_) && tuning_.warm_floor > 0.0 ? std::min(warm_idle_, idle_mean_) : idle_mean_;
+  const double floor = std::isfinite(habits_.warm_idle()) && tuning_.warm_floor > 0.0
+                           ? std::min(habits_.warm_idle(), habits_.idle_mean())
+                           : habits_.idle_mean();
   // Rolling, many engines are held above their standing idle (the rolling idle, learned under GPS).
-  const double top = speed > kMovingOffSpeed ? rolling_idle() : idle_mean_;
+  const double top = speed > kMovingOffSpeed ? rolling_idle() : habits_.idle_mean();
   const double z = freq > top ? (freq - top) / idle_sd() : freq < floor ? (floor - freq) / idle_sd() : 0.0;
   return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
 }
@@ -448,7 +287,7 @@ double SpeedSynthesizer::log_declutching(int gear, double freq, const Track& x) 
   const double line = v / theta_[gear];
   const double h = 1.0 / theta_[gear];
   const double sf = std::sqrt(h * h * x.pvv + freq_sigma(freq) * freq_sigma(freq));
-  const double idle = idle_count_ > 0.0 ? rolling_idle() : 0.0;
+  const double idle = habits_.idle_known() ? rolling_idle() : 0.0;
   const auto between = [&](double floor) {
     const double lo = floor - 2.0 * sf, hi = line - sf;
     return hi > lo && freq >= lo && freq <= hi ? 1.0 / (hi - lo) : 0.0;
@@ -473,146 +312,19 @@ double SpeedSynthesizer::launch_plausibility(double speed) const noexcept {
 // Score of the frequency while the clutch slips moving off at `speed`: revs held above idle.
 double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
   const double base = -0.5 * kLaunchRevs * kLaunchRevs + launch_plausibility(speed);
-  if (idle_count_ <= 0.0) return base;
-  const double above = 1.0 / (1.0 + std::exp(-(freq - idle_mean_ - 2.0 * idle_sd()) / idle_sd()));
+  if (!habits_.idle_known()) return base;
+  const double above = 1.0 / (1.0 + std::exp(-(freq - habits_.idle_mean() - 2.0 * idle_sd()) / idle_sd()));
   return base + std::log(std::max(above, 0.05));
-}
-
-// The idle of the engine while the car rolls declutched: many engines are held above their standing idle
-// there (a throttle kicker, an idle-up against stalling), with revs that stay flat while the car slows.
-// Learned under GPS (see learn()); the standing idle until seen for kRollKnown seconds.
-double SpeedSynthesizer::rolling_idle() const noexcept {
-  return roll_time_ >= kRollKnown && tuning_.rolling_idle > 0.0 ? std::max(idle_mean_, roll_mean_)
-                                                                : idle_mean_;
-}
-
-// The ladder's lowest gear carries the car at the warm idle (the lower of the idle learned and the fit's)
-// faster than any first gear does (first_gear_idle_speed): the ladder lacks first gear. False while no
-// idle is known.
-bool SpeedSynthesizer::lacks_first_gear() const noexcept {
-  if (gears_ < 1) return false;
-  double idle = std::isfinite(warm_idle_) ? warm_idle_ : std::numeric_limits<double>::infinity();
-  if (idle_count_ > 0.0) idle = std::min(idle, idle_mean_);
-  return std::isfinite(idle) && theta_[1] * idle > tuning_.first_gear_idle_speed;
 }
 
 // Relative chance of driving in `gear` with the engine at `freq`: near idle (standing or rolling) a driver
 // declutches rather than lug the engine, except when creeping in first gear.
 double SpeedSynthesizer::lugging(int gear, double freq) const noexcept {
-  if (idle_count_ <= 0.0) return 1.0;
+  if (!habits_.idle_known()) return 1.0;
   const double x = (freq - rolling_idle()) / idle_sd();
   const double at_idle = 1.0 / (1.0 + std::exp(3.0 * (x - 2.5)));  // ~1 up to 2 sd above idle, ~0 past 3.5
   const double floor = gear == 1 ? tuning_.lugging_first : tuning_.lugging_other;
   return 1.0 - (1.0 - floor) * at_idle;
-}
-
-// Scores this step's frequency in each gear by how usual it is there for this driver, against how usual it
-// is in gears at large: ln(p(f | gear) / sum_k alpha_k p(f | k)), bounded (0 for every gear when the model
-// records no revs). In steady driving every gear explains the revs equally well; what
-// tells them apart is that this driver runs third at 1500-2200 rpm and fourth at 1800-2600.
-void SpeedSynthesizer::score_revs_habit(double freq) noexcept {
-  revs_habit_.fill(0.0);
-  if (!std::isfinite(freq) || freq <= 0.0 || tuning_.revs_habit <= 0.0) return;
-  const double x = std::log(freq);
-  ModeArray density{};
-  double total = 0.0, weights = 0.0;
-  for (int j = 1; j <= gears_; ++j) {
-    if (revs_sd_[j] <= 0.0) continue;
-    const double z = (x - revs_mean_[j]) / revs_sd_[j];
-    density[j] = std::exp(-0.5 * z * z) / revs_sd_[j];
-    total += weight_[j] * density[j];
-    weights += weight_[j];
-  }
-  if (!(total > 0.0)) return;
-  constexpr double kMaxHabit = 3.0;  // no single reading rules a gear in or out
-  for (int j = 1; j <= gears_; ++j) {
-    if (revs_sd_[j] <= 0.0) continue;
-    const double ratio = density[j] * weights / total;
-    revs_habit_[j] = ratio > 0.0 ? std::clamp(std::log(ratio), -kMaxHabit, kMaxHabit) : -kMaxHabit;
-  }
-}
-
-// Where `freq` sits in the band of revs this driver runs `gear` at (the model's `extra.revs`), in its sds of
-// ln(freq); the band must be known (revs_sd_ > 0) and freq positive.
-double SpeedSynthesizer::revs_z(int gear, double freq) const noexcept {
-  return (std::log(freq) - revs_mean_[gear]) / revs_sd_[gear];
-}
-
-// How much likelier a shift from `from` to `to` at `freq` is for bringing the revs nearer the band this
-// driver runs the new gear in than they are to the band of the old one (the model's revs per gear): a
-// driver shifts up as the revs pass his habit and lands where he usually drives the next gear, and does
-// not shift down into revs he never runs that gear at. 1 when the model does not know both gears' revs.
-double SpeedSynthesizer::shift_comfort(int from, int to, double freq) const noexcept {
-  if (tuning_.shift_comfort <= 0.0 || !std::isfinite(freq) || freq <= 0.0 || revs_sd_[from] <= 0.0 ||
-      revs_sd_[to] <= 0.0)
-    return 1.0;
-  const double now = revs_z(from, freq);
-  const double after = revs_z(to, freq * theta_[from] / theta_[to]);
-  constexpr double kMaxLog = 3.0;
-  return std::exp(std::clamp(0.5 * tuning_.shift_comfort * (now * now - after * after), -kMaxLog, kMaxLog));
-}
-
-// How much more likely an upshift (and less likely a downshift) is at this engine frequency than at the
-// frequency this driver usually runs at in gear: drivers shift up as revs rise and down as they sag.
-double SpeedSynthesizer::shift_urge(double freq) const noexcept {
-  constexpr double kMinDriveSamples = 20.0;
-  if (!std::isfinite(freq) || drive_count_ < kMinDriveSamples) return 1.0;
-  const double sd = std::max(std::sqrt(drive_var_), 0.05 * drive_mean_);
-  return std::exp(std::clamp((freq - drive_mean_) / sd, -3.0, 3.0));
-}
-
-// Hazard multipliers of shifting up or down at this frequency, from the frequencies at which this driver
-// was seen shifting (drivers shift up as revs reach their habit, down as revs sag to theirs). Before any
-// shift was seen, the frequency usually run in gear stands in for both.
-double SpeedSynthesizer::upshift_factor(int gear, double freq) const noexcept {
-  if (!std::isfinite(freq)) return 1.0;
-  // This gear's own upshift revs once seen a few times (a driver shifts out of first lower than out of
-  // fourth), else those of all gears.
-  const bool own = tuning_.gear_shift_points > 0.0 && gear_up_count_[gear] >= kMinShifts;
-  const double mean = own ? gear_up_mean_[gear] : up_mean_, var = own ? gear_up_var_[gear] : up_var_;
-  if (!own && up_count_ < kMinShifts) return shift_urge(freq);
-  const double sd = std::max(std::sqrt(var), 0.08 * mean);
-  return std::exp(std::clamp((freq - mean) / sd, -1.5, 3.0));
-}
-
-// Before shifts down were seen, between readings further apart than the tracker's hops, the revs the model
-// records for this gear (`extra.revs`) stand in: a driver shifts down out of fifth when the revs sag below
-// where he runs fifth, not below where he runs the car at large. Against the latter, a fifth gear held at
-// 29 Hz in a steady cruise (the Etios, long1 from 681 s; its driver runs fifth at 24 Hz, sd 0.45 in
-// ln(freq)) lost the belief to a fourth gear 11 km/h low for the rest of the outage. Not for shifts up:
-// a gear's band says where it is run, not where it is left upward (first gear's is a creep's, and a car
-// creeping in first at high revs in a queue was read in second, 10 km/h fast); nor at the tracker's hops,
-// where it moved the simulated figures both ways and the daemon's path stays as measured.
-double SpeedSynthesizer::downshift_factor(int gear, double freq, bool long_step) const noexcept {
-  if (!std::isfinite(freq)) return 1.0;
-  const bool own = tuning_.gear_shift_points > 0.0 && gear_down_count_[gear] >= kMinShifts;
-  const double mean = own ? gear_down_mean_[gear] : down_mean_, var = own ? gear_down_var_[gear] : down_var_;
-  if (!own && down_count_ < kMinShifts) {
-    if (long_step && tuning_.downshift_band > 0.0 && revs_sd_[gear] > 0.0 && freq > 0.0)
-      return std::exp(std::clamp(-revs_z(gear, freq), -3.0, 3.0));
-    return 1.0 / shift_urge(freq);
-  }
-  const double sd = std::max(std::sqrt(var), 0.08 * mean);
-  return std::exp(std::clamp(-(freq - mean) / sd, -1.5, 3.0));
-}
-
-// Called under GPS after each step: notes the frequency at which a confidently held gear was left for
-// its neighbour.
-void SpeedSynthesizer::learn_shift(double freq) noexcept {
-  constexpr double kSure = 0.8;
-  constexpr double kShiftMemory = 50.0;  // shifts
-  if (!is_gear(mode_) || prob_[mode_] < kSure || !std::isfinite(freq)) return;
-  if (sure_gear_ > 0 && mode_ == sure_gear_ + 1) {
-    accumulate(sure_gear_freq_, up_mean_, up_var_, up_count_, kShiftMemory);
-    accumulate(sure_gear_freq_, gear_up_mean_[sure_gear_], gear_up_var_[sure_gear_],
-               gear_up_count_[sure_gear_], kShiftMemory);
-  } else if (sure_gear_ > 0 && mode_ == sure_gear_ - 1) {
-    accumulate(sure_gear_freq_, down_mean_, down_var_, down_count_, kShiftMemory);
-    accumulate(sure_gear_freq_, gear_down_mean_[sure_gear_], gear_down_var_[sure_gear_],
-               gear_down_count_[sure_gear_], kShiftMemory);
-  }
-  sure_gear_ = mode_;
-  sure_gear_freq_ = freq;
 }
 
 void SpeedSynthesizer::normalise() noexcept {
@@ -656,8 +368,9 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     const double base = leave_rate_[from];
     const bool long_step = dt >= kShortStep * tuning_.accel_time;  // not the tracker's hops
     const double shift_base = base * kToNeighbour;
-    double up =
-        from < gears_ ? shift_base * upshift_factor(from, freq) * shift_comfort(from, from + 1, freq) : 0.0;
+    double up = from < gears_ ? shift_base * habits_.upshift_factor(from, freq, tuning_) *
+                                    shift_comfort(from, from + 1, freq)
+                              : 0.0;
     // First gear is for moving off: the longer it has lasted, the likelier the upshift (a launch whose
     // upshift the revs did not show, between two slow readings, is not held in first gear for good). Not
     // while the revs stay near idle: creeping in a queue is done in first gear for minutes.
@@ -666,13 +379,13 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
       constexpr double kCreepRevs = 1.3, kPullingRevs = 1.8;  // x idle: creeping below, pulling above
       const double x = age_[1] / tuning_.launch_gear_time;
       double urge = std::min(x * x, kMaxLaunchUrge);
-      if (idle_count_ > 0.0 && std::isfinite(freq))
-        urge *= std::clamp((freq / idle_mean_ - kCreepRevs) / (kPullingRevs - kCreepRevs), 0.0, 1.0);
+      if (habits_.idle_known() && std::isfinite(freq))
+        urge *= std::clamp((freq / habits_.idle_mean() - kCreepRevs) / (kPullingRevs - kCreepRevs), 0.0, 1.0);
       up *= 1.0 + urge;
     }
-    double down =
-        from > 1 ? shift_base * downshift_factor(from, freq, long_step) * shift_comfort(from, from - 1, freq)
-                 : 0.0;
+    double down = from > 1 ? shift_base * habits_.downshift_factor(from, freq, long_step, tuning_) *
+                                 shift_comfort(from, from - 1, freq)
+                           : 0.0;
     // Every shift passes through the clutch. Between readings further apart than the tracker's hops, a
     // reading may fall inside the declutch of a shift due at these revs, with revs that neither gear
     // explains: that chance is the declutch's share of the step, over and above the shift that the reading
@@ -749,23 +462,8 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
 void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
   double mean = 0.0, sigma = tuning_.accel_sigma;
   if (to == 0) {
-    // Declutched, nothing drives the car: whatever GPS taught (a gear mistaken for the clutch while
-    // accelerating), it does not gain speed on its own. What GPS taught counts against the generic
-    // deceleration by how much it has seen: a few fixes at a steady speed in a declutch do not make a car
-    // that rolls on for good once the revs and GPS are both lost.
-    constexpr double kCoastPrior = 10.0;  // fixes
-    mean = std::min(
-        (coast_count_ * coast_mean_ + kCoastPrior * tuning_.coast_accel) / (coast_count_ + kCoastPrior), 0.0);
-    // With the engine at idle the clutch is not out for a shift (the free revs of a shift fall from one
-    // gear's line toward the next's, or are blipped): the driver rolls or brakes to a stop, and how hard is
-    // his habit. The car slows at the deceleration GPS showed in that state, shrunk toward the one
-    // declutched at large by a prior worth a few fixes.
-    if (at_idle_ && tuning_.idle_braking > 0.0) {
-      constexpr double kIdleCoastPrior = 3.0;  // s of fixes
-      mean = std::min((idle_coast_count_ * idle_coast_mean_ + kIdleCoastPrior * mean) /
-                          (idle_coast_count_ + kIdleCoastPrior),
-                      0.0);
-    }
+    // Declutched, nothing drives the car: it rolls and brakes as this driver does (SynthHabits).
+    mean = habits_.coast_accel(at_idle_, tuning_);
     // Rolling slowly declutched, a driver is braking to a stop: the last metres go at a firm deceleration.
     const double stopping =
         tuning_.stop_speed > 0.0 ? std::clamp(1.0 - x.v / tuning_.stop_speed, 0.0, 1.0) : 0.0;
@@ -861,80 +559,6 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
          weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);
 }
 
-// What GPS teaches about this engine and driver: the idle frequency (standing), the frequencies run at in
-// gear and the deceleration declutched (moving). Running means with a bounded memory, so they follow a
-// warming engine and a change of road.
-void SpeedSynthesizer::learn(double dt, double gps, double freq, bool gps_new) noexcept {
-  const bool was_moving = last_gps_ > 5.0 * tuning_.stationary_speed;
-  // Declutched is known from the revs: with the frequency lost every gear fades and the clutch holds the
-  // belief whatever the car does, and a cruise seen so taught a deceleration of zero (after which a car
-  // that lost GPS too was carried on at its last speed for good). Measured from one fix to the next: a
-  // fix repeated at the steps between them shows no change of speed.
-  if (gps_new) {
-    const double fix_dt = t_ - last_fix_t_;
-    if (fix_dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode_ == 0 && prob_[0] > 0.8 &&
-        std::isfinite(freq) && freq > 0.0) {
-      constexpr double kCoastMemory = 100.0;  // samples
-      const double a = std::clamp((gps - last_gps_) / fix_dt, -4.0, 1.0);
-      coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
-      coast_mean_ += (a - coast_mean_) / coast_count_;
-      // At idle, from fixes at least half a second apart (over less, the change of speed is mostly the
-      // receiver's noise, and clipped unevenly above it taught a braking no car did), each counting for
-      // the share of a second it covers (idle_coast_count_ is in seconds).
-      if (at_idle_ && fix_dt >= idle_braking::kMinGap) {
-        const double w = std::min(fix_dt, 1.0);
-        idle_coast_count_ = std::min(idle_coast_count_ + w, kCoastMemory);
-        idle_coast_mean_ += w * (a - idle_coast_mean_) / idle_coast_count_;
-      }
-    }
-    last_gps_ = gps;
-    last_fix_t_ = t_;
-  }
-  if (!std::isfinite(freq) || freq <= 0.0) {
-    roll_span_ = -1.0;
-    return;
-  }
-  const auto add = [&](double& mean, double& var, double& count, double memory) {
-    accumulate(freq, mean, var, count, memory / std::max(dt, 0.1));
-  };
-  constexpr double kIdleMemory = 60.0;    // s
-  constexpr double kDriveMemory = 600.0;  // s
-  constexpr double kSureGear = 0.8;
-  // Declutched on the move the engine idles too; a reading there at or below the idle learned so far
-  // follows a warming engine down when the car no longer stops (a cold start's high idle otherwise stays,
-  // and a car coasting at warm idle looks in gear).
-  const bool idling_moving = tuning_.idle_on_move > 0.0 && was_moving && mode_ == 0 && prob_[0] > kSureGear &&
-                             idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
-  // Rolling declutched above the standing idle (gear_model.hpp's rolling_idle rule, as the fit applies it
-  // to a log): revs that no gear explains, flat while GPS shows the car slowing, are the rolling idle. Not a
-  // shift's revs (they move), nor a slipping clutch's (the car gains speed, or creeps).
-  using namespace rolling_idle;
-  const bool roll_candidate = gps > kMinSpeed && was_moving && mode_ == 0 && prob_[0] > kSureGear &&
-                              idle_count_ > 0.0 && freq >= idle_mean_ + idle_sd() &&
-                              freq < kCeiling * idle_mean_;
-  if (!roll_candidate) {
-    roll_span_ = -1.0;
-  } else if (roll_span_ < 0.0 || std::abs(freq - roll_freq_) > kFlat * roll_freq_) {
-    roll_span_ = 0.0;
-    roll_freq_ = freq;
-    roll_speed_ = gps;
-  } else {
-    roll_span_ += dt;
-    if (roll_span_ >= kSpan && gps < roll_speed_ - tuning_.stationary_speed) {
-      double var = 0.0;  // the spread is the idle's
-      add(roll_mean_, var, roll_count_, kIdleMemory);
-      roll_time_ += dt;
-    }
-  }
-  if (gps < tuning_.stationary_speed || idling_moving) {
-    // A warming engine's idle only falls: a reading below the idle learned so far is followed sooner.
-    constexpr double kIdleFallMemory = 15.0;  // s
-    add(idle_mean_, idle_var_, idle_count_, freq < idle_mean_ ? kIdleFallMemory : kIdleMemory);
-  } else if (is_gear(mode_) && prob_[mode_] > kSureGear && gps > 10.0 * tuning_.stationary_speed) {
-    add(drive_mean_, drive_var_, drive_count_, kDriveMemory);
-  }
-}
-
 // One step of the filter: every mode sums over its predecessors, each one's track predicted over dt under
 // the mode's motion and corrected by GPS and the frequency, and keeps the moments of that mixture.
 SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new) noexcept {
@@ -947,10 +571,9 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   const double gps_var = sigma_v_ * sigma_v_;
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
-  score_revs_habit(freq);
+  habits_.score_revs(freq, weight_, gears_, tuning_, revs_habit_);
   // The engine at idle: no further above the idle it is held at rolling than a driver lugs a gear (lugging).
-  at_idle_ =
-      std::isfinite(freq) && idle_count_ > 0.0 && freq < rolling_idle() + idle_braking::kBandSds * idle_sd();
+  at_idle_ = habits_.at_idle(freq, tuning_);
   // How fast the revs climb, from kFreeRise (0) to twice it (1): only at the tracker's short steps, where
   // one reading to the next is shorter than a shift, so the climb is the engine's and not a shift's
   // between two readings. A driver who shifts every second or so otherwise had each gear outweigh the
@@ -1098,44 +721,20 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       age_[j] = 0.0;
     }
   if (have_gps) {
-    learn(dt, gps, freq, gps_new);
-    learn_shift(freq);
+    habits_.learn(t_, dt, gps, freq, gps_new, mode_, is_gear(mode_), prob_[mode_], at_idle_, tuning_);
+    habits_.learn_shift(is_gear(mode_) ? mode_ : 0, prob_[mode_], freq);
     return {gps, gps >= tuning_.stationary_speed ? model_gear(mode_) : 0, SpeedSource::kGps};
   }
-  roll_span_ = -1.0;  // a flat stretch of revs is one GPS saw whole
-  // Each mode's speed as its history has it (which orders the belief for the output's mode) and as the
-  // output counts it: a declutched or moving-off history slower than walking pace is at rest.
-  ModeArray track_speed{}, mode_speed{};
+  habits_.end_flat_stretch();  // a flat stretch of revs is one GPS saw whole
+  // Through an outage the output policy chooses the speed from the belief in the modes and their tracks.
+  ModeArray speed{}, speed_var{};
   for (int j = 0; j < modes; ++j) {
-    track_speed[j] = track_[j].v;
-    const double v = std::max(track_[j].v, 0.0);
-    mode_speed[j] = is_gear(j) || v >= tuning_.stationary_speed || tuning_.rest_output <= 0.0 ? v : 0.0;
+    speed[j] = track_[j].v;
+    speed_var[j] = track_[j].pvv;
   }
   const auto n = static_cast<std::size_t>(modes);
-  int out = belief_quantile_mode({prob_.data(), n}, {track_speed.data(), n}, tuning_.output_quantile);
-  if (out < 0) out = mode_;
-  const double speed = (1.0 - tuning_.hedge_share) * std::max(track_[out].v, 0.0) +
-                       tuning_.hedge_share * contended_speed({prob_.data(), n}, {mode_speed.data(), n});
-  double spread = 0.0, total = 0.0;
-  for (int j = 0; j < modes; ++j) {
-    const double d = mode_speed[j] - speed;
-    spread += prob_[j] * (std::max(track_[j].pvv, 0.0) + d * d);
-    total += prob_[j];
-  }
-  const double sd = total > 0.0 ? std::sqrt(spread / total) : 0.0;
-  if (is_gear(out)) return {speed, model_gear(out), SpeedSource::kEngine, sd};
-  // Declutched and slower than walking pace is at rest: a mixture of rest and a hesitant move-off must not
-  // trickle pulses.
-  return {speed < tuning_.stationary_speed && tuning_.rest_output > 0.0 ? 0.0 : speed, 0, SpeedSource::kCoast,
-          sd};
-}
-
-SynthOutput SpeedSynthesizer::hold_step(double t, double gps) noexcept {
-  if (std::isfinite(gps)) return {gps, 0, SpeedSource::kGps};
-  if (held_speed_ < 0.0) return {0.0, 0, SpeedSource::kNone};
-  const double coasted = std::max(0.0, t - held_t_ - tuning_.hold_time);
-  const double v = std::max(0.0, held_speed_ + tuning_.coast_accel * coasted);
-  return {v < tuning_.stationary_speed ? 0.0 : v, 0, SpeedSource::kCoast};
+  return SynthOutputPolicy::outage({prob_.data(), n}, {speed.data(), n}, {speed_var.data(), n}, gears_,
+                                   {model_gear_.data(), n}, mode_, tuning_);
 }
 
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new) noexcept {
@@ -1150,14 +749,13 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     for (Track& x : track_)
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
-    last_gps_ = -1.0;
+    habits_.forget_last_fix();
     dt = 0.0;
   }
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
   if (have_gps) {
-    held_speed_ = gps_speed;  // for an outage without a ladder (hold_step), whenever the ladder went
-    held_t_ = t;
+    output_.note_gps(t, gps_speed);  // for an outage without a ladder, whenever the ladder went
   }
 
   // Before the first fix or frequency reading nothing is known: no speed, not a guess.
@@ -1166,7 +764,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   if (!informed_) {
     out = {0.0, 0, SpeedSource::kNone};
   } else if (gears_ == 0) {
-    out = hold_step(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN());
+    out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
   } else {
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
     if (have_gps && gps_new) observe_gear(gps_speed, freq);

@@ -35,6 +35,9 @@
 // error in the gear's reading, until a model has that gear; such a gear has no number in the model, and an
 // output in it says gear 0.
 //
+// This file is the mode filter; what it learns of the engine and driver is SynthHabits (synth_habits.hpp),
+// and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
+//
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
 #include <array>
@@ -46,38 +49,10 @@
 #include "core/gear_model.hpp"
 #include "core/sample.hpp"
 #include "core/seen_gears.hpp"
+#include "core/synth_habits.hpp"
+#include "core/synth_output.hpp"
 
 namespace gearpulse {
-
-enum class SpeedSource : std::uint8_t { kNone, kGps, kEngine, kCoast };
-
-// "none", "gps", "engine", "coast" (the `source` column of `gearpulse replay`).
-[[nodiscard]] std::string_view source_name(SpeedSource source) noexcept;
-
-// The speed a split belief's contenders point to: each speed weighted by the square of its probability.
-// Between two modes this is the speed of least expected |error|^1.5, between the median's |error| and
-// the mean's error^2: a contender holding a fifth of the belief moves it a seventeenth of the way to its
-// own speed, one holding 0.4 against 0.6 a third of the way, so a mode that clearly leads keeps its speed.
-// `prob` and `speed` have the same size; 0 if no mode holds any belief.
-[[nodiscard]] double contended_speed(std::span<const double> prob, std::span<const double> speed) noexcept;
-
-// The mode at quantile `q` of a belief ordered by speed: the first mode, slowest first, at which the belief
-// in it and in every slower mode reaches q. Modes of equal speed (a negligible mode carries the leader's
-// history) count as one, named by the most probable of them. A mode holding at least max(q, 1 - q) is its
-// own quantile. q = 0.5 is the median, whose speed errs least in mean absolute terms where the belief is
-// right about its odds; a higher q leans toward the faster modes. `prob` and `speed` have the same size,
-// at most 16 modes; -1 if there are none.
-[[nodiscard]] int belief_quantile_mode(std::span<const double> prob, std::span<const double> speed,
-                                       double q) noexcept;
-
-struct SynthOutput {
-  double speed = 0.0;  // m/s, >= 0; what the pulse output carries
-  int gear = 0;        // 1 = lowest; 0 = none/unknown (clutch out, standing, no model)
-  SpeedSource source = SpeedSource::kNone;
-  // m/s: the belief's spread about `speed` through an outage (each mode's speed uncertainty and how far the
-  // modes' speeds lie from it, weighed by their belief); 0 while GPS gives the speed or nothing is known.
-  double speed_sd = 0.0;
-};
 
 // Driving-physics constants (not from the paper): how road cars accelerate, how drivers shift and move
 // off. They are deliberately generic, not fitted to any one log; what differs between cars and drivers
@@ -237,6 +212,7 @@ class SpeedSynthesizer {
  private:
   static constexpr int kModes = kMaxGears + 2;  // 0 = declutched, 1..gears, gears + 1 = moving off
   using ModeArray = std::array<double, kModes>;
+  static_assert(kModes == SynthHabits::kSlots && kModes <= SynthOutputPolicy::kMaxModes);
 
   // Speed (m/s) and acceleration (m/s^2) with their covariance.
   struct Track {
@@ -252,7 +228,6 @@ class SpeedSynthesizer {
   void observe_gear(double gps, double freq) noexcept;
   // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
   [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }
-  void load_habits(const GearModel* model) noexcept;
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
@@ -266,19 +241,17 @@ class SpeedSynthesizer {
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
-  [[nodiscard]] double idle_sd() const noexcept;
-  [[nodiscard]] double rolling_idle() const noexcept;
-  [[nodiscard]] bool lacks_first_gear() const noexcept;
+  [[nodiscard]] double idle_sd() const noexcept { return habits_.idle_sd(); }
+  [[nodiscard]] double rolling_idle() const noexcept { return habits_.rolling_idle(tuning_); }
+  // The ladder's lowest gear carries the car at the warm idle faster than any first gear does.
+  [[nodiscard]] bool lacks_first_gear() const noexcept {
+    return gears_ >= 1 && habits_.lacks_first_gear(theta_[1], tuning_);
+  }
+  [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept {
+    return habits_.shift_comfort(from, to, theta_[from], theta_[to], freq, tuning_);
+  }
   [[nodiscard]] double lugging(int gear, double freq) const noexcept;
-  void score_revs_habit(double freq) noexcept;
-  [[nodiscard]] double revs_z(int gear, double freq) const noexcept;
-  [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept;
-  [[nodiscard]] double shift_urge(double freq) const noexcept;
-  [[nodiscard]] double upshift_factor(int gear, double freq) const noexcept;
-  [[nodiscard]] double downshift_factor(int gear, double freq, bool long_step) const noexcept;
-  void learn_shift(double freq) noexcept;
   [[nodiscard]] int map_mode() const noexcept;
-  void learn(double dt, double gps, double freq, bool gps_new) noexcept;
   void normalise() noexcept;
 
   SynthTuning tuning_;
@@ -306,35 +279,15 @@ class SpeedSynthesizer {
   bool started_ = false;
   bool informed_ = false;  // a GPS fix or a frequency reading has been seen since reset()
   double t_ = 0.0;
-  int mode_ = 0;  // current MAP mode
-  double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
-  double warm_idle_ = 0.0;  // idle of the warm engine (the fit's, over many stops); NaN if unknown
-  // Per gear, the log engine frequency this driver runs at (the model's extra.revs; sd 0 = unknown), and
-  // this step's log-score of the frequency by it.
-  ModeArray revs_mean_{}, revs_sd_{}, revs_habit_{};
-  double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
-  double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
-  // The same with the engine at idle (idle_braking), and whether this step's frequency is at idle.
-  double idle_coast_mean_ = 0.0, idle_coast_count_ = 0.0;
-  bool at_idle_ = false;
-  // Engine frequency rolling declutched above the standing idle (rolling_idle()): its mean, the s seen,
-  // and the current flat stretch (s, -1 = none; its first frequency and GPS speed).
-  double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
-  double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
-  double last_gps_ = -1.0;
-  double last_fix_t_ = 0.0;                  // step time of the newest fix (last_gps_)
-  double held_speed_ = -1.0, held_t_ = 0.0;  // last GPS speed and its time, for hold_step (-1 = none yet)
-  // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
-  double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
-  double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
-  ModeArray gear_up_mean_{}, gear_up_var_{}, gear_up_count_{};  // the same, per gear left
-  ModeArray gear_down_mean_{}, gear_down_var_{}, gear_down_count_{};
-  int sure_gear_ = 0;            // last gear held with confidence under GPS
-  double sure_gear_freq_ = 0.0;  // its last frequency
-  double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
-  double climb_ = 0.0;           // how fast the revs climb this step, 0..1 (filter_step)
+  int mode_ = 0;        // current MAP mode
+  SynthHabits habits_;  // what this engine and driver do: learned under GPS, seeded by the fit
+  // This step's log-score of the frequency in each gear by the revs this driver runs it at.
+  ModeArray revs_habit_{};
+  bool at_idle_ = false;      // this step's frequency is at idle
+  double prev_freq_ = 0.0;    // frequency of the previous step (NaN if lost): the revs a shift left
+  double climb_ = 0.0;        // how fast the revs climb this step, 0..1 (filter_step)
+  SynthOutputPolicy output_;  // how the output is chosen from the belief, and held without a ladder
   SynthOutput last_{};
-  SynthOutput hold_step(double t, double gps) noexcept;
 };
 
 // Steps a synthesizer over the samples of a log, in order, as `gearpulse replay` and the benches do: a

@@ -1,0 +1,105 @@
+#pragma once
+// What SpeedSynthesizer knows of this engine and driver beyond the gear ladder: the idle (standing, and
+// rolling declutched), the revs run in gear at large and in each gear of the ladder, how hard the car slows
+// declutched (at large, and with the engine at idle), and the revs at which this driver shifts up and down.
+// Seeded from the fit (the model's `extra`: load()) and learned while GPS is present (learn(),
+// learn_shift()) as running means with a bounded memory, so they follow a warming engine and a change of
+// road. The queries turn them into what the filter asks: the idle band, the deceleration declutched, and
+// how the revs move the hazards of a shift. Fixed arrays only: nothing here allocates.
+#include <array>
+
+#include "core/gear_model.hpp"
+
+namespace gearpulse {
+
+struct SynthTuning;
+
+class SynthHabits {
+ public:
+  // Per position of the synthesizer's ladder (1..gears; 0 and the slot past the top unused).
+  static constexpr int kSlots = static_cast<int>(GearModel::kMaxGears) + 2;
+  using GearArray = std::array<double, kSlots>;
+  using GearNumbers = std::array<int, kSlots>;
+
+  // What the fit saw of this engine and driver: the warm idle (also the idle until GPS shows this car
+  // standing), the rolling idle and the deceleration declutched at idle until GPS shows them, and the revs
+  // run in each gear of a ladder of `gears`, whose positions carry the model's gear numbers `model_gear`
+  // (0: a gear the model lacks). Anything missing or malformed is left unknown.
+  void load(const GearModel* model, const GearNumbers& model_gear, int gears,
+            const SynthTuning& tuning) noexcept;
+
+  // Under GPS, after a step of dt ending at t: GPS speed `gps` (a new fix if gps_new), frequency `freq`
+  // (NaN if lost); the filter's most probable mode `mode` (0 = declutched) holding `belief`, `in_gear`
+  // whether it is a gear, and `at_idle` whether the frequency is at idle (at_idle()).
+  void learn(double t, double dt, double gps, double freq, bool gps_new, int mode, bool in_gear,
+             double belief, bool at_idle, const SynthTuning& tuning) noexcept;
+  // Under GPS, after each step: notes the frequency at which a confidently held gear (`gear` held with
+  // `belief`; 0 = no gear) was left for its neighbour.
+  void learn_shift(int gear, double belief, double freq) noexcept;
+
+  // The next fix starts afresh (after a reset or a gap): no speed before it to measure a deceleration by.
+  void forget_last_fix() noexcept { last_gps_ = -1.0; }
+  // A flat stretch of revs counts only if GPS saw it whole (rolling idle).
+  void end_flat_stretch() noexcept { roll_span_ = -1.0; }
+  // The ladder changed: the gear at old position i is at position to[i] (0 = gone), for old positions
+  // 1..old_gears; or, with a new model of another ladder, the shift revs per gear are forgotten.
+  void renumber_gears(const GearNumbers& to, int old_gears) noexcept;
+  void forget_gear_shifts() noexcept;
+
+  [[nodiscard]] bool idle_known() const noexcept { return idle_count_ > 0.0; }
+  [[nodiscard]] double idle_mean() const noexcept { return idle_mean_; }
+  // Learned idle frequency (Hz), NaN until known.
+  [[nodiscard]] double idle_freq() const noexcept;
+  [[nodiscard]] double idle_sd() const noexcept;
+  // Idle of the warm engine (the fit's, over many stops); NaN if unknown.
+  [[nodiscard]] double warm_idle() const noexcept { return warm_idle_; }
+  [[nodiscard]] double rolling_idle(const SynthTuning& tuning) const noexcept;
+  // Whether this frequency is at idle: no further above the rolling idle than a driver lugs a gear.
+  [[nodiscard]] bool at_idle(double freq, const SynthTuning& tuning) const noexcept;
+  // Whether a ladder whose lowest gear has `lowest_theta` lacks first gear (it carries the car at the warm
+  // idle faster than any first gear does); false while no idle is known.
+  [[nodiscard]] bool lacks_first_gear(double lowest_theta, const SynthTuning& tuning) const noexcept;
+  // m/s^2: the mean deceleration declutched on the move (at_idle: with the engine at idle), before the
+  // last metres' braking to a stop.
+  [[nodiscard]] double coast_accel(bool at_idle, const SynthTuning& tuning) const noexcept;
+
+  // Scores `freq` in each gear 1..gears by how usual it is there against gears at large, weighed by their
+  // use `weight` (0 for every gear when the revs per gear are unknown): into `out`.
+  void score_revs(double freq, const GearArray& weight, int gears, const SynthTuning& tuning,
+                  GearArray& out) const noexcept;
+  // How much likelier a shift from `from` (theta_from) to `to` (theta_to) at `freq` is for bringing the revs
+  // nearer the band this driver runs the new gear in.
+  [[nodiscard]] double shift_comfort(int from, int to, double theta_from, double theta_to, double freq,
+                                     const SynthTuning& tuning) const noexcept;
+  // Hazard multipliers of shifting up or down out of `gear` at `freq`.
+  [[nodiscard]] double upshift_factor(int gear, double freq, const SynthTuning& tuning) const noexcept;
+  [[nodiscard]] double downshift_factor(int gear, double freq, bool long_step,
+                                        const SynthTuning& tuning) const noexcept;
+
+ private:
+  [[nodiscard]] double revs_z(int gear, double freq) const noexcept;
+  [[nodiscard]] double shift_urge(double freq) const noexcept;
+
+  double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
+  double warm_idle_ = 0.0;  // NaN if unknown (load())
+  // Per gear, the log engine frequency this driver runs at (the model's extra.revs; sd 0 = unknown).
+  GearArray revs_mean_{}, revs_sd_{};
+  double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
+  double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
+  double idle_coast_mean_ = 0.0, idle_coast_count_ = 0.0;  // the same with the engine at idle
+  // Engine frequency rolling declutched above the standing idle (rolling_idle()): its mean, the s seen,
+  // and the current flat stretch (s, -1 = none; its first frequency and GPS speed).
+  double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
+  double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
+  double last_gps_ = -1.0;   // newest fix (-1 = none to measure from)
+  double last_fix_t_ = 0.0;  // its step time
+  // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
+  double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
+  double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
+  GearArray gear_up_mean_{}, gear_up_var_{}, gear_up_count_{};  // the same, per gear left
+  GearArray gear_down_mean_{}, gear_down_var_{}, gear_down_count_{};
+  int sure_gear_ = 0;            // last gear held with confidence under GPS
+  double sure_gear_freq_ = 0.0;  // its last frequency
+};
+
+}  // namespace gearpulse
