@@ -17,8 +17,14 @@ export TSAN_OPTIONS=halt_on_error=1
 bash scripts/setup.sh
 
 # ccache when installed (setup.sh installs it): a run after a small change recompiles only what changed.
+# Paths are hashed relative to the checkout (and the working directory not at all), so a clone at another
+# path hits what a run in this one compiled; the precompiled header needs the two sloppiness settings.
 launcher=()
-if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+if command -v ccache >/dev/null 2>&1; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  export CCACHE_BASEDIR=$PWD CCACHE_NOHASHDIR=true
+  export CCACHE_SLOPPINESS=pch_defines,time_macros,include_file_mtime,include_file_ctime
+fi
 # Each stage's wall time, printed as it ends.
 stage_start=$SECONDS
 stage() {
