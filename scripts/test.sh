@@ -62,7 +62,10 @@ require_ran() {
 # beside the work that needs the cores (the other tests, the sanitizer builds), which runs at the lowest CPU
 # priority so that a paced test is served as soon as its audio or fix arrives (run at the same priority,
 # a sanitized pipeline test once missed its outage's first seconds).
+# Four at once in the release tree; two in the sanitizer trees, whose paced tests need several times the
+# CPU (at four, a sanitized pipeline test twice missed a 20 s deadline for its first fix).
 paced_jobs=4
+paced_jobs_sanitized=2
 busy=(nice -n 19)
 
 # start_tests NAME DIR JOBS [ctest arguments] starts ctest on build tree DIR with JOBS tests at once (its
@@ -133,12 +136,12 @@ stage "package installed, verified and purged"
 # The three-minute drive in real time runs in the release tree only: under the sanitizers its daemon runs
 # the same code the pipeline and daemon tests drive through the same ALSA, gpsd and PTY paths.
 tsan_tests="^(ring|alsa|audio|gpsd|pulse|log queue|control|daemon|pipeline):"
-start_tests asan-paced build-asan "$paced_jobs" -L paced -E "^e2e: pulses match"
+start_tests asan-paced build-asan "$paced_jobs_sanitized" -L paced -E "^e2e: pulses match"
 start_tests asan build-asan "$jobs" -LE paced
 finish_tests asan "$may_skip_sanitized"
 finish_tests asan-paced "$may_skip_sanitized"
 stage "ASan+UBSan tests passed"
-start_tests tsan-paced build-tsan "$paced_jobs" -L paced -R "$tsan_tests"
+start_tests tsan-paced build-tsan "$paced_jobs_sanitized" -L paced -R "$tsan_tests"
 start_tests tsan build-tsan "$jobs" -LE paced -R "$tsan_tests"
 finish_tests tsan "$may_skip_sanitized"
 finish_tests tsan-paced "$may_skip_sanitized"
