@@ -1208,50 +1208,64 @@ TEST_CASE("synth: a gear measured under GPS gives way to the model's own once a 
   CHECK(synth.mode_probability(4) > 0.9);
 }
 
-TEST_CASE("synth: declutched at idle in an outage the car slows as GPS showed it braking to stops") {
-  // Stands at the light (the idle is learned), then four times: moves off and climbs to third, the clutch
-  // out for a second at each upshift (revs between the gears' lines, the speed kept), and brakes to a stop
-  // with the clutch out and the engine at idle, at 1.5 m/s^2. GPS is lost as the last drive reaches third
-  // gear: the last stop is braked in the outage as the others were under GPS, not coasted as the car
-  // coasts through its shifts.
+namespace {
+
+// A drive at 1 s rows that stands at the light, then `stops` times moves off and climbs to third, the
+// clutch out for a second at each upshift (revs between the gears' lines, the speed kept), and brakes to a
+// stop with the clutch out and the engine at idle, at 1.5 m/s^2. `third` is the row where the last climb
+// reaches third gear, `declutch` the row where its stop begins.
+struct StopDrive {
   std::vector<Row> rows;
+  std::size_t third = 0, declutch = 0;
+};
+
+StopDrive stop_drive(int stops) {
+  StopDrive d;
   double t = 0.0, v = 0.0;
   const auto add = [&](int gear, double accel, int seconds, double freq) {
     for (int k = 0; k < seconds; ++k, t += 1.0) {
       v = std::max(0.0, v + accel);
-      rows.push_back({t, v, gear > 0 ? v / kHatch[static_cast<std::size_t>(gear - 1)] : freq, gear});
+      d.rows.push_back({t, v, gear > 0 ? v / kHatch[static_cast<std::size_t>(gear - 1)] : freq, gear});
     }
   };
   add(0, 0.0, 20, kIdle);
-  std::size_t third = 0;
-  for (int k = 0; k < 4; ++k) {
+  for (int k = 0; k < stops; ++k) {
     add(1, 1.8, 3, 0.0);
     add(0, 0.0, 1, 0.5 * (v / kHatch[0] + v / kHatch[1]));
     add(2, 1.2, 4, 0.0);
     add(0, 0.0, 1, 0.5 * (v / kHatch[1] + v / kHatch[2]));
-    third = rows.size();
+    d.third = d.rows.size();
     add(3, 0.3, 5, 0.0);
+    d.declutch = d.rows.size();
     add(0, -1.5, 8, kIdle);
     add(0, 0.0, 10, kIdle);
   }
-  const std::size_t declutch = third + 5;
-  // Distance over the stop, synthesized against driven (relative error), and the s from the declutch to
-  // the output's rest.
-  const auto run = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model_of(kHatch), tuning);
-    const auto out = replay(synth, rows, rows[third].t);
-    double synthesized = 0.0, driven = 0.0, rest = -1.0;
-    for (std::size_t i = declutch; i < rows.size(); ++i) {
-      synthesized += out[i].speed;
-      driven += rows[i].speed;
-      if (rest < 0.0 && out[i].speed == 0.0) rest = rows[i].t - rows[declutch].t;
-    }
-    return std::pair{synthesized / driven - 1.0, rest};
-  };
-  const auto [braked, braked_rest] = run({});
+  return d;
+}
+
+// GPS lost as the drive's last climb reaches third gear: the distance over the last stop, synthesized
+// against driven (relative error), and the s from the declutch to the output's rest (-1: never).
+std::pair<double, double> last_stop(const StopDrive& d, SpeedSynthesizer synth) {
+  const auto out = replay(synth, d.rows, d.rows[d.third].t);
+  double synthesized = 0.0, driven = 0.0, rest = -1.0;
+  for (std::size_t i = d.declutch; i < d.rows.size(); ++i) {
+    synthesized += out[i].speed;
+    driven += d.rows[i].speed;
+    if (rest < 0.0 && out[i].speed == 0.0) rest = d.rows[i].t - d.rows[d.declutch].t;
+  }
+  return {synthesized / driven - 1.0, rest};
+}
+
+}  // namespace
+
+TEST_CASE("synth: declutched at idle in an outage the car slows as GPS showed it braking to stops") {
+  // Four stops: the last is braked in the outage as the others were under GPS, not coasted as the car
+  // coasts through its shifts.
+  const StopDrive drive = stop_drive(4);
+  const auto [braked, braked_rest] = last_stop(drive, SpeedSynthesizer(model_of(kHatch)));
   gearpulse::SynthTuning coasting;
   coasting.idle_braking = 0.0;
-  const auto [coasted, coasted_rest] = run(coasting);
+  const auto [coasted, coasted_rest] = last_stop(drive, SpeedSynthesizer(model_of(kHatch), coasting));
   INFO("distance over the stop: " << 100.0 * braked << " % off braked as learned (at rest after "
                                   << braked_rest << " s), " << 100.0 * coasted << " % coasted ("
                                   << coasted_rest << " s)");
@@ -1261,45 +1275,14 @@ TEST_CASE("synth: declutched at idle in an outage the car slows as GPS showed it
 }
 
 TEST_CASE("synth: the fit's idle braking brakes an outage's first stop before GPS showed one") {
-  // The drive of the test above, once: stands at the light, moves off and climbs to third, and brakes to a
-  // stop with the clutch out and the engine at idle, at 1.5 m/s^2. GPS is lost as the car reaches third
-  // gear, before it ever rolled declutched at idle under GPS: only the model's extra.idle_braking (what
-  // the fit saw of this driver's stops) tells that the car brakes rather than coasting as through shifts.
-  std::vector<Row> rows;
-  double t = 0.0, v = 0.0;
-  const auto add = [&](int gear, double accel, int seconds, double freq) {
-    for (int k = 0; k < seconds; ++k, t += 1.0) {
-      v = std::max(0.0, v + accel);
-      rows.push_back({t, v, gear > 0 ? v / kHatch[static_cast<std::size_t>(gear - 1)] : freq, gear});
-    }
-  };
-  add(0, 0.0, 20, kIdle);
-  add(1, 1.8, 3, 0.0);
-  add(0, 0.0, 1, 0.5 * (v / kHatch[0] + v / kHatch[1]));
-  add(2, 1.2, 4, 0.0);
-  add(0, 0.0, 1, 0.5 * (v / kHatch[1] + v / kHatch[2]));
-  const std::size_t third = rows.size();
-  add(3, 0.3, 5, 0.0);
-  const std::size_t declutch = rows.size();
-  add(0, -1.5, 8, kIdle);
-  add(0, 0.0, 10, kIdle);
-  // Distance over the stop, synthesized against driven (relative error), and the s from the declutch to
-  // the output's rest.
-  const auto run = [&](const std::shared_ptr<const GearModel>& model) {
-    SpeedSynthesizer synth(model);
-    const auto out = replay(synth, rows, rows[third].t);
-    double synthesized = 0.0, driven = 0.0, rest = -1.0;
-    for (std::size_t i = declutch; i < rows.size(); ++i) {
-      synthesized += out[i].speed;
-      driven += rows[i].speed;
-      if (rest < 0.0 && out[i].speed == 0.0) rest = rows[i].t - rows[declutch].t;
-    }
-    return std::pair{synthesized / driven - 1.0, rest};
-  };
+  // One stop: GPS is lost before the car ever rolled declutched at idle under GPS, so only the model's
+  // extra.idle_braking (what the fit saw of this driver's stops) tells that the car brakes rather than
+  // coasting as through shifts.
+  const StopDrive drive = stop_drive(1);
   auto fitted = std::make_shared<GearModel>(*model_of(kHatch));
   fitted->extra["idle_braking"] = {{"accel", -1.5}, {"seconds", 120.0}, {"samples", 120}};
-  const auto [braked, braked_rest] = run(fitted);
-  const auto [coasted, coasted_rest] = run(model_of(kHatch));
+  const auto [braked, braked_rest] = last_stop(drive, SpeedSynthesizer(fitted));
+  const auto [coasted, coasted_rest] = last_stop(drive, SpeedSynthesizer(model_of(kHatch)));
   INFO("distance over the stop: " << 100.0 * braked << " % off with the fit's idle braking (at rest after "
                                   << braked_rest << " s), " << 100.0 * coasted << " % without ("
                                   << coasted_rest << " s)");
