@@ -339,7 +339,7 @@ std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
   const double max_gap = 3.0 * gaps[gaps.size() / 2];
   auto agree = [&](std::size_t k, std::size_t j, double r) {
     if (!moving(j) || std::abs(all.t[j] - all.t[k]) > max_gap) return false;
-    return std::abs(std::log(all.v[j] / all.s[j]) - r) < 0.03 + 0.3 / all.v[k];
+    return steady_ratios_agree(r, std::log(all.v[j] / all.s[j]), all.v[k]);
   };
   for (std::size_t k = 0; k < n; ++k) {
     if (!moving(k)) continue;

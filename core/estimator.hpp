@@ -2,6 +2,7 @@
 // Gear-scale estimation from unlabelled (speed, frequency) samples.
 // "paper" mode: the ML estimator of eqs. (6)-(9) with the initialisation (11)-(16) and Table 2 constants.
 // "auto" mode (default): no priors; gear count, weights and the clutch-out density come from the data.
+#include <cmath>
 #include <span>
 #include <string>
 #include <vector>
@@ -34,6 +35,14 @@ struct FitResult {
 // Half the width of a window of log(speed / frequency) that never holds two gears: half the smallest
 // step between adjacent gears the fit accepts (a factor of 1.06).
 inline constexpr double kGearWindow = 0.029;
+
+// Whether two log(speed / frequency) readings next to each other in time, the later at `speed` (m/s), show
+// one gear: within 3 % (the revs' jitter and the tracker's), widened at low speed, where a few tenths of
+// m/s of speed error (GPS noise, integer km/h) move the ratio. The steady-pair rule of the auto fit and of
+// the gears the synthesis measures under GPS.
+[[nodiscard]] inline bool steady_ratios_agree(double log_ratio, double neighbour, double speed) noexcept {
+  return std::abs(log_ratio - neighbour) < 0.03 + 0.3 / speed;
+}
 
 // log(speed / frequency) of the moving samples in gear, ascending: those whose ratio agrees with a time
 // neighbour's (the rule the auto fit reads gear clusters with; shifts and clutch slip give isolated ratios).

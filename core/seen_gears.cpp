@@ -49,7 +49,7 @@ bool SeenGears::observe(double t, double speed, double freq, double idle_ceiling
   }
   const double r = std::log(speed / freq);
   const bool steady = have_prev_ && t - prev_t_ <= kMaxFixGap && t > prev_t_ &&
-                      std::abs(r - prev_ratio_) < 0.03 + 0.3 / speed &&
+                      steady_ratios_agree(r, prev_ratio_, speed) &&
                       std::abs(std::log(speed / prev_speed_)) < kSteadySpeed * (t - prev_t_);
   have_prev_ = true;
   prev_t_ = t;

@@ -1,14 +1,14 @@
 #pragma once
 // Gears the synthesis measures under GPS that its model lacks. While GPS gives the speed and the engine
 // frequency is tracked, the ratio v / f of a car in gear is that gear's theta (eq. (3)). A fix whose ratio
-// agrees with the fix before it (the fit's steady-pair rule: moving, log ratios within 0.03 + 0.3 / v), at
-// a speed that changed by under 2 % a second since (GPS speed lags), and that lies off every gear of the
-// model (none within a gearbox step, a factor of 1.06) is a sighting of a gear the model lacks; sightings
-// within half a gear window (kGearWindow) of each other are one gear. Once a gear has been sighted on
-// `min_fixes` fixes in a row it is *seen*: its theta is the mean ratio of all its sightings, with the
-// standard error of that mean, and its share of use that of its sightings among all steady fixes; the
-// synthesis carries it as a gear until a model has it or it has not been sighted for kForgetTime. Readings
-// at idle revs are no sightings: declutched, the car rolls at a slowly changing ratio.
+// agrees with the fix before it (the fit's steady-pair rule, steady_ratios_agree), at a speed that changed
+// by under 2 % a second since (GPS speed lags), and that lies off every gear of the model (none within a
+// gearbox step, a factor of 1.06) is a sighting of a gear the model lacks; sightings within half a gear
+// window (kGearWindow) of each other are one gear. Once a gear has been sighted on `min_fixes` fixes in a row
+// it is *seen*: its theta is the mean ratio of all its sightings, with the standard error of that mean, and
+// its share of use that of its sightings among all steady fixes; the synthesis carries it as a gear until a
+// model has it or it has not been sighted for kForgetTime. Readings at idle revs are no sightings:
+// declutched, the car rolls at a slowly changing ratio.
 //
 // Fixed capacity, no allocation.
 #include <array>
