@@ -602,6 +602,11 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       // Declutching ends the engine's drive: the car no longer gains speed. Nor does a car declutched
       // all along once GPS is lost, whatever gain GPS showed it (a slipping clutch, revs no gear explains).
       if (j == 0 && (i != 0 || !have_gps)) x.a = std::min(x.a, 0.0);
+      // The brakes are the driver's: once the clutch goes out, the deceleration may go on, ease or stop.
+      if (j == 0 && i != 0) {
+        const double spread = tuning_.declutch_brake_spread * x.a;
+        x.paa = std::max(x.paa, spread * spread);
+      }
       // A shift within the step: the engine's pull reaches the wheels through the new gear, as theta_i /
       // theta_j of the force at the same torque (eq. (3): theta is the speed per turn of the engine), so a
       // car that was pulling carries that share of its acceleration into the gear it enters; braking is the

@@ -176,6 +176,12 @@ struct SynthTuning {
   // that gear first (bite_gap), and moving off stands for driving below the ladder, as plausible at speed
   // as at a walking pace (launch_fade does not apply) (inf: the lowest gear is always first).
   double first_gear_idle_speed = 2.6;
+  // Share of the deceleration a declutch carries that is its spread: with the clutch out the driver may
+  // keep braking, ease off or stop braking (a downshift under braking), so the deceleration GPS measured
+  // in gear is known no better than its own size once the clutch goes out. A gear the revs show next is
+  // then entered from that spread of speeds, not from the braking carried on unchanged (0: the
+  // deceleration stays as certain as GPS measured it).
+  double declutch_brake_spread = 1.0;
 };
 
 class SpeedSynthesizer {

@@ -6,6 +6,7 @@
 
 #include "core/imm_speed_synth.hpp"
 #include "tests/alloc_counter.hpp"
+#include "tests/core/skip_downshift_drive.hpp"
 
 using gearpulse::GearModel;
 using gearpulse::ImmSpeedSynthesizer;
@@ -13,6 +14,7 @@ using gearpulse::kMissing;
 using gearpulse::SpeedSource;
 using gearpulse::SynthOutput;
 using gearpulse::test::g_allocations;
+using gearpulse::test::skip_downshift_outage;
 
 namespace {
 
@@ -107,50 +109,10 @@ TEST_CASE("imm synth: without a model an outage holds the last GPS speed") {
   CHECK(o.source == SpeedSource::kCoast);
 }
 
-namespace {
-
-// Braking in 4th from 85 to 40 km/h at 3.2 m/s^2, 0.4 s declutched, then 2nd gear (a skip) just as GPS is
-// lost, 60 s in 2nd at 24-34 km/h. The daemon's feed (the frequency every 0.1 s, a 1 Hz fix held for 1.5 s
-// after it came, measured once) or a log's (rows every second). Returns the outage distance's error, %.
-double skip_downshift_outage(bool daemon_feed) {
-  ImmSpeedSynthesizer synth(hatch_model());
-  constexpr double kBrake = 3.2, kFrom = 85.0 / 3.6, kTo = 40.0 / 3.6;
-  constexpr double kBrakeStart = 60.0, kBrakeEnd = kBrakeStart + (kFrom - kTo) / kBrake;
-  constexpr double kLost = kBrakeEnd + 0.4, kEnd = kLost + 60.0;
-  const auto truth = [&](double t) -> std::pair<double, double> {  // speed, frequency
-    if (t < kBrakeStart) return {kFrom, kFrom / kHatch[3]};
-    if (t < kBrakeEnd) {
-      const double v = kFrom - kBrake * (t - kBrakeStart);
-      return {v, v / kHatch[3]};
-    }
-    if (t < kLost) {
-      const double v = kTo - 0.3 * (t - kBrakeEnd);
-      return {v, 0.5 * (v / kHatch[3] + kIdle)};
-    }
-    const double start = kTo - 0.3 * 0.4, cruise = (29.0 + 5.0 * std::sin((t - kLost) / 20.0 * 6.2832)) / 3.6;
-    const double v = start + (cruise - start) * std::min(1.0, (t - kLost) / 5.0);
-    return {v, v / kHatch[1]};
-  };
-  const double step = daemon_feed ? 0.1 : 1.0;
-  double fix = kMissing, fix_t = -10.0, synthesized = 0.0, driven = 0.0;
-  for (int k = 0; k * step < kEnd; ++k) {
-    const double t = k * step;
-    const auto [v, f] = truth(t);
-    bool fresh = false;
-    if (t < kLost && (!daemon_feed || k % 10 == 0)) fix = v, fix_t = t, fresh = true;
-    const double held = daemon_feed ? 1.5 : 0.0;  // the daemon's GPS timeout
-    const double gps = t < kLost || t - fix_t < held ? fix : kMissing;
-    const SynthOutput o = synth.step(t, gps, f, fresh);
-    if (t >= kLost) synthesized += o.speed * step, driven += v * step;
-  }
-  return 100.0 * (synthesized - driven) / driven;
-}
-
-}  // namespace
-
 TEST_CASE("imm synth: a skip downshift under braking as GPS is lost is followed, live and in replay alike") {
-  const double live = skip_downshift_outage(true);
-  const double replay = skip_downshift_outage(false);
+  ImmSpeedSynthesizer live_synth(hatch_model()), replay_synth(hatch_model());
+  const double live = skip_downshift_outage(live_synth, kHatch, kIdle, true);
+  const double replay = skip_downshift_outage(replay_synth, kHatch, kIdle, false);
   INFO("outage distance error: daemon's feed " << live << " %, a log's " << replay << " %");
   CHECK(std::abs(live) < 2.0);
   CHECK(std::abs(replay) < 2.0);

@@ -18,6 +18,7 @@
 #include "bench/outage_protocol.hpp"
 #include "core/speed_synth.hpp"
 #include "tests/alloc_counter.hpp"
+#include "tests/core/skip_downshift_drive.hpp"
 #include "tools/sim/vehicle_sim.hpp"
 
 using gearpulse::GearModel;
@@ -27,6 +28,7 @@ using gearpulse::SpeedSynthesizer;
 using gearpulse::SynthOutput;
 
 using gearpulse::test::g_allocations;
+using gearpulse::test::skip_downshift_outage;
 
 namespace {
 
@@ -829,6 +831,16 @@ TEST_CASE("synth: at 10 Hz braking with two downshifts in an outage is followed 
   // a true 25 in second).
   // From 24 s, as the car brakes, to the end (70 s).
   CHECK(speed_within("braking_downshifts", 24.0, 70.0, 5.0 * kKmh) == 461);
+}
+
+TEST_CASE(
+    "synth: at 10 Hz a skip downshift under braking as GPS is lost is followed in the gear it skips to") {
+  // The clutch out between braking in 4th and 2nd: read with the braking carried on unchanged through the
+  // declutch, the car fell at the braking rate until first gear explained 2nd gear's revs (-43 %).
+  SpeedSynthesizer synth(model_of(kHatch));
+  const double error = skip_downshift_outage(synth, kHatch, kIdle, true);
+  INFO("outage distance error " << error << " %");
+  CHECK(std::abs(error) < 2.0);
 }
 
 TEST_CASE("synth: at 10 Hz a hard move-off in an outage keeps its speed through four upshifts") {
