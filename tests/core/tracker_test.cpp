@@ -292,6 +292,22 @@ TEST_CASE("tracker: engine off and idle below the band are not tracked") {
   }
 }
 
+TEST_CASE("tracker: a band down to the idle with four periods of 25 Hz tracks an idle at 27 Hz") {
+  sim::LighterSignalConfig g;
+  g.snr_db = 10.0;
+  g.seed = 8;
+  const sim::FrequencyTrajectory truth = [](double) { return 27.0; };
+  TrackerConfig c = config_at(g.sample_rate_hz);
+  c.band_lo_hz = 25.0;
+  c.window_s = 0.16;
+  SlidingDftTracker tracker(c);
+  const Stats s = score(track(tracker, sim::make_lighter_signal(g, truth, 10.0)), truth, 1.0, 9.5);
+  INFO("tracked " << s.tracked_fraction << " of " << s.considered << " hops, largest error " << s.max_error
+                  << " Hz");
+  CHECK(s.tracked_fraction >= 0.9);
+  CHECK(s.max_error <= 0.05 * 27.0);
+}
+
 TEST_CASE("tracker: silence and clipping give no crash and a sensible output") {
   SECTION("digital silence with a supply level") {
     std::vector<float> x(48000 * 3, 0.6f);
