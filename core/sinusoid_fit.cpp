@@ -5,6 +5,30 @@
 #include <numbers>
 
 namespace gearpulse {
+namespace {
+
+// Sums over m = -h..h (a window of 2h + 1 samples centred on m = 0) in closed form, for the Gram matrix
+// of the fit's columns: sum of cos(m theta) (the Dirichlet kernel) and sum of m sin(m theta) (minus its
+// derivative).
+double sum_cos(int h, double theta) noexcept {
+  const double s = std::sin(0.5 * theta);
+  if (std::abs(s) < 1e-9) return 2.0 * h + 1.0;
+  return std::sin((h + 0.5) * theta) / s;
+}
+
+double sum_m_sin(int h, double theta) noexcept {
+  const double s = std::sin(0.5 * theta);
+  if (std::abs(s) < 1e-3) {  // the closed form cancels near theta = 0
+    double sum = 0.0;
+    for (int m = 1; m <= h; ++m)
+      sum += 2.0 * m * std::sin(m * theta);
+    return sum;
+  }
+  const double a = (h + 0.5) * theta;
+  return -((h + 0.5) * std::cos(a) * s - 0.5 * std::sin(a) * std::cos(0.5 * theta)) / (s * s);
+}
+
+}  // namespace
 
 double SinusoidFit::fit(const double* y, const double* freq_hz, Result* out) const noexcept {
   double gram[kMaxCols][kMaxCols] = {};
@@ -22,21 +46,36 @@ double SinusoidFit::fit(const double* y, const double* freq_hz, Result* out) con
     rot[o] = std::polar(1.0, w);
     phasor[o] = std::polar(1.0, -w * mid);
   }
-  double v[kMaxCols];
+  // Projections of y on the columns (level, slope, cos and sin of each sinusoid), summed.
+  const double scale = 1.0 / std::max(1, mid);
   for (int j = 0; j < n_; ++j) {
-    v[0] = 1.0;
-    v[1] = static_cast<double>(j - mid) / std::max(1, mid);
+    const double yj = y[j];
+    rhs[0] += yj;
+    rhs[1] += static_cast<double>(j - mid) * scale * yj;
     for (int o = 0; o < kMaxSines; ++o) {
       if (col[o] < 0) continue;
-      v[col[o]] = phasor[o].real();
-      v[col[o] + 1] = phasor[o].imag();
+      rhs[col[o]] += phasor[o].real() * yj;
+      rhs[col[o] + 1] += phasor[o].imag() * yj;
       phasor[o] *= rot[o];
     }
-    const double yj = y[j];
-    for (int a = 0; a < cols; ++a) {
-      rhs[a] += v[a] * yj;
-      for (int b = 0; b <= a; ++b)
-        gram[a][b] += v[a] * v[b];
+  }
+  // The columns' Gram matrix in closed form (the window is symmetric about m = 0, so the level is
+  // orthogonal to the slope and to every sine, the slope to every cosine, and every cosine to every sine).
+  gram[0][0] = n_;
+  gram[1][1] = static_cast<double>(mid) * (mid + 1) * (2.0 * mid + 1) / 3.0 * scale * scale;
+  for (int o = 0; o < kMaxSines; ++o) {
+    const int a = col[o];
+    if (a < 0) continue;
+    const double wa = 2.0 * std::numbers::pi * freq_hz[o] / rate_;
+    gram[a][0] = sum_cos(mid, wa);
+    gram[a + 1][1] = sum_m_sin(mid, wa) * scale;
+    for (int p = 0; p <= o; ++p) {
+      const int b = col[p];
+      if (b < 0) continue;
+      const double wb = 2.0 * std::numbers::pi * freq_hz[p] / rate_;
+      const double minus = sum_cos(mid, wa - wb), plus = sum_cos(mid, wa + wb);
+      gram[a][b] = 0.5 * (minus + plus);
+      gram[a + 1][b + 1] = 0.5 * (minus - plus);
     }
   }
   // Cholesky solve (lower triangle); a degenerate model explains nothing.

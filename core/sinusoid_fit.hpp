@@ -3,7 +3,9 @@
 // sinusoid at each of a few given frequencies (the engine's orders, a fixed tone beside them), fitted
 // jointly, so that the orders do not leak into each other as they would through a window; its explained
 // energy, maximised over the fundamental, is the ML estimate of a harmonic signal's frequency in white
-// noise. Also the DTFT of a window and its derivatives. Nothing allocates, locks or throws.
+// noise. The window is symmetric about its centre sample (n odd), so the columns' Gram matrix is summed in
+// closed form and only the projections of the window cost a pass over it. Also the DTFT of a window and
+// its derivatives. Nothing allocates, locks or throws.
 #include <complex>
 
 namespace gearpulse {

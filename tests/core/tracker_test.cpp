@@ -8,11 +8,14 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <new>
+#include <numbers>
 #include <span>
 #include <vector>
 
+#include "core/sinusoid_fit.hpp"
 #include "core/sliding_dft_tracker.hpp"
 #include "tests/alloc_counter.hpp"
 #include "tools/sim/lighter_signal.hpp"
@@ -110,7 +113,7 @@ TEST_CASE("tracker: a clean line far above the noise is tracked") {
   const double half = GENERATE(0.3, 0.0);
   INFO("rate " << fs << " SNR " << snr << " dB hop " << hop << " s half order " << half);
   const sim::FrequencyTrajectory truth = [](double t) {
-    return 100.0 + 5.0 * std::sin(2.0 * M_PI * 0.3 * t);
+    return 100.0 + 5.0 * std::sin(2.0 * std::numbers::pi * 0.3 * t);
   };
   sim::LighterSignalConfig g;
   g.sample_rate_hz = fs;
@@ -287,6 +290,22 @@ TEST_CASE("tracker: engine off and idle below the band are not tracked") {
     CHECK(after > 30);
     CHECK(late == 0);
   }
+}
+
+TEST_CASE("tracker: a band down to the idle with four periods of 25 Hz tracks an idle at 27 Hz") {
+  sim::LighterSignalConfig g;
+  g.snr_db = 10.0;
+  g.seed = 8;
+  const sim::FrequencyTrajectory truth = [](double) { return 27.0; };
+  TrackerConfig c = config_at(g.sample_rate_hz);
+  c.band_lo_hz = 25.0;
+  c.window_s = 0.16;
+  SlidingDftTracker tracker(c);
+  const Stats s = score(track(tracker, sim::make_lighter_signal(g, truth, 10.0)), truth, 1.0, 9.5);
+  INFO("tracked " << s.tracked_fraction << " of " << s.considered << " hops, largest error " << s.max_error
+                  << " Hz");
+  CHECK(s.tracked_fraction >= 0.9);
+  CHECK(s.max_error <= 0.05 * 27.0);
 }
 
 TEST_CASE("tracker: silence and clipping give no crash and a sensible output") {
@@ -753,4 +772,78 @@ TEST_CASE("tracker: a -5 dB scene is tracked through faded windows") {
   REQUIRE(in_band >= 800);
   CHECK(static_cast<double>(tracked) >= 0.33 * static_cast<double>(in_band));
   CHECK(static_cast<double>(wrong) <= 0.03 * static_cast<double>(tracked));
+}
+
+TEST_CASE("tracker: the fit of a window's orders solves the normal equations summed over the window") {
+  constexpr double kRate = 1500.0;
+  const int n = GENERATE(1, 3, 151, 241);
+  INFO("window of " << n << " samples");
+  const int mid = (n - 1) / 2;
+  // A level, a slope, an idle's orders and a tone beside its fundamental, in pseudo-random noise.
+  std::vector<double> y(static_cast<std::size_t>(n));
+  std::uint32_t state = 12345;
+  for (int j = 0; j < n; ++j) {
+    state = state * 1664525u + 1013904223u;
+    const double noise = static_cast<double>(state >> 8) / static_cast<double>(1u << 24) - 0.5;
+    const double t = (j - mid) / kRate;
+    y[static_cast<std::size_t>(j)] = 0.3 + 2.0 * t + std::sin(2.0 * std::numbers::pi * 27.0 * t + 0.4) +
+                                     0.5 * std::cos(2.0 * std::numbers::pi * 54.2 * t) +
+                                     0.2 * std::sin(2.0 * std::numbers::pi * 33.0 * t) + 0.1 * noise;
+  }
+  const double freq[gearpulse::SinusoidFit::kMaxSines] = {13.5, 27.0, 54.0, NAN, 33.0};
+  // The reference: every column summed sample by sample, solved by Gaussian elimination.
+  std::vector<std::vector<double>> column;
+  column.emplace_back(static_cast<std::size_t>(n), 1.0);
+  column.emplace_back(static_cast<std::size_t>(n));
+  for (int j = 0; j < n; ++j)
+    column[1][static_cast<std::size_t>(j)] = static_cast<double>(j - mid) / std::max(1, mid);
+  for (const double f : freq) {
+    if (!std::isfinite(f)) continue;
+    std::vector<double> c(static_cast<std::size_t>(n)), s(static_cast<std::size_t>(n));
+    for (int j = 0; j < n; ++j) {
+      c[static_cast<std::size_t>(j)] = std::cos(2.0 * std::numbers::pi * f * (j - mid) / kRate);
+      s[static_cast<std::size_t>(j)] = std::sin(2.0 * std::numbers::pi * f * (j - mid) / kRate);
+    }
+    column.push_back(c);
+    column.push_back(s);
+  }
+  const std::size_t cols = column.size();
+  std::vector<std::vector<double>> a(cols, std::vector<double>(cols + 1, 0.0));
+  for (std::size_t r = 0; r < cols; ++r) {
+    for (std::size_t c = 0; c < cols; ++c)
+      for (int j = 0; j < n; ++j)
+        a[r][c] += column[r][static_cast<std::size_t>(j)] * column[c][static_cast<std::size_t>(j)];
+    for (int j = 0; j < n; ++j)
+      a[r][cols] += column[r][static_cast<std::size_t>(j)] * y[static_cast<std::size_t>(j)];
+  }
+  const std::vector<std::vector<double>> normal = a;
+  bool singular = false;
+  for (std::size_t p = 0; p < cols && !singular; ++p) {
+    std::size_t pivot = p;
+    for (std::size_t r = p + 1; r < cols; ++r)
+      if (std::abs(a[r][p]) > std::abs(a[pivot][p])) pivot = r;
+    std::swap(a[p], a[pivot]);
+    singular = !(std::abs(a[p][p]) > 1e-9 * std::abs(normal[p][p]));
+    for (std::size_t r = 0; r < cols && !singular; ++r) {
+      if (r == p) continue;
+      const double k = a[r][p] / a[p][p];
+      for (std::size_t c = p; c <= cols; ++c)
+        a[r][c] -= k * a[p][c];
+    }
+  }
+  gearpulse::SinusoidFit::Result fit;
+  const double explained = gearpulse::SinusoidFit(n, kRate).fit(y.data(), freq, &fit);
+  if (n < static_cast<int>(cols)) {  // fewer samples than columns: degenerate, explains nothing
+    CHECK(explained == 0.0);
+    return;
+  }
+  REQUIRE(!singular);
+  REQUIRE(fit.cols == static_cast<int>(cols));
+  double expected = 0.0;
+  for (std::size_t r = 0; r < cols; ++r) {
+    const double x = a[r][cols] / a[r][r];
+    expected += x * normal[r][cols];
+    CHECK(fit.coef[r] == Approx(x).epsilon(1e-8).margin(1e-9));
+  }
+  CHECK(explained == Approx(expected).epsilon(1e-10));
 }
