@@ -28,10 +28,10 @@ struct AudioConfig {
 // The [tracker] section as the file gives it; tracker_config_of makes the core tracker's TrackerConfig of
 // it for the rate the device gave.
 struct TrackerSection {
-  double band_low = 50.0;     // Hz
-  double band_high = 200.0;   // Hz
-  double window = 0.1;        // s, as the paper's 100 ms frames
-  double hop = 0.1;           // s
+  double band_low = TrackerConfig{}.band_lo_hz;   // Hz
+  double band_high = TrackerConfig{}.band_hi_hz;  // Hz
+  double window = TrackerConfig{}.window_s;       // s
+  double hop = TrackerConfig{}.hop_s;             // s
   double min_snr_db = -10.0;  // below this a tracked hop is not trusted for training or synthesis
 };
 

@@ -16,12 +16,20 @@
 namespace gearpulse::cli {
 namespace {
 
+// The tracker's own defaults (TrackerConfig), as the daemon's [tracker] section has them.
+std::string default_band() {
+  const TrackerConfig defaults;
+  char text[64];
+  std::snprintf(text, sizeof text, "%g:%g", defaults.band_lo_hz, defaults.band_hi_hz);
+  return text;
+}
+
 struct TrackOptions {
-  std::string band = "50:200";
-  double hop_s = 0.1;
-  double window_s = 0.1;
+  std::string band = default_band();
+  double hop_s = TrackerConfig{}.hop_s;
+  double window_s = TrackerConfig{}.window_s;
   int channel = -1;  // -1: mix all channels
-  double max_slew = 60.0;
+  double max_slew = TrackerConfig{}.max_slew_hz_per_s;
   bool any_line = false;
   bool confidence = false;
   std::string file;
