@@ -176,6 +176,10 @@ struct SynthTuning {
   // that gear first (bite_gap), and moving off stands for driving below the ladder, as plausible at speed
   // as at a walking pace (launch_fade does not apply) (inf: the lowest gear is always first).
   double first_gear_idle_speed = 2.6;
+  // 1: a ladder that lacks first gear (first_gear_idle_speed) is extended below its lowest gear by the
+  // gears a progressive gearbox has there, predicted from the ladder's own lowest steps, until the lowest
+  // carries the car at the warm idle no faster than first gear does (0: none predicted).
+  double predict_lower_gears = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -224,6 +228,8 @@ class SpeedSynthesizer {
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
+  [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
+  void insert_predicted_gears() noexcept;
   void change_ladder(bool new_model) noexcept;
   void observe_gear(double gps, double freq) noexcept;
   // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
@@ -262,6 +268,8 @@ class SpeedSynthesizer {
   ModeArray theta_{};
   ModeArray theta_se_{};
   std::array<int, kModes> model_gear_{};
+  // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
+  int predicted_ = 0;
   SeenGears seen_;
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
