@@ -774,6 +774,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(idle_braking_prior),
     GEARPULSE_FIELD(first_gear_idle_speed),
     GEARPULSE_FIELD(declutch_brake_spread),
+    GEARPULSE_FIELD(predict_lower_gears),
 };
 #undef GEARPULSE_FIELD
 
@@ -844,6 +845,7 @@ constexpr Rule kRules[] = {
     {"idle braking prior: the fit's idle braking", "idle_braking_prior=0"},
     {"first gear at idle: a ladder too tall at idle lacks first", "first_gear_idle_speed=inf"},
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
+    {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
 };
 
 std::string figure(double med, double p95) {

@@ -68,6 +68,8 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     model_gear_[j] = j;
   }
   insert_seen_gears();
+  habits_.load(model, model_gear_, gears_, tuning_);  // the warm idle, for the gears below the ladder
+  insert_predicted_gears();
   double total = 0.0;
   for (int j = 1; j <= gears_; ++j)
     total += weight_[j];
@@ -119,6 +121,60 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
   }
 }
 
+// A ladder that lacks first gear (lacks_first_gear) lacks the gears below its lowest: a young model has
+// not seen the launch gears steady. A gearbox's steps grow toward its low gears (a progressive design: the
+// engine's usable band covers less of a road speed's range there), so the gears below are predicted from
+// the ladder's two lowest steps: the next step down grows by the factor the lowest step grew by over the
+// one above it (1 with only one step known), between a factor of 1.06 (the smallest step a fit accepts)
+// and 2 (the largest gearbox step, first to second in a four-speed box). Gears are predicted until the
+// lowest carries the car at the warm idle no faster than first gear does. The ladder's gears from position
+// `base` up are the ones known; the predicted thetas go to `theta`, lowest last. Returns how many.
+int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noexcept {
+  const int known = gears_ - base + 1;
+  if (tuning_.predict_lower_gears <= 0.0 || known < 2) return 0;
+  constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
+  const double min_step = 2.0 * kGearWindow, max_step = std::log(2.0);
+  const double low_step = std::log(theta_[base + 1] / theta_[base]);
+  const double growth = known >= 3 ? std::clamp(low_step / std::log(theta_[base + 2] / theta_[base + 1]),
+                                                kMinGrowth, kMaxGrowth)
+                                   : 1.0;
+  double step = std::clamp(low_step, min_step, max_step);
+  double lowest = theta_[base];
+  int n = 0;
+  while (known + n < kMaxGears && habits_.lacks_first_gear(lowest, tuning_)) {
+    step = std::clamp(step * growth, min_step, max_step);
+    lowest /= std::exp(step);
+    theta[static_cast<std::size_t>(n)] = lowest;
+    ++n;
+  }
+  return n;
+}
+
+// The predicted gears (predict_lower_gears) join the ladder below its lowest gear, each with the least share
+// of use. Their readings carry no standard error of theta: a predicted theta's error is a bias of the speed
+// read in that gear, the same at every reading, and spread over the readings as their noise it blurred the
+// revs' drops at the launch's shifts, which the filter climbs the predicted gears by.
+void SpeedSynthesizer::insert_predicted_gears() noexcept {
+  ModeArray theta{};
+  const int n = predict_lower_gears(1, theta);
+  predicted_ = n;
+  if (n == 0) return;
+  for (int j = gears_; j >= 1; --j) {
+    theta_[j + n] = theta_[j];
+    theta_se_[j + n] = theta_se_[j];
+    weight_[j + n] = weight_[j];
+    model_gear_[j + n] = model_gear_[j];
+  }
+  for (int k = 0; k < n; ++k) {
+    const int at = n - k;  // the last predicted is the lowest
+    theta_[at] = theta[static_cast<std::size_t>(k)];
+    theta_se_[at] = 0.0;
+    weight_[at] = kMinGearShare;
+    model_gear_[at] = 0;
+  }
+  gears_ += n;
+}
+
 void SpeedSynthesizer::reset() noexcept {
   // A cold start is most likely a car at rest, out of gear: until the first evidence the belief says so,
   // rather than "in the most used gear at zero speed".
@@ -155,7 +211,14 @@ void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
   constexpr double kIdleSds = 3.0;  // revs within this many sds of the idle are idling
   const double idle_ceiling = habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
   std::array<double, kMaxGears> thetas{};
-  if (seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas))) change_ladder(false);
+  bool changed = seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas));
+  // The idle decides how many gears are missing below the ladder: it may be learned, or fall as the engine
+  // warms, after the ladder was loaded.
+  if (!changed && tuning_.predict_lower_gears > 0.0) {
+    ModeArray theta{};
+    changed = predict_lower_gears(predicted_ + 1, theta) != predicted_;
+  }
+  if (changed) change_ladder(false);
 }
 
 // Loads the ladder of the model in use and the gears seen that it lacks, carrying the belief over from the

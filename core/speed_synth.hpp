@@ -33,7 +33,8 @@
 // The filter runs on the model's gears and on the gears it has measured under GPS that the model lacks: a
 // steady ratio of GPS speed to revs off every gear of the model (seen_gears.hpp), carried, with its standard
 // error in the gear's reading, until a model has that gear; such a gear has no number in the model, and an
-// output in it says gear 0.
+// output in it says gear 0. So do the gears it predicts below a ladder that lacks first gear (a young model
+// has not seen the launch gears steady), from the ladder's own steps.
 //
 // This file is the mode filter; what it learns of the engine and driver is SynthHabits (synth_habits.hpp),
 // and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
@@ -182,6 +183,10 @@ struct SynthTuning {
   // then entered from that spread of speeds, not from the braking carried on unchanged (0: the
   // deceleration stays as certain as GPS measured it).
   double declutch_brake_spread = 1.0;
+  // 1: a ladder that lacks first gear (first_gear_idle_speed) is extended below its lowest gear by the
+  // gears a progressive gearbox has there, predicted from the ladder's own lowest steps, until the lowest
+  // carries the car at the warm idle no faster than first gear does (0: none predicted).
+  double predict_lower_gears = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -230,6 +235,8 @@ class SpeedSynthesizer {
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
+  [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
+  void insert_predicted_gears() noexcept;
   void change_ladder(bool new_model) noexcept;
   void observe_gear(double gps, double freq) noexcept;
   // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
@@ -268,6 +275,8 @@ class SpeedSynthesizer {
   ModeArray theta_{};
   ModeArray theta_se_{};
   std::array<int, kModes> model_gear_{};
+  // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
+  int predicted_ = 0;
   SeenGears seen_;
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
