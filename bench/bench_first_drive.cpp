@@ -13,12 +13,15 @@
 // Per outage: distance error |integral of the output - integral of the true speed| over the 60 s, in m.
 // Targets: a model within 3 minutes of moving; from minute 5, per-outage distance error within 2x the
 // pre-trained one.
-// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose]
+// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--require NAME<=VALUE]...
+//   --require (bench/requirements.hpp) holds the figures first_model_worst_min (min of moving),
+//   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 to thresholds.
 //   --tuning: seeds 1-10 (the seeds the schedule's defaults were chosen on); --report (default): 101-120.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -26,6 +29,7 @@
 #include <vector>
 
 #include "bench/outage_protocol.hpp"
+#include "bench/requirements.hpp"
 #include "core/estimator.hpp"
 #include "core/speed_synth.hpp"
 #include "daemon/fitter.hpp"
@@ -204,6 +208,8 @@ int main(int argc, char** argv) {
   std::uint64_t first = 101, last = 120;
   const char* which = "report";
   bool verbose = false;
+  gearpulse::bench::Requirements required;
+  if (!required.parse(argc, argv)) return 2;
   for (int i = 1; i < argc; ++i) {
     const std::string_view a = argv[i];
     if (a == "--tuning") {
@@ -218,7 +224,9 @@ int main(int argc, char** argv) {
     } else if (a == "--verbose") {
       verbose = true;
     } else {
-      std::fprintf(stderr, "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose]\n");
+      std::fprintf(stderr,
+                   "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--require "
+                   "NAME<=VALUE]...\n");
       return 2;
     }
   }
@@ -320,5 +328,10 @@ int main(int argc, char** argv) {
       known_pre / static_cast<double>(known_n), known_cold / known_pre, known_within, known_n);
   std::printf("  in a gear the model had not learned yet: %zu outages, %.1f m against %.1f m\n", unseen_n,
               unseen_cold / static_cast<double>(unseen_n), unseen_pre / static_cast<double>(unseen_n));
-  return 0;
+  required.report("first_model_worst_min", never > 0 || first_moving.empty()
+                                               ? std::numeric_limits<double>::infinity()
+                                               : first_moving.back());
+  required.report("cold_over_pretrained_from_min5", cold_after5 / pre_after5);
+  required.report("known_gears_cold_over_pretrained_from_min5", known_cold / known_pre);
+  return required.exit_status();
 }
