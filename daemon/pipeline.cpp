@@ -1,7 +1,5 @@
 #include "daemon/pipeline.hpp"
 
-#include <time.h>
-
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -39,12 +37,6 @@ constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 constexpr auto kTrackerPoll = std::chrono::milliseconds(10);
 // GPS fixes wait this long for the audio window centred on them before they are given up (FixPairer).
 constexpr double kPairWait = 3.0;
-
-double wall_now() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
-}
 
 PcmFormat format_of(const std::string& name) {
   if (name == "S32_LE") return PcmFormat::kS32;

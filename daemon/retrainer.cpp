@@ -6,7 +6,6 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include <ctime>
 #include <exception>
 #include <optional>
 #include <thread>
@@ -16,15 +15,10 @@
 
 #include "common/atomic_file.hpp"
 #include "daemon/fitter.hpp"
+#include "drivers/clock.hpp"
 
 namespace gearpulse::daemon {
 namespace {
-
-double wall_now() {
-  timespec ts{};
-  clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<double>(ts.tv_sec) + ts.tv_nsec * 1e-9;
-}
 
 // A fit may take a second of CPU on a week of data; the capture, tracker and pulse threads must not
 // notice, so the fit runs in a thread of its own that only runs when nothing else wants the CPU. Only the

@@ -106,8 +106,8 @@ finish_tests release "$may_skip"
 stage "release tests but the paced ones (and the benches' checks) passed"
 
 # The sanitizer trees skip the benchmarks (built with -Werror and run above). -O1 and line tables only (-g1,
-# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g. Built while the
-# release tree's paced tests run.
+# enough for the sanitizers' file:line reports) build in about half the time of -O2 -g; the tests and the
+# programs' front ends compile at -O0 there (CMakeLists.txt). Built while the release tree's paced tests run.
 cmake -S . -B build-asan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
   -DGEARPULSE_SANITIZE=address,undefined -DGEARPULSE_BENCH=OFF "${launcher[@]}" >/dev/null
