@@ -39,6 +39,15 @@ constexpr double kRhoMemory = 0.7;
 // -5 dB passes to "engine absent" on the many windows where its line fades and restarts anywhere, often
 // on twice the engine. Chosen on the generated scenes' tuning set (see docs/tracker.md).
 constexpr double kHiddenShare = 0.3;
+// The candidates' shoulder term (a state on the shoulder of a stronger peak within one resolution bin is
+// not where the line is) compares amplitudes (sqrt of normalised power) against unit-order noise and, on a
+// loud line, against this share of its amplitude: a window's line is no stationary sinusoid centred on a
+// fine bin (it sweeps, changes its level within the window and lies between bins), so the states place a
+// line to about a quarter of a resolution bin (where a Hann main lobe is 4 % down in amplitude) and the
+// sub-bin fit does the rest. Against noise alone the term grows with the line's level: a line 30-50 dB over
+// the noise whose top a sweep has flattened loses several nats on every state, and the track passes to
+// "engine absent" while the line stands clear.
+constexpr double kShoulderShape = 0.05;
 // Mean normalised power from which a learned tone is fitted along with the engine's orders.
 constexpr double kToneFitLevel = ToneMap::kFitLevel;
 constexpr double kToneCandidate = 0.05;  // probability from which the estimate's line is a candidate
@@ -480,7 +489,10 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
     double peak = z1;
     for (int j = std::max(0, k - lobe); j <= std::min(nfft / 2, k + lobe); ++j)
       if (!tones->near(static_cast<std::size_t>(j))) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
-    const double mismatch = std::sqrt(peak) - std::sqrt(z1);
+    // On a loud line the mismatch is counted against the line's shape error (kShoulderShape of its
+    // amplitude) as well as the noise.
+    const double mismatch =
+        (std::sqrt(peak) - std::sqrt(z1)) / std::sqrt(1.0 + kShoulderShape * kShoulderShape * peak);
     // A bin within a resolution bin of a learned tone says nothing either way: the engine may or may
     // not be under the tone or its shoulders.
     const bool on_tone = tones->near(static_cast<std::size_t>(k));
