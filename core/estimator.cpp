@@ -190,9 +190,9 @@ std::optional<DecelEstimate> estimate_idle_braking(const MixtureData& data, cons
     const auto line_from = gear_on_line(model, data.v[*from], data.s[*from]);
     const bool declutched = !line_from || line_from != gear_on_line(model, data.v[k], data.s[k]);
     if (declutched) {
-      // Clipped as under GPS: no car brakes harder than 4 m/s^2 in a habit, nor gains speed declutched.
-      const double a = std::clamp((data.v[k] - data.v[*from]) / dt, -4.0, 1.0);
-      const double w = std::min(dt, 1.0);
+      // Measured and weighed as under GPS (SynthHabits::learn).
+      const double a = idle_braking::clip((data.v[k] - data.v[*from]) / dt);
+      const double w = idle_braking::weight(dt);
       sum += w * a;
       seconds += w;
       ++pairs;

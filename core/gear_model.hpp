@@ -53,6 +53,15 @@ inline constexpr double kCeiling = 1.6;   // x the standing idle
 namespace idle_braking {
 inline constexpr double kBandSds = 2.5;  // no further above the idle than a driver lugs a gear
 inline constexpr double kMinGap = 0.5;   // s
+// A deceleration measured (m/s^2) as a habit: no car brakes harder than 4 m/s^2 in one, nor gains speed
+// declutched.
+[[nodiscard]] inline double clip(double accel) noexcept {
+  return std::clamp(accel, -4.0, 1.0);
+}
+// What such a measurement weighs: the share of a second it covers, at most one.
+[[nodiscard]] inline double weight(double dt) noexcept {
+  return std::min(dt, 1.0);
+}
 }  // namespace idle_braking
 
 // Spread of the idle frequency, bounded to 3-10 % of it so that a cold start's high idle or a single blip

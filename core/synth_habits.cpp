@@ -66,7 +66,7 @@ void SynthHabits::load(const GearModel* model, const GearNumbers& model_gear, in
       braking != extra.end() && idle_coast_count_ <= 0.0 && tuning.idle_braking_prior > 0.0) {
     const double a = number(*braking, "accel"), seconds = number(*braking, "seconds");
     if (std::isfinite(a) && std::isfinite(seconds) && seconds > 0.0) {
-      idle_coast_mean_ = std::clamp(a, -4.0, 1.0);
+      idle_coast_mean_ = idle_braking::clip(a);
       idle_coast_count_ = std::min(seconds, tuning.idle_braking_prior);
     }
   }
@@ -118,14 +118,14 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
     if (fix_dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode == 0 && belief > 0.8 && std::isfinite(freq) &&
         freq > 0.0) {
       constexpr double kCoastMemory = 100.0;  // samples
-      const double a = std::clamp((gps - last_gps_) / fix_dt, -4.0, 1.0);
+      const double a = idle_braking::clip((gps - last_gps_) / fix_dt);
       coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
       coast_mean_ += (a - coast_mean_) / coast_count_;
       // At idle, from fixes at least half a second apart (over less, the change of speed is mostly the
       // receiver's noise, and clipped unevenly above it taught a braking no car did), each counting for
       // the share of a second it covers (idle_coast_count_ is in seconds).
       if (at_idle && fix_dt >= idle_braking::kMinGap) {
-        const double w = std::min(fix_dt, 1.0);
+        const double w = idle_braking::weight(fix_dt);
         idle_coast_count_ = std::min(idle_coast_count_ + w, kCoastMemory);
         idle_coast_mean_ += w * (a - idle_coast_mean_) / idle_coast_count_;
       }

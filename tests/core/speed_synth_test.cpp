@@ -1278,22 +1278,27 @@ std::pair<double, double> last_stop(const StopDrive& d, SpeedSynthesizer synth) 
   return {synthesized / driven - 1.0, rest};
 }
 
+// The stop braked (last_stop of the synthesis braking) comes nearer the distance driven than the stop
+// coasted, and comes to rest, sooner than the coasted one if that does at all.
+void check_braked_over_coasted(std::pair<double, double> braked, std::pair<double, double> coasted) {
+  INFO("distance over the stop: " << 100.0 * braked.first << " % off braked (at rest after " << braked.second
+                                  << " s), " << 100.0 * coasted.first << " % coasted (" << coasted.second
+                                  << " s)");
+  CHECK(std::abs(braked.first) < 0.75 * std::abs(coasted.first));
+  CHECK(braked.second > 0.0);
+  CHECK((coasted.second < 0.0 || braked.second < coasted.second));
+}
+
 }  // namespace
 
 TEST_CASE("synth: declutched at idle in an outage the car slows as GPS showed it braking to stops") {
   // Four stops: the last is braked in the outage as the others were under GPS, not coasted as the car
   // coasts through its shifts.
   const StopDrive drive = stop_drive(4);
-  const auto [braked, braked_rest] = last_stop(drive, SpeedSynthesizer(model_of(kHatch)));
   gearpulse::SynthTuning coasting;
   coasting.idle_braking = 0.0;
-  const auto [coasted, coasted_rest] = last_stop(drive, SpeedSynthesizer(model_of(kHatch), coasting));
-  INFO("distance over the stop: " << 100.0 * braked << " % off braked as learned (at rest after "
-                                  << braked_rest << " s), " << 100.0 * coasted << " % coasted ("
-                                  << coasted_rest << " s)");
-  CHECK(std::abs(braked) < 0.75 * std::abs(coasted));
-  CHECK(braked_rest > 0.0);
-  CHECK((coasted_rest < 0.0 || braked_rest < coasted_rest));
+  check_braked_over_coasted(last_stop(drive, SpeedSynthesizer(model_of(kHatch))),
+                            last_stop(drive, SpeedSynthesizer(model_of(kHatch), coasting)));
 }
 
 TEST_CASE("synth: the fit's idle braking brakes an outage's first stop before GPS showed one") {
@@ -1303,14 +1308,8 @@ TEST_CASE("synth: the fit's idle braking brakes an outage's first stop before GP
   const StopDrive drive = stop_drive(1);
   auto fitted = std::make_shared<GearModel>(*model_of(kHatch));
   fitted->extra["idle_braking"] = {{"accel", -1.5}, {"seconds", 120.0}, {"samples", 120}};
-  const auto [braked, braked_rest] = last_stop(drive, SpeedSynthesizer(fitted));
-  const auto [coasted, coasted_rest] = last_stop(drive, SpeedSynthesizer(model_of(kHatch)));
-  INFO("distance over the stop: " << 100.0 * braked << " % off with the fit's idle braking (at rest after "
-                                  << braked_rest << " s), " << 100.0 * coasted << " % without ("
-                                  << coasted_rest << " s)");
-  CHECK(std::abs(braked) < 0.75 * std::abs(coasted));
-  CHECK(braked_rest > 0.0);
-  CHECK((coasted_rest < 0.0 || braked_rest < coasted_rest));
+  check_braked_over_coasted(last_stop(drive, SpeedSynthesizer(fitted)),
+                            last_stop(drive, SpeedSynthesizer(model_of(kHatch))));
 }
 
 TEST_CASE("synth: a launch below a ladder that lacks first gear is not read in the ladder's lowest gear") {
