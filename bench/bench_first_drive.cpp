@@ -89,7 +89,7 @@ Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretraine
   std::optional<Outage> current;
   double prev_t = 0.0, prev_out = 0.0, prev_true = 0.0;
   const auto refit = [&](const gd::PairsSummary& summary) {
-    GearModel fitted = fitter(pairs);
+    GearModel fitted = fitter(pairs, {});
     ++run.fits;
     new_pairs = 0;
     if (fitted.empty() && model && gd::one_gear_withdrawn(*model, pairs)) {
@@ -262,7 +262,7 @@ int main(int argc, char** argv) {
     sim::ObservationOptions gps1;
     gps1.seed = seed + 200000;
     const auto pre_pairs = sim::to_samples(sim::observe(sim::simulate_drive(car, other), gps1));
-    const auto pre_model = std::make_shared<const GearModel>(gd::make_estimator_fitter()(pre_pairs));
+    const auto pre_model = std::make_shared<const GearModel>(gd::make_estimator_fitter()(pre_pairs, {}));
     const Run cold = drive(first_drive_sim, nullptr, verbose);
     const Run pre = drive(first_drive_sim, pre_model->empty() ? nullptr : pre_model, false);
     if (cold.first_model_drive < 0.0) {

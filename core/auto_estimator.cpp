@@ -77,6 +77,7 @@ MixtureData subsample(const MixtureData& all, std::size_t target) {
   if (all.size() <= target) return all;
   MixtureData out;
   out.parallel = all.parallel;
+  out.stop = all.stop;
   const double stride = static_cast<double>(all.size()) / static_cast<double>(target);
   const double golden = 0.5 * (std::sqrt(5.0) - 1.0);
   for (std::size_t i = 0; i < target; ++i) {
@@ -574,7 +575,10 @@ Aligned aligned_channels(const MixtureData& all) {
   const double max_gap = 3.0 * gap;
   const std::size_t begin = n > kAlignSamples ? (n - kAlignSamples) / 2 : 0;
   const std::size_t end = std::min(n, begin + kAlignSamples);
-  auto sharpness = [&](double delta) { return ratio_sharpness(all, begin, end, delta, gap, max_gap); };
+  auto sharpness = [&](double delta) {
+    throw_if_stopped(all);
+    return ratio_sharpness(all, begin, end, delta, gap, max_gap);
+  };
   const double unshifted = sharpness(0.0);
   const double range = std::max(kMaxLag, gap);
   const double coarse = range / 8.0;

@@ -340,6 +340,7 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
   }
   detail::MixtureData data;
   data.parallel = options.parallel;
+  data.stop = options.stop;
   data.v.reserve(samples.size());
   data.s.reserve(samples.size());
   data.t.reserve(samples.size());

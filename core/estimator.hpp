@@ -4,6 +4,8 @@
 // "auto" mode (default): no priors; gear count, weights and the clutch-out density come from the data.
 #include <cmath>
 #include <span>
+#include <stdexcept>
+#include <stop_token>
 #include <string>
 #include <vector>
 
@@ -23,6 +25,15 @@ struct FitOptions {
   // ladder should show, or a continuum, as from a CVT below the ratio it holds at cruise).
   bool single_gear = false;
   SliceRunner* parallel = nullptr;  // runs the passes over a large log in slices; null: on this thread
+  // A stop requested here ends the fit at its next pass over the data (a few milliseconds on a week of
+  // pairs) with FitCancelled: the daemon's retrainer stops at once rather than when the fit is done.
+  std::stop_token stop;
+};
+
+// Thrown by fit_gear_model when FitOptions::stop was requested.
+class FitCancelled : public std::runtime_error {
+ public:
+  FitCancelled() : std::runtime_error("fit cancelled") {}
 };
 
 struct FitResult {

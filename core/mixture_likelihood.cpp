@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/estimator.hpp"
+
 namespace gearpulse::detail {
 namespace {
 
@@ -14,6 +16,7 @@ constexpr double kTiny = 1e-300;
 // runner) from kParallelSamples on, and returns the two slot results.
 template <typename Result, typename Fn>
 std::pair<Result, Result> split_two(const MixtureData& data, Fn&& fn) {
+  throw_if_stopped(data);
   const std::size_t n = data.size();
   Result a{};
   Result b{};
@@ -111,6 +114,10 @@ inline double sample_terms(const MixtureParams& p, const Precomputed& c, double 
 }
 
 }  // namespace
+
+void throw_if_stopped(const MixtureData& data) {
+  if (data.stop.stop_requested()) throw FitCancelled();
+}
 
 double log_likelihood(const MixtureData& data, const MixtureParams& p) {
   const Precomputed c = precompute(p);

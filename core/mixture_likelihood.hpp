@@ -6,6 +6,7 @@
 // Shared by the paper and auto estimators: log-likelihood (7), its gradient, EM sufficient statistics.
 #include <cstddef>
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include <Eigen/Dense>
@@ -19,6 +20,7 @@ struct MixtureData {
   std::vector<double> s;            // Hz
   std::vector<double> t;            // s, in sample order; may be empty (then no temporal information is used)
   SliceRunner* parallel = nullptr;  // where the passes below run their slices; null: in turn, here
+  std::stop_token stop;             // FitOptions::stop: every pass over the data checks it first
   [[nodiscard]] std::size_t size() const noexcept { return v.size(); }
 };
 
@@ -36,6 +38,9 @@ struct MixtureParams {
 
   [[nodiscard]] int gears() const noexcept { return static_cast<int>(theta.size()); }
 };
+
+// Throws FitCancelled when the fit was asked to stop (every pass over the data calls it first).
+void throw_if_stopped(const MixtureData& data);
 
 // From this many samples on, the passes over the data below are split into two slices, one per half, run
 // by data.parallel (below it a second thread costs more than it saves).

@@ -60,7 +60,7 @@ void tie_lower(MixtureParams& p, const std::vector<double>& ratios, int from) {
 // A local, bounded quasi-Newton minimisation of f (value and gradient) from x (NLopt L-BFGS); x keeps the
 // best point reached when NLopt stops early (roundoff-limited stops still carry a usable x).
 template <class F>
-void minimise_local(F& f, std::vector<double>& x, const std::vector<double>& lower,
+void minimise_local(const MixtureData& data, F& f, std::vector<double>& x, const std::vector<double>& lower,
                     const std::vector<double>& upper) {
   for (std::size_t k = 0; k < x.size(); ++k)
     x[k] = std::clamp(x[k], lower[k], upper[k]);
@@ -78,7 +78,10 @@ void minimise_local(F& f, std::vector<double>& x, const std::vector<double>& low
   try {
     opt.optimize(x, val);
   } catch (const std::exception&) {
+    // NLopt ends every early stop with an exception of its own, a cancelled fit's included (it does not
+    // carry the type through): that one is thrown again below.
   }
+  throw_if_stopped(data);
 }
 
 }  // namespace
@@ -128,6 +131,7 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
   // Section 5: drop v < 2 sigma_v (with the initial sigma_v); g uniform over the remaining speed range.
   MixtureData data;
   data.parallel = all.parallel;
+  data.stop = all.stop;
   for (std::size_t k = 0; k < all.size(); ++k) {
     if (all.v[k] >= 2.0 * p.sigma_v) {
       data.v.push_back(all.v[k]);
@@ -169,7 +173,7 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
       if (!grad.empty()) grad = {-d_theta, -g[m] * q.sigma_s, -g[m + 1] * q.sigma_v};
       return -ll;
     };
-    minimise_local(f, x, {x[0] - std::log(1.5), x[1] - 8.0, x[2] - 8.0},
+    minimise_local(data, f, x, {x[0] - std::log(1.5), x[1] - 8.0, x[2] - 8.0},
                    {x[0] + std::log(1.5), x[1] + 5.0, x[2] + 5.0});
     p.theta.back() = std::exp(x[0]);
     p.sigma_s = std::exp(x[1]);
@@ -192,7 +196,7 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
       if (!grad.empty()) grad = {-d_theta};
       return -ll;
     };
-    minimise_local(f, x, {std::log(lower)}, {std::log(upper) - 1e-6});
+    minimise_local(data, f, x, {std::log(lower)}, {std::log(upper) - 1e-6});
     p.theta[static_cast<std::size_t>(i)] = std::exp(x[0]);
     tie_lower(p, ratios, i);
   }
@@ -229,7 +233,7 @@ GearModel fit_paper(const MixtureData& all, const std::vector<double>& ratios) {
     };
     const std::vector<double> unbounded(static_cast<std::size_t>(n), HUGE_VAL);
     const std::vector<double> below(unbounded.size(), -HUGE_VAL);
-    minimise_local(f, x, below, unbounded);
+    minimise_local(data, f, x, below, unbounded);
     p.theta[0] = std::exp(x[0]);
     for (int i = 1; i < m; ++i)
       p.theta[i] = p.theta[i - 1] + std::exp(x[i]);

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stop_token>
+#include <utility>
 #include <vector>
 
 #include "core/estimator.hpp"
@@ -13,11 +15,12 @@ Retrainer::Fitter make_estimator_fitter() {
   // The default "auto" mode: no priors, the gear count comes from the data, as `gearpulse fit`, and one
   // gear accepted while the model is young; a large store's passes in two threads (the retrainer's thread
   // runs at the lowest priority, so the second core's share comes from idle time; the threads inherit it).
-  return [](std::span<const Sample> samples) -> GearModel {
+  return [](std::span<const Sample> samples, std::stop_token stop) -> GearModel {
     ThreadSliceRunner threads;
     FitOptions options;
     options.single_gear = true;
     options.parallel = &threads;
+    options.stop = std::move(stop);
     return fit_gear_model(samples, options).model;
   };
 }

@@ -14,6 +14,7 @@
 #include <spdlog/spdlog.h>
 
 #include "common/atomic_file.hpp"
+#include "core/estimator.hpp"
 #include "daemon/fitter.hpp"
 #include "drivers/clock.hpp"
 
@@ -64,6 +65,7 @@ void Retrainer::start() {
   {
     std::lock_guard lock(mutex_);
     stop_ = false;
+    fit_stop_ = std::stop_source();
   }
   thread_ = std::thread([this] { run(); });
 }
@@ -72,6 +74,7 @@ void Retrainer::stop() noexcept {
   {
     std::lock_guard lock(mutex_);
     stop_ = true;
+    fit_stop_.request_stop();
   }
   wake_.notify_all();
   if (thread_.joinable()) thread_.join();
@@ -110,9 +113,11 @@ bool Retrainer::retrain_now() {
   const std::size_t fresh = store_.new_samples();
   std::vector<Sample> samples;
   bool no_ladder_before = false;
+  std::stop_token stop;
   {
     std::lock_guard lock(mutex_);
     no_ladder_before = no_ladder_;
+    stop = fit_stop_.get_token();
     status_.busy = true;
     ++status_.runs;
     status_.last_run_wall = wall_now();
@@ -132,7 +137,7 @@ bool Retrainer::retrain_now() {
       std::size_t kept = 0;
       bool withdraw = false;
       GearModel fitted = fit_at_low_priority([&] {
-        GearModel fit = fitter_(samples);
+        GearModel fit = fitter_(samples, stop);
         if (before && fit.empty()) withdraw = one_gear_withdrawn(*before, samples);
         if (!before || before->empty() || fit.empty()) return fit;
         const std::size_t found = fit.gears.size();
@@ -206,6 +211,10 @@ bool Retrainer::retrain_now() {
       }
     }
     store_.mark_trained(fresh);
+  } catch (const FitCancelled&) {
+    // Not a failure: the pairs stay new, so the next start fits them.
+    result = "fit cancelled: gearpulsed is stopping; model kept";
+    spdlog::info("retrain: {}", result);
   } catch (const std::exception& e) {
     result = std::string("fit failed: ") + e.what() + "; model kept";
     spdlog::error("retrain: {}", result);

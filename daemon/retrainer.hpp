@@ -11,6 +11,7 @@
 #include <functional>
 #include <mutex>
 #include <span>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -33,8 +34,9 @@ inline constexpr std::string_view kTrainedLast = "trained_last";
 
 class Retrainer {
  public:
-  // Fits a model on the samples; an empty model (gears empty, reason set) means "no ladder".
-  using Fitter = std::function<GearModel(std::span<const Sample>)>;
+  // Fits a model on the samples; an empty model (gears empty, reason set) means "no ladder". A fit told to
+  // stop (the daemon is stopping) may end early by throwing FitCancelled.
+  using Fitter = std::function<GearModel(std::span<const Sample>, std::stop_token)>;
 
   struct Settings {
     std::chrono::duration<double> interval{600.0};
@@ -64,6 +66,7 @@ class Retrainer {
   Retrainer& operator=(const Retrainer&) = delete;
 
   void start();
+  // Ends the thread, cancelling a fit under way (its pairs stay new for the next start's fit).
   void stop() noexcept;
   // Fit as soon as possible, whatever the count of new samples.
   void request() noexcept;
@@ -101,6 +104,7 @@ class Retrainer {
   PairsSummary looked_;           // the pairs at the schedule's last look
   bool requested_ = false;
   bool stop_ = false;
+  std::stop_source fit_stop_;  // requested by stop(): a fit under way ends at its next pass over the pairs
   std::thread thread_;
 };
 

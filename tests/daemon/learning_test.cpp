@@ -110,7 +110,7 @@ TEST_CASE("learning: without a model a fit that found nothing is tried again onl
 TEST_CASE("learning: a young model is refitted as soon as the pairs show a gear it lacks") {
   const std::vector<double>& th = hatch_thetas();
   std::vector<Sample> pairs = drive_in_gears({th[1]}, 70.0, 8);
-  const GearModel one = make_estimator_fitter()(pairs);
+  const GearModel one = make_estimator_fitter()(pairs, {});
   REQUIRE(one.gears.size() == 1);
   LearningSchedule schedule;
   PairsSummary s = summarize_pairs(pairs, &one);
@@ -146,7 +146,7 @@ TEST_CASE("learning: a fit on a minute in one gear gives that gear alone") {
   const double theta = hatch_thetas()[1];
   const auto pairs = drive_in_gears({theta}, 60.0, 2);
   REQUIRE(summarize_pairs(pairs).largest_cluster >= LearningSettings{}.cluster_pairs);
-  const GearModel m = make_estimator_fitter()(pairs);
+  const GearModel m = make_estimator_fitter()(pairs, {});
   INFO(m.reason);
   REQUIRE(m.gears.size() == 1);
   CHECK(m.gears[0].theta == Approx(theta).epsilon(0.01));
@@ -159,7 +159,7 @@ TEST_CASE("learning: a few minutes in 2nd and 3rd only fit 2 gears with their th
   for (std::uint32_t seed = 1; seed <= 5; ++seed) {
     for (double minutes : {2.0, 3.0, 5.0}) {
       INFO("seed " << seed << ", " << minutes << " minutes");
-      const GearModel m = make_estimator_fitter()(drive_in_gears(seen, 60.0 * minutes, seed));
+      const GearModel m = make_estimator_fitter()(drive_in_gears(seen, 60.0 * minutes, seed), {});
       INFO(m.reason);
       REQUIRE(m.gears.size() == 2);
       CHECK(m.gears[0].theta == Approx(seen[0]).epsilon(0.01));
@@ -191,7 +191,7 @@ TEST_CASE("learning: a gear cruised at low revs while a cold engine idles high i
     }
   }
   REQUIRE(fourth * 1.4 * kColdIdle > 8.0);
-  const GearModel m = make_estimator_fitter()(pairs);
+  const GearModel m = make_estimator_fitter()(pairs, {});
   INFO(m.reason);
   REQUIRE(m.gears.size() == 2);
   CHECK(m.gears[0].theta == Approx(second).epsilon(0.01));
@@ -221,7 +221,7 @@ TEST_CASE("learning: a crawl on a slipping clutch at idle revs gives no gear") {
   }
   const double crawl = 1.5 / (1.15 * kIdle);
   REQUIRE(std::abs(std::log(crawl / second)) > 0.3);
-  const GearModel m = make_estimator_fitter()(pairs);
+  const GearModel m = make_estimator_fitter()(pairs, {});
   INFO(m.reason);
   REQUIRE(m.gears.size() == 2);
   CHECK(m.gears[0].theta == Approx(second).epsilon(0.01));
@@ -233,7 +233,7 @@ TEST_CASE("learning: ten minutes of a CVT give no one-gear model") {
   const sim::Vehicle cvt = sim::vehicle_preset("cvt");
   for (std::uint64_t seed = 1; seed <= 3; ++seed) {
     const auto observed = sim::simulate_observations(cvt, sim::DrivingStyle::kMixed, 600.0, 1, seed);
-    const GearModel m = make_estimator_fitter()(sim::to_samples(observed));
+    const GearModel m = make_estimator_fitter()(sim::to_samples(observed), {});
     INFO("seed " << seed << ": " << m.gears.size() << " gears");
     CHECK(m.empty());
   }
@@ -295,7 +295,7 @@ TEST_CASE("learning: a refit keeps a learned gear its pairs do not contradict") 
                                                  {{"mean_log", 3.4}, {"sd_log", 0.2}, {"samples", 300}}});
   // The refit's pairs: 2nd and 3rd only (town), and a fit that found those two.
   const auto pairs = drive_in_gears({th[1], th[2]}, 240.0, 3);
-  const GearModel fitted = make_estimator_fitter()(pairs);
+  const GearModel fitted = make_estimator_fitter()(pairs, {});
   REQUIRE(fitted.gears.size() == 2);
   SECTION("not driven in the pairs: kept") {
     const GearModel merged = keep_seen_gears(current, fitted, pairs, 40);
@@ -342,15 +342,15 @@ TEST_CASE("learning: the gear count grows as gears are seen and does not shrink 
   // 2nd and 3rd, then 4th as well, then town again (2nd and 3rd): 2, 3, then still 3 gears.
   std::vector<Sample> pairs = drive_in_gears({th[1], th[2]}, 180.0, 4);
   const auto fitter = make_estimator_fitter();
-  GearModel model = fitter(pairs);
+  GearModel model = fitter(pairs, {});
   REQUIRE(model.gears.size() == 2);
   const auto more = drive_in_gears({th[1], th[2], th[3]}, 240.0, 5, pairs.back().t + 1.0);
   pairs.insert(pairs.end(), more.begin(), more.end());
-  model = keep_seen_gears(model, fitter(pairs), pairs, 40);
+  model = keep_seen_gears(model, fitter(pairs, {}), pairs, 40);
   REQUIRE(model.gears.size() == 3);
   // A store that has let the 4th-gear pairs go (its hours are up): the fit finds two, the model keeps three.
   const auto town = drive_in_gears({th[1], th[2]}, 300.0, 6, pairs.back().t + 1.0);
-  const GearModel refit = fitter(town);
+  const GearModel refit = fitter(town, {});
   REQUIRE(refit.gears.size() == 2);
   model = keep_seen_gears(model, refit, town, 40);
   REQUIRE(model.gears.size() == 3);

@@ -17,6 +17,7 @@
 #include <memory>
 #include <random>
 #include <stdexcept>
+#include <stop_token>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,6 +26,7 @@
 
 #include "common/atomic_file.hpp"
 #include "core/estimator.hpp"
+#include "daemon/fitter.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/retrainer.hpp"
 #include "daemon/training_store.hpp"
@@ -58,7 +60,7 @@ GearModel three_gears() {
 
 // A fitter that counts its calls in `fits` and finds three gears.
 Retrainer::Fitter counting_fitter(std::atomic<int>& fits) {
-  return [&fits](std::span<const Sample>) {
+  return [&fits](std::span<const Sample>, std::stop_token) {
     ++fits;
     return three_gears();
   };
@@ -638,7 +640,7 @@ TEST_CASE("daemon: retrainer swaps in and saves a fitted model") {
   ModelHolder model;
   std::size_t seen = 0;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample> s) {
+                      [&](std::span<const Sample> s, std::stop_token) {
                         seen = s.size();
                         return three_gears();
                       },
@@ -677,7 +679,7 @@ TEST_CASE("daemon: a retrain that found the GPS speeds late against the engine s
   ModelHolder model;
   double lag = 0.0;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) {
+                      [&](std::span<const Sample>, std::stop_token) {
                         GearModel m = three_gears();
                         m.extra["speed_lag"] = lag;
                         return m;
@@ -719,7 +721,8 @@ TEST_CASE(
     store.add({observed[k].truth.t, observed[k - kLateRows].speed, observed[k].freq});
   ModelHolder model;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [](std::span<const Sample> s) { return fit_gear_model(s, {}).model; }, {});
+                      [](std::span<const Sample> s, std::stop_token) { return fit_gear_model(s, {}).model; },
+                      {});
   CHECK(retrainer.retrain_now());
   INFO(retrainer.status().last_result);
   const std::string& said = retrainer.status().last_result;
@@ -738,7 +741,7 @@ TEST_CASE("daemon: retrainer fits at start when the store holds enough pairs its
   ModelHolder model;
   model.set(std::make_shared<const GearModel>(three_gears()));
   std::atomic<int> fits{0};
-  const auto fitter = [&](std::span<const Sample>) {
+  const auto fitter = [&](std::span<const Sample>, std::stop_token) {
     ++fits;
     return three_gears();
   };
@@ -771,7 +774,7 @@ TEST_CASE("daemon: an empty or failed fit never replaces a good model") {
   model.set(good);
   int calls = 0;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) -> GearModel {
+                      [&](std::span<const Sample>, std::stop_token) -> GearModel {
                         if (++calls == 1) {
                           GearModel none;
                           none.reason = "no discrete ladder";
@@ -817,7 +820,7 @@ TEST_CASE("daemon: a fit that again finds no gear ladder is noted, not warned ab
   ModelHolder model;
   bool ladder = false;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) -> GearModel {
+                      [&](std::span<const Sample>, std::stop_token) -> GearModel {
                         if (ladder) return three_gears();
                         GearModel none;
                         none.reason = "no discrete ladder";
@@ -850,7 +853,7 @@ TEST_CASE("daemon: a fit begun before a model reset is discarded, not installed 
   model.set(std::make_shared<const GearModel>(three_gears()));
   int fits = 0;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) {
+                      [&](std::span<const Sample>, std::stop_token) {
                         if (++fits == 1) {
                           // reset-model arrives while the first fit runs (as the control thread does it)
                           const auto lock = model.lock_writes();
@@ -897,6 +900,54 @@ TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
   CHECK(model.trained());
 }
 
+TEST_CASE("daemon: stopping the retrainer cancels a fit under way and keeps its pairs new") {
+  // A fit under SCHED_IDLE on a CPU others keep busy can take minutes; a SIGTERM must not wait for it.
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 5; ++i)
+    store.add({double(i), 10.0, 100.0});
+  ModelHolder model;
+  std::atomic<bool> fitting{false};
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>, std::stop_token stop) -> GearModel {
+                        fitting = true;
+                        // A long fit: its passes over the pairs end when a stop is asked for.
+                        const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+                        while (std::chrono::steady_clock::now() < give_up) {
+                          if (stop.stop_requested()) throw FitCancelled();
+                          std::this_thread::sleep_for(std::chrono::milliseconds(5));
+                        }
+                        return three_gears();
+                      },
+                      {std::chrono::duration<double>(3600.0), 1000});
+  retrainer.start();
+  retrainer.request();
+  for (int i = 0; i < 500 && !fitting; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  REQUIRE(fitting);
+  const auto t0 = std::chrono::steady_clock::now();
+  retrainer.stop();
+  CHECK(std::chrono::steady_clock::now() - t0 < std::chrono::seconds(5));
+  CHECK_FALSE(model.trained());
+  CHECK(retrainer.status().last_result.find("cancelled") != std::string::npos);
+  CHECK_FALSE(retrainer.status().busy);
+  CHECK(store.new_samples() == 5);  // the next start fits them
+}
+
+TEST_CASE("daemon: the estimator's fit ends with FitCancelled once a stop is requested") {
+  std::vector<Sample> pairs;
+  for (int i = 0; i < 600; ++i)  // two gears' lines
+    pairs.push_back({double(i), 5.0 + 0.01 * i, (i % 2 ? 40.0 : 25.0) + 0.02 * i});
+  std::stop_source stop;
+  stop.request_stop();
+  CHECK_THROWS_AS(make_estimator_fitter()(pairs, stop.get_token()), FitCancelled);
+  FitOptions paper;
+  paper.ratios = {1.4, 1.5};
+  paper.stop = stop.get_token();
+  CHECK_THROWS_AS(fit_gear_model(pairs, paper), FitCancelled);
+  CHECK_NOTHROW(make_estimator_fitter()(pairs, {}));
+}
+
 TEST_CASE("daemon: a retrain interval shortened while the retrainer waits applies at once") {
   TempDir dir;
   TrainingStore store(1e9, 10000);
@@ -926,7 +977,7 @@ TEST_CASE("daemon: the fit runs in a thread of its own at low priority, the rest
   std::thread::id fit_thread;
   int fit_nice = 0;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) {
+                      [&](std::span<const Sample>, std::stop_token) {
                         fit_thread = std::this_thread::get_id();
                         errno = 0;
                         fit_nice = ::getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid)));
@@ -941,14 +992,16 @@ TEST_CASE("daemon: the fit runs in a thread of its own at low priority, the rest
   // The caller (who takes the store's copy and installs and saves the model) keeps its priority.
   CHECK(::getpriority(PRIO_PROCESS, static_cast<id_t>(::syscall(SYS_gettid))) == caller_nice);
   // A fit that throws is reported as it was on the caller's thread.
-  Retrainer failing(store, model, dir / "model.json",
-                    [](std::span<const Sample>) -> GearModel { throw std::runtime_error("no memory"); },
-                    {std::chrono::duration<double>(600.0), 1});
+  Retrainer failing(
+      store, model, dir / "model.json",
+      [](std::span<const Sample>, std::stop_token) -> GearModel { throw std::runtime_error("no memory"); },
+      {std::chrono::duration<double>(600.0), 1});
   CHECK_FALSE(failing.retrain_now());
   CHECK(failing.status().last_result.find("no memory") != std::string::npos);
   // Nor may a fit that throws something other than a std::exception end the retrainer's thread (and with
   // it the daemon): it is a failed fit, the model kept.
-  Retrainer odd(store, model, dir / "model.json", [](std::span<const Sample>) -> GearModel { throw 42; },
+  Retrainer odd(store, model, dir / "model.json",
+                [](std::span<const Sample>, std::stop_token) -> GearModel { throw 42; },
                 {std::chrono::duration<double>(600.0), 1});
   CHECK_FALSE(odd.retrain_now());
   CHECK(odd.status().last_result.find("fit failed") != std::string::npos);
@@ -966,7 +1019,7 @@ TEST_CASE("daemon: a fit on few samples does not replace a model learned on many
   model.set(good);
   std::size_t fitted_samples = 100;
   Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>) {
+                      [&](std::span<const Sample>, std::stop_token) {
                         GearModel m = three_gears();
                         m.samples = fitted_samples;
                         return m;
