@@ -187,6 +187,9 @@ struct SynthTuning {
   // gears a progressive gearbox has there, predicted from the ladder's own lowest steps, until the lowest
   // carries the car at the warm idle no faster than first gear does (0: none predicted).
   double predict_lower_gears = 1.0;
+  // 1: a ladder that lacks first gear takes the gears below it that a plausible ladder of more gears held
+  // in the fit (the model's extra.lower_gears) before any predicted from its steps (0: none taken).
+  double fitted_lower_gears = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -235,6 +238,7 @@ class SpeedSynthesizer {
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
+  void insert_fitted_lower_gears(const GearModel* model) noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_predicted_gears() noexcept;
   void change_ladder(bool new_model) noexcept;
