@@ -775,6 +775,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(first_gear_idle_speed),
     GEARPULSE_FIELD(declutch_brake_spread),
     GEARPULSE_FIELD(predict_lower_gears),
+    GEARPULSE_FIELD(fitted_lower_gears),
 };
 #undef GEARPULSE_FIELD
 
@@ -846,6 +847,7 @@ constexpr Rule kRules[] = {
     {"first gear at idle: a ladder too tall at idle lacks first", "first_gear_idle_speed=inf"},
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
+    {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
 };
 
 std::string figure(double med, double p95) {

@@ -656,6 +656,19 @@ Candidate single_cluster(const MixtureData& work, const std::vector<double>& ste
   return {p, ll, bic_of(ll, 1, work.size())};
 }
 
+// The gears below the chosen ladder that a plausible ladder of more gears held (BIC judged their pairs too
+// few to pay for them: a launch passes first gear in a second or two), as `extra.lower_gears`, ascending.
+// The synthesis takes them for the gears a ladder that lacks first gear has below it, where it would
+// otherwise predict them from the ladder's steps.
+void record_lower_gears(const std::vector<double>& largest, GearModel& fitted) {
+  if (fitted.gears.empty()) return;
+  const double below = fitted.gears.front().theta * std::exp(-2.0 * kGearWindow);
+  nlohmann::json lower = nlohmann::json::array();
+  for (const double theta : largest)
+    if (theta < below) lower.push_back(theta);
+  if (!lower.empty()) fitted.extra["lower_gears"] = std::move(lower);
+}
+
 }  // namespace
 
 GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
@@ -708,6 +721,7 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
   std::string last_reason = "no discrete gear ladder in the data";
   LadderCheck forced;  // what the physics says of a forced count's ladder
   Candidate more;      // with a forced count: the best plausible ladder of more gears met on the way down
+  std::vector<double> largest;  // the thetas of the plausible ladder of most gears met on the way down
   while (true) {
     const double ll = run_em(work, p, kEmIterations, 1e-6);
     const LadderCheck verdict = judge.check(p);
@@ -719,6 +733,7 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
       break;
     }
     if (verdict.offender < 0 && m >= 2) {
+      if (largest.empty()) largest = p.theta;
       const double bic = bic_of(ll, m, work.size());
       if (bic < best.bic) best = {p, ll, bic};
     } else if (!verdict.reason.empty()) {
@@ -739,6 +754,7 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
   if (work.size() < all.size()) (void)run_em(all, p, kFullDataIterations, 1e-9, false);
   GearModel fitted = finish_model(all, p, "auto", GradientLayout{p.gears(), true, p.beta_stand > 0.0});
   fitted.extra["speed_lag"] = aligned.lag;
+  if (gears == 0) record_lower_gears(largest, fitted);
   // A forced count is fitted whatever the data shows, but not silently: the ladder's first failing gear
   // and why (a near-empty gear added beside the real ones, clusters too close or too far apart), or the
   // larger plausible ladder that explains the data better (a real gear merged away).

@@ -381,6 +381,10 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
       result.model = detail::fit_paper(fit_data, options.ratios);
     } else {
       result.model = detail::fit_auto(fit_data, options.gears, options.single_gear);
+      // The gears below the ladder that more gears held (extra.lower_gears) are launch gears, passed in a
+      // second or two: between polls seconds apart the line misses a launch's speed by more than a gear
+      // step, and a polled log's clusters there are its polls' as much as a gear's.
+      if (aligned) result.model.extra.erase("lower_gears");
     }
   }
   if (result.model.method.empty()) result.model.method = options.ratios.empty() ? "auto" : "paper";

@@ -69,6 +69,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   }
   insert_seen_gears();
   habits_.load(model, model_gear_, gears_, tuning_);  // the warm idle, for the gears below the ladder
+  insert_fitted_lower_gears(model);
   insert_predicted_gears();
   double total = 0.0;
   for (int j = 1; j <= gears_; ++j)
@@ -119,6 +120,38 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
     model_gear_[at] = 0;
     ++gears_;
   }
+}
+
+// A ladder that lacks first gear (lacks_first_gear) has gears below its lowest. Where the fit met a
+// plausible ladder of more gears that held some below it (the model's extra.lower_gears: their pairs were
+// too few for BIC), those join the ladder, each with the least share of use and no number in the model: the
+// fit's evidence of where they are, where the ladder's steps only predict it (insert_predicted_gears,
+// which goes on below them while the ladder still lacks first gear).
+void SpeedSynthesizer::insert_fitted_lower_gears(const GearModel* model) noexcept {
+  if (tuning_.fitted_lower_gears <= 0.0 || model == nullptr || gears_ == 0 || !lacks_first_gear()) return;
+  const auto it = model->extra.is_object() ? model->extra.find("lower_gears") : model->extra.end();
+  if (it == model->extra.end() || !it->is_array()) return;
+  const double below = theta_[1] * std::exp(-2.0 * kGearWindow);  // off the lowest by a gearbox step
+  std::array<double, kMaxGears> lower{};
+  int n = 0;
+  for (const auto& v : *it)
+    if (v.is_number() && v.get<double>() > 0.0 && v.get<double>() < below && n < kMaxGears - gears_)
+      lower[static_cast<std::size_t>(n++)] = v.get<double>();
+  if (n == 0) return;
+  std::sort(lower.begin(), lower.begin() + n);
+  for (int j = gears_; j >= 1; --j) {
+    theta_[j + n] = theta_[j];
+    theta_se_[j + n] = theta_se_[j];
+    weight_[j + n] = weight_[j];
+    model_gear_[j + n] = model_gear_[j];
+  }
+  for (int k = 0; k < n; ++k) {
+    theta_[k + 1] = lower[static_cast<std::size_t>(k)];
+    theta_se_[k + 1] = 0.0;
+    weight_[k + 1] = kMinGearShare;
+    model_gear_[k + 1] = 0;
+  }
+  gears_ += n;
 }
 
 // A ladder that lacks first gear (lacks_first_gear) lacks the gears below its lowest: a young model has

@@ -33,8 +33,9 @@
 // The filter runs on the model's gears and on the gears it has measured under GPS that the model lacks: a
 // steady ratio of GPS speed to revs off every gear of the model (seen_gears.hpp), carried, with its standard
 // error in the gear's reading, until a model has that gear; such a gear has no number in the model, and an
-// output in it says gear 0. So do the gears it predicts below a ladder that lacks first gear (a young model
-// has not seen the launch gears steady), from the ladder's own steps.
+// output in it says gear 0. So do the gears below a ladder that lacks first gear (a young model has not seen
+// the launch gears steady): those a plausible ladder of more gears held in the fit (extra.lower_gears),
+// then the ones predicted from the ladder's own steps.
 //
 // This file is the mode filter; what it learns of the engine and driver is SynthHabits (synth_habits.hpp),
 // and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
@@ -187,6 +188,9 @@ struct SynthTuning {
   // gears a progressive gearbox has there, predicted from the ladder's own lowest steps, until the lowest
   // carries the car at the warm idle no faster than first gear does (0: none predicted).
   double predict_lower_gears = 1.0;
+  // 1: a ladder that lacks first gear takes the gears below it that a plausible ladder of more gears held
+  // in the fit (the model's extra.lower_gears) before any predicted from its steps (0: none taken).
+  double fitted_lower_gears = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -235,6 +239,7 @@ class SpeedSynthesizer {
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
+  void insert_fitted_lower_gears(const GearModel* model) noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_predicted_gears() noexcept;
   void change_ladder(bool new_model) noexcept;
