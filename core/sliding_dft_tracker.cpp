@@ -169,6 +169,9 @@ struct SlidingDftTracker::Impl {
   }
   void learn_tones(double freq, double right) noexcept;
   void candidate_likelihoods(std::vector<double>& out) const noexcept;
+  // Log odds lost by the state at fine bin k, whose line has per-bin SNR rho_line, to the root f / 4 of a
+  // comb of which it would be the 4th harmonic.
+  [[nodiscard]] double comb_root_penalty(int k, double rho_line) const noexcept;
   void reset_track() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
@@ -477,9 +480,30 @@ void SlidingDftTracker::Impl::reset_track() noexcept {
   rho_track = kDefaultRho;
 }
 
+// A ladder at f is also what an engine at f / 4 shows when its ignition spikes give it every harmonic (a
+// comb): f is then its 4th order, and an idle's 4th harmonic scores as well as the idle when the window
+// is long enough for the comb's upper lines to reach the evidence's bound. The two roots predict the
+// same lines at f's orders and differ at f / 4 and 3 f / 4: background under root f, the lower engine's
+// fundamental and 3rd order under root f / 4. The log likelihood ratio S of those two bins (each an order
+// of the lower engine, at -13 to +13 dB of f's line) gives, with the two roots equally likely beforehand,
+// the posterior of root f; the state at f loses the log odds by which it is the less likely root,
+// ln((1 + e^S) / 2) when S > 0, and nothing otherwise. Only the 4th order is judged so: f / 2 and 3 f / 2
+// are a four-stroke's own half orders (the half order's level prior and the track's continuity tell f
+// from f / 2), and f / 3 and 2 f / 3 lie a third of f apart, both inside a cabin's body resonance
+// (20-40 Hz) for an engine at 60-120 Hz (see docs/tracker.md).
+double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const noexcept {
+  double s = 0.0;
+  for (const int m : {1, 3}) {
+    const double pos = 0.25 * m * k;
+    const auto b = static_cast<std::size_t>(std::lround(pos));
+    if (pos < noise_lo || tones->near(b)) return 0.0;  // unseen, or under a learned tone: says nothing
+    s += evidence.lower_root(z_at(b), rho_line);
+  }
+  return s > 0.0 ? std::log(0.5 * (1.0 + std::exp(s))) : 0.0;
+}
+
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
 // normalised power at each of its orders.
-
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
   const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
   for (int k = s_lo; k <= k_hi; ++k) {
@@ -509,6 +533,8 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
                : o == 2 ? evidence.second(z_at(b), rho)
                         : evidence.order(z_at(b), rho);
       }
+      // The line's level (its peak's, not the state's on its shoulder) sets the lower root's expected level.
+      if (l > 0.0) l -= comb_root_penalty(k, on_tone ? rho_track : std::max(peak - 1.0, 0.1));
     }
     out[static_cast<std::size_t>(k - s_lo)] = temper * l;
   }

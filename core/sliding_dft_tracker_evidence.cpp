@@ -34,6 +34,9 @@ constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 constexpr double kSecondRatioHi = 30.0;
 constexpr double kLoudSecond = 0.15;
 constexpr int kRatioSteps = 20;
+// A line below a candidate f that is an order of a lower engine of which f is a harmonic (a comb): its ratio
+// to f's line spans the harmonics' prior either way, log-uniform over 0.05 .. 20 (-13 to +13 dB).
+constexpr double kLowerRatioHi = 20.0;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
 constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
 constexpr int kHalfTables = static_cast<int>(std::size(kHalfAbsent));
@@ -104,6 +107,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
   ladder_.assign(fund_.size(), 0.0);
   second_.assign(fund_.size(), 0.0);
+  lower_.assign(fund_.size(), 0.0);
   half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
@@ -128,6 +132,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       second_[at] =
           with_absent(log_add(std::log1p(-kLoudSecond) + log_ratio(kRatioHi), std::log(kLoudSecond) + loud),
                       kOrderAbsent);
+      lower_[at] = with_absent(log_ratio(kLowerRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
         half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
@@ -164,6 +169,10 @@ double HarmonicEvidence::order(double z, double rho_fundamental) const noexcept 
 
 double HarmonicEvidence::second(double z, double rho_fundamental) const noexcept {
   return lookup(second_, z, rho_fundamental);
+}
+
+double HarmonicEvidence::lower_root(double z, double rho_line) const noexcept {
+  return lookup(lower_, z, rho_line);
 }
 
 double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {

@@ -36,6 +36,10 @@ class HarmonicEvidence {
   // The same for the 2nd harmonic's bin, which may stand up to 15 dB over the fundamental (light load,
   // overrun).
   [[nodiscard]] double second(double z, double rho_fundamental) const noexcept;
+  // The same for a bin below a candidate's line that is an order of a lower engine of which the candidate
+  // is a harmonic (f / 4 and 3 f / 4 when it is the 4th), given the per-bin SNR of the candidate's line:
+  // the ratio spans 0.05 .. 20 (-13 to +13 dB).
+  [[nodiscard]] double lower_root(double z, double rho_line) const noexcept;
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
   [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
@@ -45,6 +49,7 @@ class HarmonicEvidence {
   std::vector<double> fund_;    // over (log10 rho, sqrt z)
   std::vector<double> ladder_;  // over (log10 rho, sqrt z)
   std::vector<double> second_;  // over (log10 rho, sqrt z)
+  std::vector<double> lower_;   // over (log10 rho, sqrt z)
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).
   std::vector<std::vector<double>> half_;

@@ -33,9 +33,10 @@ class ToneMap {
   // A reading this loud (normalised power) would make a tone within a few windows.
   [[nodiscard]] bool loud(double z) const noexcept;
   // Learns from this window's spectrum (power and noise floor per fine bin). The bins within two
-  // resolution bins of the estimate's orders (`orders` x freq_hz; none when freq_hz is NaN) are left out
-  // while the estimate is probably the engine (`on_track`) and, while it is a `candidate` not yet
-  // confident, until they have persisted.
+  // resolution bins of the estimate's orders (`orders` x freq_hz; none when freq_hz is NaN), and those
+  // within one of its other integer multiples (an engine's comb), are left out while the estimate is
+  // probably the engine (`on_track`); the orders of a `candidate` not yet confident are left out until
+  // they have persisted.
   void learn(const double* power, const double* noise, double freq_hz, std::span<const double> orders,
              bool on_track, bool candidate) noexcept;
 

@@ -77,6 +77,19 @@ double tracked_fraction(const std::vector<TrackPoint>& points) {
   return static_cast<double>(n) / static_cast<double>(points.size());
 }
 
+// Whether the window of length window_s centred at t holds a change of the engine's frequency faster than
+// any ramp (a gear shift: the generated drives fall 30-40 % within 0.3 s, 100-200 Hz/s; ramps stay within
+// the 60 Hz/s slew). Such a window smears the line over r T^2 resolution bins at rate r (170 Hz/s: 1.7
+// bins at 0.1 s, 4.4 at 0.16 s), more than a 0 dB line's per-bin SNR survives, and the windows centred
+// within (D + T) / 2 of a shift of duration D hold part of it: (D + T) / hop hops per shift, more for a
+// longer window. Coverage at 0 dB is therefore asked of the hops whose window holds no shift.
+bool window_holds_shift(const sim::FrequencyTrajectory& truth, double t, double window_s) {
+  constexpr double kShiftHzPerS = 80.0, kStep = 0.005;
+  for (double u = t - 0.5 * window_s; u <= t + 0.5 * window_s; u += kStep)
+    if (std::abs(truth(u + 0.5 * kStep) - truth(u - 0.5 * kStep)) > kShiftHzPerS * kStep) return true;
+  return false;
+}
+
 TrackerConfig config_at(double fs) {
   TrackerConfig c;
   c.sample_rate_hz = fs;
@@ -166,12 +179,17 @@ TEST_CASE("tracker: a loud launch with no half order is tracked on its fundament
 // A clean line that idles below the band, launches, cruises, shifts and comes back to idle. Its idle
 // orders stand still for seconds and the skirts of a line 40-50 dB over the noise spread over several
 // resolution bins: both were learned as fixed tones, and within 20 s most of the band said nothing (half
-// the hops or fewer tracked at 50 dB, with or without a half order).
+// the hops or fewer tracked at 50 dB, with or without a half order). With a 0.16 s window the idle's
+// comb (its ignition spikes give every harmonic) reaches the evidence's bound: the candidate at 4x the
+// idle, whose ladder is the idle's 2nd, 4th, 8th and 12th harmonics, took the track (126 of 418 hops
+// tracked at 8 kHz, 50 dB, no half order), and the comb's other lines, learned as tones during the idle,
+// blanked the next launch's orders (325 of 418 at 40 dB).
 TEST_CASE("tracker: a clean line through idles, launches and shifts is tracked all the way") {
   const double fs = GENERATE(8000.0, 48000.0);
   const double snr = GENERATE(40.0, 50.0);
   const double half = GENERATE(0.3, 0.0);
-  INFO("rate " << fs << " SNR " << snr << " dB half order " << half);
+  const double window = GENERATE(0.1, 0.16);
+  INFO("rate " << fs << " SNR " << snr << " dB half order " << half << " window " << window << " s");
   const sim::FrequencyTrajectory truth = [](double t) {
     const double cycle = std::fmod(t, 20.0);  // idle 3 s, launch, shift at 9 s, cruise, back to idle
     if (cycle < 3.0) return 38.0;
@@ -185,12 +203,14 @@ TEST_CASE("tracker: a clean line through idles, launches and shifts is tracked a
   g.snr_db = snr;
   g.half_order = half;
   g.seed = 21;
-  SlidingDftTracker tracker(config_at(fs));
+  TrackerConfig c = config_at(fs);
+  c.window_s = window;
+  SlidingDftTracker tracker(c);
   const auto points = track(tracker, sim::make_lighter_signal(g, truth, 60.0));
   std::size_t in_band = 0, tracked = 0, wrong = 0;
   for (const TrackPoint& p : points) {
     const double f = truth(p.t);
-    // Away from the band's edge and from the shift (the window straddles it for 0.1 s).
+    // Away from the band's edge and from the shift (and the windows that straddle it).
     if (p.t < 4.0 || f < 55.0 || std::abs(std::fmod(p.t, 20.0) - 9.5) < 0.6) continue;
     ++in_band;
     if (!p.tracked) continue;
@@ -601,19 +621,27 @@ TEST_CASE("tracker: at -5 dB every hop gets an estimate and the confident ones a
 
 TEST_CASE("tracker: confidence is calibrated on a 0 dB drive with shifts and stops") {
   const std::uint64_t seed = GENERATE(21, 22);
-  INFO("seed " << seed);
+  const double window = GENERATE(0.1, 0.16);
+  INFO("seed " << seed << " window " << window << " s");
   const auto truth = sim::drive_trajectory(60.0, seed);
   sim::LighterSignalConfig g;
   g.snr_db = 0.0;
   g.seed = seed;
-  SlidingDftTracker tracker(config_at(g.sample_rate_hz));
+  TrackerConfig c = config_at(g.sample_rate_hz);
+  c.window_s = window;
+  SlidingDftTracker tracker(c);
   const auto points = track(tracker, sim::make_lighter_signal(g, truth, 60.0));
-  std::size_t in_band = 0, valued = 0, right = 0, tracked = 0, tracked_right = 0;
+  std::size_t in_band = 0, valued = 0, right = 0, tracked = 0, tracked_right = 0, clear = 0,
+              clear_tracked = 0;
   double confidence = 0.0;
   for (const TrackPoint& p : points) {
     const double f = truth(p.t);
     if (!(f >= 50.0 && f <= 200.0)) continue;
     ++in_band;
+    if (!window_holds_shift(truth, p.t, tracker.config().window_s)) {
+      ++clear;
+      clear_tracked += p.tracked;
+    }
     if (!std::isfinite(p.freq)) continue;
     const bool ok = std::abs(p.freq - f) <= 0.05 * f;
     ++valued;
@@ -622,8 +650,11 @@ TEST_CASE("tracker: confidence is calibrated on a 0 dB drive with shifts and sto
     tracked += p.tracked;
     tracked_right += p.tracked && ok;
   }
+  INFO(tracked << " of " << in_band << " in-band hops tracked, " << clear_tracked << " of the " << clear
+               << " whose window holds no shift");
   REQUIRE(in_band >= 400);
-  CHECK(tracked >= 0.95 * static_cast<double>(in_band));
+  REQUIRE(clear >= 0.85 * static_cast<double>(in_band));
+  CHECK(clear_tracked >= 0.97 * static_cast<double>(clear));
   CHECK(tracked_right >= 0.99 * static_cast<double>(tracked));
   CHECK(confidence / static_cast<double>(valued) ==
         Approx(static_cast<double>(right) / static_cast<double>(valued)).margin(0.05));
@@ -724,19 +755,27 @@ TEST_CASE("tracker: a 0 dB drive at 8 kHz keeps no confident old line through it
   // A generated drive (shifts fall 30-40 % within 0.3 s) at 0 dB. In a window a shift sweeps through, the
   // line's power is smeared over two resolution bins beside where the track held it; the old line must
   // not be reported with confidence, and the sub-bin fit must stay on the line elsewhere.
+  const double window = GENERATE(0.1, 0.16);
+  INFO("window " << window << " s");
   const sim::FrequencyTrajectory truth = sim::drive_trajectory(120.0, 12);
   sim::LighterSignalConfig g;
   g.sample_rate_hz = 8000.0;
   g.snr_db = 0.0;
   g.seed = 12;
-  SlidingDftTracker tracker(config_at(g.sample_rate_hz));
+  TrackerConfig c = config_at(g.sample_rate_hz);
+  c.window_s = window;
+  SlidingDftTracker tracker(c);
   const auto points = track(tracker, sim::make_lighter_signal(g, truth, 120.0));
-  std::size_t in_band = 0, tracked = 0, wrong = 0;
+  std::size_t in_band = 0, tracked = 0, wrong = 0, clear = 0, clear_tracked = 0;
   double sq = 0.0;
   for (const TrackPoint& p : points) {
     const double f = truth(p.t);
     if (!(f >= 50.0 && f <= 200.0)) continue;
     ++in_band;
+    if (!window_holds_shift(truth, p.t, tracker.config().window_s)) {
+      ++clear;
+      clear_tracked += p.tracked;
+    }
     if (!p.tracked) continue;
     ++tracked;
     sq += (p.freq - f) * (p.freq - f);
@@ -746,8 +785,11 @@ TEST_CASE("tracker: a 0 dB drive at 8 kHz keeps no confident old line through it
                          << p.confidence);
     }
   }
+  INFO(tracked << " of " << in_band << " in-band hops tracked, " << clear_tracked << " of the " << clear
+               << " whose window holds no shift");
   REQUIRE(in_band >= 900);
-  CHECK(static_cast<double>(tracked) >= 0.95 * static_cast<double>(in_band));
+  REQUIRE(clear >= 0.85 * static_cast<double>(in_band));
+  CHECK(static_cast<double>(clear_tracked) >= 0.97 * static_cast<double>(clear));
   CHECK(wrong <= 1);
   CHECK(std::sqrt(sq / static_cast<double>(tracked)) <= 0.8);
 }

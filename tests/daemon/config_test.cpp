@@ -154,10 +154,9 @@ TEST_CASE("config: relations between keys are checked") {
   // against the other key of the pair, which the file does not set.
   CHECK(error_of("[tracker]\nband_low = 300\n") ==
         "test.toml:2: tracker.band_low: tracker.band_high (200 Hz) must be above tracker.band_low (300 Hz)");
-  CHECK(error_of("[tracker]\nhop = 0.5\n") ==
-        "test.toml:2: tracker.hop: tracker: hop 0.5 s is more than 4 windows (0.4 s): the audio between "
-        "windows "
-        "would be ignored");
+  CHECK(error_of("[tracker]\nhop = 0.7\n") ==
+        "test.toml:2: tracker.hop: tracker: hop 0.7 s is more than 4 windows (0.64 s): the audio between "
+        "windows would be ignored");
   CHECK(error_of("[output]\nmin_frequency = 1000\n").starts_with("test.toml:2: output.min_frequency:"));
   // A ring that cannot hold two capture periods dropped about half the audio, with nothing said.
   CHECK(error_of("[audio]\nrate = 16000\nperiod_frames = 4096\nring_seconds = 0.1\n") ==
@@ -180,8 +179,8 @@ TEST_CASE("config: every accepted output section is one the pulse scheduler take
 TEST_CASE("config: every accepted tracker section is one the tracker takes at the configured rate") {
   // What the tracker would refuse when the daemon opens the audio is refused by the config (so by
   // --check-config), with the line of the key to change.
-  CHECK(error_of("[tracker]\nband_low = 30.0\n")
-            .starts_with("test.toml:2: tracker.band_low: tracker: window 0.1 s is too short"));
+  CHECK(error_of("[tracker]\nband_low = 20.0\n")
+            .starts_with("test.toml:2: tracker.band_low: tracker: window 0.16 s is too short"));
   CHECK(error_of("[tracker]\nband_low = 30.0\nwindow = 0.1\n")
             .starts_with("test.toml:3: tracker.window: tracker: window"));
   CHECK(error_of("[tracker]\nwindow = 0.05\n")

@@ -232,11 +232,11 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
     CHECK(r.err.find("truncated") != std::string::npos);
   }
   SECTION("WAV of just one analysis window") {
-    const auto wav = make_wav(dir, "short.wav", std::vector<float>(800, 0.1f), 1, 8000);
+    const auto wav = make_wav(dir, "short.wav", std::vector<float>(1280, 0.1f), 1, 8000);
     const Result r = run(dir, std::string("'") + wav + "'");
     check_one_line_error(r);
     // Exactly one window's length is too short; the message says why, not that it is shorter than one.
-    CHECK(r.err.find("800 frames (0.1 s)") != std::string::npos);
+    CHECK(r.err.find("1280 frames (0.16 s)") != std::string::npos);
     CHECK(r.err.find("a little more than one window is needed") != std::string::npos);
   }
   SECTION("WAV with zero frames") {
@@ -266,7 +266,7 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
     check_one_line_error(run(dir, "--hop abc '" + good + "'"));
     check_one_line_error(run(dir, "--hop 0 '" + good + "'"));
     // As the daemon's configuration: a hop beyond 4 windows would skip the audio between them.
-    const Result wide = run(dir, "--hop 0.5 '" + good + "'");
+    const Result wide = run(dir, "--hop 0.7 '" + good + "'");
     check_one_line_error(wide);
     CHECK(wide.err.find("more than 4 windows") != std::string::npos);
     check_one_line_error(run(dir, "--window 0.01 '" + good + "'"));
@@ -283,10 +283,10 @@ TEST_CASE("track: one row per hop at hops far shorter than a read block") {
   REQUIRE(r.status == 0);
   const auto v = rows(r);
   REQUIRE(v.size() > 2);
-  // Windows of 0.1 s centred every millisecond: one row for every hop from the first to the last, none
+  // Windows of 0.16 s centred every millisecond: one row for every hop from the first to the last, none
   // missing (a read block holds more hops than the tracker's output queue).
   const double first = v.front().t, last = v.back().t;
-  CHECK(first <= 0.06);  // the first whole window
+  CHECK(first <= 0.09);  // the first whole window
   CHECK(last >= 2.9);
   CHECK(static_cast<double>(v.size()) == Approx((last - first) / 0.001 + 1.0).margin(1.0));
   for (std::size_t i = 1; i < v.size(); ++i)
