@@ -775,6 +775,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(first_gear_idle_speed),
     GEARPULSE_FIELD(declutch_brake_spread),
     GEARPULSE_FIELD(predict_lower_gears),
+    GEARPULSE_FIELD(gps_delay),
 };
 #undef GEARPULSE_FIELD
 
@@ -846,6 +847,7 @@ constexpr Rule kRules[] = {
     {"first gear at idle: a ladder too tall at idle lacks first", "first_gear_idle_speed=inf"},
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
+    {"GPS delay: a fix is the speed of a moment before", "gps_delay=0"},
 };
 
 std::string figure(double med, double p95) {
