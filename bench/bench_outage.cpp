@@ -776,6 +776,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(declutch_brake_spread),
     GEARPULSE_FIELD(predict_lower_gears),
     GEARPULSE_FIELD(fitted_lower_gears),
+    GEARPULSE_FIELD(gps_delay),
 };
 #undef GEARPULSE_FIELD
 
@@ -848,6 +849,7 @@ constexpr Rule kRules[] = {
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
     {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
+    {"GPS delay: a fix is the speed of a moment before", "gps_delay=0"},
 };
 
 std::string figure(double med, double p95) {

@@ -665,6 +665,26 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
   const bool short_step = dt < kShortStep * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
   const double gps_var = sigma_v_ * sigma_v_;
+  // A fix is the speed of `delay` s before this step (GpsDelay), and each track is held to it less what
+  // the car gained since, as far as it was measured: over the steps before this one, the gain of the
+  // filter's own speed then (the revs of the gears it followed); within this step, the gain of a gear's
+  // line over the time it has been held. Not the track's predicted acceleration: a late fix measured
+  // against it teaches the track its own guess, and at rest any fix is explained by a braking no car does.
+  const double delay = tuning_.gps_delay > 0.0 ? gps_delay_.delay() : 0.0;
+  double gained = 0.0, in_step = std::min(delay, dt);
+  ModeArray revs_gain{};  // Hz gained in each gear within the step
+  if (measure_gps && delay > 0.0) {
+    double then = 0.0, last = 0.0;
+    if (delay > dt && gps_delay_.speed_at(t_ - delay, then) && gps_delay_.speed_at(t_ - dt, last))
+      gained = last - then;
+    else
+      in_step = delay;
+    for (int j = 1; j <= gears_ && std::isfinite(freq); ++j) {
+      const double span = std::min(in_step, age_[j] + dt);
+      double before = freq;
+      if (gps_delay_.revs_at(t_ - span, before)) revs_gain[j] = freq - before;
+    }
+  }
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
   habits_.score_revs(freq, weight_, gears_, tuning_, revs_habit_);
@@ -732,8 +752,14 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       if (measure_gps) {
         // GPS pins the speed and the frequency tells the mode; but a history GPS contradicts beyond
         // ordinary jitter (a car at rest while GPS has it moving) pays for that jump once.
+        // The fix against the track's speed less what the car gained since it was taken (above), no more
+        // than a driver's acceleration at three of its spreads (accel_sigma) gains or loses in that time:
+        // revs that jump about (a tracker hopping between lines) are no gain of speed.
+        const double most = 3.0 * tuning_.accel_sigma * delay;
+        const double past =
+            std::clamp(gained + (j == i && is_gear(j) ? theta_[j] * revs_gain[j] : 0.0), -most, most);
         const double k = x.pvv / (x.pvv + gps_var);
-        const double innovation = gps - x.v;
+        const double innovation = gps - (x.v - past);
         const double z2 = innovation * innovation / (x.pvv + gps_var);
         gps_score = -jump_cost(z2);
         // The speed follows a jump; the acceleration learns from no more of it than ordinary jitter.
@@ -803,6 +829,10 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   normalise();
   mode_ = map_mode();
   prev_freq_ = freq;
+  double mean_speed = 0.0;
+  for (int j = 0; j < modes; ++j)
+    mean_speed += prob_[j] * track_[j].v;
+  gps_delay_.note_speed(t_, mean_speed);
   // A hypothesis grown negligible keeps no history of its own: if the car later shows it, it is entered
   // from the belief of the moment, not from a speed drifted apart while nothing supported it. Nor does a
   // move-off once a gear has bitten: its guessed speed is superseded by the gear's. Nor, at the tracker's
@@ -867,8 +897,12 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   } else if (gears_ == 0) {
     out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
   } else {
+    gps_delay_.note_freq(t_, freq);
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
-    if (have_gps && gps_new) observe_gear(gps_speed, freq);
+    if (have_gps && gps_new) {
+      observe_gear(gps_speed, freq);
+      gps_delay_.learn(t_, gps_speed, {theta_.data() + 1, static_cast<std::size_t>(gears_)});
+    }
   }
   last_ = out;
   return out;

@@ -28,7 +28,8 @@
 // clutch biting after a move-off may find the car faster than the move-off guessed. Apart from these, the
 // result does not depend on the step rate. The output follows the mode at a quantile of the belief by speed a
 // little above its median (the most probable one while it holds 0.6 of it), leaning halfway toward the
-// contenders' speed. No look-ahead: every output depends only on past input.
+// contenders' speed. A GPS fix is taken as the speed of a moment before its step, as late against the revs
+// as the drive's fixes show (gps_delay.hpp). No look-ahead: every output depends only on past input.
 //
 // The filter runs on the model's gears and on the gears it has measured under GPS that the model lacks: a
 // steady ratio of GPS speed to revs off every gear of the model (seen_gears.hpp), carried, with its standard
@@ -49,6 +50,7 @@
 #include <string_view>
 
 #include "core/gear_model.hpp"
+#include "core/gps_delay.hpp"
 #include "core/sample.hpp"
 #include "core/seen_gears.hpp"
 #include "core/synth_habits.hpp"
@@ -191,6 +193,9 @@ struct SynthTuning {
   // 1: a ladder that lacks first gear takes the gears below it that a plausible ladder of more gears held
   // in the fit (the model's extra.lower_gears) before any predicted from its steps (0: none taken).
   double fitted_lower_gears = 1.0;
+  // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
+  // GpsDelay learns from this drive's fixes (0: the speed of the step itself).
+  double gps_delay = 1.0;
 };
 
 class SpeedSynthesizer {
@@ -283,6 +288,7 @@ class SpeedSynthesizer {
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
   SeenGears seen_;
+  GpsDelay gps_delay_;      // how late GPS speed is against the revs, learned from the fixes
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
   double sigma_v_ = 0.0;

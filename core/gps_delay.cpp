@@ -1,0 +1,89 @@
+#include "core/gps_delay.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace gearpulse {
+namespace {
+
+// m/s: slower, the clutch may still slip and first gear runs near idle: the revs do not follow a line.
+constexpr double kMinSpeed = 3.0;
+// Bound on a fix's log-departure from the nearest gear: 10 %, half the smallest step between the gears of
+// a close-ratio box and more than a delay of a second makes of a car gaining speed at 1 m/s^2 beyond 10 m/s.
+constexpr double kClip = 0.1;
+constexpr double kMemory = 200.0;  // fixes
+// s: revs read further apart than this do not say what the engine did between them.
+constexpr double kMaxGap = 2.5;
+// m/s^2: a change of speed between fixes that is the car's, not the receiver's noise (0.1-0.2 m/s a fix).
+constexpr double kMinChange = 0.3;
+
+}  // namespace
+
+void GpsDelay::History::add(double t, double value) noexcept {
+  if (!std::isfinite(t) || !std::isfinite(value) || value < 0.0) return;
+  t_[static_cast<std::size_t>(next_)] = t;
+  value_[static_cast<std::size_t>(next_)] = value;
+  next_ = (next_ + 1) % kSize;
+  size_ = std::min(size_ + 1, kSize);
+}
+
+bool GpsDelay::History::at(double t, double& value) const noexcept {
+  double after_t = std::numeric_limits<double>::infinity(), after = 0.0;
+  for (int k = 1; k <= size_; ++k) {  // newest first
+    const auto i = static_cast<std::size_t>((next_ - k + kSize) % kSize);
+    if (t_[i] > t) {
+      after_t = t_[i];
+      after = value_[i];
+      continue;
+    }
+    if (t_[i] == t) {
+      value = value_[i];
+      return true;
+    }
+    if (!std::isfinite(after_t) || after_t - t_[i] > kMaxGap) return false;
+    value = value_[i] + (t - t_[i]) / (after_t - t_[i]) * (after - value_[i]);
+    return true;
+  }
+  return false;
+}
+
+void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexcept {
+  const double fix_dt = t - last_t_, change = gps - last_gps_;
+  last_t_ = t;
+  last_gps_ = gps;
+  // Only while the speed changes does a delay show (see the header).
+  if (!std::isfinite(gps) || gps < kMinSpeed || theta.empty() || !(fix_dt > 0.0) || fix_dt > kMaxGap ||
+      std::abs(change) < kMinChange * fix_dt)
+    return;
+  std::array<double, kCandidates> err{};
+  for (int c = 0; c < kCandidates; ++c) {
+    double f = 0.0;
+    if (!revs_.at(t - c * kStep, f) || !(f > 0.0)) return;  // every candidate judged on the same fixes
+    double best = kClip;
+    for (const double th : theta)
+      if (th > 0.0) best = std::min(best, std::abs(std::log(gps / (th * f))));
+    err[static_cast<std::size_t>(c)] = best * best;
+  }
+  for (int c = 0; c < kCandidates; ++c) {
+    const auto i = static_cast<std::size_t>(c);
+    cost_[i] += (err[i] - cost_[i]) / kMemory;
+  }
+  choose();
+}
+
+void GpsDelay::choose() noexcept {
+  int best = 0;
+  for (int c = 1; c < kCandidates; ++c)
+    if (cost_[static_cast<std::size_t>(c)] < cost_[static_cast<std::size_t>(best)]) best = c;
+  double offset = 0.0;
+  if (best > 0 && best < kCandidates - 1) {
+    const double lo = cost_[static_cast<std::size_t>(best - 1)], mid = cost_[static_cast<std::size_t>(best)],
+                 hi = cost_[static_cast<std::size_t>(best + 1)];
+    const double curvature = lo - 2.0 * mid + hi;
+    if (curvature > 0.0) offset = std::clamp(0.5 * (lo - hi) / curvature, -0.5, 0.5);
+  }
+  delay_ = (best + offset) * kStep;
+}
+
+}  // namespace gearpulse
