@@ -94,7 +94,9 @@ def main():
     last_source = None
     last_model = None
     seen_gps = False
-    first_engine = None   # first status with source engine after GPS was used: (elapsed, gps age)
+    # First status whose speed comes from the engine after GPS was used (source engine, or coast: the clutch
+    # out, the speed carried by the synthesis' declutched model): (elapsed, gps age).
+    first_engine = None
     outage_polls = {}
     samples = []
     while alive(a.until_pid):
@@ -112,7 +114,7 @@ def main():
         if out_start is not None and out_start + 5 <= el <= out_start + out_len - 2:
             outage_polls[source] = outage_polls.get(source, 0) + 1
         seen_gps = seen_gps or source == "gps"
-        if source == "engine" and seen_gps and first_engine is None:
+        if source in ("engine", "coast") and seen_gps and first_engine is None:
             first_engine = (el, gps.get("age"))
         model = model_text(s) if a.model else ""
         if not a.quiet and (el - last_print >= a.print_every or source != last_source or model != last_model):
