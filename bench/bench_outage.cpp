@@ -777,6 +777,8 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(predict_lower_gears),
     GEARPULSE_FIELD(fitted_lower_gears),
     GEARPULSE_FIELD(gps_delay),
+    GEARPULSE_FIELD(gps_delay_prior),
+    GEARPULSE_FIELD(gps_delay_significance),
 };
 #undef GEARPULSE_FIELD
 
@@ -850,6 +852,8 @@ constexpr Rule kRules[] = {
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
     {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
     {"GPS delay: a fix is the speed of a moment before", "gps_delay=0"},
+    {"GPS delay prior: the fit's speed lag until the drive's shows", "gps_delay_prior=0"},
+    {"GPS delay significance: the drive's best lag from its first fix", "gps_delay_significance=0"},
 };
 
 std::string figure(double med, double p95) {

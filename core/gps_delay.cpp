@@ -17,6 +17,9 @@ constexpr double kMemory = 200.0;  // fixes
 constexpr double kMaxGap = 2.5;
 // m/s^2: a change of speed between fixes that is the car's, not the receiver's noise (0.1-0.2 m/s a fix).
 constexpr double kMinChange = 0.3;
+// Fixes' worth (the weights' effective number) before a difference's spread is known well enough to judge
+// it by: from 20, the spread's own relative error (1 / sqrt(2 n)) is under a sixth.
+constexpr double kMinFixes = 20.0;
 
 }  // namespace
 
@@ -48,6 +51,11 @@ bool GpsDelay::History::at(double t, double& value) const noexcept {
   return false;
 }
 
+void GpsDelay::set_prior(double delay) noexcept {
+  prior_ = std::isfinite(delay) ? std::clamp(delay, 0.0, kMaxDelay) : 0.0;
+  choose();
+}
+
 void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexcept {
   const double fix_dt = t - last_t_, change = gps - last_gps_;
   last_t_ = t;
@@ -65,10 +73,14 @@ void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexce
       if (th > 0.0) best = std::min(best, std::abs(std::log(gps / (th * f))));
     err[static_cast<std::size_t>(c)] = best * best;
   }
-  for (int c = 0; c < kCandidates; ++c) {
-    const auto i = static_cast<std::size_t>(c);
-    cost_[i] += (err[i] - cost_[i]) / kMemory;
+  constexpr double kKeep = 1.0 - 1.0 / kMemory;
+  for (std::size_t i = 0; i < err.size(); ++i) {
+    cost_[i] = kKeep * cost_[i] + err[i];
+    for (std::size_t j = 0; j < err.size(); ++j)
+      cross_[i][j] = kKeep * cross_[i][j] + err[i] * err[j];
   }
+  weight_ = kKeep * weight_ + 1.0;
+  weight_sq_ = kKeep * kKeep * weight_sq_ + 1.0;
   choose();
 }
 
@@ -84,6 +96,16 @@ void GpsDelay::choose() noexcept {
     if (curvature > 0.0) offset = std::clamp(0.5 * (lo - hi) / curvature, -0.5, 0.5);
   }
   delay_ = (best + offset) * kStep;
+  // Significance against the prior's candidate: the weighted mean difference of the departures and its
+  // standard error over the weights' effective number of fixes.
+  const auto p = static_cast<std::size_t>(std::lround(prior_ / kStep));
+  const auto b = static_cast<std::size_t>(best);
+  const double fixes = weight_sq_ > 0.0 ? weight_ * weight_ / weight_sq_ : 0.0;
+  own_ = b != p && significance_ <= 0.0;
+  if (b == p || significance_ <= 0.0 || fixes < kMinFixes) return;
+  const double gain = (cost_[p] - cost_[b]) / weight_;
+  const double spread = (cross_[p][p] - 2.0 * cross_[p][b] + cross_[b][b]) / weight_ - gain * gain;
+  own_ = gain > 0.0 && gain * gain * fixes >= significance_ * significance_ * std::max(spread, 0.0);
 }
 
 }  // namespace gearpulse

@@ -11,8 +11,16 @@
 // delay d (0 to kMaxDelay in steps of kStep), the revs at t - d (interpolated between those noted) are
 // turned into a speed by the nearest gear of the ladder, and the fix's squared log-departure from it,
 // bounded by kClip (a shift or a declutch, which no gear explains, counts alike at every delay), is
-// averaged with a memory of kMemory fixes. The delay is the candidate of least average, placed between
-// its neighbours by a parabola through the three; 0 until a fix has told the candidates apart.
+// averaged with a memory of kMemory fixes. The drive's own delay is the candidate of least average,
+// placed between its neighbours by a parabola through the three.
+//
+// Before the drive shows its own, the delay is the prior: the lag the fit found between the speeds and
+// the revs it was given (the model's extra.speed_lag), which is the same quantity measured on the pairs of
+// earlier drives. The drive's own delay replaces it only once it is significant: its candidate's average
+// is lower than the prior's candidate's by at least kSignificance standard errors of that difference,
+// over at least kMinFixes fixes' worth (a fix's departures at two delays are strongly correlated, so the
+// difference's own spread, not each average's, is the noise). Where the fixes say little (polled rows
+// seconds apart, few changes of speed), the prior stands.
 //
 // It also keeps the last few seconds of revs and of the filter's own speed, which the synthesis takes a
 // fix's delay out with (SpeedSynthesizer::filter_step).
@@ -25,6 +33,10 @@ namespace gearpulse {
 
 class GpsDelay {
  public:
+  // Standard errors by which the drive's delay must beat the prior's (see the header): one-sided, a chance
+  // of about 1 in 1000 per candidate that the fixes' noise alone does it, about 1 in 100 over the ten
+  // candidates against the prior's.
+  static constexpr double kSignificance = 3.0;
   static constexpr double kStep = 0.1;      // s between candidate delays
   static constexpr double kMaxDelay = 1.0;  // s: a receiver reports a fix within its period (1 s at 1 Hz)
   static constexpr int kCandidates = 11;    // 0, kStep, ..., kMaxDelay
@@ -33,11 +45,20 @@ class GpsDelay {
   void note_freq(double t, double freq) noexcept { revs_.add(t, freq); }
   // After every step: the speed the filter holds (its belief's mean) at t.
   void note_speed(double t, double speed) noexcept { speed_.add(t, speed); }
+  // The delay believed before the drive's fixes show their own (s, clamped to 0..kMaxDelay): the model's
+  // extra.speed_lag. May change between any two steps (a retrained model); what was learned is kept.
+  void set_prior(double delay) noexcept;
+  // Standard errors by which the drive's delay must beat the prior (0: the best candidate is the delay
+  // from the first fix that tells the candidates apart, whatever the prior).
+  void set_significance(double z) noexcept { significance_ = z; }
   // A new fix: GPS speed `gps` (m/s) delivered at step time t (after note_freq for that step); `theta` the
   // ladder's gears ((m/s)/Hz).
   void learn(double t, double gps, std::span<const double> theta) noexcept;
-  // s: how much older the speed of a fix is than the revs of the step it comes with.
-  [[nodiscard]] double delay() const noexcept { return delay_; }
+  // s: how much older the speed of a fix is than the revs of the step it comes with: the drive's own
+  // delay once significant, the prior until then.
+  [[nodiscard]] double delay() const noexcept { return own_ ? delay_ : prior_; }
+  // The drive's fixes have shown a delay significantly better than the prior's.
+  [[nodiscard]] bool significant() const noexcept { return own_; }
   // The revs, or the filter's speed, at time t, interpolated between the values noted around it (false,
   // `value` untouched, if no two values 2.5 s apart or closer bracket it, or t is before the oldest kept).
   [[nodiscard]] bool revs_at(double t, double& value) const noexcept { return revs_.at(t, value); }
@@ -58,8 +79,14 @@ class GpsDelay {
   void choose() noexcept;
 
   History revs_, speed_;
-  std::array<double, kCandidates> cost_{};
-  double delay_ = 0.0;
+  std::array<double, kCandidates> cost_{};  // exponentially weighted sums of each candidate's departures
+  // ... and of the products of two candidates' departures (the spread of their difference).
+  std::array<std::array<double, kCandidates>, kCandidates> cross_{};
+  double weight_ = 0.0, weight_sq_ = 0.0;  // the sums of the weights and of their squares
+  double prior_ = 0.0;
+  double significance_ = kSignificance;
+  double delay_ = 0.0;  // the drive's own (the best candidate, refined)
+  bool own_ = false;
   double last_t_ = 0.0, last_gps_ = 0.0;  // the fix before
 };
 

@@ -30,6 +30,14 @@ std::span<const double> thetas_of(const GearModel* model,
   return {buf.data(), n};
 }
 
+// The lag the fit found between the speeds and the revs it was given (s; extra.speed_lag, 0 if absent): how
+// late a speed is against the revs logged with it, the same quantity GpsDelay learns from a drive's fixes.
+double model_speed_lag(const GearModel& model) noexcept {
+  if (!model.extra.is_object()) return 0.0;
+  const auto it = model.extra.find("speed_lag");
+  return it != model.extra.end() && it->is_number() ? it->get<double>() : 0.0;
+}
+
 }  // namespace
 
 // Keeps a track's covariance a covariance. The speed variance is capped at kMaxSpeedVar by scaling the
@@ -50,6 +58,7 @@ void SpeedSynthesizer::keep_covariance(Track& x) noexcept {
 
 SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const SynthTuning& tuning)
     : tuning_(tuning), seen_(tuning.seen_gear_fixes) {
+  gps_delay_.set_significance(tuning.gps_delay_significance);
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
   load_model(model_.get());
   reset();
@@ -68,6 +77,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     model_gear_[j] = j;
   }
   insert_seen_gears();
+  gps_delay_.set_prior(model && tuning_.gps_delay_prior > 0.0 ? model_speed_lag(*model) : 0.0);
   habits_.load(model, model_gear_, gears_, tuning_);  // the warm idle, for the gears below the ladder
   insert_fitted_lower_gears(model);
   insert_predicted_gears();

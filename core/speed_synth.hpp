@@ -196,6 +196,12 @@ struct SynthTuning {
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
   // GpsDelay learns from this drive's fixes (0: the speed of the step itself).
   double gps_delay = 1.0;
+  // 1: until the drive's fixes show their own delay significantly, it is the lag the fit found between
+  // the speeds and the revs (the model's extra.speed_lag) (0: 0 s).
+  double gps_delay_prior = 1.0;
+  // Standard errors by which the drive's own delay must beat the prior's before it is used (0: the best
+  // candidate from the first fix that tells them apart).
+  double gps_delay_significance = GpsDelay::kSignificance;
 };
 
 class SpeedSynthesizer {
