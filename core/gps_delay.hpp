@@ -51,8 +51,8 @@ class GpsDelay {
   // Standard errors by which the drive's delay must beat the prior (0: the best candidate is the delay
   // from the first fix that tells the candidates apart, whatever the prior).
   void set_significance(double z) noexcept { significance_ = z; }
-  // A new fix: GPS speed `gps` (m/s) delivered at step time t (after note_freq for that step); `theta` the
-  // ladder's gears ((m/s)/Hz).
+  // A new fix: GPS speed `gps` (m/s) stamped t (the step it comes with, or earlier: its caller's stamp;
+  // after note_freq for that step); `theta` the ladder's gears ((m/s)/Hz).
   void learn(double t, double gps, std::span<const double> theta) noexcept;
   // s: how much older the speed of a fix is than the revs of the step it comes with: the drive's own
   // delay once significant, the prior until then.

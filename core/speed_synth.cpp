@@ -667,7 +667,8 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
 
 // One step of the filter: every mode sums over its predecessors, each one's track predicted over dt under
 // the mode's motion and corrected by GPS and the frequency, and keeps the moments of that mixture.
-SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new) noexcept {
+SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new,
+                                          double gps_age) noexcept {
   const bool have_gps = std::isfinite(gps);
   const bool measure_gps = have_gps && gps_new;  // a repeated fix is not measured again
   const int modes = gears_ + 2;
@@ -675,12 +676,12 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
   const bool short_step = dt < kShortStep * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
   const double gps_var = sigma_v_ * sigma_v_;
-  // A fix is the speed of `delay` s before this step (GpsDelay), and each track is held to it less what
-  // the car gained since, as far as it was measured: over the steps before this one, the gain of the
-  // filter's own speed then (the revs of the gears it followed); within this step, the gain of a gear's
-  // line over the time it has been held. Not the track's predicted acceleration: a late fix measured
+  // A fix is the speed of `delay` s before this step (GpsDelay, from the fix's stamp), and each track is held
+  // to it less what the car gained since, as far as it was measured: over the steps before this one, the gain
+  // of the filter's own speed then (the revs of the gears it followed); within this step, the gain of a
+  // gear's line over the time it has been held. Not the track's predicted acceleration: a late fix measured
   // against it teaches the track its own guess, and at rest any fix is explained by a braking no car does.
-  const double delay = tuning_.gps_delay > 0.0 ? gps_delay_.delay() : 0.0;
+  const double delay = tuning_.gps_delay > 0.0 ? gps_delay_.delay() + gps_age : 0.0;
   double gained = 0.0, in_step = std::min(delay, dt);
   ModeArray revs_gain{};  // Hz gained in each gear within the step
   if (measure_gps && delay > 0.0) {
@@ -878,7 +879,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
                                    {model_gear_.data(), n}, mode_, tuning_);
 }
 
-SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new) noexcept {
+SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new,
+                                   double gps_age) noexcept {
   if (!std::isfinite(t)) return last_;
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
@@ -908,10 +910,12 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
   } else {
     gps_delay_.note_freq(t_, freq);
-    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
+    if (!std::isfinite(gps_age) || gps_age < 0.0) gps_age = 0.0;
+    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new,
+                      gps_age);
     if (have_gps && gps_new) {
       observe_gear(gps_speed, freq);
-      gps_delay_.learn(t_, gps_speed, {theta_.data() + 1, static_cast<std::size_t>(gears_)});
+      gps_delay_.learn(t_ - gps_age, gps_speed, {theta_.data() + 1, static_cast<std::size_t>(gears_)});
     }
   }
   last_ = out;

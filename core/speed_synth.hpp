@@ -221,8 +221,13 @@ class SpeedSynthesizer {
   // been given to an earlier step. A live caller steps at every tracker hop (10 per second and more) and
   // passes the newest fresh fix each time, one a second from most receivers: the repeats keep GPS the
   // source of the output but are not measured again (counted as ten independent readings a second, a
-  // fix held the speed to a value up to a second old and pulled it back at every hop).
-  SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true) noexcept;
+  // fix held the speed to a value up to a second old and pulled it back at every hop). gps_age: s by which
+  // the time the fix is stamped with is older than t, where a caller stamps its fixes as it stamps the
+  // pairs a model is fitted on (the daemon: receive time less gps.latency), so that the model's speed lag
+  // is the fix's delay against its stamp, as it is against the step of its own row in a replayed log
+  // (0, and the default: the fix is stamped t).
+  SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true,
+                   double gps_age = 0.0) noexcept;
 
   // Forget all state except the model and the gears measured under GPS that it lacks (e.g. after the
   // engine was off).
@@ -264,7 +269,7 @@ class SpeedSynthesizer {
   void predict(Track& x, int to, double dt) const noexcept;
   [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
                                     bool short_step) const noexcept;
-  SynthOutput filter_step(double dt, double gps, double freq, bool gps_new) noexcept;
+  SynthOutput filter_step(double dt, double gps, double freq, bool gps_new, double gps_age) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
