@@ -1,5 +1,5 @@
 #pragma once
-// A town drive whose fixes can be made late, for the tests of how late GPS speed is (GpsDelay) and of the
+// A town drive whose fixes can be made late, for the tests of how late GPS speed is (SpeedLag) and of the
 // stages that feed the synthesis its fixes.
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "core/gps_delay.hpp"
+#include "core/speed_lag.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +10,7 @@ namespace {
 // m/s: slower, the clutch may still slip and first gear runs near idle: the revs do not follow a line.
 constexpr double kMinSpeed = 3.0;
 // Bound on a fix's log-departure from the nearest gear: 10 %, half the smallest step between the gears of
-// a close-ratio box and more than a delay of a second makes of a car gaining speed at 1 m/s^2 beyond 10 m/s.
+// a close-ratio box and more than a lag of a second makes of a car gaining speed at 1 m/s^2 beyond 10 m/s.
 constexpr double kClip = 0.1;
 constexpr double kMemory = 200.0;  // fixes
 // s: revs read further apart than this do not say what the engine did between them.
@@ -23,7 +23,7 @@ constexpr double kMinFixes = 20.0;
 
 }  // namespace
 
-void GpsDelay::History::add(double t, double value) noexcept {
+void SpeedLag::History::add(double t, double value) noexcept {
   if (!std::isfinite(t) || !std::isfinite(value) || value < 0.0) return;
   t_[static_cast<std::size_t>(next_)] = t;
   value_[static_cast<std::size_t>(next_)] = value;
@@ -31,7 +31,7 @@ void GpsDelay::History::add(double t, double value) noexcept {
   size_ = std::min(size_ + 1, kSize);
 }
 
-bool GpsDelay::History::at(double t, double& value) const noexcept {
+bool SpeedLag::History::at(double t, double& value) const noexcept {
   double after_t = std::numeric_limits<double>::infinity(), after = 0.0;
   for (int k = 1; k <= size_; ++k) {  // newest first
     const auto i = static_cast<std::size_t>((next_ - k + kSize) % kSize);
@@ -51,16 +51,16 @@ bool GpsDelay::History::at(double t, double& value) const noexcept {
   return false;
 }
 
-void GpsDelay::set_prior(double delay) noexcept {
-  prior_ = std::isfinite(delay) ? std::clamp(delay, 0.0, kMaxDelay) : 0.0;
+void SpeedLag::set_prior(double lag) noexcept {
+  prior_ = std::isfinite(lag) ? std::clamp(lag, 0.0, kMaxLag) : 0.0;
   choose();
 }
 
-void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexcept {
+void SpeedLag::learn(double t, double gps, std::span<const double> theta) noexcept {
   const double fix_dt = t - last_t_, change = gps - last_gps_;
   last_t_ = t;
   last_gps_ = gps;
-  // Only while the speed changes does a delay show (see the header).
+  // Only while the speed changes does a lag show (see the header).
   if (!std::isfinite(gps) || gps < kMinSpeed || theta.empty() || !(fix_dt > 0.0) || fix_dt > kMaxGap ||
       std::abs(change) < kMinChange * fix_dt)
     return;
@@ -84,7 +84,7 @@ void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexce
   choose();
 }
 
-void GpsDelay::choose() noexcept {
+void SpeedLag::choose() noexcept {
   int best = 0;
   for (int c = 1; c < kCandidates; ++c)
     if (cost_[static_cast<std::size_t>(c)] < cost_[static_cast<std::size_t>(best)]) best = c;
@@ -95,7 +95,7 @@ void GpsDelay::choose() noexcept {
     const double curvature = lo - 2.0 * mid + hi;
     if (curvature > 0.0) offset = std::clamp(0.5 * (lo - hi) / curvature, -0.5, 0.5);
   }
-  delay_ = (best + offset) * kStep;
+  lag_ = (best + offset) * kStep;
   // Significance against the prior's candidate: the weighted mean difference of the departures and its
   // standard error over the weights' effective number of fixes.
   const auto p = static_cast<std::size_t>(std::lround(prior_ / kStep));

@@ -7,12 +7,12 @@
 #include <random>
 #include <vector>
 
-#include "core/gps_delay.hpp"
+#include "core/speed_lag.hpp"
 #include "core/speed_synth.hpp"
 #include "tests/town_drive.hpp"
 
-using gearpulse::GpsDelay;
 using gearpulse::kMissing;
+using gearpulse::SpeedLag;
 using gearpulse::SpeedSynthesizer;
 using gearpulse::SynthTuning;
 using gearpulse::test::first_launch_outage_error;
@@ -21,18 +21,18 @@ using gearpulse::test::kHatch;
 using gearpulse::test::TownDrive;
 using gearpulse::test::Truth;
 
-TEST_CASE("synth: the GPS delay is learned from fixes taken while the speed changes") {
+TEST_CASE("synth: the speed lag is learned from fixes taken while the speed changes") {
   // Fixes once a second, `late` s late, the revs every 0.1 s, the drive's gears the ladder.
   for (const double late : {0.0, 0.5, 0.9}) {
-    GpsDelay delay;
+    SpeedLag lag;
     const TownDrive drive;
     for (int k = 0; k * 0.1 < 5.0 * TownDrive::kCycle; ++k) {
       const double t = k * 0.1;
-      delay.note_freq(t, drive.at(t).freq);
-      if (k % 10 == 0 && t >= late) delay.learn(t, drive.at(t - late).speed, kHatch);
+      lag.note_freq(t, drive.at(t).freq);
+      if (k % 10 == 0 && t >= late) lag.learn(t, drive.at(t - late).speed, kHatch);
     }
-    INFO("delay " << late << " s, learned " << delay.delay());
-    CHECK(std::abs(delay.delay() - late) < 0.15);
+    INFO("lag " << late << " s, learned " << lag.lag());
+    CHECK(std::abs(lag.lag() - late) < 0.15);
   }
 }
 
@@ -60,48 +60,48 @@ TEST_CASE("synth: at 10 Hz a launch whose GPS came late is followed in its gear 
   };
   const double error = run({});
   SynthTuning as_current;
-  as_current.gps_delay = 0.0;
+  as_current.speed_lag = 0.0;
   INFO("outage distance error " << error << " % (" << run(as_current)
                                 << " % with each fix taken as current)");
   CHECK(std::abs(error) < 2.0);
 }
 
-TEST_CASE("synth: the GPS delay is the prior until the drive's fixes show their own significantly") {
+TEST_CASE("synth: the speed lag is the prior until the drive's fixes show their own significantly") {
   const TownDrive drive;
   // Fixes once a second, `late` s late, over `cycles` of the town drive.
-  const auto learn = [&](GpsDelay& delay, double late, double cycles) {
+  const auto learn = [&](SpeedLag& lag, double late, double cycles) {
     for (int k = 0; k * 0.1 < cycles * TownDrive::kCycle; ++k) {
       const double t = k * 0.1;
-      delay.note_freq(t, drive.at(t).freq);
-      if (k % 10 == 0 && t >= late) delay.learn(t, drive.at(t - late).speed, kHatch);
+      lag.note_freq(t, drive.at(t).freq);
+      if (k % 10 == 0 && t >= late) lag.learn(t, drive.at(t - late).speed, kHatch);
     }
   };
-  GpsDelay fresh;
+  SpeedLag fresh;
   fresh.set_prior(0.5);
-  CHECK(fresh.delay() == 0.5);
+  CHECK(fresh.lag() == 0.5);
   fresh.set_prior(3.0);  // a receiver reports a fix within a second
-  CHECK(fresh.delay() == GpsDelay::kMaxDelay);
+  CHECK(fresh.lag() == SpeedLag::kMaxLag);
 
   // One move-off tells the candidates apart, but a few fixes are no evidence against the prior.
-  GpsDelay one;
+  SpeedLag one;
   one.set_prior(0.5);
   learn(one, 0.0, 1.0);
-  INFO("after one cycle: " << one.delay() << " s");
+  INFO("after one cycle: " << one.lag() << " s");
   CHECK(!one.significant());
-  CHECK(one.delay() == 0.5);
+  CHECK(one.lag() == 0.5);
 
   // Five cycles' fixes show theirs.
   for (const double late : {0.0, 0.9}) {
-    GpsDelay five;
+    SpeedLag five;
     five.set_prior(0.5);
     learn(five, late, 5.0);
-    INFO("late " << late << " s, after five cycles: " << five.delay() << " s");
+    INFO("late " << late << " s, after five cycles: " << five.lag() << " s");
     CHECK(five.significant());
-    CHECK(std::abs(five.delay() - late) < 0.15);
+    CHECK(std::abs(five.lag() - late) < 0.15);
   }
 }
 
-TEST_CASE("synth: noisy fixes polled 2 s apart do not move the GPS delay off the prior") {
+TEST_CASE("synth: noisy fixes polled 2 s apart do not move the speed lag off the prior") {
   // An OBD logger's rows every 2 s: the revs (0.5 Hz of noise) and the speed (integer km/h, 0.3 m/s of
   // noise on top) polled up to a second apart in a round, either first: not late on average. Few fixes
   // are taken while the speed changes, each off by its poll's offset; the best candidate wanders (0.2-0.3
@@ -111,7 +111,7 @@ TEST_CASE("synth: noisy fixes polled 2 s apart do not move the GPS delay off the
   for (std::uint64_t seed = 1; seed <= 8; ++seed) {
     std::mt19937_64 rng(seed);
     std::normal_distribution<double> noise(0.0, 1.0);
-    GpsDelay judged, eager;
+    SpeedLag judged, eager;
     eager.set_significance(0.0);
     for (int k = 0; k * 2.0 < 6.0 * TownDrive::kCycle; ++k) {
       const double t = k * 2.0 + 0.37 * static_cast<double>(seed);
@@ -119,24 +119,24 @@ TEST_CASE("synth: noisy fixes polled 2 s apart do not move the GPS delay off the
       const double f = now.freq + 0.5 * noise(rng);
       const double polled = t + std::uniform_real_distribution<double>(-1.0, 1.0)(rng);
       const double v = std::round((drive.at(polled).speed + 0.3 * noise(rng)) * 3.6) / 3.6;
-      for (GpsDelay* d : {&judged, &eager}) {
+      for (SpeedLag* d : {&judged, &eager}) {
         d->note_freq(t, f);
         d->learn(t, v, kHatch);
       }
     }
-    if (eager.delay() >= 0.2) ++wandered;
-    if (judged.delay() >= 0.2) ++moved;
-    INFO("seed " << seed << ": " << judged.delay() << " s, the best candidate " << eager.delay() << " s");
-    CHECK(judged.delay() < 0.2);
+    if (eager.lag() >= 0.2) ++wandered;
+    if (judged.lag() >= 0.2) ++moved;
+    INFO("seed " << seed << ": " << judged.lag() << " s, the best candidate " << eager.lag() << " s");
+    CHECK(judged.lag() < 0.2);
   }
   INFO(wandered << " of 8 drives' best candidate at 0.2 s or more");
   CHECK(wandered > 0);  // the case is one where the best candidate wanders
   CHECK(moved == 0);
 }
 
-TEST_CASE("synth: the fit's speed lag takes a late fix out before the drive has shown its own delay") {
+TEST_CASE("synth: the fit's speed lag takes a late fix out before the drive has shown its own lag") {
   // With a model whose fit found the speeds 0.5 s late against the revs, the drive's few fixes before the
-  // outage no evidence of their own delay. Each fix taken as current, the outage began 1 m/s slow: -8.8 %
+  // outage no evidence of their own lag. Each fix taken as current, the outage began 1 m/s slow: -8.8 %
   // over the outage.
   const auto run = [](const SynthTuning& tuning) {
     SpeedSynthesizer synth(hatch_model(0.5), tuning);
@@ -145,7 +145,7 @@ TEST_CASE("synth: the fit's speed lag takes a late fix out before the drive has 
   };
   const double error = run({});
   SynthTuning no_prior;
-  no_prior.gps_delay_prior = 0.0;
+  no_prior.speed_lag_prior = 0.0;
   INFO("outage distance error " << error << " % (" << run(no_prior) << " % without the fit's lag)");
   CHECK(std::abs(error) < 2.0);
 }
