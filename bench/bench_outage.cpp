@@ -776,7 +776,9 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(declutch_brake_spread),
     GEARPULSE_FIELD(predict_lower_gears),
     GEARPULSE_FIELD(fitted_lower_gears),
-    GEARPULSE_FIELD(gps_delay),
+    GEARPULSE_FIELD(speed_lag),
+    GEARPULSE_FIELD(speed_lag_prior),
+    GEARPULSE_FIELD(speed_lag_significance),
 };
 #undef GEARPULSE_FIELD
 
@@ -849,7 +851,9 @@ constexpr Rule kRules[] = {
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
     {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
-    {"GPS delay: a fix is the speed of a moment before", "gps_delay=0"},
+    {"speed lag: a fix is the speed of a moment before", "speed_lag=0"},
+    {"speed lag prior: the fit's speed lag until the drive's shows", "speed_lag_prior=0"},
+    {"speed lag significance: the drive's best lag from its first fix", "speed_lag_significance=0"},
 };
 
 std::string figure(double med, double p95) {

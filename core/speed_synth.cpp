@@ -30,6 +30,14 @@ std::span<const double> thetas_of(const GearModel* model,
   return {buf.data(), n};
 }
 
+// The lag the fit found between the speeds and the revs it was given (s; extra.speed_lag, 0 if absent): how
+// late a speed is against the revs logged with it, the same quantity SpeedLag learns from a drive's fixes.
+double model_speed_lag(const GearModel& model) noexcept {
+  if (!model.extra.is_object()) return 0.0;
+  const auto it = model.extra.find("speed_lag");
+  return it != model.extra.end() && it->is_number() ? it->get<double>() : 0.0;
+}
+
 }  // namespace
 
 // Keeps a track's covariance a covariance. The speed variance is capped at kMaxSpeedVar by scaling the
@@ -50,6 +58,7 @@ void SpeedSynthesizer::keep_covariance(Track& x) noexcept {
 
 SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const SynthTuning& tuning)
     : tuning_(tuning), seen_(tuning.seen_gear_fixes) {
+  speed_lag_.set_significance(tuning.speed_lag_significance);
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
   load_model(model_.get());
   reset();
@@ -68,6 +77,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     model_gear_[j] = j;
   }
   insert_seen_gears();
+  speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? model_speed_lag(*model) : 0.0);
   habits_.load(model, model_gear_, gears_, tuning_);  // the warm idle, for the gears below the ladder
   insert_fitted_lower_gears(model);
   insert_predicted_gears();
@@ -657,7 +667,8 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
 
 // One step of the filter: every mode sums over its predecessors, each one's track predicted over dt under
 // the mode's motion and corrected by GPS and the frequency, and keeps the moments of that mixture.
-SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new) noexcept {
+SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new,
+                                          double gps_age) noexcept {
   const bool have_gps = std::isfinite(gps);
   const bool measure_gps = have_gps && gps_new;  // a repeated fix is not measured again
   const int modes = gears_ + 2;
@@ -665,24 +676,24 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
   const bool short_step = dt < kShortStep * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
   const double gps_var = sigma_v_ * sigma_v_;
-  // A fix is the speed of `delay` s before this step (GpsDelay), and each track is held to it less what
-  // the car gained since, as far as it was measured: over the steps before this one, the gain of the
-  // filter's own speed then (the revs of the gears it followed); within this step, the gain of a gear's
-  // line over the time it has been held. Not the track's predicted acceleration: a late fix measured
+  // A fix is the speed of `lag` s before this step (SpeedLag, from the fix's stamp), and each track is held
+  // to it less what the car gained since, as far as it was measured: over the steps before this one, the gain
+  // of the filter's own speed then (the revs of the gears it followed); within this step, the gain of a
+  // gear's line over the time it has been held. Not the track's predicted acceleration: a late fix measured
   // against it teaches the track its own guess, and at rest any fix is explained by a braking no car does.
-  const double delay = tuning_.gps_delay > 0.0 ? gps_delay_.delay() : 0.0;
-  double gained = 0.0, in_step = std::min(delay, dt);
+  const double lag = tuning_.speed_lag > 0.0 ? speed_lag_.lag() + gps_age : 0.0;
+  double gained = 0.0, in_step = std::min(lag, dt);
   ModeArray revs_gain{};  // Hz gained in each gear within the step
-  if (measure_gps && delay > 0.0) {
+  if (measure_gps && lag > 0.0) {
     double then = 0.0, last = 0.0;
-    if (delay > dt && gps_delay_.speed_at(t_ - delay, then) && gps_delay_.speed_at(t_ - dt, last))
+    if (lag > dt && speed_lag_.speed_at(t_ - lag, then) && speed_lag_.speed_at(t_ - dt, last))
       gained = last - then;
     else
-      in_step = delay;
+      in_step = lag;
     for (int j = 1; j <= gears_ && std::isfinite(freq); ++j) {
       const double span = std::min(in_step, age_[j] + dt);
       double before = freq;
-      if (gps_delay_.revs_at(t_ - span, before)) revs_gain[j] = freq - before;
+      if (speed_lag_.revs_at(t_ - span, before)) revs_gain[j] = freq - before;
     }
   }
   // A shift is decided by the revs before it, not by the revs it leads to.
@@ -755,7 +766,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
         // The fix against the track's speed less what the car gained since it was taken (above), no more
         // than a driver's acceleration at three of its spreads (accel_sigma) gains or loses in that time:
         // revs that jump about (a tracker hopping between lines) are no gain of speed.
-        const double most = 3.0 * tuning_.accel_sigma * delay;
+        const double most = 3.0 * tuning_.accel_sigma * lag;
         const double past =
             std::clamp(gained + (j == i && is_gear(j) ? theta_[j] * revs_gain[j] : 0.0), -most, most);
         const double k = x.pvv / (x.pvv + gps_var);
@@ -832,7 +843,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   double mean_speed = 0.0;
   for (int j = 0; j < modes; ++j)
     mean_speed += prob_[j] * track_[j].v;
-  gps_delay_.note_speed(t_, mean_speed);
+  speed_lag_.note_speed(t_, mean_speed);
   // A hypothesis grown negligible keeps no history of its own: if the car later shows it, it is entered
   // from the belief of the moment, not from a speed drifted apart while nothing supported it. Nor does a
   // move-off once a gear has bitten: its guessed speed is superseded by the gear's. Nor, at the tracker's
@@ -868,7 +879,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
                                    {model_gear_.data(), n}, mode_, tuning_);
 }
 
-SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new) noexcept {
+SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new,
+                                   double gps_age) noexcept {
   if (!std::isfinite(t)) return last_;
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
@@ -897,11 +909,13 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   } else if (gears_ == 0) {
     out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
   } else {
-    gps_delay_.note_freq(t_, freq);
-    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
+    speed_lag_.note_freq(t_, freq);
+    if (!std::isfinite(gps_age) || gps_age < 0.0) gps_age = 0.0;
+    out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new,
+                      gps_age);
     if (have_gps && gps_new) {
       observe_gear(gps_speed, freq);
-      gps_delay_.learn(t_, gps_speed, {theta_.data() + 1, static_cast<std::size_t>(gears_)});
+      speed_lag_.learn(t_ - gps_age, gps_speed, {theta_.data() + 1, static_cast<std::size_t>(gears_)});
     }
   }
   last_ = out;

@@ -29,7 +29,7 @@
 // result does not depend on the step rate. The output follows the mode at a quantile of the belief by speed a
 // little above its median (the most probable one while it holds 0.6 of it), leaning halfway toward the
 // contenders' speed. A GPS fix is taken as the speed of a moment before its step, as late against the revs
-// as the drive's fixes show (gps_delay.hpp). No look-ahead: every output depends only on past input.
+// as the drive's fixes show (speed_lag.hpp). No look-ahead: every output depends only on past input.
 //
 // The filter runs on the model's gears and on the gears it has measured under GPS that the model lacks: a
 // steady ratio of GPS speed to revs off every gear of the model (seen_gears.hpp), carried, with its standard
@@ -50,9 +50,9 @@
 #include <string_view>
 
 #include "core/gear_model.hpp"
-#include "core/gps_delay.hpp"
 #include "core/sample.hpp"
 #include "core/seen_gears.hpp"
+#include "core/speed_lag.hpp"
 #include "core/synth_habits.hpp"
 #include "core/synth_output.hpp"
 
@@ -194,8 +194,14 @@ struct SynthTuning {
   // in the fit (the model's extra.lower_gears) before any predicted from its steps (0: none taken).
   double fitted_lower_gears = 1.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
-  // GpsDelay learns from this drive's fixes (0: the speed of the step itself).
-  double gps_delay = 1.0;
+  // SpeedLag learns from this drive's fixes (0: the speed of the step itself).
+  double speed_lag = 1.0;
+  // 1: until the drive's fixes show their own lag significantly, it is the lag the fit found between
+  // the speeds and the revs (the model's extra.speed_lag) (0: 0 s).
+  double speed_lag_prior = 1.0;
+  // Standard errors by which the drive's own lag must beat the prior's before it is used (0: the best
+  // candidate from the first fix that tells them apart).
+  double speed_lag_significance = SpeedLag::kSignificance;
 };
 
 class SpeedSynthesizer {
@@ -215,8 +221,13 @@ class SpeedSynthesizer {
   // been given to an earlier step. A live caller steps at every tracker hop (10 per second and more) and
   // passes the newest fresh fix each time, one a second from most receivers: the repeats keep GPS the
   // source of the output but are not measured again (counted as ten independent readings a second, a
-  // fix held the speed to a value up to a second old and pulled it back at every hop).
-  SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true) noexcept;
+  // fix held the speed to a value up to a second old and pulled it back at every hop). gps_age: s by which
+  // the time the fix is stamped with is older than t, where a caller stamps its fixes as it stamps the
+  // pairs a model is fitted on (the daemon: receive time less gps.latency), so that the model's speed lag
+  // is the fix's lag against its stamp, as it is against the step of its own row in a replayed log
+  // (0, and the default: the fix is stamped t).
+  SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true,
+                   double gps_age = 0.0) noexcept;
 
   // Forget all state except the model and the gears measured under GPS that it lacks (e.g. after the
   // engine was off).
@@ -258,7 +269,7 @@ class SpeedSynthesizer {
   void predict(Track& x, int to, double dt) const noexcept;
   [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
                                     bool short_step) const noexcept;
-  SynthOutput filter_step(double dt, double gps, double freq, bool gps_new) noexcept;
+  SynthOutput filter_step(double dt, double gps, double freq, bool gps_new, double gps_age) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
@@ -288,7 +299,7 @@ class SpeedSynthesizer {
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
   SeenGears seen_;
-  GpsDelay gps_delay_;      // how late GPS speed is against the revs, learned from the fixes
+  SpeedLag speed_lag_;      // how late GPS speed is against the revs, learned from the fixes
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
   double sigma_v_ = 0.0;

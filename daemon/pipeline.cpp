@@ -231,7 +231,8 @@ void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool t
   // disagreement between the sound card's clock and the GPS cannot hide a good fix).
   const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
   const SynthesisStage::Step s =
-      k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed));
+      k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed),
+                       gps_latency.load(std::memory_order_relaxed));
   track_freq.store(tracked ? freq : kNan, std::memory_order_relaxed);
   track_snr.store(snr, std::memory_order_relaxed);
   track_confident.store(s.confident, std::memory_order_relaxed);

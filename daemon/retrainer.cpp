@@ -186,8 +186,9 @@ bool Retrainer::retrain_now() {
                              kept > 0 ? fmt::format(" ({} kept from the model before)", kept) : "", secs);
         // A pair is stamped receive time - gps.latency; a fit that finds its GPS speed describing the
         // engine lag s before that stamp (speed_lag > 0) says the latency is longer than set by about
-        // that much. The fit moved the speeds itself; the synthesis pairs them as stamped. Lags under
-        // kLagWorthSaying are within what the search resolves at 1 Hz.
+        // that much. The fit moved the speeds itself, and the synthesis takes the lag out of each fix
+        // counted from its stamp (SpeedLag). Lags under kLagWorthSaying are within what the search
+        // resolves at 1 Hz.
         constexpr double kLagWorthSaying = 0.1;  // s
         if (const double lag = next->extra.value("speed_lag", 0.0); std::abs(lag) >= kLagWorthSaying)
           result += fmt::format(

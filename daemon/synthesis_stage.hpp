@@ -25,15 +25,19 @@ class SynthesisStage {
 
   // One step at `t` (s, CLOCK_MONOTONIC; a step never goes back before the last) with the tracker's
   // estimate and the newest fresh GPS fix, if any. Each fix is measured once, however often it is given
-  // (gpsd may report one fix more than once); a hop below `min_snr_db` reads as no frequency.
+  // (gpsd may report one fix more than once); a hop below `min_snr_db` reads as no frequency. A fix is
+  // stamped as the training pairs are, its receive time less `gps_latency` (s): the model's speed lag is
+  // its delay against that stamp, and the synthesis is told how much older than `t` the stamp is.
   Step step(double t, double freq, double snr_db, bool tracked, const std::optional<GpsReport>& fix,
-            double min_snr_db) {
+            double min_snr_db, double gps_latency = 0.0) {
     constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
     const double gps_speed = fix ? fix->speed : kNan;
     const bool gps_new = fix && fixes_.is_new(*fix);
     const bool confident = tracked && std::isfinite(freq) && snr_db >= min_snr_db;
     last_t_ = std::max(t, last_t_);
-    return {synth_.step(last_t_, gps_speed, confident ? freq : kNan, gps_new), confident};
+    const double age =
+        fix ? std::max(0.0, last_t_ - (static_cast<double>(fix->rx_ns) * 1e-9 - gps_latency)) : 0.0;
+    return {synth_.step(last_t_, gps_speed, confident ? freq : kNan, gps_new, age), confident};
   }
 
   [[nodiscard]] double last_step_time() const noexcept { return last_t_; }

@@ -1,4 +1,4 @@
-#include "core/gps_delay.hpp"
+#include "core/speed_lag.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,17 +10,20 @@ namespace {
 // m/s: slower, the clutch may still slip and first gear runs near idle: the revs do not follow a line.
 constexpr double kMinSpeed = 3.0;
 // Bound on a fix's log-departure from the nearest gear: 10 %, half the smallest step between the gears of
-// a close-ratio box and more than a delay of a second makes of a car gaining speed at 1 m/s^2 beyond 10 m/s.
+// a close-ratio box and more than a lag of a second makes of a car gaining speed at 1 m/s^2 beyond 10 m/s.
 constexpr double kClip = 0.1;
 constexpr double kMemory = 200.0;  // fixes
 // s: revs read further apart than this do not say what the engine did between them.
 constexpr double kMaxGap = 2.5;
 // m/s^2: a change of speed between fixes that is the car's, not the receiver's noise (0.1-0.2 m/s a fix).
 constexpr double kMinChange = 0.3;
+// Fixes' worth (the weights' effective number) before a difference's spread is known well enough to judge
+// it by: from 20, the spread's own relative error (1 / sqrt(2 n)) is under a sixth.
+constexpr double kMinFixes = 20.0;
 
 }  // namespace
 
-void GpsDelay::History::add(double t, double value) noexcept {
+void SpeedLag::History::add(double t, double value) noexcept {
   if (!std::isfinite(t) || !std::isfinite(value) || value < 0.0) return;
   t_[static_cast<std::size_t>(next_)] = t;
   value_[static_cast<std::size_t>(next_)] = value;
@@ -28,7 +31,7 @@ void GpsDelay::History::add(double t, double value) noexcept {
   size_ = std::min(size_ + 1, kSize);
 }
 
-bool GpsDelay::History::at(double t, double& value) const noexcept {
+bool SpeedLag::History::at(double t, double& value) const noexcept {
   double after_t = std::numeric_limits<double>::infinity(), after = 0.0;
   for (int k = 1; k <= size_; ++k) {  // newest first
     const auto i = static_cast<std::size_t>((next_ - k + kSize) % kSize);
@@ -48,11 +51,16 @@ bool GpsDelay::History::at(double t, double& value) const noexcept {
   return false;
 }
 
-void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexcept {
+void SpeedLag::set_prior(double lag) noexcept {
+  prior_ = std::isfinite(lag) ? std::clamp(lag, 0.0, kMaxLag) : 0.0;
+  choose();
+}
+
+void SpeedLag::learn(double t, double gps, std::span<const double> theta) noexcept {
   const double fix_dt = t - last_t_, change = gps - last_gps_;
   last_t_ = t;
   last_gps_ = gps;
-  // Only while the speed changes does a delay show (see the header).
+  // Only while the speed changes does a lag show (see the header).
   if (!std::isfinite(gps) || gps < kMinSpeed || theta.empty() || !(fix_dt > 0.0) || fix_dt > kMaxGap ||
       std::abs(change) < kMinChange * fix_dt)
     return;
@@ -65,14 +73,18 @@ void GpsDelay::learn(double t, double gps, std::span<const double> theta) noexce
       if (th > 0.0) best = std::min(best, std::abs(std::log(gps / (th * f))));
     err[static_cast<std::size_t>(c)] = best * best;
   }
-  for (int c = 0; c < kCandidates; ++c) {
-    const auto i = static_cast<std::size_t>(c);
-    cost_[i] += (err[i] - cost_[i]) / kMemory;
+  constexpr double kKeep = 1.0 - 1.0 / kMemory;
+  for (std::size_t i = 0; i < err.size(); ++i) {
+    cost_[i] = kKeep * cost_[i] + err[i];
+    for (std::size_t j = 0; j < err.size(); ++j)
+      cross_[i][j] = kKeep * cross_[i][j] + err[i] * err[j];
   }
+  weight_ = kKeep * weight_ + 1.0;
+  weight_sq_ = kKeep * kKeep * weight_sq_ + 1.0;
   choose();
 }
 
-void GpsDelay::choose() noexcept {
+void SpeedLag::choose() noexcept {
   int best = 0;
   for (int c = 1; c < kCandidates; ++c)
     if (cost_[static_cast<std::size_t>(c)] < cost_[static_cast<std::size_t>(best)]) best = c;
@@ -83,7 +95,17 @@ void GpsDelay::choose() noexcept {
     const double curvature = lo - 2.0 * mid + hi;
     if (curvature > 0.0) offset = std::clamp(0.5 * (lo - hi) / curvature, -0.5, 0.5);
   }
-  delay_ = (best + offset) * kStep;
+  lag_ = (best + offset) * kStep;
+  // Significance against the prior's candidate: the weighted mean difference of the departures and its
+  // standard error over the weights' effective number of fixes.
+  const auto p = static_cast<std::size_t>(std::lround(prior_ / kStep));
+  const auto b = static_cast<std::size_t>(best);
+  const double fixes = weight_sq_ > 0.0 ? weight_ * weight_ / weight_sq_ : 0.0;
+  own_ = b != p && significance_ <= 0.0;
+  if (b == p || significance_ <= 0.0 || fixes < kMinFixes) return;
+  const double gain = (cost_[p] - cost_[b]) / weight_;
+  const double spread = (cross_[p][p] - 2.0 * cross_[p][b] + cross_[b][b]) / weight_ - gain * gain;
+  own_ = gain > 0.0 && gain * gain * fixes >= significance_ * significance_ * std::max(spread, 0.0);
 }
 
 }  // namespace gearpulse
