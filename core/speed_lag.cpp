@@ -12,9 +12,10 @@ constexpr double kMinSpeed = 3.0;
 // Bound on a fix's log-departure from the nearest gear: 10 %, half the smallest step between the gears of
 // a close-ratio box and more than a lag of a second makes of a car gaining speed at 1 m/s^2 beyond 10 m/s.
 constexpr double kClip = 0.1;
-constexpr double kMemory = 200.0;  // fixes
-// s: revs read further apart than this do not say what the engine did between them.
-constexpr double kMaxGap = 2.5;
+// Fixes (those taken while the speed changes, a few a minute in town) the averages remember: the lag belongs
+// to the receiver and the logger, fixed over a drive, so the memory is long; it lets a changed receiver's lag
+// replace the old one within a drive or two rather than never.
+constexpr double kMemory = 200.0;
 // m/s^2: a change of speed between fixes that is the car's, not the receiver's noise (0.1-0.2 m/s a fix).
 constexpr double kMinChange = 0.3;
 // Fixes' worth (the weights' effective number) before a difference's spread is known well enough to judge
@@ -25,10 +26,13 @@ constexpr double kMinFixes = 20.0;
 
 void SpeedLag::History::add(double t, double value) noexcept {
   if (!std::isfinite(t) || !std::isfinite(value) || value < 0.0) return;
+  if (size_ >= 2 && t - t_[static_cast<std::size_t>((next_ - 2 + kSize) % kSize)] < kSpacing)
+    next_ = (next_ - 1 + kSize) % kSize;  // the newest is replaced (kSpacing)
+  else
+    size_ = std::min(size_ + 1, kSize);
   t_[static_cast<std::size_t>(next_)] = t;
   value_[static_cast<std::size_t>(next_)] = value;
   next_ = (next_ + 1) % kSize;
-  size_ = std::min(size_ + 1, kSize);
 }
 
 bool SpeedLag::History::at(double t, double& value) const noexcept {
@@ -101,7 +105,7 @@ void SpeedLag::choose() noexcept {
   const auto p = static_cast<std::size_t>(std::lround(prior_ / kStep));
   const auto b = static_cast<std::size_t>(best);
   const double fixes = weight_sq_ > 0.0 ? weight_ * weight_ / weight_sq_ : 0.0;
-  own_ = b != p && significance_ <= 0.0;
+  own_ = weight_ > 0.0 && b != p && significance_ <= 0.0;  // a first fix, not the prior's zero costs
   if (b == p || significance_ <= 0.0 || fixes < kMinFixes) return;
   const double gain = (cost_[p] - cost_[b]) / weight_;
   const double spread = (cross_[p][p] - 2.0 * cross_[p][b] + cross_[b][b]) / weight_ - gain * gain;

@@ -41,6 +41,7 @@ class SpeedLag {
   static constexpr double kStep = 0.1;    // s between candidate lags
   static constexpr double kMaxLag = 1.0;  // s: a receiver reports a fix within its period (1 s at 1 Hz)
   static constexpr int kCandidates = 11;  // 0, kStep, ..., kMaxLag
+  static constexpr double kMaxGap = 2.5;  // s: revs read further apart do not say what the engine did between
 
   // Every step: the engine frequency at step time t (Hz; NaN or <= 0: none).
   void note_freq(double t, double freq) noexcept { revs_.add(t, freq); }
@@ -61,7 +62,7 @@ class SpeedLag {
   // The drive's fixes have shown a lag significantly better than the prior's.
   [[nodiscard]] bool significant() const noexcept { return own_; }
   // The revs, or the filter's speed, at time t, interpolated between the values noted around it (false,
-  // `value` untouched, if no two values 2.5 s apart or closer bracket it, or t is before the oldest kept).
+  // `value` untouched, if no two values kMaxGap apart or closer bracket it, or t is before the oldest kept).
   [[nodiscard]] bool revs_at(double t, double& value) const noexcept { return revs_.at(t, value); }
   [[nodiscard]] bool speed_at(double t, double& value) const noexcept { return speed_.at(t, value); }
 
@@ -69,7 +70,11 @@ class SpeedLag {
   // The last values of a quantity, with their times.
   class History {
    public:
-    static constexpr int kSize = 64;  // 3 s of 20 Hz hops
+    // Values closer than kSpacing to the one kept before them replace the newest rather than adding one, so
+    // the history spans kSize x kSpacing (8 s) whatever the hop: a fix's lag (up to kMaxLag) plus its age
+    // (gps.latency, a few seconds at most) plus the kMaxGap a reading may be interpolated over.
+    static constexpr int kSize = 160;
+    static constexpr double kSpacing = kStep / 2.0;  // s
     void add(double t, double value) noexcept;
     [[nodiscard]] bool at(double t, double& value) const noexcept;
 

@@ -36,6 +36,31 @@ TEST_CASE("synth: the speed lag is learned from fixes taken while the speed chan
   }
 }
 
+TEST_CASE("synth: the speed lag is learned at any tracker hop, and a prior holds until a fix") {
+  // A 5 ms hop (the shortest tracker.hop) fills the history 20 times as fast as the 0.1 s one: the lag of
+  // a fix (up to 1 s) and its age must still lie within it.
+  for (const double hop : {0.005, 0.02, 0.1}) {
+    SpeedLag lag;
+    const TownDrive drive;
+    const int per_fix = static_cast<int>(std::lround(1.0 / hop));
+    for (int k = 0; k * hop < 5.0 * TownDrive::kCycle; ++k) {
+      const double t = k * hop;
+      lag.note_freq(t, drive.at(t).freq);
+      if (k % per_fix == 0 && t >= 0.5) lag.learn(t, drive.at(t - 0.5).speed, kHatch);
+    }
+    INFO("hop " << hop << " s, learned " << lag.lag());
+    CHECK(lag.significant());
+    CHECK(std::abs(lag.lag() - 0.5) < 0.15);
+  }
+  // Without the significance test the drive's lag is taken from its first telling fix; before any, the
+  // prior stands.
+  SpeedLag untested;
+  untested.set_significance(0.0);
+  untested.set_prior(0.7);
+  CHECK(untested.lag() == Approx(0.7));
+  CHECK_FALSE(untested.significant());
+}
+
 TEST_CASE("synth: at 10 Hz a launch whose GPS came late is followed in its gear when GPS is lost") {
   // The daemon's feed (the revs every 0.1 s, a 1 Hz fix 0.5 s late, held 1.5 s), GPS lost in second gear
   // 1.2 s after it bit in the fifth move-off, the car gaining 1.5 m/s^2. Taken as the speed of its own
