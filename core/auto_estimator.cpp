@@ -663,10 +663,11 @@ Candidate single_cluster(const MixtureData& work, const std::vector<double>& ste
 void record_lower_gears(const std::vector<double>& largest, GearModel& fitted) {
   if (fitted.gears.empty()) return;
   const double below = fitted.gears.front().theta * std::exp(-2.0 * kGearWindow);
-  nlohmann::json lower = nlohmann::json::array();
+  std::vector<double> lower;
   for (const double theta : largest)
     if (theta < below) lower.push_back(theta);
-  if (!lower.empty()) fitted.extra["lower_gears"] = std::move(lower);
+  std::sort(lower.begin(), lower.end());
+  if (!lower.empty()) fitted.extra["lower_gears"] = lower;
 }
 
 }  // namespace

@@ -89,6 +89,17 @@ GearModel keep_seen_gears(const GearModel& current, GearModel fitted, std::span<
   }
   if (fitted_revs) fitted.extra["revs"] = std::move(revs);
   fitted.extra[kKeptGears] = std::move(kept_thetas);
+  // The fit's gears below its ladder (extra.lower_gears) are below the merged ladder's lowest or gone.
+  if (const auto lower = fitted.extra.find("lower_gears"); lower != fitted.extra.end() && lower->is_array()) {
+    const double below = fitted.gears.front().theta * std::exp(-2.0 * w);
+    nlohmann::json still = nlohmann::json::array();
+    for (const nlohmann::json& theta : *lower)
+      if (theta.is_number() && theta.get<double>() < below) still.push_back(theta);
+    if (still.empty())
+      fitted.extra.erase(lower);
+    else
+      *lower = std::move(still);
+  }
   return fitted;
 }
 

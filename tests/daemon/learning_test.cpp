@@ -326,6 +326,16 @@ TEST_CASE("learning: a refit keeps a learned gear its pairs do not contradict") 
     CHECK(merged.gears.size() == 2);
     CHECK(merged.extra.find(kKeptGears) == merged.extra.end());
   }
+  SECTION("the fit's gears below its ladder stay only below the merged ladder") {
+    GearModel launch = current;  // first, third and fourth gear learned
+    launch.gears[0].theta = th[0];
+    GearModel refit = fitted;  // the refit recorded first gear below its ladder, and one lower still
+    refit.extra["lower_gears"] = nlohmann::json::array({0.6 * th[0], 1.01 * th[0]});
+    const GearModel merged = keep_seen_gears(launch, refit, pairs, 40);
+    REQUIRE(merged.gears.size() == 4);
+    CHECK(merged.gears[0].theta == th[0]);
+    CHECK(merged.extra["lower_gears"] == nlohmann::json::array({0.6 * th[0]}));
+  }
   SECTION("a gear the refit moved is the refit's") {
     GearModel moved = current;
     moved.gears[0].theta = fitted.gears[0].theta * 1.03;
