@@ -5,7 +5,7 @@
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
-//   bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]
+//   bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
 //                 [--hop S] [--offset S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
@@ -13,7 +13,8 @@
 // instead of the built-in drive ("drive").
 // --scenes scores the tracker on LighterScene recordings (a cabin's other lines, a load that moves energy
 // between f and 2 f, automatic gain, clipping, launches) at 10, 0 and -5 dB over one of two fixed seed
-// sets: "tuning" (seeds 101-106, for choosing constants) or "report" (seeds 201-206, for figures only).
+// sets: "tuning" (seeds 101-106, for choosing constants), "report" (seeds 201-206, for figures only) or
+// "check" (seeds 301-306, a second unseen set for a change's side effects, not for choosing constants).
 // --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
 // is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
@@ -473,7 +474,7 @@ constexpr double kScoredLoHz = 50.0, kScoredHiHz = 200.0, kIdleLoHz = 20.0;
 
 int scenes(const std::string& set, const TrackerConfig& base) {
   constexpr double kDurationS = 120.0;
-  const std::uint64_t first = set == "tuning" ? 101 : 201;
+  const std::uint64_t first = set == "tuning" ? 101 : set == "check" ? 301 : 201;
   constexpr int kSeeds = 6;
   std::printf(
       "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), band %g:%g "
@@ -630,7 +631,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
                  "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
-                 "       bench_tracker --scenes tuning|report [--band LO:HI] [--window S] [--hop S]\n"
+                 "       bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S]\n"
                  "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
                  "                     [--window S] [--hop S] [--offset S] [--dump]\n");
     return 2;
@@ -641,7 +642,7 @@ int main(int argc, char** argv) {
     double number = 0.0;
     if (a == "--scenes" && more) {
       scene_set = argv[++i];
-      if (scene_set != "tuning" && scene_set != "report") return usage();
+      if (scene_set != "tuning" && scene_set != "report" && scene_set != "check") return usage();
     } else if (a == "--wav" && more) {
       wav.wav = argv[++i];
     } else if (a == "--tacho" && more) {
