@@ -26,8 +26,8 @@
 // vehicles' models on a mixed drive of M minutes instead of 40. --worst PCT lists every outage of the
 // daemon's synthesis erring beyond PCT % with its failure mode (outage_cause) and, per line, each mode's
 // share of the error. --debug CAR STYLE FROM TO prints both filters' beliefs per row from FROM to TO s of
-// that drive (CAR a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3
-// highway).
+// that drive, and the daemon's synthesis' track (speed, acceleration) at each position of its ladder (CAR
+// a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
 //
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
@@ -294,6 +294,11 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
       std::fprintf(stderr, " || synth %.1f g%d p:", o.speed, o.gear);
       for (int m = 0; m <= static_cast<int>(model.gears.size()); ++m)
         std::fprintf(stderr, " %.2f", synth.mode_probability(m));
+      // ... and what it carries at each position of its ladder: speed m/s, acceleration ~ its sd m/s^2.
+      for (int m = 0; m <= synth.ladder_gears() + 1; ++m) {
+        const auto x = synth.mode_track(m);
+        std::fprintf(stderr, " [%d %.1f %.2f~%.2f]", m, x.speed, x.accel, x.accel_sd);
+      }
       std::fprintf(stderr, "\n");
     }
     if (std::isfinite(r.freq)) last_freq = r.freq;

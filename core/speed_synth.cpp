@@ -328,6 +328,12 @@ double SpeedSynthesizer::mode_probability(int mode) const noexcept {
   return 0.0;
 }
 
+SpeedSynthesizer::ModeTrack SpeedSynthesizer::mode_track(int position) const noexcept {
+  if (position < 0 || position > gears_ + 1) return {};
+  const Track& x = track_[static_cast<std::size_t>(position)];
+  return {x.v, x.a, std::sqrt(x.paa)};
+}
+
 double SpeedSynthesizer::idle_freq() const noexcept {
   return habits_.idle_freq();
 }

@@ -239,6 +239,14 @@ class SpeedSynthesizer {
   [[nodiscard]] double mode_probability(int mode) const noexcept;
   // Learned idle frequency (Hz), NaN until GPS has seen the car standing with the engine tracked.
   [[nodiscard]] double idle_freq() const noexcept;
+  // For diagnostics: what the filter carries at a position of its ladder (0 = declutched, 1..ladder_gears()
+  // the gears ascending, ladder_gears() + 1 = moving off): the speed (m/s), the acceleration (m/s^2) and
+  // the acceleration's standard deviation.
+  struct ModeTrack {
+    double speed = 0.0, accel = 0.0, accel_sd = 0.0;
+  };
+  [[nodiscard]] ModeTrack mode_track(int position) const noexcept;
+  [[nodiscard]] int ladder_gears() const noexcept { return gears_; }
 
  private:
   static constexpr int kModes = kMaxGears + 2;  // 0 = declutched, 1..gears, gears + 1 = moving off
