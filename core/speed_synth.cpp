@@ -236,6 +236,7 @@ void SpeedSynthesizer::reset() noexcept {
   output_.forget_gps();
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   habits_.end_flat_stretch();
+  unlearned_fix_ = {};
   last_ = {};
 }
 
@@ -687,7 +688,7 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   // of the filter's own speed then (the revs of the gears it followed); within this step, the gain of a
   // gear's line over the time it has been held. Not the track's predicted acceleration: a late fix measured
   // against it teaches the track its own guess, and at rest any fix is explained by a braking no car does.
-  const double lag = tuning_.speed_lag > 0.0 ? speed_lag_.lag() + gps_age : 0.0;
+  const double lag = fix_lag(gps_age);
   double gained = 0.0, in_step = std::min(lag, dt);
   ModeArray revs_gain{};  // Hz gained in each gear within the step
   if (measure_gps && lag > 0.0) {
@@ -916,12 +917,19 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
   } else {
     speed_lag_.note_freq(t_, freq);
-    if (!std::isfinite(gps_age) || gps_age < 0.0) gps_age = 0.0;
+    if (!std::isfinite(gps_age)) gps_age = 0.0;
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new,
                       gps_age);
     if (have_gps && gps_new) {
       observe_gear(gps_speed, freq);
-      speed_lag_.learn(t_ - gps_age, gps_speed, {theta_.data() + 1, static_cast<std::size_t>(gears_)});
+      unlearned_fix_ = {t_ - gps_age, gps_speed};
+    }
+    // A fix teaches the lag once the revs at its stamp are noted: at once, or at the first step at or after
+    // a stamp later than the step it came with.
+    if (unlearned_fix_.t <= t_) {
+      speed_lag_.learn(unlearned_fix_.t, unlearned_fix_.speed,
+                       {theta_.data() + 1, static_cast<std::size_t>(gears_)});
+      unlearned_fix_ = {};
     }
   }
   last_ = out;

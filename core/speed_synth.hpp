@@ -225,12 +225,20 @@ class SpeedSynthesizer {
   // the time the fix is stamped with is older than t, where a caller stamps its fixes as it stamps the
   // pairs a model is fitted on (the daemon: receive time less gps.latency), so that the model's speed lag
   // is the fix's lag against its stamp, as it is against the step of its own row in a replayed log
-  // (0, and the default: the fix is stamped t).
+  // (0, and the default: the fix is stamped t). Negative when the stamp is later than t (a live step's t is
+  // its window's centre, older than the hop's processing, and a fix received meanwhile is newer): the lag
+  // is then counted from t less that, at least 0, and the fix teaches the lag at the first step at or
+  // after its stamp.
   SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true,
                    double gps_age = 0.0) noexcept;
+  // s: how much older than its step the speed of a fix given with `gps_age` is (the speed lag against the
+  // stamps plus the age, at least 0; 0 with the rule off).
+  [[nodiscard]] double fix_lag(double gps_age) const noexcept {
+    return tuning_.speed_lag > 0.0 ? std::max(0.0, speed_lag_.lag() + gps_age) : 0.0;
+  }
 
-  // Forget all state except the model and the gears measured under GPS that it lacks (e.g. after the
-  // engine was off).
+  // Forget all state except the model, the gears measured under GPS that it lacks, and the speed lag learned
+  // (the receiver's and the logger's, not the drive's) (e.g. after the engine was off).
   void reset() noexcept;
 
   [[nodiscard]] const SynthOutput& last() const noexcept { return last_; }
@@ -307,6 +315,11 @@ class SpeedSynthesizer {
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
   SeenGears seen_;
+  // The newest fix not yet taught to speed_lag_: its stamp (s; +inf: none) and speed.
+  struct UnlearnedFix {
+    double t = std::numeric_limits<double>::infinity();
+    double speed = 0.0;
+  } unlearned_fix_;
   SpeedLag speed_lag_;      // how late GPS speed is against the revs, learned from the fixes
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear

@@ -27,7 +27,7 @@ class SynthesisStage {
   // estimate and the newest fresh GPS fix, if any. Each fix is measured once, however often it is given
   // (gpsd may report one fix more than once); a hop below `min_snr_db` reads as no frequency. A fix is
   // stamped as the training pairs are, its receive time less `gps_latency` (s): the model's speed lag is
-  // its delay against that stamp, and the synthesis is told how much older than `t` the stamp is.
+  // its lag against that stamp, and the synthesis is told how much older than `t` the stamp is (or newer).
   Step step(double t, double freq, double snr_db, bool tracked, const std::optional<GpsReport>& fix,
             double min_snr_db, double gps_latency = 0.0) {
     constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
@@ -35,8 +35,8 @@ class SynthesisStage {
     const bool gps_new = fix && fixes_.is_new(*fix);
     const bool confident = tracked && std::isfinite(freq) && snr_db >= min_snr_db;
     last_t_ = std::max(t, last_t_);
-    const double age =
-        fix ? std::max(0.0, last_t_ - (static_cast<double>(fix->rx_ns) * 1e-9 - gps_latency)) : 0.0;
+    // Negative when the fix is newer than the window this step's t is the centre of.
+    const double age = fix ? last_t_ - (static_cast<double>(fix->rx_ns) * 1e-9 - gps_latency) : 0.0;
     return {synth_.step(last_t_, gps_speed, confident ? freq : kNan, gps_new, age), confident};
   }
 

@@ -189,3 +189,24 @@ TEST_CASE("synth: a fix stamped before its step is as late as the fit's lag agai
   INFO("outage distance error " << error << " % (" << run(0.0) << " % with the fix stamped at its step)");
   CHECK(std::abs(error) < 2.0);
 }
+
+TEST_CASE("synth: a fix stamped after its step is counted from its stamp, and teaches the lag there") {
+  // A live step's t is its window's centre; a fix received after that moment is stamped later than the
+  // step it comes with (a negative age). The fit's lag is against the stamps: with 0.7 s and a fix stamped
+  // 0.2 s after its step, the fix is the speed of 0.5 s before the step.
+  SpeedSynthesizer fitted(hatch_model(0.7));
+  CHECK(fitted.fix_lag(-0.2) == Approx(0.5));
+  CHECK(fitted.fix_lag(-1.0) == 0.0);
+  // A drive whose fixes, each the speed 0.2 s before its step, are stamped 0.3 s after it: the lag it
+  // learns is against the stamps (0.5 s), as the fit's, and is taken out as 0.2 s from the step.
+  SpeedSynthesizer synth(hatch_model(0.0));
+  const TownDrive drive;
+  for (int k = 0; k * 0.1 < 5.0 * TownDrive::kCycle; ++k) {
+    const double t = k * 0.1;
+    const bool fix = k % 10 == 0 && t >= 0.2;
+    synth.step(t, fix ? drive.at(t - 0.2).speed : kMissing, drive.at(t).freq, fix, -0.3);
+  }
+  INFO("lag against the stamps " << synth.fix_lag(0.0) << " s");
+  CHECK(std::abs(synth.fix_lag(0.0) - 0.5) < 0.15);
+  CHECK(std::abs(synth.fix_lag(-0.3) - 0.2) < 0.15);
+}
