@@ -147,8 +147,15 @@ void SpeedSynthesizer::insert_fitted_lower_gears(const GearModel* model) noexcep
   for (const auto& v : *it)
     if (v.is_number() && v.get<double>() > 0.0 && v.get<double>() < below && n < kMaxGears - gears_)
       lower[static_cast<std::size_t>(n++)] = v.get<double>();
-  if (n == 0) return;
   std::sort(lower.begin(), lower.begin() + n);
+  insert_below_ladder({lower.data(), static_cast<std::size_t>(n)});
+}
+
+// Gears of no number in the model join the ladder below its lowest (`thetas` ascending), each with the
+// least share of use and no standard error of theta.
+void SpeedSynthesizer::insert_below_ladder(std::span<const double> thetas) noexcept {
+  const int n = static_cast<int>(thetas.size());
+  if (n == 0) return;
   for (int j = gears_; j >= 1; --j) {
     theta_[j + n] = theta_[j];
     theta_se_[j + n] = theta_se_[j];
@@ -156,7 +163,7 @@ void SpeedSynthesizer::insert_fitted_lower_gears(const GearModel* model) noexcep
     model_gear_[j + n] = model_gear_[j];
   }
   for (int k = 0; k < n; ++k) {
-    theta_[k + 1] = lower[static_cast<std::size_t>(k)];
+    theta_[k + 1] = thetas[static_cast<std::size_t>(k)];
     theta_se_[k + 1] = 0.0;
     weight_[k + 1] = kMinGearShare;
     model_gear_[k + 1] = 0;
@@ -201,21 +208,8 @@ void SpeedSynthesizer::insert_predicted_gears() noexcept {
   ModeArray theta{};
   const int n = predict_lower_gears(1, theta);
   predicted_ = n;
-  if (n == 0) return;
-  for (int j = gears_; j >= 1; --j) {
-    theta_[j + n] = theta_[j];
-    theta_se_[j + n] = theta_se_[j];
-    weight_[j + n] = weight_[j];
-    model_gear_[j + n] = model_gear_[j];
-  }
-  for (int k = 0; k < n; ++k) {
-    const int at = n - k;  // the last predicted is the lowest
-    theta_[at] = theta[static_cast<std::size_t>(k)];
-    theta_se_[at] = 0.0;
-    weight_[at] = kMinGearShare;
-    model_gear_[at] = 0;
-  }
-  gears_ += n;
+  std::reverse(theta.begin(), theta.begin() + n);  // the last predicted is the lowest
+  insert_below_ladder({theta.data(), static_cast<std::size_t>(n)});
 }
 
 void SpeedSynthesizer::reset() noexcept {

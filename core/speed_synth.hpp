@@ -273,6 +273,7 @@ class SpeedSynthesizer {
   void insert_seen_gears() noexcept;
   void insert_fitted_lower_gears(const GearModel* model) noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
+  void insert_below_ladder(std::span<const double> thetas) noexcept;
   void insert_predicted_gears() noexcept;
   void change_ladder(bool new_model) noexcept;
   void observe_gear(double gps, double freq) noexcept;
