@@ -1,5 +1,5 @@
 // Engine-frequency tracker bench: accuracy on generated lighter-voltage recordings (a drive with shifts
-// and stops) at several SNRs, against a plain FFT-peak tracker over the same 100 ms windows and the
+// and stops) at several SNRs, against a plain FFT-peak tracker over windows of the same length and the
 // Cramer-Rao bound of one window; how well the reported confidence predicts a right estimate; the same
 // at 0 dB over other seeds, simulated vehicles, harmonic mixes, interfering tones and rates; then the
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
@@ -140,7 +140,7 @@ struct Score {
   [[nodiscard]] double valued_gross_pct() const { return pct(valued_gross, valued); }
 };
 
-// Argmax bin of a rectangular 100 ms FFT inside the band, no interpolation.
+// Argmax bin of a rectangular FFT of the tracker's window length inside the band, no interpolation.
 class FftPeakTracker {
  public:
   FftPeakTracker(double fs, double window_s)
@@ -237,9 +237,9 @@ Result accuracy(const Case& c) {
   tc.sample_rate_hz = c.fs;
   SlidingDftTracker tracker(tc);
   Result r;
-  FftPeakTracker fft(c.fs, 0.1);
+  FftPeakTracker fft(c.fs, tc.window_s);
   TrackPoint p;
-  const double n = std::round(0.1 * c.fs);
+  const double n = std::round(tc.window_s * c.fs);
   const double sigma2 =
       cfg.amplitude * cfg.amplitude / 2.0 / std::pow(10.0, c.snr_db / 10.0) * (c.fs / 2.0) / 150.0;
   // Single-tone CRB of the frequency (Hz^2) for N samples at fs (Rife & Boorstyn).
