@@ -61,10 +61,13 @@ void ToneMap::learn(const double* power, const double* noise, double freq_hz, st
       near = std::abs(k * df_ - orders[o] * freq_hz) <= 2.0 * lobe_ * df_;
     // Nor the engine's other harmonics while the track holds it: its ignition spikes give every multiple of
     // the fundamental (a comb), which at an idle stands still for seconds and, learned as tones, would
-    // blank the orders of the engine's own next launch.
+    // blank the orders of the engine's own next launch. Each line's whole main lobe (two resolution bins
+    // either side) is its own: its shoulders, one to two bins out, stand within 20 dB of its peak (so the
+    // skirt test below keeps them), and learned as tones they would blank a loud engine's orders
+    // wherever they cross them.
     if (on_track && std::isfinite(freq_hz) && freq_hz > 0.0) {
       const double m = std::round(k * df_ / freq_hz);
-      near = near || (m >= 1.0 && std::abs(k * df_ - m * freq_hz) <= lobe_ * df_);
+      near = near || (m >= 1.0 && std::abs(k * df_ - m * freq_hz) <= 2.0 * lobe_ * df_);
     }
     if (on_track && near) continue;
     const auto i = static_cast<std::size_t>(k);
