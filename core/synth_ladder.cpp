@@ -1,0 +1,269 @@
+// The ladder the synthesis runs on (SpeedSynthesizer, core/speed_synth.hpp): the model's gears, the gears
+// measured under GPS that it lacks, the gears below a ladder that lacks first gear (the fit's dropped ones,
+// then predicted ones), and the belief carried across a change of ladder.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <span>
+
+#include "core/estimator.hpp"
+#include "core/speed_synth.hpp"
+
+namespace gearpulse {
+namespace {
+
+constexpr double kDefaultClutchShare =
+    0.15;                               // declutched share when the model gives none (cf. beta, eq. (6))
+constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its training weight
+
+// The model's thetas in `buf` (empty without a model).
+std::span<const double> thetas_of(const GearModel* model,
+                                  std::array<double, GearModel::kMaxGears>& buf) noexcept {
+  std::size_t n = 0;
+  if (model != nullptr)
+    for (; n < model->gears.size() && n < buf.size(); ++n)
+      buf[n] = model->gears[n].theta;
+  return {buf.data(), n};
+}
+
+// The lag the fit found between the speeds and the revs it was given (s; extra.speed_lag, 0 if absent): how
+// late a speed is against the revs logged with it, the same quantity SpeedLag learns from a drive's fixes.
+double model_speed_lag(const GearModel& model) noexcept {
+  if (!model.extra.is_object()) return 0.0;
+  const auto it = model.extra.find("speed_lag");
+  return it != model.extra.end() && it->is_number() ? it->get<double>() : 0.0;
+}
+
+}  // namespace
+
+void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
+  gears_ = model ? static_cast<int>(model->gears.size()) : 0;
+  theta_.fill(0.0);
+  theta_se_.fill(0.0);
+  model_gear_.fill(0);
+  weight_.fill(0.0);
+  for (int j = 1; j <= gears_; ++j) {
+    const Gear& g = model->gears[static_cast<std::size_t>(j - 1)];
+    theta_[j] = g.theta;  // its standard error stays 0: a fit's is well under the 1 % floor on a reading
+    weight_[j] = std::max(g.weight, kMinGearShare);
+    model_gear_[j] = j;
+  }
+  insert_seen_gears();
+  speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? model_speed_lag(*model) : 0.0);
+  habits_.load(model, model_gear_, gears_, tuning_);  // the warm idle, for the gears below the ladder
+  insert_fitted_lower_gears(model);
+  insert_predicted_gears();
+  double total = 0.0;
+  for (int j = 1; j <= gears_; ++j)
+    total += weight_[j];
+  const double clutch = model && model->outlier_weight > 0.0 ? std::clamp(model->outlier_weight, 0.05, 0.5)
+                                                             : kDefaultClutchShare;
+  for (int j = 1; j <= gears_; ++j)
+    weight_[j] *= (1.0 - clutch) / total;
+  weight_[0] = gears_ > 0 ? clutch : 1.0;
+  // A gear used for a small share of the time is one a driver passes through quickly (first gear when
+  // moving off): its dwell time, hence its rate of being left, scales with its weight alpha_i.
+  leave_rate_.fill(0.0);
+  for (int j = 1; j <= gears_; ++j) {
+    constexpr double kMaxRateFactor = 5.0;
+    const double typical = (1.0 - clutch) / gears_;
+    const double by_use = tuning_.dwell_by_use > 0.0 ? typical / weight_[j] : 1.0;
+    leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
+  }
+  sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
+  habits_.load(model, model_gear_, gears_, tuning_);
+  sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
+}
+
+// The gears seen under GPS that the model lacks (seen_) join its ladder in theta order, each used for its
+// share of the steady fixes seen, while there is room and the model has a ladder at all.
+void SpeedSynthesizer::insert_seen_gears() noexcept {
+  if (gears_ == 0) return;
+  std::array<SeenGears::Gear, SeenGears::kCapacity> seen{};
+  const int n = seen_.seen(seen);
+  for (int k = 0; k < n && gears_ < kMaxGears; ++k) {
+    const SeenGears::Gear& g = seen[static_cast<std::size_t>(k)];
+    int at = gears_ + 1;  // ladder position it takes
+    bool known = false;
+    for (int j = 1; j <= gears_; ++j) {
+      known = known || std::abs(std::log(g.theta / theta_[j])) < 2.0 * kGearWindow;
+      if (at > gears_ && g.theta < theta_[j]) at = j;
+    }
+    if (known) continue;
+    for (int j = gears_; j >= at; --j) {
+      theta_[j + 1] = theta_[j];
+      theta_se_[j + 1] = theta_se_[j];
+      weight_[j + 1] = weight_[j];
+      model_gear_[j + 1] = model_gear_[j];
+    }
+    theta_[at] = g.theta;
+    theta_se_[at] = g.std_error;
+    weight_[at] = std::max(g.share, kMinGearShare);
+    model_gear_[at] = 0;
+    ++gears_;
+  }
+}
+
+// A ladder that lacks first gear (lacks_first_gear) has gears below its lowest. Where the fit met a
+// plausible ladder of more gears that held some below it (the model's extra.lower_gears: their pairs were
+// too few for BIC), those join the ladder, each with the least share of use and no number in the model: the
+// fit's evidence of where they are, where the ladder's steps only predict it (insert_predicted_gears,
+// which goes on below them while the ladder still lacks first gear).
+void SpeedSynthesizer::insert_fitted_lower_gears(const GearModel* model) noexcept {
+  if (tuning_.fitted_lower_gears <= 0.0 || model == nullptr || gears_ == 0 || !lacks_first_gear()) return;
+  const auto it = model->extra.is_object() ? model->extra.find("lower_gears") : model->extra.end();
+  if (it == model->extra.end() || !it->is_array()) return;
+  const double below = theta_[1] * std::exp(-2.0 * kGearWindow);  // off the lowest by a gearbox step
+  std::array<double, kMaxGears> lower{};
+  int n = 0;
+  for (const auto& v : *it)
+    if (v.is_number() && v.get<double>() > 0.0 && v.get<double>() < below && n < kMaxGears - gears_)
+      lower[static_cast<std::size_t>(n++)] = v.get<double>();
+  std::sort(lower.begin(), lower.begin() + n);
+  insert_below_ladder({lower.data(), static_cast<std::size_t>(n)});
+}
+
+// Gears of no number in the model join the ladder below its lowest (`thetas` ascending), each with the
+// least share of use and no standard error of theta.
+void SpeedSynthesizer::insert_below_ladder(std::span<const double> thetas) noexcept {
+  const int n = static_cast<int>(thetas.size());
+  if (n == 0) return;
+  for (int j = gears_; j >= 1; --j) {
+    theta_[j + n] = theta_[j];
+    theta_se_[j + n] = theta_se_[j];
+    weight_[j + n] = weight_[j];
+    model_gear_[j + n] = model_gear_[j];
+  }
+  for (int k = 0; k < n; ++k) {
+    theta_[k + 1] = thetas[static_cast<std::size_t>(k)];
+    theta_se_[k + 1] = 0.0;
+    weight_[k + 1] = kMinGearShare;
+    model_gear_[k + 1] = 0;
+  }
+  gears_ += n;
+}
+
+// A ladder that lacks first gear (lacks_first_gear) lacks the gears below its lowest: a young model has
+// not seen the launch gears steady. A gearbox's steps grow toward its low gears (a progressive design: the
+// engine's usable band covers less of a road speed's range there), so the gears below are predicted from
+// the ladder's two lowest steps: the next step down grows by the factor the lowest step grew by over the
+// one above it (1 with only one step known), between a factor of 1.06 (the smallest step a fit accepts)
+// and 2 (the largest gearbox step, first to second in a four-speed box). Gears are predicted until the
+// lowest carries the car at the warm idle no faster than first gear does. The ladder's gears from position
+// `base` up are the ones known; the predicted thetas go to `theta`, lowest last. Returns how many.
+int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noexcept {
+  const int known = gears_ - base + 1;
+  if (tuning_.predict_lower_gears <= 0.0 || known < 2) return 0;
+  constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
+  const double min_step = 2.0 * kGearWindow, max_step = std::log(2.0);
+  const double low_step = std::log(theta_[base + 1] / theta_[base]);
+  const double growth = known >= 3 ? std::clamp(low_step / std::log(theta_[base + 2] / theta_[base + 1]),
+                                                kMinGrowth, kMaxGrowth)
+                                   : 1.0;
+  double step = std::clamp(low_step, min_step, max_step);
+  double lowest = theta_[base];
+  int n = 0;
+  while (known + n < kMaxGears && habits_.lacks_first_gear(lowest, tuning_)) {
+    step = std::clamp(step * growth, min_step, max_step);
+    lowest /= std::exp(step);
+    theta[static_cast<std::size_t>(n)] = lowest;
+    ++n;
+  }
+  return n;
+}
+
+// The predicted gears (predict_lower_gears) join the ladder below its lowest gear, each with the least share
+// of use. Their readings carry no standard error of theta: a predicted theta's error is a bias of the speed
+// read in that gear, the same at every reading, and spread over the readings as their noise it blurred the
+// revs' drops at the launch's shifts, which the filter climbs the predicted gears by.
+void SpeedSynthesizer::insert_predicted_gears() noexcept {
+  ModeArray theta{};
+  const int n = predict_lower_gears(1, theta);
+  predicted_ = n;
+  std::reverse(theta.begin(), theta.begin() + n);  // the last predicted is the lowest
+  insert_below_ladder({theta.data(), static_cast<std::size_t>(n)});
+}
+
+bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
+  if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
+  model_ = std::move(model);
+  std::array<double, kMaxGears> thetas{};
+  seen_.forget_learned(thetas_of(model_.get(), thetas));
+  change_ladder(true);
+  return true;
+}
+
+// A gear seen under GPS that the model lacks (seen_) joins the ladder or leaves it.
+void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
+  if (gears_ == 0 || model_ == nullptr) return;
+  constexpr double kIdleSds = 3.0;  // revs within this many sds of the idle are idling
+  const double idle_ceiling = habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
+  std::array<double, kMaxGears> thetas{};
+  bool changed = seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas));
+  // The idle decides how many gears are missing below the ladder: it may be learned, or fall as the engine
+  // warms, after the ladder was loaded.
+  if (!changed && tuning_.predict_lower_gears > 0.0) {
+    ModeArray theta{};
+    changed = predict_lower_gears(predicted_ + 1, theta) != predicted_;
+  }
+  if (changed) change_ladder(false);
+}
+
+// Loads the ladder of the model in use and the gears seen that it lacks, carrying the belief over from the
+// ladder before. new_model: the model changed (else only the gears seen did, and every gear of the old
+// ladder is still in the new one, or has left it).
+void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
+  const int old_gears = gears_;
+  const ModeArray old_theta = theta_, old_prob = prob_, old_age = age_;
+  const TrackArray old_track = track_;
+  load_model(model_.get());
+  if (!new_model) {
+    // The same gears keep what was learned of them (their shift revs) under their new numbers.
+    std::array<int, kModes> to{};  // new number of each old gear, 0 = gone
+    for (int i = 1; i <= old_gears; ++i)
+      for (int j = 1; j <= gears_; ++j)
+        if (theta_[j] == old_theta[i]) to[i] = j;
+    habits_.renumber_gears(to, old_gears);
+  } else if (gears_ != old_gears) {
+    habits_.forget_gear_shifts();  // shift revs learned per gear belong to the old ladder
+  }
+  // Carry the belief over: each old gear hands its probability to the new gear with the nearest theta
+  // (in ratio) with its track, so a retrained model of the same car continues where it was.
+  prob_.fill(0.0);
+  prob_[0] = old_prob[0];
+  track_[0] = old_track[0];
+  age_.fill(0.0);
+  age_[0] = old_age[0];
+  for (int j = 1; j <= gears_; ++j)
+    track_[j] = old_track[0];
+  track_[launch_mode()] = old_track[old_gears + 1];
+  age_[launch_mode()] = old_age[old_gears + 1];
+  prob_[launch_mode()] = gears_ > 0 ? old_prob[old_gears + 1] : 0.0;
+  next_p_.fill(0.0);  // strongest old gear handed to each new gear so far
+  for (int i = 1; i <= old_gears && gears_ > 0; ++i) {
+    int best = 1;
+    for (int j = 2; j <= gears_; ++j) {
+      if (std::abs(std::log(theta_[j] / old_theta[i])) < std::abs(std::log(theta_[best] / old_theta[i])))
+        best = j;
+    }
+    prob_[best] += old_prob[i];
+    if (old_prob[i] > next_p_[best]) {
+      next_p_[best] = old_prob[i];
+      track_[best] = old_track[i];
+      age_[best] = old_age[i];
+    }
+  }
+  if (gears_ == 0) {
+    prob_.fill(0.0);
+    prob_[0] = 1.0;
+  } else if (old_gears == 0) {
+    for (int j = 0; j <= gears_; ++j)
+      prob_[j] = weight_[j];
+  }
+  normalise();
+  mode_ = map_mode();
+  // The last output (what step() repeats for a step it cannot take) names a gear of the new model.
+  if (last_.gear > (model_ ? static_cast<int>(model_->gears.size()) : 0)) last_.gear = model_gear(mode_);
+}
+
+}  // namespace gearpulse
