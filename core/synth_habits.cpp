@@ -21,22 +21,21 @@ void accumulate(double x, double& mean, double& var, double& count, double memor
   var += k * (d * d * (1.0 - k) - var);
 }
 
+// A number under `key` of a JSON object; NaN if absent or not a number.
+double number(const nlohmann::json& j, const char* key) noexcept {
+  if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
+  const auto it = j.find(key);
+  return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
+}
+
 }  // namespace
 
 // Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
-void SynthHabits::load(const GearModel* model, const GearNumbers& model_gear, int gears,
-                       const SynthTuning& tuning) noexcept {
+void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning) noexcept {
   warm_idle_ = std::numeric_limits<double>::quiet_NaN();
-  revs_mean_.fill(0.0);
-  revs_sd_.fill(0.0);
   if (model == nullptr) return;
   const nlohmann::json& extra = model->extra;
   if (!extra.is_object()) return;
-  const auto number = [](const nlohmann::json& j, const char* key) {
-    if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
-    const auto it = j.find(key);
-    return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
-  };
   if (const auto idle = extra.find("idle"); idle != extra.end()) {
     const double f = number(*idle, "freq"), sd = number(*idle, "sd");
     if (std::isfinite(f) && f > 0.0) {
@@ -70,6 +69,13 @@ void SynthHabits::load(const GearModel* model, const GearNumbers& model_gear, in
       idle_coast_count_ = std::min(seconds, tuning.idle_braking_prior);
     }
   }
+}
+
+void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& model_gear, int gears) noexcept {
+  revs_mean_.fill(0.0);
+  revs_sd_.fill(0.0);
+  if (model == nullptr || !model->extra.is_object()) return;
+  const nlohmann::json& extra = model->extra;
   const auto revs = extra.find("revs");
   if (revs == extra.end() || !revs->is_array() || revs->size() != model->gears.size()) return;
   // Each gear's revs are shrunk toward those of all gears by a prior worth kPriorSamples samples: a gear

@@ -2,10 +2,10 @@
 // What SpeedSynthesizer knows of this engine and driver beyond the gear ladder: the idle (standing, and
 // rolling declutched), the revs run in gear at large and in each gear of the ladder, how hard the car slows
 // declutched (at large, and with the engine at idle), and the revs at which this driver shifts up and down.
-// Seeded from the fit (the model's `extra`: load()) and learned while GPS is present (learn(),
-// learn_shift()) as running means with a bounded memory, so they follow a warming engine and a change of
-// road. The queries turn them into what the filter asks: the idle band, the deceleration declutched, and
-// how the revs move the hazards of a shift. Fixed arrays only: nothing here allocates.
+// Seeded from the fit (the model's `extra`: load_engine(), load_gear_revs()) and learned while GPS is present
+// (learn(), learn_shift()) as running means with a bounded memory, so they follow a warming engine and a
+// change of road. The queries turn them into what the filter asks: the idle band, the deceleration
+// declutched, and how the revs move the hazards of a shift. Fixed arrays only: nothing here allocates.
 #include <array>
 
 #include "core/gear_model.hpp"
@@ -22,11 +22,12 @@ class SynthHabits {
   using GearNumbers = std::array<int, kSlots>;
 
   // What the fit saw of this engine and driver: the warm idle (also the idle until GPS shows this car
-  // standing), the rolling idle and the deceleration declutched at idle until GPS shows them, and the revs
-  // run in each gear of a ladder of `gears`, whose positions carry the model's gear numbers `model_gear`
-  // (0: a gear the model lacks). Anything missing or malformed is left unknown.
-  void load(const GearModel* model, const GearNumbers& model_gear, int gears,
-            const SynthTuning& tuning) noexcept;
+  // standing), the rolling idle and the deceleration declutched at idle until GPS shows them. Anything
+  // missing or malformed is left unknown.
+  void load_engine(const GearModel* model, const SynthTuning& tuning) noexcept;
+  // The revs the fit saw run in each gear of a ladder of `gears`, whose positions carry the model's gear
+  // numbers `model_gear` (0: a gear the model lacks), once the ladder is built.
+  void load_gear_revs(const GearModel* model, const GearNumbers& model_gear, int gears) noexcept;
 
   // Under GPS, after a step of dt ending at t: GPS speed `gps` (a new fix if gps_new), frequency `freq`
   // (NaN if lost); the filter's most probable mode `mode` (0 = declutched) holding `belief`, `in_gear`
@@ -81,7 +82,7 @@ class SynthHabits {
   [[nodiscard]] double shift_urge(double freq) const noexcept;
 
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
-  double warm_idle_ = 0.0;  // NaN if unknown (load())
+  double warm_idle_ = 0.0;  // NaN if unknown (load_engine())
   // Per gear, the log engine frequency this driver runs at (the model's extra.revs; sd 0 = unknown).
   GearArray revs_mean_{}, revs_sd_{};
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear

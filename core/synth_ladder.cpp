@@ -50,7 +50,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   }
   insert_seen_gears();
   speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? model_speed_lag(*model) : 0.0);
-  habits_.load(model, model_gear_, gears_, tuning_);  // the warm idle, for the gears below the ladder
+  habits_.load_engine(model, tuning_);  // the warm idle, for the gears below the ladder
   insert_fitted_lower_gears(model);
   insert_predicted_gears();
   double total = 0.0;
@@ -71,7 +71,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
-  habits_.load(model, model_gear_, gears_, tuning_);
+  habits_.load_gear_revs(model, model_gear_, gears_);
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
 }
 
