@@ -100,14 +100,26 @@ Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet
   return cell;
 }
 
-std::optional<std::size_t> find_column(const std::vector<std::string>& header, std::string_view name) {
-  for (std::size_t i = 0; i < header.size(); ++i) {
-    if (header[i].size() != name.size()) continue;
-    if (std::equal(name.begin(), name.end(), header[i].begin(), [](char a, char b) {
-          return std::tolower(static_cast<unsigned char>(a)) == std::tolower(static_cast<unsigned char>(b));
-        }))
-      return i;
+// Header names compare without case and without spaces: Torque writes "Engine RPM(rpm)" in one version and
+// "Engine RPM (rpm)" in another, "GPS Speed(km/h)" beside "GPS Speed (Meters/second)".
+bool same_name(std::string_view a, std::string_view b) noexcept {
+  const auto space = [](char c) { return std::isspace(static_cast<unsigned char>(c)) != 0; };
+  std::size_t i = 0, j = 0;
+  while (true) {
+    while (i < a.size() && space(a[i]))
+      ++i;
+    while (j < b.size() && space(b[j]))
+      ++j;
+    if (i == a.size() || j == b.size()) return i == a.size() && j == b.size();
+    if (std::tolower(static_cast<unsigned char>(a[i])) != std::tolower(static_cast<unsigned char>(b[j])))
+      return false;
+    ++i, ++j;
   }
+}
+
+std::optional<std::size_t> find_column(const std::vector<std::string>& header, std::string_view name) {
+  for (std::size_t i = 0; i < header.size(); ++i)
+    if (same_name(header[i], name)) return i;
   return std::nullopt;
 }
 
@@ -511,10 +523,10 @@ struct SpeedColumn {
   double to_ms;
   bool gps;
 };
-constexpr SpeedColumn kTorqueSpeeds[] = {{"GPS Speed (Meters/second)", 1.0, true},
-                                         {"Speed (GPS)(km/h)", kKmhToMs, true},
-                                         {"Speed (OBD)(km/h)", kKmhToMs, false},
-                                         {"Speed (OBD)(mph)", kMphToMs, false}};
+constexpr SpeedColumn kTorqueSpeeds[] = {
+    {"GPS Speed (Meters/second)", 1.0, true}, {"Speed (GPS)(km/h)", kKmhToMs, true},
+    {"GPS Speed (km/h)", kKmhToMs, true},     {"Speed (GPS)(mph)", kMphToMs, true},
+    {"Speed (OBD)(km/h)", kKmhToMs, false},   {"Speed (OBD)(mph)", kMphToMs, false}};
 
 // Torque's clock wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times are unwrapped in file order.
 // A clock cell that jumps away from the row before it while the row after it goes on from that one is

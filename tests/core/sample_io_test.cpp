@@ -500,6 +500,24 @@ TEST_CASE("io: Torque exports pick GPS or OBD speed and unwrap the clock") {
   CHECK(log.samples[1].speed == Approx(23 * 0.44704));
 }
 
+TEST_CASE("io: Torque's column names are read whatever their spacing, GPS speed in mph or km/h") {
+  const SampleLog mph = read_text(
+      "Device Time, Engine RPM (rpm), Speed (GPS)(mph)\n"
+      "10:00.0,1200,10\n10:01.0,1300,20\n");
+  CHECK(mph.format == SampleFileFormat::kTorque);
+  CHECK(mph.speed_column == "Speed (GPS)(mph)");
+  REQUIRE(mph.samples.size() == 2);
+  CHECK(mph.samples[1].speed == Approx(20 * 0.44704));
+  CHECK(mph.samples[1].freq == Approx(1300.0 / 60));
+
+  const SampleLog kmh = read_text(
+      "GPS Time,Engine RPM(rpm),GPS Speed(km/h)\n"
+      "Thu Jan 11 19:59:58 EST 2018,1200,36\n");
+  CHECK(kmh.speed_column == "GPS Speed (km/h)");
+  REQUIRE(kmh.samples.size() == 1);
+  CHECK(kmh.samples[0].speed == Approx(10));
+}
+
 TEST_CASE("io: the wheel speed of a Torque export read from GPS, row for row, and of nothing else") {
   const std::string both =
       "GPS Time, Device Time,GPS Speed (Meters/second),Engine RPM(rpm),Speed (OBD)(mph)\n"
