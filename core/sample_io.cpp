@@ -26,14 +26,16 @@ std::string_view trim(std::string_view s) noexcept {
   return s;
 }
 
-// Splits on commas (Carloop uses ", " and a trailing comma: trimming handles the first, the second only
-// adds an empty cell past the last column). At most `limit` cells are kept, so that a row of millions of
-// commas costs no more than the columns read from it; returns false when cells were left unsplit.
-bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit) {
+// Splits on the file's delimiter (Carloop uses ", " and a trailing comma: trimming handles the first, the
+// second only adds an empty cell past the last column). At most `limit` cells are kept, so that a row of
+// millions of commas costs no more than the columns read from it; returns false when cells were left
+// unsplit.
+bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit,
+                 char delimiter) {
   cells.clear();
   std::size_t start = 0;
   while (cells.size() < limit) {
-    const std::size_t comma = line.find(',', start);
+    const std::size_t comma = line.find(delimiter, start);
     if (comma == std::string_view::npos) {
       cells.push_back(trim(line.substr(start)));
       return true;
@@ -308,16 +310,30 @@ class TimeOrder {
   std::vector<TimeDrop>::const_iterator next_;
 };
 
+// A log's lines. The delimiter is a comma unless the header has none and has semicolons or tabs (a
+// spreadsheet saved where the comma is the decimal mark): then a comma in a data line is a decimal mark.
 struct LineReader {
   std::istream& in;
   std::string line;
   std::size_t number = 0;
+  char delimiter = ',';
   bool next() {
     if (!std::getline(in, line)) return false;
     ++number;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (number == 1 && line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+    if (delimiter != ',') std::replace(line.begin(), line.end(), ',', '.');
     return true;
+  }
+  void detect_delimiter() noexcept {
+    if (line.find(',') != std::string::npos) return;
+    if (line.find(';') != std::string::npos)
+      delimiter = ';';
+    else if (line.find('\t') != std::string::npos)
+      delimiter = '\t';
+  }
+  bool cells(std::vector<std::string_view>& out, std::size_t limit) const {
+    return split_cells(line, out, limit, delimiter);
   }
 };
 
@@ -341,7 +357,7 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   std::vector<Sample> rows;
   while (reader.next()) {
     if (blank(reader.line)) continue;
-    split_cells(reader.line, cells, need);
+    reader.cells(cells, need);
     if (cells.size() < need) {
       out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
@@ -398,23 +414,102 @@ std::vector<double> smooth_row_times(const std::vector<double>& rows, const std:
   return out;
 }
 
-// Carloop and `speed,rpm` logs: OBD values held between refreshes. A row whose rpm and speed both equal
-// the previous row's carries nothing new (the logger polls many PIDs round-robin), so it is dropped.
-void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
-              SampleFileFormat format) {
-  std::optional<std::size_t> it;
-  std::size_t irpm = 0, ispeed = 0;
-  if (format == SampleFileFormat::kCarloop) {
-    it = find_column(header, "ENGINE_RUN_TINE ()");  // sic: the logger's own spelling
-    if (!it) it = find_column(header, "ENGINE_RUN_TIME ()");
-    irpm = *find_column(header, "ENGINE_RPM ()");
-    ispeed = *find_column(header, "VEHICLE_SPEED ()");
-    out.log().speed_column = "VEHICLE_SPEED ()";
-  } else {
-    irpm = *find_column(header, "rpm");
-    ispeed = *find_column(header, "speed");
-    out.log().speed_column = "speed";
+// Where an OBD log's values are: its columns, the speed's unit and the time's.
+struct ObdLayout {
+  SampleFileFormat format = SampleFileFormat::kSpeedRpm;
+  std::size_t rpm = 0, speed = 0;
+  std::optional<std::size_t> time;  // none: the row counter times ReadOptions::row_seconds
+  double speed_to_ms = kKmhToMs;
+  double time_to_s = 1.0;
+  std::string speed_column;
+};
+
+// A column name folded for matching: lower case, no spaces or underscores.
+std::string folded(std::string_view name) {
+  std::string out;
+  for (char c : name)
+    if (!std::isspace(static_cast<unsigned char>(c)) && c != '_')
+      out += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return out;
+}
+
+bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept {
+  return std::any_of(parts.begin(), parts.end(),
+                     [&](std::string_view part) { return text.find(part) != std::string_view::npos; });
+}
+
+// The speed unit a column's name states (m/s per unit), or 0.
+double speed_unit(std::string_view name) noexcept {
+  if (holds(name, {"km/h", "kmh", "kph", "km/hr"})) return kKmhToMs;
+  if (holds(name, {"mph", "mi/h"})) return kMphToMs;
+  if (holds(name, {"m/s", "mps", "meters/second", "metres/second"})) return 1.0;
+  return 0.0;
+}
+
+// Logs of other OBD apps and data sets, found by their column names (see folded()): the first column
+// whose name holds "rpm"; a speed column, whose name holds "speed" and states its unit, a GPS one (its name
+// holds "gps") or another as `--speed` asks (auto: GPS when there is one); a time column named time,
+// timestamp, seconds or t, in milliseconds when its name ends in ms, (ms) or [ms]. None when the header
+// has no rpm or no speed column; an error naming the column when the only speed has no unit.
+std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
+                                      const std::string& name) {
+  ObdLayout layout;
+  layout.format = SampleFileFormat::kColumns;
+  std::optional<std::size_t> rpm, gps, other, unitless;
+  for (std::size_t i = 0; i < header.size(); ++i) {
+    const std::string f = folded(header[i]);
+    if (f.find("rpm") != std::string::npos) {
+      if (!rpm) rpm = i;
+      continue;
+    }
+    std::string base = f.substr(0, f.find_first_of("(["));
+    bool ms = f.substr(base.size()) == "(ms)" || f.substr(base.size()) == "[ms]";
+    if (!ms && base.size() > 2 && base.ends_with("ms")) {
+      base.resize(base.size() - 2);
+      ms = true;
+    }
+    if (!layout.time && (base == "time" || base == "timestamp" || base == "seconds" || base == "t")) {
+      layout.time = i;
+      layout.time_to_s = ms ? 1e-3 : 1.0;
+      continue;
+    }
+    if (f.find("speed") == std::string::npos) continue;
+    if (speed_unit(f) == 0.0) {
+      if (!unitless) unitless = i;
+    } else if (f.find("gps") != std::string::npos) {
+      if (!gps) gps = i;
+    } else if (!other) {
+      other = i;
+    }
   }
+  if (!rpm) return std::nullopt;
+  std::optional<std::size_t> speed = choice == TorqueSpeed::kObd ? other : gps ? gps : other;
+  if (choice == TorqueSpeed::kGps) speed = gps;
+  if (!speed) {
+    if (choice != TorqueSpeed::kAuto && (gps || other))
+      throw SampleFileError(name + ":1: no " + (choice == TorqueSpeed::kGps ? "GPS" : "OBD") +
+                            " speed column (a name holding 'speed' and a unit" +
+                            (choice == TorqueSpeed::kGps ? ", and 'GPS')" : ", without 'GPS')"));
+    if (unitless)
+      throw SampleFileError(name + ":1: speed column " + quoted(header[*unitless]) +
+                            " states no unit: name it with km/h, mph or m/s");
+    return std::nullopt;
+  }
+  layout.rpm = *rpm;
+  layout.speed = *speed;
+  layout.speed_to_ms = speed_unit(folded(header[*speed]));
+  layout.speed_column = header[*speed];
+  return layout;
+}
+
+// Carloop, `speed,rpm` and named-column logs: OBD values held between refreshes. A row whose rpm and
+// speed both equal the previous row's carries nothing new (a logger polls many PIDs round-robin), so it
+// is dropped. A named-column log's times count from its first row; its time cells may be clocks.
+void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
+  const SampleFileFormat format = layout.format;
+  const std::optional<std::size_t> it = layout.time;
+  const std::size_t irpm = layout.rpm, ispeed = layout.speed;
+  out.log().speed_column = layout.speed_column;
   out.log().format = format;
   out.log().time_from_rows = !it.has_value();
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
@@ -436,10 +531,11 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     double counter, t, rpm, speed;
   };
   std::vector<Parsed> parsed;
+  double last_clock = -1.0, clock_offset = 0.0;  // a clock's time of day, unwrapped past midnight
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double counter = static_cast<double>(row++);
-    split_cells(reader.line, cells, need);
+    reader.cells(cells, need);
     if (cells.size() < need) {
       out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
@@ -449,7 +545,22 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     Cell t;
     t.kind = CellKind::kNumber;
     t.value = counter * out.row_seconds();
-    if (it) t = parse_cell(cells[*it], "time", false);
+    if (it) {
+      t = parse_cell(cells[*it], "time", false);
+      // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
+      constexpr double kMillisecondsAtLeast = 1e11;
+      if (t.kind == CellKind::kNumber)
+        t.value *=
+            format == SampleFileFormat::kColumns && t.value >= kMillisecondsAtLeast ? 1e-3 : layout.time_to_s;
+      const auto clock = format == SampleFileFormat::kColumns && t.kind == CellKind::kBad
+                             ? parse_clock(cells[*it])
+                             : std::nullopt;
+      if (clock) {
+        if (last_clock >= 0.0 && clock->first < last_clock - clock->second / 2) clock_offset += clock->second;
+        last_clock = clock->first;
+        t = Cell{CellKind::kNumber, clock->first + clock_offset, {}};
+      }
+    }
     if (t.kind == CellKind::kMissing) {
       out.skip(reader.number, "missing time");
       continue;
@@ -460,6 +571,11 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
       continue;
     }
     parsed.push_back({reader.number, counter, t.value, rpm.value, speed.value});
+  }
+  if (format == SampleFileFormat::kColumns && it && !parsed.empty()) {
+    const double t0 = parsed.front().t;
+    for (Parsed& p : parsed)
+      p.t -= t0;
   }
   TimeOrder order(parsed, [](const Parsed& p) { return p.t; });
   for (std::size_t i = 0; i < parsed.size(); ++i) {
@@ -481,7 +597,7 @@ void read_obd(LineReader& reader, const std::vector<std::string>& header, LogBui
     have_last = true;
     lines.push_back(p.line);
     rows.push_back(p.counter);
-    kept.push_back(Sample{p.t, p.speed * kKmhToMs, p.rpm / kSecondsPerMinute});
+    kept.push_back(Sample{p.t, p.speed * layout.speed_to_ms, p.rpm / kSecondsPerMinute});
   }
   if (format == SampleFileFormat::kCarloop && it && refresh_row.size() >= 2) {
     // The counter on a row is the whole second at its last refresh, at most one polling round old: the
@@ -595,7 +711,7 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
   while (reader.next()) {
     if (blank(reader.line)) continue;
     const double row_time = static_cast<double>(counter++);
-    split_cells(reader.line, cells, need);
+    reader.cells(cells, need);
     if (cells.size() < need) {
       out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
@@ -654,6 +770,8 @@ std::string_view format_name(SampleFileFormat format) noexcept {
       return "carloop";
     case SampleFileFormat::kSpeedRpm:
       return "speed-rpm";
+    case SampleFileFormat::kColumns:
+      return "columns";
   }
   return "unknown";
 }
@@ -713,7 +831,8 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     throw SampleFileError(std::string(name) + ": empty file");
   }
   std::vector<std::string_view> views;
-  if (!split_cells(reader.line, views, kMaxColumns))
+  reader.detect_delimiter();
+  if (!reader.cells(views, kMaxColumns))
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
                           ": header has more than " + std::to_string(kMaxColumns) + " columns");
   std::vector<std::string> header(views.begin(), views.end());
@@ -725,13 +844,26 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);
   } else if (has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()")) {
-    read_obd(reader, header, out, SampleFileFormat::kCarloop);
+    ObdLayout carloop{SampleFileFormat::kCarloop,
+                      *find_column(header, "ENGINE_RPM ()"),
+                      *find_column(header, "VEHICLE_SPEED ()"),
+                      find_column(header, "ENGINE_RUN_TINE ()"),
+                      kKmhToMs,
+                      1.0,
+                      "VEHICLE_SPEED ()"};  // sic: the logger's own spelling, RUN_TINE
+    if (!carloop.time) carloop.time = find_column(header, "ENGINE_RUN_TIME ()");
+    read_obd(reader, out, carloop);
   } else if (header.size() >= 2 && has("speed") && has("rpm")) {
-    read_obd(reader, header, out, SampleFileFormat::kSpeedRpm);
+    read_obd(reader, out,
+             ObdLayout{SampleFileFormat::kSpeedRpm, *find_column(header, "rpm"),
+                       *find_column(header, "speed"), std::nullopt, kKmhToMs, 1.0, "speed"});
+  } else if (auto layout = named_layout(header, options.torque_speed, std::string(name))) {
+    read_obd(reader, out, *layout);
   } else {
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) + ": unrecognised header " +
                           quoted(reader.line) +
-                          " (expected t,speed,freq or a Torque Pro, Carloop or speed,rpm log)");
+                          " (expected t,speed,freq, a Torque Pro, Carloop or speed,rpm log, or columns "
+                          "named rpm and speed with a unit)");
   }
   if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
   SampleLog log = out.finish();

@@ -20,7 +20,8 @@
 namespace gearpulse {
 
 // The layout of a driving log file: which one read_samples found (SampleLog::format).
-enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm };
+// kColumns: another OBD app's or data set's log, its rpm, speed and time columns found by their names.
+enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm, kColumns };
 
 [[nodiscard]] std::string_view format_name(SampleFileFormat format) noexcept;
 

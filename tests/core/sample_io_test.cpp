@@ -518,6 +518,62 @@ TEST_CASE("io: Torque's column names are read whatever their spacing, GPS speed 
   CHECK(kmh.samples[0].speed == Approx(10));
 }
 
+TEST_CASE("io: another app's log is read by its column names: rpm, speed with a unit, a time") {
+  SECTION("an OBD data set's export: a clock, km/h, held values dropped") {
+    const SampleLog log = read_text(
+        "Time,Engine Coolant Temperature [C],Engine RPM [RPM],Vehicle Speed Sensor [km/h]\n"
+        "10:56:25.5,80,1800,36\n10:56:25.6,80,1800,36\n10:56:26.25,80,2400,45\n");
+    CHECK(log.format == SampleFileFormat::kColumns);
+    CHECK(log.speed_column == "Vehicle Speed Sensor [km/h]");
+    CHECK(log.repeated_rows == 1);
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[0].t == Approx(0));
+    CHECK(log.samples[1].t == Approx(0.75));
+    CHECK(log.samples[1].speed == Approx(12.5));
+    CHECK(log.samples[1].freq == Approx(40));
+  }
+  SECTION("a clock passing midnight runs on") {
+    const SampleLog log = read_text("time,rpm,speed (mph)\n23:59:59,1200,10\n00:00:01,1300,20\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].t == Approx(2));
+    CHECK(log.samples[1].speed == Approx(20 * 0.44704));
+  }
+  SECTION("seconds, milliseconds stated or since 1970") {
+    CHECK(read_text("Time (s),RPM,Speed (m/s)\n5,600,1\n6.5,660,2\n").samples[1].t == Approx(1.5));
+    CHECK(read_text("time_ms,engine_rpm,speed_kmh\n5000,600,1\n6500,660,2\n").samples[1].t == Approx(1.5));
+    CHECK(read_text("timestamp,rpm,speed kph\n1557132000000,600,1\n1557132001500,660,2\n").samples[1].t ==
+          Approx(1.5));
+  }
+  SECTION("a GPS speed unless --speed obd; no time column: the row counter") {
+    const std::string text = "Engine RPM,OBD Speed (km/h),GPS Speed (m/s)\n1200,36,9\n1500,45,12\n";
+    const SampleLog gps = read_text(text);
+    CHECK(gps.speed_column == "GPS Speed (m/s)");
+    CHECK(gps.time_from_rows);
+    REQUIRE(gps.samples.size() == 2);
+    CHECK(gps.samples[1].t == Approx(1));
+    CHECK(gps.samples[1].speed == Approx(12));
+    gearpulse::ReadOptions obd;
+    obd.torque_speed = gearpulse::TorqueSpeed::kObd;
+    CHECK(read_text(text, obd).samples[1].speed == Approx(12.5));
+  }
+  SECTION("a speed without a unit is refused, naming the column") {
+    CHECK(error_of("Time,Engine RPM,Speed\n1,800,0\n") ==
+          "log.csv:1: speed column 'Speed' states no unit: name it with km/h, mph or m/s");
+  }
+}
+
+TEST_CASE("io: a log saved with semicolons reads its decimal commas") {
+  const SampleLog log = read_text("\"t\";\"speed\";\"freq\"\n0;1,5;20,25\n1;2;21\n");
+  CHECK(log.format == SampleFileFormat::kGeneric);
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.samples[0].speed == Approx(1.5));
+  CHECK(log.samples[0].freq == Approx(20.25));
+  const SampleLog tabs = read_text("Time\tEngine RPM\tSpeed (km/h)\n0\t600\t0\n1\t1200\t18\n");
+  CHECK(tabs.format == SampleFileFormat::kColumns);
+  REQUIRE(tabs.samples.size() == 2);
+  CHECK(tabs.samples[1].speed == Approx(5));
+}
+
 TEST_CASE("io: the wheel speed of a Torque export read from GPS, row for row, and of nothing else") {
   const std::string both =
       "GPS Time, Device Time,GPS Speed (Meters/second),Engine RPM(rpm),Speed (OBD)(mph)\n"
