@@ -502,19 +502,18 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
   return layout;
 }
 
-// Carloop, `speed,rpm` and named-column logs: OBD values held between refreshes. A row whose rpm and
-// speed both equal the previous row's carries nothing new (a logger polls many PIDs round-robin), so it
-// is dropped. A named-column log's times count from its first row; its time cells may be clocks.
-void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
+// One OBD row as read: its line, its place among the data rows, its time, rpm and speed (the log's unit).
+struct ObdRow {
+  std::size_t line;
+  double counter, t, rpm, speed;
+};
+
+// OBD values held between refreshes, in file order. A row whose rpm and speed both equal the previous
+// row's carries nothing new (a logger polls many PIDs round-robin), so it is dropped. Times count from the
+// first row but in Carloop logs (the engine's run time).
+void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout& layout) {
   const SampleFileFormat format = layout.format;
-  const std::optional<std::size_t> it = layout.time;
-  const std::size_t irpm = layout.rpm, ispeed = layout.speed;
-  out.log().speed_column = layout.speed_column;
-  out.log().format = format;
-  out.log().time_from_rows = !it.has_value();
-  const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
-  std::vector<std::string_view> cells;
-  std::size_t row = 0;
+  const bool timed = layout.time.has_value();
   double last_rpm = kMissing, last_speed = kMissing, last_t = -std::numeric_limits<double>::infinity();
   bool have_last = false;
   std::vector<std::size_t> lines;
@@ -526,11 +525,81 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     std::size_t of, line;
   };
   std::vector<Repeat> repeats;
-  struct Parsed {
-    std::size_t line;
-    double counter, t, rpm, speed;
-  };
-  std::vector<Parsed> parsed;
+  if (format != SampleFileFormat::kCarloop && timed && !parsed.empty()) {
+    const double t0 = parsed.front().t;
+    for (ObdRow& p : parsed)
+      p.t -= t0;
+  }
+  TimeOrder order(parsed, [](const ObdRow& p) { return p.t; });
+  for (std::size_t i = 0; i < parsed.size(); ++i) {
+    const ObdRow& p = parsed[i];
+    if (!order.keep(i, p.line, out)) continue;
+    if (p.t != last_t) {
+      refresh_row.push_back(p.counter);
+      refresh_t.push_back(p.t + 0.5);
+    }
+    last_t = p.t;
+    const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
+    if (have_last && same(p.rpm, last_rpm) && same(p.speed, last_speed)) {
+      ++out.log().repeated_rows;
+      if (out.keeps_rows()) repeats.push_back({p.counter, p.t, kept.size() - 1, p.line});
+      continue;
+    }
+    last_rpm = p.rpm;
+    last_speed = p.speed;
+    have_last = true;
+    lines.push_back(p.line);
+    rows.push_back(p.counter);
+    kept.push_back(Sample{p.t, p.speed * layout.speed_to_ms, p.rpm / kSecondsPerMinute});
+  }
+  if (format == SampleFileFormat::kCarloop && timed && refresh_row.size() >= 2) {
+    // The counter on a row is the whole second at its last refresh, at most one polling round old: the
+    // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
+    constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
+    const auto estimate = [&](const std::vector<double>& at, auto&& own_t, auto&& set_t) {
+      const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
+      double previous = -std::numeric_limits<double>::infinity();
+      for (std::size_t i = 0; i < at.size(); ++i) {
+        previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
+        set_t(i, previous);
+      }
+    };
+    estimate(
+        rows, [&](std::size_t i) { return kept[i].t; }, [&](std::size_t i, double t) { kept[i].t = t; });
+    if (!repeats.empty()) {
+      std::vector<double> repeat_rows(repeats.size());
+      for (std::size_t i = 0; i < repeats.size(); ++i)
+        repeat_rows[i] = repeats[i].row;
+      estimate(
+          repeat_rows, [&](std::size_t i) { return repeats[i].t; },
+          [&](std::size_t i, double t) { repeats[i].t = t; });
+    }
+  }
+  std::size_t r = 0;
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    const bool added = out.add(lines[i], kept[i]);
+    for (; r < repeats.size() && repeats[r].of == i; ++r) {
+      if (added)
+        out.add_repeat(repeats[r].t);
+      else
+        out.skip(repeats[r].line, "repeats the values of the bad row at line " + std::to_string(lines[i]));
+    }
+  }
+}
+
+// Carloop, `speed,rpm` and named-column logs. A named-column log's times count from its first row; its
+// time cells may be clocks.
+void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
+  const SampleFileFormat format = layout.format;
+  const std::optional<std::size_t> it = layout.time;
+  const std::size_t irpm = layout.rpm, ispeed = layout.speed;
+  out.log().speed_column = layout.speed_column;
+  out.log().format = format;
+  out.log().time_from_rows = !it.has_value();
+  const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
+  std::vector<std::string_view> cells;
+  std::size_t row = 0;
+  std::vector<ObdRow> parsed;
   double last_clock = -1.0, clock_offset = 0.0;  // a clock's time of day, unwrapped past midnight
   while (reader.next()) {
     if (blank(reader.line)) continue;
@@ -572,66 +641,110 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     }
     parsed.push_back({reader.number, counter, t.value, rpm.value, speed.value});
   }
-  if (format == SampleFileFormat::kColumns && it && !parsed.empty()) {
-    const double t0 = parsed.front().t;
-    for (Parsed& p : parsed)
-      p.t -= t0;
-  }
-  TimeOrder order(parsed, [](const Parsed& p) { return p.t; });
-  for (std::size_t i = 0; i < parsed.size(); ++i) {
-    const Parsed& p = parsed[i];
-    if (!order.keep(i, p.line, out)) continue;
-    if (p.t != last_t) {
-      refresh_row.push_back(p.counter);
-      refresh_t.push_back(p.t + 0.5);
-    }
-    last_t = p.t;
-    const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
-    if (have_last && same(p.rpm, last_rpm) && same(p.speed, last_speed)) {
-      ++out.log().repeated_rows;
-      if (out.keeps_rows()) repeats.push_back({p.counter, p.t, kept.size() - 1, p.line});
+  add_obd_rows(parsed, out, layout);
+}
+
+// One reading per row (`SECONDS;PID;VALUE;UNITS`, as phone OBD apps such as Car Scanner export): the
+// engine's rpm (the PID named Engine RPM, else the first whose unit or name is rpm) and a speed (a PID
+// whose name holds "speed" but no average or maximum, with a speed unit; GPS or OBD as `--speed` asks,
+// auto: GPS when there is one) are held between their readings, and each reading of either is a row. A
+// SECONDS clock that falls back by half a day has passed midnight.
+void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+                   TorqueSpeed choice) {
+  const std::size_t it = *find_column(header, "SECONDS"), ipid = *find_column(header, "PID"),
+                    ivalue = *find_column(header, "VALUE");
+  const std::optional<std::size_t> iunit = find_column(header, "UNITS");
+  const std::size_t need = std::max({it, ipid, ivalue, iunit.value_or(0)}) + 1;
+  struct Reading {
+    std::size_t line;
+    double t, value;
+    std::size_t pid;      // index into names
+    double to_ms;         // speed unit of the row (0: none)
+    std::string problem;  // why the value does not read (said only for the PIDs used)
+  };
+  std::vector<std::string> names;
+  std::vector<std::string> units;  // of each PID's first reading, folded
+  std::vector<Reading> readings;
+  std::vector<std::string_view> cells;
+  constexpr double kDay = 86400.0;
+  double last_t = -1.0, offset = 0.0;
+  while (reader.next()) {
+    if (blank(reader.line)) continue;
+    reader.cells(cells, need);
+    if (cells.size() < need) {
+      out.skip(reader.number, cells_problem(cells.size(), need));
       continue;
     }
-    last_rpm = p.rpm;
-    last_speed = p.speed;
-    have_last = true;
-    lines.push_back(p.line);
-    rows.push_back(p.counter);
-    kept.push_back(Sample{p.t, p.speed * layout.speed_to_ms, p.rpm / kSecondsPerMinute});
-  }
-  if (format == SampleFileFormat::kCarloop && it && refresh_row.size() >= 2) {
-    // The counter on a row is the whole second at its last refresh, at most one polling round old: the
-    // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
-    constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
-    const auto estimate = [&](const std::vector<double>& at, auto&& own_t, auto&& set_t) {
-      const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
-      double previous = -std::numeric_limits<double>::infinity();
-      for (std::size_t i = 0; i < at.size(); ++i) {
-        previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
-        set_t(i, previous);
-      }
-    };
-    estimate(
-        rows, [&](std::size_t i) { return kept[i].t; }, [&](std::size_t i, double t) { kept[i].t = t; });
-    if (!repeats.empty()) {
-      std::vector<double> repeat_rows(repeats.size());
-      for (std::size_t i = 0; i < repeats.size(); ++i)
-        repeat_rows[i] = repeats[i].row;
-      estimate(
-          repeat_rows, [&](std::size_t i) { return repeats[i].t; },
-          [&](std::size_t i, double t) { repeats[i].t = t; });
+    const Cell t = parse_cell(cells[it], "time", false);
+    const Cell value = parse_cell(cells[ivalue], "value", false);
+    if (t.kind != CellKind::kNumber) {
+      out.skip(reader.number, t.kind == CellKind::kMissing ? "missing time" : t.problem);
+      continue;
     }
-  }
-  std::size_t r = 0;
-  for (std::size_t i = 0; i < kept.size(); ++i) {
-    const bool added = out.add(lines[i], kept[i]);
-    for (; r < repeats.size() && repeats[r].of == i; ++r) {
-      if (added)
-        out.add_repeat(repeats[r].t);
-      else
-        out.skip(repeats[r].line, "repeats the values of the bad row at line " + std::to_string(lines[i]));
+    if (value.kind == CellKind::kMissing) continue;  // a PID the car did not answer
+    const std::string name = folded(cells[ipid]);
+    auto known = std::find(names.begin(), names.end(), name);
+    const std::size_t pid = static_cast<std::size_t>(known - names.begin());
+    const std::string unit = iunit ? folded(cells[*iunit]) : std::string{};
+    if (known == names.end()) {
+      names.push_back(name);
+      units.push_back(unit);
     }
+    double seconds = t.value >= 1e11 ? t.value * 1e-3 : t.value;  // milliseconds since 1970, as above
+    if (last_t >= 0.0 && seconds + offset < last_t - kDay / 2) offset += kDay;
+    seconds += offset;
+    last_t = seconds;
+    readings.push_back(
+        {reader.number, seconds, value.value, pid, speed_unit(unit.empty() ? name : unit), value.problem});
   }
+  const auto find_pid = [&](auto&& good) -> std::optional<std::size_t> {
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (good(i)) return i;
+    return std::nullopt;
+  };
+  std::optional<std::size_t> rpm = find_pid([&](std::size_t i) { return names[i] == "enginerpm"; });
+  if (!rpm) rpm = find_pid([&](std::size_t i) { return units[i] == "rpm" || holds(names[i], {"rpm"}); });
+  const auto speed_pid = [&](std::size_t i, bool gps) {
+    return holds(names[i], {"speed"}) && !holds(names[i], {"average", "avg", "max", "min", "limit"}) &&
+           speed_unit(units[i].empty() ? names[i] : units[i]) > 0.0 && holds(names[i], {"gps"}) == gps;
+  };
+  const std::optional<std::size_t> gps = find_pid([&](std::size_t i) { return speed_pid(i, true); });
+  const std::optional<std::size_t> obd = find_pid([&](std::size_t i) { return speed_pid(i, false); });
+  const std::optional<std::size_t> speed = choice == TorqueSpeed::kGps   ? gps
+                                           : choice == TorqueSpeed::kObd ? obd
+                                           : gps                         ? gps
+                                                                         : obd;
+  if (!rpm) throw SampleFileError(out.log().name + ": no engine rpm among the PIDs (a PID named or in rpm)");
+  if (!speed)
+    throw SampleFileError(out.log().name + ": no " +
+                          (choice == TorqueSpeed::kGps   ? "GPS speed"
+                           : choice == TorqueSpeed::kObd ? "OBD speed"
+                                                         : "speed") +
+                          " among the PIDs (a PID whose name holds 'speed', in km/h, mph or m/s)");
+  ObdLayout layout;
+  layout.format = SampleFileFormat::kPidRows;
+  layout.time = it;
+  layout.speed_to_ms = 1.0;  // each reading converted by its own unit
+  layout.speed_column = names[*speed];
+  out.log().format = layout.format;
+  out.log().speed_column = layout.speed_column;
+  std::vector<ObdRow> rows;
+  double held_rpm = kMissing, held_speed = kMissing;
+  for (const Reading& r : readings) {
+    if ((r.pid == *rpm || r.pid == *speed) && !r.problem.empty()) {
+      out.skip(r.line, r.problem);
+      continue;
+    }
+    if (r.pid == *rpm)
+      held_rpm = r.value;
+    else if (r.pid == *speed)
+      held_speed = r.value * r.to_ms;
+    else
+      continue;
+    if (!std::isnan(held_rpm) && !std::isnan(held_speed))
+      rows.push_back({r.line, static_cast<double>(rows.size()), r.t, held_rpm, held_speed});
+  }
+  add_obd_rows(rows, out, layout);
 }
 
 struct SpeedColumn {
@@ -772,6 +885,8 @@ std::string_view format_name(SampleFileFormat format) noexcept {
       return "speed-rpm";
     case SampleFileFormat::kColumns:
       return "columns";
+    case SampleFileFormat::kPidRows:
+      return "pid-rows";
   }
   return "unknown";
 }
@@ -857,6 +972,8 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     read_obd(reader, out,
              ObdLayout{SampleFileFormat::kSpeedRpm, *find_column(header, "rpm"),
                        *find_column(header, "speed"), std::nullopt, kKmhToMs, 1.0, "speed"});
+  } else if (has("SECONDS") && has("PID") && has("VALUE")) {
+    read_pid_rows(reader, header, out, options.torque_speed);
   } else if (auto layout = named_layout(header, options.torque_speed, std::string(name))) {
     read_obd(reader, out, *layout);
   } else {

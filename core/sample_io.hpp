@@ -20,8 +20,9 @@
 namespace gearpulse {
 
 // The layout of a driving log file: which one read_samples found (SampleLog::format).
-// kColumns: another OBD app's or data set's log, its rpm, speed and time columns found by their names.
-enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm, kColumns };
+// kColumns: another OBD app's or data set's log, its rpm, speed and time columns found by their names;
+// kPidRows: one reading per row (SECONDS, PID, VALUE, UNITS), as phone OBD apps export.
+enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm, kColumns, kPidRows };
 
 [[nodiscard]] std::string_view format_name(SampleFileFormat format) noexcept;
 

@@ -657,6 +657,7 @@ TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothi
   const std::string log = simulated_log(dir, 21);
   const Result r = run(dir, "fit --speed gps " + log);
   CHECK(r.status == 0);
-  CHECK(r.err.find("--speed applies to Torque Pro exports and named-column logs") != std::string::npos);
+  CHECK(r.err.find("--speed applies to Torque Pro exports, named-column and PID-row logs") !=
+        std::string::npos);
   CHECK(run(dir, "fit " + log).err.empty());
 }

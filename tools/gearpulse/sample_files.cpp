@@ -75,11 +75,11 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
     }
     const SampleLog& log = logs.back();
     if (options.torque_speed != TorqueSpeed::kAuto && log.format != SampleFileFormat::kTorque &&
-        log.format != SampleFileFormat::kColumns)
+        log.format != SampleFileFormat::kColumns && log.format != SampleFileFormat::kPidRows)
       std::fprintf(
           stderr,
-          "gearpulse: warning: %s: --speed applies to Torque Pro exports and named-column logs; this %s log "
-          "has one speed\n",
+          "gearpulse: warning: %s: --speed applies to Torque Pro exports, named-column and PID-row logs; "
+          "this %s log has one speed\n",
           path.c_str(), std::string(format_name(log.format)).c_str());
     for (const std::string& warning : log.warnings)
       std::fprintf(stderr, "gearpulse: warning: %s\n", warning.c_str());
