@@ -647,7 +647,7 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
 // One reading per row (`SECONDS;PID;VALUE;UNITS`, as phone OBD apps such as Car Scanner export): the
 // engine's rpm (the PID named Engine RPM, else the first whose unit or name is rpm) and a speed (a PID
 // whose name holds "speed" but no average or maximum, with a speed unit; GPS or OBD as `--speed` asks,
-// auto: GPS when there is one) are held between their readings, and each reading of either is a row. A
+// auto: GPS when there is one) are read; each rpm reading is a row, with the speed at its time (below). A
 // SECONDS clock that falls back by half a day has passed midnight.
 void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
                    TorqueSpeed choice) {
@@ -728,21 +728,42 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   layout.speed_column = names[*speed];
   out.log().format = layout.format;
   out.log().speed_column = layout.speed_column;
-  std::vector<ObdRow> rows;
-  double held_rpm = kMissing, held_speed = kMissing;
+  // The speed at each rpm reading, interpolated between the speed readings on either side when they are
+  // at most kMaxSpeedGap apart (a phone app polls each PID every few seconds; across a longer gap the
+  // speed is not known): rpm and speed are read at different instants, and a speed held from its last
+  // reading would pair every rpm with a speed up to a polling round old.
+  constexpr double kMaxSpeedGap = 10.0;  // s
+  struct SpeedAt {
+    double t, v;
+  };
+  std::vector<SpeedAt> speeds;
+  std::vector<const Reading*> revs;
   for (const Reading& r : readings) {
-    if ((r.pid == *rpm || r.pid == *speed) && !r.problem.empty()) {
+    if (r.pid != *rpm && r.pid != *speed) continue;
+    if (!r.problem.empty()) {
       out.skip(r.line, r.problem);
       continue;
     }
     if (r.pid == *rpm)
-      held_rpm = r.value;
-    else if (r.pid == *speed)
-      held_speed = r.value * r.to_ms;
+      revs.push_back(&r);
     else
-      continue;
-    if (!std::isnan(held_rpm) && !std::isnan(held_speed))
-      rows.push_back({r.line, static_cast<double>(rows.size()), r.t, held_rpm, held_speed});
+      speeds.push_back({r.t, r.value * r.to_ms});
+  }
+  std::stable_sort(speeds.begin(), speeds.end(),
+                   [](const SpeedAt& a, const SpeedAt& b) { return a.t < b.t; });
+  std::vector<ObdRow> rows;
+  for (const Reading* r : revs) {
+    const auto after = std::lower_bound(speeds.begin(), speeds.end(), r->t,
+                                        [](const SpeedAt& a, double t) { return a.t < t; });
+    double v = kMissing;
+    if (after != speeds.end() && after->t == r->t) {
+      v = after->v;
+    } else if (after != speeds.end() && after != speeds.begin() &&
+               after->t - (after - 1)->t <= kMaxSpeedGap) {
+      const SpeedAt& before = *(after - 1);
+      v = before.v + (after->v - before.v) * (r->t - before.t) / (after->t - before.t);
+    }
+    rows.push_back({r->line, static_cast<double>(rows.size()), r->t, r->value, v});
   }
   add_obd_rows(rows, out, layout);
 }

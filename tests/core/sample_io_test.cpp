@@ -562,34 +562,38 @@ TEST_CASE("io: another app's log is read by its column names: rpm, speed with a 
   }
 }
 
-TEST_CASE("io: a phone app's log of one reading per row holds rpm and speed between their readings") {
+TEST_CASE("io: a phone app's log of one reading per row: each rpm with the speed at its time") {
   const std::string text =
       "\"SECONDS\";\"PID\";\"VALUE\";\"UNITS\";\"LATITUDE\";\"LONGTITUDE\";\n"
       "\"86399.0\";\"Engine RPM\";\"1200\";\"rpm\";\"\";\"\";\n"
       "\"86399.2\";\"Fuel trim\";\"-3,5\";\"%\";\"\";\"\";\n"
-      "\"86399.5\";\"Vehicle speed\";\"36\";\"km/h\";\"\";\"\";\n"
-      "\"86399.6\";\"Average speed (GPS)\";\"20\";\"km/h\";\"\";\"\";\n"
-      "\"86399.7\";\"Speed (GPS)\";\"22,5\";\"mph\";\"\";\"\";\n"
+      "\"86399.5\";\"Speed (GPS)\";\"20\";\"mph\";\"\";\"\";\n"
+      "\"86399.6\";\"Average speed (GPS)\";\"90\";\"km/h\";\"\";\"\";\n"
+      "\"86399.7\";\"Vehicle speed\";\"36\";\"km/h\";\"\";\"\";\n"
       "\"0.5\";\"Engine RPM\";\"1500\";\"rpm\";\"\";\"\";\n"
-      "\"0.7\";\"Engine RPM\";\"x\";\"rpm\";\"\";\"\";\n";
+      "\"0.7\";\"Engine RPM\";\"x\";\"rpm\";\"\";\"\";\n"
+      "\"1.5\";\"Speed (GPS)\";\"30\";\"mph\";\"\";\"\";\n"
+      "\"2.7\";\"Vehicle speed\";\"54\";\"km/h\";\"\";\"\";\n"
+      "\"20\";\"Engine RPM\";\"900\";\"rpm\";\"\";\"\";\n";
   const SampleLog gps = read_text(text);
   CHECK(gps.format == SampleFileFormat::kPidRows);
   CHECK(gps.speed_column == "speed(gps)");
-  REQUIRE(gps.samples.size() == 2);
-  CHECK(gps.samples[0].t == Approx(0));  // from the first row used, at 86399.7
-  CHECK(gps.samples[0].speed == Approx(22.5 * 0.44704));
+  REQUIRE(gps.samples.size() == 3);
+  CHECK(gps.samples[0].t == Approx(0));  // 86399.0: no speed read before it
+  CHECK_FALSE(gps.samples[0].has_speed());
   CHECK(gps.samples[0].freq == Approx(20));
-  CHECK(gps.samples[1].t == Approx(0.8));  // past midnight
+  CHECK(gps.samples[1].t == Approx(1.5));  // past midnight, between the GPS readings 2 s apart
+  CHECK(gps.samples[1].speed == Approx(25 * 0.44704));
   CHECK(gps.samples[1].freq == Approx(25));
-  REQUIRE(gps.skipped.size() == 1);  // the bad rpm, not the negative fuel trim
+  CHECK_FALSE(gps.samples[2].has_speed());  // no speed read after it
+  REQUIRE(gps.skipped.size() == 1);         // the bad rpm, not the negative fuel trim
   CHECK(gps.skipped[0].rfind("log.csv:8: not a number", 0) == 0);
 
   gearpulse::ReadOptions obd;
   obd.torque_speed = gearpulse::TorqueSpeed::kObd;
   const SampleLog wheel = read_text(text, obd);
-  REQUIRE(wheel.samples.size() == 2);
-  CHECK(wheel.samples[0].speed == Approx(10));
-  CHECK(wheel.samples[1].t == Approx(1));
+  REQUIRE(wheel.samples.size() == 3);
+  CHECK(wheel.samples[1].speed == Approx((36 + 18 * 0.8 / 3) / 3.6));
 
   CHECK(error_of("SECONDS;PID;VALUE;UNITS\n1;Engine RPM;800;rpm\n").find("no speed among the PIDs") !=
         std::string::npos);
