@@ -29,9 +29,14 @@
 // that drive, and the daemon's synthesis' track (speed, acceleration) at each position of its ladder (CAR
 // a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
 //
+// --log FILE (repeatable) scores the logs of one car of the user's instead of the set's real cars (any
+// format `gearpulse fit` reads; --row-seconds S for logs without a time column): fitted on the logs in
+// even places, replayed on those in odd places, and the other way round (one log: its halves).
+//
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
-//                     [--fit-minutes M] [--worst PCT] [--debug CAR STYLE FROM TO] [DATA_DIR]
+//                     [--fit-minutes M] [--worst PCT] [--debug CAR STYLE FROM TO] [--log FILE]...
+//                     [--row-seconds S] [DATA_DIR]
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -581,6 +586,32 @@ void real_logs(const fs::path& root, bool report_set, Workload& w) {
   }
 }
 
+// Logs a user gives (--log, repeatable): one car's drives. Two folds: the logs in even places against
+// those in odd places, each fitted on one and replayed on the other; a single log is split in halves.
+void given_logs(const std::vector<fs::path>& paths, double row_s, Workload& w) {
+  gearpulse::ReadOptions options;
+  options.row_seconds = row_s;
+  std::vector<std::vector<Sample>> logs;
+  for (const fs::path& p : paths) {
+    std::ifstream in(p, std::ios::binary);
+    if (!in) throw gearpulse::SampleFileError(p.string() + ": cannot open");
+    logs.push_back(gearpulse::read_samples(in, p.string(), options).samples);
+  }
+  w.lines.push_back({"Logs given (fit on some, replay the others)",
+                     logs.size() == 1 ? "the log's halves" : "even against odd logs", "given", false});
+  if (logs.size() == 1) {
+    const auto [a, b] = halves(logs.front(), 1.0);
+    fold(a, b, w);
+    fold(b, a, w);
+    return;
+  }
+  std::vector<std::vector<Sample>> even, odd;
+  for (std::size_t i = 0; i < logs.size(); ++i)
+    (i % 2 == 0 ? even : odd).push_back(std::move(logs[i]));
+  fold(even, odd, w);
+  fold(odd, even, w);
+}
+
 // ---- simulated vehicles ----
 
 struct Cadence {
@@ -932,6 +963,8 @@ int main(int argc, char** argv) {
   gearpulse::SynthTuning tuning;
   std::vector<std::string> only;
   fs::path root = GEARPULSE_REAL_DATA_DIR;
+  std::vector<fs::path> given;
+  double row_seconds = 1.0;
   for (int i = 1; i < argc; ++i) {
     const std::string_view a = argv[i];
     if (a == "--set" && i + 1 < argc) {
@@ -964,6 +997,10 @@ int main(int argc, char** argv) {
       g_fits = true;
     } else if (a == "--fit-minutes" && i + 1 < argc) {
       g_fit_minutes = std::atof(argv[++i]);
+    } else if (a == "--log" && i + 1 < argc) {
+      given.emplace_back(argv[++i]);
+    } else if (a == "--row-seconds" && i + 1 < argc) {
+      row_seconds = std::atof(argv[++i]);
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {
@@ -973,12 +1010,20 @@ int main(int argc, char** argv) {
     }
   }
   const auto start = std::chrono::steady_clock::now();
-  if (real && !fs::exists(root / (report_set ? "torque-louisville" : "carloop-etios"))) {
+  if (real && given.empty() && !fs::exists(root / (report_set ? "torque-louisville" : "carloop-etios"))) {
     std::printf("GEARPULSE_SKIP: bench_outage: no real logs under %s\n", root.c_str());
     return 0;
   }
   Workload w;
-  if (real) real_logs(root, report_set, w);
+  try {
+    if (real && !given.empty())
+      given_logs(given, row_seconds, w);
+    else if (real)
+      real_logs(root, report_set, w);
+  } catch (const gearpulse::SampleFileError& e) {
+    std::fprintf(stderr, "bench_outage: %s\n", e.what());
+    return 2;
+  }
   if (simu) simulated(report_set, seeds, randoms, w);
   if (ablation) {
     g_candidate = false;
