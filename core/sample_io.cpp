@@ -310,6 +310,14 @@ class TimeOrder {
   std::vector<TimeDrop>::const_iterator next_;
 };
 
+bool blank(std::string_view line) {
+  return trim(line).empty();
+}
+
+std::string cells_problem(std::size_t have, std::size_t need) {
+  return "too few cells (" + std::to_string(have) + ", need " + std::to_string(need) + ")";
+}
+
 // A log's lines. The delimiter is a comma unless the header has none and has semicolons or tabs (a
 // spreadsheet saved where the comma is the decimal mark): then a comma in a data line is a decimal mark.
 struct LineReader {
@@ -335,15 +343,20 @@ struct LineReader {
   bool cells(std::vector<std::string_view>& out, std::size_t limit) const {
     return split_cells(line, out, limit, delimiter);
   }
+  // The next data line that is not blank, split into its first `need` cells; one with fewer is reported
+  // and passed over. False at the end. `rows` counts the lines that are not blank, short ones included.
+  bool next_row(std::vector<std::string_view>& out, std::size_t need, LogBuilder& log) {
+    while (next()) {
+      if (blank(line)) continue;
+      ++rows;
+      cells(out, need);
+      if (out.size() >= need) return true;
+      log.skip(number, cells_problem(out.size(), need));
+    }
+    return false;
+  }
+  std::size_t rows = 0;
 };
-
-bool blank(std::string_view line) {
-  return trim(line).empty();
-}
-
-std::string cells_problem(std::size_t have, std::size_t need) {
-  return "too few cells (" + std::to_string(have) + ", need " + std::to_string(need) + ")";
-}
 
 void read_generic(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out) {
   const std::size_t it = *find_column(header, "t");
@@ -355,13 +368,7 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   std::vector<std::string_view> cells;
   std::vector<std::size_t> lines;
   std::vector<Sample> rows;
-  while (reader.next()) {
-    if (blank(reader.line)) continue;
-    reader.cells(cells, need);
-    if (cells.size() < need) {
-      out.skip(reader.number, cells_problem(cells.size(), need));
-      continue;
-    }
+  while (reader.next_row(cells, need, out)) {
     const Cell t = parse_cell(cells[it], "t", false);
     const Cell v = parse_cell(cells[is], "speed", false);
     const Cell f = parse_cell(cells[iff], "freq", false);
@@ -598,17 +605,10 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   out.log().time_from_rows = !it.has_value();
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
   std::vector<std::string_view> cells;
-  std::size_t row = 0;
   std::vector<ObdRow> parsed;
   double last_clock = -1.0, clock_offset = 0.0;  // a clock's time of day, unwrapped past midnight
-  while (reader.next()) {
-    if (blank(reader.line)) continue;
-    const double counter = static_cast<double>(row++);
-    reader.cells(cells, need);
-    if (cells.size() < need) {
-      out.skip(reader.number, cells_problem(cells.size(), need));
-      continue;
-    }
+  while (reader.next_row(cells, need, out)) {
+    const auto counter = static_cast<double>(reader.rows - 1);
     const Cell rpm = parse_cell(cells[irpm], "rpm", false);
     const Cell speed = parse_cell(cells[ispeed], "speed", false);
     Cell t;
@@ -668,13 +668,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   std::vector<std::string_view> cells;
   constexpr double kDay = 86400.0;
   double last_t = -1.0, offset = 0.0;
-  while (reader.next()) {
-    if (blank(reader.line)) continue;
-    reader.cells(cells, need);
-    if (cells.size() < need) {
-      out.skip(reader.number, cells_problem(cells.size(), need));
-      continue;
-    }
+  while (reader.next_row(cells, need, out)) {
     const Cell t = parse_cell(cells[it], "time", false);
     const Cell value = parse_cell(cells[ivalue], "value", false);
     if (t.kind != CellKind::kNumber) {
@@ -840,16 +834,9 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
   for (auto i : {itime, igps, iobd})
     if (i) need = std::max(need, *i + 1);
   std::vector<std::string_view> cells;
-  std::size_t counter = 0;
   std::size_t gps_count = 0;
-  while (reader.next()) {
-    if (blank(reader.line)) continue;
-    const double row_time = static_cast<double>(counter++);
-    reader.cells(cells, need);
-    if (cells.size() < need) {
-      out.skip(reader.number, cells_problem(cells.size(), need));
-      continue;
-    }
+  while (reader.next_row(cells, need, out)) {
+    const auto row_time = static_cast<double>(reader.rows - 1);
     Row row{reader.number, row_time, kMissing, kMissing, kMissing};
     if (itime) {
       const auto clock = parse_clock(cells[*itime]);
