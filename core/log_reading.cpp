@@ -1,0 +1,187 @@
+#include "core/log_reading.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+
+namespace gearpulse::log_reading {
+
+std::string_view trim(std::string_view s) noexcept {
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front())))
+    s.remove_prefix(1);
+  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back())))
+    s.remove_suffix(1);
+  if (s.size() >= 2 && s.front() == '"' && s.back() == '"') s = trim(s.substr(1, s.size() - 2));
+  return s;
+}
+
+bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit,
+                 char delimiter) {
+  cells.clear();
+  std::size_t start = 0;
+  while (cells.size() < limit) {
+    const std::size_t comma = line.find(delimiter, start);
+    if (comma == std::string_view::npos) {
+      cells.push_back(trim(line.substr(start)));
+      return true;
+    }
+    cells.push_back(trim(line.substr(start, comma - start)));
+    start = comma + 1;
+  }
+  return false;
+}
+
+std::string quoted(std::string_view cell) {
+  constexpr std::size_t kMaxShown = 24;
+  std::string out = "'";
+  for (char c : cell.substr(0, kMaxShown))
+    out += std::isprint(static_cast<unsigned char>(c)) ? c : '?';
+  if (cell.size() > kMaxShown) out += "...";
+  return out + "'";
+}
+
+Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet_missing) {
+  Cell cell;
+  if (text.empty()) return cell;
+  if (spreadsheet_missing && (text == "-" || text.front() == '#' || text == "N/A")) return cell;
+  double value = 0.0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || ptr != text.data() + text.size()) {
+    cell.kind = CellKind::kBad;
+    cell.problem = "not a number in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  if (!std::isfinite(value)) {
+    cell.kind = CellKind::kBad;
+    cell.problem = "non-finite value in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  // A log's clock stays far below this, even in milliseconds since 1970 (read, and warned about as a
+  // generic log's rows far apart); a time beyond it is a corrupt cell (1e308 overflowed the Carloop
+  // reader's fit of its row times).
+  constexpr double kMaxTime = 1e13;
+  if ((column == "t" || column == "time") && std::abs(value) > kMaxTime) {
+    cell.kind = CellKind::kBad;
+    cell.problem = "time beyond any log's clock in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  if (value < 0.0 && column != "t") {
+    cell.kind = CellKind::kBad;
+    cell.problem = "negative value in column " + std::string(column) + ": " + quoted(text);
+    return cell;
+  }
+  cell.kind = CellKind::kNumber;
+  cell.value = value;
+  return cell;
+}
+
+bool same_name(std::string_view a, std::string_view b) noexcept {
+  const auto space = [](char c) { return std::isspace(static_cast<unsigned char>(c)) != 0; };
+  std::size_t i = 0, j = 0;
+  while (true) {
+    while (i < a.size() && space(a[i]))
+      ++i;
+    while (j < b.size() && space(b[j]))
+      ++j;
+    if (i == a.size() || j == b.size()) return i == a.size() && j == b.size();
+    if (std::tolower(static_cast<unsigned char>(a[i])) != std::tolower(static_cast<unsigned char>(b[j])))
+      return false;
+    ++i, ++j;
+  }
+}
+
+std::optional<std::size_t> find_column(const std::vector<std::string>& header, std::string_view name) {
+  for (std::size_t i = 0; i < header.size(); ++i)
+    if (same_name(header[i], name)) return i;
+  return std::nullopt;
+}
+
+std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
+  std::string_view token;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    std::size_t end = text.find(' ', start);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string_view word = text.substr(start, end - start);
+    if (word.find(':') != std::string_view::npos) token = word;
+    start = end + 1;
+  }
+  if (token.empty()) return std::nullopt;
+  double parts[3] = {0, 0, 0};
+  int count = 0;
+  std::size_t pos = 0;
+  while (count < 3) {
+    std::size_t colon = token.find(':', pos);
+    const std::string_view part =
+        token.substr(pos, colon == std::string_view::npos ? token.npos : colon - pos);
+    const auto [ptr, ec] = std::from_chars(part.data(), part.data() + part.size(), parts[count]);
+    if (part.empty() || ec != std::errc() || ptr != part.data() + part.size() ||
+        !std::isfinite(parts[count]) || parts[count] < 0)
+      return std::nullopt;
+    ++count;
+    if (colon == std::string_view::npos) break;
+    pos = colon + 1;
+    if (count == 3) return std::nullopt;
+  }
+  // A clock's fields stay below their wrap: minutes and seconds below 60, hours below 24 ("99:02.0" in a
+  // run of "10:0x" is a corrupt cell, not a time an hour and a half on).
+  if (parts[count - 1] >= 60.0 || (count >= 2 && parts[count - 2] >= 60.0) ||
+      (count == 3 && parts[0] >= 24.0))
+    return std::nullopt;
+  if (count == 2) return std::make_pair(parts[0] * 60.0 + parts[1], 3600.0);
+  if (count == 3) return std::make_pair(parts[0] * 3600.0 + parts[1] * 60.0 + parts[2], 86400.0);
+  return std::nullopt;
+}
+
+std::vector<TimeDrop> time_order_drops(std::span<const double> t) {
+  std::vector<TimeDrop> drops;
+  const std::size_t n = t.size();
+  std::optional<std::size_t> last;  // the last row kept
+  char buf[96];
+  for (std::size_t i = 0; i < n; ++i) {
+    if (last && t[i] < t[*last]) {
+      std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", t[i], t[*last]);
+      drops.push_back({i, buf});
+      continue;
+    }
+    if (i + 1 < n && t[i] > t[i + 1]) {
+      const bool next_follows =
+          last ? t[*last] <= t[i + 1] : i + 2 < n && t[i + 1] <= t[i + 2] && t[i] > t[i + 2];
+      if (next_follows) {
+        std::snprintf(buf, sizeof buf, "time %.6g is ahead of the rows around it", t[i]);
+        drops.push_back({i, buf});
+        continue;
+      }
+    }
+    last = i;
+  }
+  return drops;
+}
+
+std::string cells_problem(std::size_t have, std::size_t need) {
+  return "too few cells (" + std::to_string(have) + ", need " + std::to_string(need) + ")";
+}
+
+std::string folded(std::string_view name) {
+  std::string out;
+  for (char c : name)
+    if (!std::isspace(static_cast<unsigned char>(c)) && c != '_')
+      out += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return out;
+}
+
+bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept {
+  return std::any_of(parts.begin(), parts.end(),
+                     [&](std::string_view part) { return text.find(part) != std::string_view::npos; });
+}
+
+double speed_unit(std::string_view name) noexcept {
+  if (holds(name, {"km/h", "kmh", "kph", "km/hr"})) return kKmhToMs;
+  if (holds(name, {"mph", "mi/h"})) return kMphToMs;
+  if (holds(name, {"m/s", "mps", "meters/second", "metres/second"})) return 1.0;
+  return 0.0;
+}
+
+}  // namespace gearpulse::log_reading

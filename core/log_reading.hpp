@@ -1,0 +1,271 @@
+#pragma once
+
+// What every log reader of core/sample_io.cpp is made of (cells, column names, clocks, time order, the
+// builder that collects a log's samples and bad rows, the line reader) and the readers of the OBD and
+// Torque layouts. Internal to core: the contract is core/sample_io.hpp.
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdio>
+#include <initializer_list>
+#include <istream>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "core/sample_io.hpp"
+
+namespace gearpulse::log_reading {
+
+inline constexpr double kKmhToMs = 1.0 / 3.6;
+inline constexpr double kMphToMs = 0.44704;
+inline constexpr double kSecondsPerMinute = 60.0;  // freq = rpm / 60
+
+std::string_view trim(std::string_view s) noexcept;
+
+// Splits on the file's delimiter (Carloop uses ", " and a trailing comma: trimming handles the first, the
+// second only adds an empty cell past the last column). At most `limit` cells are kept, so that a row of
+// millions of commas costs no more than the columns read from it; returns false when cells were left
+// unsplit.
+bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit,
+                 char delimiter);
+
+// A header wider than this is not a log (Torque's widest exports have a few hundred columns).
+inline constexpr std::size_t kMaxColumns = 4096;
+
+std::string quoted(std::string_view cell);
+
+enum class CellKind { kMissing, kNumber, kBad };
+
+struct Cell {
+  CellKind kind = CellKind::kMissing;
+  double value = kMissing;
+  std::string problem;  // set when kind == kBad
+};
+
+// `spreadsheet_missing`: tokens that Torque and spreadsheets write for "no value" ("-", "#N/A", "#DIV/0!").
+Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet_missing);
+
+// Header names compare without case and without spaces: Torque writes "Engine RPM(rpm)" in one version and
+// "Engine RPM (rpm)" in another, "GPS Speed(km/h)" beside "GPS Speed (Meters/second)".
+bool same_name(std::string_view a, std::string_view b) noexcept;
+
+std::optional<std::size_t> find_column(const std::vector<std::string>& header, std::string_view name);
+
+// Clock time of day from Torque's time columns: "06:37.7" (mm:ss.s, as a spreadsheet re-saved it),
+// "19:06:38" inside "Thu Jan 11 19:06:38 EST 2018", "06:34:27.403" inside "23-Feb-2022 06:34:27.403".
+// Returns seconds and the period after which the clock wraps (an hour or a day).
+std::optional<std::pair<double, double>> parse_clock(std::string_view text);
+
+// The rows of a log (their times, in file order) to drop so that its time never runs backwards, each
+// with its reason, in row order. A row whose time jumps ahead of the rows on both sides (a corrupt cell)
+// is the bad one, not every row after it: ahead of the next row, which follows on from the last row kept
+// (or, for the rows before any is kept, from which the row after it follows on while the jump stays ahead
+// of that one too). Otherwise a row behind the last row kept is the bad one (a clock that restarts keeps
+// the rows before the restart).
+struct TimeDrop {
+  std::size_t row;
+  std::string reason;
+};
+std::vector<TimeDrop> time_order_drops(std::span<const double> t);
+
+// Collects samples and skip reports; enforces the rules common to every format.
+class LogBuilder {
+ public:
+  LogBuilder(std::string_view name, const ReadOptions& options) : options_(options) { log_.name = name; }
+  [[nodiscard]] double row_seconds() const noexcept { return options_.row_seconds; }
+
+  // Reports a bad row. The messages kept are those of the first rows in the file, in line order, whichever
+  // order the reader finds them in (a row's time is judged once the rows after it are read).
+  void skip(std::size_t line, std::string_view reason) {
+    ++log_.skipped_count;
+    const auto at = std::upper_bound(skipped_lines_.begin(), skipped_lines_.end(), line);
+    if (static_cast<std::size_t>(at - skipped_lines_.begin()) >= options_.max_messages) return;
+    log_.skipped.insert(log_.skipped.begin() + (at - skipped_lines_.begin()),
+                        log_.name + ":" + std::to_string(line) + ": " + std::string(reason));
+    skipped_lines_.insert(at, line);
+    if (skipped_lines_.size() > options_.max_messages) {
+      skipped_lines_.pop_back();
+      log_.skipped.pop_back();
+    }
+  }
+  // Returns false (and reports) when t runs backwards or a value is beyond any road vehicle.
+  bool add(std::size_t line, Sample s) {
+    // A road vehicle's speed, and an engine-related frequency (crank speed up to a redline of 30,000 rpm
+    // and its harmonics, or a tracked ripple): anything beyond is a unit mix-up or a corrupt cell.
+    constexpr double kMaxSpeed = 150.0;   // m/s (540 km/h)
+    constexpr double kMaxFreq = 20000.0;  // Hz
+    constexpr double kMinFreq = 1e-3;     // Hz: below it (but above 0, an engine at rest) nothing turns
+    char buf[96];
+    if (!std::isfinite(s.t)) {  // the readers bound their time cells; this holds for any caller
+      skip(line, "time is not a finite number");
+      return false;
+    }
+    if (s.has_speed() && s.speed > kMaxSpeed) {
+      std::snprintf(buf, sizeof buf, "speed %.6g m/s is beyond any road vehicle", s.speed);
+      skip(line, buf);
+      return false;
+    }
+    if (s.has_freq() && (s.freq > kMaxFreq || (s.freq > 0.0 && s.freq < kMinFreq))) {
+      std::snprintf(buf, sizeof buf, "frequency %.6g Hz is outside any engine's", s.freq);
+      skip(line, buf);
+      return false;
+    }
+    // The readers drop rows out of time order before (time_order_drops); this holds for any caller.
+    if (!log_.samples.empty() && s.t < log_.samples.back().t) {
+      std::snprintf(buf, sizeof buf, "time goes backwards (%.6g after %.6g)", s.t, log_.samples.back().t);
+      skip(line, buf);
+      return false;
+    }
+    log_.samples.push_back(s);
+    add_repeat(s.t);
+    return true;
+  }
+  // A row carried by the sample added last (its own, or one an OBD row repeats between refreshes), at
+  // time t, kept in time order.
+  void add_repeat(double t) {
+    if (options_.keep_rows && !log_.samples.empty())
+      log_.rows.push_back({log_.rows.empty() ? t : std::max(t, log_.rows.back().t), log_.samples.size() - 1});
+  }
+  SampleLog& log() noexcept { return log_; }
+  [[nodiscard]] bool keeps_rows() const noexcept { return options_.keep_rows; }
+
+  SampleLog finish() {
+    const bool usable = std::any_of(log_.samples.begin(), log_.samples.end(),
+                                    [](const Sample& s) { return s.has_speed() || s.has_freq(); });
+    if (!usable) {
+      std::string msg = log_.name + ": no usable samples";
+      if (log_.skipped_count > 0) {
+        msg += " (" + std::to_string(log_.skipped_count) +
+               (log_.skipped_count == 1 ? " bad row" : " bad rows") + "; first: " + log_.skipped.front() +
+               ")";
+      } else if (log_.samples.empty() && log_.repeated_rows == 0) {
+        msg += " (no data rows after the header)";
+      } else {
+        msg += " (every row lacks both speed and frequency)";
+      }
+      throw SampleFileError(msg);
+    }
+    return std::move(log_);
+  }
+
+ private:
+  const ReadOptions& options_;
+  SampleLog log_;
+  std::vector<std::size_t> skipped_lines_;  // the line of each message in log_.skipped
+};
+
+// A reader's rows, in file order, walked against their time_order_drops(): keep() reports a dropped row
+// as skipped and returns false.
+class TimeOrder {
+ public:
+  template <class Rows, class Time>
+  TimeOrder(const Rows& rows, Time time) {
+    std::vector<double> t;
+    t.reserve(rows.size());
+    for (const auto& r : rows)
+      t.push_back(time(r));
+    drops_ = time_order_drops(t);
+    next_ = drops_.begin();
+  }
+  bool keep(std::size_t row, std::size_t line, LogBuilder& out) {
+    if (next_ == drops_.end() || next_->row != row) return true;
+    out.skip(line, (next_++)->reason);
+    return false;
+  }
+
+ private:
+  std::vector<TimeDrop> drops_;
+  std::vector<TimeDrop>::const_iterator next_;
+};
+
+inline bool blank(std::string_view line) {
+  return trim(line).empty();
+}
+
+std::string cells_problem(std::size_t have, std::size_t need);
+
+// A log's lines. The delimiter is a comma unless the header has none and has semicolons or tabs (a
+// spreadsheet saved where the comma is the decimal mark): then a comma in a data line is a decimal mark.
+struct LineReader {
+  std::istream& in;
+  std::string line;
+  std::size_t number = 0;
+  char delimiter = ',';
+  bool next() {
+    if (!std::getline(in, line)) return false;
+    ++number;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (number == 1 && line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+    if (delimiter != ',') std::replace(line.begin(), line.end(), ',', '.');
+    return true;
+  }
+  void detect_delimiter() noexcept {
+    if (line.find(',') != std::string::npos) return;
+    if (line.find(';') != std::string::npos)
+      delimiter = ';';
+    else if (line.find('\t') != std::string::npos)
+      delimiter = '\t';
+  }
+  bool cells(std::vector<std::string_view>& out, std::size_t limit) const {
+    return split_cells(line, out, limit, delimiter);
+  }
+  // The next data line that is not blank, split into its first `need` cells; one with fewer is reported
+  // and passed over. False at the end. `rows` counts the lines that are not blank, short ones included.
+  bool next_row(std::vector<std::string_view>& out, std::size_t need, LogBuilder& log) {
+    while (next()) {
+      if (blank(line)) continue;
+      ++rows;
+      cells(out, need);
+      if (out.size() >= need) return true;
+      log.skip(number, cells_problem(out.size(), need));
+    }
+    return false;
+  }
+  std::size_t rows = 0;
+};
+
+// A column name folded for matching: lower case, no spaces or underscores.
+std::string folded(std::string_view name);
+
+bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept;
+
+// The speed unit a column's name states (m/s per unit), or 0.
+double speed_unit(std::string_view name) noexcept;
+
+// ---- The readers of OBD and Torque layouts (core/obd_logs.cpp, core/torque_logs.cpp) ----
+
+// Where an OBD log's values are: its columns, the speed's unit and the time's.
+struct ObdLayout {
+  SampleFileFormat format = SampleFileFormat::kSpeedRpm;
+  std::size_t rpm = 0, speed = 0;
+  std::optional<std::size_t> time;  // none: the row counter times ReadOptions::row_seconds
+  double speed_to_ms = kKmhToMs;
+  double time_to_s = 1.0;
+  std::string speed_column;
+};
+
+// A named-column log's layout (core/obd_logs.cpp says how columns are found): none when the header has no
+// rpm or no speed column. Throws SampleFileError when the only speed column states no unit.
+std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
+                                      const std::string& name);
+
+// Carloop, `speed,rpm` and named-column logs, laid out as `layout` says.
+void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout);
+
+// Logs of one reading per row (SECONDS, PID, VALUE, UNITS).
+void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+                   TorqueSpeed choice);
+
+// Torque Pro exports.
+void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+                 TorqueSpeed choice);
+
+// Whether a Torque speed column (SampleLog::speed_column of a Torque log) is a GPS one.
+[[nodiscard]] bool torque_gps_column(std::string_view column) noexcept;
+
+}  // namespace gearpulse::log_reading

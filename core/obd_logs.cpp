@@ -1,0 +1,357 @@
+// The OBD readers: Carloop logs, `speed,rpm` logs, logs whose columns are found by their names, and logs
+// of one reading per row. Each parses its rows into ObdRow and add_obd_rows() keeps what is new.
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <limits>
+
+#include "core/log_reading.hpp"
+
+namespace gearpulse::log_reading {
+namespace {
+
+// The Carloop logger writes rows at a steady rate (it polls its PIDs round-robin) but its run-time
+// counter has a resolution of one second and is itself refreshed only once per cycle (~1.8 s). The time of
+// a row is therefore estimated from its row number by a local straight-line fit through the points where
+// the counter changed (middle of its one-second step), which brings the timing error well below a second.
+std::vector<double> smooth_row_times(const std::vector<double>& rows, const std::vector<double>& refresh_row,
+                                     const std::vector<double>& refresh_t) {
+  constexpr std::size_t kHalfWindow = 8;  // refresh points each side (~15 s)
+  std::vector<double> out(rows.size());
+  double previous = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const auto k = static_cast<std::size_t>(
+        std::lower_bound(refresh_row.begin(), refresh_row.end(), rows[i]) - refresh_row.begin());
+    const std::size_t lo = k > kHalfWindow ? k - kHalfWindow : 0;
+    const std::size_t hi = std::min(refresh_row.size(), k + kHalfWindow + 1);
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    const double n = static_cast<double>(hi - lo);
+    for (std::size_t m = lo; m < hi; ++m) {
+      const double x = refresh_row[m] - rows[i];
+      sx += x;
+      sy += refresh_t[m];
+      sxx += x * x;
+      sxy += x * refresh_t[m];
+    }
+    const double det = n * sxx - sx * sx;
+    double t = n > 0 ? sy / n : rows[i];
+    if (n >= 2 && det > 1e-9) t = (sy * sxx - sx * sxy) / det;  // intercept at rows[i]
+    out[i] = std::max(t, previous);
+    previous = out[i];
+  }
+  return out;
+}
+
+// One OBD row as read: its line, its place among the data rows, its time, rpm and speed (the log's unit).
+struct ObdRow {
+  std::size_t line;
+  double counter, t, rpm, speed;
+};
+
+// OBD values held between refreshes, in file order. A row whose rpm and speed both equal the previous
+// row's carries nothing new (a logger polls many PIDs round-robin), so it is dropped. Times count from the
+// first row but in Carloop logs (the engine's run time).
+void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout& layout) {
+  const SampleFileFormat format = layout.format;
+  const bool timed = layout.time.has_value();
+  double last_rpm = kMissing, last_speed = kMissing, last_t = -std::numeric_limits<double>::infinity();
+  bool have_last = false;
+  std::vector<std::size_t> lines;
+  std::vector<double> rows, refresh_row, refresh_t;
+  std::vector<Sample> kept;
+  // Rows repeating held values (kept for SampleLog::rows only): row counter, own time, the kept row.
+  struct Repeat {
+    double row, t;
+    std::size_t of, line;
+  };
+  std::vector<Repeat> repeats;
+  if (format != SampleFileFormat::kCarloop && timed && !parsed.empty()) {
+    const double t0 = parsed.front().t;
+    for (ObdRow& p : parsed)
+      p.t -= t0;
+  }
+  TimeOrder order(parsed, [](const ObdRow& p) { return p.t; });
+  for (std::size_t i = 0; i < parsed.size(); ++i) {
+    const ObdRow& p = parsed[i];
+    if (!order.keep(i, p.line, out)) continue;
+    if (p.t != last_t) {
+      refresh_row.push_back(p.counter);
+      refresh_t.push_back(p.t + 0.5);
+    }
+    last_t = p.t;
+    const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
+    if (have_last && same(p.rpm, last_rpm) && same(p.speed, last_speed)) {
+      ++out.log().repeated_rows;
+      if (out.keeps_rows()) repeats.push_back({p.counter, p.t, kept.size() - 1, p.line});
+      continue;
+    }
+    last_rpm = p.rpm;
+    last_speed = p.speed;
+    have_last = true;
+    lines.push_back(p.line);
+    rows.push_back(p.counter);
+    kept.push_back(Sample{p.t, p.speed * layout.speed_to_ms, p.rpm / kSecondsPerMinute});
+  }
+  if (format == SampleFileFormat::kCarloop && timed && refresh_row.size() >= 2) {
+    // The counter on a row is the whole second at its last refresh, at most one polling round old: the
+    // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
+    constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
+    const auto estimate = [&](const std::vector<double>& at, auto&& own_t, auto&& set_t) {
+      const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
+      double previous = -std::numeric_limits<double>::infinity();
+      for (std::size_t i = 0; i < at.size(); ++i) {
+        previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
+        set_t(i, previous);
+      }
+    };
+    estimate(
+        rows, [&](std::size_t i) { return kept[i].t; }, [&](std::size_t i, double t) { kept[i].t = t; });
+    if (!repeats.empty()) {
+      std::vector<double> repeat_rows(repeats.size());
+      for (std::size_t i = 0; i < repeats.size(); ++i)
+        repeat_rows[i] = repeats[i].row;
+      estimate(
+          repeat_rows, [&](std::size_t i) { return repeats[i].t; },
+          [&](std::size_t i, double t) { repeats[i].t = t; });
+    }
+  }
+  std::size_t r = 0;
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    const bool added = out.add(lines[i], kept[i]);
+    for (; r < repeats.size() && repeats[r].of == i; ++r) {
+      if (added)
+        out.add_repeat(repeats[r].t);
+      else
+        out.skip(repeats[r].line, "repeats the values of the bad row at line " + std::to_string(lines[i]));
+    }
+  }
+}
+
+}  // namespace
+
+// Logs of other OBD apps and data sets, found by their column names (see folded()): the first column
+// whose name holds "rpm"; a speed column, whose name holds "speed" and states its unit, a GPS one (its name
+// holds "gps") or another as `--speed` asks (auto: GPS when there is one); a time column named time,
+// timestamp, seconds or t, in milliseconds when its name ends in ms, (ms) or [ms]. None when the header
+// has no rpm or no speed column; an error naming the column when the only speed has no unit.
+std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
+                                      const std::string& name) {
+  ObdLayout layout;
+  layout.format = SampleFileFormat::kColumns;
+  std::optional<std::size_t> rpm, gps, other, unitless;
+  for (std::size_t i = 0; i < header.size(); ++i) {
+    const std::string f = folded(header[i]);
+    if (f.find("rpm") != std::string::npos) {
+      if (!rpm) rpm = i;
+      continue;
+    }
+    std::string base = f.substr(0, f.find_first_of("(["));
+    bool ms = f.substr(base.size()) == "(ms)" || f.substr(base.size()) == "[ms]";
+    if (!ms && base.size() > 2 && base.ends_with("ms")) {
+      base.resize(base.size() - 2);
+      ms = true;
+    }
+    if (!layout.time && (base == "time" || base == "timestamp" || base == "seconds" || base == "t")) {
+      layout.time = i;
+      layout.time_to_s = ms ? 1e-3 : 1.0;
+      continue;
+    }
+    if (f.find("speed") == std::string::npos) continue;
+    if (speed_unit(f) == 0.0) {
+      if (!unitless) unitless = i;
+    } else if (f.find("gps") != std::string::npos) {
+      if (!gps) gps = i;
+    } else if (!other) {
+      other = i;
+    }
+  }
+  if (!rpm) return std::nullopt;
+  std::optional<std::size_t> speed = choice == TorqueSpeed::kObd ? other : gps ? gps : other;
+  if (choice == TorqueSpeed::kGps) speed = gps;
+  if (!speed) {
+    if (choice != TorqueSpeed::kAuto && (gps || other))
+      throw SampleFileError(name + ":1: no " + (choice == TorqueSpeed::kGps ? "GPS" : "OBD") +
+                            " speed column (a name holding 'speed' and a unit" +
+                            (choice == TorqueSpeed::kGps ? ", and 'GPS')" : ", without 'GPS')"));
+    if (unitless)
+      throw SampleFileError(name + ":1: speed column " + quoted(header[*unitless]) +
+                            " states no unit: name it with km/h, mph or m/s");
+    return std::nullopt;
+  }
+  layout.rpm = *rpm;
+  layout.speed = *speed;
+  layout.speed_to_ms = speed_unit(folded(header[*speed]));
+  layout.speed_column = header[*speed];
+  return layout;
+}
+
+// Carloop, `speed,rpm` and named-column logs. A named-column log's times count from its first row; its
+// time cells may be clocks.
+void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
+  const SampleFileFormat format = layout.format;
+  const std::optional<std::size_t> it = layout.time;
+  const std::size_t irpm = layout.rpm, ispeed = layout.speed;
+  out.log().speed_column = layout.speed_column;
+  out.log().format = format;
+  out.log().time_from_rows = !it.has_value();
+  const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
+  std::vector<std::string_view> cells;
+  std::vector<ObdRow> parsed;
+  double last_clock = -1.0, clock_offset = 0.0;  // a clock's time of day, unwrapped past midnight
+  while (reader.next_row(cells, need, out)) {
+    const auto counter = static_cast<double>(reader.rows - 1);
+    const Cell rpm = parse_cell(cells[irpm], "rpm", false);
+    const Cell speed = parse_cell(cells[ispeed], "speed", false);
+    Cell t;
+    t.kind = CellKind::kNumber;
+    t.value = counter * out.row_seconds();
+    if (it) {
+      t = parse_cell(cells[*it], "time", false);
+      // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
+      constexpr double kMillisecondsAtLeast = 1e11;
+      if (t.kind == CellKind::kNumber)
+        t.value *=
+            format == SampleFileFormat::kColumns && t.value >= kMillisecondsAtLeast ? 1e-3 : layout.time_to_s;
+      const auto clock = format == SampleFileFormat::kColumns && t.kind == CellKind::kBad
+                             ? parse_clock(cells[*it])
+                             : std::nullopt;
+      if (clock) {
+        if (last_clock >= 0.0 && clock->first < last_clock - clock->second / 2) clock_offset += clock->second;
+        last_clock = clock->first;
+        t = Cell{CellKind::kNumber, clock->first + clock_offset, {}};
+      }
+    }
+    if (t.kind == CellKind::kMissing) {
+      out.skip(reader.number, "missing time");
+      continue;
+    }
+    const Cell* bad = t.kind == CellKind::kBad ? &t : rpm.kind == CellKind::kBad ? &rpm : &speed;
+    if (bad->kind == CellKind::kBad) {
+      out.skip(reader.number, bad->problem);
+      continue;
+    }
+    parsed.push_back({reader.number, counter, t.value, rpm.value, speed.value});
+  }
+  add_obd_rows(parsed, out, layout);
+}
+
+// One reading per row (`SECONDS;PID;VALUE;UNITS`, as phone OBD apps such as Car Scanner export): the
+// engine's rpm (the PID named Engine RPM, else the first whose unit or name is rpm) and a speed (a PID
+// whose name holds "speed" but no average or maximum, with a speed unit; GPS or OBD as `--speed` asks,
+// auto: GPS when there is one) are read; each rpm reading is a row, with the speed at its time (below). A
+// SECONDS clock that falls back by half a day has passed midnight.
+void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+                   TorqueSpeed choice) {
+  const std::size_t it = *find_column(header, "SECONDS"), ipid = *find_column(header, "PID"),
+                    ivalue = *find_column(header, "VALUE");
+  const std::optional<std::size_t> iunit = find_column(header, "UNITS");
+  const std::size_t need = std::max({it, ipid, ivalue, iunit.value_or(0)}) + 1;
+  struct Reading {
+    std::size_t line;
+    double t, value;
+    std::size_t pid;      // index into names
+    double to_ms;         // speed unit of the row (0: none)
+    std::string problem;  // why the value does not read (said only for the PIDs used)
+  };
+  std::vector<std::string> names;
+  std::vector<std::string> units;  // of each PID's first reading, folded
+  std::vector<Reading> readings;
+  std::vector<std::string_view> cells;
+  constexpr double kDay = 86400.0;
+  double last_t = -1.0, offset = 0.0;
+  while (reader.next_row(cells, need, out)) {
+    const Cell t = parse_cell(cells[it], "time", false);
+    const Cell value = parse_cell(cells[ivalue], "value", false);
+    if (t.kind != CellKind::kNumber) {
+      out.skip(reader.number, t.kind == CellKind::kMissing ? "missing time" : t.problem);
+      continue;
+    }
+    if (value.kind == CellKind::kMissing) continue;  // a PID the car did not answer
+    const std::string name = folded(cells[ipid]);
+    auto known = std::find(names.begin(), names.end(), name);
+    const std::size_t pid = static_cast<std::size_t>(known - names.begin());
+    const std::string unit = iunit ? folded(cells[*iunit]) : std::string{};
+    if (known == names.end()) {
+      names.push_back(name);
+      units.push_back(unit);
+    }
+    double seconds = t.value >= 1e11 ? t.value * 1e-3 : t.value;  // milliseconds since 1970, as above
+    if (last_t >= 0.0 && seconds + offset < last_t - kDay / 2) offset += kDay;
+    seconds += offset;
+    last_t = seconds;
+    readings.push_back(
+        {reader.number, seconds, value.value, pid, speed_unit(unit.empty() ? name : unit), value.problem});
+  }
+  const auto find_pid = [&](auto&& good) -> std::optional<std::size_t> {
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (good(i)) return i;
+    return std::nullopt;
+  };
+  std::optional<std::size_t> rpm = find_pid([&](std::size_t i) { return names[i] == "enginerpm"; });
+  if (!rpm) rpm = find_pid([&](std::size_t i) { return units[i] == "rpm" || holds(names[i], {"rpm"}); });
+  const auto speed_pid = [&](std::size_t i, bool gps) {
+    return holds(names[i], {"speed"}) && !holds(names[i], {"average", "avg", "max", "min", "limit"}) &&
+           speed_unit(units[i].empty() ? names[i] : units[i]) > 0.0 && holds(names[i], {"gps"}) == gps;
+  };
+  const std::optional<std::size_t> gps = find_pid([&](std::size_t i) { return speed_pid(i, true); });
+  const std::optional<std::size_t> obd = find_pid([&](std::size_t i) { return speed_pid(i, false); });
+  const std::optional<std::size_t> speed = choice == TorqueSpeed::kGps   ? gps
+                                           : choice == TorqueSpeed::kObd ? obd
+                                           : gps                         ? gps
+                                                                         : obd;
+  if (!rpm) throw SampleFileError(out.log().name + ": no engine rpm among the PIDs (a PID named or in rpm)");
+  if (!speed)
+    throw SampleFileError(out.log().name + ": no " +
+                          (choice == TorqueSpeed::kGps   ? "GPS speed"
+                           : choice == TorqueSpeed::kObd ? "OBD speed"
+                                                         : "speed") +
+                          " among the PIDs (a PID whose name holds 'speed', in km/h, mph or m/s)");
+  ObdLayout layout;
+  layout.format = SampleFileFormat::kPidRows;
+  layout.time = it;
+  layout.speed_to_ms = 1.0;  // each reading converted by its own unit
+  layout.speed_column = names[*speed];
+  out.log().format = layout.format;
+  out.log().speed_column = layout.speed_column;
+  // The speed at each rpm reading, interpolated between the speed readings on either side when they are
+  // at most kMaxSpeedGap apart (a phone app polls each PID every few seconds; across a longer gap the
+  // speed is not known): rpm and speed are read at different instants, and a speed held from its last
+  // reading would pair every rpm with a speed up to a polling round old.
+  constexpr double kMaxSpeedGap = 10.0;  // s
+  struct SpeedAt {
+    double t, v;
+  };
+  std::vector<SpeedAt> speeds;
+  std::vector<const Reading*> revs;
+  for (const Reading& r : readings) {
+    if (r.pid != *rpm && r.pid != *speed) continue;
+    if (!r.problem.empty()) {
+      out.skip(r.line, r.problem);
+      continue;
+    }
+    if (r.pid == *rpm)
+      revs.push_back(&r);
+    else
+      speeds.push_back({r.t, r.value * r.to_ms});
+  }
+  std::stable_sort(speeds.begin(), speeds.end(),
+                   [](const SpeedAt& a, const SpeedAt& b) { return a.t < b.t; });
+  std::vector<ObdRow> rows;
+  for (const Reading* r : revs) {
+    const auto after = std::lower_bound(speeds.begin(), speeds.end(), r->t,
+                                        [](const SpeedAt& a, double t) { return a.t < t; });
+    double v = kMissing;
+    if (after != speeds.end() && after->t == r->t) {
+      v = after->v;
+    } else if (after != speeds.end() && after != speeds.begin() &&
+               after->t - (after - 1)->t <= kMaxSpeedGap) {
+      const SpeedAt& before = *(after - 1);
+      v = before.v + (after->v - before.v) * (r->t - before.t) / (after->t - before.t);
+    }
+    rows.push_back({r->line, static_cast<double>(rows.size()), r->t, r->value, v});
+  }
+  add_obd_rows(rows, out, layout);
+}
+
+}  // namespace gearpulse::log_reading

@@ -1,0 +1,136 @@
+// The Torque Pro export reader.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <iterator>
+
+#include "core/log_reading.hpp"
+
+namespace gearpulse::log_reading {
+namespace {
+
+struct SpeedColumn {
+  const char* header;
+  double to_ms;
+  bool gps;
+};
+constexpr SpeedColumn kTorqueSpeeds[] = {
+    {"GPS Speed (Meters/second)", 1.0, true}, {"Speed (GPS)(km/h)", kKmhToMs, true},
+    {"GPS Speed (km/h)", kKmhToMs, true},     {"Speed (GPS)(mph)", kMphToMs, true},
+    {"Speed (OBD)(km/h)", kKmhToMs, false},   {"Speed (OBD)(mph)", kMphToMs, false}};
+
+// Torque's clock wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times are unwrapped in file order.
+// A clock cell that jumps away from the row before it while the row after it goes on from that one is
+// corrupt: its row is skipped, and its jump is not taken for a wrap (one such cell, "45:00" among "10:0x",
+// put every later row an hour on).
+template <typename Row>
+void unwrap_clock(std::vector<Row>& rows, LogBuilder& out) {
+  constexpr double kJump = 60.0;  // s: a log's rows are a second or so apart; more is a pause or corrupt
+  const auto apart = [](double a, double b, double period) {
+    const double d = std::abs(a - b);
+    return std::min(d, period - d);  // either way round the clock
+  };
+  double offset = 0.0, last = -1.0;
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    Row& r = rows[i];
+    const double jump = last >= 0.0 ? apart(r.clock, last, r.period) : 0.0;
+    if (jump > kJump && i + 1 < rows.size() && apart(rows[i + 1].clock, last, r.period) <= kJump) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "time jumps %.0f s away from the rows around it",
+                    std::abs(r.clock - last));
+      out.skip(r.line, buf);
+      continue;
+    }
+    if (last >= 0.0 && r.clock < last - r.period / 2) offset += r.period;
+    last = r.clock;
+    r.t = r.clock + offset;
+    rows[kept++] = r;
+  }
+  rows.resize(kept);
+}
+
+}  // namespace
+
+void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
+                 TorqueSpeed choice) {
+  out.log().format = SampleFileFormat::kTorque;
+  const std::size_t irpm = *find_column(header, "Engine RPM(rpm)");
+  std::optional<std::size_t> itime = find_column(header, "Device Time");
+  if (!itime) itime = find_column(header, "GPS Time");
+  // First GPS and first OBD speed column present.
+  std::optional<std::size_t> igps, iobd;
+  const SpeedColumn* gps_col = nullptr;
+  const SpeedColumn* obd_col = nullptr;
+  for (const SpeedColumn& c : kTorqueSpeeds) {
+    if (auto i = find_column(header, c.header)) {
+      if (c.gps && !igps) igps = i, gps_col = &c;
+      if (!c.gps && !iobd) iobd = i, obd_col = &c;
+    }
+  }
+  if (choice == TorqueSpeed::kGps && !igps)
+    throw SampleFileError(out.log().name + ":1: no GPS speed column ('GPS Speed (Meters/second)')");
+  if (choice == TorqueSpeed::kObd && !iobd)
+    throw SampleFileError(out.log().name + ":1: no OBD speed column ('Speed (OBD)(km/h)' or '(mph)')");
+
+  struct Row {
+    std::size_t line;
+    double t, gps, obd, freq;
+    double clock = -1.0, period = 0.0;  // time of day (s) and its wrap, when the log has a time column
+  };
+  std::vector<Row> rows;
+  std::size_t need = irpm + 1;
+  for (auto i : {itime, igps, iobd})
+    if (i) need = std::max(need, *i + 1);
+  std::vector<std::string_view> cells;
+  std::size_t gps_count = 0;
+  while (reader.next_row(cells, need, out)) {
+    const auto row_time = static_cast<double>(reader.rows - 1);
+    Row row{reader.number, row_time, kMissing, kMissing, kMissing};
+    if (itime) {
+      const auto clock = parse_clock(cells[*itime]);
+      if (!clock) {
+        out.skip(reader.number, "unreadable time " + quoted(cells[*itime]));
+        continue;
+      }
+      row.clock = clock->first;
+      row.period = clock->second;
+    }
+    const Cell rpm = parse_cell(cells[irpm], header[irpm], true);
+    Cell gps, obd;
+    if (igps) gps = parse_cell(cells[*igps], header[*igps], true);
+    if (iobd) obd = parse_cell(cells[*iobd], header[*iobd], true);
+    const Cell* bad = rpm.kind == CellKind::kBad ? &rpm : gps.kind == CellKind::kBad ? &gps : &obd;
+    if (bad->kind == CellKind::kBad) {
+      out.skip(reader.number, bad->problem);
+      continue;
+    }
+    row.freq = rpm.value / kSecondsPerMinute;
+    if (igps) row.gps = gps.value * gps_col->to_ms;
+    if (iobd) row.obd = obd.value * obd_col->to_ms;
+    if (std::isfinite(row.gps)) ++gps_count;
+    rows.push_back(row);
+  }
+  if (itime) unwrap_clock(rows, out);
+  const bool use_gps = choice == TorqueSpeed::kGps || (choice == TorqueSpeed::kAuto && gps_count > 0);
+  if (!use_gps && !iobd)
+    throw SampleFileError(out.log().name +
+                          ":1: no speed values (no OBD speed column and no GPS speed value)");
+  out.log().speed_column = use_gps ? gps_col->header : obd_col->header;
+  // Times count from the first row kept (a first row dropped for a corrupt time would shift them all).
+  TimeOrder order(rows, [](const Row& r) { return r.t; });
+  std::optional<double> t0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Row& r = rows[i];
+    if (!order.keep(i, r.line, out)) continue;
+    if (!t0) t0 = r.t;
+    out.add(r.line, Sample{r.t - *t0, use_gps ? r.gps : r.obd, r.freq});
+  }
+}
+bool torque_gps_column(std::string_view column) noexcept {
+  return std::any_of(std::begin(kTorqueSpeeds), std::end(kTorqueSpeeds),
+                     [&](const SpeedColumn& c) { return c.gps && column == c.header; });
+}
+
+}  // namespace gearpulse::log_reading
