@@ -86,7 +86,7 @@ TEST_CASE("synth: the speed lag is the prior until the drive's fixes show their 
   fresh.set_prior(0.5);
   CHECK(fresh.lag() == 0.5);
   fresh.set_prior(3.0);  // a receiver reports a fix within a second
-  CHECK(fresh.lag() == SpeedLag::kMaxLag);
+  CHECK(fresh.lag() == SpeedLag::kLongestLag);
 
   // One move-off tells the candidates apart, but a few fixes are no evidence against the prior.
   SpeedLag one;
