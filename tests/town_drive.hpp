@@ -1,6 +1,7 @@
 #pragma once
-// A town drive whose fixes can be made late, for the tests of how late GPS speed is (SpeedLag) and of the
-// stages that feed the synthesis its fixes.
+// The hatch the synthesis's tests drive (its ladder, idle and model), and a town drive whose fixes can be
+// made late, for the tests of how late GPS speed is (SpeedLag) and of the stages that feed the synthesis
+// its fixes.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -14,14 +15,21 @@ namespace gearpulse::test {
 inline constexpr double kIdle = 13.3;                                           // Hz
 inline const std::vector<double> kHatch = {0.125, 0.225, 0.347, 0.471, 0.574};  // (m/s)/Hz
 
-inline std::shared_ptr<const gearpulse::GearModel> hatch_model(double speed_lag = 0.0) {
-  auto m = std::make_shared<gearpulse::GearModel>();
-  if (speed_lag != 0.0) m->extra["speed_lag"] = speed_lag;
-  for (double t : kHatch)
-    m->gears.push_back({t, 1.0 / static_cast<double>(kHatch.size()), 0.0});
+// A model of the ladder `theta` ((m/s)/Hz, each ratio times `scale`), its gears equally used.
+inline std::shared_ptr<const GearModel> model_of(const std::vector<double>& theta, double scale = 1.0) {
+  auto m = std::make_shared<GearModel>();
+  for (double t : theta)
+    m->gears.push_back({t * scale, 1.0 / static_cast<double>(theta.size()), 0.0});
   m->sigma_speed = 0.1;
   m->sigma_freq = 0.3;
   m->outlier_weight = 0.1;
+  return m;
+}
+
+// The hatch's model, its fit having found the speeds `speed_lag` s late against the revs.
+inline std::shared_ptr<const GearModel> hatch_model(double speed_lag = 0.0) {
+  auto m = std::make_shared<GearModel>(*model_of(kHatch));
+  if (speed_lag != 0.0) m->extra["speed_lag"] = speed_lag;
   return m;
 }
 

@@ -1,7 +1,7 @@
 #pragma once
 // The drives the synthesis's tests step SpeedSynthesizer through: drives scripted phase by phase at 1 Hz,
 // and drives recorded from the simulator (tests/core/data) with the model fitted for each. The car is the
-// town drive's hatch (kHatch, kIdle in tests/town_drive.hpp) unless a test gives its own ladder.
+// town drive's hatch (kHatch, kIdle, model_of in tests/town_drive.hpp) unless a test gives its own ladder.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
@@ -21,17 +21,6 @@
 namespace gearpulse::test {
 
 inline constexpr double kKmh = 1.0 / 3.6;
-
-// A model of the ladder `theta` ((m/s)/Hz, each ratio times `scale`), its gears equally used.
-inline std::shared_ptr<const GearModel> model_of(const std::vector<double>& theta, double scale = 1.0) {
-  auto m = std::make_shared<GearModel>();
-  for (double t : theta)
-    m->gears.push_back({t * scale, 1.0 / static_cast<double>(theta.size()), 0.0});
-  m->sigma_speed = 0.1;
-  m->sigma_freq = 0.3;
-  m->outlier_weight = 0.1;
-  return m;
-}
 
 // A scripted drive at 1 Hz: each phase holds a gear (0 = declutched at idle) and an acceleration.
 struct Phase {
