@@ -550,17 +550,17 @@ double ratio_sharpness(const MixtureData& d, std::size_t begin, std::size_t end,
 // A logger that reads speed and engine speed at different instants (OBD-II polls its PIDs in turn and
 // the ECU's speed may lag; a GPS fix is reported after the audio it belongs to, by up to a second or
 // so whatever the fix rate) pairs them with a time offset; at acceleration a the speed is then off by
-// a * offset, in first gear as much as the step between gears. The offset, searched over +-2 s (or one
-// sampling interval if longer), coarse then fine, is the one that makes the gear lines sharpest; the
-// speeds are moved to it. The search looks at a contiguous stretch of at most kAlignSamples samples
-// (enough to see the lag, and it keeps a week-long log fast). Without time stamps nothing changes.
+// a * offset, in first gear as much as the step between gears. The offset, searched over +-kLagSearch
+// (2 s, or one sampling interval if longer), coarse then fine, is the one that makes the gear lines
+// sharpest; the speeds are moved to it. The search looks at a contiguous stretch of at most kAlignSamples
+// samples (enough to see the lag, and it keeps a week-long log fast). Without time stamps nothing changes.
 struct Aligned {
   MixtureData data;
   double lag = 0.0;  // s: the speed paired with engine speed at t is the one logged at t + lag
 };
 
 Aligned aligned_channels(const MixtureData& all) {
-  constexpr double kMaxLag = 2.0;                // s
+  constexpr double kLagSearch = 2.0;             // s: offsets searched, -kLagSearch to +kLagSearch
   constexpr std::size_t kAlignSamples = 200000;  // samples the search looks at
   const std::size_t n = all.size();
   if (all.t.size() != n || n < 30) return {all, 0.0};
@@ -580,7 +580,7 @@ Aligned aligned_channels(const MixtureData& all) {
     return ratio_sharpness(all, begin, end, delta, gap, max_gap);
   };
   const double unshifted = sharpness(0.0);
-  const double range = std::max(kMaxLag, gap);
+  const double range = std::max(kLagSearch, gap);
   const double coarse = range / 8.0;
   double best_delta = 0.0;
   double best = unshifted;

@@ -56,7 +56,7 @@ bool SpeedLag::History::at(double t, double& value) const noexcept {
 }
 
 void SpeedLag::set_prior(double lag) noexcept {
-  prior_ = std::isfinite(lag) ? std::clamp(lag, 0.0, kMaxLag) : 0.0;
+  prior_ = std::isfinite(lag) ? std::clamp(lag, 0.0, kLongestLag) : 0.0;
   choose();
 }
 

@@ -9,7 +9,7 @@
 // Learned from the drive's own fixes by cross-correlation: for each fix faster than kMinSpeed, taken while
 // the speed changes by kMinChange a second or more (at a steady speed every candidate fits alike but for
 // the revs' noise, which a reading interpolated between two others averages down), and for each candidate
-// lag d (0 to kMaxLag in steps of kStep), the revs at t - d (interpolated between those noted) are
+// lag d (0 to kLongestLag in steps of kStep), the revs at t - d (interpolated between those noted) are
 // turned into a speed by the nearest gear of the ladder, and the fix's squared log-departure from it,
 // bounded by kClip (a shift or a declutch, which no gear explains, counts alike at every lag), is
 // averaged with a memory of kMemory fixes. The drive's own lag is the candidate of least average,
@@ -38,16 +38,16 @@ class SpeedLag {
   // of about 1 in 1000 per candidate that the fixes' noise alone does it, about 1 in 100 over the ten
   // candidates against the prior's.
   static constexpr double kSignificance = 3.0;
-  static constexpr double kStep = 0.1;    // s between candidate lags
-  static constexpr double kMaxLag = 1.0;  // s: a receiver reports a fix within its period (1 s at 1 Hz)
-  static constexpr int kCandidates = 11;  // 0, kStep, ..., kMaxLag
+  static constexpr double kStep = 0.1;        // s between candidate lags
+  static constexpr double kLongestLag = 1.0;  // s: a receiver reports a fix within its period (1 s at 1 Hz)
+  static constexpr int kCandidates = 11;      // 0, kStep, ..., kLongestLag
   static constexpr double kMaxGap = 2.5;  // s: revs read further apart do not say what the engine did between
 
   // Every step: the engine frequency at step time t (Hz; NaN or <= 0: none).
   void note_freq(double t, double freq) noexcept { revs_.add(t, freq); }
   // After every step: the speed the filter holds (its belief's mean) at t.
   void note_speed(double t, double speed) noexcept { speed_.add(t, speed); }
-  // The lag believed before the drive's fixes show their own (s, clamped to 0..kMaxLag): the model's
+  // The lag believed before the drive's fixes show their own (s, clamped to 0..kLongestLag): the model's
   // extra.speed_lag. May change between any two steps (a retrained model); what was learned is kept.
   void set_prior(double lag) noexcept;
   // Standard errors by which the drive's lag must beat the prior (0: the best candidate is the lag
@@ -71,8 +71,8 @@ class SpeedLag {
   class History {
    public:
     // Values closer than kSpacing to the one kept before them replace the newest rather than adding one, so
-    // the history spans kSize x kSpacing (8 s) whatever the hop: a fix's lag (up to kMaxLag) plus its age
-    // (gps.latency, a few seconds at most) plus the kMaxGap a reading may be interpolated over.
+    // the history spans kSize x kSpacing (8 s) whatever the hop: a fix's lag (up to kLongestLag) plus its
+    // age (gps.latency, a few seconds at most) plus the kMaxGap a reading may be interpolated over.
     static constexpr int kSize = 160;
     static constexpr double kSpacing = kStep / 2.0;  // s
     void add(double t, double value) noexcept;

@@ -1,6 +1,7 @@
 #pragma once
-// A town drive whose fixes can be made late, for the tests of how late GPS speed is (SpeedLag) and of the
-// stages that feed the synthesis its fixes.
+// The hatch the synthesis's tests drive (its ladder, idle and model), and a town drive whose fixes can be
+// made late, for the tests of how late GPS speed is (SpeedLag) and of the stages that feed the synthesis
+// its fixes.
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -14,14 +15,21 @@ namespace gearpulse::test {
 inline constexpr double kIdle = 13.3;                                           // Hz
 inline const std::vector<double> kHatch = {0.125, 0.225, 0.347, 0.471, 0.574};  // (m/s)/Hz
 
-inline std::shared_ptr<const gearpulse::GearModel> hatch_model(double speed_lag = 0.0) {
-  auto m = std::make_shared<gearpulse::GearModel>();
-  if (speed_lag != 0.0) m->extra["speed_lag"] = speed_lag;
-  for (double t : kHatch)
-    m->gears.push_back({t, 1.0 / static_cast<double>(kHatch.size()), 0.0});
+// A model of the ladder `theta` ((m/s)/Hz, each ratio times `scale`), its gears equally used.
+inline std::shared_ptr<const GearModel> model_of(const std::vector<double>& theta, double scale = 1.0) {
+  auto m = std::make_shared<GearModel>();
+  for (double t : theta)
+    m->gears.push_back({t * scale, 1.0 / static_cast<double>(theta.size()), 0.0});
   m->sigma_speed = 0.1;
   m->sigma_freq = 0.3;
   m->outlier_weight = 0.1;
+  return m;
+}
+
+// The hatch's model, its fit having found the speeds `speed_lag` s late against the revs.
+inline std::shared_ptr<const GearModel> hatch_model(double speed_lag = 0.0) {
+  auto m = std::make_shared<GearModel>(*model_of(kHatch));
+  if (speed_lag != 0.0) m->extra["speed_lag"] = speed_lag;
   return m;
 }
 
@@ -64,14 +72,26 @@ class TownDrive {
   }
 };
 
-// The first move-off of a TownDrive at the daemon's feed (the revs every 0.1 s, a fix once a second and 0.5
-// s late, held 1.5 s after GPS is lost), GPS lost in first gear 2 s after moving off: the outage's distance
-// error, %, of `step(t, gps, freq, fresh)` (the speed output; gps NaN once lost).
+// Walks `cycles` of a TownDrive at hops of `hop` s, calling at_hop(t, freq, fix) at each: `fix` is the speed
+// `late` s before t once a second from t = late on (a fix `late` s late), NaN at the other hops.
+template <class AtHop>
+void walk_town_drive(double cycles, double hop, double late, AtHop&& at_hop) {
+  const TownDrive drive;
+  const int per_fix = static_cast<int>(std::lround(1.0 / hop));
+  for (int k = 0; k * hop < cycles * TownDrive::kCycle; ++k) {
+    const double t = k * hop;
+    const bool fix = k % per_fix == 0 && t >= late;
+    at_hop(t, drive.at(t).freq, fix ? drive.at(t - late).speed : std::numeric_limits<double>::quiet_NaN());
+  }
+}
+
+// A TownDrive at the daemon's feed (the revs every 0.1 s, a fix once a second and 0.5 s late, held 1.5 s
+// after GPS is lost), GPS lost at `lost` s and back at `back`: the outage's distance error, %, of
+// `step(t, gps, freq, fresh)` (the speed output; gps NaN once lost).
 template <class Step>
-double first_launch_outage_error(Step&& step) {
+double town_drive_outage_error(double lost, double back, Step&& step) {
   constexpr double kLate = 0.5;  // s
   const TownDrive drive;
-  const double lost = TownDrive::kSecondGear - 1.0, back = TownDrive::kCruiseEnd;
   double fix = std::numeric_limits<double>::quiet_NaN(), fix_t = -10.0, synthesized = 0.0, driven = 0.0;
   for (int k = 0; k * 0.1 < back; ++k) {
     const double t = k * 0.1;
@@ -83,6 +103,12 @@ double first_launch_outage_error(Step&& step) {
     if (t >= lost) synthesized += speed * 0.1, driven += now.speed * 0.1;
   }
   return 100.0 * (synthesized - driven) / driven;
+}
+
+// The same over the first move-off, GPS lost in first gear 2 s after moving off.
+template <class Step>
+double first_launch_outage_error(Step&& step) {
+  return town_drive_outage_error(TownDrive::kSecondGear - 1.0, TownDrive::kCruiseEnd, step);
 }
 
 }  // namespace gearpulse::test

@@ -1,36 +1,41 @@
 #include <catch2/catch.hpp>
 
-#include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <memory>
 #include <random>
-#include <vector>
 
 #include "core/speed_lag.hpp"
 #include "core/speed_synth.hpp"
 #include "tests/town_drive.hpp"
 
-using gearpulse::kMissing;
 using gearpulse::SpeedLag;
 using gearpulse::SpeedSynthesizer;
 using gearpulse::SynthTuning;
 using gearpulse::test::first_launch_outage_error;
 using gearpulse::test::hatch_model;
 using gearpulse::test::kHatch;
+using gearpulse::test::town_drive_outage_error;
 using gearpulse::test::TownDrive;
 using gearpulse::test::Truth;
+using gearpulse::test::walk_town_drive;
+
+namespace {
+
+// Teaches `lag` `cycles` of the town drive at hops of `hop` s, a fix once a second `late` s late.
+void learn_town_drive(SpeedLag& lag, double late, double cycles, double hop = 0.1) {
+  walk_town_drive(cycles, hop, late, [&](double t, double freq, double fix) {
+    lag.note_freq(t, freq);
+    if (!std::isnan(fix)) lag.learn(t, fix, kHatch);
+  });
+}
+
+}  // namespace
 
 TEST_CASE("synth: the speed lag is learned from fixes taken while the speed changes") {
   // Fixes once a second, `late` s late, the revs every 0.1 s, the drive's gears the ladder.
   for (const double late : {0.0, 0.5, 0.9}) {
     SpeedLag lag;
-    const TownDrive drive;
-    for (int k = 0; k * 0.1 < 5.0 * TownDrive::kCycle; ++k) {
-      const double t = k * 0.1;
-      lag.note_freq(t, drive.at(t).freq);
-      if (k % 10 == 0 && t >= late) lag.learn(t, drive.at(t - late).speed, kHatch);
-    }
+    learn_town_drive(lag, late, 5.0);
     INFO("lag " << late << " s, learned " << lag.lag());
     CHECK(std::abs(lag.lag() - late) < 0.15);
   }
@@ -41,13 +46,7 @@ TEST_CASE("synth: the speed lag is learned at any tracker hop, and a prior holds
   // a fix (up to 1 s) and its age must still lie within it.
   for (const double hop : {0.005, 0.02, 0.1}) {
     SpeedLag lag;
-    const TownDrive drive;
-    const int per_fix = static_cast<int>(std::lround(1.0 / hop));
-    for (int k = 0; k * hop < 5.0 * TownDrive::kCycle; ++k) {
-      const double t = k * hop;
-      lag.note_freq(t, drive.at(t).freq);
-      if (k % per_fix == 0 && t >= 0.5) lag.learn(t, drive.at(t - 0.5).speed, kHatch);
-    }
+    learn_town_drive(lag, 0.5, 5.0, hop);
     INFO("hop " << hop << " s, learned " << lag.lag());
     CHECK(lag.significant());
     CHECK(std::abs(lag.lag() - 0.5) < 0.15);
@@ -66,22 +65,13 @@ TEST_CASE("synth: at 10 Hz a launch whose GPS came late is followed in its gear 
   // 1.2 s after it bit in the fifth move-off, the car gaining 1.5 m/s^2. Taken as the speed of its own
   // moment, the last fix (0.75 m/s slow) contradicted second gear, whose line the revs followed, and the
   // outage began from its speed: -3.5 % over the outage.
-  const TownDrive drive;
   const double lost = 4.0 * TownDrive::kCycle + TownDrive::kSecondGear + 1.2;
   const double back = 4.0 * TownDrive::kCycle + TownDrive::kCruiseEnd;
   const auto run = [&](const SynthTuning& tuning) {
     SpeedSynthesizer synth(hatch_model(), tuning);
-    double fix = kMissing, fix_t = -10.0, synthesized = 0.0, driven = 0.0;
-    for (int k = 0; k * 0.1 < back; ++k) {
-      const double t = k * 0.1;
-      const Truth now = drive.at(t);
-      bool fresh = false;
-      if (k % 10 == 0 && t < lost) fix = drive.at(std::max(t - 0.5, 0.0)).speed, fix_t = t, fresh = true;
-      const double gps = t < lost || t - fix_t < 1.5 ? fix : kMissing;
-      const auto o = synth.step(t, gps, now.freq, fresh);
-      if (t >= lost) synthesized += o.speed * 0.1, driven += now.speed * 0.1;
-    }
-    return 100.0 * (synthesized - driven) / driven;
+    return town_drive_outage_error(lost, back, [&](double t, double gps, double freq, bool fresh) {
+      return synth.step(t, gps, freq, fresh).speed;
+    });
   };
   const double error = run({});
   SynthTuning as_current;
@@ -92,25 +82,16 @@ TEST_CASE("synth: at 10 Hz a launch whose GPS came late is followed in its gear 
 }
 
 TEST_CASE("synth: the speed lag is the prior until the drive's fixes show their own significantly") {
-  const TownDrive drive;
-  // Fixes once a second, `late` s late, over `cycles` of the town drive.
-  const auto learn = [&](SpeedLag& lag, double late, double cycles) {
-    for (int k = 0; k * 0.1 < cycles * TownDrive::kCycle; ++k) {
-      const double t = k * 0.1;
-      lag.note_freq(t, drive.at(t).freq);
-      if (k % 10 == 0 && t >= late) lag.learn(t, drive.at(t - late).speed, kHatch);
-    }
-  };
   SpeedLag fresh;
   fresh.set_prior(0.5);
   CHECK(fresh.lag() == 0.5);
   fresh.set_prior(3.0);  // a receiver reports a fix within a second
-  CHECK(fresh.lag() == SpeedLag::kMaxLag);
+  CHECK(fresh.lag() == SpeedLag::kLongestLag);
 
   // One move-off tells the candidates apart, but a few fixes are no evidence against the prior.
   SpeedLag one;
   one.set_prior(0.5);
-  learn(one, 0.0, 1.0);
+  learn_town_drive(one, 0.0, 1.0);
   INFO("after one cycle: " << one.lag() << " s");
   CHECK(!one.significant());
   CHECK(one.lag() == 0.5);
@@ -119,7 +100,7 @@ TEST_CASE("synth: the speed lag is the prior until the drive's fixes show their 
   for (const double late : {0.0, 0.9}) {
     SpeedLag five;
     five.set_prior(0.5);
-    learn(five, late, 5.0);
+    learn_town_drive(five, late, 5.0);
     INFO("late " << late << " s, after five cycles: " << five.lag() << " s");
     CHECK(five.significant());
     CHECK(std::abs(five.lag() - late) < 0.15);
@@ -200,12 +181,9 @@ TEST_CASE("synth: a fix stamped after its step is counted from its stamp, and te
   // A drive whose fixes, each the speed 0.2 s before its step, are stamped 0.3 s after it: the lag it
   // learns is against the stamps (0.5 s), as the fit's, and is taken out as 0.2 s from the step.
   SpeedSynthesizer synth(hatch_model(0.0));
-  const TownDrive drive;
-  for (int k = 0; k * 0.1 < 5.0 * TownDrive::kCycle; ++k) {
-    const double t = k * 0.1;
-    const bool fix = k % 10 == 0 && t >= 0.2;
-    synth.step(t, fix ? drive.at(t - 0.2).speed : kMissing, drive.at(t).freq, fix, -0.3);
-  }
+  walk_town_drive(5.0, 0.1, 0.2, [&](double t, double freq, double fix) {
+    synth.step(t, fix, freq, !std::isnan(fix), -0.3);
+  });
   INFO("lag against the stamps " << synth.fix_lag(0.0) << " s");
   CHECK(std::abs(synth.fix_lag(0.0) - 0.5) < 0.15);
   CHECK(std::abs(synth.fix_lag(-0.3) - 0.2) < 0.15);

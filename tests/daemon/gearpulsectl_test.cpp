@@ -1,0 +1,198 @@
+// gearpulsectl against the built gearpulsed, and against a socket that is not gearpulsed: its tables and
+// JSON, and how it fails.
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "daemon/control_server.hpp"
+#include "tests/daemon/daemon_process.hpp"
+#include "tests/test_util.hpp"
+
+using gearpulse::test::config_for;
+using gearpulse::test::kDaemon;
+using gearpulse::test::LineClient;
+using gearpulse::test::Process;
+using gearpulse::test::read_text;
+using gearpulse::test::TempDir;
+using gearpulse::test::wait_for_status;
+using gearpulse::test::write_text;
+using nlohmann::json;
+
+TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly without a daemon") {
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  {
+    Process absent({ctl, "--socket", sock, "status"}, dir / "absent.txt");
+    const auto rc = absent.wait();
+    REQUIRE(rc.has_value());
+    CHECK(*rc != 0);
+    CHECK(read_text(dir / "absent.txt").find("gearpulsed is not running") != std::string::npos);
+    Process unknown({ctl, "--socket", sock, "--json", "frobnicate"}, dir / "unknown.txt");
+    CHECK(unknown.wait() == 2);
+    CHECK(read_text(dir / "unknown.txt").find("unknown command 'frobnicate'") != std::string::npos);
+  }
+  write_text(dir / "gearpulse.toml", config_for(dir));
+  Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
+  REQUIRE(wait_for_status(dir, daemon).is_object());
+
+  Process table({ctl, "--socket", sock, "status"}, dir / "table.txt");
+  CHECK(table.wait() == 0);
+  const std::string text = read_text(dir / "table.txt");
+  CHECK(text.find("source") != std::string::npos);
+  CHECK(text.find("model        learning") != std::string::npos);
+
+  Process full({ctl, "--socket", sock, "status"}, "/dev/full");  // a reply that cannot be written
+  CHECK(full.wait() == 2);
+
+  Process raw({ctl, "--socket", sock, "status", "--json"}, dir / "raw.txt");
+  CHECK(raw.wait() == 0);
+  const json parsed = json::parse(read_text(dir / "raw.txt"));
+  CHECK(parsed["ok"] == true);
+  CHECK(parsed.contains("pulses"));
+
+  Process refuse({ctl, "--socket", sock, "reset-model"}, dir / "refuse.txt");
+  CHECK(refuse.wait() == 2);
+  CHECK(read_text(dir / "refuse.txt").find("--confirm") != std::string::npos);
+  Process reset({ctl, "--socket", sock, "reset-model", "--confirm"}, dir / "reset.txt");
+  CHECK(reset.wait() == 0);
+  Process gears({ctl, "--socket", sock, "gears"}, dir / "gears.txt");
+  CHECK(gears.wait() == 0);
+  Process retrain({ctl, "--socket", sock, "retrain", "--json"}, dir / "retrain.txt");
+  CHECK(retrain.wait() == 0);
+  CHECK(json::parse(read_text(dir / "retrain.txt"))["queued"] == true);
+
+  daemon.signal(SIGTERM);
+  CHECK(daemon.wait() == 0);
+}
+
+TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe it leaves") {
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  // The server refuses another user's connection when the daemon's own user (root here) holds every slot.
+  const std::string as_nobody = "/usr/bin/setpriv --reuid=65534 --regid=65534 --clear-groups ";
+  if (::geteuid() != 0 || !std::filesystem::exists("/usr/bin/setpriv") ||
+      std::system((as_nobody + "test -x " + ctl).c_str()) != 0) {
+    std::puts("GEARPULSE_SKIP: needs root and a gearpulsectl that user nobody may run");
+    return;
+  }
+  std::filesystem::permissions(dir.path(), std::filesystem::perms::all);
+  const std::string sock = (dir / "ctl.sock").string();
+  gearpulse::daemon::ControlServer server(
+      sock,
+      [](const json&) {
+        return json{{"x", 1}};
+      },
+      gearpulse::daemon::ControlLimits{.max_clients = 1});
+  server.start();
+  std::filesystem::permissions(sock, std::filesystem::perms::all);
+  LineClient holder(sock);  // takes the one slot
+  REQUIRE(holder.send_all("{\"cmd\":\"status\"}\n"));
+  REQUIRE(holder.read_line().has_value());
+  // The server writes its reason and closes without reading: most runs' request then meets a closed
+  // socket (EPIPE), and the reason waiting in it is what the user must see.
+  for (int i = 0; i < 10; ++i) {
+    const auto out = dir / ("busy" + std::to_string(i) + ".txt");
+    Process p({"/usr/bin/setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", ctl, "--socket", sock,
+               "status"},
+              out);
+    CHECK(p.wait() == 1);
+    CHECK(read_text(out) == "gearpulsectl: too many clients\n");
+  }
+  // A path that is no socket is named as such, not as a daemon that is not running.
+  write_text(dir / "plain", "x");
+  Process plain({ctl, "--socket", (dir / "plain").string(), "status"}, dir / "plain.txt");
+  CHECK(plain.wait() == 3);
+  CHECK(read_text(dir / "plain.txt").find("is not a socket") != std::string::npos);
+}
+
+namespace {
+// A listening Unix socket at `path` that is not gearpulsed, for gearpulsectl to talk to.
+int listen_unix(const std::string& path) {
+  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  REQUIRE(listener >= 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
+  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
+  REQUIRE(::listen(listener, 4) == 0);
+  return listener;
+}
+}  // namespace
+
+TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of aborting") {
+  // Something else on the socket (or a broken daemon) answers valid JSON that is not a status.
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  const int listener = listen_unix(sock);
+  // The last two: a status whose "gps" is no object (found after the speed line was printed, which then
+  // stood above the error), and a reply that never ends (read without bound before).
+  const std::vector<std::string> replies = {R"([1,2])",
+                                            R"({"ok":"yes"})",
+                                            R"({"ok":false,"error":5})",
+                                            R"({"ok":true,"gears":[1]})",
+                                            R"({"ok":true,"speed":1.5,"gps":5})",
+                                            std::string(2 << 20, ' ')};
+  std::thread server([&] {
+    for (const std::string& reply : replies) {
+      const int c = ::accept(listener, nullptr, nullptr);
+      if (c < 0) return;
+      char buf[512];
+      (void)!::read(c, buf, sizeof buf);
+      const std::string line = reply + "\n";
+      (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);  // the client may stop reading first
+      ::close(c);
+    }
+  });
+  for (const std::string& reply : replies) {
+    INFO(reply.substr(0, 80));
+    Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
+    const auto rc = p.wait();
+    REQUIRE(rc.has_value());
+    CHECK(*rc == 1);
+    const std::string out = read_text(dir / "out.txt");
+    CHECK(out.rfind("gearpulsectl: ", 0) == 0);
+    CHECK(out.find("speed ") == std::string::npos);  // nothing of a status printed above the error
+  }
+  server.join();
+  ::close(listener);
+}
+
+TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of printing it") {
+  // Printed with --json (recursively), a reply nested 100,000 deep would overflow the stack or grow to
+  // gigabytes of indentation first.
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  const int listener = listen_unix(sock);
+  std::thread server([&] {
+    const int c = ::accept(listener, nullptr, nullptr);
+    if (c < 0) return;
+    char buf[512];
+    (void)!::read(c, buf, sizeof buf);
+    const std::string line =
+        R"({"ok":true,"x":)" + std::string(100000, '[') + std::string(100000, ']') + "}\n";
+    (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
+    ::close(c);
+  });
+  Process p({ctl, "--socket", sock, "status", "--json"}, dir / "out.txt");
+  const auto rc = p.wait();
+  server.join();
+  ::close(listener);
+  REQUIRE(rc.has_value());
+  CHECK(*rc == 1);
+  CHECK(read_text(dir / "out.txt") == "gearpulsectl: gearpulsed sent a reply nested deeper than 64 levels\n");
+}
