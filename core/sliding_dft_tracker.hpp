@@ -6,11 +6,11 @@
 // window needs), detrended (a 12-14 V line shows ripple, not the level), Hann-windowed, zero-padded and
 // transformed with FFTW. Every candidate fundamental is weighed by the likelihood ratio of its harmonic
 // ladder (f/2, f, 2f, 3f; see sliding_dft_tracker_evidence.hpp), and a hidden Markov chain over the
-// candidates plus an "engine absent" state carries the evidence from hop to hop (a line moves within a
-// steady, slew or shift gate that follows the track's drift). Fixed tones of other equipment are learned
-// over tens of seconds and discounted. The estimate is refined below the bin width by a joint
-// least-squares fit of all orders (with the track's prediction as prior), and every output carries the
-// posterior probability that it is the engine (its confidence) and an SNR.
+// candidates and their rate of change plus an "engine absent" state carries the evidence from hop to hop
+// (a line moves at its rate within a steady gate, or its rate changes within a slew or shift gate). Fixed
+// tones of other equipment are learned over tens of seconds and discounted. The estimate is refined below the
+// bin width by a joint least-squares fit of all orders (with the track's prediction as prior), and every
+// output carries the posterior probability that it is the engine (its confidence) and an SNR.
 //
 // Real-time contract: all memory and FFT plans are made at construction; push(), pop(), at() and
 // nearest() never allocate, never lock and never throw.

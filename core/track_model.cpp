@@ -12,11 +12,21 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kStopRate = 0.05;
 constexpr double kStartRate = 0.5;
 constexpr double kJumpRate = 0.02;
-// A continuing line moves within one of three gates per hop: steady (cruise: a few Hz/s), the slew of
-// an accelerating engine, or a gear shift; shares of each.
+// The line's rate of change is a state: layers of rates from -max slew to +max slew, this far apart
+// (Hz/s), at most kMaxRateLayers either side of 0. A continuing line moves at its layer's rate within a
+// steady gate (cruise wobble, a rate between layers: a few Hz/s), unless its rate changes, within the slew
+// of an accelerating engine (a ramp starts or ends) or a gear shift, about as often each.
 constexpr double kSteadyHzPerS = 5.0;
-constexpr double kSteadyShare = 0.5, kSlewShare = 0.4;  // the rest: shift
-// Memory (per hop) of the track's drift, which moves the steady and slew gates.
+constexpr double kRateStepHzPerS = 10.0;
+constexpr int kMaxRateLayers = 8;
+// An engine's rate of change holds for about a second (a gear's ramp lasts seconds, a shift a few tenths,
+// a cruise or engine braking many): the rate changes at 1 / kRateMemoryS per second, half of the changes
+// within the slew gate and half within the shift gate. Chosen on the generated scenes' tuning set (0.5,
+// 0.7, 1 and 2 s; see docs/tracker.md).
+constexpr double kRateMemoryS = 0.7;
+constexpr double kShiftOfChange = 0.5;
+// Memory (per hop) of the track's drift, from which the next hop's line is predicted (the prior of the
+// sub-bin estimate).
 constexpr double kDriftMemory = 0.7;
 // An estimate is right within 5 % of the engine's fundamental; a confident one has 0.8 of the posterior
 // there (the tracker's "tracked").
@@ -34,13 +44,25 @@ TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin,
       df_(df_hz),
       lobe_(lobe) {
   const auto states = static_cast<std::size_t>(last_ - first_ + 1);
-  post_.assign(states, 0.0);
-  loglik_.assign(states, 0.0);
-  cumsum_.assign(states + 1, 0.0);
   const double dt = hop_s_;
+  const int side = std::min(kMaxRateLayers, static_cast<int>(std::ceil(max_slew_ / kRateStepHzPerS - 1e-9)));
+  layers_ = 2 * side + 1;
+  rate_bins_.assign(static_cast<std::size_t>(layers_), 0.0);
+  for (int j = 0; j < layers_; ++j)
+    rate_bins_[static_cast<std::size_t>(j)] = side > 0 ? max_slew_ * (j - side) / side * dt / df_ : 0.0;
+  post_.assign(states * static_cast<std::size_t>(layers_), 0.0);
+  next_.assign(post_.size(), 0.0);
+  marginal_.assign(states, 0.0);
+  loglik_.assign(states, 0.0);
+  moved_.assign(states, 0.0);
+  cumsum_.assign(states + 1, 0.0);
   gate_steady_ = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df_)) + 1;
   gate_slew_ = static_cast<int>(std::ceil((max_slew_ * dt) / df_)) + 2;
   gate_shift_ = static_cast<int>(std::ceil((std::max(max_slew_, config.shift_slew_hz_per_s) * dt) / df_)) + 2;
+  const double change = 1.0 - std::exp(-dt / kRateMemoryS);
+  keep_ = 1.0 - change;
+  shift_share_ = kShiftOfChange * change;
+  slew_share_ = change - shift_share_;
   p_stop_ = 1.0 - std::exp(-kStopRate * dt);
   p_start_ = 1.0 - std::exp(-kStartRate * dt);
   p_jump_ = 1.0 - std::exp(-kJumpRate * dt);
@@ -50,29 +72,31 @@ TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin,
 void TrackModel::reset() noexcept {
   post_absent_ = 0.5;
   std::fill(post_.begin(), post_.end(), 0.5 / static_cast<double>(post_.size()));
+  std::fill(marginal_.begin(), marginal_.end(), 0.5 / static_cast<double>(marginal_.size()));
   drift_hz_per_s_ = 0.0;
   last_freq_ = kNaN;
   anchor_freq_ = kNaN;
   anchor_age_ = 0;
 }
 
-// Prior of this hop from the previous posterior: a continuing line moves within a steady, a slew or a
-// shift gate (box kernels by prefix sums); the engine may stop, start, or be found anywhere.
+// Prior of this hop from the previous posterior: a continuing line moves by its layer's rate within the
+// steady gate, or within a slew or shift gate that redraws its rate (box kernels by prefix sums); the
+// engine may stop, start, or be found anywhere.
 void TrackModel::predict() noexcept {
-  const auto n = static_cast<int>(post_.size());
-  cumsum_[0] = 0.0;
-  for (int i = 0; i < n; ++i)
-    cumsum_[static_cast<std::size_t>(i) + 1] =
-        cumsum_[static_cast<std::size_t>(i)] + post_[static_cast<std::size_t>(i)];
-  const double present = cumsum_[static_cast<std::size_t>(n)];
-  const auto box = [&](int i, int g) {
-    const int lo = std::max(0, i - g), hi = std::min(n - 1, i + g);
-    if (lo > hi) return 0.0;
-    return (cumsum_[static_cast<std::size_t>(hi) + 1] - cumsum_[static_cast<std::size_t>(lo)]) /
-           (2.0 * g + 1.0);
+  const auto n = static_cast<int>(marginal_.size());
+  const auto un = static_cast<std::size_t>(n);
+  // Sum of the sequence behind cumsum_ over [c - g, c + g] (clipped to the states), and its mean over a box
+  // of half-width g centred at c + a for a fraction a in [0, 1).
+  const auto sum = [&](int c, int g) {
+    const int lo = std::max(0, c - g), hi = std::min(n - 1, c + g);
+    return lo > hi ? 0.0 : cumsum_[static_cast<std::size_t>(hi) + 1] - cumsum_[static_cast<std::size_t>(lo)];
   };
-  // The steady and slew gates move with the track's recent drift (a ramping engine stays in its gate).
-  const auto shift = static_cast<int>(std::lround(drift_hz_per_s_ * hop_s_ / df_));
+  const auto box = [&](int c, double a, int g) {
+    return ((1.0 - a) * sum(c, g) + (a > 0.0 ? a * sum(c + 1, g) : 0.0)) / (2.0 * g + 1.0);
+  };
+  double present = 0.0;
+  for (const double p : marginal_)
+    present += p;
   const double stay = 1.0 - p_stop_ - p_jump_;
   // The engine found again after the track lost it (a window smeared by a shift, a few drowned hops) is
   // where the latest tracked estimate could have ramped to since, at the slew, unless it stopped or was
@@ -90,43 +114,83 @@ void TrackModel::predict() noexcept {
   const double anywhere = (p_jump_ * present + (1.0 - near_share) * p_start_ * post_absent_) / n;
   const double near =
       near_hi >= near_lo ? near_share * p_start_ * post_absent_ / (near_hi - near_lo + 1) : 0.0;
-  // loglik_ is free here: write the prior into it, then into post_.
-  for (int i = 0; i < n; ++i)
-    loglik_[static_cast<std::size_t>(i)] =
-        stay * (kSteadyShare * box(i - shift, gate_steady_) + kSlewShare * box(i - shift, gate_slew_) +
-                (1.0 - kSteadyShare - kSlewShare) * box(i, gate_shift_)) +
-        anywhere + (i >= near_lo && i <= near_hi ? near : 0.0);
+  // Each layer keeps its rate within the steady gate; what enters the slew gate (from the line's place
+  // one hop on at its rate) and the shift gate (from where it was) is spread over all rates.
+  std::fill(moved_.begin(), moved_.end(), 0.0);
+  for (int j = 0; j < layers_; ++j) {
+    const double* p = post_.data() + static_cast<std::size_t>(j) * un;
+    double* q = next_.data() + static_cast<std::size_t>(j) * un;
+    cumsum_[0] = 0.0;
+    for (std::size_t i = 0; i < un; ++i)
+      cumsum_[i + 1] = cumsum_[i] + p[i];
+    // This layer's line at i comes from i - r (r its bins per hop): o whole bins and a fraction a of one.
+    const double back = -rate_bins_[static_cast<std::size_t>(j)];
+    const double whole = std::floor(back);
+    const auto o = static_cast<int>(whole);
+    const double a = back - whole;
+    for (int i = 0; i < n; ++i) {
+      q[i] = stay * keep_ * box(i + o, a, gate_steady_);
+      moved_[static_cast<std::size_t>(i)] += box(i + o, a, gate_slew_);
+    }
+  }
+  cumsum_[0] = 0.0;
+  for (std::size_t i = 0; i < un; ++i)
+    cumsum_[i + 1] = cumsum_[i] + marginal_[i];
+  const double per_layer = 1.0 / layers_;
+  for (int i = 0; i < n; ++i) {
+    const auto ui = static_cast<std::size_t>(i);
+    moved_[ui] = per_layer * (stay * (slew_share_ * moved_[ui] + shift_share_ * box(i, 0.0, gate_shift_)) +
+                              anywhere + (i >= near_lo && i <= near_hi ? near : 0.0));
+  }
+  for (int j = 0; j < layers_; ++j) {
+    double* q = next_.data() + static_cast<std::size_t>(j) * un;
+    for (std::size_t i = 0; i < un; ++i)
+      q[i] += moved_[i];
+  }
   post_absent_ = p_stop_ * present + (1.0 - p_start_) * post_absent_;
-  std::copy(loglik_.begin(), loglik_.end(), post_.begin());
+  post_.swap(next_);
 }
 
 bool TrackModel::update(double hidden) noexcept {
   hidden = std::clamp(hidden, 0.0, 1.0);
   // Logs in the window's terms (the hop's ratio over the temper), less the largest ratio `top`; a window
-  // that says nothing has ratio 1 (log 0).
+  // that says nothing has ratio 1 (log 0). The ratio depends on the fundamental alone: moved_ (free after
+  // predict()) takes each fundamental's factor, which multiplies every layer.
   const double top = std::max(0.0, *std::max_element(loglik_.begin(), loglik_.end())) / temper_;
   const double log_shown = std::log1p(-hidden);
   const double log_blank = (hidden > 0.0 ? std::log(hidden) : -INFINITY) - top;
-  double total = post_absent_ * std::exp(-temper_ * top);
-  for (std::size_t i = 0; i < post_.size(); ++i) {
+  const std::size_t n = marginal_.size();
+  for (std::size_t i = 0; i < n; ++i) {
     const double a = log_shown + loglik_[i] / temper_ - top;
     const double m = std::max(a, log_blank);
-    const double log_window = m + std::log1p(std::exp(std::min(a, log_blank) - m));
-    post_[i] *= std::exp(temper_ * log_window);
-    total += post_[i];
+    moved_[i] = std::exp(temper_ * (m + std::log1p(std::exp(std::min(a, log_blank) - m))));
   }
+  double total = post_absent_ * std::exp(-temper_ * top);
+  std::fill(marginal_.begin(), marginal_.end(), 0.0);
+  for (int j = 0; j < layers_; ++j) {
+    double* p = post_.data() + static_cast<std::size_t>(j) * n;
+    for (std::size_t i = 0; i < n; ++i) {
+      p[i] *= moved_[i];
+      marginal_[i] += p[i];
+    }
+  }
+  for (const double m : marginal_)
+    total += m;
   if (!(total > 0.0) || !std::isfinite(total)) {
     reset();
     return false;
   }
   post_absent_ *= std::exp(-temper_ * top) / total;
+  const double scale = 1.0 / total;
   for (double& p : post_)
-    p /= total;
+    p *= scale;
+  for (double& m : marginal_)
+    m *= scale;
   return true;
 }
 
 int TrackModel::mode_bin() const noexcept {
-  return static_cast<int>(std::max_element(post_.begin(), post_.end()) - post_.begin()) + first_;
+  return static_cast<int>(std::max_element(marginal_.begin(), marginal_.end()) - marginal_.begin()) + first_;
 }
 
 double TrackModel::mass_near(double f) const noexcept {
@@ -136,7 +200,7 @@ double TrackModel::mass_near(double f) const noexcept {
   const int lo = std::max(first_, static_cast<int>(std::ceil((f - reach) / df_)));
   const int hi = std::min(last_, static_cast<int>(std::floor((f + reach) / df_)));
   for (int k = lo; k <= hi; ++k)
-    mass += post_[static_cast<std::size_t>(k - first_)];
+    mass += marginal_[static_cast<std::size_t>(k - first_)];
   return std::clamp(mass, 0.0, 1.0);
 }
 

@@ -1,14 +1,15 @@
 #pragma once
 // The engine-frequency tracker's model of the track over hops: a hidden Markov chain over candidate
-// fundamentals (fine spectral bins) plus an "engine absent" state, filtered forward with each hop's
-// evidence, and the track's continuity (the drift of a confident line and the latest tracked estimate).
+// fundamentals (fine spectral bins) and the line's rate of change (layers of rates within the slew), plus
+// an "engine absent" state, filtered forward with each hop's evidence, and the track's continuity (the
+// drift of a confident line and the latest tracked estimate).
 //
-// Per hop: predict() spreads the previous posterior (a continuing line moves within a steady, a slew or a
-// shift gate that follows the track's drift; the engine stops, starts or is found elsewhere; a line found
-// again after the track lost it is found near the latest tracked estimate), the caller writes every
-// state's log likelihood ratio into evidence(), update() applies it (allowing for a window that hides the
-// line), and observe() tells the model what the hop reported. Sized at construction; nothing allocates, locks
-// or throws afterwards.
+// Per hop: predict() spreads the previous posterior (a continuing line moves at its rate within a steady
+// gate, or its rate changes within a slew or a shift gate; the engine stops, starts or is found elsewhere;
+// a line found again after the track lost it is found near the latest tracked estimate), the caller writes
+// every fundamental's log likelihood ratio into evidence(), update() applies it to every rate (allowing
+// for a window that hides the line), and observe() tells the model what the hop reported. Sized at
+// construction; nothing allocates, locks or throws afterwards.
 #include <vector>
 
 #include "core/sliding_dft_tracker.hpp"
@@ -22,7 +23,7 @@ class TrackModel {
 
   void reset() noexcept;
   void predict() noexcept;
-  // Per state (first_bin + i): this hop's log likelihood ratio, written by the caller before update().
+  // Per fundamental (first_bin + i): this hop's log likelihood ratio, written by the caller before update().
   // Windows that overlap (a hop shorter than the window) are not independent evidence: a hop's ratio is
   // the window's raised to hop / window (the temper).
   [[nodiscard]] std::vector<double>& evidence() noexcept { return loglik_; }
@@ -52,9 +53,14 @@ class TrackModel {
   int first_, last_;
   double df_;
   int lobe_;
-  int gate_steady_ = 1, gate_slew_ = 1, gate_shift_ = 1;  // fine bins per hop
-  double p_stop_ = 0.0, p_start_ = 0.0, p_jump_ = 0.0;    // per hop
-  std::vector<double> post_, loglik_, cumsum_;
+  int gate_steady_ = 1, gate_slew_ = 1, gate_shift_ = 1;      // fine bins per hop
+  double keep_ = 1.0, slew_share_ = 0.0, shift_share_ = 0.0;  // per hop
+  double p_stop_ = 0.0, p_start_ = 0.0, p_jump_ = 0.0;        // per hop
+  // Rate layers: the posterior over (fundamental, rate of change); layer j moves rate_bins_[j] fine bins
+  // per hop. post_ holds the layers one after another, marginal_ their sum per fundamental.
+  int layers_ = 1;
+  std::vector<double> rate_bins_;
+  std::vector<double> post_, next_, marginal_, loglik_, cumsum_, moved_;
   double post_absent_ = 0.5;
   double drift_hz_per_s_ = 0.0;  // recent rate of change of the tracked line
   double last_freq_ = 0.0;       // previous hop's estimate while confident, else NaN
