@@ -51,7 +51,7 @@ inline constexpr double kCeiling = 1.6;   // x the standing idle
 // measure its deceleration between speeds at least kMinGap apart (over less, the change of speed is mostly
 // the receiver's noise).
 namespace idle_braking {
-inline constexpr double kBandSds = 2.5;  // no further above the idle than a driver lugs a gear
+inline constexpr double kBandSds = 2.5;  // idle spreads above the idle that are the engine idling
 inline constexpr double kMinGap = 0.5;   // s
 // A deceleration measured (m/s^2) as a habit: no car brakes harder than 4 m/s^2 in one, nor gains speed
 // declutched.

@@ -173,14 +173,11 @@ double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
   return base + std::log(std::max(above, 0.05));
 }
 
-// Relative chance of driving in `gear` with the engine at `freq`: near idle (standing or rolling) a driver
-// declutches rather than lug the engine, except when creeping in first gear.
-double SpeedSynthesizer::lugging(int gear, double freq) const noexcept {
-  if (!habits_.idle_known()) return 1.0;
-  const double x = (freq - rolling_idle()) / idle_sd();
-  const double at_idle = 1.0 / (1.0 + std::exp(3.0 * (x - 2.5)));  // ~1 up to 2 sd above idle, ~0 past 3.5
+// Relative chance of driving in `gear` with this step's frequency: below the revs this driver holds his gears
+// at (SynthHabits::lugged) he declutches rather than lug the engine, except when creeping in first gear.
+double SpeedSynthesizer::lugging(int gear) const noexcept {
   const double floor = gear == 1 ? tuning_.lugging_first : tuning_.lugging_other;
-  return 1.0 - (1.0 - floor) * at_idle;
+  return 1.0 - (1.0 - floor) * lugged_;
 }
 
 void SpeedSynthesizer::normalise() noexcept {
@@ -412,7 +409,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   if (short_step && tuning_.jump_reopen > 0.0 && z2 > kDeadZone * kDeadZone && innovation > 0.0)
     x.paa = std::max(x.paa, tuning_.accel_sigma * tuning_.accel_sigma);
   return -jump_cost(z2) - 0.5 * weight * std::min(z2, kDeadZone * kDeadZone) +
-         weight * (std::log(lugging(mode, freq)) + tuning_.revs_habit * revs_habit_[mode]);
+         weight * (std::log(lugging(mode)) + tuning_.revs_habit * revs_habit_[mode]);
 }
 
 // One step of the filter: every mode sums over its predecessors, each one's track predicted over dt under
@@ -449,8 +446,10 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
   habits_.score_revs(freq, weight_, gears_, tuning_, revs_habit_);
-  // The engine at idle: no further above the idle it is held at rolling than a driver lugs a gear (lugging).
+  // The engine at idle: within the band of revs a braking to a stop or a roll declutched shows
+  // (idle_braking).
   at_idle_ = habits_.at_idle(freq, tuning_);
+  lugged_ = habits_.lugged(freq, gears_, tuning_);
   // How fast the revs climb, from kFreeRise (0) to twice it (1): only at the tracker's short steps, where
   // one reading to the next is shorter than a shift, so the climb is the engine's and not a shift's
   // between two readings. A driver who shifts every second or so otherwise had each gear outweigh the

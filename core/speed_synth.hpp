@@ -79,8 +79,8 @@ struct SynthTuning {
   double skip_share = 0.1;      // share of shifts that skip a gear
   double evidence_time = 1.0;   // s: correlation time of the frequency's departures from the model
   double idle_weight = 0.6;     // share of the declutched frequency density in the idle spike
-  double lugging_first = 0.2;   // relative chance of first gear with the engine at idle (creeping)
-  double lugging_other = 0.05;  // same for higher gears: drivers do not lug an engine at idle
+  double lugging_first = 0.2;   // relative chance of first gear with the engine lugged (creeping)
+  double lugging_other = 0.05;  // same for higher gears, below the revs their driver holds them at
   // s: first gear is a launch gear, left for second within seconds of moving off: its upshift rate grows
   // with the time spent in it, by 1 + (time / launch_gear_time)^2 (at most 6x; none while the revs stay
   // near idle, creeping), where other gears' rates do not depend on how long they have been held.
@@ -301,7 +301,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept {
     return habits_.shift_comfort(from, to, theta_[from], theta_[to], freq, tuning_);
   }
-  [[nodiscard]] double lugging(int gear, double freq) const noexcept;
+  [[nodiscard]] double lugging(int gear) const noexcept;
   [[nodiscard]] int map_mode() const noexcept;
   void normalise() noexcept;
 
@@ -343,6 +343,7 @@ class SpeedSynthesizer {
   // This step's log-score of the frequency in each gear by the revs this driver runs it at.
   ModeArray revs_habit_{};
   bool at_idle_ = false;      // this step's frequency is at idle
+  double lugged_ = 0.0;       // share of a gear's chance at this step's frequency that is lugging it
   double prev_freq_ = 0.0;    // frequency of the previous step (NaN if lost): the revs a shift left
   double climb_ = 0.0;        // how fast the revs climb this step, 0..1 (filter_step)
   SynthOutputPolicy output_;  // how the output is chosen from the belief, and held without a ladder

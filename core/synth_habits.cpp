@@ -11,6 +11,12 @@ namespace {
 
 constexpr double kRollKnown = 3.0;  // s of rolling declutched seen before its idle counts (rolling_idle)
 constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift points are trusted
+constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
+// The edge of the lugging band (lugged()): its logistic falls from 0.95 to 0.05 over 2 ln(19) / 3 = 2 of the
+// band's spreads, and the band's top lies at least far enough above the idle that the logistic reaches 0.95
+// there, where the idle lugs any gear wholly.
+constexpr double kLuggedSteepness = 3.0;
+const double kIdleLugged = std::log(19.0) / kLuggedSteepness;
 
 // Running mean and variance with a bounded memory (in samples).
 void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {
@@ -101,7 +107,6 @@ void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& mode
   for (int j = 1; j <= gears; ++j)
     pooled_var += count[j] * (var[j] + (mean[j] - pooled_mean) * (mean[j] - pooled_mean));
   pooled_var /= total;
-  constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
   for (int j = 1; j <= gears; ++j) {
     const double n = count[j];
     revs_mean_[j] = (n * mean[j] + kPriorSamples * pooled_mean) / (n + kPriorSamples);
@@ -325,6 +330,38 @@ double SynthHabits::shift_urge(double freq) const noexcept {
   if (!std::isfinite(freq) || drive_count_ < kMinDriveSamples) return 1.0;
   const double sd = std::max(std::sqrt(drive_var_), 0.05 * drive_mean_);
   return std::exp(std::clamp((freq - drive_mean_) / sd, -3.0, 3.0));
+}
+
+// Lugging is driving a gear at revs too low for it: the engine judders, and a driver declutches or shifts
+// down instead (except creeping in first gear, which SpeedSynthesizer weighs apart). Where that begins is
+// this driver's: below the revs he holds his gears at. Per gear above first, the low end of the band the
+// fit saw him run it in (extra.revs, as load_gear_revs shrinks it: kLuggedSds of its spread in ln(freq)
+// below its mean, the revs he runs it below 5 % of the time); the band's top is the lowest of these, with
+// the spread of the gear it comes from. First gear is left out: its revs reach down to the idle, since a car
+// creeps in it. The engine at its idle lugs any gear, so the top is never less than the idle (rolling, as
+// the car may be) by kIdleLugged spreads. Without the fit's revs (an older model) that floor is the band.
+SynthHabits::LuggedBand SynthHabits::lugged_band(int gears, const SynthTuning& tuning) const noexcept {
+  constexpr double kLuggedSds = 1.645;  // the 5 % quantile of a normal band
+  const double idle = std::log(rolling_idle(tuning));
+  LuggedBand band{std::numeric_limits<double>::infinity(), kMinRevsSd};
+  for (int j = std::clamp(gears, 1, 2); j <= gears; ++j) {
+    const double sd = revs_sd_[j] > 0.0 ? revs_sd_[j] : kMinRevsSd;
+    const double low = revs_sd_[j] > 0.0 ? revs_mean_[j] - kLuggedSds * sd : idle;
+    const double top = std::max(low, idle + kIdleLugged * sd);
+    if (top < band.top) band = {top, sd};
+  }
+  if (!std::isfinite(band.top)) band = {idle + kIdleLugged * kMinRevsSd, kMinRevsSd};
+  return band;
+}
+
+// A logistic in ln(freq) around the band's top, kLuggedSteepness per spread of the band; wholly lugged at or
+// below the idle.
+double SynthHabits::lugged(double freq, int gears, const SynthTuning& tuning) const noexcept {
+  if (!std::isfinite(freq) || freq <= 0.0 || idle_count_ <= 0.0) return 0.0;
+  if (freq <= rolling_idle(tuning)) return 1.0;
+  const LuggedBand band = lugged_band(gears, tuning);
+  const double x = kLuggedSteepness * (std::log(freq) - band.top) / band.sd;
+  return 1.0 / (1.0 + std::exp(std::clamp(x, -50.0, 50.0)));
 }
 
 // Hazard multipliers of shifting up or down at this frequency, from the frequencies at which this driver

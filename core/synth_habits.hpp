@@ -55,7 +55,7 @@ class SynthHabits {
   // Idle of the warm engine (the fit's, over many stops); NaN if unknown.
   [[nodiscard]] double warm_idle() const noexcept { return warm_idle_; }
   [[nodiscard]] double rolling_idle(const SynthTuning& tuning) const noexcept;
-  // Whether this frequency is at idle: no further above the rolling idle than a driver lugs a gear.
+  // Whether this frequency is at idle: below the rolling idle plus idle_braking::kBandSds idle spreads.
   [[nodiscard]] bool at_idle(double freq, const SynthTuning& tuning) const noexcept;
   // Whether a ladder whose lowest gear has `lowest_theta` lacks first gear (it carries the car at the warm
   // idle faster than any first gear does); false while no idle is known.
@@ -72,6 +72,9 @@ class SynthHabits {
   // nearer the band this driver runs the new gear in.
   [[nodiscard]] double shift_comfort(int from, int to, double theta_from, double theta_to, double freq,
                                      const SynthTuning& tuning) const noexcept;
+  // Share (0..1) of the chance of a gear at `freq` that is lugging it, for a ladder of `gears`: revs below
+  // those this driver holds any gear above first at (lugged_band()). 0 while no idle is known.
+  [[nodiscard]] double lugged(double freq, int gears, const SynthTuning& tuning) const noexcept;
   // Hazard multipliers of shifting up or down out of `gear` at `freq`.
   [[nodiscard]] double upshift_factor(int gear, double freq, const SynthTuning& tuning) const noexcept;
   [[nodiscard]] double downshift_factor(int gear, double freq, bool long_step,
@@ -79,6 +82,11 @@ class SynthHabits {
 
  private:
   [[nodiscard]] double revs_z(int gear, double freq) const noexcept;
+  // The band of lugging revs: its top in ln(freq) and the spread (ln(freq)) its edge is soft over.
+  struct LuggedBand {
+    double top = 0.0, sd = 0.0;
+  };
+  [[nodiscard]] LuggedBand lugged_band(int gears, const SynthTuning& tuning) const noexcept;
   [[nodiscard]] double shift_urge(double freq) const noexcept;
 
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
