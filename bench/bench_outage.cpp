@@ -857,7 +857,7 @@ constexpr Rule kRules[] = {
     {"quantile: output mode above the belief's median", "output_quantile=0.5"},
     {"revs habit: steady revs scored by the gear's band", "revs_habit=0"},
     {"shift comfort: shifts toward the new gear's band", "shift_comfort=0"},
-    {"lugging: no gear at idle revs", "lugging_first=1,lugging_other=1"},
+    {"lugging: no gear below the revs its driver holds it at", "lugging_first=1,lugging_other=1"},
     {"creeping: first gear exempt from lugging", "lugging_first=lugging_other"},
     {"launch gear: first gear left the sooner", "launch_gear_time=inf"},
     {"stop: slow declutched car brakes to rest", "stop_speed=0"},

@@ -6,26 +6,22 @@
 #include <vector>
 
 #include "core/speed_synth.hpp"
+#include "tests/town_drive.hpp"
 
 using gearpulse::GearModel;
 using gearpulse::kMissing;
 using gearpulse::SpeedSynthesizer;
 using gearpulse::SynthOutput;
+using gearpulse::test::kHatch;
+using gearpulse::test::kIdle;
+using gearpulse::test::model_of;
 
 namespace {
-
-constexpr double kIdle = 13.3;                                           // Hz
-const std::vector<double> kHatch = {0.125, 0.225, 0.347, 0.471, 0.574};  // (m/s)/Hz
 
 // A model of kHatch whose fit saw a steady warm idle (its spread below the 3 % floor) and this driver's revs
 // per gear: first gear from a creep upward, every gear above it at `held` x the idle (+-15 %).
 std::shared_ptr<const GearModel> model_with_revs(double held) {
-  auto m = std::make_shared<GearModel>();
-  for (double t : kHatch)
-    m->gears.push_back({t, 1.0 / static_cast<double>(kHatch.size()), 0.0});
-  m->sigma_speed = 0.1;
-  m->sigma_freq = 0.3;
-  m->outlier_weight = 0.1;
+  auto m = std::make_shared<GearModel>(*model_of(kHatch));
   m->extra["idle"] = {{"freq", kIdle}, {"sd", 0.2}, {"samples", 500}};
   nlohmann::json revs = nlohmann::json::array();
   revs.push_back({{"mean_log", std::log(1.5 * kIdle)}, {"sd_log", 0.3}, {"samples", 2000}});
