@@ -12,6 +12,9 @@ namespace {
 constexpr double kRollKnown = 3.0;  // s of rolling declutched seen before its idle counts (rolling_idle)
 constexpr double kMinShifts = 3.0;  // shifts seen before the learned shift points are trusted
 constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a band narrower than +-10 %
+// Samples a prior on a gear's revs is worth (load_gear_revs, lugged_band): a young model's few samples of
+// a gear move its band only part of the way from the prior.
+constexpr double kRevsPriorSamples = 20.0;
 // The edge of the lugging band (lugged()): its logistic falls from 0.95 to 0.05 over 2 ln(19) / 3 = 2 of the
 // band's spreads, and the band's top lies at least far enough above the idle that the logistic reaches 0.95
 // there, where the idle lugs any gear wholly.
@@ -80,14 +83,14 @@ void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning)
 void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& model_gear, int gears) noexcept {
   revs_mean_.fill(0.0);
   revs_sd_.fill(0.0);
+  revs_count_.fill(0.0);
   if (model == nullptr || !model->extra.is_object()) return;
   const nlohmann::json& extra = model->extra;
   const auto revs = extra.find("revs");
   if (revs == extra.end() || !revs->is_array() || revs->size() != model->gears.size()) return;
-  // Each gear's revs are shrunk toward those of all gears by a prior worth kPriorSamples samples: a gear
-  // seen on a few samples (a short log, a first gear) says little, and one seen on none says what the
+  // Each gear's revs are shrunk toward those of all gears by a prior worth kRevsPriorSamples samples: a
+  // gear seen on a few samples (a short log, a first gear) says little, and one seen on none says what the
   // driver's revs say at large, rather than leaving the gears that were seen to outscore it.
-  constexpr double kPriorSamples = 20.0;
   GearArray mean{}, var{}, count{};
   double total = 0.0, pooled_mean = 0.0;
   for (int j = 1; j <= gears; ++j) {
@@ -109,9 +112,10 @@ void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& mode
   pooled_var /= total;
   for (int j = 1; j <= gears; ++j) {
     const double n = count[j];
-    revs_mean_[j] = (n * mean[j] + kPriorSamples * pooled_mean) / (n + kPriorSamples);
-    const double v = (n * var[j] + kPriorSamples * pooled_var) / (n + kPriorSamples);
+    revs_mean_[j] = (n * mean[j] + kRevsPriorSamples * pooled_mean) / (n + kRevsPriorSamples);
+    const double v = (n * var[j] + kRevsPriorSamples * pooled_var) / (n + kRevsPriorSamples);
     revs_sd_[j] = std::max(std::sqrt(v), kMinRevsSd);
+    revs_count_[j] = n;
   }
 }
 
@@ -345,9 +349,14 @@ SynthHabits::LuggedBand SynthHabits::lugged_band(int gears, const SynthTuning& t
   const double idle = std::log(rolling_idle(tuning));
   LuggedBand band{std::numeric_limits<double>::infinity(), kMinRevsSd};
   for (int j = std::clamp(gears, 1, 2); j <= gears; ++j) {
-    const double sd = revs_sd_[j] > 0.0 ? revs_sd_[j] : kMinRevsSd;
-    const double low = revs_sd_[j] > 0.0 ? revs_mean_[j] - kLuggedSds * sd : idle;
-    const double top = std::max(low, idle + kIdleLugged * sd);
+    if (!(revs_count_[j] > 0.0)) continue;  // a gear the fit did not see says nothing of how it is held
+    const double sd = revs_sd_[j];
+    const double low = revs_mean_[j] - kLuggedSds * sd;
+    // A gear the fit saw on few samples (a young model's) moves the top from the idle's floor only as far
+    // as its samples outweigh the prior.
+    const double floor = idle + kIdleLugged * sd;
+    const double seen = revs_count_[j] / (revs_count_[j] + kRevsPriorSamples);
+    const double top = floor + seen * (std::max(low, floor) - floor);
     if (top < band.top) band = {top, sd};
   }
   if (!std::isfinite(band.top)) band = {idle + kIdleLugged * kMinRevsSd, kMinRevsSd};

@@ -93,6 +93,7 @@ class SynthHabits {
   double warm_idle_ = 0.0;  // NaN if unknown (load_engine())
   // Per gear, the log engine frequency this driver runs at (the model's extra.revs; sd 0 = unknown).
   GearArray revs_mean_{}, revs_sd_{};
+  GearArray revs_count_{};                                         // samples the fit saw each gear's revs on
   double drive_mean_ = 0.0, drive_var_ = 0.0, drive_count_ = 0.0;  // engine frequency while in gear
   double coast_mean_ = 0.0, coast_count_ = 0.0;  // acceleration declutched and moving, seen under GPS
   double idle_coast_mean_ = 0.0, idle_coast_count_ = 0.0;  // the same with the engine at idle

@@ -6,12 +6,15 @@
 #include <vector>
 
 #include "core/speed_synth.hpp"
+#include "core/synth_habits.hpp"
 #include "tests/town_drive.hpp"
 
 using gearpulse::GearModel;
 using gearpulse::kMissing;
 using gearpulse::SpeedSynthesizer;
+using gearpulse::SynthHabits;
 using gearpulse::SynthOutput;
+using gearpulse::SynthTuning;
 using gearpulse::test::kHatch;
 using gearpulse::test::kIdle;
 using gearpulse::test::model_of;
@@ -19,14 +22,15 @@ using gearpulse::test::model_of;
 namespace {
 
 // A model of kHatch whose fit saw a steady warm idle (its spread below the 3 % floor) and this driver's revs
-// per gear: first gear from a creep upward, every gear above it at `held` x the idle (+-15 %).
-std::shared_ptr<const GearModel> model_with_revs(double held) {
+// per gear: first gear from a creep upward, every gear above it at `held` x the idle (+-15 %), each gear
+// seen on `samples` samples.
+std::shared_ptr<const GearModel> model_with_revs(double held, double samples = 2000) {
   auto m = std::make_shared<GearModel>(*model_of(kHatch));
   m->extra["idle"] = {{"freq", kIdle}, {"sd", 0.2}, {"samples", 500}};
   nlohmann::json revs = nlohmann::json::array();
-  revs.push_back({{"mean_log", std::log(1.5 * kIdle)}, {"sd_log", 0.3}, {"samples", 2000}});
+  revs.push_back({{"mean_log", std::log(1.5 * kIdle)}, {"sd_log", 0.3}, {"samples", samples}});
   for (std::size_t i = 1; i < kHatch.size(); ++i)
-    revs.push_back({{"mean_log", std::log(held * kIdle)}, {"sd_log", 0.15}, {"samples", 2000}});
+    revs.push_back({{"mean_log", std::log(held * kIdle)}, {"sd_log", 0.15}, {"samples", samples}});
   m->extra["revs"] = std::move(revs);
   return m;
 }
@@ -99,4 +103,23 @@ TEST_CASE(
   const auto rows = brake_into_a_creep(1.2, lost);
   SpeedSynthesizer synth(model_with_revs(2.0));
   CHECK(seconds_creeping(rows, replay(synth, rows, lost)) == 20);
+}
+
+TEST_CASE("synth lugging: a young model's few samples of its gears' revs move the band little") {
+  // The first model of a drive has seen each gear on a few samples, all at twice the idle: they do not yet
+  // show that this driver never holds a gear at 1.35 x the idle, and the band stays near the idle's floor.
+  // Thousands of samples do show it.
+  const SynthTuning tuning;
+  const auto lugged_at = [&](double samples) {
+    const auto model = model_with_revs(2.0, samples);
+    SynthHabits habits;
+    habits.load_engine(model.get(), tuning);
+    SynthHabits::GearNumbers numbers{};
+    for (int j = 1; j <= static_cast<int>(kHatch.size()); ++j)
+      numbers[static_cast<std::size_t>(j)] = j;
+    habits.load_gear_revs(model.get(), numbers, static_cast<int>(kHatch.size()));
+    return habits.lugged(1.35 * kIdle, static_cast<int>(kHatch.size()), tuning);
+  };
+  CHECK(lugged_at(5) < 0.35);
+  CHECK(lugged_at(2000) > 0.9);
 }
