@@ -15,7 +15,8 @@
 // pre-trained one.
 // Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--require NAME<=VALUE]...
 //   --require (bench/requirements.hpp) holds the figures first_model_worst_min (min of moving),
-//   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 to thresholds.
+//   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 (ratios), cold_m_from_min5
+//   and known_gears_cold_m_from_min5 (m per outage) to thresholds.
 //   --tuning: seeds 1-10 (the seeds the schedule's defaults were chosen on); --report (default): 101-120.
 #include <algorithm>
 #include <cmath>
@@ -333,5 +334,7 @@ int main(int argc, char** argv) {
                                                : first_moving.back());
   required.report("cold_over_pretrained_from_min5", cold_after5 / pre_after5);
   required.report("known_gears_cold_over_pretrained_from_min5", known_cold / known_pre);
+  required.report("cold_m_from_min5", cold_after5 / static_cast<double>(outages_after5));
+  required.report("known_gears_cold_m_from_min5", known_cold / static_cast<double>(known_n));
   return required.exit_status();
 }
