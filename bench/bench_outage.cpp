@@ -70,17 +70,20 @@ namespace {
 constexpr int kMethods = 5;
 constexpr const char* kMethodNames[kMethods] = {"gearpulse", "IMM cand.", "keep gear", "hold speed",
                                                 "hindsight"};
-gearpulse::bench::Requirements g_required;  // --require NAME<=VALUE (bench/requirements.hpp)
-std::FILE* g_trace = nullptr;               // --trace FILE: every outage row
-long g_cadence = -1;
-double g_debug_from = 0.0, g_debug_to = 0.0;  // --debug CAR STYLE FROM TO: the candidate's belief, per row
-std::string g_debug_car;
-int g_debug_style = -1;                 // --cadence K: only the K-th simulated cadence
-bool g_fits = false;                    // --fits: each fitted ladder beside the true one, on stderr
-double g_fit_minutes = 40.0;            // --fit-minutes M: the length of the drive the model is fitted on
-bool g_candidate = true;                // the candidate IMM filter runs beside the daemon's synthesis
-double g_worst = 0.0;                   // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
 constexpr double kMinDistance = 100.0;  // m: shorter outages have no meaningful relative distance error
+
+// What a run does beside scoring the set, from the command line.
+struct Options {
+  std::FILE* trace = nullptr;  // --trace FILE: every outage row
+  long cadence = -1;           // --cadence K: only the K-th simulated cadence
+  std::string debug_car;       // --debug CAR STYLE FROM TO: both filters' beliefs, per row
+  int debug_style = -1;
+  double debug_from = 0.0, debug_to = 0.0;
+  bool fits = false;          // --fits: each fitted ladder beside the true one, on stderr
+  double fit_minutes = 40.0;  // --fit-minutes M: the length of the drive the model is fitted on
+  bool candidate = true;      // the candidate IMM filter runs beside the daemon's synthesis
+  double worst = 0.0;         // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
+};
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
 // fix is new, the frequency, and the truth.
@@ -236,11 +239,11 @@ std::pair<std::string, std::string> outage_cause(const std::vector<Row>& rows, c
 // Replays rows with outages; a row repeating an OBD logger's held rpm in an outage brings nothing (as
 // `gearpulse replay` does).
 // `where` names the case for --worst (line, car) and `true_theta` is the simulated car's ladder (empty for a
-// real log).
+// real log). Rows from opt.debug_from to `debug_to` s are printed for --debug.
 void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>& shared,
-            const gearpulse::SynthTuning& tuning, bool live, Results& res,
-            const std::array<std::string, 2>& where = {}, int style = 0,
-            const std::vector<double>& true_theta = {}) {
+            const gearpulse::SynthTuning& tuning, bool live, const Options& opt, double debug_to,
+            Results& res, const std::array<std::string, 2>& where, int style,
+            const std::vector<double>& true_theta) {
   if (rows.empty()) return;
   const GearModel& model = *shared;
   gearpulse::SpeedSynthesizer synth(shared, tuning);
@@ -254,17 +257,17 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
   bool was_out = false;
   gearpulse::SynthOutput o, o_imm;
   gearpulse::LogReplayer replayer(synth);
-  std::vector<Step> steps(g_worst > 0.0 ? rows.size() : 0);
+  std::vector<Step> steps(opt.worst > 0.0 ? rows.size() : 0);
   std::size_t out_begin = 0;  // first row of the current outage
   const auto close_outage = [&](std::size_t out_end) {
     if (dist[kMethods] >= kMinDistance) {
       for (int m = 0; m < kMethods; ++m)
         res.dist[m].push_back(100.0 * std::abs(dist[m] - dist[kMethods]) / dist[kMethods]);
-      if (g_worst > 0.0) {
+      if (opt.worst > 0.0) {
         auto [cause, detail] = outage_cause(rows, steps, out_begin, out_end, model, true_theta);
         const double err = res.dist[0].back();
         res.cause.push_back(cause);
-        if (err > g_worst)
+        if (err > opt.worst)
           res.worst.push_back({where[0], where[1], style, rows[out_begin].t - t0, err,
                                100.0 * (dist[0] - dist[kMethods]) / dist[kMethods], res.dist[2].back(),
                                res.dist[4].back(), std::move(cause), std::move(detail)});
@@ -278,11 +281,11 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
     const double gps = out ? gearpulse::kMissing : r.gps;
     // Live, as the daemon steps at every hop; a log, as `gearpulse replay` does.
     o = live ? synth.step(r.t, gps, r.freq, r.gps_new) : replayer.step({r.t, gps, r.freq});
-    if (g_candidate)
+    if (opt.candidate)
       o_imm = live ? imm.step(r.t, gps, r.freq, r.gps_new) : imm_replayer.step({r.t, gps, r.freq});
-    if (g_debug_from < g_debug_to && r.t - t0 >= g_debug_from && r.t - t0 <= g_debug_to) {
+    if (opt.debug_from < debug_to && r.t - t0 >= opt.debug_from && r.t - t0 <= debug_to) {
       const auto& flt = imm.filter();
-      if (r.t - t0 - g_debug_from < 0.15) {
+      if (r.t - t0 - opt.debug_from < 0.15) {
         const auto& h = imm.habits();
         std::fprintf(stderr, "idle %.1f/%.2f bands:", h.idle, h.idle_sd);
         for (int g = 1; g <= static_cast<int>(model.gears.size()); ++g)
@@ -333,9 +336,9 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
       res.speed[m].push_back(std::abs(value[m] - r.truth) * kMsToKmh);
     }
     dist[kMethods] += r.truth * dt;
-    if (g_trace !=
+    if (opt.trace !=
         nullptr)  // t, truth, freq, then the candidate's gear, speed and belief, keep gear, hindsight
-      std::fprintf(g_trace, "%.1f,%.2f,%.2f,%d,%.2f,%.2f,%.2f,%.2f,%d,%.2f\n", r.t - t0, r.truth * kMsToKmh,
+      std::fprintf(opt.trace, "%.1f,%.2f,%.2f,%d,%.2f,%.2f,%.2f,%.2f,%d,%.2f\n", r.t - t0, r.truth * kMsToKmh,
                    f, o_imm.gear, o_imm.speed * kMsToKmh, value[2] * kMsToKmh, value[4] * kMsToKmh,
                    imm.mode_probability(o_imm.gear), r.gear, o.speed * kMsToKmh);
   }
@@ -360,12 +363,12 @@ void print_header() {
 
 // Reports the daemon's synthesis' figures of a set as NAME_dist_med_pct, NAME_dist_p95_pct and their
 // differences from keeping the gear (NAME_dist_med_minus_keep, NAME_dist_p95_minus_keep: below 0 is better).
-void report(const std::string& name, const Results& r) {
+void report(const std::string& name, const Results& r, Requirements& required) {
   const double med = quantile(r.dist[0], 0.5), p95 = quantile(r.dist[0], 0.95);
-  g_required.report(name + "_dist_med_pct", med);
-  g_required.report(name + "_dist_p95_pct", p95);
-  g_required.report(name + "_dist_med_minus_keep", med - quantile(r.dist[2], 0.5));
-  g_required.report(name + "_dist_p95_minus_keep", p95 - quantile(r.dist[2], 0.95));
+  required.report(name + "_dist_med_pct", med);
+  required.report(name + "_dist_p95_pct", p95);
+  required.report(name + "_dist_med_minus_keep", med - quantile(r.dist[2], 0.5));
+  required.report(name + "_dist_p95_minus_keep", p95 - quantile(r.dist[2], 0.95));
 }
 
 void print_line(const std::string& label, const Results& r) {
@@ -413,26 +416,25 @@ struct Outcome {
   std::vector<std::array<Results, 4>> styles;  // per line and style (simulated lines)
 };
 
-Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning) {
+Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning, const Options& opt) {
   Outcome o;
   o.all.resize(w.lines.size());
   o.styles.resize(w.lines.size());
   for (const Case& c : w.cases) {
     Results r;
-    if (g_trace != nullptr) std::fprintf(g_trace, "# %s %d\n", c.car.c_str(), c.style);
-    const double debug_to = g_debug_to;
+    if (opt.trace != nullptr) std::fprintf(opt.trace, "# %s %d\n", c.car.c_str(), c.style);
     // A simulated case is named CAR/sSEED; --debug CAR takes every seed of the car.
     const std::string name = c.seed > 0 ? c.car + "/s" + std::to_string(c.seed) : c.car;
-    if ((c.car != g_debug_car && name != g_debug_car) || c.style != g_debug_style) g_debug_to = 0.0;
-    replay(c.rows, c.model, tuning, c.live, r, {w.lines[c.line].label, name}, c.style, c.true_theta);
-    g_debug_to = debug_to;
+    const bool debugged = (c.car == opt.debug_car || name == opt.debug_car) && c.style == opt.debug_style;
+    replay(c.rows, c.model, tuning, c.live, opt, debugged ? opt.debug_to : 0.0, r,
+           {w.lines[c.line].label, name}, c.style, c.true_theta);
     o.styles[c.line][static_cast<std::size_t>(c.style)].append(r);
     o.all[c.line].append(r);
   }
   return o;
 }
 
-void print_outcome(const Workload& w, const Outcome& o) {
+void print_outcome(const Workload& w, const Outcome& o, Requirements& required) {
   for (std::size_t l = 0; l < w.lines.size(); ++l) {
     const Line& line = w.lines[l];
     if (!line.title.empty()) {
@@ -446,23 +448,24 @@ void print_outcome(const Workload& w, const Outcome& o) {
     } else {
       print_line(line.label, o.all[l]);
     }
-    report(line.key, o.all[l]);
+    report(line.key, o.all[l], required);
   }
 }
 
-// --worst: every outage of the daemon's synthesis beyond g_worst %, worst first, with its failure mode;
-// then per line, per failure mode: its outages, those beyond g_worst and beyond the line's p95, and the p95
+// --worst: every outage of the daemon's synthesis beyond `worst` %, worst first, with its failure mode;
+// then per line, per failure mode: its outages, those beyond `worst` and beyond the line's p95, and the p95
 // the line would have were that mode's outages as good as the hindsight gear.
-void print_worst(const Workload& w, const Outcome& o) {
+void print_worst(const Workload& w, const Outcome& o, double worst) {
   for (std::size_t l = 0; l < w.lines.size(); ++l) {
     const Results& r = o.all[l];
     if (r.cause.size() != r.dist[0].size() || r.dist[0].empty()) continue;
-    std::vector<WorstOutage> worst = r.worst;
-    std::sort(worst.begin(), worst.end(), [](const auto& a, const auto& b) { return a.err > b.err; });
+    std::vector<WorstOutage> beyond_worst = r.worst;
+    std::sort(beyond_worst.begin(), beyond_worst.end(),
+              [](const auto& a, const auto& b) { return a.err > b.err; });
     const double p95 = quantile(r.dist[0], 0.95);
     std::printf("\n%s: %zu outages, p95 %.2f %%, %zu beyond %g %% (error, keep gear, hindsight %%)\n",
-                w.lines[l].label.c_str(), r.dist[0].size(), p95, worst.size(), g_worst);
-    for (const WorstOutage& x : worst)
+                w.lines[l].label.c_str(), r.dist[0].size(), p95, beyond_worst.size(), worst);
+    for (const WorstOutage& x : beyond_worst)
       std::printf("  %+7.1f %6.1f %5.1f  %-16s %-8s t %6.0f  %-36s %s\n", x.signed_err, x.keep, x.hindsight,
                   x.car.c_str(), kStyleNames[x.style], x.start, x.cause.c_str(), x.detail.c_str());
     std::vector<std::string> causes = r.cause;
@@ -482,7 +485,7 @@ void print_worst(const Workload& w, const Outcome& o) {
       for (std::size_t k = 0; k < r.cause.size(); ++k) {
         if (r.cause[k] != c) continue;
         ++n;
-        beyond += r.dist[0][k] > g_worst ? 1 : 0;
+        beyond += r.dist[0][k] > worst ? 1 : 0;
         above += r.dist[0][k] > p95 ? 1 : 0;
         mine += std::max(r.dist[0][k] - kTarget, 0.0);
         fixed[k] = r.dist[4][k];
@@ -692,9 +695,9 @@ sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double dur
 }
 
 // The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a mixed drive of
-// g_fit_minutes (40 unless --fit-minutes).
-GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t seed) {
-  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 60.0 * g_fit_minutes, seed);
+// `minutes` (40 unless --fit-minutes).
+GearModel fit_model(const sim::Vehicle& car, const Cadence& c, double minutes, std::uint64_t seed) {
+  const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 60.0 * minutes, seed);
   Cadence fit = c;
   if (fit.obd_refresh == 0.0) fit.freq_period = 1.0, fit.fix_period = 1.0;
   std::vector<Sample> samples;
@@ -703,14 +706,14 @@ GearModel fit_model(const sim::Vehicle& car, const Cadence& c, std::uint64_t see
   return gearpulse::fit_gear_model(samples, {}).model;
 }
 
-void simulated(bool report_set, int seeds, int randoms, Workload& w) {
+void simulated(bool report_set, int seeds, int randoms, const Options& opt, Workload& w) {
   const std::uint64_t base = report_set ? 1000 : 0;
   char title[200];
   std::snprintf(title, sizeof title,
                 "Simulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
                 "style)",
                 report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
-                static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), g_fit_minutes);
+                static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), opt.fit_minutes);
   std::vector<sim::Vehicle> cars;
   for (const sim::Vehicle& v : sim::vehicle_presets())
     if (!v.is_cvt()) cars.push_back(v);
@@ -718,14 +721,15 @@ void simulated(bool report_set, int seeds, int randoms, Workload& w) {
     cars.push_back(sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
   bool first = true;
   for (const Cadence& c : kCadences) {
-    if (g_cadence >= 0 && &c - kCadences != g_cadence) continue;
+    if (opt.cadence >= 0 && &c - kCadences != opt.cadence) continue;
     w.lines.push_back({first ? title : "", c.name, std::string("sim_") + c.key, true});
     first = false;
     for (const sim::Vehicle& car : cars)
       for (int s = 1; s <= seeds; ++s) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
-        const auto model = std::make_shared<const GearModel>(fit_model(car, c, seed * 31 + 3));
-        if (g_fits) {
+        const auto model =
+            std::make_shared<const GearModel>(fit_model(car, c, opt.fit_minutes, seed * 31 + 3));
+        if (opt.fits) {
           std::fprintf(stderr, "%s %s seed %llu fit", c.key, car.name.c_str(),
                        static_cast<unsigned long long>(seed));
           for (const auto& g : model->gears)
@@ -915,7 +919,8 @@ std::string change(double med, double p95) {
 // Runs the workload with `base` and once per rule with that rule absent; one markdown row per rule: the
 // daemon's synthesis' per-outage distance error (median / p95, %) on every line of the set and its change
 // against `base`, and how many of those figures grew.
-void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::vector<std::string>& only) {
+void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::vector<std::string>& only,
+            const Options& opt) {
   const auto summary = [&](const Outcome& o) {
     std::vector<std::pair<double, double>> f;
     for (const Results& r : o.all)
@@ -931,7 +936,7 @@ void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::ve
   for (std::size_t l = 0; l < w.lines.size(); ++l)
     std::printf("---|");
   std::printf("---|\n");
-  const auto defaults = summary(evaluate(w, base));
+  const auto defaults = summary(evaluate(w, base, opt));
   std::printf("| defaults | |");
   for (const auto& [med, p95] : defaults)
     std::printf(" %s |", figure(med, p95).c_str());
@@ -941,7 +946,7 @@ void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::ve
     if (!only.empty() && std::find(only.begin(), only.end(), rule.neutral) == only.end()) continue;
     gearpulse::SynthTuning t = base;
     if (!apply_settings(t, rule.neutral)) continue;
-    const auto f = summary(evaluate(w, t));
+    const auto f = summary(evaluate(w, t, opt));
     int worse = 0;
     std::printf("| %s | `%s` |", rule.name, rule.neutral);
     for (std::size_t l = 0; l < f.size(); ++l) {
@@ -957,7 +962,10 @@ void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::ve
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (!g_required.parse(argc, argv)) return 2;
+  Requirements required;  // --require NAME<=VALUE (bench/requirements.hpp)
+  if (!required.parse(argc, argv)) return 2;
+  Options opt;
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> trace(nullptr, &std::fclose);
   bool report_set = false, real = true, simu = true, ablation = false;
   int seeds = 2, randoms = 7;
   gearpulse::SynthTuning tuning;
@@ -974,14 +982,15 @@ int main(int argc, char** argv) {
     } else if (a == "--random" && i + 1 < argc) {
       randoms = std::atoi(argv[++i]);
     } else if (a == "--trace" && i + 1 < argc) {
-      g_trace = std::fopen(argv[++i], "w");
+      trace.reset(std::fopen(argv[++i], "w"));
+      opt.trace = trace.get();
     } else if (a == "--cadence" && i + 1 < argc) {
-      g_cadence = std::atol(argv[++i]);
+      opt.cadence = std::atol(argv[++i]);
     } else if (a == "--debug" && i + 4 < argc) {
-      g_debug_car = argv[++i];
-      g_debug_style = std::atoi(argv[++i]);
-      g_debug_from = std::atof(argv[++i]);
-      g_debug_to = std::atof(argv[++i]);
+      opt.debug_car = argv[++i];
+      opt.debug_style = std::atoi(argv[++i]);
+      opt.debug_from = std::atof(argv[++i]);
+      opt.debug_to = std::atof(argv[++i]);
     } else if (a == "--synth" && i + 1 < argc) {
       if (!apply_settings(tuning, argv[++i])) {
         std::fprintf(stderr, "--synth wants KEY=VALUE, KEY a SynthTuning field: %s\n", argv[i]);
@@ -992,11 +1001,11 @@ int main(int argc, char** argv) {
     } else if (a == "--rule" && i + 1 < argc) {
       only.emplace_back(argv[++i]);
     } else if (a == "--worst" && i + 1 < argc) {
-      g_worst = std::atof(argv[++i]);
+      opt.worst = std::atof(argv[++i]);
     } else if (a == "--fits") {
-      g_fits = true;
+      opt.fits = true;
     } else if (a == "--fit-minutes" && i + 1 < argc) {
-      g_fit_minutes = std::atof(argv[++i]);
+      opt.fit_minutes = std::atof(argv[++i]);
     } else if (a == "--log" && i + 1 < argc) {
       given.emplace_back(argv[++i]);
     } else if (a == "--row-seconds" && i + 1 < argc) {
@@ -1024,16 +1033,16 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_outage: %s\n", e.what());
     return 2;
   }
-  if (simu) simulated(report_set, seeds, randoms, w);
+  if (simu) simulated(report_set, seeds, randoms, opt, w);
   if (ablation) {
-    g_candidate = false;
-    ablate(w, tuning, only);
+    opt.candidate = false;
+    ablate(w, tuning, only, opt);
   } else {
-    const Outcome o = evaluate(w, tuning);
-    print_outcome(w, o);
-    if (g_worst > 0.0) print_worst(w, o);
+    const Outcome o = evaluate(w, tuning, opt);
+    print_outcome(w, o, required);
+    if (opt.worst > 0.0) print_worst(w, o, opt.worst);
   }
   std::printf("\n(%.1f s)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-  return ablation ? 0 : g_required.exit_status();
+  return ablation ? 0 : required.exit_status();
 }
