@@ -1,0 +1,123 @@
+#pragma once
+// The parts of the outage bench (bench/bench_outage.cpp holds main() and says what the bench measures and
+// how it is run): the workload of a run, built once (real logs: real_logs.cpp; simulated vehicles:
+// simulated.cpp), its replay with outages (evaluate.cpp), the printed tables and figures (print.cpp), and
+// the synthesis' tuning and ablation (ablation.cpp).
+#include <array>
+#include <cstddef>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bench/requirements.hpp"
+#include "core/gear_model.hpp"
+#include "core/sample.hpp"
+#include "core/speed_synth.hpp"
+
+namespace gearpulse::bench::outage {
+
+// The methods scored, in this order: the daemon's synthesis, the candidate IMM filter, keep gear, hold
+// speed, hindsight (print.cpp: kMethodNames).
+inline constexpr int kMethods = 5;
+
+// What a run does beside scoring the set, from the command line.
+struct Options {
+  std::FILE* trace = nullptr;  // --trace FILE: every outage row
+  long cadence = -1;           // --cadence K: only the K-th simulated cadence
+  std::string debug_car;       // --debug CAR STYLE FROM TO: both filters' beliefs, per row
+  int debug_style = -1;
+  double debug_from = 0.0, debug_to = 0.0;
+  bool fits = false;          // --fits: each fitted ladder beside the true one, on stderr
+  double fit_minutes = 40.0;  // --fit-minutes M: the length of the drive the model is fitted on
+  bool candidate = true;      // the candidate IMM filter runs beside the daemon's synthesis
+  double worst = 0.0;         // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
+};
+
+// One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
+// fix is new, the frequency, and the truth.
+struct Row {
+  double t = 0.0, gps = gearpulse::kMissing, freq = gearpulse::kMissing, truth = 0.0;
+  bool gps_new = true;
+  int gear = -1;  // the true gear where known (simulated drives; 0 = clutch out), for the trace
+};
+
+// One outage of the daemon's synthesis erring beyond --worst: where it was and what went wrong.
+struct WorstOutage {
+  std::string line, car;
+  int style = 0;
+  double start = 0.0;                  // s from the drive's start
+  double err = 0.0, signed_err = 0.0;  // %, |distance error| and its sign (+: too far)
+  double keep = 0.0, hindsight = 0.0;  // % of the baselines
+  std::string cause, detail;
+};
+
+// The scores of one or more replays, per method.
+struct Results {
+  std::vector<double> dist[kMethods];   // per outage, %
+  std::vector<double> speed[kMethods];  // per sample, km/h
+  std::vector<std::string> cause;       // per outage (--worst), the failure mode of the daemon's synthesis
+  std::vector<WorstOutage> worst;       // with --worst, the outages beyond it
+  void append(const Results& o) {
+    for (int m = 0; m < kMethods; ++m) {
+      dist[m].insert(dist[m].end(), o.dist[m].begin(), o.dist[m].end());
+      speed[m].insert(speed[m].end(), o.speed[m].begin(), o.speed[m].end());
+    }
+    cause.insert(cause.end(), o.cause.begin(), o.cause.end());
+    worst.insert(worst.end(), o.worst.begin(), o.worst.end());
+  }
+};
+
+// ---- the workload: every replay of a run, built once ----
+// Fits and simulated drives do not depend on the synthesis' tuning, so --ablate replays the same cases
+// under every tuning it compares.
+struct Line {
+  std::string title;    // printed with the header before the line, if not empty
+  std::string label;    // a simulated cadence's name (its lines: ", mixed" ... ", ALL")
+  std::string key;      // figure names: KEY_dist_med_pct ...
+  bool styles = false;  // simulated: one line per style before the ALL line
+};
+
+struct Case {
+  std::size_t line = 0;
+  int style = 0;
+  std::string car;  // for --trace and --debug
+  std::vector<Row> rows;
+  std::shared_ptr<const GearModel> model;
+  bool live = false;               // stepped at every row as the daemon does, else as `gearpulse replay` does
+  std::vector<double> true_theta;  // the simulated car's ladder (--worst), empty for a real log
+  int seed = 0;                    // the simulated drive's seed (1..N, 1001..), 0 for a real log
+};
+
+struct Workload {
+  std::vector<Line> lines;
+  std::vector<Case> cases;
+};
+
+struct Outcome {
+  std::vector<Results> all;                    // per line
+  std::vector<std::array<Results, 4>> styles;  // per line and style (simulated lines)
+};
+
+// Real logs (real_logs.cpp): the set's car, or the logs of one car a user gives (--log).
+void real_logs(const std::filesystem::path& root, bool report_set, Workload& w);
+void given_logs(const std::vector<std::filesystem::path>& paths, double row_s, Workload& w);
+
+// Simulated vehicles (simulated.cpp): every cadence (or --cadence's), car, seed and style of the set.
+void simulated(bool report_set, int seeds, int randoms, const Options& opt, Workload& w);
+
+// Replays every case of the workload under `tuning` (evaluate.cpp).
+Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning, const Options& opt);
+
+// The tables and figures of an outcome, and --worst's outages and failure modes (print.cpp).
+void print_outcome(const Workload& w, const Outcome& o, Requirements& required);
+void print_worst(const Workload& w, const Outcome& o, double worst);
+
+// --synth KEY=VALUE[,KEY=VALUE...] and --ablate (ablation.cpp).
+bool apply_settings(gearpulse::SynthTuning& t, std::string_view settings);
+void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::vector<std::string>& only,
+            const Options& opt);
+
+}  // namespace gearpulse::bench::outage
