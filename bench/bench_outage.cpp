@@ -40,6 +40,7 @@
 //
 // The bench's parts are in bench/outage/ (outage.hpp: the shared types and which file does what).
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -106,6 +107,10 @@ int main(int argc, char** argv) {
       given.emplace_back(argv[++i]);
     } else if (a == "--row-seconds" && i + 1 < argc) {
       row_seconds = std::atof(argv[++i]);
+      if (!(std::isfinite(row_seconds) && row_seconds > 0.0)) {
+        std::fprintf(stderr, "--row-seconds wants seconds above 0: %s\n", argv[i]);
+        return 2;
+      }
     } else if (a == "--real-only") {
       simu = false;
     } else if (a == "--sim-only") {

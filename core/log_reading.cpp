@@ -177,8 +177,12 @@ bool holds(std::string_view text, std::initializer_list<std::string_view> parts)
                      [&](std::string_view part) { return text.find(part) != std::string_view::npos; });
 }
 
+bool summary_speed(std::string_view name) noexcept {
+  return holds(name, {"average", "avg", "max", "min", "limit"});
+}
+
 double speed_unit(std::string_view name) noexcept {
-  if (holds(name, {"km/h", "kmh", "kph", "km/hr"})) return kKmhToMs;
+  if (holds(name, {"km/h", "kmh", "kph", "km/hr", "kmph"})) return kKmhToMs;  // before mph: "kmph" holds it
   if (holds(name, {"mph", "mi/h"})) return kMphToMs;
   if (holds(name, {"m/s", "mps", "meters/second", "metres/second"})) return 1.0;
   return 0.0;

@@ -1,8 +1,8 @@
 #pragma once
 
-// What every log reader of core/sample_io.cpp is made of (cells, column names, clocks, time order, the
-// builder that collects a log's samples and bad rows, the line reader) and the readers of the OBD and
-// Torque layouts. Internal to core: the contract is core/sample_io.hpp.
+// What every log reader is made of (cells, column names, clocks, time order, the builder that collects a
+// log's samples and bad rows, the line reader) and the readers of the OBD and Torque layouts, which
+// core/sample_io.cpp picks by a log's header. Internal to core: the contract is core/sample_io.hpp.
 
 #include <algorithm>
 #include <cmath>
@@ -232,10 +232,47 @@ struct LineReader {
 // A column name folded for matching: lower case, no spaces or underscores.
 std::string folded(std::string_view name);
 
+// Whether `text` holds any of `parts`.
 bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept;
+
+// Whether a speed column or PID (folded name) is a summary of the drive (an average, a maximum, a limit)
+// rather than the car's speed.
+bool summary_speed(std::string_view name) noexcept;
 
 // The speed unit a column's name states (m/s per unit), or 0.
 double speed_unit(std::string_view name) noexcept;
+
+// A clock of the time of day wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times (Row::clock,
+// Row::period, from parse_clock) are unwrapped in file order into Row::t.
+// A clock cell that jumps away from the row before it while the row after it goes on from that one is
+// corrupt: its row is skipped, and its jump is not taken for a wrap (one such cell, "45:00" among "10:0x",
+// put every later row an hour on).
+template <typename Row>
+inline void unwrap_clock(std::vector<Row>& rows, LogBuilder& out) {
+  constexpr double kJump = 60.0;  // s: a log's rows are a second or so apart; more is a pause or corrupt
+  const auto apart = [](double a, double b, double period) {
+    const double d = std::abs(a - b);
+    return std::min(d, period - d);  // either way round the clock
+  };
+  double offset = 0.0, last = -1.0;
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    Row& r = rows[i];
+    const double jump = last >= 0.0 ? apart(r.clock, last, r.period) : 0.0;
+    if (jump > kJump && i + 1 < rows.size() && apart(rows[i + 1].clock, last, r.period) <= kJump) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "time jumps %.0f s away from the rows around it",
+                    std::abs(r.clock - last));
+      out.skip(r.line, buf);
+      continue;
+    }
+    if (last >= 0.0 && r.clock < last - r.period / 2) offset += r.period;
+    last = r.clock;
+    r.t = r.clock + offset;
+    rows[kept++] = r;
+  }
+  rows.resize(kept);
+}
 
 // ---- The readers of OBD and Torque layouts (core/obd_logs.cpp, core/torque_logs.cpp) ----
 

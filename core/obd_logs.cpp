@@ -47,11 +47,12 @@ std::vector<double> smooth_row_times(const std::vector<double>& rows, const std:
 struct ObdRow {
   std::size_t line;
   double counter, t, rpm, speed;
+  double clock = -1.0, period = 0.0;  // a clock cell's time of day (s) and its wrap (unwrap_clock)
 };
 
 // OBD values held between refreshes, in file order. A row whose rpm and speed both equal the previous
-// row's carries nothing new (a logger polls many PIDs round-robin), so it is dropped. Times count from the
-// first row but in Carloop logs (the engine's run time).
+// row's carries nothing new (a logger polls many PIDs round-robin), so it is dropped (not in PID-row logs).
+// Times count from the first row kept but in Carloop logs (the engine's run time).
 void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout& layout) {
   const SampleFileFormat format = layout.format;
   const bool timed = layout.time.has_value();
@@ -66,22 +67,23 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
     std::size_t of, line;
   };
   std::vector<Repeat> repeats;
-  if (format != SampleFileFormat::kCarloop && timed && !parsed.empty()) {
-    const double t0 = parsed.front().t;
-    for (ObdRow& p : parsed)
-      p.t -= t0;
-  }
+  const bool from_first = format != SampleFileFormat::kCarloop && timed;
+  // Each reading of a PID-row log is a poll of its own, not a value held by a logger's row.
+  const bool held = format != SampleFileFormat::kPidRows;
+  std::optional<double> t0;
   TimeOrder order(parsed, [](const ObdRow& p) { return p.t; });
   for (std::size_t i = 0; i < parsed.size(); ++i) {
-    const ObdRow& p = parsed[i];
-    if (!order.keep(i, p.line, out)) continue;
+    if (!order.keep(i, parsed[i].line, out)) continue;
+    if (from_first && !t0) t0 = parsed[i].t;
+    ObdRow p = parsed[i];
+    if (t0) p.t -= *t0;
     if (p.t != last_t) {
       refresh_row.push_back(p.counter);
       refresh_t.push_back(p.t + 0.5);
     }
     last_t = p.t;
     const auto same = [](double a, double b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
-    if (have_last && same(p.rpm, last_rpm) && same(p.speed, last_speed)) {
+    if (held && have_last && same(p.rpm, last_rpm) && same(p.speed, last_speed)) {
       ++out.log().repeated_rows;
       if (out.keeps_rows()) repeats.push_back({p.counter, p.t, kept.size() - 1, p.line});
       continue;
@@ -157,7 +159,7 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
       layout.time_to_s = ms ? 1e-3 : 1.0;
       continue;
     }
-    if (f.find("speed") == std::string::npos) continue;
+    if (f.find("speed") == std::string::npos || summary_speed(f)) continue;
     if (speed_unit(f) == 0.0) {
       if (!unitless) unitless = i;
     } else if (f.find("gps") != std::string::npos) {
@@ -198,9 +200,10 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
-  double last_clock = -1.0, clock_offset = 0.0;  // a clock's time of day, unwrapped past midnight
+  bool clocks = false;  // the time column holds clock times (unwrap_clock)
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
+    double period = 0.0;  // of a clock cell's time of day
     const Cell rpm = parse_cell(cells[irpm], "rpm", false);
     const Cell speed = parse_cell(cells[ispeed], "speed", false);
     Cell t;
@@ -217,9 +220,11 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
                              ? parse_clock(cells[*it])
                              : std::nullopt;
       if (clock) {
-        if (last_clock >= 0.0 && clock->first < last_clock - clock->second / 2) clock_offset += clock->second;
-        last_clock = clock->first;
-        t = Cell{CellKind::kNumber, clock->first + clock_offset, {}};
+        clocks = true;
+        t = Cell{CellKind::kNumber, clock->first, {}};
+        period = clock->second;
+      } else if (clocks && t.kind == CellKind::kNumber) {
+        t = Cell{CellKind::kBad, kMissing, "a number among clock times in column time"};
       }
     }
     if (t.kind == CellKind::kMissing) {
@@ -231,7 +236,17 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
       out.skip(reader.number, bad->problem);
       continue;
     }
-    parsed.push_back({reader.number, counter, t.value, rpm.value, speed.value});
+    ObdRow row{reader.number, counter, t.value, rpm.value, speed.value};
+    if (period > 0.0) row.clock = t.value, row.period = period;
+    parsed.push_back(row);
+  }
+  if (clocks) {
+    std::erase_if(parsed, [&](const ObdRow& r) {
+      if (r.period > 0.0) return false;
+      out.skip(r.line, "a number among clock times in column time");
+      return true;
+    });
+    unwrap_clock(parsed, out);
   }
   add_obd_rows(parsed, out, layout);
 }
@@ -254,8 +269,9 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     double to_ms;         // speed unit of the row (0: none)
     std::string problem;  // why the value does not read (said only for the PIDs used)
   };
-  std::vector<std::string> names;
-  std::vector<std::string> units;  // of each PID's first reading, folded
+  std::vector<std::string> names;    // folded, for matching
+  std::vector<std::string> written;  // as the log writes them
+  std::vector<std::string> units;    // of each PID's first reading with a unit, folded
   std::vector<Reading> readings;
   std::vector<std::string_view> cells;
   constexpr double kDay = 86400.0;
@@ -274,14 +290,19 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     const std::string unit = iunit ? folded(cells[*iunit]) : std::string{};
     if (known == names.end()) {
       names.push_back(name);
+      written.emplace_back(cells[ipid]);
       units.push_back(unit);
+    } else if (units[pid].empty()) {
+      units[pid] = unit;
     }
     double seconds = t.value >= 1e11 ? t.value * 1e-3 : t.value;  // milliseconds since 1970, as above
     if (last_t >= 0.0 && seconds + offset < last_t - kDay / 2) offset += kDay;
     seconds += offset;
     last_t = seconds;
+    // A reading without a unit has its PID's.
+    const std::string& own = unit.empty() ? units[pid] : unit;
     readings.push_back(
-        {reader.number, seconds, value.value, pid, speed_unit(unit.empty() ? name : unit), value.problem});
+        {reader.number, seconds, value.value, pid, speed_unit(own.empty() ? name : own), value.problem});
   }
   const auto find_pid = [&](auto&& good) -> std::optional<std::size_t> {
     for (std::size_t i = 0; i < names.size(); ++i)
@@ -291,7 +312,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   std::optional<std::size_t> rpm = find_pid([&](std::size_t i) { return names[i] == "enginerpm"; });
   if (!rpm) rpm = find_pid([&](std::size_t i) { return units[i] == "rpm" || holds(names[i], {"rpm"}); });
   const auto speed_pid = [&](std::size_t i, bool gps) {
-    return holds(names[i], {"speed"}) && !holds(names[i], {"average", "avg", "max", "min", "limit"}) &&
+    return holds(names[i], {"speed"}) && !summary_speed(names[i]) &&
            speed_unit(units[i].empty() ? names[i] : units[i]) > 0.0 && holds(names[i], {"gps"}) == gps;
   };
   const std::optional<std::size_t> gps = find_pid([&](std::size_t i) { return speed_pid(i, true); });
@@ -311,7 +332,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   layout.format = SampleFileFormat::kPidRows;
   layout.time = it;
   layout.speed_to_ms = 1.0;  // each reading converted by its own unit
-  layout.speed_column = names[*speed];
+  layout.speed_column = written[*speed];
   out.log().format = layout.format;
   out.log().speed_column = layout.speed_column;
   // The speed at each rpm reading, interpolated between the speed readings on either side when they are
@@ -332,8 +353,10 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     }
     if (r.pid == *rpm)
       revs.push_back(&r);
-    else
+    else if (r.to_ms > 0.0)
       speeds.push_back({r.t, r.value * r.to_ms});
+    else
+      out.skip(r.line, "no speed unit for " + quoted(written[r.pid]));
   }
   std::stable_sort(speeds.begin(), speeds.end(),
                    [](const SpeedAt& a, const SpeedAt& b) { return a.t < b.t; });

@@ -26,9 +26,10 @@ enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm, kColumns, 
 
 [[nodiscard]] std::string_view format_name(SampleFileFormat format) noexcept;
 
-// Which speed a Torque Pro export gives. kAuto takes the GPS Doppler speed when the file has any (it is
-// what the daemon sees live from gpsd, so a model fitted on it matches the live input), else the OBD
-// speed (the car's own wheel-speed reading: smoother but quantised and often a few % high).
+// Which speed a log with both gives (Torque Pro exports, named-column and PID-row logs; the name is the
+// first of them). kAuto takes the GPS Doppler speed when the file has any (it is what the daemon sees live
+// from gpsd, so a model fitted on it matches the live input), else the OBD speed (the car's own
+// wheel-speed reading: smoother but quantised and often a few % high).
 enum class TorqueSpeed { kAuto, kGps, kObd };
 
 struct ReadOptions {
@@ -50,7 +51,7 @@ struct InputRow {
 struct SampleLog {
   std::string name;
   SampleFileFormat format = SampleFileFormat::kGeneric;
-  std::string speed_column;  // header of the column the speed came from
+  std::string speed_column;  // header of the column the speed came from (a PID-row log: the PID's name)
   std::vector<Sample> samples;
   std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages
   std::size_t skipped_count = 0;     // every skipped bad row

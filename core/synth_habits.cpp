@@ -19,7 +19,7 @@ constexpr double kRevsPriorSamples = 20.0;
 // band's spreads, and the band's top lies at least far enough above the idle that the logistic reaches 0.95
 // there, where the idle lugs any gear wholly.
 constexpr double kLuggedSteepness = 3.0;
-const double kIdleLugged = std::log(19.0) / kLuggedSteepness;
+constexpr double kIdleLugged = 2.9444389791664403 / kLuggedSteepness;  // ln(19) / 3
 
 // Running mean and variance with a bounded memory (in samples).
 void accumulate(double x, double& mean, double& var, double& count, double memory) noexcept {

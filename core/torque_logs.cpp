@@ -20,37 +20,6 @@ constexpr SpeedColumn kTorqueSpeeds[] = {
     {"GPS Speed (km/h)", kKmhToMs, true},     {"Speed (GPS)(mph)", kMphToMs, true},
     {"Speed (OBD)(km/h)", kKmhToMs, false},   {"Speed (OBD)(mph)", kMphToMs, false}};
 
-// Torque's clock wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times are unwrapped in file order.
-// A clock cell that jumps away from the row before it while the row after it goes on from that one is
-// corrupt: its row is skipped, and its jump is not taken for a wrap (one such cell, "45:00" among "10:0x",
-// put every later row an hour on).
-template <typename Row>
-void unwrap_clock(std::vector<Row>& rows, LogBuilder& out) {
-  constexpr double kJump = 60.0;  // s: a log's rows are a second or so apart; more is a pause or corrupt
-  const auto apart = [](double a, double b, double period) {
-    const double d = std::abs(a - b);
-    return std::min(d, period - d);  // either way round the clock
-  };
-  double offset = 0.0, last = -1.0;
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    Row& r = rows[i];
-    const double jump = last >= 0.0 ? apart(r.clock, last, r.period) : 0.0;
-    if (jump > kJump && i + 1 < rows.size() && apart(rows[i + 1].clock, last, r.period) <= kJump) {
-      char buf[96];
-      std::snprintf(buf, sizeof buf, "time jumps %.0f s away from the rows around it",
-                    std::abs(r.clock - last));
-      out.skip(r.line, buf);
-      continue;
-    }
-    if (last >= 0.0 && r.clock < last - r.period / 2) offset += r.period;
-    last = r.clock;
-    r.t = r.clock + offset;
-    rows[kept++] = r;
-  }
-  rows.resize(kept);
-}
-
 }  // namespace
 
 void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,

@@ -55,6 +55,7 @@ TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin,
   marginal_.assign(states, 0.0);
   loglik_.assign(states, 0.0);
   moved_.assign(states, 0.0);
+  factor_.assign(states, 0.0);
   cumsum_.assign(states + 1, 0.0);
   gate_steady_ = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df_)) + 1;
   gate_slew_ = static_cast<int>(std::ceil((max_slew_ * dt) / df_)) + 2;
@@ -154,8 +155,8 @@ void TrackModel::predict() noexcept {
 bool TrackModel::update(double hidden) noexcept {
   hidden = std::clamp(hidden, 0.0, 1.0);
   // Logs in the window's terms (the hop's ratio over the temper), less the largest ratio `top`; a window
-  // that says nothing has ratio 1 (log 0). The ratio depends on the fundamental alone: moved_ (free after
-  // predict()) takes each fundamental's factor, which multiplies every layer.
+  // that says nothing has ratio 1 (log 0). The ratio depends on the fundamental alone: factor_ takes each
+  // fundamental's, which multiplies every layer.
   const double top = std::max(0.0, *std::max_element(loglik_.begin(), loglik_.end())) / temper_;
   const double log_shown = std::log1p(-hidden);
   const double log_blank = (hidden > 0.0 ? std::log(hidden) : -INFINITY) - top;
@@ -163,14 +164,14 @@ bool TrackModel::update(double hidden) noexcept {
   for (std::size_t i = 0; i < n; ++i) {
     const double a = log_shown + loglik_[i] / temper_ - top;
     const double m = std::max(a, log_blank);
-    moved_[i] = std::exp(temper_ * (m + std::log1p(std::exp(std::min(a, log_blank) - m))));
+    factor_[i] = std::exp(temper_ * (m + std::log1p(std::exp(std::min(a, log_blank) - m))));
   }
   double total = post_absent_ * std::exp(-temper_ * top);
   std::fill(marginal_.begin(), marginal_.end(), 0.0);
   for (int j = 0; j < layers_; ++j) {
     double* p = post_.data() + static_cast<std::size_t>(j) * n;
     for (std::size_t i = 0; i < n; ++i) {
-      p[i] *= moved_[i];
+      p[i] *= factor_[i];
       marginal_[i] += p[i];
     }
   }

@@ -61,6 +61,7 @@ class TrackModel {
   int layers_ = 1;
   std::vector<double> rate_bins_;
   std::vector<double> post_, next_, marginal_, loglik_, cumsum_, moved_;
+  std::vector<double> factor_;  // update(): each fundamental's likelihood factor, common to every layer
   double post_absent_ = 0.5;
   double drift_hz_per_s_ = 0.0;  // recent rate of change of the tracked line
   double last_freq_ = 0.0;       // previous hop's estimate while confident, else NaN

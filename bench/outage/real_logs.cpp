@@ -1,5 +1,6 @@
 // The outage bench's real-log workload: a car's logs, fitted on some drives and replayed on the others.
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -119,7 +120,13 @@ void given_logs(const std::vector<fs::path>& paths, double row_s, Workload& w) {
   for (const fs::path& p : paths) {
     std::ifstream in(p, std::ios::binary);
     if (!in) throw gearpulse::SampleFileError(p.string() + ": cannot open");
-    logs.push_back(gearpulse::read_samples(in, p.string(), options).samples);
+    gearpulse::SampleLog log = gearpulse::read_samples(in, p.string(), options);
+    for (const std::string& warning : log.warnings)
+      std::fprintf(stderr, "bench_outage: warning: %s\n", warning.c_str());
+    if (log.skipped_count > 0)
+      std::fprintf(stderr, "bench_outage: %s: skipped %zu bad rows (first: %s)\n", p.c_str(),
+                   log.skipped_count, log.skipped.front().c_str());
+    logs.push_back(std::move(log.samples));
   }
   w.lines.push_back({"Logs given (fit on some, replay the others)",
                      logs.size() == 1 ? "the log's halves" : "even against odd logs", "given", false});

@@ -577,7 +577,7 @@ TEST_CASE("io: a phone app's log of one reading per row: each rpm with the speed
       "\"20\";\"Engine RPM\";\"900\";\"rpm\";\"\";\"\";\n";
   const SampleLog gps = read_text(text);
   CHECK(gps.format == SampleFileFormat::kPidRows);
-  CHECK(gps.speed_column == "speed(gps)");
+  CHECK(gps.speed_column == "Speed (GPS)");
   REQUIRE(gps.samples.size() == 3);
   CHECK(gps.samples[0].t == Approx(0));  // 86399.0: no speed read before it
   CHECK_FALSE(gps.samples[0].has_speed());
@@ -597,6 +597,42 @@ TEST_CASE("io: a phone app's log of one reading per row: each rpm with the speed
 
   CHECK(error_of("SECONDS;PID;VALUE;UNITS\n1;Engine RPM;800;rpm\n").find("no speed among the PIDs") !=
         std::string::npos);
+}
+
+TEST_CASE("io: named columns and PID rows: units, corrupt clocks and times, summaries, repeated polls") {
+  SECTION("kmph is km/h, not mph") {
+    CHECK(read_text("time,rpm,Speed (kmph)\n0,800,36\n1,900,45\n").samples[1].speed == Approx(12.5));
+  }
+  SECTION("a clock cell off its neighbours costs its row, not an hour on every later row") {
+    const SampleLog log = read_text(
+        "time,rpm,speed km/h\n10:01,800,1\n10:02,900,2\n45:00,1000,3\n"
+        "10:04,1100,4\n10:05,1200,5\n");
+    REQUIRE(log.samples.size() == 4);
+    CHECK(log.samples[3].t == Approx(4));  // mm:ss
+    CHECK(log.skipped_count == 1);
+  }
+  SECTION("a first row whose time is bad: the times count from the first row kept") {
+    const SampleLog log = read_text("time,rpm,speed km/h\n900,800,1\n1,900,2\n2,1000,3\n3,1100,4\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[0].t == Approx(0));
+    CHECK(log.samples[2].t == Approx(2));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].find("time 900") != std::string::npos);
+  }
+  SECTION("an average or maximum speed is not the car's") {
+    const SampleLog log = read_text("time,Average speed (km/h),rpm,Speed (km/h)\n0,50,800,36\n");
+    CHECK(log.speed_column == "Speed (km/h)");
+    CHECK(log.samples[0].speed == Approx(10));
+  }
+  SECTION("a PID reading without a unit has its PID's; each rpm poll is a sample") {
+    const SampleLog log = read_text(
+        "SECONDS;PID;VALUE;UNITS\n0;Vehicle speed;36;km/h\n1;Engine RPM;800;rpm\n2;Engine RPM;800;rpm\n"
+        "3;Vehicle speed;36;\n4;Engine RPM;800;rpm\n5;Vehicle speed;36;km/h\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.repeated_rows == 0);
+    CHECK(log.samples[2].speed == Approx(10));
+    CHECK(log.samples[1].speed == Approx(10));
+  }
 }
 
 TEST_CASE("io: a log saved with semicolons reads its decimal commas") {
