@@ -63,6 +63,18 @@ constexpr double kToneCandidateMismatch = 2.0;
 constexpr double kHalfObserveRho = 100.0;
 constexpr double kHalfMemoryS = 1.0;
 constexpr double kHalfObserveRight = 0.95;
+// The 3rd harmonic's level against the fundamental is a property of the engine and its wiring (the shape of
+// its firing pulse) and changes slowly: it is learned (dB, a mean and a spread over kThirdMemoryS) from the
+// hops on which the half order's presence is learned (a confident estimate, a fundamental 20 dB over the
+// noise per bin, so that a 3rd harmonic at -20 dB shows; a weaker one is read at that floor). The 3rd
+// harmonic's level prior is then a mixture: the learned level (normal in dB, its spread widened by
+// kThirdSpreadFloorDb) with weight n / (n + kThirdPriorS / hop) for n hops learned (exponentially
+// forgotten), the fixed prior with the rest, so that the fixed prior is worth kThirdPriorS of such hops.
+// The 2nd harmonic's level swings with load and the half order's presence is learned on its own (see
+// docs/tracker.md). Chosen on the generated scenes' tuning set.
+constexpr double kThirdMemoryS = 10.0;
+constexpr double kThirdPriorS = 0.5;
+constexpr double kThirdSpreadFloorDb = 2.0;
 // Memory (per hop) of the band's noise level behind the reported SNR.
 constexpr double kNoiseMemory = 0.9;
 // Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
@@ -136,7 +148,12 @@ struct SlidingDftTracker::Impl {
   double temper = 1.0;        // overlapping windows are not independent evidence
   double half_present = 1.0;  // share of clear confident hops that showed a half order (see kHalfMemoryS)
   double half_keep = 1.0;     // per hop
-  int lobe = 1;               // fine bins per resolution bin (1 / window)
+  // The 3rd harmonic's learned level ratio to the fundamental (see kThirdMemoryS): weight of the hops
+  // learned, the ratio's mean and variance (dB).
+  double third_n = 0.0, third_mean_db = 0.0, third_var_db = 0.0;
+  double third_keep = 1.0;   // per hop
+  double third_prior = 1.0;  // hops the fixed prior is worth
+  int lobe = 1;              // fine bins per resolution bin (1 / window)
 
   // The track over hops: candidates are the fine bins s_lo..k_hi (from half the band's lower edge, so
   // that an idling engine is followed below the band and its 2nd harmonic is not taken for it).
@@ -175,6 +192,7 @@ struct SlidingDftTracker::Impl {
   // Log odds lost by the state at fine bin k, whose line has per-bin SNR rho_line, to the root f / 4 of a
   // comb of which it would be the 4th harmonic.
   [[nodiscard]] double comb_root_penalty(int k, double rho_line) const noexcept;
+  void learn_third(const Evidence& ev, double right) noexcept;
   void reset_track() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
@@ -233,6 +251,8 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   at_loglik.assign(states, 0.0);
   temper = std::min(1.0, cfg.hop_s / cfg.window_s);
   half_keep = std::exp(-cfg.hop_s / kHalfMemoryS);
+  third_keep = std::exp(-cfg.hop_s / kThirdMemoryS);
+  third_prior = kThirdPriorS / cfg.hop_s;
   lobe = std::max(1, nfft / n_win);
   track.emplace(cfg, s_lo, k_hi, df, lobe);
   tones.emplace(bins, noise_lo, noise_hi, lobe, df, cfg.hop_s);
@@ -509,6 +529,10 @@ double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const 
 // normalised power at each of its orders.
 void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) const noexcept {
   const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
+  // The 3rd harmonic's learned level: its weight in the prior, its mean (a ratio) and spread (dB).
+  const double third_w = third_n / (third_n + third_prior);
+  const double third_ratio = std::pow(10.0, 0.1 * third_mean_db);
+  const double third_spread = std::sqrt(third_var_db + kThirdSpreadFloorDb * kThirdSpreadFloorDb);
   for (int k = s_lo; k <= k_hi; ++k) {
     const double z1 = z_at(static_cast<std::size_t>(k));
     // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one
@@ -531,10 +555,19 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out) co
         const double pos = kOrder[o] * k;
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
-        if (!tones->near(b))
-          l += o == 0   ? evidence.half_order(z_at(b), rho, half_absent)
-               : o == 2 ? evidence.second(z_at(b), rho)
-                        : evidence.order(z_at(b), rho);
+        if (tones->near(b)) continue;
+        const double z = z_at(b);
+        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent)
+                             : o == 2 ? evidence.second(z, rho)
+                                      : evidence.order(z, rho);
+        if (o != 3 || third_w <= 0.0) {
+          l += fixed;
+          continue;
+        }
+        // The mixture of the two priors, whose ratios to background add with the priors' weights.
+        const double learned = evidence.profiled(z, rho * third_ratio, third_spread);
+        const double m = std::max(fixed, learned);
+        l += m + std::log((1.0 - third_w) * std::exp(fixed - m) + third_w * std::exp(learned - m));
       }
       // The line's level (its peak's, not the state's on its shoulder) sets the lower root's expected level.
       if (l > 0.0) l -= comb_root_penalty(k, on_tone ? rho_track : std::max(peak - 1.0, 0.1));
@@ -620,7 +653,23 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     if (b < tones->bins() && !tones->near(b))
       half_present = half_keep * half_present + (1.0 - half_keep) * (ev.snr[0] >= kToneFitLevel ? 1.0 : 0.0);
   }
+  learn_third(ev, right);
   return out;
+}
+
+// The 3rd harmonic's level ratio, from hops that can tell: a confident estimate with a loud fundamental.
+void SlidingDftTracker::Impl::learn_third(const Evidence& ev, double right) noexcept {
+  third_n *= third_keep;
+  const double rho1 = ev.snr[1] - 1.0;
+  if (right < kHalfObserveRight || !ev.available[3] || rho1 < kHalfObserveRho) return;
+  const auto b = static_cast<std::size_t>(std::lround(3.0 * ev.freq / df));
+  if (b >= tones->bins() || tones->near(b)) return;
+  // A 3rd harmonic below the noise is read at the floor the fundamental's level lets show.
+  const double x = 10.0 * std::log10(std::max(ev.snr[3] - 1.0, 1.0) / rho1);
+  third_n += 1.0;
+  const double d = x - third_mean_db;
+  third_mean_db += d / third_n;
+  third_var_db = (1.0 - 1.0 / third_n) * (third_var_db + d * d / third_n);
 }
 
 // Learns the fixed tones from this window, leaving out the orders of the estimate `freq` while it is
@@ -725,6 +774,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.reset_track();
   s.tones->reset();
   s.half_present = 1.0;  // the half order is the source's: learned again from the new stream
+  s.third_n = s.third_mean_db = s.third_var_db = 0.0;  // so is the 3rd harmonic's level
   s.log_noise = kNaN;
   s.outputs.clear();
 }

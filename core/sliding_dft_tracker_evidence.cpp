@@ -40,6 +40,7 @@ constexpr double kLowerRatioHi = 20.0;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
 constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
 constexpr int kHalfTables = static_cast<int>(std::size(kHalfAbsent));
+constexpr int kProfileTables = static_cast<int>(std::size(HarmonicEvidence::kProfileSpreadDb));
 
 double log_i0(double x) {
   if (x < 20.0) {
@@ -109,6 +110,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   second_.assign(fund_.size(), 0.0);
   lower_.assign(fund_.size(), 0.0);
   half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
+  profile_.assign(kProfileTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
     const double log_broad =
@@ -136,6 +138,18 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
         half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
+      // A ratio normal in dB about 0 dB, over +-4 spreads: the mean over ln r of Rice x the normal density,
+      // times the range (a uniform mean over it).
+      for (int n = 0; n < kProfileTables; ++n) {
+        const double s = kProfileSpreadDb[n] * std::numbers::ln10 / 10.0, range = 8.0 * s;
+        const double log_norm = -0.5 * std::log(2.0 * std::numbers::pi * s * s) + std::log(range);
+        const double normal =
+            log_mean_over(std::exp(-4.0 * s), std::exp(4.0 * s), kRatioSteps, [&](double r) {
+              const double x = std::log(r) / s;
+              return log_rice(z, rho * r) + log_norm - 0.5 * x * x;
+            });
+        profile_[static_cast<std::size_t>(n)][at] = with_absent(normal, kOrderAbsent);
+      }
     }
   }
 }
@@ -184,6 +198,17 @@ double HarmonicEvidence::half_order(double z, double rho_fundamental, double abs
   const auto i = static_cast<std::size_t>(n);
   if (w <= 0.0) return lookup(half_[i], z, rho_fundamental);
   return (1.0 - w) * lookup(half_[i], z, rho_fundamental) + w * lookup(half_[i + 1], z, rho_fundamental);
+}
+
+double HarmonicEvidence::profiled(double z, double rho, double spread_db) const noexcept {
+  spread_db = std::clamp(spread_db, kProfileSpreadDb[0], kProfileSpreadDb[kProfileTables - 1]);
+  int n = 0;
+  while (n + 2 < kProfileTables && spread_db > kProfileSpreadDb[n + 1])
+    ++n;
+  const double w = (spread_db - kProfileSpreadDb[n]) / (kProfileSpreadDb[n + 1] - kProfileSpreadDb[n]);
+  const auto i = static_cast<std::size_t>(n);
+  if (w <= 0.0) return lookup(profile_[i], z, rho);
+  return (1.0 - w) * lookup(profile_[i], z, rho) + w * lookup(profile_[i + 1], z, rho);
 }
 
 }  // namespace gearpulse

@@ -11,9 +11,10 @@
 // something is there. The fundamental's SNR is expected near the track's recent level (a matched test,
 // the longer integration a steady engine allows) or anywhere over a broad range (acquisition, level
 // changes). The other orders (f/2, 2f, 3f) are expected at a fraction r of the fundamental's SNR, r
-// unknown over two decades (the 2nd harmonic's up to +15 dB), or absent: a loud line whose harmonics are all
-// missing is unlikely to be the engine; a weak one whose harmonics drown in the noise is not penalised. Some
-// signals have no half order at all: the probability of its absence can be given as learned (half_order()).
+// unknown over two decades (the 2nd harmonic's up to +15 dB) or known about a learned ratio, or absent: a
+// loud line whose harmonics are all missing is unlikely to be the engine; a weak one whose harmonics drown in
+// the noise is not penalised. Some signals have no half order at all: the probability of its absence can be
+// given as learned (half_order()).
 //
 // Everything is tabulated at construction; lookups are noexcept and allocation-free.
 #include <vector>
@@ -43,6 +44,12 @@ class HarmonicEvidence {
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
   [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
+  // The same for an order's bin whose level is known: its per-bin SNR normal in dB about rho_expected
+  // (the fundamental's times a ratio learned from this engine) with `spread_db` (clamped to
+  // kProfileSpreadDb's range), or the order absent (kOrderAbsent).
+  [[nodiscard]] double profiled(double z, double rho_expected, double spread_db) const noexcept;
+  // Spreads (dB) of the tabulated profiles; profiled() interpolates between them.
+  static constexpr double kProfileSpreadDb[] = {2.0, 4.0, 8.0};
 
  private:
   [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
@@ -53,6 +60,8 @@ class HarmonicEvidence {
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).
   std::vector<std::vector<double>> half_;
+  // One table per kProfileSpreadDb, the ratio's mean at 0 dB, over (log10 rho, sqrt z).
+  std::vector<std::vector<double>> profile_;
 };
 
 }  // namespace gearpulse
