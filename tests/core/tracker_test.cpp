@@ -830,6 +830,25 @@ TEST_CASE("tracker: a 0 dB drive at 8 kHz keeps no confident old line through it
   CHECK(std::sqrt(sq / static_cast<double>(tracked)) <= 0.8);
 }
 
+namespace {
+
+// The track points and the true line of a 120 s scene of the generated sets (launches, shifts, overruns,
+// a cabin's other lines) at `snr_db`.
+struct ScenePoints {
+  sim::FrequencyTrajectory truth;
+  std::vector<TrackPoint> points;
+};
+ScenePoints track_scene(std::uint64_t seed, double snr_db) {
+  constexpr double kDurationS = 120.0;
+  sim::FrequencyTrajectory truth = sim::launch_drive_trajectory(kDurationS, seed);
+  const sim::LighterSceneConfig c = sim::scene_for_seed(seed, snr_db);
+  SlidingDftTracker tracker(config_at(c.sample_rate_hz));
+  auto points = track(tracker, sim::make_lighter_scene(c, truth, kDurationS));
+  return {std::move(truth), std::move(points)};
+}
+
+}  // namespace
+
 // A -5 dB scene of the generated tuning set (launches, shifts, overruns, a cabin's other lines): the
 // engine's line fades from window to window, and a track that passed to "engine absent" on every faded
 // window restarted anywhere, often on twice the engine. The track keeps its line through faded windows:
@@ -837,11 +856,7 @@ TEST_CASE("tracker: a 0 dB drive at 8 kHz keeps no confident old line through it
 TEST_CASE("tracker: a -5 dB scene is tracked through faded windows") {
   const std::uint64_t seed = GENERATE(101, 106);
   INFO("seed " << seed);
-  constexpr double kDurationS = 120.0;
-  const sim::FrequencyTrajectory truth = sim::launch_drive_trajectory(kDurationS, seed);
-  const sim::LighterSceneConfig c = sim::scene_for_seed(seed, -5.0);
-  SlidingDftTracker tracker(config_at(c.sample_rate_hz));
-  const auto points = track(tracker, sim::make_lighter_scene(c, truth, kDurationS));
+  const auto [truth, points] = track_scene(seed, -5.0);
   std::size_t in_band = 0, tracked = 0, wrong = 0;
   for (const TrackPoint& p : points) {
     const double f = truth(p.t);
@@ -864,11 +879,7 @@ TEST_CASE("tracker: a -5 dB scene is tracked through faded windows") {
 TEST_CASE("tracker: at -5 dB a launch's ramps are followed at their rate") {
   const std::uint64_t seed = GENERATE(102, 106);
   INFO("seed " << seed);
-  constexpr double kDurationS = 120.0;
-  const sim::FrequencyTrajectory truth = sim::launch_drive_trajectory(kDurationS, seed);
-  const sim::LighterSceneConfig c = sim::scene_for_seed(seed, -5.0);
-  SlidingDftTracker tracker(config_at(c.sample_rate_hz));
-  const auto points = track(tracker, sim::make_lighter_scene(c, truth, kDurationS));
+  const auto [truth, points] = track_scene(seed, -5.0);
   std::size_t rising = 0, tracked = 0, wrong = 0;
   for (const TrackPoint& p : points) {
     const double f = truth(p.t);
@@ -891,12 +902,7 @@ TEST_CASE("tracker: at -5 dB a launch's ramps are followed at their rate") {
 // loud. Scene 305 at 10 dB: without the learned level 6.8 % of the tracked in-band hops sit at two thirds of
 // the engine, in runs of up to 2.4 s; with it 0.4 %, none longer than 0.3 s.
 TEST_CASE("tracker: the learned level of the 3rd harmonic keeps the track off two thirds of the engine") {
-  constexpr std::uint64_t kSeed = 305;
-  constexpr double kDurationS = 120.0;
-  const sim::FrequencyTrajectory truth = sim::launch_drive_trajectory(kDurationS, kSeed);
-  const sim::LighterSceneConfig c = sim::scene_for_seed(kSeed, 10.0);
-  SlidingDftTracker tracker(config_at(c.sample_rate_hz));
-  const auto points = track(tracker, sim::make_lighter_scene(c, truth, kDurationS));
+  const auto [truth, points] = track_scene(305, 10.0);
   std::size_t in_band = 0, tracked = 0, at_two_thirds = 0, run = 0, longest = 0;
   for (const TrackPoint& p : points) {
     const double f = truth(p.t);
