@@ -177,7 +177,7 @@ bool holds(std::string_view text, std::initializer_list<std::string_view> parts)
                      [&](std::string_view part) { return text.find(part) != std::string_view::npos; });
 }
 
-bool summary_speed(std::string_view name) noexcept {
+bool summary_column(std::string_view name) noexcept {
   return holds(name, {"average", "avg", "max", "min", "limit"});
 }
 

@@ -235,9 +235,9 @@ std::string folded(std::string_view name);
 // Whether `text` holds any of `parts`.
 bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept;
 
-// Whether a speed column or PID (folded name) is a summary of the drive (an average, a maximum, a limit)
-// rather than the car's speed.
-bool summary_speed(std::string_view name) noexcept;
+// Whether a column or PID (folded name) is a summary of the drive (an average, a maximum, a limit) rather
+// than the car's speed or rpm at the moment.
+bool summary_column(std::string_view name) noexcept;
 
 // The speed unit a column's name states (m/s per unit), or 0.
 double speed_unit(std::string_view name) noexcept;
@@ -258,6 +258,12 @@ inline void unwrap_clock(std::vector<Row>& rows, LogBuilder& out) {
   std::size_t kept = 0;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     Row& r = rows[i];
+    // The first row has none before it: it is corrupt when it lies away from the two after it, which agree.
+    if (i == 0 && rows.size() >= 3 && apart(rows[1].clock, r.clock, r.period) > kJump &&
+        apart(rows[2].clock, rows[1].clock, r.period) <= kJump) {
+      out.skip(r.line, "time jumps away from the rows after it");
+      continue;
+    }
     const double jump = last >= 0.0 ? apart(r.clock, last, r.period) : 0.0;
     if (jump > kJump && i + 1 < rows.size() && apart(rows[i + 1].clock, last, r.period) <= kJump) {
       char buf[96];

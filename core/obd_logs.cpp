@@ -145,7 +145,7 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
   for (std::size_t i = 0; i < header.size(); ++i) {
     const std::string f = folded(header[i]);
     if (f.find("rpm") != std::string::npos) {
-      if (!rpm) rpm = i;
+      if (!rpm && !summary_column(f)) rpm = i;
       continue;
     }
     std::string base = f.substr(0, f.find_first_of("(["));
@@ -159,7 +159,7 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
       layout.time_to_s = ms ? 1e-3 : 1.0;
       continue;
     }
-    if (f.find("speed") == std::string::npos || summary_speed(f)) continue;
+    if (f.find("speed") == std::string::npos || summary_column(f)) continue;
     if (speed_unit(f) == 0.0) {
       if (!unitless) unitless = i;
     } else if (f.find("gps") != std::string::npos) {
@@ -200,7 +200,6 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
-  bool clocks = false;  // the time column holds clock times (unwrap_clock)
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
     double period = 0.0;  // of a clock cell's time of day
@@ -220,11 +219,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
                              ? parse_clock(cells[*it])
                              : std::nullopt;
       if (clock) {
-        clocks = true;
         t = Cell{CellKind::kNumber, clock->first, {}};
         period = clock->second;
-      } else if (clocks && t.kind == CellKind::kNumber) {
-        t = Cell{CellKind::kBad, kMissing, "a number among clock times in column time"};
       }
     }
     if (t.kind == CellKind::kMissing) {
@@ -240,13 +236,18 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     if (period > 0.0) row.clock = t.value, row.period = period;
     parsed.push_back(row);
   }
-  if (clocks) {
+  // A time column holds numbers or clock times: the fewer kind are bad cells.
+  const auto clock_rows = static_cast<std::size_t>(
+      std::count_if(parsed.begin(), parsed.end(), [](const ObdRow& r) { return r.period > 0.0; }));
+  if (clock_rows > 0) {
+    const bool clocks = 2 * clock_rows >= parsed.size();
     std::erase_if(parsed, [&](const ObdRow& r) {
-      if (r.period > 0.0) return false;
-      out.skip(r.line, "a number among clock times in column time");
+      if ((r.period > 0.0) == clocks) return false;
+      out.skip(r.line, clocks ? "a number among clock times in column time"
+                              : "a clock time among numbers in column time");
       return true;
     });
-    unwrap_clock(parsed, out);
+    if (clocks) unwrap_clock(parsed, out);
   }
   add_obd_rows(parsed, out, layout);
 }
@@ -266,7 +267,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     std::size_t line;
     double t, value;
     std::size_t pid;      // index into names
-    double to_ms;         // speed unit of the row (0: none)
+    double to_ms;         // speed unit of the row (0: none; -1: none written, its PID's)
     std::string problem;  // why the value does not read (said only for the PIDs used)
   };
   std::vector<std::string> names;    // folded, for matching
@@ -299,10 +300,8 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     if (last_t >= 0.0 && seconds + offset < last_t - kDay / 2) offset += kDay;
     seconds += offset;
     last_t = seconds;
-    // A reading without a unit has its PID's.
-    const std::string& own = unit.empty() ? units[pid] : unit;
     readings.push_back(
-        {reader.number, seconds, value.value, pid, speed_unit(own.empty() ? name : own), value.problem});
+        {reader.number, seconds, value.value, pid, unit.empty() ? -1.0 : speed_unit(unit), value.problem});
   }
   const auto find_pid = [&](auto&& good) -> std::optional<std::size_t> {
     for (std::size_t i = 0; i < names.size(); ++i)
@@ -310,9 +309,12 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     return std::nullopt;
   };
   std::optional<std::size_t> rpm = find_pid([&](std::size_t i) { return names[i] == "enginerpm"; });
-  if (!rpm) rpm = find_pid([&](std::size_t i) { return units[i] == "rpm" || holds(names[i], {"rpm"}); });
+  if (!rpm)
+    rpm = find_pid([&](std::size_t i) {
+      return (units[i] == "rpm" || holds(names[i], {"rpm"})) && !summary_column(names[i]);
+    });
   const auto speed_pid = [&](std::size_t i, bool gps) {
-    return holds(names[i], {"speed"}) && !summary_speed(names[i]) &&
+    return holds(names[i], {"speed"}) && !summary_column(names[i]) &&
            speed_unit(units[i].empty() ? names[i] : units[i]) > 0.0 && holds(names[i], {"gps"}) == gps;
   };
   const std::optional<std::size_t> gps = find_pid([&](std::size_t i) { return speed_pid(i, true); });
@@ -345,8 +347,9 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   };
   std::vector<SpeedAt> speeds;
   std::vector<const Reading*> revs;
-  for (const Reading& r : readings) {
+  for (Reading& r : readings) {
     if (r.pid != *rpm && r.pid != *speed) continue;
+    if (r.to_ms < 0.0) r.to_ms = speed_unit(units[r.pid].empty() ? names[r.pid] : units[r.pid]);
     if (!r.problem.empty()) {
       out.skip(r.line, r.problem);
       continue;

@@ -660,8 +660,11 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
 // The 3rd harmonic's level ratio, from hops that can tell: a confident estimate with a loud fundamental.
 void SlidingDftTracker::Impl::learn_third(const Evidence& ev, double right) noexcept {
   third_n *= third_keep;
+  // Written so that a NaN fails each test (a non-finite level would poison every later hop's prior).
+  if (!(right >= kHalfObserveRight) || !ev.available[3] || !(ev.snr[1] >= kHalfObserveRho) ||
+      !std::isfinite(ev.snr[1]) || !std::isfinite(ev.snr[3]))
+    return;
   const double rho1 = ev.snr[1] - 1.0;
-  if (right < kHalfObserveRight || !ev.available[3] || rho1 < kHalfObserveRho) return;
   const auto b = static_cast<std::size_t>(std::lround(3.0 * ev.freq / df));
   if (b >= tones->bins() || tones->near(b)) return;
   // A 3rd harmonic below the noise is read at the floor the fundamental's level lets show.

@@ -611,6 +611,25 @@ TEST_CASE("io: named columns and PID rows: units, corrupt clocks and times, summ
     CHECK(log.samples[3].t == Approx(4));  // mm:ss
     CHECK(log.skipped_count == 1);
   }
+  SECTION("a clock cell among numbers, or a number among clocks, is the bad one") {
+    const SampleLog numbers = read_text("time,rpm,speed km/h\n0,800,1\n1,900,2\n12:30,1000,3\n3,1100,4\n");
+    CHECK(numbers.samples.size() == 3);
+    CHECK(numbers.skipped_count == 1);
+    const SampleLog clocks =
+        read_text("time,rpm,speed km/h\n10:01,800,1\n5,900,2\n10:03,1000,3\n10:04,1100,4\n");
+    CHECK(clocks.samples.size() == 3);
+    CHECK(clocks.skipped_count == 1);
+  }
+  SECTION("a first clock cell away from the rows after it is the bad one") {
+    const SampleLog log =
+        read_text("time,rpm,speed km/h\n45:00,800,1\n10:01,900,2\n10:02,1000,3\n10:03,1100,4\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[2].t == Approx(2));
+    CHECK(log.skipped_count == 1);
+  }
+  SECTION("an average rpm is not the engine's") {
+    CHECK(read_text("time,Average RPM,Engine RPM,speed km/h\n0,1500,900,1\n").samples[0].freq == Approx(15));
+  }
   SECTION("a first row whose time is bad: the times count from the first row kept") {
     const SampleLog log = read_text("time,rpm,speed km/h\n900,800,1\n1,900,2\n2,1000,3\n3,1100,4\n");
     REQUIRE(log.samples.size() == 3);
@@ -626,7 +645,8 @@ TEST_CASE("io: named columns and PID rows: units, corrupt clocks and times, summ
   }
   SECTION("a PID reading without a unit has its PID's; each rpm poll is a sample") {
     const SampleLog log = read_text(
-        "SECONDS;PID;VALUE;UNITS\n0;Vehicle speed;36;km/h\n1;Engine RPM;800;rpm\n2;Engine RPM;800;rpm\n"
+        "SECONDS;PID;VALUE;UNITS\n0;Vehicle speed;36;\n1;Engine RPM;800;rpm\n2;Engine RPM;800;rpm\n"
+        "2.5;Vehicle speed;36;km/h\n"
         "3;Vehicle speed;36;\n4;Engine RPM;800;rpm\n5;Vehicle speed;36;km/h\n");
     REQUIRE(log.samples.size() == 3);
     CHECK(log.repeated_rows == 0);
