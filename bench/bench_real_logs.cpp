@@ -48,13 +48,7 @@ struct Log {
 
 std::vector<Log> read_logs(const fs::path& dir, const std::string& prefix) {
   std::vector<Log> logs;
-  if (!fs::exists(dir)) return logs;
-  std::vector<fs::path> paths;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().extension() == ".csv" && e.path().filename().string().rfind(prefix, 0) == 0)
-      paths.push_back(e.path());
-  std::sort(paths.begin(), paths.end());
-  for (const auto& p : paths) {
+  for (const auto& p : csv_logs(dir, prefix)) {
     std::ifstream in(p, std::ios::binary);
     const gearpulse::SampleLog log = gearpulse::read_samples(in, p.string());
     logs.push_back({p.filename().string(), log.samples, {}});

@@ -4,11 +4,25 @@
 // hindsight choice (a gear, or standing); quantiles of the errors.
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <string>
 #include <vector>
 
 #include "core/gear_model.hpp"
 
 namespace gearpulse::bench {
+
+// The CSV logs in `dir` whose names begin with `prefix`, sorted (none when `dir` is missing).
+inline std::vector<std::filesystem::path> csv_logs(const std::filesystem::path& dir,
+                                                   const std::string& prefix) {
+  std::vector<std::filesystem::path> paths;
+  if (!std::filesystem::exists(dir)) return paths;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().extension() == ".csv" && e.path().filename().string().rfind(prefix, 0) == 0)
+      paths.push_back(e.path());
+  std::sort(paths.begin(), paths.end());
+  return paths;
+}
 
 inline constexpr double kOutageStart = 120.0;   // s after the drive starts
 inline constexpr double kOutagePeriod = 180.0;  // s between outage starts

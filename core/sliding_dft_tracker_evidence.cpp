@@ -189,26 +189,25 @@ double HarmonicEvidence::lower_root(double z, double rho_line) const noexcept {
   return lookup(lower_, z, rho_line);
 }
 
-double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
-  absent = std::clamp(absent, kHalfAbsent[0], kHalfAbsent[kHalfTables - 1]);
+double HarmonicEvidence::between(const std::vector<std::vector<double>>& tables, std::span<const double> keys,
+                                 double key, double z, double rho) const noexcept {
+  const int last = static_cast<int>(keys.size()) - 1;
+  key = std::clamp(key, keys[0], keys[static_cast<std::size_t>(last)]);
   int n = 0;
-  while (n + 2 < kHalfTables && absent > kHalfAbsent[n + 1])
+  while (n + 1 < last && key > keys[static_cast<std::size_t>(n + 1)])
     ++n;
-  const double w = (absent - kHalfAbsent[n]) / (kHalfAbsent[n + 1] - kHalfAbsent[n]);
   const auto i = static_cast<std::size_t>(n);
-  if (w <= 0.0) return lookup(half_[i], z, rho_fundamental);
-  return (1.0 - w) * lookup(half_[i], z, rho_fundamental) + w * lookup(half_[i + 1], z, rho_fundamental);
+  const double w = (key - keys[i]) / (keys[i + 1] - keys[i]);
+  if (w <= 0.0) return lookup(tables[i], z, rho);
+  return (1.0 - w) * lookup(tables[i], z, rho) + w * lookup(tables[i + 1], z, rho);
+}
+
+double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
+  return between(half_, kHalfAbsent, absent, z, rho_fundamental);
 }
 
 double HarmonicEvidence::profiled(double z, double rho, double spread_db) const noexcept {
-  spread_db = std::clamp(spread_db, kProfileSpreadDb[0], kProfileSpreadDb[kProfileTables - 1]);
-  int n = 0;
-  while (n + 2 < kProfileTables && spread_db > kProfileSpreadDb[n + 1])
-    ++n;
-  const double w = (spread_db - kProfileSpreadDb[n]) / (kProfileSpreadDb[n + 1] - kProfileSpreadDb[n]);
-  const auto i = static_cast<std::size_t>(n);
-  if (w <= 0.0) return lookup(profile_[i], z, rho);
-  return (1.0 - w) * lookup(profile_[i], z, rho) + w * lookup(profile_[i + 1], z, rho);
+  return between(profile_, kProfileSpreadDb, spread_db, z, rho);
 }
 
 }  // namespace gearpulse

@@ -17,6 +17,7 @@
 // given as learned (half_order()).
 //
 // Everything is tabulated at construction; lookups are noexcept and allocation-free.
+#include <span>
 #include <vector>
 
 namespace gearpulse {
@@ -53,6 +54,10 @@ class HarmonicEvidence {
 
  private:
   [[nodiscard]] double lookup(const std::vector<double>& table, double z, double rho) const noexcept;
+  // A lookup interpolated between the tables of the two `keys` (ascending, one per table) about `key`,
+  // clamped to their range.
+  [[nodiscard]] double between(const std::vector<std::vector<double>>& tables, std::span<const double> keys,
+                               double key, double z, double rho) const noexcept;
   std::vector<double> fund_;    // over (log10 rho, sqrt z)
   std::vector<double> ladder_;  // over (log10 rho, sqrt z)
   std::vector<double> second_;  // over (log10 rho, sqrt z)

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "bench/outage/outage.hpp"
+#include "bench/outage_protocol.hpp"
 #include "core/estimator.hpp"
 #include "core/sample_io.hpp"
 
@@ -20,13 +21,7 @@ namespace {
 
 std::vector<std::vector<Sample>> read_logs(const fs::path& dir, const std::string& prefix) {
   std::vector<std::vector<Sample>> logs;
-  if (!fs::exists(dir)) return logs;
-  std::vector<fs::path> paths;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().extension() == ".csv" && e.path().filename().string().rfind(prefix, 0) == 0)
-      paths.push_back(e.path());
-  std::sort(paths.begin(), paths.end());
-  for (const auto& p : paths) {
+  for (const auto& p : csv_logs(dir, prefix)) {
     std::ifstream in(p, std::ios::binary);
     logs.push_back(gearpulse::read_samples(in, p.string()).samples);
   }
