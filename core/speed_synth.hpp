@@ -193,6 +193,9 @@ struct SynthTuning {
   // 1: a ladder that lacks first gear takes the gears below it that a plausible ladder of more gears held
   // in the fit (the model's extra.lower_gears) before any predicted from its steps (0: none taken).
   double fitted_lower_gears = 1.0;
+  // 1: a step of the model's ladder twice the step above it or more lacks the gears a progressive gearbox
+  // has there (its steps do not shrink toward the low gears), predicted from the steps above (0: none).
+  double fill_ladder_gaps = 1.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
   // SpeedLag learns from this drive's fixes (0: the speed of the step itself).
   double speed_lag = 1.0;
@@ -271,6 +274,8 @@ class SpeedSynthesizer {
   static void keep_covariance(Track& x) noexcept;
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
+  void insert_gap_gears() noexcept;
+  void insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
   void insert_fitted_lower_gears(const GearModel* model) noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;

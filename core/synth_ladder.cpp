@@ -49,6 +49,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     model_gear_[j] = j;
   }
   insert_seen_gears();
+  insert_gap_gears();
   speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? model_speed_lag(*model) : 0.0);
   habits_.load_engine(model, tuning_);  // the warm idle, for the gears below the ladder
   insert_fitted_lower_gears(model);
@@ -83,25 +84,93 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
   const int n = seen_.seen(seen);
   for (int k = 0; k < n && gears_ < kMaxGears; ++k) {
     const SeenGears::Gear& g = seen[static_cast<std::size_t>(k)];
-    int at = gears_ + 1;  // ladder position it takes
     bool known = false;
-    for (int j = 1; j <= gears_; ++j) {
+    for (int j = 1; j <= gears_; ++j)
       known = known || std::abs(std::log(g.theta / theta_[j])) < 2.0 * kGearWindow;
-      if (at > gears_ && g.theta < theta_[j]) at = j;
-    }
-    if (known) continue;
-    for (int j = gears_; j >= at; --j) {
-      theta_[j + 1] = theta_[j];
-      theta_se_[j + 1] = theta_se_[j];
-      weight_[j + 1] = weight_[j];
-      model_gear_[j + 1] = model_gear_[j];
-    }
-    theta_[at] = g.theta;
-    theta_se_[at] = g.std_error;
-    weight_[at] = std::max(g.share, kMinGearShare);
-    model_gear_[at] = 0;
-    ++gears_;
+    if (!known) insert_in_ladder(g.theta, g.std_error, std::max(g.share, kMinGearShare), 0);
   }
+}
+
+// One gear joins the ladder in theta order.
+void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double weight,
+                                        int model_gear) noexcept {
+  int at = gears_ + 1;  // ladder position it takes
+  for (int j = gears_; j >= 1 && theta < theta_[j]; --j)
+    at = j;
+  for (int j = gears_; j >= at; --j) {
+    theta_[j + 1] = theta_[j];
+    theta_se_[j + 1] = theta_se_[j];
+    weight_[j + 1] = weight_[j];
+    model_gear_[j + 1] = model_gear_[j];
+  }
+  theta_[at] = theta;
+  theta_se_[at] = theta_se;
+  weight_[at] = weight;
+  model_gear_[at] = model_gear;
+  ++gears_;
+}
+
+// A young model lacks the gears not yet driven steadily, and those may lie between gears it has: the
+// gears passed in a launch, between a low gear driven steadily (creeping in town) and the cruising gears.
+// A gearbox is progressive: its steps (log theta ratios) do not shrink toward the low gears. A gear missing
+// in a step of the model's ladder thus makes that step the sum of two gearbox steps or more, each at least
+// the step above it: a step twice the one above it or more is taken to lack gears, one under that lacks
+// none (the steps of the gearboxes known here grow by a factor of 1.1 to 1.9 from one gear to the next
+// lower). How many it lacks is read from the steps above it, as for the gears predicted below the ladder
+// (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
+// the one above it (between 1 and 1.5; 1 with no step above it), and the count whose sum comes nearest the
+// step in ratio is taken. The gears go where those steps, scaled to fill the step exactly, put them. Only
+// the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse cadences sometimes
+// a ratio no gear has) stands for the predicted gear within half a predicted step of it. Each predicted
+// gear has the least share of use, no standard error of theta (as those predicted below the ladder) and
+// no number in the model.
+void SpeedSynthesizer::insert_gap_gears() noexcept {
+  if (tuning_.fill_ladder_gaps <= 0.0 || model_ == nullptr) return;
+  std::array<double, kMaxGears> thetas{};
+  const std::span<const double> model = thetas_of(model_.get(), thetas);
+  const int m = static_cast<int>(model.size());
+  if (m < 3) return;
+  constexpr double kMaxGrowth = 1.5;
+  const auto step = [&](int k) {
+    return std::log(model[static_cast<std::size_t>(k + 1)] / model[static_cast<std::size_t>(k)]);
+  };
+  ModeArray gap{};  // predicted thetas, any order
+  int n_gap = 0;
+  for (int k = 0; k + 1 < m; ++k) {
+    const double size = step(k);
+    // A gear missing in this step makes it the sum of two gearbox steps at least, each no smaller than the
+    // step above it: a step under twice the one above it lacks no gear.
+    if (k + 2 >= m || size < 2.0 * step(k + 1)) continue;
+    const double ref = step(k + 1);
+    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), 1.0, kMaxGrowth) : 1.0;
+    const int room = kMaxGears - gears_ - n_gap;
+    int best = 1;
+    double sum = ref * growth, best_sum = sum, miss = std::abs(std::log(size / sum));
+    double next = ref * growth;
+    for (int n = 2; n <= room + 1; ++n) {
+      next *= growth;
+      sum += next;
+      const double d = std::abs(std::log(size / sum));
+      if (n > 2 && d >= miss) break;
+      best = n, best_sum = sum, miss = d;
+    }
+    if (best < 2) continue;
+    // The predicted gears from the top of the step down, each step scaled to fill it.
+    const double scale = size / best_sum;
+    const double half = 0.5 * scale * ref * growth;  // half the smallest predicted step
+    double part = ref, down = 0.0;
+    for (int i = 1; i < best; ++i) {
+      part *= growth;
+      down += part * scale;
+      const double theta = model[static_cast<std::size_t>(k + 1)] * std::exp(-down);
+      bool stood_for = false;  // a gear seen under GPS stands for it
+      for (int j = 1; j <= gears_; ++j)
+        stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
+      if (!stood_for) gap[static_cast<std::size_t>(n_gap++)] = theta;
+    }
+  }
+  for (int i = 0; i < n_gap; ++i)
+    insert_in_ladder(gap[static_cast<std::size_t>(i)], 0.0, kMinGearShare, 0);
 }
 
 // A ladder that lacks first gear (lacks_first_gear) has gears below its lowest. Where the fit met a

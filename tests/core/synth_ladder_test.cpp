@@ -298,3 +298,51 @@ TEST_CASE("synth: a ladder lacking first gear takes the fit's gears below it ove
   CHECK(fitted < 0.03);
   CHECK(fitted < 0.5 * predicted);
 }
+
+TEST_CASE("synth: a launch through gears missing inside a young ladder climbs the gears predicted there") {
+  // A 7-speed whose young model has second, fifth, sixth and seventh gear: first, third and fourth were
+  // passed in launches, never driven steadily. The step from its second to its fifth gear (a factor of
+  // 2.3) is three gearbox steps. At the tracker's hops, GPS shows the car standing at idle, then is lost;
+  // the car moves off and pulls through every gear to the revs this driver shifts at (5 idles), with the
+  // clutch out 0.4 s at each shift, and cruises in seventh. The launch in first gear is read in second
+  // (the model's lowest carries the car at idle at a first gear's speed, so none is predicted below it).
+  const std::vector<double> seven = {0.0145, 0.0200, 0.0270, 0.0358, 0.0463, 0.0590, 0.0737};
+  constexpr double kCarIdle = 47.0;  // Hz: first gear carries the car at 0.7 m/s at idle
+  const auto model = model_of({seven[1], seven[4], seven[5], seven[6]});
+  struct Hop {
+    double t, speed, freq;
+  };
+  std::vector<Hop> hops;
+  constexpr double kDt = 0.1, kLost = 15.0, kLaunch = 20.0, kAccel = 1.2, kShift = 0.4, kCruise = 30.0;
+  const double upshift = 5.0 * kCarIdle;
+  double t = 0.0, v = 0.0;
+  for (; t < kLaunch; t += kDt)
+    hops.push_back({t, 0.0, kCarIdle});
+  for (std::size_t gear = 0; gear + 1 < seven.size(); ++gear) {
+    for (; v / seven[gear] < upshift; t += kDt, v += kAccel * kDt)
+      hops.push_back({t, v, std::max(1.6 * kCarIdle, v / seven[gear])});  // the clutch slips at first
+    for (double s = 0.0; s < kShift; s += kDt, t += kDt)  // declutched, the revs fall toward the next gear
+      hops.push_back({t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear])});
+  }
+  for (const double end = t + kCruise; t < end; t += kDt)
+    hops.push_back({t, v, v / seven[6]});
+  const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double synthesized = 0.0, driven = 0.0;
+    for (const Hop& h : hops) {
+      const SynthOutput o = synth.step(h.t, h.t < kLost ? h.speed : kMissing, h.freq);
+      if (h.t >= kLaunch) synthesized += o.speed * kDt, driven += h.speed * kDt;
+    }
+    return std::abs(synthesized - driven) / driven;
+  };
+  SpeedSynthesizer filled(model);
+  CHECK(filled.ladder_gears() == 6);  // two gears predicted in the step from second to fifth
+  const double with_gaps = distance_error({});
+  gearpulse::SynthTuning ladder_alone;
+  ladder_alone.fill_ladder_gaps = 0.0;
+  const double without = distance_error(ladder_alone);
+  INFO("distance error over the launch and cruise: " << 100.0 * with_gaps << " % with the gears in the step "
+                                                     << "predicted, " << 100.0 * without << " % without");
+  CHECK(with_gaps < 0.1);
+  CHECK(with_gaps < 0.5 * without);
+}
