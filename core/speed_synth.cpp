@@ -657,6 +657,8 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     out = {0.0, 0, SpeedSource::kNone};
   } else if (gears_ == 0) {
     out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
+    // Before a model, GPS still shows the car standing: the idle is learned as with one (no mode is held).
+    if (have_gps) habits_.learn(t_, dt, gps_speed, freq, gps_new, 0, false, 0.0, false, tuning_);
   } else {
     speed_lag_.note_freq(t_, freq);
     if (!std::isfinite(gps_age)) gps_age = 0.0;

@@ -60,6 +60,34 @@ TEST_CASE("synth: knows the idle from the model before GPS has shown the car sta
   }
 }
 
+TEST_CASE("synth: the idle GPS showed before a first model tells a wait in an outage from a gear") {
+  // A first drive: no model yet while GPS shows the car waiting at idle and moving off. A young model of
+  // third to fifth gear comes, fitted on too few standing pairs to record the idle. GPS is lost in 3rd;
+  // the car brakes in gear, declutches and waits at idle. With the idle GPS showed before the model, that
+  // is a car at rest, not fifth gear at idle revs.
+  const auto young = model_of({kHatch[2], kHatch[3], kHatch[4]});
+  std::vector<Row> rows;
+  for (int k = 0; k < 10; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  for (Row r : script(0.0, {{1, 1.5, 3}, {2, 1.0, 5}, {3, 0.3, 20}, {3, -1.0, 5}, {0, -1.5, 6}, {0, 0.0, 40}},
+                      kHatch)) {
+    r.t += 10.0;
+    rows.push_back(r);
+  }
+  SpeedSynthesizer synth;
+  std::vector<gearpulse::SynthOutput> out;
+  for (const Row& r : rows) {
+    if (r.t == 30.0) synth.set_model(young);
+    out.push_back(synth.step(r.t, r.t < 40.0 ? r.speed : gearpulse::kMissing, r.freq));
+  }
+  CHECK(synth.idle_freq() == Approx(kIdle));
+  for (std::size_t i = rows.size() - 20; i < rows.size(); ++i) {
+    INFO("t = " << rows[i].t << ", synthesized " << out[i].speed << " m/s in gear " << out[i].gear);
+    CHECK(out[i].speed == 0.0);
+    CHECK(out[i].gear == 0);
+  }
+}
+
 TEST_CASE("synth: the idle follows a warming engine down sooner than a blip up") {
   SpeedSynthesizer synth(model_of(kHatch));
   double t = 0.0;
