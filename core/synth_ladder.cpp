@@ -118,8 +118,9 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
 // none (the steps of the gearboxes known here grow by a factor of 1.1 to 1.9 from one gear to the next
 // lower). How many it lacks is read from the steps above it, as for the gears predicted below the ladder
 // (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
-// the one above it (between 1 and 1.5; 1 with no step above it), and the count whose sum comes nearest the
-// step in ratio is taken. The gears go where those steps, scaled to fill the step exactly, put them. Only
+// the one above it (between 1 and 1.5), and the count whose sum comes nearest the step in ratio is taken;
+// with no step above it to measure the growth by, the largest (1.5): the fewest gears a progressive
+// gearbox allows. The gears go where those steps, scaled to fill the step exactly, put them. Only
 // the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse cadences sometimes
 // a ratio no gear has) stands for the predicted gear within half a predicted step of it. Each predicted
 // gear has the least share of use, no standard error of theta (as those predicted below the ladder) and
@@ -142,7 +143,7 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
     // step above it: a step under twice the one above it lacks no gear.
     if (k + 2 >= m || size < 2.0 * step(k + 1)) continue;
     const double ref = step(k + 1);
-    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), 1.0, kMaxGrowth) : 1.0;
+    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), 1.0, kMaxGrowth) : kMaxGrowth;
     const int room = kMaxGears - gears_ - n_gap;
     int best = 1;
     double sum = ref * growth, best_sum = sum, miss = std::abs(std::log(size / sum));

@@ -346,3 +346,20 @@ TEST_CASE("synth: a launch through gears missing inside a young ladder climbs th
   CHECK(with_gaps < 0.1);
   CHECK(with_gaps < 0.5 * without);
 }
+
+TEST_CASE("synth: a ladder's step lacking gears under its top step holds the fewest a gearbox allows") {
+  // A 5-speed whose top step is its smallest (0.198) and whose steps grow by 1.2-1.6 a gear below it; its
+  // model lacks third gear, so the step from second to fourth (0.707) is more than twice the top step.
+  // With only the top step above it, the growth is not measured: at the largest a gearbox has (1.5 a
+  // gear) the step holds two gearbox steps, one gear, near the true third; at a growth of 1 it would
+  // hold four.
+  const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
+  SpeedSynthesizer synth(model_of({five[0], five[1], five[3], five[4]}));
+  REQUIRE(synth.ladder_gears() == 5);
+  // The gear predicted between second and fourth carries the car within 5 % of the true third: the revs
+  // of a cruise in third at 9 m/s read at its speed within that.
+  for (int k = 0; k < 30; ++k)
+    synth.step(k, 9.0, 9.0 / five[2]);
+  const SynthOutput o = synth.step(30.0, kMissing, 9.0 / five[2]);
+  CHECK(o.speed == Approx(9.0).epsilon(0.05));
+}
