@@ -6,7 +6,8 @@
 //
 // The engaged mode is tracked over {declutched, gear 1..M, moving off} by a switching Kalman filter: every
 // mode carries an estimate of the car's speed and acceleration (an Ornstein-Uhlenbeck acceleration, its
-// covariance grown by the exact integrals, so many short steps equal one long one) and a belief; each step
+// covariance grown by the exact integrals, so many short steps equal one long one; in a gear the brakes may
+// also go on within a step, a branch of the gear's history merged with the held one) and a belief; each step
 // sums over the predecessors of every mode, predicted under that mode's motion and corrected by GPS and
 // the frequency, and matches the mixture's first two moments (generalised pseudo-Bayes of order 2).
 // In gear i the engine frequency is speed / theta_i (eq. (3)); declutched the car rolls and brakes and
