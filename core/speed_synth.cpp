@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <utility>
 
 #include "core/estimator.hpp"
 
@@ -33,6 +34,20 @@ void SpeedSynthesizer::keep_covariance(Track& x) noexcept {
   x.paa = std::max(x.paa, kMinVar);
   const double bound = 0.999 * std::sqrt(x.pvv * x.paa);
   x.pva = std::clamp(x.pva, -bound, bound);
+}
+
+// The track with the first two moments of the mixture of `x` and `y` weighed `wx` and `wy`.
+SpeedSynthesizer::Track SpeedSynthesizer::moment_match(const Track& x, double wx, const Track& y,
+                                                       double wy) noexcept {
+  const double sx = wx / (wx + wy), sy = wy / (wx + wy);
+  Track m{sx * x.v + sy * y.v, sx * x.a + sy * y.a, 0.0, 0.0, 0.0};
+  for (const auto& [t, share] : {std::pair{x, sx}, std::pair{y, sy}}) {
+    m.pvv += share * (t.pvv + (t.v - m.v) * (t.v - m.v));
+    m.pva += share * (t.pva + (t.v - m.v) * (t.a - m.a));
+    m.paa += share * (t.paa + (t.a - m.a) * (t.a - m.a));
+  }
+  keep_covariance(m);
+  return m;
 }
 
 SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const SynthTuning& tuning)
@@ -495,53 +510,87 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       const int pulling = moving_off || i == launch_mode() ? 1 : i;  // the gear whose pull x.a is
       if (tuning_.pull_transfer > 0.0 && is_gear(pulling) && is_gear(j) && j != pulling && x.a > 0.0)
         x.a *= theta_[pulling] / theta_[j];
-      predict(x, moving_off ? launch_mode() : j, dt);
-      // A slipping clutch says only that the car is no faster than first gear turns the revs into: when
-      // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the
-      // gap up to the gear's reading, so a hard launch is not lost to the clutch for having gained more
-      // than the guess (at 1 Hz and slower that guess already spans a whole launch, and measured better).
-      // Only out of the move-off, whose clutch has been slipping: a car rolling declutched that engages a
-      // gear within one short step has gained nothing, and with the gap as its spread any gear would fit
-      // (fifth gear's reading at 42 km/h taken up from a roll at 7 km/h as the launch's first gear bit).
-      if (short_step && tuning_.bite_gap > 0.0 && is_gear(j) && i == launch_mode() && std::isfinite(freq) &&
-          !lacks_first) {
-        const double gap = theta_[j] * freq - x.v;
-        if (gap > 0.0) x.pvv = std::max(x.pvv, gap * gap);
+      // Predicted over the step under mode j, corrected by GPS and scored by the frequency: the track it
+      // leads to and its log-score (GPS and revs).
+      const auto propagate = [&](Track y, double& score_out) {
+        predict(y, moving_off ? launch_mode() : j, dt);
+        // A slipping clutch says only that the car is no faster than first gear turns the revs into: when
+        // it bites, at the tracker's short steps, the move-off's guessed speed is known no better than the
+        // gap up to the gear's reading, so a hard launch is not lost to the clutch for having gained more
+        // than the guess (at 1 Hz and slower that guess already spans a whole launch, and measured better).
+        // Only out of the move-off, whose clutch has been slipping: a car rolling declutched that engages a
+        // gear within one short step has gained nothing, and with the gap as its spread any gear would fit
+        // (fifth gear's reading at 42 km/h taken up from a roll at 7 km/h as the launch's first gear bit).
+        if (short_step && tuning_.bite_gap > 0.0 && is_gear(j) && i == launch_mode() && std::isfinite(freq) &&
+            !lacks_first) {
+          const double gap = theta_[j] * freq - y.v;
+          if (gap > 0.0) y.pvv = std::max(y.pvv, gap * gap);
+        }
+        double gps_score = 0.0;
+        if (measure_gps) {
+          // GPS pins the speed and the frequency tells the mode; but a history GPS contradicts beyond
+          // ordinary jitter (a car at rest while GPS has it moving) pays for that jump once.
+          // The fix against the track's speed less what the car gained since it was taken (above), no more
+          // than a driver's acceleration at three of its spreads (accel_sigma) gains or loses in that time:
+          // revs that jump about (a tracker hopping between lines) are no gain of speed.
+          const double most = 3.0 * tuning_.accel_sigma * lag;
+          const double past =
+              std::clamp(gained + (j == i && is_gear(j) ? theta_[j] * revs_gain[j] : 0.0), -most, most);
+          const double k = y.pvv / (y.pvv + gps_var);
+          const double innovation = gps - (y.v - past);
+          const double z2 = innovation * innovation / (y.pvv + gps_var);
+          gps_score = -jump_cost(z2);
+          // The speed follows a jump; the acceleration learns from no more of it than ordinary jitter.
+          const double dead = kDeadZone * kDeadZone;
+          y.v += k * innovation;
+          y.a += y.pva / (y.pvv + gps_var) * innovation *
+                 (z2 > dead && tuning_.gps_accel_clip > 0.0 ? std::sqrt(dead / z2) : 1.0);
+          y.paa -= y.pva * y.pva / (y.pvv + gps_var);
+          y.pva *= 1.0 - k;
+          y.pvv *= 1.0 - k;
+          keep_covariance(y);
+        }
+        double evidence = log_evidence(y, j, freq, weight, short_step);
+        // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
+        // reading, scores its revs on their way down from the gear's line (log_declutching) where that
+        // explains them better than free revs.
+        if (j == 0 && caught > 0.0 && std::isfinite(freq)) {
+          const double on_the_way = std::max(evidence, weight * log_declutching(i, freq, y));
+          evidence = on_the_way + std::log((1.0 - caught) * std::exp(evidence - on_the_way) + caught);
+        }
+        score_out = gps_score + evidence;
+        return y;
+      };
+      double score = 0.0;
+      Track held = propagate(x, score);
+      // Held in a gear, the car may start braking within the step: the brakes go on within a few tenths of
+      // a second (a car slowing in gear at 2-3 m/s^2 from one moment to the next), faster than the
+      // acceleration's drift over accel_time follows. That history, its deceleration opened by brake_sigma
+      // before the step, is weighed by the chance that the brakes go on within it (brake_rate, from a foot
+      // off the throttle: not while the car gains speed in gear) and kept beside the held one as the
+      // mixture's first two moments; a reading it explains only by gaining speed is not the brakes'. Without
+      // it, braking in gear at the tracker's hops was a run of jumps the held acceleration could not follow,
+      // and the clutch took the first falling readings with the acceleration from before the brakes (about
+      // 0): a car braked to rest was still rolling in the output.
+      if (tuning_.brake_rate > 0.0 && i == j && is_gear(j)) {
+        Track opened = x;
+        opened.a = std::min(opened.a, 0.0);
+        opened.paa = std::max(opened.paa, tuning_.brake_sigma * tuning_.brake_sigma);
+        keep_covariance(opened);
+        double braked_score = 0.0;
+        const Track braked = propagate(opened, braked_score);
+        const double off_throttle = 0.5 * std::erfc(x.a / std::sqrt(2.0 * x.paa));
+        const double p = (1.0 - std::exp(-tuning_.brake_rate * dt)) * off_throttle;
+        if (p > 1e-12 && braked.a < x.a) {
+          const double l_held = std::log1p(-p) + score, l_braked = std::log(p) + braked_score;
+          const double top = std::max(l_held, l_braked);
+          const double w_held = std::exp(l_held - top), w_braked = std::exp(l_braked - top);
+          held = moment_match(held, w_held, braked, w_braked);
+          score = top + std::log(w_held + w_braked);
+        }
       }
-      double gps_score = 0.0;
-      if (measure_gps) {
-        // GPS pins the speed and the frequency tells the mode; but a history GPS contradicts beyond
-        // ordinary jitter (a car at rest while GPS has it moving) pays for that jump once.
-        // The fix against the track's speed less what the car gained since it was taken (above), no more
-        // than a driver's acceleration at three of its spreads (accel_sigma) gains or loses in that time:
-        // revs that jump about (a tracker hopping between lines) are no gain of speed.
-        const double most = 3.0 * tuning_.accel_sigma * lag;
-        const double past =
-            std::clamp(gained + (j == i && is_gear(j) ? theta_[j] * revs_gain[j] : 0.0), -most, most);
-        const double k = x.pvv / (x.pvv + gps_var);
-        const double innovation = gps - (x.v - past);
-        const double z2 = innovation * innovation / (x.pvv + gps_var);
-        gps_score = -jump_cost(z2);
-        // The speed follows a jump; the acceleration learns from no more of it than ordinary jitter.
-        const double dead = kDeadZone * kDeadZone;
-        x.v += k * innovation;
-        x.a += x.pva / (x.pvv + gps_var) * innovation *
-               (z2 > dead && tuning_.gps_accel_clip > 0.0 ? std::sqrt(dead / z2) : 1.0);
-        x.paa -= x.pva * x.pva / (x.pvv + gps_var);
-        x.pva *= 1.0 - k;
-        x.pvv *= 1.0 - k;
-        keep_covariance(x);
-      }
-      double evidence = log_evidence(x, j, freq, weight, short_step);
-      // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
-      // reading, scores its revs on their way down from the gear's line (log_declutching) where that
-      // explains them better than free revs.
-      if (j == 0 && caught > 0.0 && std::isfinite(freq)) {
-        const double on_the_way = std::max(evidence, weight * log_declutching(i, freq, x));
-        evidence = on_the_way + std::log((1.0 - caught) * std::exp(evidence - on_the_way) + caught);
-      }
-      pair_score_[i][j] = log_pi + std::log(row_[j]) + gps_score + evidence;
-      pair_track_[i][j] = x;
+      pair_score_[i][j] = log_pi + std::log(row_[j]) + score;
+      pair_track_[i][j] = held;
     }
   }
   ModeArray log_p{}, next_age{};

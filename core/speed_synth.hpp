@@ -6,7 +6,8 @@
 //
 // The engaged mode is tracked over {declutched, gear 1..M, moving off} by a switching Kalman filter: every
 // mode carries an estimate of the car's speed and acceleration (an Ornstein-Uhlenbeck acceleration, its
-// covariance grown by the exact integrals, so many short steps equal one long one) and a belief; each step
+// covariance grown by the exact integrals, so many short steps equal one long one; in a gear the brakes may
+// also go on within a step, a branch of the gear's history merged with the held one) and a belief; each step
 // sums over the predecessors of every mode, predicted under that mode's motion and corrected by GPS and
 // the frequency, and matches the mixture's first two moments (generalised pseudo-Bayes of order 2).
 // In gear i the engine frequency is speed / theta_i (eq. (3)); declutched the car rolls and brakes and
@@ -62,15 +63,21 @@ namespace gearpulse {
 // off. They are deliberately generic, not fitted to any one log; what differs between cars and drivers
 // (idle, shift points, how hard the car slows declutched) is learned online while GPS is present.
 struct SynthTuning {
-  double accel_sigma = 0.8;     // m/s^2: spread of a driver's acceleration in gear
-  double accel_time = 3.0;      // s: how long an acceleration persists
-  double coast_accel = -0.6;    // m/s^2: declutched and moving (rolling, braking); weighs as 10 fixes learned
-  double coast_sigma = 0.8;     // m/s^2
-  double coast_time = 8.0;      // s: declutched, a braking or rolling deceleration persists
-  double stop_speed = 4.0;      // m/s: declutched below this, the car is being braked to a stop
-  double stop_accel = -1.5;     // m/s^2: ... at an ordinary firm deceleration
-  double launch_accel = 1.8;    // m/s^2: moving off while the clutch slips
-  double launch_sigma = 1.0;    // m/s^2
+  double accel_sigma = 0.8;   // m/s^2: spread of a driver's acceleration in gear
+  double accel_time = 3.0;    // s: how long an acceleration persists
+  double coast_accel = -0.6;  // m/s^2: declutched and moving (rolling, braking); weighs as 10 fixes learned
+  double coast_sigma = 0.8;   // m/s^2
+  double coast_time = 8.0;    // s: declutched, a braking or rolling deceleration persists
+  double stop_speed = 4.0;    // m/s: declutched below this, the car is being braked to a stop
+  double stop_accel = -1.5;   // m/s^2: ... at an ordinary firm deceleration
+  double launch_accel = 1.8;  // m/s^2: moving off while the clutch slips
+  double launch_sigma = 1.0;  // m/s^2
+  // In gear the brakes go on from one moment to the next (a pedal pressed within a few tenths of a second),
+  // not over accel_time as the acceleration's drift has it: brake_rate (1/s) is how often a driver does so,
+  // about twice a minute in town (0: never), and brake_sigma (m/s^2) the spread of the deceleration it adds
+  // (ordinary braking reaches 1-3 m/s^2).
+  double brake_rate = 0.03;
+  double brake_sigma = 1.0;
   double gear_dwell = 8.0;      // s: mean time in a gear of average use before it is left
   double engage_rate = 1.0;     // 1/s: declutched -> a gear while moving (a shift takes about a second)
   double launch_rate = 0.2;     // 1/s: standing -> moving off (the frequency tells when)
@@ -272,6 +279,7 @@ class SpeedSynthesizer {
   using TrackArray = std::array<Track, kModes>;
 
   static void keep_covariance(Track& x) noexcept;
+  [[nodiscard]] static Track moment_match(const Track& x, double wx, const Track& y, double wy) noexcept;
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
   void insert_gap_gears() noexcept;

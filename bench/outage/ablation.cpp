@@ -35,6 +35,8 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(stop_accel),
     GEARPULSE_FIELD(launch_accel),
     GEARPULSE_FIELD(launch_sigma),
+    GEARPULSE_FIELD(brake_rate),
+    GEARPULSE_FIELD(brake_sigma),
     GEARPULSE_FIELD(gear_dwell),
     GEARPULSE_FIELD(engage_rate),
     GEARPULSE_FIELD(launch_rate),

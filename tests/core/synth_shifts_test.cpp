@@ -27,6 +27,8 @@ using gearpulse::test::Row;
 using gearpulse::test::script;
 using gearpulse::test::skip_downshift_outage;
 using gearpulse::test::speed_within;
+using gearpulse::test::town_drive_outage_error;
+using gearpulse::test::TownDrive;
 
 namespace {
 
@@ -295,4 +297,29 @@ TEST_CASE("synth: a quick move-off straight into second gear is seen under GPS a
     CHECK(out[i].gear == 2);
     CHECK(out[i].speed == Approx(rows[i].speed).margin(1.0 * kKmh));
   }
+}
+
+TEST_CASE(
+    "synth: at 10 Hz braking in gear is followed, not read as the clutch going out at its first readings") {
+  // Recorded from the simulator at the daemon's cadence: a random 5-speed in a jam, GPS lost at 60 s. At 107
+  // s the car cruising in third at 41 km/h brakes in gear at 3 m/s^2 for a second, declutches, rev-matches
+  // into second and brakes on to 8 km/h in first. Held at the cruise's acceleration, third gear could not
+  // follow the first falling readings: the clutch took them with the cruise's acceleration (about 0), was
+  // 7 km/h fast when second gear's revs came, and third gear took the blip at 45 km/h.
+  const auto outage = [](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(gearpulse::test::recorded_model("braking_in_gear_jam"), tuning);
+    double synthesized = 0.0, driven = 0.0;
+    gearpulse::test::replay_rows("braking_in_gear_jam", "10hz", synth,
+                                 [&](double t, double truth, const SynthOutput& out) {
+                                   if (t < 60.0) return;
+                                   synthesized += out.speed;
+                                   driven += truth;
+                                 });
+    return 100.0 * (synthesized - driven) / driven;
+  };
+  gearpulse::SynthTuning held;
+  held.brake_rate = 0.0;
+  const double followed = outage({}), without = outage(held);
+  INFO("outage distance: " << followed << " % off with the brakes' onset, " << without << " % without");
+  CHECK(std::abs(followed) < 5.0);
 }
