@@ -30,9 +30,12 @@ constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 // 1 - kLoudSecond as the other harmonics', with kLoudSecond log-uniform over 2 .. 30 (+3 to +15 dB). A
 // proper prior, not the better of two: a loud 2nd harmonic costs ln kLoudSecond against a usual one, so
 // a candidate's sub-harmonic (whose 2nd harmonic is the engine's fundamental) is not lifted for free.
-// kLoudSecond, the share of light load and overrun, is chosen on the generated scenes' tuning set.
+// kLoudSecond, the share of light load and overrun, is chosen on the generated scenes' tuning set. On the
+// overrun itself (a line falling fast: the engine does not drive the car) the 2nd harmonic is as likely
+// loud as not: kLoudSecondOverrun.
 constexpr double kSecondRatioHi = 30.0;
 constexpr double kLoudSecond = 0.15;
+constexpr double kLoudSecondOverrun = 0.5;
 constexpr int kRatioSteps = 20;
 // A line below a candidate f that is an order of a lower engine of which f is a harmonic (a comb): its ratio
 // to f's line spans the harmonics' prior either way, log-uniform over 0.05 .. 20 (-13 to +13 dB).
@@ -108,6 +111,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
   ladder_.assign(fund_.size(), 0.0);
   second_.assign(fund_.size(), 0.0);
+  second_overrun_.assign(fund_.size(), 0.0);
   lower_.assign(fund_.size(), 0.0);
   half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   profile_.assign(kProfileTables, std::vector<double>(fund_.size(), 0.0));
@@ -131,9 +135,12 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
       const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
                                         [z, rho](double r) { return log_rice(z, rho * r); });
-      second_[at] =
-          with_absent(log_add(std::log1p(-kLoudSecond) + log_ratio(kRatioHi), std::log(kLoudSecond) + loud),
-                      kOrderAbsent);
+      const double usual = log_ratio(kRatioHi);
+      const auto second = [&](double share) {
+        return with_absent(log_add(std::log1p(-share) + usual, std::log(share) + loud), kOrderAbsent);
+      };
+      second_[at] = second(kLoudSecond);
+      second_overrun_[at] = second(kLoudSecondOverrun);
       lower_[at] = with_absent(log_ratio(kLowerRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
@@ -183,6 +190,10 @@ double HarmonicEvidence::order(double z, double rho_fundamental) const noexcept 
 
 double HarmonicEvidence::second(double z, double rho_fundamental) const noexcept {
   return lookup(second_, z, rho_fundamental);
+}
+
+double HarmonicEvidence::second_overrun(double z, double rho_fundamental) const noexcept {
+  return lookup(second_overrun_, z, rho_fundamental);
 }
 
 double HarmonicEvidence::lower_root(double z, double rho_line) const noexcept {

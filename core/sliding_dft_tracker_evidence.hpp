@@ -38,6 +38,9 @@ class HarmonicEvidence {
   // The same for the 2nd harmonic's bin, which may stand up to 15 dB over the fundamental (light load,
   // overrun).
   [[nodiscard]] double second(double z, double rho_fundamental) const noexcept;
+  // The same on the overrun (engine braking: a line falling fast), where the 2nd harmonic is as likely to
+  // stand over the fundamental as not.
+  [[nodiscard]] double second_overrun(double z, double rho_fundamental) const noexcept;
   // The same for a bin below a candidate's line that is an order of a lower engine of which the candidate
   // is a harmonic (f / 4 and 3 f / 4 when it is the 4th), given the per-bin SNR of the candidate's line:
   // the ratio spans 0.05 .. 20 (-13 to +13 dB).
@@ -58,10 +61,11 @@ class HarmonicEvidence {
   // clamped to their range.
   [[nodiscard]] double between(const std::vector<std::vector<double>>& tables, std::span<const double> keys,
                                double key, double z, double rho) const noexcept;
-  std::vector<double> fund_;    // over (log10 rho, sqrt z)
-  std::vector<double> ladder_;  // over (log10 rho, sqrt z)
-  std::vector<double> second_;  // over (log10 rho, sqrt z)
-  std::vector<double> lower_;   // over (log10 rho, sqrt z)
+  std::vector<double> fund_;            // over (log10 rho, sqrt z)
+  std::vector<double> ladder_;          // over (log10 rho, sqrt z)
+  std::vector<double> second_;          // over (log10 rho, sqrt z)
+  std::vector<double> second_overrun_;  // over (log10 rho, sqrt z)
+  std::vector<double> lower_;           // over (log10 rho, sqrt z)
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).
   std::vector<std::vector<double>> half_;

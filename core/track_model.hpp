@@ -7,9 +7,10 @@
 // Per hop: predict() spreads the previous posterior (a continuing line moves at its rate within a steady
 // gate, or its rate changes within a slew or a shift gate; the engine stops, starts or is found elsewhere;
 // a line found again after the track lost it is found near the latest tracked estimate), the caller writes
-// every fundamental's log likelihood ratio into evidence(), update() applies it to every rate (allowing
-// for a window that hides the line), and observe() tells the model what the hop reported. Sized at
-// construction; nothing allocates, locks or throws afterwards.
+// every fundamental's log likelihood ratio into evidence() (and, for the falling rates of engine braking,
+// overrun_excess()), update() applies it to every rate (allowing for a window that hides the line), and
+// observe() tells the model what the hop reported. Sized at construction; nothing allocates, locks or
+// throws afterwards.
 #include <vector>
 
 #include "core/sliding_dft_tracker.hpp"
@@ -27,6 +28,17 @@ class TrackModel {
   // Windows that overlap (a hop shorter than the window) are not independent evidence: a hop's ratio is
   // the window's raised to hop / window (the temper).
   [[nodiscard]] std::vector<double>& evidence() noexcept { return loglik_; }
+  // For a line on the overrun, whose orders' levels differ (engine braking: the 2nd harmonic often stands
+  // over the fundamental), what its log likelihood ratio adds to evidence()'s, per fundamental: read by the
+  // rate layers falling at kOverrunHzPerS or faster (when overrun_layers()). Zero, the same evidence,
+  // unless the caller writes it; it keeps what was written.
+  [[nodiscard]] std::vector<double>& overrun_excess() noexcept { return overrun_excess_; }
+  [[nodiscard]] bool overrun_layers() const noexcept { return overrun_layers_ > 0; }
+  // A line falling at this rate (Hz/s) or faster is on the overrun: revs fall that fast (600 rpm/s on a
+  // four-cylinder) only while the engine does not drive the car (engine braking, or the clutch in and the
+  // revs falling to idle). Chosen on the generated scenes' tuning set (10, 20 and 30 Hz/s; see
+  // docs/tracker.md).
+  static constexpr double kOverrunHzPerS = 20.0;
   // Bayes update with evidence(), when the window hides the engine's line with probability `hidden` (a
   // gear shift's smear, a line masked by another or faded below the evidence's level prior): a hidden
   // window says nothing about where the engine is, so each state's likelihood ratio is the mixture
@@ -61,7 +73,11 @@ class TrackModel {
   int layers_ = 1;
   std::vector<double> rate_bins_;
   std::vector<double> post_, next_, marginal_, loglik_, cumsum_, moved_;
-  std::vector<double> factor_;  // update(): each fundamental's likelihood factor, common to every layer
+  // update(): each fundamental's likelihood factor, common to every layer that is not on the overrun, and
+  // the overrun's (layers 0 .. overrun_layers_ - 1, the fastest falling).
+  std::vector<double> factor_, factor_overrun_;
+  std::vector<double> overrun_excess_;
+  int overrun_layers_ = 0;
   double post_absent_ = 0.5;
   double drift_hz_per_s_ = 0.0;  // recent rate of change of the tracked line
   double last_freq_ = 0.0;       // previous hop's estimate while confident, else NaN

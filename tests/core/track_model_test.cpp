@@ -99,3 +99,32 @@ TEST_CASE("track model: a window that hides the line does not throw the track aw
     CHECK(model.mass_near(100.0) < 0.8);
   }
 }
+
+// The overrun's evidence (a loud 2nd harmonic read as likely) is read by the layers of a line falling at
+// TrackModel::kOverrunHzPerS or faster: a weak line's posterior grows with it while the line falls fast,
+// and hardly while it holds still.
+TEST_CASE("track model: the overrun's evidence counts for a fast falling line only") {
+  const double rate = GENERATE(0.0, -30.0);  // Hz/s
+  INFO("line at " << rate << " Hz/s");
+  double near[2] = {0.0, 0.0};
+  for (int with = 0; with < 2; ++with) {
+    TrackModel model(TrackerConfig{}, kFirst, kLast, kDf, 4);
+    double f = 150.0;
+    for (int i = 0; i < 15; ++i) {
+      std::vector<double>& excess = model.overrun_excess();
+      for (int k = kFirst; k <= kLast; ++k)
+        excess[static_cast<std::size_t>(k - kFirst)] = with && std::abs(k * kDf - f) <= 2.0 ? 0.7 : 0.0;
+      hop(model, {{f, 0.5}}, -0.2);
+      f += rate * TrackerConfig{}.hop_s;
+    }
+    near[with] = model.mass_near(f - rate * TrackerConfig{}.hop_s);
+  }
+  INFO("posterior near the line: " << near[0] << " without the overrun's evidence, " << near[1]
+                                   << " with it");
+  // A steady line gains a little: its mass whose rate changes passes through the falling layers.
+  if (rate < 0.0) {
+    CHECK(near[1] >= near[0] + 0.3);
+  } else {
+    CHECK(near[1] <= near[0] + 0.1);
+  }
+}
