@@ -565,13 +565,13 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
       Track held = propagate(x, score);
       // Held in a gear, the car may start braking within the step: the brakes go on within a few tenths of
       // a second (a car slowing in gear at 2-3 m/s^2 from one moment to the next), faster than the
-      // acceleration's drift over accel_time follows. That history, its deceleration opened by brake_sigma
-      // before the step, is weighed by the chance that the brakes go on within it (brake_rate, from a foot
-      // off the throttle: not while the car gains speed in gear) and kept beside the held one as the
-      // mixture's first two moments; a reading it explains only by gaining speed is not the brakes'. Without
-      // it, braking in gear at the tracker's hops was a run of jumps the held acceleration could not follow,
-      // and the clutch took the first falling readings with the acceleration from before the brakes (about
-      // 0): a car braked to rest was still rolling in the output.
+      // acceleration's drift over accel_time follows. That history, its acceleration's spread opened to
+      // brake_sigma before the step (about 0 where the car was gaining speed), is weighed by the chance that
+      // the brakes go on within it (brake_rate, from a foot off the throttle: not while the car gains speed
+      // in gear) and kept beside the held one as the mixture's first two moments; one whose acceleration
+      // after the step is no lower than before it is not the brakes'. Without it, braking in gear at the
+      // tracker's hops is a run of jumps the held acceleration cannot follow, and the clutch takes the first
+      // falling readings with the acceleration from before the brakes (about 0).
       if (tuning_.brake_rate > 0.0 && i == j && is_gear(j)) {
         Track opened = x;
         opened.a = std::min(opened.a, 0.0);

@@ -74,8 +74,8 @@ struct SynthTuning {
   double launch_sigma = 1.0;  // m/s^2
   // In gear the brakes go on from one moment to the next (a pedal pressed within a few tenths of a second),
   // not over accel_time as the acceleration's drift has it: brake_rate (1/s) is how often a driver does so,
-  // about twice a minute in town (0: never), and brake_sigma (m/s^2) the spread of the deceleration it adds
-  // (ordinary braking reaches 1-3 m/s^2).
+  // about twice a minute in town (0: never), and brake_sigma (m/s^2) the least spread of the acceleration
+  // at that moment (ordinary braking reaches 1-3 m/s^2).
   double brake_rate = 0.03;
   double brake_sigma = 1.0;
   double gear_dwell = 8.0;      // s: mean time in a gear of average use before it is left
