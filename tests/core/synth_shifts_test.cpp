@@ -27,8 +27,6 @@ using gearpulse::test::Row;
 using gearpulse::test::script;
 using gearpulse::test::skip_downshift_outage;
 using gearpulse::test::speed_within;
-using gearpulse::test::town_drive_outage_error;
-using gearpulse::test::TownDrive;
 
 namespace {
 
