@@ -15,6 +15,10 @@ namespace {
 constexpr double kDefaultClutchShare =
     0.15;                               // declutched share when the model gives none (cf. beta, eq. (6))
 constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its training weight
+// The factor by which a gearbox's steps (log theta ratios) grow from one gear to the next lower, as the
+// gears predicted below the ladder and inside it take it from the steps above them: progressive, so at
+// least 1; at most 1.5, the fewest gears predicted where the steps grow faster.
+constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
 
 // The model's thetas in `buf` (empty without a model).
 std::span<const double> thetas_of(const GearModel* model,
@@ -119,19 +123,18 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
 // lower). How many it lacks is read from the steps above it, as for the gears predicted below the ladder
 // (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
 // the one above it (between 1 and 1.5), and the count whose sum comes nearest the step in ratio is taken;
-// with no step above it to measure the growth by, the largest (1.5): the fewest gears a progressive
-// gearbox allows. The gears go where those steps, scaled to fill the step exactly, put them. Only
-// the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse cadences sometimes
-// a ratio no gear has) stands for the predicted gear within half a predicted step of it. Each predicted
-// gear has the least share of use, no standard error of theta (as those predicted below the ladder) and
-// no number in the model.
+// with no step above it to measure the growth by, the largest of that range (1.5): the fewest gears a
+// gearbox whose steps grow within it allows. The gears go where those steps, scaled to fill the step exactly,
+// put them. Only the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse
+// cadences sometimes a ratio no gear has) stands for the predicted gear within half a predicted step of it.
+// Each predicted gear has the least share of use, no standard error of theta (as those predicted below the
+// ladder) and no number in the model.
 void SpeedSynthesizer::insert_gap_gears() noexcept {
   if (tuning_.fill_ladder_gaps <= 0.0 || model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
   const std::span<const double> model = thetas_of(model_.get(), thetas);
   const int m = static_cast<int>(model.size());
   if (m < 3) return;
-  constexpr double kMaxGrowth = 1.5;
   const auto step = [&](int k) {
     return std::log(model[static_cast<std::size_t>(k + 1)] / model[static_cast<std::size_t>(k)]);
   };
@@ -143,7 +146,7 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
     // step above it: a step under twice the one above it lacks no gear.
     if (k + 2 >= m || size < 2.0 * step(k + 1)) continue;
     const double ref = step(k + 1);
-    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), 1.0, kMaxGrowth) : kMaxGrowth;
+    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), kMinGrowth, kMaxGrowth) : kMaxGrowth;
     const int room = kMaxGears - gears_ - n_gap;
     int best = 1;
     double sum = ref * growth, best_sum = sum, miss = std::abs(std::log(size / sum));
@@ -224,7 +227,6 @@ void SpeedSynthesizer::insert_below_ladder(std::span<const double> thetas) noexc
 int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noexcept {
   const int known = gears_ - base + 1;
   if (tuning_.predict_lower_gears <= 0.0 || known < 2) return 0;
-  constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
   const double min_step = 2.0 * kGearWindow, max_step = std::log(2.0);
   const double low_step = std::log(theta_[base + 1] / theta_[base]);
   const double growth = known >= 3 ? std::clamp(low_step / std::log(theta_[base + 2] / theta_[base + 1]),

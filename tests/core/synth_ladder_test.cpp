@@ -350,8 +350,8 @@ TEST_CASE("synth: a launch through gears missing inside a young ladder climbs th
 TEST_CASE("synth: a ladder's step lacking gears under its top step holds the fewest a gearbox allows") {
   // A 5-speed whose top step is its smallest (0.198) and whose steps grow by 1.2-1.6 a gear below it; its
   // model lacks third gear, so the step from second to fourth (0.707) is more than twice the top step.
-  // With only the top step above it, the growth is not measured: at the largest a gearbox has (1.5 a
-  // gear) the step holds two gearbox steps, one gear, near the true third; at a growth of 1 it would
+  // With only the top step above it, the growth is not measured: at the largest the prediction takes (1.5
+  // a gear) the step holds two gearbox steps, one gear, near the true third; at a growth of 1 it would
   // hold four.
   const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
   SpeedSynthesizer synth(model_of({five[0], five[1], five[3], five[4]}));
