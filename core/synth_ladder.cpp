@@ -95,9 +95,11 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
   }
 }
 
-// One gear joins the ladder in theta order.
+// One gear joins the ladder in theta order; a full ladder (kMaxGears) takes none: its gears and the
+// moving-off mode above them fill the mode arrays.
 void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double weight,
                                         int model_gear) noexcept {
+  if (gears_ >= kMaxGears) return;
   int at = gears_ + 1;  // ladder position it takes
   for (int j = gears_; j >= 1 && theta < theta_[j]; --j)
     at = j;
