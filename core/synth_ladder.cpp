@@ -233,7 +233,14 @@ int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noex
   double step = std::clamp(low_step, min_step, max_step);
   double lowest = theta_[base];
   int n = 0;
-  while (known + n < kMaxGears && habits_.lacks_first_gear(lowest, tuning_)) {
+  int wanted = -1;  // gears the launches show below the base, once the idle's are predicted (-1: not asked)
+  while (known + n < kMaxGears) {
+    if (!habits_.lacks_first_gear(lowest, tuning_)) {
+      if (wanted < 0)
+        wanted =
+            tuning_.launch_gears > 0.0 ? launches_.gears_below(theta_[base], n, tuning_.launch_second) : n;
+      if (n >= wanted) break;
+    }
     step = std::clamp(step * growth, min_step, max_step);
     lowest /= std::exp(step);
     theta[static_cast<std::size_t>(n)] = lowest;
@@ -277,6 +284,27 @@ void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
     changed = predict_lower_gears(predicted_ + 1, theta) != predicted_;
   }
   if (changed) change_ladder(false);
+}
+
+// Under GPS, at every step: the launches from rest, counted by the upshifts they make before the filter holds
+// the lowest gear of the ladder that is not predicted (the base). An upshift lowers the revs by a gearbox
+// step, and the steps below the base are no smaller than the base's own to the gear above it
+// (predict_lower_gears): a fall of three quarters of that step (at least two gear windows) is one. Only
+// revs read at steps no longer than a shift's clutch-out time (declutch_time) show every shift of a launch,
+// whose gears are held a second or two: a launch with a longer step is not counted.
+void SpeedSynthesizer::observe_launch(double dt, double gps, double freq, bool gps_new) noexcept {
+  const int base = predicted_ + 1;
+  if (!std::isfinite(gps) || tuning_.launch_gears <= 0.0 || base > gears_ || dt > tuning_.declutch_time) {
+    launches_.abort();
+    return;
+  }
+  constexpr double kShareOfStep = 0.75;
+  const double step = base < gears_ ? std::log(theta_[base + 1] / theta_[base]) : 0.0;
+  launches_.observe_revs(freq, std::max(kShareOfStep * step, 2.0 * kGearWindow));
+  if (!gps_new) return;
+  constexpr double kConfident = 0.8;  // belief in the mode held for it to count
+  const bool sure = is_gear(mode_) && mode_ >= base && prob_[mode_] >= kConfident;
+  launches_.observe_fix(t_, gps < tuning_.stationary_speed, theta_[base], sure ? mode_ - base : -1);
 }
 
 // Loads the ladder of the model in use and the gears seen that it lacks, carrying the belief over from the
