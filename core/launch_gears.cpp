@@ -12,20 +12,30 @@ namespace {
 // s after moving off within which the filter holds a measured gear: a launch through first to third takes
 // 5-10 s; one that lasts longer is a crawl in a jam, not a launch.
 constexpr double kMaxLaunchTime = 20.0;
+// An upshift lowers the revs by a gearbox step, no smaller than the base's own to the gear above it: a
+// fall of this share of that step (at least two gear windows) is one.
+constexpr double kShareOfStep = 0.75;
 
 }  // namespace
 
-void LaunchGears::observe_revs(double freq, double upshift_drop) noexcept {
+void LaunchGears::observe_revs(double freq, double step, double idle_ceiling) noexcept {
   if (state_ == State::kIdle || !std::isfinite(freq) || freq <= 0.0) return;
   const double lf = std::log(freq);
   if (falling_) {
-    // The upshift ends where the revs climb again in the new gear, by more than their jitter.
+    // The upshift ends where the revs climb again in the new gear, by more than their jitter. A gear held
+    // for a moment only is passed with no climb: the fall then spans its step too, and counts once for
+    // each whole step of the base's that it spans (the steps below the base are no smaller). A fall into
+    // the idle band is a declutch whose depth tells nothing of the gears passed: it counts once.
     trough_ = std::min(trough_, lf);
-    if (lf > trough_ + kGearWindow) falling_ = false, peak_ = lf;
+    if (lf > trough_ + kGearWindow) {
+      if (step > 0.0 && trough_ > std::log(idle_ceiling))
+        upshifts_ += std::max(0, static_cast<int>(std::floor((peak_ - lf) / step)) - 1);
+      falling_ = false, peak_ = lf;
+    }
     return;
   }
   peak_ = std::max(peak_, lf);
-  if (state_ == State::kLaunch && lf < peak_ - upshift_drop) {
+  if (state_ == State::kLaunch && lf < peak_ - std::max(kShareOfStep * step, 2.0 * kGearWindow)) {
     ++upshifts_;
     falling_ = true;
     trough_ = lf;

@@ -25,10 +25,10 @@ class LaunchGears {
  public:
   static constexpr int kMaxBelow = 4;  // the most gears counted below the base
 
-  // At every step with GPS present: the engine frequency (NaN if not tracked), and the factor (log) by
-  // which the revs must fall for an upshift: a share of the base's step to the gear above it, the smallest
-  // step below it in a progressive gearbox.
-  void observe_revs(double freq, double upshift_drop) noexcept;
+  // At every step with GPS present: the engine frequency (NaN if not tracked), the base's step to the gear
+  // above it (log theta ratio; 0 at the top of the ladder), and the revs at or below which the engine is
+  // at idle (Hz; 0 = unknown).
+  void observe_revs(double freq, double step, double idle_ceiling) noexcept;
   // At every new fix, at step time t (s): whether GPS shows the car standing, the base's theta, and the gear
   // the filter holds confidently, as ladder positions above the base (0: the base itself; -1: none, a gear
   // below the base, a move-off or a declutch). A launch held first in a gear `above` positions over the base

@@ -305,6 +305,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept { return habits_.idle_sd(); }
   [[nodiscard]] double rolling_idle() const noexcept { return habits_.rolling_idle(tuning_); }
+  [[nodiscard]] double idle_ceiling() const noexcept;
   // The ladder's lowest gear carries the car at the warm idle faster than any first gear does.
   [[nodiscard]] bool lacks_first_gear() const noexcept {
     return gears_ >= 1 && habits_.lacks_first_gear(theta_[1], tuning_);

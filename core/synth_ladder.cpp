@@ -270,13 +270,17 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   return true;
 }
 
+// Revs at or below this are idling (Hz; 0 while no idle is known).
+double SpeedSynthesizer::idle_ceiling() const noexcept {
+  constexpr double kIdleSds = 3.0;
+  return habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
+}
+
 // A gear seen under GPS that the model lacks (seen_) joins the ladder or leaves it.
 void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
   if (gears_ == 0 || model_ == nullptr) return;
-  constexpr double kIdleSds = 3.0;  // revs within this many sds of the idle are idling
-  const double idle_ceiling = habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
   std::array<double, kMaxGears> thetas{};
-  bool changed = seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas));
+  bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas));
   // The idle decides how many gears are missing below the ladder: it may be learned, or fall as the engine
   // warms, after the ladder was loaded.
   if (!changed && tuning_.predict_lower_gears > 0.0) {
@@ -287,9 +291,7 @@ void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
 }
 
 // Under GPS, at every step: the launches from rest, counted by the upshifts they make before the filter holds
-// the lowest gear of the ladder that is not predicted (the base). An upshift lowers the revs by a gearbox
-// step, and the steps below the base are no smaller than the base's own to the gear above it
-// (predict_lower_gears): a fall of three quarters of that step (at least two gear windows) is one. Only
+// the lowest gear of the ladder that is not predicted (the base; launch_gears.hpp). Only
 // revs read at steps no longer than a shift's clutch-out time (declutch_time) show every shift of a launch,
 // whose gears are held a second or two: a launch with a longer step is not counted.
 void SpeedSynthesizer::observe_launch(double dt, double gps, double freq, bool gps_new) noexcept {
@@ -298,9 +300,8 @@ void SpeedSynthesizer::observe_launch(double dt, double gps, double freq, bool g
     launches_.abort();
     return;
   }
-  constexpr double kShareOfStep = 0.75;
   const double step = base < gears_ ? std::log(theta_[base + 1] / theta_[base]) : 0.0;
-  launches_.observe_revs(freq, std::max(kShareOfStep * step, 2.0 * kGearWindow));
+  launches_.observe_revs(freq, step, idle_ceiling());
   if (!gps_new) return;
   constexpr double kConfident = 0.8;  // belief in the mode held for it to count
   const bool sure = is_gear(mode_) && mode_ >= base && prob_[mode_] >= kConfident;
