@@ -77,6 +77,7 @@ void SpeedSynthesizer::reset() noexcept {
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   habits_.end_flat_stretch();
   unlearned_fix_ = {};
+  launches_.abort();
   last_ = {};
 }
 
@@ -713,6 +714,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     if (!std::isfinite(gps_age)) gps_age = 0.0;
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new,
                       gps_age);
+    observe_launch(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
     if (have_gps && gps_new) {
       observe_gear(gps_speed, freq);
       unlearned_fix_ = {t_ - gps_age, gps_speed};

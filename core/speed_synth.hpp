@@ -51,6 +51,7 @@
 #include <string_view>
 
 #include "core/gear_model.hpp"
+#include "core/launch_gears.hpp"
 #include "core/sample.hpp"
 #include "core/seen_gears.hpp"
 #include "core/speed_lag.hpp"
@@ -203,6 +204,10 @@ struct SynthTuning {
   // 1: a step of the model's ladder twice the step above it or more lacks the gears a progressive gearbox
   // has there (its steps do not shrink toward the low gears), predicted from the steps above (0: none).
   double fill_ladder_gaps = 1.0;
+  // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
+  // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
+  // launch's count is off by one with the share launch_second (0: the idle alone decides).
+  double launch_gears = 1.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
   // SpeedLag learns from this drive's fixes (0: the speed of the step itself).
   double speed_lag = 1.0;
@@ -290,6 +295,7 @@ class SpeedSynthesizer {
   void insert_predicted_gears() noexcept;
   void change_ladder(bool new_model) noexcept;
   void observe_gear(double gps, double freq) noexcept;
+  void observe_launch(double dt, double gps, double freq, bool gps_new) noexcept;
   // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
   [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
@@ -307,6 +313,7 @@ class SpeedSynthesizer {
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
   [[nodiscard]] double idle_sd() const noexcept { return habits_.idle_sd(); }
   [[nodiscard]] double rolling_idle() const noexcept { return habits_.rolling_idle(tuning_); }
+  [[nodiscard]] double idle_ceiling() const noexcept;
   // The ladder's lowest gear carries the car at the warm idle faster than any first gear does.
   [[nodiscard]] bool lacks_first_gear() const noexcept {
     return gears_ >= 1 && habits_.lacks_first_gear(theta_[1], tuning_);
@@ -329,6 +336,7 @@ class SpeedSynthesizer {
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
   SeenGears seen_;
+  LaunchGears launches_;  // how many gears the launches seen under GPS pass below the lowest measured
   // The newest fix not yet taught to speed_lag_: its stamp (s; +inf: none) and speed.
   struct UnlearnedFix {
     double t = std::numeric_limits<double>::infinity();

@@ -237,7 +237,14 @@ int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noex
   double step = std::clamp(low_step, min_step, max_step);
   double lowest = theta_[base];
   int n = 0;
-  while (known + n < kMaxGears && habits_.lacks_first_gear(lowest, tuning_)) {
+  int wanted = -1;  // gears the launches show below the base, once the idle's are predicted (-1: not asked)
+  while (known + n < kMaxGears) {
+    if (!habits_.lacks_first_gear(lowest, tuning_)) {
+      if (wanted < 0)
+        wanted =
+            tuning_.launch_gears > 0.0 ? launches_.gears_below(theta_[base], n, tuning_.launch_second) : n;
+      if (n >= wanted) break;
+    }
     step = std::clamp(step * growth, min_step, max_step);
     lowest /= std::exp(step);
     theta[static_cast<std::size_t>(n)] = lowest;
@@ -267,13 +274,17 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   return true;
 }
 
+// Revs at or below this are idling (Hz; 0 while no idle is known).
+double SpeedSynthesizer::idle_ceiling() const noexcept {
+  constexpr double kIdleSds = 3.0;
+  return habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
+}
+
 // A gear seen under GPS that the model lacks (seen_) joins the ladder or leaves it.
 void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
   if (gears_ == 0 || model_ == nullptr) return;
-  constexpr double kIdleSds = 3.0;  // revs within this many sds of the idle are idling
-  const double idle_ceiling = habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
   std::array<double, kMaxGears> thetas{};
-  bool changed = seen_.observe(t_, gps, freq, idle_ceiling, thetas_of(model_.get(), thetas));
+  bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas));
   // The idle decides how many gears are missing below the ladder: it may be learned, or fall as the engine
   // warms, after the ladder was loaded.
   if (!changed && tuning_.predict_lower_gears > 0.0) {
@@ -281,6 +292,24 @@ void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
     changed = predict_lower_gears(predicted_ + 1, theta) != predicted_;
   }
   if (changed) change_ladder(false);
+}
+
+// Under GPS, at every step: the launches from rest, counted by the upshifts they make before the filter holds
+// the lowest gear of the ladder that is not predicted (the base; launch_gears.hpp). Only
+// revs read at steps no longer than a shift's clutch-out time (declutch_time) show every shift of a launch,
+// whose gears are held a second or two: a launch with a longer step is not counted.
+void SpeedSynthesizer::observe_launch(double dt, double gps, double freq, bool gps_new) noexcept {
+  const int base = predicted_ + 1;
+  if (!std::isfinite(gps) || tuning_.launch_gears <= 0.0 || base > gears_ || dt > tuning_.declutch_time) {
+    launches_.abort();
+    return;
+  }
+  const double step = base < gears_ ? std::log(theta_[base + 1] / theta_[base]) : 0.0;
+  launches_.observe_revs(freq, step, idle_ceiling());
+  if (!gps_new) return;
+  constexpr double kConfident = 0.8;  // belief in the mode held for it to count
+  const bool sure = is_gear(mode_) && mode_ >= base && prob_[mode_] >= kConfident;
+  launches_.observe_fix(t_, gps < tuning_.stationary_speed, theta_[base], sure ? mode_ - base : -1);
 }
 
 // Loads the ladder of the model in use and the gears seen that it lacks, carrying the belief over from the

@@ -363,3 +363,88 @@ TEST_CASE("synth: a ladder's step lacking gears under its top step holds the few
   const SynthOutput o = synth.step(30.0, kMissing, 9.0 / five[2]);
   CHECK(o.speed == Approx(9.0).epsilon(0.05));
 }
+
+TEST_CASE("synth: launches seen under GPS tell a ladder whose lowest gear could be first that it is not") {
+  // The 7-speed above, whose young model has second, fifth, sixth and seventh gear: its second carries the
+  // car at idle at 0.9 m/s, a first gear's speed, so the idle predicts no gear below it. Under GPS the car
+  // stands at idle, moves off and pulls through every gear, the revs falling at each shift: one upshift
+  // before the filter holds the model's lowest gear, first gear below it. It brakes to rest declutched,
+  // GPS is lost, and it moves off again the same way: the launch is read in the gears the ladder has.
+  const std::vector<double> seven = {0.0145, 0.0200, 0.0270, 0.0358, 0.0463, 0.0590, 0.0737};
+  constexpr double kCarIdle = 47.0;
+  struct Hop {
+    double t, speed, freq;
+  };
+  std::vector<Hop> hops;
+  constexpr double kDt = 0.1, kStand = 20.0, kAccel = 1.2, kShift = 0.4, kCruise = 15.0, kBrake = 2.0;
+  const double upshift = 5.0 * kCarIdle;
+  double t = 0.0, v = 0.0, braked = 0.0;
+  const auto stand = [&](double seconds) {
+    for (const double end = t + seconds; t < end; t += kDt)
+      hops.push_back({t, 0.0, kCarIdle});
+  };
+  const auto launch_and_stop = [&](std::size_t first) {
+    for (std::size_t gear = first; gear + 1 < seven.size(); ++gear) {
+      for (; v / seven[gear] < upshift; t += kDt, v += kAccel * kDt)
+        hops.push_back({t, v, std::max(1.6 * kCarIdle, v / seven[gear])});  // the clutch slips at first
+      for (double s = 0.0; s < kShift; s += kDt, t += kDt)
+        hops.push_back({t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear])});
+    }
+    for (const double end = t + kCruise; t < end; t += kDt)
+      hops.push_back({t, v, v / seven[6]});
+    braked = t;
+    for (; v > 0.0; t += kDt, v = std::max(0.0, v - kBrake * kDt))  // declutched, the revs fall to idle
+      hops.push_back({t, v, kCarIdle});
+  };
+  stand(kStand);
+  launch_and_stop(0);
+  stand(kStand);
+  const double lost = t - 5.0, relaunch = t;
+  launch_and_stop(0);
+  const auto model = model_of({seven[1], seven[4], seven[5], seven[6]});
+  const auto distance_error = [&](const gearpulse::SynthTuning& tuning, int& ladder) {
+    SpeedSynthesizer synth(model, tuning);
+    double synthesized = 0.0, driven = 0.0;
+    for (const Hop& h : hops) {
+      const SynthOutput o = synth.step(h.t, h.t < lost ? h.speed : kMissing, h.freq);
+      if (h.t >= relaunch && h.t < braked) synthesized += o.speed * kDt, driven += h.speed * kDt;
+    }
+    ladder = synth.ladder_gears();
+    return std::abs(synthesized - driven) / driven;
+  };
+  int counted_ladder = 0, idle_ladder = 0;
+  const double counted = distance_error({}, counted_ladder);
+  gearpulse::SynthTuning idle_alone;
+  idle_alone.launch_gears = 0.0;
+  const double without = distance_error(idle_alone, idle_ladder);
+  CHECK(idle_ladder == 6);     // two gears predicted between second and fifth
+  CHECK(counted_ladder == 7);  // and first below second
+  INFO("distance error over the launch and cruise in the outage: "
+       << 100.0 * counted << " % with the launch seen, " << 100.0 * without << " % with the idle alone");
+  CHECK(counted < 0.05);
+  CHECK(counted < 0.5 * without);
+}
+
+TEST_CASE("synth: launches seen under GPS from a ladder's lowest gear add no gear below it") {
+  // The same car with a model of first, second, fifth, sixth and seventh gear: the launches under GPS
+  // reach first gear with no upshift, and nothing is predicted below it.
+  const std::vector<double> seven = {0.0145, 0.0200, 0.0270, 0.0358, 0.0463, 0.0590, 0.0737};
+  constexpr double kCarIdle = 47.0, kDt = 0.1, kAccel = 1.2, kShift = 0.4;
+  SpeedSynthesizer synth(model_of({seven[0], seven[1], seven[4], seven[5], seven[6]}));
+  REQUIRE(synth.ladder_gears() == 7);
+  double t = 0.0;
+  for (int launch = 0; launch < 3; ++launch) {
+    double v = 0.0;
+    for (const double end = t + 10.0; t < end; t += kDt)
+      synth.step(t, 0.0, kCarIdle);
+    for (std::size_t gear = 0; gear < 3; ++gear) {
+      for (; v / seven[gear] < 5.0 * kCarIdle; t += kDt, v += kAccel * kDt)
+        synth.step(t, v, std::max(1.6 * kCarIdle, v / seven[gear]));
+      for (double s = 0.0; s < kShift; s += kDt, t += kDt)
+        synth.step(t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear]));
+    }
+    for (; v > 0.0; t += kDt, v = std::max(0.0, v - 2.0 * kDt))
+      synth.step(t, v, kCarIdle);
+  }
+  CHECK(synth.ladder_gears() == 7);
+}

@@ -1,0 +1,87 @@
+#include "core/launch_gears.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/estimator.hpp"
+
+namespace gearpulse {
+namespace {
+
+// s after moving off within which the filter holds a measured gear: a launch through first to third takes
+// 5-10 s; one that lasts longer is a crawl in a jam, not a launch.
+constexpr double kMaxLaunchTime = 20.0;
+// An upshift lowers the revs by a gearbox step, no smaller than the base's own to the gear above it: a
+// fall of this share of that step (at least two gear windows) is one.
+constexpr double kShareOfStep = 0.75;
+
+}  // namespace
+
+void LaunchGears::observe_revs(double freq, double step, double idle_ceiling) noexcept {
+  if (state_ == State::kIdle || !std::isfinite(freq) || freq <= 0.0) return;
+  const double lf = std::log(freq);
+  if (falling_) {
+    // The upshift ends where the revs climb again in the new gear, by more than their jitter. A gear held
+    // for a moment only is passed with no climb: the fall then spans its step too, and counts once for
+    // each whole step of the base's that it spans (the steps below the base are no smaller). A fall into
+    // the idle band is a declutch whose depth tells nothing of the gears passed: it counts once.
+    trough_ = std::min(trough_, lf);
+    if (lf > trough_ + kGearWindow) {
+      if (step > 0.0 && trough_ > std::log(idle_ceiling))
+        upshifts_ += std::max(0, static_cast<int>(std::floor((peak_ - lf) / step)) - 1);
+      falling_ = false, peak_ = lf;
+    }
+    return;
+  }
+  peak_ = std::max(peak_, lf);
+  if (state_ == State::kLaunch && lf < peak_ - std::max(kShareOfStep * step, 2.0 * kGearWindow)) {
+    ++upshifts_;
+    falling_ = true;
+    trough_ = lf;
+  }
+}
+
+void LaunchGears::observe_fix(double t, bool standing, double base_theta, int above) noexcept {
+  if (standing) {
+    // Revs before the car moves (a blip, the idle settling) are no shift.
+    state_ = State::kStanding;
+    upshifts_ = 0;
+    falling_ = false;
+    peak_ = -std::numeric_limits<double>::infinity();
+    return;
+  }
+  if (state_ == State::kStanding) state_ = State::kLaunch, moved_ = t;
+  if (state_ != State::kLaunch) return;
+  if (t - moved_ > kMaxLaunchTime) state_ = State::kIdle;  // a crawl, not a launch
+  if (above < 0 || state_ != State::kLaunch) return;
+  state_ = State::kIdle;
+  const int below = upshifts_ - above;
+  if (below < 0 || !(base_theta > 0.0)) return;  // a shift missed: nothing to count
+  if (!(base_theta_ > 0.0) || std::abs(std::log(base_theta / base_theta_)) >= 2.0 * kGearWindow) {
+    counts_.fill(0.0);  // another gear is the base: the counts were of the gears below the old one
+    base_theta_ = base_theta;
+  }
+  counts_[static_cast<std::size_t>(std::min(below, kMaxBelow))] += 1.0;
+}
+
+int LaunchGears::gears_below(double base_theta, int at_least, double off_share) const noexcept {
+  if (at_least >= kMaxBelow || !(base_theta_ > 0.0) || !(base_theta > 0.0) ||
+      std::abs(std::log(base_theta / base_theta_)) >= 2.0 * kGearWindow)
+    return at_least;
+  const double off = std::clamp(off_share, 1e-6, 0.5);
+  const double log_on = std::log(1.0 - off), log_off = std::log(off / kMaxBelow);
+  double total = 0.0;
+  for (double c : counts_)
+    total += c;
+  int best = at_least;
+  double best_score = -std::numeric_limits<double>::infinity();
+  for (int k = std::max(at_least, 0); k <= kMaxBelow; ++k) {
+    const double on = counts_[static_cast<std::size_t>(k)];
+    const double score = (k - at_least) * std::log(off) + on * log_on + (total - on) * log_off;
+    if (score > best_score) best = k, best_score = score;
+  }
+  return best;
+}
+
+}  // namespace gearpulse

@@ -1,0 +1,58 @@
+#pragma once
+// How many gears a launch from rest passes below the lowest gear the synthesis has measured (its *base*:
+// the lowest gear of its ladder that is not predicted). A young model lacks the launch gears, which are
+// never steady under GPS, and where the base carries the car at idle no faster than a first gear may, the
+// idle cannot tell whether the base is first. A launch can: GPS shows the car standing, then moving; the
+// engine frequency, read at every step, falls by a gearbox step at each upshift; and once the filter holds
+// the base, or a gear above it, confidently under GPS, the upshifts counted since the car stood, less the
+// gears of the ladder from the base up to that one, are the gears the launch drove below the base. A car
+// whose base is first reaches it with no upshift (the clutch slips at held revs, then bites in first), one
+// that lacks first gear after one upshift, and so on.
+//
+// Each launch so counted is a reading of the gears below the base, off by one at times (a launch in
+// second gear, a shift missed or a fall of the revs that was none): with `off_share` the share of such
+// readings, the count k has a posterior under which a reading equal to k has likelihood 1 - off_share and
+// any other off_share / kMaxBelow; its prior is off_share^j for j gears beyond those the idle requires
+// (each gear more as unlikely as a reading that is off), so one launch against none decides, and readings
+// that disagree weigh against each other. The counts belong to one base: a new one starts them afresh.
+//
+// Fixed capacity, no allocation.
+#include <array>
+
+namespace gearpulse {
+
+class LaunchGears {
+ public:
+  static constexpr int kMaxBelow = 4;  // the most gears counted below the base
+
+  // At every step with GPS present: the engine frequency (NaN if not tracked), the base's step to the gear
+  // above it (log theta ratio; 0 at the top of the ladder), and the revs at or below which the engine is
+  // at idle (Hz; 0 = unknown).
+  void observe_revs(double freq, double step, double idle_ceiling) noexcept;
+  // At every new fix, at step time t (s): whether GPS shows the car standing, the base's theta, and the gear
+  // the filter holds confidently, as ladder positions above the base (0: the base itself; -1: none, a gear
+  // below the base, a move-off or a declutch). A launch held first in a gear `above` positions over the base
+  // passed the ones between by as many upshifts, which are not gears below it.
+  void observe_fix(double t, bool standing, double base_theta, int above) noexcept;
+  // GPS was lost, or the filter restarted: a launch in progress is not counted.
+  void abort() noexcept { state_ = State::kIdle; }
+
+  // The most probable count of gears below a base of `base_theta`, at least `at_least` (the gears the idle
+  // requires below it): at_least when no launch was counted on that base.
+  [[nodiscard]] int gears_below(double base_theta, int at_least, double off_share) const noexcept;
+  // Launches counted on the current base with k upshifts before it (k <= kMaxBelow).
+  [[nodiscard]] double launches(int k) const noexcept { return counts_[static_cast<std::size_t>(k)]; }
+
+ private:
+  enum class State { kIdle, kStanding, kLaunch };
+  State state_ = State::kIdle;
+  int upshifts_ = 0;         // counted since the car stood
+  bool falling_ = false;     // the revs are falling through an upshift counted
+  double peak_ = 0.0;        // highest revs since the car stood or the last upshift ended
+  double trough_ = 0.0;      // lowest revs of the upshift in progress
+  double moved_ = 0.0;       // time of the first fix moving
+  double base_theta_ = 0.0;  // the base the counts belong to (0: none)
+  std::array<double, kMaxBelow + 1> counts_{};
+};
+
+}  // namespace gearpulse

@@ -1,0 +1,92 @@
+// LaunchGears: the upshifts a launch from rest makes before the filter holds the ladder's lowest measured
+// gear (the base), and the count of gears below the base they make most probable.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+#include <vector>
+
+#include "core/launch_gears.hpp"
+
+using gearpulse::LaunchGears;
+
+namespace {
+
+constexpr double kBase = 0.0200;                     // (m/s)/Hz
+constexpr double kStep = std::log(1.35);             // the base's step to the gear above it
+constexpr double kIdle = 50.0, kIdleCeiling = 55.0;  // Hz
+
+// One launch at 10 Hz: standing at idle (a fix), then the revs given, a fix every second moving, and a
+// last fix at which the filter holds the gear `above` positions over the base.
+void launch(LaunchGears& gears, double& t, const std::vector<double>& revs, int above) {
+  gears.observe_fix(t, true, kBase, -1);
+  gears.observe_revs(kIdle, kStep, kIdleCeiling);
+  for (std::size_t k = 0; k < revs.size(); ++k) {
+    t += 0.1;
+    gears.observe_revs(revs[k], kStep, kIdleCeiling);
+    if (k % 10 == 5) gears.observe_fix(t, false, kBase, -1);
+  }
+  gears.observe_fix(t, false, kBase, above);
+  t += 10.0;
+}
+
+// Revs climbing from `from` to `to` in `n` readings.
+void climb(std::vector<double>& revs, double from, double to, int n) {
+  for (int k = 0; k < n; ++k)
+    revs.push_back(from + (to - from) * k / (n - 1));
+}
+
+}  // namespace
+
+TEST_CASE("launch gears: one upshift before the base is one gear below it") {
+  LaunchGears gears;
+  double t = 0.0;
+  std::vector<double> revs;
+  climb(revs, 80.0, 250.0, 20);   // first gear
+  climb(revs, 180.0, 200.0, 10);  // second, the base: the revs fell by first gear's step
+  launch(gears, t, revs, 0);
+  CHECK(gears.launches(1) == 1.0);
+  CHECK(gears.gears_below(kBase, 0, 0.1) == 1);
+  CHECK(gears.gears_below(kBase * 1.2, 0, 0.1) == 0);  // another base: nothing counted on it
+}
+
+TEST_CASE("launch gears: a gear passed with no climb of the revs counts by the steps its fall spans") {
+  // First gear to 250 Hz, second held for a moment only (the revs never climb in it), third from 130 Hz:
+  // one fall spanning two steps, then the filter holds the gear above the base.
+  LaunchGears gears;
+  double t = 0.0;
+  std::vector<double> revs;
+  climb(revs, 80.0, 250.0, 20);
+  climb(revs, 230.0, 130.0, 6);  // falling through second into third
+  climb(revs, 135.0, 170.0, 15);
+  launch(gears, t, revs, 1);
+  CHECK(gears.launches(1) == 1.0);  // two upshifts, one of them into the gear above the base
+
+  // The same fall ending in the idle band (the clutch out, the revs at idle) counts once: it tells
+  // nothing of the gears passed.
+  LaunchGears idle;
+  std::vector<double> to_idle;
+  climb(to_idle, 80.0, 250.0, 20);
+  climb(to_idle, 200.0, 52.0, 6);
+  climb(to_idle, 130.0, 170.0, 15);
+  launch(idle, t, to_idle, 0);
+  CHECK(idle.launches(1) == 1.0);
+}
+
+TEST_CASE("launch gears: the count most probable weighs launches against each other and the idle") {
+  LaunchGears gears;
+  double t = 0.0;
+  std::vector<double> from_base;
+  climb(from_base, 80.0, 250.0, 20);
+  for (int k = 0; k < 3; ++k)
+    launch(gears, t, from_base, 0);  // no upshift before the base
+  CHECK(gears.gears_below(kBase, 0, 0.1) == 0);
+  std::vector<double> below;
+  climb(below, 80.0, 250.0, 20);
+  climb(below, 180.0, 200.0, 10);
+  launch(gears, t, below, 0);  // one launch against three: off by one
+  CHECK(gears.gears_below(kBase, 0, 0.1) == 0);
+  CHECK(gears.gears_below(kBase, 2, 0.1) == 2);  // never fewer than the idle requires
+  for (int k = 0; k < 3; ++k)
+    launch(gears, t, below, 0);
+  CHECK(gears.gears_below(kBase, 0, 0.1) == 1);  // four against three
+}
