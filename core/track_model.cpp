@@ -32,6 +32,18 @@ constexpr double kDriftMemory = 0.7;
 // there (the tracker's "tracked").
 constexpr double kRightFraction = 0.05;
 constexpr double kConfident = 0.8;
+// A line that rises is an engine under power, and a gear shift from it is an upshift: the revs fall by the
+// gear step while the clutch is out and the new gear takes them; they do not rise. The shift gate of the
+// rising layers therefore reaches below the line only. A steady line's shift may go either way (an upshift
+// at a cruise, a kick-down), and a falling line's too (a downshift's blip, the revs falling to idle).
+// Where an upshift leads: a car gearbox's ratio steps lower the revs to about 0.55 (first to second gear)
+// to 0.85 (the top gears) of where they were; the lower edge keeps half the line (its half order, within
+// 5 %) out. The engine found again after the track lost it is, with this share of the probability that it
+// is near the latest tracked estimate, where an upshift from that estimate leads, and with the rest within
+// the slew's reach of it, as likely the one as the other.
+constexpr double kUpshiftLow = 0.55;
+constexpr double kUpshiftHigh = 0.85;
+constexpr double kUpshiftShare = 0.5;
 
 }  // namespace
 
@@ -62,6 +74,11 @@ TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin,
   for (int j = 0; j < layers_; ++j)
     if (rate_bins_[static_cast<std::size_t>(j)] * df_ / dt <= -kOverrunHzPerS + 1e-9) overrun_layers_ = j + 1;
   cumsum_.assign(states + 1, 0.0);
+  rising_.assign(states, 0.0);
+  rising_cumsum_.assign(states + 1, 0.0);
+  rise_from_ = layers_;  // the layers with a positive rate: the last ones
+  for (int j = layers_ - 1; j >= 0 && rate_bins_[static_cast<std::size_t>(j)] > 0.0; --j)
+    rise_from_ = j;
   gate_steady_ = static_cast<int>(std::ceil((kSteadyHzPerS * dt) / df_)) + 1;
   gate_slew_ = static_cast<int>(std::ceil((max_slew_ * dt) / df_)) + 2;
   gate_shift_ = static_cast<int>(std::ceil((std::max(max_slew_, config.shift_slew_hz_per_s) * dt) / df_)) + 2;
@@ -108,23 +125,33 @@ void TrackModel::predict() noexcept {
   // where the latest tracked estimate could have ramped to since, at the slew, unless it stopped or was
   // found elsewhere meanwhile (the stop and jump rates). Without this a line found again after a lost hop
   // was as likely anywhere, and a loud 2nd harmonic there took the track for a hop at twice the engine.
+  // Unless it lies beyond the states, half of that is where an upshift from the estimate leads.
   double near_share = 0.0;
-  int near_lo = 0, near_hi = -1;
+  int near_lo = 0, near_hi = -1, up_lo = 0, up_hi = -1;
   if (std::isfinite(anchor_freq_)) {
     const double dt = (anchor_age_ + 1) * hop_s_;
     const double reach = max_slew_ * dt + std::max(kRightFraction * anchor_freq_, lobe_ * df_);
     near_lo = std::max(0, static_cast<int>(std::ceil((anchor_freq_ - reach) / df_)) - first_);
     near_hi = std::min(n - 1, static_cast<int>(std::floor((anchor_freq_ + reach) / df_)) - first_);
+    up_lo = std::max(0, static_cast<int>(std::ceil(kUpshiftLow * anchor_freq_ / df_)) - first_);
+    up_hi = std::min(n - 1, static_cast<int>(std::floor(kUpshiftHigh * anchor_freq_ / df_)) - first_);
     if (near_hi >= near_lo) near_share = std::exp(-(kJumpRate + kStopRate) * dt);
   }
   const double anywhere = (p_jump_ * present + (1.0 - near_share) * p_start_ * post_absent_) / n;
-  const double near =
-      near_hi >= near_lo ? near_share * p_start_ * post_absent_ / (near_hi - near_lo + 1) : 0.0;
+  const double upshift_share = near_share > 0.0 && up_hi >= up_lo ? kUpshiftShare : 0.0;
+  const double found = near_share * p_start_ * post_absent_;
+  const double near = near_hi >= near_lo ? (1.0 - upshift_share) * found / (near_hi - near_lo + 1) : 0.0;
+  const double upshift = upshift_share > 0.0 ? upshift_share * found / (up_hi - up_lo + 1) : 0.0;
   // Each layer keeps its rate within the steady gate; what enters the slew gate (from the line's place
-  // one hop on at its rate) and the shift gate (from where it was) is spread over all rates.
+  // one hop on at its rate) and the shift gate (from where it was; below it for a rising line) is spread
+  // over all rates.
   std::fill(moved_.begin(), moved_.end(), 0.0);
+  std::fill(rising_.begin(), rising_.end(), 0.0);
   for (int j = 0; j < layers_; ++j) {
     const double* p = post_.data() + static_cast<std::size_t>(j) * un;
+    if (j >= rise_from_)
+      for (std::size_t i = 0; i < un; ++i)
+        rising_[i] += p[i];
     double* q = next_.data() + static_cast<std::size_t>(j) * un;
     cumsum_[0] = 0.0;
     for (std::size_t i = 0; i < un; ++i)
@@ -139,14 +166,23 @@ void TrackModel::predict() noexcept {
       moved_[static_cast<std::size_t>(i)] += box(i + o, a, gate_slew_);
     }
   }
-  cumsum_[0] = 0.0;
-  for (std::size_t i = 0; i < un; ++i)
-    cumsum_[i + 1] = cumsum_[i] + marginal_[i];
+  // The shift gate: the layers that do not rise spread within it both ways (cumsum_), the rising ones
+  // (rising_cumsum_) into the one side below the line, of gate_shift_ + 1 fine bins.
+  cumsum_[0] = rising_cumsum_[0] = 0.0;
+  for (std::size_t i = 0; i < un; ++i) {
+    cumsum_[i + 1] = cumsum_[i] + (marginal_[i] - rising_[i]);
+    rising_cumsum_[i + 1] = rising_cumsum_[i] + rising_[i];
+  }
   const double per_layer = 1.0 / layers_;
+  const double below = 1.0 / (gate_shift_ + 1.0);
   for (int i = 0; i < n; ++i) {
     const auto ui = static_cast<std::size_t>(i);
-    moved_[ui] = per_layer * (stay * (slew_share_ * moved_[ui] + shift_share_ * box(i, 0.0, gate_shift_)) +
-                              anywhere + (i >= near_lo && i <= near_hi ? near : 0.0));
+    const auto top = static_cast<std::size_t>(std::min(n - 1, i + gate_shift_)) + 1;
+    const double upshift_in = below * (rising_cumsum_[top] - rising_cumsum_[ui]);
+    moved_[ui] =
+        per_layer *
+        (stay * (slew_share_ * moved_[ui] + shift_share_ * (box(i, 0.0, gate_shift_) + upshift_in)) +
+         anywhere + (i >= near_lo && i <= near_hi ? near : 0.0) + (i >= up_lo && i <= up_hi ? upshift : 0.0));
   }
   for (int j = 0; j < layers_; ++j) {
     double* q = next_.data() + static_cast<std::size_t>(j) * un;

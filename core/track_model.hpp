@@ -5,8 +5,9 @@
 // drift of a confident line and the latest tracked estimate).
 //
 // Per hop: predict() spreads the previous posterior (a continuing line moves at its rate within a steady
-// gate, or its rate changes within a slew or a shift gate; the engine stops, starts or is found elsewhere;
-// a line found again after the track lost it is found near the latest tracked estimate), the caller writes
+// gate, or its rate changes within a slew or a shift gate, which for a rising line reaches only below it;
+// the engine stops, starts or is found elsewhere; a line found again after the track lost it is found near
+// the latest tracked estimate or where an upshift from it leads), the caller writes
 // every fundamental's log likelihood ratio into evidence() (and, for the falling rates of engine braking,
 // overrun_excess()), update() applies it to every rate (allowing for a window that hides the line), and
 // observe() tells the model what the hop reported. Sized at construction; nothing allocates, locks or
@@ -73,6 +74,10 @@ class TrackModel {
   int layers_ = 1;
   std::vector<double> rate_bins_;
   std::vector<double> post_, next_, marginal_, loglik_, cumsum_, moved_;
+  // The rising layers (rise_from_ .. layers_ - 1, a positive rate) summed per fundamental, and its prefix
+  // sums: their shift gate reaches below the line only (an upshift).
+  int rise_from_ = 1;
+  std::vector<double> rising_, rising_cumsum_;
   // update(): each fundamental's likelihood factor, common to every layer that is not on the overrun, and
   // the overrun's (layers 0 .. overrun_layers_ - 1, the fastest falling).
   std::vector<double> factor_, factor_overrun_;

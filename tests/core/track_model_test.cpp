@@ -54,6 +54,34 @@ TEST_CASE(
   CHECK(model.mass_near(100.0) > model.mass_near(200.0));
 }
 
+// A line rising at 20 Hz/s (an engine under power) is followed to 120 Hz; then three windows show nothing
+// (a gear shift's smear) and the next shows two equal lines: at 0.65 of the old line (the new gear's
+// fundamental) and at 1.3 of it (the new gear's 2nd harmonic, a little louder). A rising line's shift is
+// an upshift, which lowers the revs by the gear step; the revs do not rise by a third while the line is
+// hidden. The posterior favours the lower line.
+TEST_CASE("track model: a rising line lost in a gear shift is found again below, not at a line above") {
+  TrackModel model(TrackerConfig{}, kFirst, kLast, kDf, 4);
+  const double hop_s = TrackerConfig{}.hop_s;
+  double f = 90.0;
+  for (int i = 0; i <= 15; ++i, f += 20.0 * hop_s) {
+    hop(model, {{f, 3.0}}, 0.0);
+    const double mode = model.mode_bin() * kDf;
+    model.observe(mode, model.mass_near(mode), true);
+  }
+  const double old_line = f - 20.0 * hop_s;
+  REQUIRE(model.mass_near(old_line) >= 0.8);
+  for (int i = 0; i < 3; ++i) {
+    hop(model, {}, -1.0);
+    const double mode = model.mode_bin() * kDf;
+    model.observe(mode, model.mass_near(mode), false);
+  }
+  const double below = 0.65 * old_line, above = 1.3 * old_line;
+  hop(model, {{below, 3.0}, {above, 3.5}}, -1.0);
+  INFO("old line " << old_line << " Hz; posterior near " << below << " Hz " << model.mass_near(below)
+                   << ", near " << above << " Hz " << model.mass_near(above));
+  CHECK(model.mass_near(below) >= 2.0 * model.mass_near(above));
+}
+
 // Far from the latest tracked estimate (long ago: the engine may have stopped or moved anywhere), the
 // louder line wins.
 TEST_CASE("track model: long after the latest tracked estimate a line is found wherever it is loudest") {
