@@ -13,11 +13,13 @@
 // Per outage: distance error |integral of the output - integral of the true speed| over the 60 s, in m.
 // Targets: a model within 3 minutes of moving; from minute 5, per-outage distance error within 2x the
 // pre-trained one.
-// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--require NAME<=VALUE]...
+// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--synth KEY=VALUE[,...]]
+//        [--require NAME<=VALUE]...
 //   --require (bench/requirements.hpp) holds the figures first_model_worst_min (min of moving),
 //   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 (ratios), cold_m_from_min5
 //   and known_gears_cold_m_from_min5 (m per outage) to thresholds.
 //   --tuning: seeds 1-10 (the seeds the schedule's defaults were chosen on); --report (default): 101-120.
+//   --synth sets SynthTuning fields of both runs' synthesis (bench/synth_settings.hpp), e.g. a rule off.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -31,6 +33,7 @@
 
 #include "bench/outage_protocol.hpp"
 #include "bench/requirements.hpp"
+#include "bench/synth_settings.hpp"
 #include "core/estimator.hpp"
 #include "core/speed_synth.hpp"
 #include "daemon/fitter.hpp"
@@ -72,12 +75,13 @@ struct Run {
 };
 
 // The drive stepped through the synthesis; with `pretrained` null the daemon's cold start learns as it goes.
-Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretrained, bool verbose) {
+Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretrained,
+          const gearpulse::SynthTuning& tuning, bool verbose) {
   sim::ObservationOptions hop;
   hop.period = 0.1;
   hop.seed = d.options.seed + 7;
   const std::vector<sim::Observation> rows = sim::observe(d, hop);
-  gearpulse::SpeedSynthesizer synth(pretrained);
+  gearpulse::SpeedSynthesizer synth(pretrained, tuning);
   const auto fitter = gd::make_estimator_fitter();
   gd::LearningSchedule schedule;  // the daemon's defaults
   std::shared_ptr<const GearModel> model = pretrained;
@@ -209,6 +213,7 @@ int main(int argc, char** argv) {
   std::uint64_t first = 101, last = 120;
   const char* which = "report";
   bool verbose = false;
+  gearpulse::SynthTuning tuning;  // the daemon's defaults unless --synth KEY=VALUE sets a field
   gearpulse::bench::Requirements required;
   if (!required.parse(argc, argv)) return 2;
   for (int i = 1; i < argc; ++i) {
@@ -224,10 +229,13 @@ int main(int argc, char** argv) {
       i += 2;
     } else if (a == "--verbose") {
       verbose = true;
+    } else if (a == "--synth" && i + 1 < argc && gearpulse::bench::apply_settings(tuning, argv[i + 1])) {
+      ++i;
     } else {
-      std::fprintf(stderr,
-                   "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--require "
-                   "NAME<=VALUE]...\n");
+      std::fprintf(
+          stderr,
+          "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--synth KEY=VALUE] "
+          "[--require NAME<=VALUE]...\n");
       return 2;
     }
   }
@@ -264,8 +272,8 @@ int main(int argc, char** argv) {
     gps1.seed = seed + 200000;
     const auto pre_pairs = sim::to_samples(sim::observe(sim::simulate_drive(car, other), gps1));
     const auto pre_model = std::make_shared<const GearModel>(gd::make_estimator_fitter()(pre_pairs, {}));
-    const Run cold = drive(first_drive_sim, nullptr, verbose);
-    const Run pre = drive(first_drive_sim, pre_model->empty() ? nullptr : pre_model, false);
+    const Run cold = drive(first_drive_sim, nullptr, tuning, verbose);
+    const Run pre = drive(first_drive_sim, pre_model->empty() ? nullptr : pre_model, tuning, false);
     if (cold.first_model_drive < 0.0) {
       ++never;
     } else {

@@ -51,6 +51,7 @@
 
 #include "bench/outage/outage.hpp"
 #include "bench/requirements.hpp"
+#include "bench/synth_settings.hpp"
 #include "core/sample_io.hpp"
 #include "core/speed_synth.hpp"
 

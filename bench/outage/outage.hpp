@@ -115,8 +115,7 @@ Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning, const 
 void print_outcome(const Workload& w, const Outcome& o, Requirements& required);
 void print_worst(const Workload& w, const Outcome& o, double worst);
 
-// --synth KEY=VALUE[,KEY=VALUE...] and --ablate (ablation.cpp).
-bool apply_settings(gearpulse::SynthTuning& t, std::string_view settings);
+// --ablate (ablation.cpp); --synth is bench/synth_settings.hpp's apply_settings.
 void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::vector<std::string>& only,
             const Options& opt);
 
