@@ -188,8 +188,10 @@ struct SlidingDftTracker::Impl {
     return power()[k] / (noise()[k] * tones->background(k));
   }
   void learn_tones(double freq, double right) noexcept;
-  // `overrun`, when given, gets what a line on the overrun adds to it (HarmonicEvidence::second_overrun()).
-  void candidate_likelihoods(std::vector<double>& out, std::vector<double>* overrun = nullptr) const noexcept;
+  // `overrun`, when given, gets what a line on the overrun adds to it (HarmonicEvidence::second_overrun()),
+  // `power` what a line under power adds (HarmonicEvidence::second_power()).
+  void candidate_likelihoods(std::vector<double>& out, std::vector<double>* overrun = nullptr,
+                             std::vector<double>* power = nullptr) const noexcept;
   // Log odds lost by the state at fine bin k, whose line has per-bin SNR rho_line, to the root f / 4 of a
   // comb of which it would be the 4th harmonic.
   [[nodiscard]] double comb_root_penalty(int k, double rho_line) const noexcept;
@@ -528,8 +530,8 @@ double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const 
 
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
 // normalised power at each of its orders.
-void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out,
-                                                    std::vector<double>* overrun) const noexcept {
+void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, std::vector<double>* overrun,
+                                                    std::vector<double>* power) const noexcept {
   const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
   // The 3rd harmonic's learned level: its weight in the prior, its mean (a ratio) and spread (dB).
   const double third_w = third_n / (third_n + third_prior);
@@ -551,6 +553,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out,
     const bool on_tone = tones->near(static_cast<std::size_t>(k));
     double l = on_tone ? 0.0 : evidence.fundamental(z1, rho_track) - mismatch * mismatch;
     double overrun_second = 0.0;  // the overrun's 2nd harmonic term less the usual one
+    double power_second = 0.0;    // the same under power
     if (cfg.require_harmonics) {
       const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
       for (int o = 0; o < kOrders; ++o) {
@@ -564,6 +567,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out,
                              : o == 2 ? evidence.second(z, rho)
                                       : evidence.order(z, rho);
         if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho) - fixed;
+        if (o == 2 && power) power_second = evidence.second_power(z, rho) - fixed;
         if (o != 3 || third_w <= 0.0) {
           l += fixed;
           continue;
@@ -575,12 +579,15 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out,
       }
       // The line's level (its peak's, not the state's on its shoulder) sets the lower root's expected level.
       const double lo = l + overrun_second;
-      const double penalty = l > 0.0 || (overrun && lo > 0.0)
+      const double lp = l + power_second;
+      const double penalty = l > 0.0 || (overrun && lo > 0.0) || (power && lp > 0.0)
                                  ? comb_root_penalty(k, on_tone ? rho_track : std::max(peak - 1.0, 0.1))
                                  : 0.0;
       const double usual = l > 0.0 ? l - penalty : l;
       if (overrun)
         (*overrun)[static_cast<std::size_t>(k - s_lo)] = temper * ((lo > 0.0 ? lo - penalty : lo) - usual);
+      if (power)
+        (*power)[static_cast<std::size_t>(k - s_lo)] = temper * ((lp > 0.0 ? lp - penalty : lp) - usual);
       l = usual;
     }
     out[static_cast<std::size_t>(k - s_lo)] = temper * l;
@@ -610,7 +617,8 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   }
   track->predict();
   tones->mark();
-  candidate_likelihoods(track->evidence(), track->overrun_layers() ? &track->overrun_excess() : nullptr);
+  candidate_likelihoods(track->evidence(), track->overrun_layers() ? &track->overrun_excess() : nullptr,
+                        track->power_layers() ? &track->power_excess() : nullptr);
   const double level = std::min(1.0, kDefaultRho / rho_track);
   if (!track->update(kHiddenShare * level * level)) {
     reset_track();

@@ -32,10 +32,13 @@ constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 // a candidate's sub-harmonic (whose 2nd harmonic is the engine's fundamental) is not lifted for free.
 // kLoudSecond, the share of light load and overrun, is chosen on the generated scenes' tuning set. On the
 // overrun itself (a line falling fast: the engine does not drive the car) the 2nd harmonic is as likely
-// loud as not: kLoudSecondOverrun.
+// loud as not: kLoudSecondOverrun. Under power (a line rising fast: the engine drives the car hard) the
+// fundamental takes the firing energy and a 2nd harmonic over it is rare: kLoudSecondPower, chosen on the
+// tuning set (0.02 and 0.05).
 constexpr double kSecondRatioHi = 30.0;
 constexpr double kLoudSecond = 0.15;
 constexpr double kLoudSecondOverrun = 0.5;
+constexpr double kLoudSecondPower = 0.02;
 constexpr int kRatioSteps = 20;
 // A line below a candidate f that is an order of a lower engine of which f is a harmonic (a comb): its ratio
 // to f's line spans the harmonics' prior either way, log-uniform over 0.05 .. 20 (-13 to +13 dB).
@@ -112,6 +115,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   ladder_.assign(fund_.size(), 0.0);
   second_.assign(fund_.size(), 0.0);
   second_overrun_.assign(fund_.size(), 0.0);
+  second_power_.assign(fund_.size(), 0.0);
   lower_.assign(fund_.size(), 0.0);
   half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   profile_.assign(kProfileTables, std::vector<double>(fund_.size(), 0.0));
@@ -141,6 +145,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       };
       second_[at] = second(kLoudSecond);
       second_overrun_[at] = second(kLoudSecondOverrun);
+      second_power_[at] = second(kLoudSecondPower);
       lower_[at] = with_absent(log_ratio(kLowerRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
@@ -194,6 +199,10 @@ double HarmonicEvidence::second(double z, double rho_fundamental) const noexcept
 
 double HarmonicEvidence::second_overrun(double z, double rho_fundamental) const noexcept {
   return lookup(second_overrun_, z, rho_fundamental);
+}
+
+double HarmonicEvidence::second_power(double z, double rho_fundamental) const noexcept {
+  return lookup(second_power_, z, rho_fundamental);
 }
 
 double HarmonicEvidence::lower_root(double z, double rho_line) const noexcept {

@@ -41,6 +41,9 @@ class HarmonicEvidence {
   // The same on the overrun (engine braking: a line falling fast), where the 2nd harmonic is as likely to
   // stand over the fundamental as not.
   [[nodiscard]] double second_overrun(double z, double rho_fundamental) const noexcept;
+  // The same under power (a line rising fast: the engine drives the car hard), where the fundamental
+  // takes the firing energy and a 2nd harmonic over it is rare.
+  [[nodiscard]] double second_power(double z, double rho_fundamental) const noexcept;
   // The same for a bin below a candidate's line that is an order of a lower engine of which the candidate
   // is a harmonic (f / 4 and 3 f / 4 when it is the 4th), given the per-bin SNR of the candidate's line:
   // the ratio spans 0.05 .. 20 (-13 to +13 dB).
@@ -65,6 +68,7 @@ class HarmonicEvidence {
   std::vector<double> ladder_;          // over (log10 rho, sqrt z)
   std::vector<double> second_;          // over (log10 rho, sqrt z)
   std::vector<double> second_overrun_;  // over (log10 rho, sqrt z)
+  std::vector<double> second_power_;    // over (log10 rho, sqrt z)
   std::vector<double> lower_;           // over (log10 rho, sqrt z)
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
   // (log10 rho, sqrt z).

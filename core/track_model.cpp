@@ -70,6 +70,12 @@ TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin,
   factor_.assign(states, 0.0);
   factor_overrun_.assign(states, 0.0);
   overrun_excess_.assign(states, 0.0);
+  factor_power_.assign(states, 0.0);
+  power_excess_.assign(states, 0.0);
+  power_from_ = layers_;
+  for (int j = layers_ - 1;
+       j >= 0 && rate_bins_[static_cast<std::size_t>(j)] * df_ / dt >= kPowerHzPerS - 1e-9; --j)
+    power_from_ = j;
   overrun_layers_ = 0;  // the layers falling at kOverrunHzPerS or faster: the first ones
   for (int j = 0; j < layers_; ++j)
     if (rate_bins_[static_cast<std::size_t>(j)] * df_ / dt <= -kOverrunHzPerS + 1e-9) overrun_layers_ = j + 1;
@@ -197,12 +203,15 @@ bool TrackModel::update(double hidden) noexcept {
   hidden = std::clamp(hidden, 0.0, 1.0);
   // Logs in the window's terms (the hop's ratio over the temper), less the largest ratio `top`; a window
   // that says nothing has ratio 1 (log 0). The ratio depends on the fundamental alone, and on whether the
-  // line is on the overrun: factor_ takes each fundamental's, which multiplies every layer but the
-  // overrun's, factor_overrun_ theirs.
+  // line is on the overrun or under power: factor_ takes each fundamental's, which multiplies every layer
+  // but the overrun's and power's, factor_overrun_ and factor_power_ theirs.
   double top = std::max(0.0, *std::max_element(loglik_.begin(), loglik_.end())) / temper_;
   if (overrun_layers_ > 0)
     for (std::size_t i = 0; i < loglik_.size(); ++i)
       top = std::max(top, (loglik_[i] + overrun_excess_[i]) / temper_);
+  if (power_from_ < layers_)
+    for (std::size_t i = 0; i < loglik_.size(); ++i)
+      top = std::max(top, (loglik_[i] + power_excess_[i]) / temper_);
   const double log_shown = std::log1p(-hidden);
   const double log_blank = (hidden > 0.0 ? std::log(hidden) : -INFINITY) - top;
   const std::size_t n = marginal_.size();
@@ -216,11 +225,16 @@ bool TrackModel::update(double hidden) noexcept {
   if (overrun_layers_ > 0)
     for (std::size_t i = 0; i < n; ++i)
       factor_overrun_[i] = factor(loglik_[i] + overrun_excess_[i]);
+  if (power_from_ < layers_)
+    for (std::size_t i = 0; i < n; ++i)
+      factor_power_[i] = factor(loglik_[i] + power_excess_[i]);
   double total = post_absent_ * std::exp(-temper_ * top);
   std::fill(marginal_.begin(), marginal_.end(), 0.0);
   for (int j = 0; j < layers_; ++j) {
     double* p = post_.data() + static_cast<std::size_t>(j) * n;
-    const double* f = j < overrun_layers_ ? factor_overrun_.data() : factor_.data();
+    const double* f = j < overrun_layers_ ? factor_overrun_.data()
+                      : j >= power_from_  ? factor_power_.data()
+                                          : factor_.data();
     for (std::size_t i = 0; i < n; ++i) {
       p[i] *= f[i];
       marginal_[i] += p[i];

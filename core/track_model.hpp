@@ -9,9 +9,9 @@
 // the engine stops, starts or is found elsewhere; a line found again after the track lost it is found near
 // the latest tracked estimate or where an upshift from it leads), the caller writes
 // every fundamental's log likelihood ratio into evidence() (and, for the falling rates of engine braking,
-// overrun_excess()), update() applies it to every rate (allowing for a window that hides the line), and
-// observe() tells the model what the hop reported. Sized at construction; nothing allocates, locks or
-// throws afterwards.
+// overrun_excess(), for the fast rising rates under power, power_excess()), update() applies it to every rate
+// (allowing for a window that hides the line), and observe() tells the model what the hop reported. Sized at
+// construction; nothing allocates, locks or throws afterwards.
 #include <vector>
 
 #include "core/sliding_dft_tracker.hpp"
@@ -40,6 +40,15 @@ class TrackModel {
   // revs falling to idle). Chosen on the generated scenes' tuning set (10, 20 and 30 Hz/s; see
   // docs/tracker.md).
   static constexpr double kOverrunHzPerS = 20.0;
+  // For a line under power, whose 2nd harmonic seldom stands over the fundamental, what its log likelihood
+  // ratio adds to evidence()'s, per fundamental: read by the rate layers rising at kPowerHzPerS or faster
+  // (when power_layers()). Zero unless the caller writes it; it keeps what was written.
+  [[nodiscard]] std::vector<double>& power_excess() noexcept { return power_excess_; }
+  [[nodiscard]] bool power_layers() const noexcept { return power_from_ < layers_; }
+  // A line rising at this rate (Hz/s) or faster is under power: revs rise 900 rpm/s on a four-cylinder
+  // only at a wide throttle in the low gears. Chosen on the generated scenes' tuning set (20 and 30 Hz/s;
+  // see docs/tracker.md).
+  static constexpr double kPowerHzPerS = 30.0;
   // Bayes update with evidence(), when the window hides the engine's line with probability `hidden` (a
   // gear shift's smear, a line masked by another or faded below the evidence's level prior): a hidden
   // window says nothing about where the engine is, so each state's likelihood ratio is the mixture
@@ -78,11 +87,12 @@ class TrackModel {
   // sums: their shift gate reaches below the line only (an upshift).
   int rise_from_ = 1;
   std::vector<double> rising_, rising_cumsum_;
-  // update(): each fundamental's likelihood factor, common to every layer that is not on the overrun, and
-  // the overrun's (layers 0 .. overrun_layers_ - 1, the fastest falling).
-  std::vector<double> factor_, factor_overrun_;
-  std::vector<double> overrun_excess_;
+  // update(): each fundamental's likelihood factor, common to every layer that is neither on the overrun
+  // nor under power, the overrun's (layers 0 .. overrun_layers_ - 1, the fastest falling) and power's.
+  std::vector<double> factor_, factor_overrun_, factor_power_;
+  std::vector<double> overrun_excess_, power_excess_;
   int overrun_layers_ = 0;
+  int power_from_ = 1;  // the layers rising at kPowerHzPerS or faster: power_from_ .. layers_ - 1
   double post_absent_ = 0.5;
   double drift_hz_per_s_ = 0.0;  // recent rate of change of the tracked line
   double last_freq_ = 0.0;       // previous hop's estimate while confident, else NaN
