@@ -692,6 +692,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
     habits_.forget_last_fix();
+    launches_.abort();  // the launch's shifts in the gap are unseen
     dt = 0.0;
   }
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
