@@ -82,6 +82,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(predict_lower_gears),
     GEARPULSE_FIELD(fitted_lower_gears),
     GEARPULSE_FIELD(fill_ladder_gaps),
+    GEARPULSE_FIELD(launch_gears),
     GEARPULSE_FIELD(speed_lag),
     GEARPULSE_FIELD(speed_lag_prior),
     GEARPULSE_FIELD(speed_lag_significance),
