@@ -40,8 +40,11 @@ class LaunchGears {
   // The most probable count of gears below a base of `base_theta`, at least `at_least` (the gears the idle
   // requires below it): at_least when no launch was counted on that base.
   [[nodiscard]] int gears_below(double base_theta, int at_least, double off_share) const noexcept;
-  // Launches counted on the current base with k upshifts before it (k <= kMaxBelow).
-  [[nodiscard]] double launches(int k) const noexcept { return counts_[static_cast<std::size_t>(k)]; }
+  // Launches counted on the current base with k upshifts before it (k = kMaxBelow: that many or more; 0
+  // for any k outside 0..kMaxBelow).
+  [[nodiscard]] double launches(int k) const noexcept {
+    return k >= 0 && k <= kMaxBelow ? counts_[static_cast<std::size_t>(k)] : 0.0;
+  }
 
  private:
   enum class State { kIdle, kStanding, kLaunch };

@@ -45,6 +45,8 @@ TEST_CASE("launch gears: one upshift before the base is one gear below it") {
   climb(revs, 180.0, 200.0, 10);  // second, the base: the revs fell by first gear's step
   launch(gears, t, revs, 0);
   CHECK(gears.launches(1) == 1.0);
+  CHECK(gears.launches(-1) == 0.0);  // no count outside 0..kMaxBelow
+  CHECK(gears.launches(LaunchGears::kMaxBelow + 1) == 0.0);
   CHECK(gears.gears_below(kBase, 0, 0.1) == 1);
   CHECK(gears.gears_below(kBase * 1.2, 0, 0.1) == 0);  // another base: nothing counted on it
 }
