@@ -51,8 +51,8 @@ class LaunchGears {
   State state_ = State::kIdle;
   int upshifts_ = 0;         // counted since the car stood
   bool falling_ = false;     // the revs are falling through an upshift counted
-  double peak_ = 0.0;        // highest revs since the car stood or the last upshift ended
-  double trough_ = 0.0;      // lowest revs of the upshift in progress
+  double peak_ = 0.0;        // highest log revs since the car stood or the last upshift ended
+  double trough_ = 0.0;      // lowest log revs of the upshift in progress
   double moved_ = 0.0;       // time of the first fix moving
   double base_theta_ = 0.0;  // the base the counts belong to (0: none)
   std::array<double, kMaxBelow + 1> counts_{};
