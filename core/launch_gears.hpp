@@ -34,7 +34,8 @@ class LaunchGears {
   // below the base, a move-off or a declutch). A launch held first in a gear `above` positions over the base
   // passed the ones between by as many upshifts, which are not gears below it.
   void observe_fix(double t, bool standing, double base_theta, int above) noexcept;
-  // GPS was lost, or the filter restarted: a launch in progress is not counted.
+  // GPS was lost, the steps paused, the ladder went or the filter restarted: a launch in progress is not
+  // counted.
   void abort() noexcept { state_ = State::kIdle; }
 
   // The most probable count of gears below a base of `base_theta`, at least `at_least` (the gears the idle
