@@ -24,8 +24,9 @@ void LaunchGears::observe_revs(double freq, double step, double idle_ceiling) no
   if (falling_) {
     // The upshift ends where the revs climb again in the new gear, by more than their jitter. A gear held
     // for a moment only is passed with no climb: the fall then spans its step too, and counts once for
-    // each whole step of the base's that it spans (the steps below the base are no smaller). A fall into
-    // the idle band is a declutch whose depth tells nothing of the gears passed: it counts once.
+    // each whole step of the base's from the peak to the reading that ends it (the steps below the base
+    // are no smaller). A fall into the idle band is a declutch whose depth tells nothing of the gears
+    // passed: it counts once.
     trough_ = std::min(trough_, lf);
     if (lf > trough_ + kGearWindow) {
       if (step > 0.0 && trough_ > std::log(idle_ceiling))

@@ -34,22 +34,26 @@ class LaunchGears {
   // below the base, a move-off or a declutch). A launch held first in a gear `above` positions over the base
   // passed the ones between by as many upshifts, which are not gears below it.
   void observe_fix(double t, bool standing, double base_theta, int above) noexcept;
-  // GPS was lost, or the filter restarted: a launch in progress is not counted.
+  // GPS was lost, the steps paused, the ladder went or the filter restarted: a launch in progress is not
+  // counted.
   void abort() noexcept { state_ = State::kIdle; }
 
   // The most probable count of gears below a base of `base_theta`, at least `at_least` (the gears the idle
   // requires below it): at_least when no launch was counted on that base.
   [[nodiscard]] int gears_below(double base_theta, int at_least, double off_share) const noexcept;
-  // Launches counted on the current base with k upshifts before it (k <= kMaxBelow).
-  [[nodiscard]] double launches(int k) const noexcept { return counts_[static_cast<std::size_t>(k)]; }
+  // Launches counted on the current base with k upshifts before it (k = kMaxBelow: that many or more; 0
+  // for any k outside 0..kMaxBelow).
+  [[nodiscard]] double launches(int k) const noexcept {
+    return k >= 0 && k <= kMaxBelow ? counts_[static_cast<std::size_t>(k)] : 0.0;
+  }
 
  private:
   enum class State { kIdle, kStanding, kLaunch };
   State state_ = State::kIdle;
   int upshifts_ = 0;         // counted since the car stood
   bool falling_ = false;     // the revs are falling through an upshift counted
-  double peak_ = 0.0;        // highest revs since the car stood or the last upshift ended
-  double trough_ = 0.0;      // lowest revs of the upshift in progress
+  double peak_ = 0.0;        // highest log revs since the car stood or the last upshift ended
+  double trough_ = 0.0;      // lowest log revs of the upshift in progress
   double moved_ = 0.0;       // time of the first fix moving
   double base_theta_ = 0.0;  // the base the counts belong to (0: none)
   std::array<double, kMaxBelow + 1> counts_{};

@@ -692,6 +692,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
     habits_.forget_last_fix();
+    launches_.abort();  // the launch's shifts in the gap are unseen
     dt = 0.0;
   }
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
@@ -706,6 +707,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   if (!informed_) {
     out = {0.0, 0, SpeedSource::kNone};
   } else if (gears_ == 0) {
+    launches_.abort();  // no ladder to follow a launch on
     out = output_.hold(t, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), tuning_);
     // Before a model, GPS still shows the car standing: the idle is learned as with one (no mode is held).
     if (have_gps) habits_.learn(t_, dt, gps_speed, freq, gps_new, 0, false, 0.0, false, tuning_);

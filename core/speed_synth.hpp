@@ -37,7 +37,8 @@
 // error in the gear's reading, until a model has that gear; such a gear has no number in the model, and an
 // output in it says gear 0. So do the gears below a ladder that lacks first gear (a young model has not seen
 // the launch gears steady): those a plausible ladder of more gears held in the fit (extra.lower_gears),
-// then the ones predicted from the ladder's own steps.
+// then the ones predicted from the ladder's own steps, as many as the idle and the launches from rest seen
+// under GPS show (launch_gears.hpp).
 //
 // This file is the mode filter; what it learns of the engine and driver is SynthHabits (synth_habits.hpp),
 // and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).

@@ -224,8 +224,9 @@ void SpeedSynthesizer::insert_below_ladder(std::span<const double> thetas) noexc
 // the ladder's two lowest steps: the next step down grows by the factor the lowest step grew by over the
 // one above it (1 with only one step known), between a factor of 1.06 (the smallest step a fit accepts)
 // and 2 (the largest gearbox step, first to second in a four-speed box). Gears are predicted until the
-// lowest carries the car at the warm idle no faster than first gear does. The ladder's gears from position
-// `base` up are the ones known; the predicted thetas go to `theta`, lowest last. Returns how many.
+// lowest carries the car at the warm idle no faster than first gear does, and on down to as many below
+// the base as the launches seen under GPS show (launch_gears.hpp). The ladder's gears from position `base`
+// up are the ones known; the predicted thetas go to `theta`, lowest last. Returns how many.
 int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noexcept {
   const int known = gears_ - base + 1;
   if (tuning_.predict_lower_gears <= 0.0 || known < 2) return 0;
@@ -285,8 +286,8 @@ void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
   if (gears_ == 0 || model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
   bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas));
-  // The idle decides how many gears are missing below the ladder: it may be learned, or fall as the engine
-  // warms, after the ladder was loaded.
+  // The idle and the launches seen under GPS decide how many gears are missing below the ladder: the idle
+  // may be learned, or fall as the engine warms, and a launch be counted, after the ladder was loaded.
   if (!changed && tuning_.predict_lower_gears > 0.0) {
     ModeArray theta{};
     changed = predict_lower_gears(predicted_ + 1, theta) != predicted_;

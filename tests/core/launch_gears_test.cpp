@@ -45,6 +45,8 @@ TEST_CASE("launch gears: one upshift before the base is one gear below it") {
   climb(revs, 180.0, 200.0, 10);  // second, the base: the revs fell by first gear's step
   launch(gears, t, revs, 0);
   CHECK(gears.launches(1) == 1.0);
+  CHECK(gears.launches(-1) == 0.0);  // no count outside 0..kMaxBelow
+  CHECK(gears.launches(LaunchGears::kMaxBelow + 1) == 0.0);
   CHECK(gears.gears_below(kBase, 0, 0.1) == 1);
   CHECK(gears.gears_below(kBase * 1.2, 0, 0.1) == 0);  // another base: nothing counted on it
 }
@@ -89,4 +91,47 @@ TEST_CASE("launch gears: the count most probable weighs launches against each ot
   for (int k = 0; k < 3; ++k)
     launch(gears, t, below, 0);
   CHECK(gears.gears_below(kBase, 0, 0.1) == 1);  // four against three
+}
+
+TEST_CASE("launch gears: a launch that loses GPS or crawls past the launch time is not counted") {
+  std::vector<double> below;
+  climb(below, 80.0, 250.0, 20);
+  climb(below, 180.0, 200.0, 10);
+  double t = 0.0;
+
+  // GPS lost after the upshift: the fixes that follow it belong to no launch seen whole.
+  LaunchGears lost;
+  lost.observe_fix(t, true, kBase, -1);
+  for (std::size_t k = 0; k < below.size(); ++k) {
+    t += 0.1;
+    lost.observe_revs(below[k], kStep, kIdleCeiling);
+    if (k == 5) lost.observe_fix(t, false, kBase, -1);
+  }
+  lost.abort();
+  lost.observe_fix(t + 1.0, false, kBase, 0);
+  CHECK(lost.launches(1) == 0.0);
+  CHECK(lost.gears_below(kBase, 0, 0.1) == 0);
+
+  // The base held only 30 s after moving off: a crawl, not a launch.
+  LaunchGears crawl;
+  crawl.observe_fix(t, true, kBase, -1);
+  crawl.observe_revs(kIdle, kStep, kIdleCeiling);
+  const double moved = t + 0.5;
+  for (std::size_t k = 0; k < below.size(); ++k) {
+    crawl.observe_revs(below[k], kStep, kIdleCeiling);
+    crawl.observe_fix(moved + k, false, kBase, -1);
+  }
+  crawl.observe_fix(moved + 30.0, false, kBase, 0);
+  CHECK(crawl.launches(1) == 0.0);
+
+  // The same launch holding the base within the launch time is counted.
+  LaunchGears quick;
+  quick.observe_fix(t, true, kBase, -1);
+  quick.observe_revs(kIdle, kStep, kIdleCeiling);
+  for (std::size_t k = 0; k < below.size(); ++k) {
+    quick.observe_revs(below[k], kStep, kIdleCeiling);
+    quick.observe_fix(moved + 0.1 * static_cast<double>(k), false, kBase, -1);
+  }
+  quick.observe_fix(moved + 5.0, false, kBase, 0);
+  CHECK(quick.launches(1) == 1.0);
 }

@@ -448,3 +448,51 @@ TEST_CASE("synth: launches seen under GPS from a ladder's lowest gear add no gea
   }
   CHECK(synth.ladder_gears() == 7);
 }
+
+TEST_CASE("synth: a launch from rest partly unseen counts no gears below the ladder") {
+  // The young 7-speed model without first gear above: a launch under GPS shows first gear below its
+  // lowest. The car then stands under GPS and moves off through first unseen (no steps for longer than
+  // max_gap, or no ladder to follow the launch on), and is seen again in second gear under GPS: what the
+  // launch passed unseen is not counted, and the count of gears below stays the first launch's.
+  const std::vector<double> seven = {0.0145, 0.0200, 0.0270, 0.0358, 0.0463, 0.0590, 0.0737};
+  constexpr double kCarIdle = 47.0, kDt = 0.1, kAccel = 1.2, kShift = 0.4;
+  const auto model = model_of({seven[1], seven[4], seven[5], seven[6]});
+  SpeedSynthesizer synth(model);
+  REQUIRE(synth.ladder_gears() == 6);
+  double t = 0.0, v = 0.0;
+  const auto stand = [&](double seconds) {
+    for (const double end = t + seconds; t < end; t += kDt)
+      synth.step(t, 0.0, kCarIdle);
+  };
+  const auto through = [&](std::size_t first, std::size_t last) {  // gears first..last-1, shifting up
+    for (std::size_t gear = first; gear < last; ++gear) {
+      for (; v / seven[gear] < 5.0 * kCarIdle; t += kDt, v += kAccel * kDt)
+        synth.step(t, v, std::max(1.6 * kCarIdle, v / seven[gear]));
+      for (double s = 0.0; s < kShift; s += kDt, t += kDt)
+        synth.step(t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear]));
+    }
+  };
+  const auto cruise_and_stop = [&](std::size_t gear) {
+    for (const double end = t + 10.0; t < end; t += kDt)
+      synth.step(t, v, v / seven[gear]);
+    for (; v > 0.0; t += kDt, v = std::max(0.0, v - 2.0 * kDt))
+      synth.step(t, v, kCarIdle);
+  };
+  stand(20.0);
+  through(0, 3);
+  cruise_and_stop(3);
+  stand(20.0);
+  REQUIRE(synth.ladder_gears() == 7);  // first gear predicted below second
+  SECTION("no steps for longer than max_gap") {
+    t += gearpulse::SynthTuning{}.max_gap + 10.0;
+    v = 2.0 * kCarIdle * seven[1];
+  }
+  SECTION("no ladder") {
+    synth.set_model(nullptr);
+    through(0, 1);
+    synth.set_model(model);
+  }
+  through(1, 3);
+  cruise_and_stop(3);
+  CHECK(synth.ladder_gears() == 7);
+}
