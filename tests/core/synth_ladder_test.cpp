@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <limits>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "core/speed_synth.hpp"
@@ -29,6 +30,49 @@ using gearpulse::test::replay;
 using gearpulse::test::replay_rows;
 using gearpulse::test::Row;
 using gearpulse::test::script;
+
+namespace {
+
+// A tracker hop: its time, the car's true speed and the engine line's frequency.
+struct LaunchHop {
+  double t, speed, freq;
+};
+constexpr double kLaunchDt = 0.1, kLaunchLost = 15.0, kLaunchAt = 20.0, kLaunchShift = 0.4;
+
+// GPS shows the car standing at `idle` and is lost at kLaunchLost; at kLaunchAt the car moves off at
+// `accel` and pulls through gears 0 to `cruise_gear` of `ratios` to `upshift` revs, with the clutch out
+// kLaunchShift at each shift, then cruises `cruise` seconds in `cruise_gear`.
+std::vector<LaunchHop> launch_hops(const std::vector<double>& ratios, std::size_t cruise_gear, double idle,
+                                   double accel, double upshift, double cruise) {
+  std::vector<LaunchHop> hops;
+  double t = 0.0, v = 0.0;
+  for (; t < kLaunchAt; t += kLaunchDt)
+    hops.push_back({t, 0.0, idle});
+  for (std::size_t gear = 0; gear < cruise_gear; ++gear) {
+    for (; v / ratios[gear] < upshift; t += kLaunchDt, v += accel * kLaunchDt)
+      hops.push_back({t, v, std::max(1.6 * idle, v / ratios[gear])});       // the clutch slips at first
+    for (double s = 0.0; s < kLaunchShift; s += kLaunchDt, t += kLaunchDt)  // declutched, the revs fall
+      hops.push_back(
+          {t, v, v / ratios[gear] + (s / kLaunchShift) * (v / ratios[gear + 1] - v / ratios[gear])});
+  }
+  for (const double end = t + cruise; t < end; t += kLaunchDt)
+    hops.push_back({t, v, v / ratios[cruise_gear]});
+  return hops;
+}
+
+// The synthesis's distance error over the launch and cruise of `hops`, a share of the distance driven.
+double launch_distance_error(std::shared_ptr<const GearModel> model, const gearpulse::SynthTuning& tuning,
+                             const std::vector<LaunchHop>& hops) {
+  SpeedSynthesizer synth(std::move(model), tuning);
+  double synthesized = 0.0, driven = 0.0;
+  for (const LaunchHop& h : hops) {
+    const SynthOutput o = synth.step(h.t, h.t < kLaunchLost ? h.speed : kMissing, h.freq);
+    if (h.t >= kLaunchAt) synthesized += o.speed * kLaunchDt, driven += h.speed * kLaunchDt;
+  }
+  return std::abs(synthesized - driven) / driven;
+}
+
+}  // namespace
 
 TEST_CASE("synth: a model swap mid-outage keeps the output continuous") {
   SpeedSynthesizer synth(model_of(kHatch));
@@ -263,31 +307,10 @@ TEST_CASE("synth: a ladder lacking first gear takes the fit's gears below it ove
   const std::vector<double> seven = {0.1434, 0.1894, 0.2444, 0.3095, 0.3851, 0.4714, 0.5682};
   auto model = std::make_shared<GearModel>(*model_of({seven.begin() + 2, seven.end()}));
   model->extra["lower_gears"] = {seven[0], seven[1]};
-  struct Hop {
-    double t, speed, freq;
-  };
-  std::vector<Hop> hops;
-  constexpr double kDt = 0.1, kLost = 15.0, kLaunch = 20.0, kAccel = 1.5, kShift = 0.4, kCruise = 20.0;
-  const double upshift = 2.6 * kIdle;
-  double t = 0.0, v = 0.0;
-  for (; t < kLaunch; t += kDt)
-    hops.push_back({t, 0.0, kIdle});
-  for (std::size_t gear = 0; gear < 3; ++gear) {  // first to third, each up to the shift revs
-    for (; v / seven[gear] < upshift; t += kDt, v += kAccel * kDt)
-      hops.push_back({t, v, std::max(1.6 * kIdle, v / seven[gear])});  // the clutch slips at first
-    for (double s = 0.0; s < kShift; s += kDt, t += kDt)  // declutched, the revs fall toward the next gear
-      hops.push_back({t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear])});
-  }
-  for (const double end = t + kCruise; t < end; t += kDt)
-    hops.push_back({t, v, v / seven[3]});
+  // First to third gear, each up to the shift revs, then fourth.
+  const auto hops = launch_hops(seven, 3, kIdle, 1.5, 2.6 * kIdle, 20.0);
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double synthesized = 0.0, driven = 0.0;
-    for (const Hop& h : hops) {
-      const SynthOutput o = synth.step(h.t, h.t < kLost ? h.speed : kMissing, h.freq);
-      if (h.t >= kLaunch) synthesized += o.speed * kDt, driven += h.speed * kDt;
-    }
-    return std::abs(synthesized - driven) / driven;
+    return launch_distance_error(model, tuning, hops);
   };
   const double fitted = distance_error({});
   gearpulse::SynthTuning predicted_only;
@@ -309,31 +332,9 @@ TEST_CASE("synth: a launch through gears missing inside a young ladder climbs th
   const std::vector<double> seven = {0.0145, 0.0200, 0.0270, 0.0358, 0.0463, 0.0590, 0.0737};
   constexpr double kCarIdle = 47.0;  // Hz: first gear carries the car at 0.7 m/s at idle
   const auto model = model_of({seven[1], seven[4], seven[5], seven[6]});
-  struct Hop {
-    double t, speed, freq;
-  };
-  std::vector<Hop> hops;
-  constexpr double kDt = 0.1, kLost = 15.0, kLaunch = 20.0, kAccel = 1.2, kShift = 0.4, kCruise = 30.0;
-  const double upshift = 5.0 * kCarIdle;
-  double t = 0.0, v = 0.0;
-  for (; t < kLaunch; t += kDt)
-    hops.push_back({t, 0.0, kCarIdle});
-  for (std::size_t gear = 0; gear + 1 < seven.size(); ++gear) {
-    for (; v / seven[gear] < upshift; t += kDt, v += kAccel * kDt)
-      hops.push_back({t, v, std::max(1.6 * kCarIdle, v / seven[gear])});  // the clutch slips at first
-    for (double s = 0.0; s < kShift; s += kDt, t += kDt)  // declutched, the revs fall toward the next gear
-      hops.push_back({t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear])});
-  }
-  for (const double end = t + kCruise; t < end; t += kDt)
-    hops.push_back({t, v, v / seven[6]});
+  const auto hops = launch_hops(seven, 6, kCarIdle, 1.2, 5.0 * kCarIdle, 30.0);
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double synthesized = 0.0, driven = 0.0;
-    for (const Hop& h : hops) {
-      const SynthOutput o = synth.step(h.t, h.t < kLost ? h.speed : kMissing, h.freq);
-      if (h.t >= kLaunch) synthesized += o.speed * kDt, driven += h.speed * kDt;
-    }
-    return std::abs(synthesized - driven) / driven;
+    return launch_distance_error(model, tuning, hops);
   };
   SpeedSynthesizer filled(model);
   CHECK(filled.ladder_gears() == 6);  // two gears predicted in the step from second to fifth

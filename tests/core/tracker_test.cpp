@@ -847,6 +847,54 @@ ScenePoints track_scene(std::uint64_t seed, double snr_db) {
   return {std::move(truth), std::move(points)};
 }
 
+// The true line's rate of change at `t` (Hz/s).
+double rate_at(const sim::FrequencyTrajectory& truth, double t) {
+  return (truth(t + 0.1) - truth(t - 0.1)) / 0.2;
+}
+
+// Of a scene's in-band hops (50-200 Hz) those `keep` selects by their time, how many are tracked and how
+// many tracked ones are more than 5 % off the line.
+struct HopCounts {
+  std::size_t selected = 0, tracked = 0, wrong = 0;
+};
+template <class Keep>
+HopCounts count_hops(const ScenePoints& scene, Keep keep) {
+  HopCounts n;
+  for (const TrackPoint& p : scene.points) {
+    const double f = scene.truth(p.t);
+    if (!(f >= 50.0 && f <= 200.0) || !keep(p.t)) continue;
+    ++n.selected;
+    if (!p.tracked) continue;
+    ++n.tracked;
+    n.wrong += std::abs(p.freq - f) > 0.05 * f;
+  }
+  return n;
+}
+
+// Of a scene's in-band hops, how many are tracked, how many tracked within 5 % of `multiple` times the
+// engine, and the longest run of those (a run is in time: an out-of-band stretch ends it).
+struct MultipleCounts {
+  std::size_t in_band = 0, tracked = 0, there = 0, longest = 0;
+};
+MultipleCounts count_at_multiple(const ScenePoints& scene, double multiple) {
+  MultipleCounts n;
+  std::size_t run = 0;
+  for (const TrackPoint& p : scene.points) {
+    const double f = scene.truth(p.t);
+    if (!(f >= 50.0 && f <= 200.0)) {
+      run = 0;
+      continue;
+    }
+    ++n.in_band;
+    const bool there = p.tracked && std::abs(p.freq - multiple * f) <= 0.05 * (multiple * f);
+    n.tracked += p.tracked;
+    n.there += there;
+    run = there ? run + 1 : 0;
+    n.longest = std::max(n.longest, run);
+  }
+  return n;
+}
+
 }  // namespace
 
 // A -5 dB scene of the generated tuning set (launches, shifts, overruns, a cabin's other lines): the
@@ -856,16 +904,7 @@ ScenePoints track_scene(std::uint64_t seed, double snr_db) {
 TEST_CASE("tracker: a -5 dB scene is tracked through faded windows") {
   const std::uint64_t seed = GENERATE(101, 106);
   INFO("seed " << seed);
-  const auto [truth, points] = track_scene(seed, -5.0);
-  std::size_t in_band = 0, tracked = 0, wrong = 0;
-  for (const TrackPoint& p : points) {
-    const double f = truth(p.t);
-    if (!(f >= 50.0 && f <= 200.0)) continue;
-    ++in_band;
-    if (!p.tracked) continue;
-    ++tracked;
-    wrong += std::abs(p.freq - f) > 0.05 * f;
-  }
+  const auto [in_band, tracked, wrong] = count_hops(track_scene(seed, -5.0), [](double) { return true; });
   INFO(in_band << " in-band hops, " << tracked << " tracked, " << wrong << " of them wrong");
   REQUIRE(in_band >= 800);
   CHECK(static_cast<double>(tracked) >= 0.33 * static_cast<double>(in_band));
@@ -879,17 +918,9 @@ TEST_CASE("tracker: a -5 dB scene is tracked through faded windows") {
 TEST_CASE("tracker: at -5 dB a launch's ramps are followed at their rate") {
   const std::uint64_t seed = GENERATE(102, 106);
   INFO("seed " << seed);
-  const auto [truth, points] = track_scene(seed, -5.0);
-  std::size_t rising = 0, tracked = 0, wrong = 0;
-  for (const TrackPoint& p : points) {
-    const double f = truth(p.t);
-    const double rate = (truth(p.t + 0.1) - truth(p.t - 0.1)) / 0.2;  // Hz/s
-    if (!(f >= 50.0 && f <= 200.0) || !(rate > 8.0)) continue;
-    ++rising;
-    if (!p.tracked) continue;
-    ++tracked;
-    wrong += std::abs(p.freq - f) > 0.05 * f;
-  }
+  const ScenePoints scene = track_scene(seed, -5.0);
+  const auto [rising, tracked, wrong] =
+      count_hops(scene, [&](double t) { return rate_at(scene.truth, t) > 8.0; });
   INFO(rising << " rising in-band hops, " << tracked << " tracked, " << wrong << " of them wrong");
   REQUIRE(rising >= 250);
   CHECK(static_cast<double>(tracked) >= 0.65 * static_cast<double>(rising));
@@ -905,17 +936,9 @@ TEST_CASE("tracker: at -5 dB a launch's ramps are followed at their rate") {
 TEST_CASE("tracker: at -5 dB engine braking is tracked through its loud 2nd harmonic") {
   const std::uint64_t seed = GENERATE(103, 104);
   INFO("seed " << seed);
-  const auto [truth, points] = track_scene(seed, -5.0);
-  std::size_t falling = 0, tracked = 0, wrong = 0;
-  for (const TrackPoint& p : points) {
-    const double f = truth(p.t);
-    const double rate = (truth(p.t + 0.1) - truth(p.t - 0.1)) / 0.2;  // Hz/s
-    if (!(f >= 50.0 && f <= 200.0) || !(rate < -8.0)) continue;
-    ++falling;
-    if (!p.tracked) continue;
-    ++tracked;
-    wrong += std::abs(p.freq - f) > 0.05 * f;
-  }
+  const ScenePoints scene = track_scene(seed, -5.0);
+  const auto [falling, tracked, wrong] =
+      count_hops(scene, [&](double t) { return rate_at(scene.truth, t) < -8.0; });
   INFO(falling << " falling in-band hops, " << tracked << " tracked, " << wrong << " of them wrong");
   REQUIRE(falling >= 250);
   CHECK(static_cast<double>(tracked) >= 0.72 * static_cast<double>(falling));
@@ -928,21 +951,8 @@ TEST_CASE("tracker: at -5 dB engine braking is tracked through its loud 2nd harm
 // loud. Scene 305 at 10 dB: without the learned level 6.8 % of the tracked in-band hops sit at two thirds of
 // the engine, in runs of up to 2.4 s; with it 0.4 %, none longer than 0.3 s.
 TEST_CASE("tracker: the learned level of the 3rd harmonic keeps the track off two thirds of the engine") {
-  const auto [truth, points] = track_scene(305, 10.0);
-  std::size_t in_band = 0, tracked = 0, at_two_thirds = 0, run = 0, longest = 0;
-  for (const TrackPoint& p : points) {
-    const double f = truth(p.t);
-    if (!(f >= 50.0 && f <= 200.0)) {
-      run = 0;  // a run is in time: an out-of-band stretch ends it
-      continue;
-    }
-    ++in_band;
-    const bool there = p.tracked && std::abs(p.freq - 2.0 / 3.0 * f) <= 0.05 * (2.0 / 3.0 * f);
-    tracked += p.tracked;
-    at_two_thirds += there;
-    run = there ? run + 1 : 0;
-    longest = std::max(longest, run);
-  }
+  const auto [in_band, tracked, at_two_thirds, longest] =
+      count_at_multiple(track_scene(305, 10.0), 2.0 / 3.0);
   INFO(in_band << " in-band hops, " << tracked << " tracked, " << at_two_thirds
                << " at two thirds of the engine, longest run " << longest << " hops");
   REQUIRE(in_band >= 800);
@@ -961,13 +971,9 @@ TEST_CASE("tracker: the learned level of the 3rd harmonic keeps the track off tw
 TEST_CASE("tracker: a launch under power is not tracked at half the engine") {
   std::size_t in_band = 0, halved = 0;
   for (const auto& [seed, snr] : {std::pair<std::uint64_t, double>{105, 10.0}, {101, 0.0}}) {
-    const auto [truth, points] = track_scene(seed, snr);
-    for (const TrackPoint& p : points) {
-      const double f = truth(p.t);
-      if (!(f >= 50.0 && f <= 200.0)) continue;
-      ++in_band;
-      halved += p.tracked && std::abs(p.freq - 0.5 * f) <= 0.05 * (0.5 * f);
-    }
+    const MultipleCounts n = count_at_multiple(track_scene(seed, snr), 0.5);
+    in_band += n.in_band;
+    halved += n.there;
   }
   INFO(in_band << " in-band hops, " << halved << " tracked at half the engine");
   REQUIRE(in_band >= 1600);
@@ -978,25 +984,12 @@ TEST_CASE("tracker: a launch under power is not tracked at half the engine") {
 // harmonic at about 1.3 times the line before the shift. A rising line's shift is an upshift, whose revs
 // fall by the gear step, so the track is found again below, not on that 2nd harmonic. Scenes 101 and 104 at
 // -5 dB: with a shift that reaches either way from a rising line, 16 and 15 tracked hops sat at twice the
-// engine after upshifts, in runs of up to 11 and 15 hops; now 3 and 0, in runs of at most 3 (0.3 s).
+// engine after upshifts, in runs of up to 11 and 15 hops; with its shift reaching below only, 3 and 0,
+// in runs of at most 3 (0.3 s).
 TEST_CASE("tracker: after an upshift at -5 dB the track is not held at twice the engine") {
   const std::uint64_t seed = GENERATE(101, 104);
   INFO("seed " << seed);
-  const auto [truth, points] = track_scene(seed, -5.0);
-  std::size_t in_band = 0, tracked = 0, doubled = 0, run = 0, longest = 0;
-  for (const TrackPoint& p : points) {
-    const double f = truth(p.t);
-    if (!(f >= 50.0 && f <= 200.0)) {
-      run = 0;  // a run is in time: an out-of-band stretch ends it
-      continue;
-    }
-    ++in_band;
-    const bool there = p.tracked && std::abs(p.freq - 2.0 * f) <= 0.05 * (2.0 * f);
-    tracked += p.tracked;
-    doubled += there;
-    run = there ? run + 1 : 0;
-    longest = std::max(longest, run);
-  }
+  const auto [in_band, tracked, doubled, longest] = count_at_multiple(track_scene(seed, -5.0), 2.0);
   INFO(in_band << " in-band hops, " << tracked << " tracked, " << doubled
                << " at twice the engine, longest run " << longest << " hops");
   REQUIRE(in_band >= 800);
