@@ -29,8 +29,10 @@ void LaunchGears::observe_revs(double freq, double step, double idle_ceiling) no
     // passed: it counts once.
     trough_ = std::min(trough_, lf);
     if (lf > trough_ + kGearWindow) {
-      if (step > 0.0 && trough_ > std::log(idle_ceiling))
-        upshifts_ += std::max(0, static_cast<int>(std::floor((peak_ - lf) / step)) - 1);
+      if (step > 0.0 && trough_ > std::log(idle_ceiling)) {
+        const double steps = std::min(std::floor((peak_ - lf) / step), static_cast<double>(kMaxBelow + 1));
+        upshifts_ += std::max(0, static_cast<int>(steps) - 1);
+      }
       falling_ = false, peak_ = lf;
     }
     return;
@@ -59,17 +61,21 @@ void LaunchGears::observe_fix(double t, bool standing, double base_theta, int ab
   state_ = State::kIdle;
   const int below = upshifts_ - above;
   if (below < 0 || !(base_theta > 0.0)) return;  // a shift missed: nothing to count
-  if (!(base_theta_ > 0.0) || std::abs(std::log(base_theta / base_theta_)) >= 2.0 * kGearWindow) {
+  if (!same_base(base_theta)) {
     counts_.fill(0.0);  // another gear is the base: the counts were of the gears below the old one
     base_theta_ = base_theta;
   }
   counts_[static_cast<std::size_t>(std::min(below, kMaxBelow))] += 1.0;
 }
 
+// Whether `base_theta` is the base the counts belong to: within two gear windows of it.
+bool LaunchGears::same_base(double base_theta) const noexcept {
+  return base_theta_ > 0.0 && base_theta > 0.0 &&
+         std::abs(std::log(base_theta / base_theta_)) < 2.0 * kGearWindow;
+}
+
 int LaunchGears::gears_below(double base_theta, int at_least, double off_share) const noexcept {
-  if (at_least >= kMaxBelow || !(base_theta_ > 0.0) || !(base_theta > 0.0) ||
-      std::abs(std::log(base_theta / base_theta_)) >= 2.0 * kGearWindow)
-    return at_least;
+  if (at_least >= kMaxBelow || !same_base(base_theta)) return at_least;
   const double off = std::clamp(off_share, 1e-6, 0.5);
   const double log_on = std::log(1.0 - off), log_off = std::log(off / kMaxBelow);
   double total = 0.0;

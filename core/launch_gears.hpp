@@ -48,6 +48,8 @@ class LaunchGears {
   }
 
  private:
+  [[nodiscard]] bool same_base(double base_theta) const noexcept;
+
   enum class State { kIdle, kStanding, kLaunch };
   State state_ = State::kIdle;
   int upshifts_ = 0;         // counted since the car stood
