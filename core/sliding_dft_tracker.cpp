@@ -40,7 +40,7 @@ constexpr double kRhoMemory = 0.7;
 // is hidden less often, by the square of its per-bin SNR over the default (a loud line that vanishes has
 // stopped or moved, and the track lets it go as fast as without the allowance). Otherwise a track at
 // -5 dB passes to "engine absent" on the many windows where its line fades and restarts anywhere, often
-// on twice the engine. Chosen on the generated scenes' tuning set (see docs/tracker.md).
+// on twice the engine. Chosen on the generated scenes' tuning set (see docs/algorithms/tracker-method.md).
 constexpr double kHiddenShare = 0.3;
 // The candidates' shoulder term (a state on the shoulder of a stronger peak within one resolution bin is
 // not where the line is) compares amplitudes (sqrt of normalised power) against unit-order noise and, on a
@@ -71,7 +71,7 @@ constexpr double kHalfObserveRight = 0.95;
 // kThirdSpreadFloorDb) with weight n / (n + kThirdPriorS / hop) for n hops learned (exponentially
 // forgotten), the fixed prior with the rest, so that the fixed prior is worth kThirdPriorS of such hops.
 // The 2nd harmonic's level swings with load and the half order's presence is learned on its own (see
-// docs/tracker.md). Chosen on the generated scenes' tuning set.
+// docs/algorithms/tracker-method.md). Chosen on the generated scenes' tuning set.
 constexpr double kThirdMemoryS = 10.0;
 constexpr double kThirdPriorS = 0.5;
 constexpr double kThirdSpreadFloorDb = 2.0;
@@ -516,7 +516,7 @@ void SlidingDftTracker::Impl::reset_track() noexcept {
 // ln((1 + e^S) / 2) when S > 0, and nothing otherwise. Only the 4th order is judged so: f / 2 and 3 f / 2
 // are a four-stroke's own half orders (the half order's level prior and the track's continuity tell f
 // from f / 2), and f / 3 and 2 f / 3 lie a third of f apart, both inside a cabin's body resonance
-// (20-40 Hz) for an engine at 60-120 Hz (see docs/tracker.md).
+// (20-40 Hz) for an engine at 60-120 Hz (see docs/algorithms/tracker-experiments.md).
 double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const noexcept {
   double s = 0.0;
   for (const int m : {1, 3}) {

@@ -22,7 +22,7 @@ constexpr int kMaxRateLayers = 8;
 // An engine's rate of change holds for about a second (a gear's ramp lasts seconds, a shift a few tenths,
 // a cruise or engine braking many): the rate changes at 1 / kRateMemoryS per second, half of the changes
 // within the slew gate and half within the shift gate. Chosen on the generated scenes' tuning set (0.5,
-// 0.7, 1 and 2 s; see docs/tracker.md).
+// 0.7, 1 and 2 s; see docs/algorithms/tracker-experiments.md).
 constexpr double kRateMemoryS = 0.7;
 constexpr double kShiftOfChange = 0.5;
 // Memory (per hop) of the track's drift, from which the next hop's line is predicted (the prior of the

@@ -38,7 +38,7 @@ class TrackModel {
   // A line falling at this rate (Hz/s) or faster is on the overrun: revs fall that fast (600 rpm/s on a
   // four-cylinder) only while the engine does not drive the car (engine braking, or the clutch in and the
   // revs falling to idle). Chosen on the generated scenes' tuning set (10, 20 and 30 Hz/s; see
-  // docs/tracker.md).
+  // docs/algorithms/tracker-method.md).
   static constexpr double kOverrunHzPerS = 20.0;
   // For a line under power, whose 2nd harmonic seldom stands over the fundamental, what its log likelihood
   // ratio adds to evidence()'s, per fundamental: read by the rate layers rising at kPowerHzPerS or faster
@@ -47,7 +47,7 @@ class TrackModel {
   [[nodiscard]] bool power_layers() const noexcept { return power_from_ < layers_; }
   // A line rising at this rate (Hz/s) or faster is under power: revs rise 900 rpm/s on a four-cylinder
   // only at a wide throttle in the low gears. Chosen on the generated scenes' tuning set (20 and 30 Hz/s;
-  // see docs/tracker.md).
+  // see docs/algorithms/tracker-method.md).
   static constexpr double kPowerHzPerS = 30.0;
   // Bayes update with evidence(), when the window hides the engine's line with probability `hidden` (a
   // gear shift's smear, a line masked by another or faded below the evidence's level prior): a hidden
