@@ -102,6 +102,8 @@ int main(int argc, char** argv) {
       opt.worst = std::atof(argv[++i]);
     } else if (a == "--fits") {
       opt.fits = true;
+    } else if (a == "--easy-sim") {
+      opt.easy_sim = true;
     } else if (a == "--fit-minutes" && i + 1 < argc) {
       opt.fit_minutes = std::atof(argv[++i]);
     } else if (a == "--log" && i + 1 < argc) {
