@@ -44,7 +44,7 @@ double heavy(std::mt19937_64& rng) {
 // hops more than 5 % off, mostly at half or twice the engine, in locks of a few tenths of a second. Here
 // 6 % of the hops are refused (no reading) in gaps of 0.1-0.5 s, and 1 % are read on another line in runs
 // of 0.2-0.5 s: half or twice the engine's frequency, or a loud tone that does not follow the engine (a body
-// resonance at 20-40 Hz, mains hum at 50 or 100 Hz, one of each per drive).
+// resonance at 20-40 Hz, mains hum at 50 or 100 Hz, one of each per drive), a quarter of the runs each.
 constexpr double kTrackerHop = 0.1;   // s
 constexpr double kGapShare = 0.06;    // of the hops
 constexpr double kWrongShare = 0.01;  // of the hops
