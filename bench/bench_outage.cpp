@@ -12,10 +12,12 @@
 //   real logs: the Etios (Carloop OBD) is the tuning car; Louisville (Torque, 1 Hz GPS) and the Swift are
 //     report cars. Each car: fit on some drives, replay the others (two folds). A run prints one set only.
 //   simulated: the 7 manual presets and random vehicles (sim::random_vehicle), every style, made harder than
-//     the road: skip downshifts under braking, GPS speed 0.5 s late, heavy-tailed (Student t, 3 degrees of
-//     freedom) speed and frequency noise, a cold engine. Cadences: the daemon's (frequency every 0.1 s, a 1
-//     Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app every 5 s. Seeds:
-//     tuning 1..N, report 1001..1000+N.
+//     the road: skip downshifts under braking, heavy-tailed (Student t, 3 degrees of freedom) speed and
+//     frequency noise, a cold engine, and at the GPS cadences GPS speed 0.2-1.0 s late (drawn per drive) and
+//     the frequency tracker's gaps and readings on another line (bench/outage/simulated.cpp); --easy-sim
+//     gives every drive's GPS 0.5 s late and no tracker failures instead. Cadences: the daemon's (frequency
+//     every 0.1 s, a 1 Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app
+//     every 5 s. Seeds: tuning 1..N, report 1001..1000+N.
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // --synth KEY=VALUE sets a SynthTuning field of the daemon's synthesis for the run (repeatable; VALUE a
 // number, "inf", or another field's name). --ablate runs the set once as tuned and once per rule of the
@@ -35,8 +37,8 @@
 //
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
-//                     [--fit-minutes M] [--worst PCT] [--debug CAR STYLE FROM TO] [--log FILE]...
-//                     [--row-seconds S] [DATA_DIR]
+//                     [--fit-minutes M] [--easy-sim] [--worst PCT] [--debug CAR STYLE FROM TO]
+//                     [--log FILE]... [--row-seconds S] [DATA_DIR]
 //
 // The bench's parts are in bench/outage/ (outage.hpp: the shared types and which file does what).
 #include <chrono>
@@ -102,6 +104,8 @@ int main(int argc, char** argv) {
       opt.worst = std::atof(argv[++i]);
     } else if (a == "--fits") {
       opt.fits = true;
+    } else if (a == "--easy-sim") {
+      opt.easy_sim = true;
     } else if (a == "--fit-minutes" && i + 1 < argc) {
       opt.fit_minutes = std::atof(argv[++i]);
     } else if (a == "--log" && i + 1 < argc) {

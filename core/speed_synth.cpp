@@ -75,6 +75,8 @@ void SpeedSynthesizer::reset() noexcept {
   habits_.forget_last_fix();
   output_.forget_gps();
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
+  freq_seen_t_ = -std::numeric_limits<double>::infinity();
+  lost_for_ = 0.0;
   habits_.end_flat_stretch();
   unlearned_fix_ = {};
   launches_.abort();
@@ -369,10 +371,15 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
                                       bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
-    if (is_gear(mode)) return -weight * tuning_.lost_gear_cost;
+    // The tracker refuses a hop now and then, in gaps of a few tenths of a second (docs/tracker.md: 4-11 %
+    // of the hops at 0-10 dB), and a log's row may fall on such a hop: a reading lost for no longer than a
+    // row of 1 s says nothing of the mode. Lost for longer, the engine's line is gone and a gear fades.
+    constexpr double kTrackerGap = 1.0;  // s
+    const double lost = lost_for_ > kTrackerGap + 1e-6 ? tuning_.lost_gear_cost : 0.0;
+    if (is_gear(mode)) return -weight * lost;
     // Moving off is told by the revs: without them it is as unsupported as a gear, and at speed not a
     // launch at all, so its acceleration cannot carry the speed away while the frequency is lost.
-    return mode == launch_mode() ? weight * (-tuning_.lost_gear_cost + launch_plausibility(x.v)) : 0.0;
+    return mode == launch_mode() ? weight * (-lost + launch_plausibility(x.v)) : 0.0;
   }
   // Declutched, moving off and lugging are states: their scores count per second of being in them.
   if (mode == 0) {
@@ -696,6 +703,8 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     dt = 0.0;
   }
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
+  lost_for_ = std::isfinite(freq) ? 0.0 : t_ - freq_seen_t_;
+  if (std::isfinite(freq)) freq_seen_t_ = t_;
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
   if (have_gps) {
     output_.note_gps(t, gps_speed);  // for an outage without a ladder, whenever the ladder went

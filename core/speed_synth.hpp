@@ -162,7 +162,8 @@ struct SynthTuning {
   double pull_transfer = 1.0;
   // 1: a GPS fix beyond the dead zone teaches the acceleration no more than the dead zone's worth (0: all).
   double gps_accel_clip = 1.0;
-  // 1/s: log-cost of being in a gear while the frequency is lost (0: a lost reading says nothing).
+  // 1/s: log-cost of being in a gear while the frequency is lost for longer than 1 s, longer than the
+  // tracker's gaps (0: a lost reading says nothing).
   double lost_gear_cost = 3.0;
   // 1: moving off grows less plausible as the car gains speed (0: as plausible at any speed).
   double launch_fade = 1.0;
@@ -367,6 +368,8 @@ class SpeedSynthesizer {
   bool at_idle_ = false;      // this step's frequency is at idle
   double lugged_ = 0.0;       // share of a gear's chance at this step's frequency that is lugging it
   double prev_freq_ = 0.0;    // frequency of the previous step (NaN if lost): the revs a shift left
+  double freq_seen_t_ = 0.0;  // time of the latest frequency reading (-inf before the first)
+  double lost_for_ = 0.0;     // s since then at this step, 0 with a reading
   double climb_ = 0.0;        // how fast the revs climb this step, 0..1 (filter_step)
   SynthOutputPolicy output_;  // how the output is chosen from the belief, and held without a ladder
   SynthOutput last_{};

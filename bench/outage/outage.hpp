@@ -32,6 +32,7 @@ struct Options {
   double debug_from = 0.0, debug_to = 0.0;
   bool fits = false;          // --fits: each fitted ladder beside the true one, on stderr
   double fit_minutes = 40.0;  // --fit-minutes M: the length of the drive the model is fitted on
+  bool easy_sim = false;      // --easy-sim: simulated GPS 0.5 s late on every drive, no tracker failures
   bool candidate = true;      // the candidate IMM filter runs beside the daemon's synthesis
   double worst = 0.0;         // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
 };
