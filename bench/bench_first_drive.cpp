@@ -20,7 +20,10 @@
 //   and known_gears_cold_m_from_min5 (m per outage) to thresholds.
 //   --tuning: seeds 1-10 (the seeds the schedule's defaults were chosen on); --report (default): 101-120.
 //   --synth sets SynthTuning fields of both runs' synthesis (bench/synth_settings.hpp), e.g. a rule off.
+//   --verbose adds each fit's ladder, each outage, for an outage in gears the model lacks the seconds in
+//   them below, inside and above its ladder, and the outages in a gear not learned yet split by where.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -64,6 +67,10 @@ struct Outage {
   double unseen = 0.0;    // share of its time with the clutch transmitting (engaged or slipping) spent in a
                           // gear the model lacks (no theta within a factor of 1.06)
   double engaged = 0.0;   // s with the clutch transmitting
+  // s with the clutch transmitting in a gear the model lacks, by where that gear lies against the model's
+  // ladder: below its lowest gear, between two of its gears, above its top gear.
+  double below = 0.0, inside = 0.0, above = 0.0;
+  int lacked_low = 0, lacked_high = 0;  // lowest and highest true gear so driven (0: none)
 };
 
 struct Run {
@@ -155,6 +162,16 @@ Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretraine
                          });
       current->engaged += hop.period;
       current->unseen += known ? 0.0 : hop.period;
+      if (!known) {
+        double lo = std::numeric_limits<double>::infinity(), hi = 0.0;
+        if (model)
+          for (const auto& g : model->gears)
+            lo = std::min(lo, g.theta), hi = std::max(hi, g.theta);
+        (theta < lo ? current->below : theta > hi ? current->above : current->inside) += hop.period;
+        const int gear = r.truth.gear;
+        current->lacked_low = current->lacked_low == 0 ? gear : std::min(current->lacked_low, gear);
+        current->lacked_high = std::max(current->lacked_high, gear);
+      }
     }
     if (out) {
       if (!current) {
@@ -254,6 +271,9 @@ int main(int argc, char** argv) {
   constexpr double kUnseenShare = 0.1;
   double known_cold = 0.0, known_pre = 0.0, unseen_cold = 0.0, unseen_pre = 0.0;
   std::size_t known_n = 0, unseen_n = 0, known_within = 0;
+  // The outages in a gear not learned yet by where its gears mostly lie: below, inside, above the ladder.
+  std::array<double, 3> lacked_cold{}, lacked_pre{};
+  std::array<std::size_t, 3> lacked_n{};
   for (std::uint64_t seed = first; seed <= last; ++seed) {
     const sim::Vehicle car = sim::random_vehicle(seed);
     sim::DriveOptions options;
@@ -301,6 +321,15 @@ int main(int argc, char** argv) {
         (known ? known_pre : unseen_pre) += pre.outages[k].error;
         ++(known ? known_n : unseen_n);
         known_within += known && cold.outages[k].error <= 2.0 * pre.outages[k].error + 1.0 ? 1 : 0;
+        if (!known) {  // by where the gears it lacks mostly lie
+          const Outage& o = cold.outages[k];
+          const std::size_t where = o.below >= o.inside && o.below >= o.above ? 0
+                                    : o.inside >= o.above                     ? 1
+                                                                              : 2;
+          lacked_cold[where] += o.error;
+          lacked_pre[where] += pre.outages[k].error;
+          ++lacked_n[where];
+        }
       }
       if (verbose)
         std::printf(
@@ -308,6 +337,11 @@ int main(int argc, char** argv) {
             "pre-trained %6.1f m\n",
             cold.outages[k].start / 60.0, cold.outages[k].truth, cold.outages[k].gears, cold.outages[k].error,
             100.0 * cold.outages[k].unseen, pre.outages[k].error);
+      if (verbose && cold.outages[k].unseen > 0.0)
+        std::printf(
+            "      in gears it lacks (true %d-%d): %.0f s below its ladder, %.0f s inside, %.0f s above\n",
+            cold.outages[k].lacked_low, cold.outages[k].lacked_high, cold.outages[k].below,
+            cold.outages[k].inside, cold.outages[k].above);
     }
   }
   std::printf("\nper outage, mean over seeds (distance error in m, and in %% of the distance driven):\n");
@@ -337,6 +371,14 @@ int main(int argc, char** argv) {
       known_pre / static_cast<double>(known_n), known_cold / known_pre, known_within, known_n);
   std::printf("  in a gear the model had not learned yet: %zu outages, %.1f m against %.1f m\n", unseen_n,
               unseen_cold / static_cast<double>(unseen_n), unseen_pre / static_cast<double>(unseen_n));
+  if (verbose)
+    for (std::size_t w = 0; w < 3; ++w)
+      std::printf("    mostly %s the model's ladder: %zu outages, %.1f m against %.1f m\n",
+                  w == 0   ? "below"
+                  : w == 1 ? "inside"
+                           : "above",
+                  lacked_n[w], lacked_cold[w] / static_cast<double>(lacked_n[w]),
+                  lacked_pre[w] / static_cast<double>(lacked_n[w]));
   required.report("first_model_worst_min", never > 0 || first_moving.empty()
                                                ? std::numeric_limits<double>::infinity()
                                                : first_moving.back());

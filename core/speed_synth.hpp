@@ -210,6 +210,19 @@ struct SynthTuning {
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).
   double launch_gears = 1.0;
+  // Gears predicted above the model's top gear, at most (0: none): a young model has not yet cruised in
+  // the tall gears. Each is the next step of a gearbox whose steps shrink toward the top, from the model's
+  // own top steps, while the highest carries the car at the warm idle slower than top_gear_idle_speed.
+  double predict_upper_gears = 1.0;
+  // m/s: the most a top gear carries a car at idle (the tallest top gears of manual boxes, about 60 km/h per
+  // 1000 rpm, at an idle of 700-800 rpm: 12-13 m/s).
+  double top_gear_idle_speed = 12.0;
+  // 1: gears are predicted above a model's top gear only where its fit saw that gear run no higher than the
+  // gear below it (extra.revs, the upper ends of their bands): a driver leaves a gear for the next before
+  // the revs pass his usual band, so a gear run higher than the one below it had no gear above to be left
+  // for; and the predicted gear runs in the top gear's band, without which it takes a car rolling at idle
+  // revs as cruising (0: whatever the revs; the driver's revs at large for the predicted gear).
+  double top_gear_revs = 1.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
   // SpeedLag learns from this drive's fixes (0: the speed of the step itself).
   double speed_lag = 1.0;
@@ -295,6 +308,9 @@ class SpeedSynthesizer {
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;
   void insert_predicted_gears() noexcept;
+  [[nodiscard]] int predict_upper_gears(ModeArray& theta) const noexcept;
+  void insert_upper_gears() noexcept;
+  void read_top_gear_revs() noexcept;
   void change_ladder(bool new_model) noexcept;
   void observe_gear(double gps, double freq) noexcept;
   void observe_launch(double dt, double gps, double freq, bool gps_new) noexcept;
@@ -337,6 +353,10 @@ class SpeedSynthesizer {
   std::array<int, kModes> model_gear_{};
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
+  int predicted_above_ = 0;  // gears predicted above the model's top gear (insert_upper_gears)
+  ModeArray upper_theta_{};  // the thetas of those in the ladder (a gear seen may stand for one)
+  int upper_ = 0;
+  bool top_gear_below_band_ = false;  // the fit saw the model's top gear run no higher than the one below
   SeenGears seen_;
   LaunchGears launches_;  // how many gears the launches seen under GPS pass below the lowest measured
   // The newest fix not yet taught to speed_lag_: its stamp (s; +inf: none) and speed.

@@ -253,9 +253,13 @@ bool SynthHabits::at_idle(double freq, const SynthTuning& tuning) const noexcept
 
 // The warm idle is the lower of the idle learned and the fit's.
 bool SynthHabits::lacks_first_gear(double lowest_theta, const SynthTuning& tuning) const noexcept {
+  return idle_speed(lowest_theta) > tuning.first_gear_idle_speed;  // false while NaN
+}
+
+double SynthHabits::idle_speed(double theta) const noexcept {
   double idle = std::isfinite(warm_idle_) ? warm_idle_ : std::numeric_limits<double>::infinity();
   if (idle_count_ > 0.0) idle = std::min(idle, idle_mean_);
-  return std::isfinite(idle) && lowest_theta * idle > tuning.first_gear_idle_speed;
+  return std::isfinite(idle) ? theta * idle : std::numeric_limits<double>::quiet_NaN();
 }
 
 // Declutched, nothing drives the car: whatever GPS taught (a gear mistaken for the clutch while

@@ -28,6 +28,10 @@ class SynthHabits {
   // The revs the fit saw run in each gear of a ladder of `gears`, whose positions carry the model's gear
   // numbers `model_gear` (0: a gear the model lacks), once the ladder is built.
   void load_gear_revs(const GearModel* model, const GearNumbers& model_gear, int gears) noexcept;
+  // The gear at position `to` is run as the one at `from` is (its revs band), once load_gear_revs has run.
+  void share_gear_revs(int from, int to) noexcept {
+    revs_mean_[to] = revs_mean_[from], revs_sd_[to] = revs_sd_[from], revs_count_[to] = revs_count_[from];
+  }
 
   // Under GPS, after a step of dt ending at t: GPS speed `gps` (a new fix if gps_new), frequency `freq`
   // (NaN if lost); the filter's most probable mode `mode` (0 = declutched) holding `belief`, `in_gear`
@@ -60,6 +64,9 @@ class SynthHabits {
   // Whether a ladder whose lowest gear has `lowest_theta` lacks first gear (it carries the car at the warm
   // idle faster than any first gear does); false while no idle is known.
   [[nodiscard]] bool lacks_first_gear(double lowest_theta, const SynthTuning& tuning) const noexcept;
+  // m/s: the speed a gear of `theta` carries the car at at the warm idle (the lower of the idle learned and
+  // the fit's); NaN while no idle is known.
+  [[nodiscard]] double idle_speed(double theta) const noexcept;
   // m/s^2: the mean deceleration declutched on the move (at_idle: with the engine at idle), before the
   // last metres' braking to a stop.
   [[nodiscard]] double coast_accel(bool at_idle, const SynthTuning& tuning) const noexcept;

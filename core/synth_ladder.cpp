@@ -1,9 +1,11 @@
 // The ladder the synthesis runs on (SpeedSynthesizer, core/speed_synth.hpp): the model's gears, the gears
 // measured under GPS that it lacks, the gears below a ladder that lacks first gear (the fit's dropped ones,
-// then predicted ones), and the belief carried across a change of ladder.
+// then predicted ones), those predicted inside and above a young ladder, and the belief carried across a
+// change of ladder.
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <span>
 
 #include "core/estimator.hpp"
@@ -19,6 +21,23 @@ constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its trai
 // gears predicted below the ladder and inside it take it from the steps above them: progressive, so at
 // least 1; at most 1.5, the fewest gears predicted where the steps grow faster.
 constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
+
+// The upper end of the revs the fit saw in gear `index` of the model (ln Hz: extra.revs' mean_log plus
+// sd_log), NaN where the model does not say or saw the gear on fewer than `min_samples` pairs.
+double fitted_revs_top(const GearModel& model, std::size_t index, double min_samples) noexcept {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (!model.extra.is_object()) return nan;
+  const auto revs = model.extra.find("revs");
+  if (revs == model.extra.end() || !revs->is_array() || revs->size() != model.gears.size()) return nan;
+  const nlohmann::json& r = (*revs)[index];
+  if (!r.is_object()) return nan;
+  const auto get = [&](const char* key) {
+    const auto it = r.find(key);
+    return it != r.end() && it->is_number() ? it->get<double>() : nan;
+  };
+  const double n = get("samples");
+  return n >= min_samples ? get("mean_log") + get("sd_log") : nan;
+}
 
 // The model's thetas in `buf` (empty without a model).
 std::span<const double> thetas_of(const GearModel* model,
@@ -56,6 +75,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   insert_gap_gears();
   speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? model_speed_lag(*model) : 0.0);
   habits_.load_engine(model, tuning_);  // the warm idle, for the gears below the ladder
+  insert_upper_gears();
   insert_fitted_lower_gears(model);
   insert_predicted_gears();
   double total = 0.0;
@@ -77,6 +97,12 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   habits_.load_gear_revs(model, model_gear_, gears_);
+  // A gear predicted above the model's top is run as that top gear is: cruising (insert_upper_gears).
+  for (int j = 1, top = 0; j <= gears_; ++j) {
+    if (model_gear_[j] > 0) top = j;
+    for (int i = 0; i < upper_ && top > 0 && tuning_.top_gear_revs > 0.0; ++i)
+      if (theta_[j] == upper_theta_[static_cast<std::size_t>(i)]) habits_.share_gear_revs(top, j);
+  }
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
 }
 
@@ -266,9 +292,83 @@ void SpeedSynthesizer::insert_predicted_gears() noexcept {
   insert_below_ladder({theta.data(), static_cast<std::size_t>(n)});
 }
 
+// A young model lacks the gears not yet driven steadily, and those may lie above its top gear: a car that
+// has driven in town only has not yet cruised in its tall gears, and an outage on its first open road is
+// read in the ladder's top gear, too slow by the missing step. A gearbox's steps (log theta ratios) shrink
+// toward its top gears, where the engine's band of revs covers a wider span of road speeds (the mirror of
+// predict_lower_gears): the next step up is the model's top step shrunk by the factor the step below it
+// grew by over it (1 when the model has two gears; between 1 and 1.5), at least a factor of 1.06 (the
+// smallest step a fit accepts). At most predict_upper_gears gears are predicted, and only while the
+// highest carries the car at the warm idle slower than any top gear does (top_gear_idle_speed); none while
+// no idle is known. None either unless the fit saw the model's top gear run no higher than the gear below
+// it (top_gear_revs; the upper ends of their bands, extra.revs' mean_log + sd_log): a driver leaves a gear
+// for the next before its revs pass his usual band, so a gear run higher than the one below it is one he
+// had no gear to leave for; and a model that records no revs gives the predicted gear no band to run in
+// (insert_upper_gears). The predicted thetas go to `theta`, lowest first. Returns how many.
+int SpeedSynthesizer::predict_upper_gears(ModeArray& theta) const noexcept {
+  if (tuning_.predict_upper_gears <= 0.0 || model_ == nullptr) return 0;
+  std::array<double, kMaxGears> thetas{};
+  const std::span<const double> model = thetas_of(model_.get(), thetas);
+  const int m = static_cast<int>(model.size());
+  if (m < 2) return 0;
+  if (tuning_.top_gear_revs > 0.0 && !top_gear_below_band_) return 0;
+  const auto at = [&](int k) { return model[static_cast<std::size_t>(k)]; };
+  const double top_step = std::log(at(m - 1) / at(m - 2));
+  const double growth =
+      m >= 3 ? std::clamp(std::log(at(m - 2) / at(m - 3)) / top_step, kMinGrowth, kMaxGrowth) : 1.0;
+  const double min_step = 2.0 * kGearWindow;
+  double step = std::max(top_step, min_step), highest = at(m - 1);
+  int n = 0;
+  while (m + n < kMaxGears && n < tuning_.predict_upper_gears) {
+    const double speed = habits_.idle_speed(highest);
+    if (!(speed < tuning_.top_gear_idle_speed)) break;  // also while no idle is known
+    step = std::max(step / growth, min_step);
+    highest *= std::exp(step);
+    theta[static_cast<std::size_t>(n++)] = highest;
+  }
+  return n;
+}
+
+// Whether the fit saw the model's top gear run no higher than the gear below it (predict_upper_gears), read
+// once per model: false where the model records no revs for either.
+void SpeedSynthesizer::read_top_gear_revs() noexcept {
+  constexpr double kMinSamples = 5.0;  // the fewest a fit accepts a gear on
+  const std::size_t m = model_ ? model_->gears.size() : 0;
+  top_gear_below_band_ =
+      m >= 2 && fitted_revs_top(*model_, m - 1, kMinSamples) <= fitted_revs_top(*model_, m - 2, kMinSamples);
+}
+
+// The gears predicted above the model's top (predict_upper_gears) join the ladder with no standard error of
+// theta and no number in the model, as those predicted below it, each used as the model's top gear is (its
+// share of use, and its revs band: load_model): a top gear is a cruising gear, held for minutes on an open
+// road at the revs this driver cruises at, where the least share (a launch gear's) has it left within
+// seconds, and the driver's revs at large let it take a car rolling at idle revs. A gear seen under GPS
+// within half a predicted step of one stands for it.
+void SpeedSynthesizer::insert_upper_gears() noexcept {
+  ModeArray theta{};
+  const int n = predict_upper_gears(theta);
+  predicted_above_ = n;
+  upper_ = 0;
+  double below = model_ && !model_->gears.empty() ? model_->gears.back().theta : 0.0;
+  double top_share = kMinGearShare;  // the model's top gear's
+  for (int j = 1; j <= gears_; ++j)
+    if (model_gear_[j] > 0) top_share = weight_[j];
+  for (int i = 0; i < n; ++i) {
+    const double t = theta[static_cast<std::size_t>(i)];
+    const double half = 0.5 * std::log(t / below);
+    below = t;
+    bool stood_for = false;
+    for (int j = 1; j <= gears_; ++j)
+      stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / t)) < half);
+    if (!stood_for)
+      insert_in_ladder(t, 0.0, top_share, 0), upper_theta_[static_cast<std::size_t>(upper_++)] = t;
+  }
+}
+
 bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
   model_ = std::move(model);
+  read_top_gear_revs();
   std::array<double, kMaxGears> thetas{};
   seen_.forget_learned(thetas_of(model_.get(), thetas));
   change_ladder(true);
@@ -291,6 +391,10 @@ void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
   if (!changed && tuning_.predict_lower_gears > 0.0) {
     ModeArray theta{};
     changed = predict_lower_gears(predicted_ + 1, theta) != predicted_;
+  }
+  if (!changed && tuning_.predict_upper_gears > 0.0) {
+    ModeArray theta{};
+    changed = predict_upper_gears(theta) != predicted_above_;
   }
   if (changed) change_ladder(false);
 }

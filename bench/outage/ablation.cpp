@@ -58,6 +58,7 @@ constexpr Rule kRules[] = {
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
     {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
+    {"upper gears: a young ladder extended above its top", "predict_upper_gears=0"},
     {"speed lag: a fix is the speed of a moment before", "speed_lag=0"},
     {"speed lag prior: the fit's speed lag until the drive's shows", "speed_lag_prior=0"},
     {"speed lag significance: the drive's best lag from its first fix", "speed_lag_significance=0"},

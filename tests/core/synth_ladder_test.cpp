@@ -497,3 +497,83 @@ TEST_CASE("synth: a launch from rest partly unseen counts no gears below the lad
   cruise_and_stop(3);
   CHECK(synth.ladder_gears() == 7);
 }
+
+namespace {
+
+// The hatch's young model of second to fourth gear, with the fit's idle and its revs per gear (extra.revs,
+// mean_log and sd_log 0.2 in ln Hz): second and third at `low_mean_log`, fourth at `top_mean_log`.
+std::shared_ptr<GearModel> young_hatch(double low_mean_log, double top_mean_log) {
+  auto m = std::make_shared<GearModel>(*model_of({kHatch[1], kHatch[2], kHatch[3]}));
+  m->extra["idle"] = {{"freq", kIdle}, {"sd", 0.3}, {"samples", 100}};
+  m->extra["revs"] = nlohmann::json::array();
+  for (double mean_log : {low_mean_log, low_mean_log, top_mean_log})
+    m->extra["revs"].push_back({{"mean_log", mean_log}, {"sd_log", 0.2}, {"samples", 100}});
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("synth: an outage in a gear above a young ladder's top is read in the gear predicted there") {
+  // The hatch's young model has second to fourth gear, each run in the same band of revs: the car has not
+  // yet cruised in fifth. GPS shows it standing at idle, moving off through the gears and cruising in
+  // fourth; then GPS is lost, and the car shifts up into fifth and drives on. Fourth gear, the ladder's
+  // top, reads fifth's revs 18 % slow; the gear predicted above it from the ladder's shrinking steps
+  // (0.584 (m/s)/Hz) is 2 % off the true fifth.
+  const auto young = young_hatch(3.3, 3.3);
+  std::vector<Row> rows;
+  for (int k = 0; k < 20; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  const double drive_from = 20.0;
+  for (Row r : script(0.0,
+                      {{1, 1.5, 3},
+                       {0, -0.2, 1},
+                       {2, 1.2, 4},
+                       {0, -0.2, 1},
+                       {3, 1.0, 5},
+                       {0, -0.2, 1},
+                       {4, 0.5, 6},
+                       {4, 0.0, 30},
+                       {0, -0.2, 1},
+                       {5, 0.3, 15},
+                       {5, 0.0, 40}},
+                      kHatch)) {
+    r.t += drive_from;
+    rows.push_back(r);
+  }
+  const double outage_from = drive_from + 50.0;  // the car in fourth, ten seconds before the upshift
+  const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(young, tuning);
+    const auto out = replay(synth, rows, outage_from);
+    double synthesized = 0.0, driven = 0.0;
+    for (std::size_t i = 1; i < rows.size(); ++i) {
+      if (rows[i].t <= outage_from) continue;
+      INFO("t = " << rows[i].t << ": truth " << rows[i].speed * 3.6 << " km/h, synthesized "
+                  << out[i].speed * 3.6 << " in gear " << out[i].gear);
+      synthesized += out[i].speed;
+      driven += rows[i].speed;
+    }
+    return synthesized / driven - 1.0;
+  };
+  const double predicted = distance_error({});
+  gearpulse::SynthTuning ladder_alone;
+  ladder_alone.predict_upper_gears = 0.0;
+  const double without = distance_error(ladder_alone);
+  INFO("distance error over the outage: " << 100.0 * predicted << " % with the gear above predicted, "
+                                          << 100.0 * without << " % without");
+  CHECK(std::abs(predicted) < 0.04);
+  CHECK(without < -0.1);
+}
+
+TEST_CASE("synth: a gear is predicted above a top gear the fit saw run no higher than the gear below it") {
+  // The fit's revs per gear say whether the young ladder's top gear was run where a driver leaves a gear
+  // for the next (the band of the gear below it), or above that, as only a gear with none above is.
+  // Below its lowest gear a first gear is predicted either way (its lowest carries the car at idle at
+  // 3 m/s, faster than a first gear does).
+  CHECK(SpeedSynthesizer(young_hatch(3.4, 3.3)).ladder_gears() == 5);
+  CHECK(SpeedSynthesizer(young_hatch(3.4, 3.6)).ladder_gears() == 4);
+  gearpulse::SynthTuning revs_ignored;
+  revs_ignored.top_gear_revs = 0.0;
+  CHECK(SpeedSynthesizer(young_hatch(3.4, 3.6), revs_ignored).ladder_gears() == 5);
+  // A model that records no revs says nothing of it: no gear is predicted above.
+  CHECK(SpeedSynthesizer(model_of({kHatch[1], kHatch[2], kHatch[3]})).ladder_gears() == 3);
+}
