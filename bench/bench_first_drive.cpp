@@ -13,8 +13,8 @@
 // Per outage: distance error |integral of the output - integral of the true speed| over the 60 s, in m.
 // Targets: a model within 3 minutes of moving; from minute 5, per-outage distance error within 2x the
 // pre-trained one.
-// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--synth KEY=VALUE[,...]]
-//        [--require NAME<=VALUE]...
+// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--trace MINUTE]
+//        [--synth KEY=VALUE[,...]] [--require NAME<=VALUE]...
 //   --require (bench/requirements.hpp) holds the figures first_model_worst_min (min of moving),
 //   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 (ratios), cold_m_from_min5
 //   and known_gears_cold_m_from_min5 (m per outage) to thresholds.
@@ -22,6 +22,9 @@
 //   --synth sets SynthTuning fields of both runs' synthesis (bench/synth_settings.hpp), e.g. a rule off.
 //   --verbose adds each fit's ladder, each outage, for an outage in gears the model lacks the seconds in
 //   them below, inside and above its ladder, and the outages in a gear not learned yet split by where.
+//   --trace MINUTE steps through the cold start's outage that begins at MINUTE (every outage when negative)
+//   every 0.5 s from 10 s before it: true gear, clutch and speed, revs, fix, output, the most probable
+//   ladder position with its belief, the ladder's thetas.
 #include <algorithm>
 #include <array>
 #include <cmath>
