@@ -13,8 +13,8 @@
 // Per outage: distance error |integral of the output - integral of the true speed| over the 60 s, in m.
 // Targets: a model within 3 minutes of moving; from minute 5, per-outage distance error within 2x the
 // pre-trained one.
-// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--synth KEY=VALUE[,...]]
-//        [--require NAME<=VALUE]...
+// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--trace MINUTE]
+//        [--synth KEY=VALUE[,...]] [--require NAME<=VALUE]...
 //   --require (bench/requirements.hpp) holds the figures first_model_worst_min (min of moving),
 //   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 (ratios), cold_m_from_min5
 //   and known_gears_cold_m_from_min5 (m per outage) to thresholds.
@@ -22,6 +22,9 @@
 //   --synth sets SynthTuning fields of both runs' synthesis (bench/synth_settings.hpp), e.g. a rule off.
 //   --verbose adds each fit's ladder, each outage, for an outage in gears the model lacks the seconds in
 //   them below, inside and above its ladder, and the outages in a gear not learned yet split by where.
+//   --trace MINUTE steps through the cold start's outage that begins at MINUTE (every outage when negative)
+//   every 0.5 s from 10 s before it: true gear, clutch and speed, revs, fix, output, the most probable
+//   ladder position with its belief, the ladder's thetas.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -82,8 +85,32 @@ struct Run {
 };
 
 // The drive stepped through the synthesis; with `pretrained` null the daemon's cold start learns as it goes.
+// --trace: the outage that begins at `minute` (every outage when negative) stepped through, every 0.5 s from
+// 10 s before it, for the cold start.
+struct Trace {
+  bool on = false;
+  double minute = -1.0;
+};
+
+void trace_step(const gearpulse::SpeedSynthesizer& synth, const sim::Observation& r, double fix,
+                const gearpulse::SynthOutput& o) {
+  const int n = synth.ladder_gears();
+  int best = 0;
+  for (int j = 1; j <= n + 1; ++j)
+    if (synth.position_probability(j) > synth.position_probability(best)) best = j;
+  std::printf(
+      "    t %7.1f  true gear %d clutch %d v %5.2f | freq %6.1f gps %5.2f | out %5.2f gear %d | map %2d "
+      "(%.2f)",
+      r.truth.t, r.truth.gear, static_cast<int>(r.truth.clutch), r.truth.speed, r.freq, fix, o.speed, o.gear,
+      best, synth.position_probability(best));
+  std::printf(" | ladder");
+  for (int j = 1; j <= n; ++j)
+    std::printf(" %.4f", synth.ladder_theta(j));
+  std::printf("\n");
+}
+
 Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretrained,
-          const gearpulse::SynthTuning& tuning, bool verbose) {
+          const gearpulse::SynthTuning& tuning, bool verbose, Trace trace = {}) {
   sim::ObservationOptions hop;
   hop.period = 0.1;
   hop.seed = d.options.seed + 7;
@@ -155,6 +182,13 @@ Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretraine
       }
     }
     const gearpulse::SynthOutput o = synth.step(t, out ? gearpulse::kMissing : fix, r.freq, fresh);
+    if (trace.on && std::lround(t * 10.0) % 5 == 0) {
+      const double start =
+          kOutageStart + kOutagePeriod * std::floor((t + 10.0 - kOutageStart) / kOutagePeriod);
+      if (start >= kOutageStart && t >= start - 10.0 && t < start + kOutageLength &&
+          (trace.minute < 0.0 || std::abs(start / 60.0 - trace.minute) < 0.01))
+        trace_step(synth, r, out ? gearpulse::kMissing : fix, o);
+    }
     if (out && current && r.truth.gear > 0) {
       const double theta = d.vehicle.theta[static_cast<std::size_t>(r.truth.gear - 1)];
       const bool known = model && std::any_of(model->gears.begin(), model->gears.end(), [&](const auto& g) {
@@ -230,6 +264,7 @@ int main(int argc, char** argv) {
   std::uint64_t first = 101, last = 120;
   const char* which = "report";
   bool verbose = false;
+  Trace trace;
   gearpulse::SynthTuning tuning;  // the daemon's defaults unless --synth KEY=VALUE sets a field
   gearpulse::bench::Requirements required;
   if (!required.parse(argc, argv)) return 2;
@@ -246,13 +281,15 @@ int main(int argc, char** argv) {
       i += 2;
     } else if (a == "--verbose") {
       verbose = true;
+    } else if (a == "--trace" && i + 1 < argc) {
+      trace = {true, std::strtod(argv[++i], nullptr)};
     } else if (a == "--synth" && i + 1 < argc && gearpulse::bench::apply_settings(tuning, argv[i + 1])) {
       ++i;
     } else {
       std::fprintf(
           stderr,
-          "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--synth KEY=VALUE] "
-          "[--require NAME<=VALUE]...\n");
+          "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--trace MINUTE] "
+          "[--synth KEY=VALUE] [--require NAME<=VALUE]...\n");
       return 2;
     }
   }
@@ -292,7 +329,7 @@ int main(int argc, char** argv) {
     gps1.seed = seed + 200000;
     const auto pre_pairs = sim::to_samples(sim::observe(sim::simulate_drive(car, other), gps1));
     const auto pre_model = std::make_shared<const GearModel>(gd::make_estimator_fitter()(pre_pairs, {}));
-    const Run cold = drive(first_drive_sim, nullptr, tuning, verbose);
+    const Run cold = drive(first_drive_sim, nullptr, tuning, verbose, trace);
     const Run pre = drive(first_drive_sim, pre_model->empty() ? nullptr : pre_model, tuning, false);
     if (cold.first_model_drive < 0.0) {
       ++never;

@@ -76,6 +76,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(fitted_lower_gears),
     GEARPULSE_FIELD(fill_ladder_gaps),
     GEARPULSE_FIELD(launch_gears),
+    GEARPULSE_FIELD(launch_gear_engage),
     GEARPULSE_FIELD(predict_upper_gears),
     GEARPULSE_FIELD(top_gear_idle_speed),
     GEARPULSE_FIELD(top_gear_revs),

@@ -210,6 +210,11 @@ struct SynthTuning {
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).
   double launch_gears = 1.0;
+  // 1: a gear below the model's lowest (fitted, seen or predicted) is engaged from the clutch as often as
+  // the model's lowest gear is: a launch engages every gear below the cruising ones once, however briefly
+  // each is held, so its share of time in gear (which sets how soon it is left) is not its share of the
+  // engagements (0: engaged by its share of time in gear, as every gear).
+  double launch_gear_engage = 1.0;
   // Gears predicted above the model's top gear, at most (0: none): a young model has not yet cruised in
   // the tall gears. Each is the next step of a gearbox whose steps shrink toward the top, from the model's
   // own top steps, while the highest carries the car at the warm idle slower than top_gear_idle_speed.
@@ -285,6 +290,14 @@ class SpeedSynthesizer {
   };
   [[nodiscard]] ModeTrack mode_track(int position) const noexcept;
   [[nodiscard]] int ladder_gears() const noexcept { return gears_; }
+  // For diagnostics: the theta of a gear of the ladder (1..ladder_gears(), ascending; 0 outside) and the
+  // belief in a position of the ladder (as mode_track's positions).
+  [[nodiscard]] double ladder_theta(int position) const noexcept {
+    return position >= 1 && position <= gears_ ? theta_[static_cast<std::size_t>(position)] : 0.0;
+  }
+  [[nodiscard]] double position_probability(int position) const noexcept {
+    return position >= 0 && position <= gears_ + 1 ? prob_[static_cast<std::size_t>(position)] : 0.0;
+  }
 
  private:
   static constexpr int kModes = kMaxGears + 2;  // 0 = declutched, 1..gears, gears + 1 = moving off
@@ -305,6 +318,7 @@ class SpeedSynthesizer {
   void insert_gap_gears() noexcept;
   void insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
   void insert_fitted_lower_gears(const GearModel* model) noexcept;
+  void load_engage_shares() noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;
   void insert_predicted_gears() noexcept;
@@ -353,8 +367,9 @@ class SpeedSynthesizer {
   std::array<int, kModes> model_gear_{};
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
-  int predicted_above_ = 0;  // gears predicted above the model's top gear (insert_upper_gears)
-  ModeArray upper_theta_{};  // the thetas of those in the ladder (a gear seen may stand for one)
+  int predicted_above_ = 0;   // gears predicted above the model's top gear (insert_upper_gears)
+  ModeArray engage_share_{};  // per gear, its share of the gears engaged from the clutch (load_model)
+  ModeArray upper_theta_{};   // the thetas of those in the ladder (a gear seen may stand for one)
   int upper_ = 0;
   bool top_gear_below_band_ = false;  // the fit saw the model's top gear run no higher than the one below
   SeenGears seen_;

@@ -95,6 +95,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     const double by_use = tuning_.dwell_by_use > 0.0 ? typical / weight_[j] : 1.0;
     leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
+  load_engage_shares();
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   habits_.load_gear_revs(model, model_gear_, gears_);
   // A gear predicted above the model's top is run as that top gear is: cruising (insert_upper_gears).
@@ -104,6 +105,24 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
       if (theta_[j] == upper_theta_[static_cast<std::size_t>(i)]) habits_.share_gear_revs(top, j);
   }
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
+}
+
+// Each gear's share of the gears engaged from the clutch: its share of time in gear, except below the
+// model's lowest gear, where a gear is engaged at least as often as that lowest gear (launch_gear_engage).
+void SpeedSynthesizer::load_engage_shares() noexcept {
+  engage_share_.fill(0.0);
+  int lowest = 0;  // the model's lowest gear's position
+  for (int j = gears_; j >= 1; --j)
+    if (model_gear_[j] > 0) lowest = j;
+  double total = 0.0;
+  for (int j = 1; j <= gears_; ++j) {
+    engage_share_[j] = weight_[j];
+    if (tuning_.launch_gear_engage > 0.0 && j < lowest)
+      engage_share_[j] = std::max(weight_[j], weight_[lowest]);
+    total += engage_share_[j];
+  }
+  for (int j = 1; j <= gears_ && total > 0.0; ++j)
+    engage_share_[j] /= total;
 }
 
 // The gears seen under GPS that the model lacks (seen_) join its ladder in theta order, each used for its
