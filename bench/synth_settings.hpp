@@ -80,6 +80,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(predict_upper_gears),
     GEARPULSE_FIELD(top_gear_idle_speed),
     GEARPULSE_FIELD(top_gear_revs),
+    GEARPULSE_FIELD(upper_gear_samples),
     GEARPULSE_FIELD(speed_lag),
     GEARPULSE_FIELD(speed_lag_prior),
     GEARPULSE_FIELD(speed_lag_significance),

@@ -228,6 +228,11 @@ struct SynthTuning {
   // for; and the predicted gear runs in the top gear's band, without which it takes a car rolling at idle
   // revs as cruising (0: whatever the revs; the driver's revs at large for the predicted gear).
   double top_gear_revs = 1.0;
+  // Pairs: gears are predicted above a model's top gear only while its fit saw that gear on fewer pairs
+  // than this. A driver with a gear above the top one seen shifts into it within minutes of cruising on an
+  // open road; 300 pairs are five minutes at the daemon's 1 Hz fixes (ten at 2 s rows). Beyond that the top
+  // gear seen is the gearbox's (infinity: however long it was driven).
+  double upper_gear_samples = 300.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
   // SpeedLag learns from this drive's fixes (0: the speed of the step itself).
   double speed_lag = 1.0;
@@ -372,6 +377,7 @@ class SpeedSynthesizer {
   ModeArray upper_theta_{};   // the thetas of those in the ladder (a gear seen may stand for one)
   int upper_ = 0;
   bool top_gear_below_band_ = false;  // the fit saw the model's top gear run no higher than the one below
+  double top_gear_samples_ = 0.0;     // pairs the fit saw in the model's top gear (extra.revs)
   SeenGears seen_;
   LaunchGears launches_;  // how many gears the launches seen under GPS pass below the lowest measured
   // The newest fix not yet taught to speed_lag_: its stamp (s; +inf: none) and speed.

@@ -22,21 +22,25 @@ constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its trai
 // least 1; at most 1.5, the fewest gears predicted where the steps grow faster.
 constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
 
-// The upper end of the revs the fit saw in gear `index` of the model (ln Hz: extra.revs' mean_log plus
-// sd_log), NaN where the model does not say or saw the gear on fewer than `min_samples` pairs.
-double fitted_revs_top(const GearModel& model, std::size_t index, double min_samples) noexcept {
+// What the fit saw of the revs in gear `index` of the model (extra.revs): `key` of its entry, NaN where the
+// model does not say.
+double fitted_revs(const GearModel& model, std::size_t index, const char* key) noexcept {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   if (!model.extra.is_object()) return nan;
   const auto revs = model.extra.find("revs");
   if (revs == model.extra.end() || !revs->is_array() || revs->size() != model.gears.size()) return nan;
   const nlohmann::json& r = (*revs)[index];
   if (!r.is_object()) return nan;
-  const auto get = [&](const char* key) {
-    const auto it = r.find(key);
-    return it != r.end() && it->is_number() ? it->get<double>() : nan;
-  };
-  const double n = get("samples");
-  return n >= min_samples ? get("mean_log") + get("sd_log") : nan;
+  const auto it = r.find(key);
+  return it != r.end() && it->is_number() ? it->get<double>() : nan;
+}
+
+// The upper end of the revs the fit saw in gear `index` of the model (ln Hz: extra.revs' mean_log plus
+// sd_log), NaN where the model does not say or saw the gear on fewer than `min_samples` pairs.
+double fitted_revs_top(const GearModel& model, std::size_t index, double min_samples) noexcept {
+  return fitted_revs(model, index, "samples") >= min_samples
+             ? fitted_revs(model, index, "mean_log") + fitted_revs(model, index, "sd_log")
+             : std::numeric_limits<double>::quiet_NaN();
 }
 
 // The model's thetas in `buf` (empty without a model).
@@ -331,6 +335,7 @@ int SpeedSynthesizer::predict_upper_gears(ModeArray& theta) const noexcept {
   const int m = static_cast<int>(model.size());
   if (m < 2) return 0;
   if (tuning_.top_gear_revs > 0.0 && !top_gear_below_band_) return 0;
+  if (!(top_gear_samples_ < tuning_.upper_gear_samples)) return 0;
   const auto at = [&](int k) { return model[static_cast<std::size_t>(k)]; };
   const double top_step = std::log(at(m - 1) / at(m - 2));
   const double growth =
@@ -355,6 +360,8 @@ void SpeedSynthesizer::read_top_gear_revs() noexcept {
   const std::size_t m = model_ ? model_->gears.size() : 0;
   top_gear_below_band_ =
       m >= 2 && fitted_revs_top(*model_, m - 1, kMinSamples) <= fitted_revs_top(*model_, m - 2, kMinSamples);
+  top_gear_samples_ = m >= 1 ? fitted_revs(*model_, m - 1, "samples") : 0.0;
+  if (!std::isfinite(top_gear_samples_)) top_gear_samples_ = 0.0;
 }
 
 // The gears predicted above the model's top (predict_upper_gears) join the ladder with no standard error of

@@ -502,12 +502,13 @@ namespace {
 
 // The hatch's young model of second to fourth gear, with the fit's idle and its revs per gear (extra.revs,
 // mean_log and sd_log 0.2 in ln Hz): second and third at `low_mean_log`, fourth at `top_mean_log`.
-std::shared_ptr<GearModel> young_hatch(double low_mean_log, double top_mean_log) {
+std::shared_ptr<GearModel> young_hatch(double low_mean_log, double top_mean_log, int top_samples = 100) {
   auto m = std::make_shared<GearModel>(*model_of({kHatch[1], kHatch[2], kHatch[3]}));
   m->extra["idle"] = {{"freq", kIdle}, {"sd", 0.3}, {"samples", 100}};
   m->extra["revs"] = nlohmann::json::array();
-  for (double mean_log : {low_mean_log, low_mean_log, top_mean_log})
+  for (double mean_log : {low_mean_log, low_mean_log})
     m->extra["revs"].push_back({{"mean_log", mean_log}, {"sd_log", 0.2}, {"samples", 100}});
+  m->extra["revs"].push_back({{"mean_log", top_mean_log}, {"sd_log", 0.2}, {"samples", top_samples}});
   return m;
 }
 
@@ -608,4 +609,14 @@ TEST_CASE("synth: after each declutch of a launch below a young ladder the next 
                                          << 100.0 * by_time_share << " % by their share of time in gear");
   CHECK(as_lowest < 0.05);
   CHECK(as_lowest < 0.5 * by_time_share);
+}
+
+TEST_CASE("synth: no gear is predicted above a top gear cruised in for long") {
+  // A driver with a gear above the top one seen shifts into it within minutes of cruising: a top gear the
+  // fit saw on 2,000 pairs (over half an hour at 1 Hz) is the gearbox's top, whatever its revs.
+  CHECK(SpeedSynthesizer(young_hatch(3.4, 3.3, 2000)).ladder_gears() == 4);
+  CHECK(SpeedSynthesizer(young_hatch(3.4, 3.3, 200)).ladder_gears() == 5);
+  gearpulse::SynthTuning ungated;
+  ungated.upper_gear_samples = std::numeric_limits<double>::infinity();
+  CHECK(SpeedSynthesizer(young_hatch(3.4, 3.3, 2000), ungated).ladder_gears() == 5);
 }
