@@ -60,6 +60,29 @@ std::vector<LaunchHop> launch_hops(const std::vector<double>& ratios, std::size_
   return hops;
 }
 
+// The model fitted on a recording from the simulator (recorded_model), as a young model has it: without its
+// `lacking` lowest gears, and without the revs per gear (recorded for the full ladder).
+std::shared_ptr<GearModel> young_recorded_model(const char* recording, int lacking) {
+  auto model = recorded_model(recording);
+  model->gears.erase(model->gears.begin(), model->gears.begin() + lacking);
+  model->extra.erase("revs");
+  return model;
+}
+
+// The synthesis's distance error over a recording's outage (its 10 Hz rows, GPS lost at 10 s), a share of
+// the distance driven.
+double recorded_outage_error(const char* recording, std::shared_ptr<const GearModel> model,
+                             const gearpulse::SynthTuning& tuning) {
+  SpeedSynthesizer synth(std::move(model), tuning);
+  double synthesized = 0.0, driven = 0.0;
+  replay_rows(recording, "10hz", synth, [&](double t, double truth, const SynthOutput& out) {
+    if (t < 10.0) return;
+    synthesized += 0.1 * out.speed;
+    driven += 0.1 * truth;
+  });
+  return std::abs(synthesized - driven) / driven;
+}
+
 // The synthesis's distance error over the launch and cruise of `hops`, a share of the distance driven.
 double launch_distance_error(std::shared_ptr<const GearModel> model, const gearpulse::SynthTuning& tuning,
                              const std::vector<LaunchHop>& hops) {
@@ -272,18 +295,9 @@ TEST_CASE("synth: at 10 Hz a move-off below a ladder lacking the launch gears cl
     int lacking;  // gears the young model lacks, from first up
   };
   for (const Young young : {Young{"hard_launch_five_speed", 2}, Young{"hard_launch_jam", 1}}) {
-    auto model = recorded_model(young.recording);
-    model->gears.erase(model->gears.begin(), model->gears.begin() + young.lacking);
-    model->extra.erase("revs");  // per gear of the full ladder
+    const auto model = young_recorded_model(young.recording, young.lacking);
     const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-      SpeedSynthesizer synth(model, tuning);
-      double synthesized = 0.0, driven = 0.0;
-      replay_rows(young.recording, "10hz", synth, [&](double t, double truth, const SynthOutput& out) {
-        if (t < 10.0) return;  // GPS is lost at 10 s
-        synthesized += 0.1 * out.speed;
-        driven += 0.1 * truth;
-      });
-      return std::abs(synthesized - driven) / driven;
+      return recorded_outage_error(young.recording, model, tuning);
     };
     const double predicted = distance_error({});
     gearpulse::SynthTuning ladder_alone;
@@ -587,18 +601,9 @@ TEST_CASE("synth: after each declutch of a launch below a young ladder the next 
   // second lost to the model's third at a jump of the speed, and the filter climbed the ladder a gear high;
   // engaged as often as the model's lowest gear, as a launch engages every gear below the cruising ones,
   // it is read in second.
-  auto model = recorded_model("hard_launch_jam");
-  model->gears.erase(model->gears.begin(), model->gears.begin() + 2);
-  model->extra.erase("revs");  // per gear of the full ladder
+  const auto model = young_recorded_model("hard_launch_jam", 2);
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double synthesized = 0.0, driven = 0.0;
-    replay_rows("hard_launch_jam", "10hz", synth, [&](double t, double truth, const SynthOutput& out) {
-      if (t < 10.0) return;  // GPS is lost at 10 s
-      synthesized += 0.1 * out.speed;
-      driven += 0.1 * truth;
-    });
-    return std::abs(synthesized - driven) / driven;
+    return recorded_outage_error("hard_launch_jam", model, tuning);
   };
   const double as_lowest = distance_error({});
   gearpulse::SynthTuning by_time;
