@@ -598,7 +598,7 @@ TEST_CASE("synth: after each declutch of a launch below a young ladder the next 
   // at rest), read with a model of third to fifth gear: first and second are predicted below it. Each shift
   // of the launch passes through the clutch, and the gear engaged after it is the next one up, a predicted
   // gear after the shift out of first. Engaged by its share of time in gear, the least, the predicted
-  // second lost to the model's third at a jump of the speed, and the filter climbed the ladder a gear high;
+  // second loses to the model's third at a jump of the speed, and the filter climbs the ladder a gear high;
   // engaged as often as the model's lowest gear, as a launch engages every gear below the cruising ones,
   // it is read in second.
   const auto model = young_recorded_model("hard_launch_jam", 2);
