@@ -186,25 +186,20 @@ TEST_CASE("synth: an outage in a gear the model lacks follows the ratio GPS show
   // The model lacks fourth gear (a young model, or a fit that missed it). The car moves off, climbs to
   // fourth and cruises in it with GPS, then GPS is lost while it stays in fourth.
   const std::vector<double> lacking = {kHatch[0], kHatch[1], kHatch[2], kHatch[4]};
-  std::vector<Row> rows;
-  for (int k = 0; k < 20; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
-  const double drive_from = 20.0, outage_from = 80.0;
-  for (Row r : script(0.0,
-                      {{1, 1.5, 3},
-                       {0, -0.2, 1},
-                       {2, 1.2, 4},
-                       {0, -0.2, 1},
-                       {3, 1.0, 5},
-                       {0, -0.2, 1},
-                       {4, 0.5, 4},
-                       {4, 0.0, 41},
-                       {4, 0.3, 15},
-                       {4, -0.3, 15}},
-                      kHatch)) {
-    r.t += drive_from;
-    rows.push_back(r);
-  }
+  const double outage_from = 80.0;
+  const auto rows = script(0.0,
+                           {{0, 0.0, 20},
+                            {1, 1.5, 3},
+                            {0, -0.2, 1},
+                            {2, 1.2, 4},
+                            {0, -0.2, 1},
+                            {3, 1.0, 5},
+                            {0, -0.2, 1},
+                            {4, 0.5, 4},
+                            {4, 0.0, 41},
+                            {4, 0.3, 15},
+                            {4, -0.3, 15}},
+                           kHatch);
   const auto distance = [&](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(model_of(lacking), tuning);
     const auto out = replay(synth, rows, outage_from);
@@ -535,26 +530,21 @@ TEST_CASE("synth: an outage in a gear above a young ladder's top is read in the 
   // top, reads fifth's revs 18 % slow; the gear predicted above it from the ladder's shrinking steps
   // (0.584 (m/s)/Hz) is 2 % off the true fifth.
   const auto young = young_hatch(3.3, 3.3);
-  std::vector<Row> rows;
-  for (int k = 0; k < 20; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
   const double drive_from = 20.0;
-  for (Row r : script(0.0,
-                      {{1, 1.5, 3},
-                       {0, -0.2, 1},
-                       {2, 1.2, 4},
-                       {0, -0.2, 1},
-                       {3, 1.0, 5},
-                       {0, -0.2, 1},
-                       {4, 0.5, 6},
-                       {4, 0.0, 30},
-                       {0, -0.2, 1},
-                       {5, 0.3, 15},
-                       {5, 0.0, 40}},
-                      kHatch)) {
-    r.t += drive_from;
-    rows.push_back(r);
-  }
+  const auto rows = script(0.0,
+                           {{0, 0.0, drive_from},
+                            {1, 1.5, 3},
+                            {0, -0.2, 1},
+                            {2, 1.2, 4},
+                            {0, -0.2, 1},
+                            {3, 1.0, 5},
+                            {0, -0.2, 1},
+                            {4, 0.5, 6},
+                            {4, 0.0, 30},
+                            {0, -0.2, 1},
+                            {5, 0.3, 15},
+                            {5, 0.0, 40}},
+                           kHatch);
   const double outage_from = drive_from + 50.0;  // the car in fourth, ten seconds before the upshift
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(young, tuning);
