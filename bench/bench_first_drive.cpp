@@ -84,7 +84,6 @@ struct Run {
   std::size_t final_gears = 0;
 };
 
-// The drive stepped through the synthesis; with `pretrained` null the daemon's cold start learns as it goes.
 // --trace: the outage that begins at `minute` (every outage when negative) stepped through, every 0.5 s from
 // 10 s before it, for the cold start.
 struct Trace {
@@ -92,6 +91,7 @@ struct Trace {
   double minute = -1.0;
 };
 
+// One line of the trace: the truth, the readings, the output and the belief after a step.
 void trace_step(const gearpulse::SpeedSynthesizer& synth, const sim::Observation& r, double fix,
                 const gearpulse::SynthOutput& o) {
   const int n = synth.ladder_gears();
@@ -109,6 +109,7 @@ void trace_step(const gearpulse::SpeedSynthesizer& synth, const sim::Observation
   std::printf("\n");
 }
 
+// The drive stepped through the synthesis; with `pretrained` null the daemon's cold start learns as it goes.
 Run drive(const sim::Drive& d, const std::shared_ptr<const GearModel>& pretrained,
           const gearpulse::SynthTuning& tuning, bool verbose, Trace trace = {}) {
   sim::ObservationOptions hop;
@@ -410,12 +411,13 @@ int main(int argc, char** argv) {
               unseen_cold / static_cast<double>(unseen_n), unseen_pre / static_cast<double>(unseen_n));
   if (verbose)
     for (std::size_t w = 0; w < 3; ++w)
-      std::printf("    mostly %s the model's ladder: %zu outages, %.1f m against %.1f m\n",
-                  w == 0   ? "below"
-                  : w == 1 ? "inside"
-                           : "above",
-                  lacked_n[w], lacked_cold[w] / static_cast<double>(lacked_n[w]),
-                  lacked_pre[w] / static_cast<double>(lacked_n[w]));
+      if (lacked_n[w] > 0)
+        std::printf("    mostly %s the model's ladder: %zu outages, %.1f m against %.1f m\n",
+                    w == 0   ? "below"
+                    : w == 1 ? "inside"
+                             : "above",
+                    lacked_n[w], lacked_cold[w] / static_cast<double>(lacked_n[w]),
+                    lacked_pre[w] / static_cast<double>(lacked_n[w]));
   required.report("first_model_worst_min", never > 0 || first_moving.empty()
                                                ? std::numeric_limits<double>::infinity()
                                                : first_moving.back());

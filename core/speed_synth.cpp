@@ -373,8 +373,9 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
                                       bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
     // The tracker refuses a hop now and then, in gaps of a few tenths of a second (docs/tracker.md: 4-11 %
-    // of the hops at 0-10 dB), and a log's row may fall on such a hop: a reading lost for no longer than a
-    // row of 1 s says nothing of the mode. Lost for longer, the engine's line is gone and a gear fades.
+    // of the in-band hops at 0-10 dB), and a log's row may fall on such a hop: a reading lost for 1 s or
+    // less (one row of a 1 Hz log) says nothing of the mode. Lost for longer, the engine's line is gone and
+    // a gear fades.
     constexpr double kTrackerGap = 1.0;  // s
     const double lost = lost_for_ > kTrackerGap + 1e-6 ? tuning_.lost_gear_cost : 0.0;
     if (is_gear(mode)) return -weight * lost;

@@ -372,9 +372,11 @@ class SpeedSynthesizer {
   std::array<int, kModes> model_gear_{};
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
-  int predicted_above_ = 0;   // gears predicted above the model's top gear (insert_upper_gears)
-  ModeArray engage_share_{};  // per gear, its share of the gears engaged from the clutch (load_model)
-  ModeArray upper_theta_{};   // the thetas of those in the ladder (a gear seen may stand for one)
+  ModeArray engage_share_{};  // per gear, its share of the gears engaged from the clutch (load_engage_shares)
+  // How many gears are predicted above the model's top gear (insert_upper_gears), and the thetas of the
+  // upper_ of them that joined the ladder (a gear seen under GPS may stand for one).
+  int predicted_above_ = 0;
+  ModeArray upper_theta_{};
   int upper_ = 0;
   bool top_gear_below_band_ = false;  // the fit saw the model's top gear run no higher than the one below
   double top_gear_samples_ = 0.0;     // pairs the fit saw in the model's top gear (extra.revs)

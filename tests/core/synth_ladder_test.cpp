@@ -60,6 +60,29 @@ std::vector<LaunchHop> launch_hops(const std::vector<double>& ratios, std::size_
   return hops;
 }
 
+// The model fitted on a recording from the simulator (recorded_model), as a young model has it: without its
+// `lacking` lowest gears, and without the revs per gear (recorded for the full ladder).
+std::shared_ptr<GearModel> young_recorded_model(const char* recording, int lacking) {
+  auto model = recorded_model(recording);
+  model->gears.erase(model->gears.begin(), model->gears.begin() + lacking);
+  model->extra.erase("revs");
+  return model;
+}
+
+// The synthesis's distance error over a recording's outage (its 10 Hz rows, GPS lost at 10 s), a share of
+// the distance driven.
+double recorded_outage_error(const char* recording, std::shared_ptr<const GearModel> model,
+                             const gearpulse::SynthTuning& tuning) {
+  SpeedSynthesizer synth(std::move(model), tuning);
+  double synthesized = 0.0, driven = 0.0;
+  replay_rows(recording, "10hz", synth, [&](double t, double truth, const SynthOutput& out) {
+    if (t < 10.0) return;
+    synthesized += 0.1 * out.speed;
+    driven += 0.1 * truth;
+  });
+  return std::abs(synthesized - driven) / driven;
+}
+
 // The synthesis's distance error over the launch and cruise of `hops`, a share of the distance driven.
 double launch_distance_error(std::shared_ptr<const GearModel> model, const gearpulse::SynthTuning& tuning,
                              const std::vector<LaunchHop>& hops) {
@@ -163,25 +186,20 @@ TEST_CASE("synth: an outage in a gear the model lacks follows the ratio GPS show
   // The model lacks fourth gear (a young model, or a fit that missed it). The car moves off, climbs to
   // fourth and cruises in it with GPS, then GPS is lost while it stays in fourth.
   const std::vector<double> lacking = {kHatch[0], kHatch[1], kHatch[2], kHatch[4]};
-  std::vector<Row> rows;
-  for (int k = 0; k < 20; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
-  const double drive_from = 20.0, outage_from = 80.0;
-  for (Row r : script(0.0,
-                      {{1, 1.5, 3},
-                       {0, -0.2, 1},
-                       {2, 1.2, 4},
-                       {0, -0.2, 1},
-                       {3, 1.0, 5},
-                       {0, -0.2, 1},
-                       {4, 0.5, 4},
-                       {4, 0.0, 41},
-                       {4, 0.3, 15},
-                       {4, -0.3, 15}},
-                      kHatch)) {
-    r.t += drive_from;
-    rows.push_back(r);
-  }
+  const double outage_from = 80.0;
+  const auto rows = script(0.0,
+                           {{0, 0.0, 20},
+                            {1, 1.5, 3},
+                            {0, -0.2, 1},
+                            {2, 1.2, 4},
+                            {0, -0.2, 1},
+                            {3, 1.0, 5},
+                            {0, -0.2, 1},
+                            {4, 0.5, 4},
+                            {4, 0.0, 41},
+                            {4, 0.3, 15},
+                            {4, -0.3, 15}},
+                           kHatch);
   const auto distance = [&](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(model_of(lacking), tuning);
     const auto out = replay(synth, rows, outage_from);
@@ -272,18 +290,9 @@ TEST_CASE("synth: at 10 Hz a move-off below a ladder lacking the launch gears cl
     int lacking;  // gears the young model lacks, from first up
   };
   for (const Young young : {Young{"hard_launch_five_speed", 2}, Young{"hard_launch_jam", 1}}) {
-    auto model = recorded_model(young.recording);
-    model->gears.erase(model->gears.begin(), model->gears.begin() + young.lacking);
-    model->extra.erase("revs");  // per gear of the full ladder
+    const auto model = young_recorded_model(young.recording, young.lacking);
     const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-      SpeedSynthesizer synth(model, tuning);
-      double synthesized = 0.0, driven = 0.0;
-      replay_rows(young.recording, "10hz", synth, [&](double t, double truth, const SynthOutput& out) {
-        if (t < 10.0) return;  // GPS is lost at 10 s
-        synthesized += 0.1 * out.speed;
-        driven += 0.1 * truth;
-      });
-      return std::abs(synthesized - driven) / driven;
+      return recorded_outage_error(young.recording, model, tuning);
     };
     const double predicted = distance_error({});
     gearpulse::SynthTuning ladder_alone;
@@ -521,26 +530,21 @@ TEST_CASE("synth: an outage in a gear above a young ladder's top is read in the 
   // top, reads fifth's revs 18 % slow; the gear predicted above it from the ladder's shrinking steps
   // (0.584 (m/s)/Hz) is 2 % off the true fifth.
   const auto young = young_hatch(3.3, 3.3);
-  std::vector<Row> rows;
-  for (int k = 0; k < 20; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
   const double drive_from = 20.0;
-  for (Row r : script(0.0,
-                      {{1, 1.5, 3},
-                       {0, -0.2, 1},
-                       {2, 1.2, 4},
-                       {0, -0.2, 1},
-                       {3, 1.0, 5},
-                       {0, -0.2, 1},
-                       {4, 0.5, 6},
-                       {4, 0.0, 30},
-                       {0, -0.2, 1},
-                       {5, 0.3, 15},
-                       {5, 0.0, 40}},
-                      kHatch)) {
-    r.t += drive_from;
-    rows.push_back(r);
-  }
+  const auto rows = script(0.0,
+                           {{0, 0.0, drive_from},
+                            {1, 1.5, 3},
+                            {0, -0.2, 1},
+                            {2, 1.2, 4},
+                            {0, -0.2, 1},
+                            {3, 1.0, 5},
+                            {0, -0.2, 1},
+                            {4, 0.5, 6},
+                            {4, 0.0, 30},
+                            {0, -0.2, 1},
+                            {5, 0.3, 15},
+                            {5, 0.0, 40}},
+                           kHatch);
   const double outage_from = drive_from + 50.0;  // the car in fourth, ten seconds before the upshift
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(young, tuning);
@@ -584,21 +588,12 @@ TEST_CASE("synth: after each declutch of a launch below a young ladder the next 
   // at rest), read with a model of third to fifth gear: first and second are predicted below it. Each shift
   // of the launch passes through the clutch, and the gear engaged after it is the next one up, a predicted
   // gear after the shift out of first. Engaged by its share of time in gear, the least, the predicted
-  // second lost to the model's third at a jump of the speed, and the filter climbed the ladder a gear high;
+  // second loses to the model's third at a jump of the speed, and the filter climbs the ladder a gear high;
   // engaged as often as the model's lowest gear, as a launch engages every gear below the cruising ones,
   // it is read in second.
-  auto model = recorded_model("hard_launch_jam");
-  model->gears.erase(model->gears.begin(), model->gears.begin() + 2);
-  model->extra.erase("revs");  // per gear of the full ladder
+  const auto model = young_recorded_model("hard_launch_jam", 2);
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double synthesized = 0.0, driven = 0.0;
-    replay_rows("hard_launch_jam", "10hz", synth, [&](double t, double truth, const SynthOutput& out) {
-      if (t < 10.0) return;  // GPS is lost at 10 s
-      synthesized += 0.1 * out.speed;
-      driven += 0.1 * truth;
-    });
-    return std::abs(synthesized - driven) / driven;
+    return recorded_outage_error("hard_launch_jam", model, tuning);
   };
   const double as_lowest = distance_error({});
   gearpulse::SynthTuning by_time;
