@@ -206,6 +206,10 @@ struct SynthTuning {
   // 1: a step of the model's ladder twice the step above it or more lacks the gears a progressive gearbox
   // has there (its steps do not shrink toward the low gears), predicted from the steps above (0: none).
   double fill_ladder_gaps = 1.0;
+  // 1: the model's top step lacks gears where it is more than 1.5 times the step below it (steps shrink
+  // toward the top gears), or, on a two-gear ladder, more than a factor of 2 (the largest gearbox step):
+  // the fewest gears that make its steps no larger than that bound, at equal steps (0: none).
+  double fill_top_step = 1.0;
   // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).

@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <span>
 
 #include "core/estimator.hpp"
@@ -21,6 +22,8 @@ constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its trai
 // gears predicted below the ladder and inside it take it from the steps above them: progressive, so at
 // least 1; at most 1.5, the fewest gears predicted where the steps grow faster.
 constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
+// The largest step (log theta ratio) of a gearbox: first to second gear in a four-speed box, a factor of 2.
+constexpr double kMaxGearStep = std::numbers::ln2;
 
 // What the fit saw of the revs in gear `index` of the model (extra.revs): `key` of its entry, NaN where the
 // model does not say.
@@ -185,7 +188,7 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
   std::array<double, kMaxGears> thetas{};
   const std::span<const double> model = thetas_of(model_.get(), thetas);
   const int m = static_cast<int>(model.size());
-  if (m < 3) return;
+  if (m < 2) return;
   const auto step = [&](int k) {
     return std::log(model[static_cast<std::size_t>(k + 1)] / model[static_cast<std::size_t>(k)]);
   };
@@ -218,6 +221,25 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       part *= growth;
       down += part * scale;
       const double theta = model[static_cast<std::size_t>(k + 1)] * std::exp(-down);
+      bool stood_for = false;  // a gear seen under GPS stands for it
+      for (int j = 1; j <= gears_; ++j)
+        stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
+      if (!stood_for) gap[static_cast<std::size_t>(n_gap++)] = theta;
+    }
+  }
+  // The top step: steps shrink toward the top gears, so a top step larger than the step below it by more
+  // than steps grow from one gear to the next (kMaxGrowth) lacks gears; with no step below it, a top step
+  // larger than any gearbox step (kMaxGearStep) does. The gears it lacks are the fewest that make its steps
+  // no larger than the step below it (that bound), placed at equal steps.
+  if (tuning_.fill_top_step > 0.0) {
+    const double size = step(m - 2);
+    const double bound = m >= 3 ? step(m - 3) : kMaxGearStep;
+    const bool lacks = m >= 3 ? size > kMaxGrowth * bound : size > bound;
+    const int room = kMaxGears - gears_ - n_gap;
+    const int steps = lacks ? std::min(static_cast<int>(std::ceil(size / bound)), room + 1) : 1;
+    const double each = size / steps, half = 0.5 * each;
+    for (int i = 1; i < steps; ++i) {
+      const double theta = model[static_cast<std::size_t>(m - 2)] * std::exp(i * each);
       bool stood_for = false;  // a gear seen under GPS stands for it
       for (int j = 1; j <= gears_; ++j)
         stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);

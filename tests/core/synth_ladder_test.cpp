@@ -374,6 +374,38 @@ TEST_CASE("synth: a ladder's step lacking gears under its top step holds the few
   CHECK(o.speed == Approx(9.0).epsilon(0.05));
 }
 
+TEST_CASE("synth: a top step larger than the step below it by more than steps grow holds a gear") {
+  // A 6-speed whose young model has second, third and fifth gear: fourth was passed in launches, never
+  // driven steadily. The model's top step (0.53) is 1.7 times the step below it (0.31), where a gearbox's
+  // steps shrink toward the top: it holds two, the gear predicted at its middle 1.5 % off the true fourth.
+  // Under GPS the car cruises in fifth at 15 m/s; GPS is lost, the car brakes in fifth to 12 m/s, declutches
+  // 0.5 s and drives on in fourth: its revs are read at that gear's speed, not at third's (24 % slow) or
+  // fifth's (28 % fast).
+  const std::vector<double> six = {0.0550, 0.0788, 0.1083, 0.1433, 0.1834, 0.2280};
+  const auto model = model_of({six[1], six[2], six[4]});
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double t = 0.0;
+    for (; t < 30.0; t += 0.1)
+      (void)synth.step(t, 15.0, 15.0 / six[4]);
+    for (; t < 36.0; t += 0.1)  // braking in fifth to 12 m/s
+      (void)synth.step(t, kMissing, (15.0 - 0.5 * (t - 30.0)) / six[4]);
+    for (; t < 36.5; t += 0.1)
+      (void)synth.step(t, kMissing, 20.0);
+    SynthOutput o{};
+    for (; t < 60.0; t += 0.1)
+      o = synth.step(t, kMissing, 12.0 / six[3]);
+    return o.speed;
+  };
+  CHECK(SpeedSynthesizer(model).ladder_gears() >= 4);
+  gearpulse::SynthTuning without;
+  without.fill_top_step = 0.0;
+  INFO("speed in fourth at 12 m/s: " << outage_speed({}) << " m/s with the top step filled, "
+                                     << outage_speed(without) << " m/s without");
+  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
+  CHECK(std::abs(outage_speed(without) - 12.0) > 2.0);
+}
+
 TEST_CASE("synth: launches seen under GPS tell a ladder whose lowest gear could be first that it is not") {
   // The 7-speed above, whose young model has second, fifth, sixth and seventh gear: its second carries the
   // car at idle at 0.9 m/s, a first gear's speed, so the idle predicts no gear below it. Under GPS the car
