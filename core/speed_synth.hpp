@@ -210,6 +210,10 @@ struct SynthTuning {
   // toward the top gears), or, on a two-gear ladder, more than a factor of 2 (the largest gearbox step):
   // the fewest gears that make its steps no larger than that bound, at equal steps (0: none).
   double fill_top_step = 1.0;
+  // 1: a step of the ladder lacking gears with a step below it (fill_ladder_gaps) holds gearbox steps
+  // between the step above it and the step below it, growing at one rate from one to the other: their
+  // count and places come from both neighbours (0: from the steps above alone).
+  double gap_step_below = 1.0;
   // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).

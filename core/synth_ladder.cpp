@@ -178,13 +178,15 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
 // (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
 // the one above it (between 1 and 1.5), and the count whose sum comes nearest the step in ratio is taken;
 // with no step above it to measure the growth by, the largest of that range (1.5): the fewest gears a
-// gearbox whose steps grow within it allows. The gears go where those steps, scaled to fill the step exactly,
-// put them. Only the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse
-// cadences sometimes a ratio no gear has) stands for the predicted gear within half a predicted step of it.
-// Each predicted gear has the least share of use, no standard error of theta (as those predicted below the
-// ladder) and no number in the model.
+// gearbox whose steps grow within it allows. With a step below it that lacks no gear itself, the steps it
+// holds lie between the step above and that one, so both bound them (gap_step_below): the count is the one
+// whose steps, growing at one rate from the step above to the step below, sum nearest it. The gears go where
+// those steps, scaled to fill the step exactly, put them. Only the model's own steps are judged: a gear seen
+// under GPS (insert_seen_gears, at sparse cadences sometimes a ratio no gear has) stands for the predicted
+// gear within half a predicted step of it. Each predicted gear has the least share of use, no standard error
+// of theta (as those predicted below the ladder) and no number in the model.
 void SpeedSynthesizer::insert_gap_gears() noexcept {
-  if (tuning_.fill_ladder_gaps <= 0.0 || model_ == nullptr) return;
+  if (model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
   const std::span<const double> model = thetas_of(model_.get(), thetas);
   const int m = static_cast<int>(model.size());
@@ -194,7 +196,7 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
   };
   ModeArray gap{};  // predicted thetas, any order
   int n_gap = 0;
-  for (int k = 0; k + 1 < m; ++k) {
+  for (int k = 0; tuning_.fill_ladder_gaps > 0.0 && k + 1 < m; ++k) {
     const double size = step(k);
     // A gear missing in this step makes it the sum of two gearbox steps at least, each no smaller than the
     // step above it: a step under twice the one above it lacks no gear.
@@ -212,13 +214,31 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       if (n > 2 && d >= miss) break;
       best = n, best_sum = sum, miss = d;
     }
+    // With a step below it that lacks no gear itself, each gearbox step the gap holds lies between the
+    // step above it and that one: the count is the one whose steps, growing at one rate from the step
+    // above to the step below, sum nearest the gap (gap_step_below).
+    const double below = k >= 1 ? step(k - 1) : 0.0;
+    const bool bounded = tuning_.gap_step_below > 0.0 && k >= 1 && below < 2.0 * size;
+    double rate = growth;
+    if (bounded) {
+      best = 1, miss = std::numeric_limits<double>::infinity();
+      for (int n = 2; n <= room + 1; ++n) {
+        const double g = std::max(std::pow(below / ref, 1.0 / (n + 1)), kMinGrowth);
+        double total = 0.0, part = ref;
+        for (int i = 0; i < n; ++i)
+          total += part *= g;
+        const double d = std::abs(std::log(size / total));
+        if (d >= miss) break;
+        best = n, best_sum = total, miss = d, rate = g;
+      }
+    }
     if (best < 2) continue;
     // The predicted gears from the top of the step down, each step scaled to fill it.
     const double scale = size / best_sum;
-    const double half = 0.5 * scale * ref * growth;  // half the smallest predicted step
+    const double half = 0.5 * scale * ref * rate;  // half the smallest predicted step
     double part = ref, down = 0.0;
     for (int i = 1; i < best; ++i) {
-      part *= growth;
+      part *= rate;
       down += part * scale;
       const double theta = model[static_cast<std::size_t>(k + 1)] * std::exp(-down);
       bool stood_for = false;  // a gear seen under GPS stands for it

@@ -406,6 +406,37 @@ TEST_CASE("synth: a top step larger than the step below it by more than steps gr
   CHECK(std::abs(outage_speed(without) - 12.0) > 2.0);
 }
 
+TEST_CASE("synth: a step lacking gears between two known steps holds steps growing from one to the other") {
+  // A 7-speed whose young model lacks fourth and fifth: the step from third to sixth (0.68) lies under a
+  // step of 0.18 and over one of 0.29. Each gearbox step it holds lies between those two, so it holds
+  // three, growing at one rate from 0.18 to 0.29: fifth and fourth are predicted within 1 % (from the step
+  // above alone it would hold two, one gear 7 % below the true fifth). Under GPS the car cruises in sixth
+  // at 30 m/s; GPS is lost, it brakes in sixth to 20 m/s, declutches 0.5 s and drives on in fifth.
+  const std::vector<double> seven = {0.1518, 0.2089, 0.2778, 0.3582, 0.4492, 0.5497, 0.6582};
+  const auto model = model_of({seven[0], seven[1], seven[2], seven[5], seven[6]});
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double t = 0.0;
+    for (; t < 30.0; t += 0.1)
+      (void)synth.step(t, 30.0, 30.0 / seven[5]);
+    for (; t < 38.0; t += 0.1)  // braking in sixth to 20 m/s
+      (void)synth.step(t, kMissing, (30.0 - 1.25 * (t - 30.0)) / seven[5]);
+    for (; t < 38.5; t += 0.1)
+      (void)synth.step(t, kMissing, 20.0);
+    SynthOutput o{};
+    for (; t < 60.0; t += 0.1)
+      o = synth.step(t, kMissing, 20.0 / seven[4]);
+    return o.speed;
+  };
+  CHECK(SpeedSynthesizer(model).ladder_gears() == 7);
+  gearpulse::SynthTuning above_alone;
+  above_alone.gap_step_below = 0.0;
+  INFO("speed in fifth at 20 m/s: " << outage_speed({}) << " m/s from both neighbouring steps, "
+                                    << outage_speed(above_alone) << " m/s from the step above alone");
+  CHECK(outage_speed({}) == Approx(20.0).epsilon(0.03));
+  CHECK(std::abs(outage_speed(above_alone) - 20.0) > 1.0);
+}
+
 TEST_CASE("synth: launches seen under GPS tell a ladder whose lowest gear could be first that it is not") {
   // The 7-speed above, whose young model has second, fifth, sixth and seventh gear: its second carries the
   // car at idle at 0.9 m/s, a first gear's speed, so the idle predicts no gear below it. Under GPS the car
