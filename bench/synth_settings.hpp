@@ -77,6 +77,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(fill_ladder_gaps),
     GEARPULSE_FIELD(fill_top_step),
     GEARPULSE_FIELD(gap_step_below),
+    GEARPULSE_FIELD(gap_gear_share),
     GEARPULSE_FIELD(launch_gears),
     GEARPULSE_FIELD(launch_gear_engage),
     GEARPULSE_FIELD(predict_upper_gears),

@@ -214,6 +214,10 @@ struct SynthTuning {
   // between the step above it and the step below it, growing at one rate from one to the other: their
   // count and places come from both neighbours (0: from the steps above alone).
   double gap_step_below = 1.0;
+  // 1: a gear predicted inside the ladder (fill_ladder_gaps, fill_top_step) is used as the less used of the
+  // model's gears beside it: it lies among cruising gears and is no launch gear passed in a second (0: the
+  // least share of use).
+  double gap_gear_share = 1.0;
   // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).

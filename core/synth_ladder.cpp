@@ -183,8 +183,11 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
 // whose steps, growing at one rate from the step above to the step below, sum nearest it. The gears go where
 // those steps, scaled to fill the step exactly, put them. Only the model's own steps are judged: a gear seen
 // under GPS (insert_seen_gears, at sparse cadences sometimes a ratio no gear has) stands for the predicted
-// gear within half a predicted step of it. Each predicted gear has the least share of use, no standard error
-// of theta (as those predicted below the ladder) and no number in the model.
+// gear within half a predicted step of it. Each predicted gear is used as the less used of the model's gears
+// beside it (gap_gear_share: it lies among gears driven steadily, not below them, where a launch passes a
+// gear in a second; with the least share it was left within seconds for a gear the speed could reach in that
+// time), and has no standard error of theta (as those predicted below the ladder) and no number in the
+// model.
 void SpeedSynthesizer::insert_gap_gears() noexcept {
   if (model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
@@ -194,7 +197,16 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
   const auto step = [&](int k) {
     return std::log(model[static_cast<std::size_t>(k + 1)] / model[static_cast<std::size_t>(k)]);
   };
-  ModeArray gap{};  // predicted thetas, any order
+  ModeArray gap{}, share{};  // predicted thetas, any order, and their shares of use
+  // A gear predicted inside the ladder is used as the less used of the model's gears beside it
+  // (gap_gear_share), or for the least share.
+  const auto share_beside = [&](int k) {
+    return tuning_.gap_gear_share > 0.0
+               ? std::max(std::min(model_->gears[static_cast<std::size_t>(k)].weight,
+                                   model_->gears[static_cast<std::size_t>(k + 1)].weight),
+                          kMinGearShare)
+               : kMinGearShare;
+  };
   int n_gap = 0;
   for (int k = 0; tuning_.fill_ladder_gaps > 0.0 && k + 1 < m; ++k) {
     const double size = step(k);
@@ -244,7 +256,9 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       bool stood_for = false;  // a gear seen under GPS stands for it
       for (int j = 1; j <= gears_; ++j)
         stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
-      if (!stood_for) gap[static_cast<std::size_t>(n_gap++)] = theta;
+      if (!stood_for)
+        share[static_cast<std::size_t>(n_gap)] = share_beside(k),
+        gap[static_cast<std::size_t>(n_gap++)] = theta;
     }
   }
   // The top step: steps shrink toward the top gears, so a top step larger than the step below it by more
@@ -263,11 +277,13 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       bool stood_for = false;  // a gear seen under GPS stands for it
       for (int j = 1; j <= gears_; ++j)
         stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
-      if (!stood_for) gap[static_cast<std::size_t>(n_gap++)] = theta;
+      if (!stood_for)
+        share[static_cast<std::size_t>(n_gap)] = share_beside(m - 2),
+        gap[static_cast<std::size_t>(n_gap++)] = theta;
     }
   }
   for (int i = 0; i < n_gap; ++i)
-    insert_in_ladder(gap[static_cast<std::size_t>(i)], 0.0, kMinGearShare, 0);
+    insert_in_ladder(gap[static_cast<std::size_t>(i)], 0.0, share[static_cast<std::size_t>(i)], 0);
 }
 
 // A ladder that lacks first gear (lacks_first_gear) has gears below its lowest. Where the fit met a

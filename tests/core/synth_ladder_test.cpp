@@ -437,6 +437,36 @@ TEST_CASE("synth: a step lacking gears between two known steps holds steps growi
   CHECK(std::abs(outage_speed(above_alone) - 20.0) > 1.0);
 }
 
+TEST_CASE("synth: a gear predicted inside the ladder is held as long as the gears beside it") {
+  // A 5-speed whose young model lacks fourth: its top step (0.54) is 1.6 times the step below it, and the
+  // gear predicted there lies 2 % off the true fourth. Under GPS the car cruises in fifth at 21 m/s; GPS is
+  // lost, the car brakes in fifth to 13 m/s, declutches 0.5 s and drives on in fourth at 12 m/s for 20 s.
+  // Used for the least share of use, the predicted gear is left within seconds for third, whose reading
+  // (9 m/s) the speed can fall to in that time; used as the gears beside it, it is held.
+  const std::vector<double> five = {0.0846, 0.1250, 0.1749, 0.2334, 0.2991};
+  const auto model = model_of({five[0], five[1], five[2], five[4]});
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double t = 0.0;
+    for (; t < 30.0; t += 0.1)
+      (void)synth.step(t, 21.0, 21.0 / five[4]);
+    for (; t < 36.0; t += 0.1)  // braking in fifth to 13 m/s
+      (void)synth.step(t, kMissing, (21.0 - 8.0 / 6.0 * (t - 30.0)) / five[4]);
+    for (; t < 36.5; t += 0.1)
+      (void)synth.step(t, kMissing, 20.0);
+    SynthOutput o{};
+    for (; t < 56.5; t += 0.1)
+      o = synth.step(t, kMissing, 12.0 / five[3]);
+    return o.speed;
+  };
+  gearpulse::SynthTuning least;
+  least.gap_gear_share = 0.0;
+  INFO("speed in fourth at 12 m/s: " << outage_speed({}) << " m/s used as the gears beside it, "
+                                     << outage_speed(least) << " m/s for the least share");
+  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
+  CHECK(std::abs(outage_speed(least) - 12.0) > 1.5);
+}
+
 TEST_CASE("synth: launches seen under GPS tell a ladder whose lowest gear could be first that it is not") {
   // The 7-speed above, whose young model has second, fifth, sixth and seventh gear: its second carries the
   // car at idle at 0.9 m/s, a first gear's speed, so the idle predicts no gear below it. Under GPS the car
