@@ -78,6 +78,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(fill_top_step),
     GEARPULSE_FIELD(gap_step_below),
     GEARPULSE_FIELD(gap_gear_share),
+    GEARPULSE_FIELD(gap_step_growth),
     GEARPULSE_FIELD(launch_gears),
     GEARPULSE_FIELD(launch_gear_engage),
     GEARPULSE_FIELD(predict_upper_gears),

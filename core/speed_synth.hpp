@@ -218,6 +218,11 @@ struct SynthTuning {
   // model's gears beside it: it lies among cruising gears and is no launch gear passed in a second (0: the
   // least share of use).
   double gap_gear_share = 1.0;
+  // The factor by which the steps in a step of the ladder lacking gears (fill_ladder_gaps) grow from one
+  // gear to the next lower where no step above the step above it measures it: the geometric middle of the
+  // range a progressive gearbox's steps grow within (1 to 1.5), sqrt 1.5. A step below it bounds the count
+  // (gap_step_below) where it has one.
+  double gap_step_growth = 1.2247;
   // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).

@@ -177,17 +177,16 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
 // lower). How many it lacks is read from the steps above it, as for the gears predicted below the ladder
 // (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
 // the one above it (between 1 and 1.5), and the count whose sum comes nearest the step in ratio is taken;
-// with no step above it to measure the growth by, the largest of that range (1.5): the fewest gears a
-// gearbox whose steps grow within it allows. With a step below it that lacks no gear itself, the steps it
-// holds lie between the step above and that one, so both bound them (gap_step_below): the count is the one
-// whose steps, growing at one rate from the step above to the step below, sum nearest it. The gears go where
-// those steps, scaled to fill the step exactly, put them. Only the model's own steps are judged: a gear seen
-// under GPS (insert_seen_gears, at sparse cadences sometimes a ratio no gear has) stands for the predicted
-// gear within half a predicted step of it. Each predicted gear is used as the less used of the model's gears
-// beside it (gap_gear_share: it lies among gears driven steadily, not below them, where a launch passes a
-// gear in a second; with the least share it was left within seconds for a gear the speed could reach in that
-// time), and has no standard error of theta (as those predicted below the ladder) and no number in the
-// model.
+// with no step above it to measure the growth by, gap_step_growth (the middle of that range). With a step
+// below it that lacks no gear itself, the steps it holds lie between the step above and that one, so both
+// bound them (gap_step_below): the count is the one whose steps, growing at one rate from the step above to
+// the step below, sum nearest it. The gears go where those steps, scaled to fill the step exactly, put them.
+// Only the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse cadences
+// sometimes a ratio no gear has) stands for the predicted gear within half a predicted step of it. Each
+// predicted gear is used as the less used of the model's gears beside it (gap_gear_share: it lies among gears
+// driven steadily, not below them, where a launch passes a gear in a second; with the least share it was left
+// within seconds for a gear the speed could reach in that time), and has no standard error of theta (as those
+// predicted below the ladder) and no number in the model.
 void SpeedSynthesizer::insert_gap_gears() noexcept {
   if (model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
@@ -214,7 +213,8 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
     // step above it: a step under twice the one above it lacks no gear.
     if (k + 2 >= m || size < 2.0 * step(k + 1)) continue;
     const double ref = step(k + 1);
-    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), kMinGrowth, kMaxGrowth) : kMaxGrowth;
+    const double growth =
+        k + 3 < m ? std::clamp(ref / step(k + 2), kMinGrowth, kMaxGrowth) : tuning_.gap_step_growth;
     const int room = kMaxGears - gears_ - n_gap;
     int best = 1;
     double sum = ref * growth, best_sum = sum, miss = std::abs(std::log(size / sum));

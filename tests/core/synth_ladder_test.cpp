@@ -360,9 +360,9 @@ TEST_CASE("synth: a launch through gears missing inside a young ladder climbs th
 TEST_CASE("synth: a ladder's step lacking gears under its top step holds the fewest a gearbox allows") {
   // A 5-speed whose top step is its smallest (0.198) and whose steps grow by 1.2-1.6 a gear below it; its
   // model lacks third gear, so the step from second to fourth (0.707) is more than twice the top step.
-  // With only the top step above it, the growth is not measured: at the largest the prediction takes (1.5
-  // a gear) the step holds two gearbox steps, one gear, near the true third; at a growth of 1 it would
-  // hold four.
+  // With only the top step above it, the growth is not measured; the step below it (0.515) bounds the steps
+  // it holds (gap_step_below): two gearbox steps, one gear, near the true third. From the top step alone at
+  // a growth of 1 it would hold four.
   const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
   SpeedSynthesizer synth(model_of({five[0], five[1], five[3], five[4]}));
   REQUIRE(synth.ladder_gears() == 5);
@@ -407,34 +407,35 @@ TEST_CASE("synth: a top step larger than the step below it by more than steps gr
 }
 
 TEST_CASE("synth: a step lacking gears between two known steps holds steps growing from one to the other") {
-  // A 7-speed whose young model lacks fourth and fifth: the step from third to sixth (0.68) lies under a
-  // step of 0.18 and over one of 0.29. Each gearbox step it holds lies between those two, so it holds
-  // three, growing at one rate from 0.18 to 0.29: fifth and fourth are predicted within 1 % (from the step
-  // above alone it would hold two, one gear 7 % below the true fifth). Under GPS the car cruises in sixth
-  // at 30 m/s; GPS is lost, it brakes in sixth to 20 m/s, declutches 0.5 s and drives on in fifth.
-  const std::vector<double> seven = {0.1518, 0.2089, 0.2778, 0.3582, 0.4492, 0.5497, 0.6582};
-  const auto model = model_of({seven[0], seven[1], seven[2], seven[5], seven[6]});
+  // A 5-speed whose steps grow by 1.2-1.6 a gear from its top step (0.198) down, its model lacking third:
+  // the step from second to fourth (0.707) lies under the top step and over one of 0.515. Each gearbox step
+  // it holds lies between those two, so it holds two, one gear 2 % off the true third; from the step above
+  // alone, at a growth not measured, it would hold three, two gears 14 % above and 10 % below it. Under GPS
+  // the car cruises in fourth at 20 m/s; GPS is lost, it brakes in fourth to 13 m/s, declutches 0.5 s and
+  // drives on in third at 12 m/s.
+  const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
+  const auto model = model_of({five[0], five[1], five[3], five[4]});
   const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(model, tuning);
     double t = 0.0;
     for (; t < 30.0; t += 0.1)
-      (void)synth.step(t, 30.0, 30.0 / seven[5]);
-    for (; t < 38.0; t += 0.1)  // braking in sixth to 20 m/s
-      (void)synth.step(t, kMissing, (30.0 - 1.25 * (t - 30.0)) / seven[5]);
-    for (; t < 38.5; t += 0.1)
+      (void)synth.step(t, 20.0, 20.0 / five[3]);
+    for (; t < 37.0; t += 0.1)  // braking in fourth to 13 m/s
+      (void)synth.step(t, kMissing, (20.0 - (t - 30.0)) / five[3]);
+    for (; t < 37.5; t += 0.1)
       (void)synth.step(t, kMissing, 20.0);
     SynthOutput o{};
-    for (; t < 60.0; t += 0.1)
-      o = synth.step(t, kMissing, 20.0 / seven[4]);
+    for (; t < 57.5; t += 0.1)
+      o = synth.step(t, kMissing, 12.0 / five[2]);
     return o.speed;
   };
-  CHECK(SpeedSynthesizer(model).ladder_gears() == 7);
+  CHECK(SpeedSynthesizer(model).ladder_gears() == 5);
   gearpulse::SynthTuning above_alone;
   above_alone.gap_step_below = 0.0;
-  INFO("speed in fifth at 20 m/s: " << outage_speed({}) << " m/s from both neighbouring steps, "
+  INFO("speed in third at 12 m/s: " << outage_speed({}) << " m/s from both neighbouring steps, "
                                     << outage_speed(above_alone) << " m/s from the step above alone");
-  CHECK(outage_speed({}) == Approx(20.0).epsilon(0.03));
-  CHECK(std::abs(outage_speed(above_alone) - 20.0) > 1.0);
+  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
+  CHECK(std::abs(outage_speed(above_alone) - 12.0) > 1.0);
 }
 
 TEST_CASE("synth: a gear predicted inside the ladder is held as long as the gears beside it") {
