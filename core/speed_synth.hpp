@@ -206,6 +206,23 @@ struct SynthTuning {
   // 1: a step of the model's ladder twice the step above it or more lacks the gears a progressive gearbox
   // has there (its steps do not shrink toward the low gears), predicted from the steps above (0: none).
   double fill_ladder_gaps = 1.0;
+  // 1: the model's top step lacks gears where it is more than 1.5 times the step below it (steps shrink
+  // toward the top gears), or, on a two-gear ladder, more than a factor of 2 (the largest gearbox step):
+  // the fewest gears that make its steps no larger than that bound, at equal steps (0: none).
+  double fill_top_step = 1.0;
+  // 1: a step of the ladder lacking gears with a step below it (fill_ladder_gaps) holds gearbox steps
+  // between the step above it and the step below it, growing at one rate from one to the other: their
+  // count and places come from both neighbours (0: from the steps above alone).
+  double gap_step_below = 1.0;
+  // 1: a gear predicted inside the ladder (fill_ladder_gaps, fill_top_step) is used as the less used of the
+  // model's gears beside it: it lies among cruising gears and is no launch gear passed in a second (0: the
+  // least share of use).
+  double gap_gear_share = 1.0;
+  // The factor by which the steps in a step of the ladder lacking gears (fill_ladder_gaps) grow from one
+  // gear to the next lower where no step above the step above it measures it: the geometric middle of the
+  // range a progressive gearbox's steps grow within (1 to 1.5), sqrt 1.5. A step below it bounds the count
+  // (gap_step_below) where it has one.
+  double gap_step_growth = 1.2247;
   // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).

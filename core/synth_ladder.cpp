@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <span>
 
 #include "core/estimator.hpp"
@@ -21,6 +22,8 @@ constexpr double kMinGearShare = 0.02;  // no gear is ever ruled out by its trai
 // gears predicted below the ladder and inside it take it from the steps above them: progressive, so at
 // least 1; at most 1.5, the fewest gears predicted where the steps grow faster.
 constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
+// The largest step (log theta ratio) of a gearbox: first to second gear in a four-speed box, a factor of 2.
+constexpr double kMaxGearStep = std::numbers::ln2;
 
 // What the fit saw of the revs in gear `index` of the model (extra.revs): `key` of its entry, NaN where the
 // model does not say.
@@ -174,30 +177,44 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
 // lower). How many it lacks is read from the steps above it, as for the gears predicted below the ladder
 // (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
 // the one above it (between 1 and 1.5), and the count whose sum comes nearest the step in ratio is taken;
-// with no step above it to measure the growth by, the largest of that range (1.5): the fewest gears a
-// gearbox whose steps grow within it allows. The gears go where those steps, scaled to fill the step exactly,
-// put them. Only the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse
-// cadences sometimes a ratio no gear has) stands for the predicted gear within half a predicted step of it.
-// Each predicted gear has the least share of use, no standard error of theta (as those predicted below the
-// ladder) and no number in the model.
+// with no step above it to measure the growth by, gap_step_growth (the middle of that range). With a step
+// below it that lacks no gear itself, the steps it holds lie between the step above and that one, so both
+// bound them (gap_step_below): the count is the one whose steps, growing at one rate from the step above to
+// the step below, sum nearest it. The gears go where those steps, scaled to fill the step exactly, put them.
+// Only the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse cadences
+// sometimes a ratio no gear has) stands for the predicted gear within half a predicted step of it. Each
+// predicted gear is used as the less used of the model's gears beside it (gap_gear_share: it lies among gears
+// driven steadily, not below them, where a launch passes a gear in a second; with the least share it was left
+// within seconds for a gear the speed could reach in that time), and has no standard error of theta (as those
+// predicted below the ladder) and no number in the model.
 void SpeedSynthesizer::insert_gap_gears() noexcept {
-  if (tuning_.fill_ladder_gaps <= 0.0 || model_ == nullptr) return;
+  if (model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
   const std::span<const double> model = thetas_of(model_.get(), thetas);
   const int m = static_cast<int>(model.size());
-  if (m < 3) return;
+  if (m < 2) return;
   const auto step = [&](int k) {
     return std::log(model[static_cast<std::size_t>(k + 1)] / model[static_cast<std::size_t>(k)]);
   };
-  ModeArray gap{};  // predicted thetas, any order
+  ModeArray gap{}, share{};  // predicted thetas, any order, and their shares of use
+  // A gear predicted inside the ladder is used as the less used of the model's gears beside it
+  // (gap_gear_share), or for the least share.
+  const auto share_beside = [&](int k) {
+    return tuning_.gap_gear_share > 0.0
+               ? std::max(std::min(model_->gears[static_cast<std::size_t>(k)].weight,
+                                   model_->gears[static_cast<std::size_t>(k + 1)].weight),
+                          kMinGearShare)
+               : kMinGearShare;
+  };
   int n_gap = 0;
-  for (int k = 0; k + 1 < m; ++k) {
+  for (int k = 0; tuning_.fill_ladder_gaps > 0.0 && k + 1 < m; ++k) {
     const double size = step(k);
     // A gear missing in this step makes it the sum of two gearbox steps at least, each no smaller than the
     // step above it: a step under twice the one above it lacks no gear.
     if (k + 2 >= m || size < 2.0 * step(k + 1)) continue;
     const double ref = step(k + 1);
-    const double growth = k + 3 < m ? std::clamp(ref / step(k + 2), kMinGrowth, kMaxGrowth) : kMaxGrowth;
+    const double growth =
+        k + 3 < m ? std::clamp(ref / step(k + 2), kMinGrowth, kMaxGrowth) : tuning_.gap_step_growth;
     const int room = kMaxGears - gears_ - n_gap;
     int best = 1;
     double sum = ref * growth, best_sum = sum, miss = std::abs(std::log(size / sum));
@@ -209,23 +226,64 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       if (n > 2 && d >= miss) break;
       best = n, best_sum = sum, miss = d;
     }
+    // With a step below it that lacks no gear itself, each gearbox step the gap holds lies between the
+    // step above it and that one: the count is the one whose steps, growing at one rate from the step
+    // above to the step below, sum nearest the gap (gap_step_below).
+    const double below = k >= 1 ? step(k - 1) : 0.0;
+    const bool bounded = tuning_.gap_step_below > 0.0 && k >= 1 && below < 2.0 * size;
+    double rate = growth;
+    if (bounded) {
+      best = 1, miss = std::numeric_limits<double>::infinity();
+      for (int n = 2; n <= room + 1; ++n) {
+        const double g = std::max(std::pow(below / ref, 1.0 / (n + 1)), kMinGrowth);
+        double total = 0.0, part = ref;
+        for (int i = 0; i < n; ++i)
+          total += part *= g;
+        const double d = std::abs(std::log(size / total));
+        if (d >= miss) break;
+        best = n, best_sum = total, miss = d, rate = g;
+      }
+    }
     if (best < 2) continue;
     // The predicted gears from the top of the step down, each step scaled to fill it.
     const double scale = size / best_sum;
-    const double half = 0.5 * scale * ref * growth;  // half the smallest predicted step
+    const double half = 0.5 * scale * ref * rate;  // half the smallest predicted step
     double part = ref, down = 0.0;
     for (int i = 1; i < best; ++i) {
-      part *= growth;
+      part *= rate;
       down += part * scale;
       const double theta = model[static_cast<std::size_t>(k + 1)] * std::exp(-down);
       bool stood_for = false;  // a gear seen under GPS stands for it
       for (int j = 1; j <= gears_; ++j)
         stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
-      if (!stood_for) gap[static_cast<std::size_t>(n_gap++)] = theta;
+      if (!stood_for)
+        share[static_cast<std::size_t>(n_gap)] = share_beside(k),
+        gap[static_cast<std::size_t>(n_gap++)] = theta;
+    }
+  }
+  // The top step: steps shrink toward the top gears, so a top step larger than the step below it by more
+  // than steps grow from one gear to the next (kMaxGrowth) lacks gears; with no step below it, a top step
+  // larger than any gearbox step (kMaxGearStep) does. The gears it lacks are the fewest that make its steps
+  // no larger than the step below it (that bound), placed at equal steps.
+  if (tuning_.fill_top_step > 0.0) {
+    const double size = step(m - 2);
+    const double bound = m >= 3 ? step(m - 3) : kMaxGearStep;
+    const bool lacks = m >= 3 ? size > kMaxGrowth * bound : size > bound;
+    const int room = kMaxGears - gears_ - n_gap;
+    const int steps = lacks ? std::min(static_cast<int>(std::ceil(size / bound)), room + 1) : 1;
+    const double each = size / steps, half = 0.5 * each;
+    for (int i = 1; i < steps; ++i) {
+      const double theta = model[static_cast<std::size_t>(m - 2)] * std::exp(i * each);
+      bool stood_for = false;  // a gear seen under GPS stands for it
+      for (int j = 1; j <= gears_; ++j)
+        stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
+      if (!stood_for)
+        share[static_cast<std::size_t>(n_gap)] = share_beside(m - 2),
+        gap[static_cast<std::size_t>(n_gap++)] = theta;
     }
   }
   for (int i = 0; i < n_gap; ++i)
-    insert_in_ladder(gap[static_cast<std::size_t>(i)], 0.0, kMinGearShare, 0);
+    insert_in_ladder(gap[static_cast<std::size_t>(i)], 0.0, share[static_cast<std::size_t>(i)], 0);
 }
 
 // A ladder that lacks first gear (lacks_first_gear) has gears below its lowest. Where the fit met a

@@ -360,9 +360,9 @@ TEST_CASE("synth: a launch through gears missing inside a young ladder climbs th
 TEST_CASE("synth: a ladder's step lacking gears under its top step holds the fewest a gearbox allows") {
   // A 5-speed whose top step is its smallest (0.198) and whose steps grow by 1.2-1.6 a gear below it; its
   // model lacks third gear, so the step from second to fourth (0.707) is more than twice the top step.
-  // With only the top step above it, the growth is not measured: at the largest the prediction takes (1.5
-  // a gear) the step holds two gearbox steps, one gear, near the true third; at a growth of 1 it would
-  // hold four.
+  // With only the top step above it, the growth is not measured; the step below it (0.515) bounds the steps
+  // it holds (gap_step_below): two gearbox steps, one gear, near the true third. From the top step alone at
+  // a growth of 1 it would hold four.
   const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
   SpeedSynthesizer synth(model_of({five[0], five[1], five[3], five[4]}));
   REQUIRE(synth.ladder_gears() == 5);
@@ -372,6 +372,100 @@ TEST_CASE("synth: a ladder's step lacking gears under its top step holds the few
     synth.step(k, 9.0, 9.0 / five[2]);
   const SynthOutput o = synth.step(30.0, kMissing, 9.0 / five[2]);
   CHECK(o.speed == Approx(9.0).epsilon(0.05));
+}
+
+TEST_CASE("synth: a top step larger than the step below it by more than steps grow holds a gear") {
+  // A 6-speed whose young model has second, third and fifth gear: fourth was passed in launches, never
+  // driven steadily. The model's top step (0.53) is 1.7 times the step below it (0.31), where a gearbox's
+  // steps shrink toward the top: it holds two, the gear predicted at its middle 1.5 % off the true fourth.
+  // Under GPS the car cruises in fifth at 15 m/s; GPS is lost, the car brakes in fifth to 12 m/s, declutches
+  // 0.5 s and drives on in fourth: its revs are read at that gear's speed, not at third's (24 % slow) or
+  // fifth's (28 % fast).
+  const std::vector<double> six = {0.0550, 0.0788, 0.1083, 0.1433, 0.1834, 0.2280};
+  const auto model = model_of({six[1], six[2], six[4]});
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double t = 0.0;
+    for (; t < 30.0; t += 0.1)
+      (void)synth.step(t, 15.0, 15.0 / six[4]);
+    for (; t < 36.0; t += 0.1)  // braking in fifth to 12 m/s
+      (void)synth.step(t, kMissing, (15.0 - 0.5 * (t - 30.0)) / six[4]);
+    for (; t < 36.5; t += 0.1)
+      (void)synth.step(t, kMissing, 20.0);
+    SynthOutput o{};
+    for (; t < 60.0; t += 0.1)
+      o = synth.step(t, kMissing, 12.0 / six[3]);
+    return o.speed;
+  };
+  CHECK(SpeedSynthesizer(model).ladder_gears() >= 4);
+  gearpulse::SynthTuning without;
+  without.fill_top_step = 0.0;
+  INFO("speed in fourth at 12 m/s: " << outage_speed({}) << " m/s with the top step filled, "
+                                     << outage_speed(without) << " m/s without");
+  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
+  CHECK(std::abs(outage_speed(without) - 12.0) > 2.0);
+}
+
+TEST_CASE("synth: a step lacking gears between two known steps holds steps growing from one to the other") {
+  // A 5-speed whose steps grow by 1.2-1.6 a gear from its top step (0.198) down, its model lacking third:
+  // the step from second to fourth (0.707) lies under the top step and over one of 0.515. Each gearbox step
+  // it holds lies between those two, so it holds two, one gear 2 % off the true third; from the step above
+  // alone, at a growth not measured, it would hold three, two gears 14 % above and 10 % below it. Under GPS
+  // the car cruises in fourth at 20 m/s; GPS is lost, it brakes in fourth to 13 m/s, declutches 0.5 s and
+  // drives on in third at 12 m/s.
+  const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
+  const auto model = model_of({five[0], five[1], five[3], five[4]});
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double t = 0.0;
+    for (; t < 30.0; t += 0.1)
+      (void)synth.step(t, 20.0, 20.0 / five[3]);
+    for (; t < 37.0; t += 0.1)  // braking in fourth to 13 m/s
+      (void)synth.step(t, kMissing, (20.0 - (t - 30.0)) / five[3]);
+    for (; t < 37.5; t += 0.1)
+      (void)synth.step(t, kMissing, 20.0);
+    SynthOutput o{};
+    for (; t < 57.5; t += 0.1)
+      o = synth.step(t, kMissing, 12.0 / five[2]);
+    return o.speed;
+  };
+  CHECK(SpeedSynthesizer(model).ladder_gears() == 5);
+  gearpulse::SynthTuning above_alone;
+  above_alone.gap_step_below = 0.0;
+  INFO("speed in third at 12 m/s: " << outage_speed({}) << " m/s from both neighbouring steps, "
+                                    << outage_speed(above_alone) << " m/s from the step above alone");
+  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
+  CHECK(std::abs(outage_speed(above_alone) - 12.0) > 1.0);
+}
+
+TEST_CASE("synth: a gear predicted inside the ladder is held as long as the gears beside it") {
+  // A 5-speed whose young model lacks fourth: its top step (0.54) is 1.6 times the step below it, and the
+  // gear predicted there lies 2 % off the true fourth. Under GPS the car cruises in fifth at 21 m/s; GPS is
+  // lost, the car brakes in fifth to 13 m/s, declutches 0.5 s and drives on in fourth at 12 m/s for 20 s.
+  // Used for the least share of use, the predicted gear is left within seconds for third, whose reading
+  // (9 m/s) the speed can fall to in that time; used as the gears beside it, it is held.
+  const std::vector<double> five = {0.0846, 0.1250, 0.1749, 0.2334, 0.2991};
+  const auto model = model_of({five[0], five[1], five[2], five[4]});
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    double t = 0.0;
+    for (; t < 30.0; t += 0.1)
+      (void)synth.step(t, 21.0, 21.0 / five[4]);
+    for (; t < 36.0; t += 0.1)  // braking in fifth to 13 m/s
+      (void)synth.step(t, kMissing, (21.0 - 8.0 / 6.0 * (t - 30.0)) / five[4]);
+    for (; t < 36.5; t += 0.1)
+      (void)synth.step(t, kMissing, 20.0);
+    SynthOutput o{};
+    for (; t < 56.5; t += 0.1)
+      o = synth.step(t, kMissing, 12.0 / five[3]);
+    return o.speed;
+  };
+  gearpulse::SynthTuning least;
+  least.gap_gear_share = 0.0;
+  INFO("speed in fourth at 12 m/s: " << outage_speed({}) << " m/s used as the gears beside it, "
+                                     << outage_speed(least) << " m/s for the least share");
+  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
+  CHECK(std::abs(outage_speed(least) - 12.0) > 1.5);
 }
 
 TEST_CASE("synth: launches seen under GPS tell a ladder whose lowest gear could be first that it is not") {
