@@ -95,6 +95,27 @@ double launch_distance_error(std::shared_ptr<const GearModel> model, const gearp
   return std::abs(synthesized - driven) / driven;
 }
 
+// The speed output at the end of an outage at the tracker's hops (0.1 s): 30 s cruising under GPS at `cruise`
+// m/s in the gear of `theta_from`; GPS lost, braking in that gear to `braked` m/s over `brake_s`; 0.5 s
+// declutched (20 Hz); then `drive_s` in the gear of `theta_to` at `speed` m/s.
+double downshift_outage_speed(std::shared_ptr<const GearModel> model, const gearpulse::SynthTuning& tuning,
+                              double theta_from, double cruise, double braked, double brake_s,
+                              double theta_to, double speed, double drive_s) {
+  SpeedSynthesizer synth(std::move(model), tuning);
+  const double braked_at = 30.0 + brake_s, engaged_at = braked_at + 0.5;
+  double t = 0.0;
+  for (; t < 30.0; t += 0.1)
+    (void)synth.step(t, cruise, cruise / theta_from);
+  for (; t < braked_at; t += 0.1)
+    (void)synth.step(t, kMissing, (cruise - (cruise - braked) * (t - 30.0) / brake_s) / theta_from);
+  for (; t < engaged_at; t += 0.1)
+    (void)synth.step(t, kMissing, 20.0);
+  SynthOutput o{};
+  for (; t < engaged_at + drive_s; t += 0.1)
+    o = synth.step(t, kMissing, speed / theta_to);
+  return o.speed;
+}
+
 }  // namespace
 
 TEST_CASE("synth: a model swap mid-outage keeps the output continuous") {
@@ -383,19 +404,8 @@ TEST_CASE("synth: a top step larger than the step below it by more than steps gr
   // fifth's (28 % fast).
   const std::vector<double> six = {0.0550, 0.0788, 0.1083, 0.1433, 0.1834, 0.2280};
   const auto model = model_of({six[1], six[2], six[4]});
-  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double t = 0.0;
-    for (; t < 30.0; t += 0.1)
-      (void)synth.step(t, 15.0, 15.0 / six[4]);
-    for (; t < 36.0; t += 0.1)  // braking in fifth to 12 m/s
-      (void)synth.step(t, kMissing, (15.0 - 0.5 * (t - 30.0)) / six[4]);
-    for (; t < 36.5; t += 0.1)
-      (void)synth.step(t, kMissing, 20.0);
-    SynthOutput o{};
-    for (; t < 60.0; t += 0.1)
-      o = synth.step(t, kMissing, 12.0 / six[3]);
-    return o.speed;
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {  // braking in fifth to 12 m/s
+    return downshift_outage_speed(model, tuning, six[4], 15.0, 12.0, 6.0, six[3], 12.0, 23.5);
   };
   CHECK(SpeedSynthesizer(model).ladder_gears() >= 4);
   gearpulse::SynthTuning without;
@@ -415,19 +425,8 @@ TEST_CASE("synth: a step lacking gears between two known steps holds steps growi
   // drives on in third at 12 m/s.
   const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
   const auto model = model_of({five[0], five[1], five[3], five[4]});
-  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double t = 0.0;
-    for (; t < 30.0; t += 0.1)
-      (void)synth.step(t, 20.0, 20.0 / five[3]);
-    for (; t < 37.0; t += 0.1)  // braking in fourth to 13 m/s
-      (void)synth.step(t, kMissing, (20.0 - (t - 30.0)) / five[3]);
-    for (; t < 37.5; t += 0.1)
-      (void)synth.step(t, kMissing, 20.0);
-    SynthOutput o{};
-    for (; t < 57.5; t += 0.1)
-      o = synth.step(t, kMissing, 12.0 / five[2]);
-    return o.speed;
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {  // braking in fourth to 13 m/s
+    return downshift_outage_speed(model, tuning, five[3], 20.0, 13.0, 7.0, five[2], 12.0, 20.0);
   };
   CHECK(SpeedSynthesizer(model).ladder_gears() == 5);
   gearpulse::SynthTuning above_alone;
@@ -446,19 +445,8 @@ TEST_CASE("synth: a gear predicted inside the ladder is held as long as the gear
   // (9 m/s) the speed can fall to in that time; used as the gears beside it, it is held.
   const std::vector<double> five = {0.0846, 0.1250, 0.1749, 0.2334, 0.2991};
   const auto model = model_of({five[0], five[1], five[2], five[4]});
-  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {
-    SpeedSynthesizer synth(model, tuning);
-    double t = 0.0;
-    for (; t < 30.0; t += 0.1)
-      (void)synth.step(t, 21.0, 21.0 / five[4]);
-    for (; t < 36.0; t += 0.1)  // braking in fifth to 13 m/s
-      (void)synth.step(t, kMissing, (21.0 - 8.0 / 6.0 * (t - 30.0)) / five[4]);
-    for (; t < 36.5; t += 0.1)
-      (void)synth.step(t, kMissing, 20.0);
-    SynthOutput o{};
-    for (; t < 56.5; t += 0.1)
-      o = synth.step(t, kMissing, 12.0 / five[3]);
-    return o.speed;
+  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {  // braking in fifth to 13 m/s
+    return downshift_outage_speed(model, tuning, five[4], 21.0, 13.0, 6.0, five[3], 12.0, 20.0);
   };
   gearpulse::SynthTuning least;
   least.gap_gear_share = 0.0;
