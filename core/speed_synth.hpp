@@ -338,6 +338,7 @@ class SpeedSynthesizer {
   void load_model(const GearModel* model) noexcept;
   void insert_seen_gears() noexcept;
   void insert_gap_gears() noexcept;
+  [[nodiscard]] bool seen_gear_near(double theta, double half) const noexcept;
   void insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
   void insert_fitted_lower_gears(const GearModel* model) noexcept;
   void load_engage_shares() noexcept;

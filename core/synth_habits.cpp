@@ -30,14 +30,13 @@ void accumulate(double x, double& mean, double& var, double& count, double memor
   var += k * (d * d * (1.0 - k) - var);
 }
 
-// A number under `key` of a JSON object; NaN if absent or not a number.
-double number(const nlohmann::json& j, const char* key) noexcept {
+}  // namespace
+
+double extra_number(const nlohmann::json& j, const char* key) noexcept {
   if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
   const auto it = j.find(key);
   return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
 }
-
-}  // namespace
 
 // Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
 void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning) noexcept {
@@ -46,7 +45,7 @@ void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning)
   const nlohmann::json& extra = model->extra;
   if (!extra.is_object()) return;
   if (const auto idle = extra.find("idle"); idle != extra.end()) {
-    const double f = number(*idle, "freq"), sd = number(*idle, "sd");
+    const double f = extra_number(*idle, "freq"), sd = extra_number(*idle, "sd");
     if (std::isfinite(f) && f > 0.0) {
       warm_idle_ = f;
       if (idle_count_ <= 0.0 && std::isfinite(sd) && sd >= 0.0) {
@@ -60,7 +59,7 @@ void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning)
   // The rolling idle the fit saw, until GPS shows this car rolling (a prior worth a few samples, as the
   // idle's).
   if (const auto rolling = extra.find("rolling_idle"); rolling != extra.end() && roll_time_ <= 0.0) {
-    const double f = number(*rolling, "freq");
+    const double f = extra_number(*rolling, "freq");
     if (std::isfinite(f) && f > 0.0) {
       constexpr double kPriorSamples = 5.0;
       roll_mean_ = f;
@@ -72,7 +71,7 @@ void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning)
   // the seconds the fit saw, up to idle_braking_prior, so that the drive's own fixes soon outweigh it.
   if (const auto braking = extra.find("idle_braking");
       braking != extra.end() && idle_coast_count_ <= 0.0 && tuning.idle_braking_prior > 0.0) {
-    const double a = number(*braking, "accel"), seconds = number(*braking, "seconds");
+    const double a = extra_number(*braking, "accel"), seconds = extra_number(*braking, "seconds");
     if (std::isfinite(a) && std::isfinite(seconds) && seconds > 0.0) {
       idle_coast_mean_ = idle_braking::clip(a);
       idle_coast_count_ = std::min(seconds, tuning.idle_braking_prior);
@@ -96,7 +95,8 @@ void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& mode
   for (int j = 1; j <= gears; ++j) {
     if (model_gear[j] == 0) continue;  // a gear seen under GPS: the driver's revs at large (below)
     const nlohmann::json& r = (*revs)[static_cast<std::size_t>(model_gear[j] - 1)];
-    const double m = number(r, "mean_log"), sd = number(r, "sd_log"), n = number(r, "samples");
+    const double m = extra_number(r, "mean_log"), sd = extra_number(r, "sd_log"),
+                 n = extra_number(r, "samples");
     if (!std::isfinite(m) || !std::isfinite(sd) || sd < 0.0 || !std::isfinite(n) || !(n > 0.0)) continue;
     mean[j] = m;
     var[j] = sd * sd;

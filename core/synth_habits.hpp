@@ -12,6 +12,9 @@
 
 namespace gearpulse {
 
+// A number under `key` of a JSON object (a model's extra fields); NaN if absent or not a number.
+[[nodiscard]] double extra_number(const nlohmann::json& j, const char* key) noexcept;
+
 struct SynthTuning;
 
 class SynthHabits {

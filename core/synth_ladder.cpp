@@ -28,14 +28,11 @@ constexpr double kMaxGearStep = std::numbers::ln2;
 // What the fit saw of the revs in gear `index` of the model (extra.revs): `key` of its entry, NaN where the
 // model does not say.
 double fitted_revs(const GearModel& model, std::size_t index, const char* key) noexcept {
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  if (!model.extra.is_object()) return nan;
+  if (!model.extra.is_object()) return std::numeric_limits<double>::quiet_NaN();
   const auto revs = model.extra.find("revs");
-  if (revs == model.extra.end() || !revs->is_array() || revs->size() != model.gears.size()) return nan;
-  const nlohmann::json& r = (*revs)[index];
-  if (!r.is_object()) return nan;
-  const auto it = r.find(key);
-  return it != r.end() && it->is_number() ? it->get<double>() : nan;
+  if (revs == model.extra.end() || !revs->is_array() || revs->size() != model.gears.size())
+    return std::numeric_limits<double>::quiet_NaN();
+  return extra_number((*revs)[index], key);
 }
 
 // The upper end of the revs the fit saw in gear `index` of the model (ln Hz: extra.revs' mean_log plus
@@ -168,6 +165,14 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
   ++gears_;
 }
 
+// Whether a gear seen under GPS that the model lacks lies within `half` (in log theta) of `theta`: such a
+// gear stands for a gear predicted there.
+bool SpeedSynthesizer::seen_gear_near(double theta, double half) const noexcept {
+  for (int j = 1; j <= gears_; ++j)
+    if (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half) return true;
+  return false;
+}
+
 // A young model lacks the gears not yet driven steadily, and those may lie between gears it has: the
 // gears passed in a launch, between a low gear driven steadily (creeping in town) and the cruising gears.
 // A gearbox is progressive: its steps (log theta ratios) do not shrink toward the low gears. A gear missing
@@ -207,6 +212,13 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
                : kMinGearShare;
   };
   int n_gap = 0;
+  // A gear predicted at `theta` in the step above the model's gear `k`, unless a gear seen under GPS within
+  // `half` of it stands for it.
+  const auto add_gap = [&](double theta, double half, int k) {
+    if (seen_gear_near(theta, half)) return;
+    share[static_cast<std::size_t>(n_gap)] = share_beside(k);
+    gap[static_cast<std::size_t>(n_gap++)] = theta;
+  };
   for (int k = 0; tuning_.fill_ladder_gaps > 0.0 && k + 1 < m; ++k) {
     const double size = step(k);
     // A gear missing in this step makes it the sum of two gearbox steps at least, each no smaller than the
@@ -253,12 +265,7 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       part *= rate;
       down += part * scale;
       const double theta = model[static_cast<std::size_t>(k + 1)] * std::exp(-down);
-      bool stood_for = false;  // a gear seen under GPS stands for it
-      for (int j = 1; j <= gears_; ++j)
-        stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
-      if (!stood_for)
-        share[static_cast<std::size_t>(n_gap)] = share_beside(k),
-        gap[static_cast<std::size_t>(n_gap++)] = theta;
+      add_gap(theta, half, k);
     }
   }
   // The top step: steps shrink toward the top gears, so a top step larger than the step below it by more
@@ -274,12 +281,7 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
     const double each = size / steps, half = 0.5 * each;
     for (int i = 1; i < steps; ++i) {
       const double theta = model[static_cast<std::size_t>(m - 2)] * std::exp(i * each);
-      bool stood_for = false;  // a gear seen under GPS stands for it
-      for (int j = 1; j <= gears_; ++j)
-        stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / theta)) < half);
-      if (!stood_for)
-        share[static_cast<std::size_t>(n_gap)] = share_beside(m - 2),
-        gap[static_cast<std::size_t>(n_gap++)] = theta;
+      add_gap(theta, half, m - 2);
     }
   }
   for (int i = 0; i < n_gap; ++i)
@@ -441,11 +443,9 @@ void SpeedSynthesizer::insert_upper_gears() noexcept {
     const double t = theta[static_cast<std::size_t>(i)];
     const double half = 0.5 * std::log(t / below);
     below = t;
-    bool stood_for = false;
-    for (int j = 1; j <= gears_; ++j)
-      stood_for = stood_for || (model_gear_[j] == 0 && std::abs(std::log(theta_[j] / t)) < half);
-    if (!stood_for)
-      insert_in_ladder(t, 0.0, top_share, 0), upper_theta_[static_cast<std::size_t>(upper_++)] = t;
+    if (seen_gear_near(t, half)) continue;
+    insert_in_ladder(t, 0.0, top_share, 0);
+    upper_theta_[static_cast<std::size_t>(upper_++)] = t;
   }
 }
 
