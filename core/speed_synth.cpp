@@ -305,7 +305,7 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     row[0] = std::exp(-total * dt);
     spread(total, launch, launch_rate);
     for (int j = 1; j <= gears_; ++j)
-      spread(total, j, engage * engage_share_[j]);
+      spread(total, j, engage * weight_[j] / (1.0 - weight_[0]));
     // Moving off and biting within the same step (a step may be longer than a launch): of the launches
     // begun at a uniform time inside dt, the share whose clutch has bitten by its end.
     const double bite = tuning_.bite_rate * dt;

@@ -210,28 +210,18 @@ struct SynthTuning {
   // toward the top gears), or, on a two-gear ladder, more than a factor of 2 (the largest gearbox step):
   // the fewest gears that make its steps no larger than that bound, at equal steps (0: none).
   double fill_top_step = 1.0;
-  // 1: a step of the ladder lacking gears with a step below it (fill_ladder_gaps) holds gearbox steps
-  // between the step above it and the step below it, growing at one rate from one to the other: their
-  // count and places come from both neighbours (0: from the steps above alone).
-  double gap_step_below = 1.0;
   // 1: a gear predicted inside the ladder (fill_ladder_gaps, fill_top_step) is used as the less used of the
   // model's gears beside it: it lies among cruising gears and is no launch gear passed in a second (0: the
   // least share of use).
   double gap_gear_share = 1.0;
   // The factor by which the steps in a step of the ladder lacking gears (fill_ladder_gaps) grow from one
   // gear to the next lower where no step above the step above it measures it: the geometric middle of the
-  // range a progressive gearbox's steps grow within (1 to 1.5), sqrt 1.5. A step below it bounds the count
-  // (gap_step_below) where it has one.
+  // range a progressive gearbox's steps grow within (1 to 1.5), sqrt 1.5.
   double gap_step_growth = 1.2247;
   // 1: the gears below the ladder's lowest measured gear are also as many as the launches from rest seen
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).
   double launch_gears = 1.0;
-  // 1: a gear below the model's lowest (fitted, seen or predicted) is engaged from the clutch as often as
-  // the model's lowest gear is: a launch engages every gear below the cruising ones once, however briefly
-  // each is held, so its share of time in gear (which sets how soon it is left) is not its share of the
-  // engagements (0: engaged by its share of time in gear, as every gear).
-  double launch_gear_engage = 1.0;
   // Gears predicted above the model's top gear, at most (0: none): a young model has not yet cruised in
   // the tall gears. Each is the next step of a gearbox whose steps shrink toward the top, from the model's
   // own top steps, while the highest carries the car at the warm idle slower than top_gear_idle_speed.
@@ -341,7 +331,6 @@ class SpeedSynthesizer {
   [[nodiscard]] bool seen_gear_near(double theta, double half) const noexcept;
   void insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
   void insert_fitted_lower_gears(const GearModel* model) noexcept;
-  void load_engage_shares() noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;
   void insert_predicted_gears() noexcept;
@@ -390,7 +379,6 @@ class SpeedSynthesizer {
   std::array<int, kModes> model_gear_{};
   // How many of the ladder's lowest gears are predicted below the lowest known (insert_predicted_gears).
   int predicted_ = 0;
-  ModeArray engage_share_{};  // per gear, its share of the gears engaged from the clutch (load_engage_shares)
   // How many gears are predicted above the model's top gear (insert_upper_gears), and the thetas of the
   // upper_ of them that joined the ladder (a gear seen under GPS may stand for one).
   int predicted_above_ = 0;

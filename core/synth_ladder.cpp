@@ -99,7 +99,6 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     const double by_use = tuning_.dwell_by_use > 0.0 ? typical / weight_[j] : 1.0;
     leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
-  load_engage_shares();
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
   habits_.load_gear_revs(model, model_gear_, gears_);
   // A gear predicted above the model's top is run as that top gear is: cruising (insert_upper_gears).
@@ -109,24 +108,6 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
       if (theta_[j] == upper_theta_[static_cast<std::size_t>(i)]) habits_.share_gear_revs(top, j);
   }
   sigma_s_ = model ? std::max(model->sigma_freq, 0.0) : 0.0;
-}
-
-// Each gear's share of the gears engaged from the clutch: its share of time in gear, except below the
-// model's lowest gear, where a gear is engaged at least as often as that lowest gear (launch_gear_engage).
-void SpeedSynthesizer::load_engage_shares() noexcept {
-  engage_share_.fill(0.0);
-  int lowest = 0;  // the model's lowest gear's position
-  for (int j = gears_; j >= 1; --j)
-    if (model_gear_[j] > 0) lowest = j;
-  double total = 0.0;
-  for (int j = 1; j <= gears_; ++j) {
-    engage_share_[j] = weight_[j];
-    if (tuning_.launch_gear_engage > 0.0 && j < lowest)
-      engage_share_[j] = std::max(weight_[j], weight_[lowest]);
-    total += engage_share_[j];
-  }
-  for (int j = 1; j <= gears_ && total > 0.0; ++j)
-    engage_share_[j] /= total;
 }
 
 // The gears seen under GPS that the model lacks (seen_) join its ladder in theta order, each used for its
@@ -182,10 +163,8 @@ bool SpeedSynthesizer::seen_gear_near(double theta, double half) const noexcept 
 // lower). How many it lacks is read from the steps above it, as for the gears predicted below the ladder
 // (predict_lower_gears): the steps down from the one above it grow by the factor that step grew by over
 // the one above it (between 1 and 1.5), and the count whose sum comes nearest the step in ratio is taken;
-// with no step above it to measure the growth by, gap_step_growth (the middle of that range). With a step
-// below it that lacks no gear itself, the steps it holds lie between the step above and that one, so both
-// bound them (gap_step_below): the count is the one whose steps, growing at one rate from the step above to
-// the step below, sum nearest it. The gears go where those steps, scaled to fill the step exactly, put them.
+// with no step above it to measure the growth by, gap_step_growth (the middle of that range). The gears go
+// where those steps, scaled to fill the step exactly, put them.
 // Only the model's own steps are judged: a gear seen under GPS (insert_seen_gears, at sparse cadences
 // sometimes a ratio no gear has) stands for the predicted gear within half a predicted step of it. Each
 // predicted gear is used as the less used of the model's gears beside it (gap_gear_share: it lies among gears
@@ -238,31 +217,13 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
       if (n > 2 && d >= miss) break;
       best = n, best_sum = sum, miss = d;
     }
-    // With a step below it that lacks no gear itself, each gearbox step the gap holds lies between the
-    // step above it and that one: the count is the one whose steps, growing at one rate from the step
-    // above to the step below, sum nearest the gap (gap_step_below).
-    const double below = k >= 1 ? step(k - 1) : 0.0;
-    const bool bounded = tuning_.gap_step_below > 0.0 && k >= 1 && below < 2.0 * size;
-    double rate = growth;
-    if (bounded) {
-      best = 1, miss = std::numeric_limits<double>::infinity();
-      for (int n = 2; n <= room + 1; ++n) {
-        const double g = std::max(std::pow(below / ref, 1.0 / (n + 1)), kMinGrowth);
-        double total = 0.0, part = ref;
-        for (int i = 0; i < n; ++i)
-          total += part *= g;
-        const double d = std::abs(std::log(size / total));
-        if (d >= miss) break;
-        best = n, best_sum = total, miss = d, rate = g;
-      }
-    }
     if (best < 2) continue;
     // The predicted gears from the top of the step down, each step scaled to fill it.
     const double scale = size / best_sum;
-    const double half = 0.5 * scale * ref * rate;  // half the smallest predicted step
+    const double half = 0.5 * scale * ref * growth;  // half the smallest predicted step
     double part = ref, down = 0.0;
     for (int i = 1; i < best; ++i) {
-      part *= rate;
+      part *= growth;
       down += part * scale;
       const double theta = model[static_cast<std::size_t>(k + 1)] * std::exp(-down);
       add_gap(theta, half, k);

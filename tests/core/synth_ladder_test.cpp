@@ -378,23 +378,6 @@ TEST_CASE("synth: a launch through gears missing inside a young ladder climbs th
   CHECK(with_gaps < 0.5 * without);
 }
 
-TEST_CASE("synth: a ladder's step lacking gears under its top step holds the fewest a gearbox allows") {
-  // A 5-speed whose top step is its smallest (0.198) and whose steps grow by 1.2-1.6 a gear below it; its
-  // model lacks third gear, so the step from second to fourth (0.707) is more than twice the top step.
-  // With only the top step above it, the growth is not measured; the step below it (0.515) bounds the steps
-  // it holds (gap_step_below): two gearbox steps, one gear, near the true third. From the top step alone at
-  // a growth of 1 it would hold four.
-  const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
-  SpeedSynthesizer synth(model_of({five[0], five[1], five[3], five[4]}));
-  REQUIRE(synth.ladder_gears() == 5);
-  // The gear predicted between second and fourth carries the car within 5 % of the true third: the revs
-  // of a cruise in third at 9 m/s read at its speed within that.
-  for (int k = 0; k < 30; ++k)
-    synth.step(k, 9.0, 9.0 / five[2]);
-  const SynthOutput o = synth.step(30.0, kMissing, 9.0 / five[2]);
-  CHECK(o.speed == Approx(9.0).epsilon(0.05));
-}
-
 TEST_CASE("synth: a top step larger than the step below it by more than steps grow holds a gear") {
   // A 6-speed whose young model has second, third and fifth gear: fourth was passed in launches, never
   // driven steadily. The model's top step (0.53) is 1.7 times the step below it (0.31), where a gearbox's
@@ -414,27 +397,6 @@ TEST_CASE("synth: a top step larger than the step below it by more than steps gr
                                      << outage_speed(without) << " m/s without");
   CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
   CHECK(std::abs(outage_speed(without) - 12.0) > 2.0);
-}
-
-TEST_CASE("synth: a step lacking gears between two known steps holds steps growing from one to the other") {
-  // A 5-speed whose steps grow by 1.2-1.6 a gear from its top step (0.198) down, its model lacking third:
-  // the step from second to fourth (0.707) lies under the top step and over one of 0.515. Each gearbox step
-  // it holds lies between those two, so it holds two, one gear 2 % off the true third; from the step above
-  // alone, at a growth not measured, it would hold three, two gears 14 % above and 10 % below it. Under GPS
-  // the car cruises in fourth at 20 m/s; GPS is lost, it brakes in fourth to 13 m/s, declutches 0.5 s and
-  // drives on in third at 12 m/s.
-  const std::vector<double> five = {0.0430, 0.0720, 0.1060, 0.1460, 0.1780};
-  const auto model = model_of({five[0], five[1], five[3], five[4]});
-  const auto outage_speed = [&](const gearpulse::SynthTuning& tuning) {  // braking in fourth to 13 m/s
-    return downshift_outage_speed(model, tuning, five[3], 20.0, 13.0, 7.0, five[2], 12.0, 20.0);
-  };
-  CHECK(SpeedSynthesizer(model).ladder_gears() == 5);
-  gearpulse::SynthTuning above_alone;
-  above_alone.gap_step_below = 0.0;
-  INFO("speed in third at 12 m/s: " << outage_speed({}) << " m/s from both neighbouring steps, "
-                                    << outage_speed(above_alone) << " m/s from the step above alone");
-  CHECK(outage_speed({}) == Approx(12.0).epsilon(0.05));
-  CHECK(std::abs(outage_speed(above_alone) - 12.0) > 1.0);
 }
 
 TEST_CASE("synth: a gear predicted inside the ladder is held as long as the gears beside it") {
@@ -663,29 +625,6 @@ TEST_CASE("synth: a gear is predicted above a top gear the fit saw run no higher
   CHECK(SpeedSynthesizer(young_hatch(3.4, 3.6), revs_ignored).ladder_gears() == 5);
   // A model that records no revs says nothing of it: no gear is predicted above.
   CHECK(SpeedSynthesizer(model_of({kHatch[1], kHatch[2], kHatch[3]})).ladder_gears() == 3);
-}
-
-TEST_CASE("synth: after each declutch of a launch below a young ladder the next gear predicted is engaged") {
-  // A hard move-off in a jam recorded from the simulator (a random 5-speed, GPS lost at 10 s with the car
-  // at rest), read with a model of third to fifth gear: first and second are predicted below it. Each shift
-  // of the launch passes through the clutch, and the gear engaged after it is the next one up, a predicted
-  // gear after the shift out of first. Engaged by its share of time in gear, the least, the predicted
-  // second loses to the model's third at a jump of the speed, and the filter climbs the ladder a gear high;
-  // engaged as often as the model's lowest gear, as a launch engages every gear below the cruising ones,
-  // it is read in second.
-  const auto model = young_recorded_model("hard_launch_jam", 2);
-  const auto distance_error = [&](const gearpulse::SynthTuning& tuning) {
-    return recorded_outage_error("hard_launch_jam", model, tuning);
-  };
-  const double as_lowest = distance_error({});
-  gearpulse::SynthTuning by_time;
-  by_time.launch_gear_engage = 0.0;
-  const double by_time_share = distance_error(by_time);
-  INFO("distance error over the outage " << 100.0 * as_lowest
-                                         << " % with the gears below engaged as the model's lowest, "
-                                         << 100.0 * by_time_share << " % by their share of time in gear");
-  CHECK(as_lowest < 0.05);
-  CHECK(as_lowest < 0.5 * by_time_share);
 }
 
 TEST_CASE("synth: no gear is predicted above a top gear cruised in for long") {
