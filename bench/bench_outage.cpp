@@ -17,7 +17,8 @@
 //     the frequency tracker's gaps and readings on another line (bench/outage/simulated.cpp); --easy-sim
 //     gives every drive's GPS 0.5 s late and no tracker failures instead. Cadences: the daemon's (frequency
 //     every 0.1 s, a 1 Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app
-//     every 5 s. Seeds: tuning 1..N, report 1001..1000+N.
+//     every 5 s. Seeds: tuning 1..N, report 1001..1000+N; --first-seed S takes S..S+N-1 instead (random
+//     vehicles S+500..), for seeds never used by any decision (a fresh report).
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // --synth KEY=VALUE sets a SynthTuning field of the daemon's synthesis for the run (repeatable; VALUE a
 // number, "inf", or another field's name). --ablate runs the set once as tuned and once per rule of the
@@ -35,7 +36,8 @@
 // format `gearpulse fit` reads; --row-seconds S for logs without a time column): fitted on the logs in
 // even places, replayed on those in odd places, and the other way round (one log: its halves).
 //
-// Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--cadence K] [--real-only] [--sim-only]
+// Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--first-seed S] [--cadence K]
+// [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
 //                     [--fit-minutes M] [--easy-sim] [--worst PCT] [--debug CAR STYLE FROM TO]
 //                     [--log FILE]... [--row-seconds S] [DATA_DIR]
@@ -81,6 +83,12 @@ int main(int argc, char** argv) {
       seeds = std::atoi(argv[++i]);
     } else if (a == "--random" && i + 1 < argc) {
       randoms = std::atoi(argv[++i]);
+    } else if (a == "--first-seed" && i + 1 < argc) {
+      opt.first_seed = std::atol(argv[++i]);
+      if (opt.first_seed < 1) {
+        std::fprintf(stderr, "--first-seed wants a seed of 1 or more: %s\n", argv[i]);
+        return 2;
+      }
     } else if (a == "--trace" && i + 1 < argc) {
       trace.reset(std::fopen(argv[++i], "w"));
       opt.trace = trace.get();

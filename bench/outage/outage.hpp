@@ -35,6 +35,7 @@ struct Options {
   bool easy_sim = false;      // --easy-sim: simulated GPS 0.5 s late on every drive, no tracker failures
   bool candidate = true;      // the candidate IMM filter runs beside the daemon's synthesis
   double worst = 0.0;         // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
+  long first_seed = -1;       // --first-seed N: simulated seeds N.., random vehicles N+500.. (else the set's)
 };
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the

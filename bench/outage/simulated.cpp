@@ -187,12 +187,17 @@ GearModel fit_model(const sim::Vehicle& car, const Cadence& c, double minutes, s
 }  // namespace
 
 void simulated(bool report_set, int seeds, int randoms, const Options& opt, Workload& w) {
-  const std::uint64_t base = report_set ? 1000 : 0;
+  const std::uint64_t base = opt.first_seed > 0 ? static_cast<std::uint64_t>(opt.first_seed - 1)
+                             : report_set       ? 1000
+                                                : 0;
   char title[300];
   std::snprintf(title, sizeof title,
                 "Simulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
                 "style; %s)",
-                report_set ? "REPORT" : "TUNING", static_cast<unsigned long long>(base + 1),
+                opt.first_seed > 0 ? "GIVEN"
+                : report_set       ? "REPORT"
+                                   : "TUNING",
+                static_cast<unsigned long long>(base + 1),
                 static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), opt.fit_minutes,
                 opt.easy_sim ? "--easy-sim: GPS 0.5 s late, no tracker failures"
                              : "GPS 0.2-1.0 s late per drive, tracker gaps and wrong lines");
