@@ -54,6 +54,7 @@ SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const
     : tuning_(tuning), seen_(tuning.seen_gear_fixes) {
   speed_lag_.set_significance(tuning.speed_lag_significance);
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
+  extras_ = read_model_extras(model_.get());
   read_top_gear_revs();
   load_model(model_.get());
   reset();

@@ -53,6 +53,7 @@
 
 #include "core/gear_model.hpp"
 #include "core/launch_gears.hpp"
+#include "core/model_extras.hpp"
 #include "core/sample.hpp"
 #include "core/seen_gears.hpp"
 #include "core/speed_lag.hpp"
@@ -330,7 +331,7 @@ class SpeedSynthesizer {
   void insert_gap_gears() noexcept;
   [[nodiscard]] bool seen_gear_near(double theta, double half) const noexcept;
   void insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
-  void insert_fitted_lower_gears(const GearModel* model) noexcept;
+  void insert_fitted_lower_gears() noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;
   void insert_predicted_gears() noexcept;
@@ -412,6 +413,7 @@ class SpeedSynthesizer {
   double t_ = 0.0;
   int mode_ = 0;        // current MAP mode
   SynthHabits habits_;  // what this engine and driver do: learned under GPS, seeded by the fit
+  ModelExtras extras_;  // what the fit recorded beside the model's ladder, read once per model
   // This step's log-score of the frequency in each gear by the revs this driver runs it at.
   ModeArray revs_habit_{};
   bool at_idle_ = false;      // this step's frequency is at idle

@@ -32,61 +32,44 @@ void accumulate(double x, double& mean, double& var, double& count, double memor
 
 }  // namespace
 
-double extra_number(const nlohmann::json& j, const char* key) noexcept {
-  if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
-  const auto it = j.find(key);
-  return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
-}
-
 // Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
-void SynthHabits::load_engine(const GearModel* model, const SynthTuning& tuning) noexcept {
+void SynthHabits::load_engine(const ModelExtras& extras, const SynthTuning& tuning) noexcept {
   warm_idle_ = std::numeric_limits<double>::quiet_NaN();
-  if (model == nullptr) return;
-  const nlohmann::json& extra = model->extra;
-  if (!extra.is_object()) return;
-  if (const auto idle = extra.find("idle"); idle != extra.end()) {
-    const double f = extra_number(*idle, "freq"), sd = extra_number(*idle, "sd");
-    if (std::isfinite(f) && f > 0.0) {
-      warm_idle_ = f;
-      if (idle_count_ <= 0.0 && std::isfinite(sd) && sd >= 0.0) {
-        constexpr double kPriorSamples = 5.0;  // GPS standing overrules the prior within seconds
-        idle_mean_ = f;
-        idle_var_ = sd * sd;
-        idle_count_ = kPriorSamples;
-      }
+  const double f = extras.idle_freq, sd = extras.idle_sd;
+  if (std::isfinite(f) && f > 0.0) {
+    warm_idle_ = f;
+    if (idle_count_ <= 0.0 && std::isfinite(sd) && sd >= 0.0) {
+      constexpr double kPriorSamples = 5.0;  // GPS standing overrules the prior within seconds
+      idle_mean_ = f;
+      idle_var_ = sd * sd;
+      idle_count_ = kPriorSamples;
     }
   }
   // The rolling idle the fit saw, until GPS shows this car rolling (a prior worth a few samples, as the
   // idle's).
-  if (const auto rolling = extra.find("rolling_idle"); rolling != extra.end() && roll_time_ <= 0.0) {
-    const double f = extra_number(*rolling, "freq");
-    if (std::isfinite(f) && f > 0.0) {
-      constexpr double kPriorSamples = 5.0;
-      roll_mean_ = f;
-      roll_count_ = kPriorSamples;
-      roll_time_ = kRollKnown;
-    }
+  if (const double rolling = extras.rolling_idle;
+      roll_time_ <= 0.0 && std::isfinite(rolling) && rolling > 0.0) {
+    constexpr double kPriorSamples = 5.0;
+    roll_mean_ = rolling;
+    roll_count_ = kPriorSamples;
+    roll_time_ = kRollKnown;
   }
   // How hard this driver slowed declutched at idle in the fit's logs, until GPS shows it in this drive: worth
   // the seconds the fit saw, up to idle_braking_prior, so that the drive's own fixes soon outweigh it.
-  if (const auto braking = extra.find("idle_braking");
-      braking != extra.end() && idle_coast_count_ <= 0.0 && tuning.idle_braking_prior > 0.0) {
-    const double a = extra_number(*braking, "accel"), seconds = extra_number(*braking, "seconds");
-    if (std::isfinite(a) && std::isfinite(seconds) && seconds > 0.0) {
-      idle_coast_mean_ = idle_braking::clip(a);
-      idle_coast_count_ = std::min(seconds, tuning.idle_braking_prior);
-    }
+  const double a = extras.idle_braking_accel, seconds = extras.idle_braking_seconds;
+  if (idle_coast_count_ <= 0.0 && tuning.idle_braking_prior > 0.0 && std::isfinite(a) &&
+      std::isfinite(seconds) && seconds > 0.0) {
+    idle_coast_mean_ = idle_braking::clip(a);
+    idle_coast_count_ = std::min(seconds, tuning.idle_braking_prior);
   }
 }
 
-void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& model_gear, int gears) noexcept {
+void SynthHabits::load_gear_revs(const ModelExtras& extras, const GearNumbers& model_gear,
+                                 int gears) noexcept {
   revs_mean_.fill(0.0);
   revs_sd_.fill(0.0);
   revs_count_.fill(0.0);
-  if (model == nullptr || !model->extra.is_object()) return;
-  const nlohmann::json& extra = model->extra;
-  const auto revs = extra.find("revs");
-  if (revs == extra.end() || !revs->is_array() || revs->size() != model->gears.size()) return;
+  if (!extras.has_revs) return;
   // Each gear's revs are shrunk toward those of all gears by a prior worth kRevsPriorSamples samples: a
   // gear seen on a few samples (a short log, a first gear) says little, and one seen on none says what the
   // driver's revs say at large, rather than leaving the gears that were seen to outscore it.
@@ -94,9 +77,8 @@ void SynthHabits::load_gear_revs(const GearModel* model, const GearNumbers& mode
   double total = 0.0, pooled_mean = 0.0;
   for (int j = 1; j <= gears; ++j) {
     if (model_gear[j] == 0) continue;  // a gear seen under GPS: the driver's revs at large (below)
-    const nlohmann::json& r = (*revs)[static_cast<std::size_t>(model_gear[j] - 1)];
-    const double m = extra_number(r, "mean_log"), sd = extra_number(r, "sd_log"),
-                 n = extra_number(r, "samples");
+    const ModelExtras::GearRevs& r = extras.revs[static_cast<std::size_t>(model_gear[j] - 1)];
+    const double m = r.mean_log, sd = r.sd_log, n = r.samples;
     if (!std::isfinite(m) || !std::isfinite(sd) || sd < 0.0 || !std::isfinite(n) || !(n > 0.0)) continue;
     mean[j] = m;
     var[j] = sd * sd;

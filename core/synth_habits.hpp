@@ -2,18 +2,16 @@
 // What SpeedSynthesizer knows of this engine and driver beyond the gear ladder: the idle (standing, and
 // rolling declutched), the revs run in gear at large and in each gear of the ladder, how hard the car slows
 // declutched (at large, and with the engine at idle), and the revs at which this driver shifts up and down.
-// Seeded from the fit (the model's `extra`: load_engine(), load_gear_revs()) and learned while GPS is present
+// Seeded from the fit (the model's extras: load_engine(), load_gear_revs()) and learned while GPS is present
 // (learn(), learn_shift()) as running means with a bounded memory, so they follow a warming engine and a
 // change of road. The queries turn them into what the filter asks: the idle band, the deceleration
 // declutched, and how the revs move the hazards of a shift. Fixed arrays only: nothing here allocates.
 #include <array>
 
 #include "core/gear_model.hpp"
+#include "core/model_extras.hpp"
 
 namespace gearpulse {
-
-// A number under `key` of a JSON object (a model's extra fields); NaN if absent or not a number.
-[[nodiscard]] double extra_number(const nlohmann::json& j, const char* key) noexcept;
 
 struct SynthTuning;
 
@@ -27,10 +25,10 @@ class SynthHabits {
   // What the fit saw of this engine and driver: the warm idle (also the idle until GPS shows this car
   // standing), the rolling idle and the deceleration declutched at idle until GPS shows them. Anything
   // missing or malformed is left unknown.
-  void load_engine(const GearModel* model, const SynthTuning& tuning) noexcept;
+  void load_engine(const ModelExtras& extras, const SynthTuning& tuning) noexcept;
   // The revs the fit saw run in each gear of a ladder of `gears`, whose positions carry the model's gear
   // numbers `model_gear` (0: a gear the model lacks), once the ladder is built.
-  void load_gear_revs(const GearModel* model, const GearNumbers& model_gear, int gears) noexcept;
+  void load_gear_revs(const ModelExtras& extras, const GearNumbers& model_gear, int gears) noexcept;
   // The gear at position `to` is run as the one at `from` is (its revs band), once load_gear_revs has run.
   void share_gear_revs(int from, int to) noexcept {
     revs_mean_[to] = revs_mean_[from], revs_sd_[to] = revs_sd_[from], revs_count_[to] = revs_count_[from];

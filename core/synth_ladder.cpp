@@ -25,22 +25,11 @@ constexpr double kMinGrowth = 1.0, kMaxGrowth = 1.5;
 // The largest step (log theta ratio) of a gearbox: first to second gear in a four-speed box, a factor of 2.
 constexpr double kMaxGearStep = std::numbers::ln2;
 
-// What the fit saw of the revs in gear `index` of the model (extra.revs): `key` of its entry, NaN where the
-// model does not say.
-double fitted_revs(const GearModel& model, std::size_t index, const char* key) noexcept {
-  if (!model.extra.is_object()) return std::numeric_limits<double>::quiet_NaN();
-  const auto revs = model.extra.find("revs");
-  if (revs == model.extra.end() || !revs->is_array() || revs->size() != model.gears.size())
-    return std::numeric_limits<double>::quiet_NaN();
-  return extra_number((*revs)[index], key);
-}
-
 // The upper end of the revs the fit saw in gear `index` of the model (ln Hz: extra.revs' mean_log plus
 // sd_log), NaN where the model does not say or saw the gear on fewer than `min_samples` pairs.
-double fitted_revs_top(const GearModel& model, std::size_t index, double min_samples) noexcept {
-  return fitted_revs(model, index, "samples") >= min_samples
-             ? fitted_revs(model, index, "mean_log") + fitted_revs(model, index, "sd_log")
-             : std::numeric_limits<double>::quiet_NaN();
+double fitted_revs_top(const ModelExtras& extras, std::size_t index, double min_samples) noexcept {
+  const ModelExtras::GearRevs& r = extras.revs[index];
+  return r.samples >= min_samples ? r.mean_log + r.sd_log : std::numeric_limits<double>::quiet_NaN();
 }
 
 // The model's thetas in `buf` (empty without a model).
@@ -51,14 +40,6 @@ std::span<const double> thetas_of(const GearModel* model,
     for (; n < model->gears.size() && n < buf.size(); ++n)
       buf[n] = model->gears[n].theta;
   return {buf.data(), n};
-}
-
-// The lag the fit found between the speeds and the revs it was given (s; extra.speed_lag, 0 if absent): how
-// late a speed is against the revs logged with it, the same quantity SpeedLag learns from a drive's fixes.
-double model_speed_lag(const GearModel& model) noexcept {
-  if (!model.extra.is_object()) return 0.0;
-  const auto it = model.extra.find("speed_lag");
-  return it != model.extra.end() && it->is_number() ? it->get<double>() : 0.0;
 }
 
 }  // namespace
@@ -77,10 +58,10 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
   }
   insert_seen_gears();
   insert_gap_gears();
-  speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? model_speed_lag(*model) : 0.0);
-  habits_.load_engine(model, tuning_);  // the warm idle, for the gears below the ladder
+  speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? extras_.speed_lag : 0.0);
+  habits_.load_engine(extras_, tuning_);  // the warm idle, for the gears below the ladder
   insert_upper_gears();
-  insert_fitted_lower_gears(model);
+  insert_fitted_lower_gears();
   insert_predicted_gears();
   double total = 0.0;
   for (int j = 1; j <= gears_; ++j)
@@ -100,7 +81,7 @@ void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
     leave_rate_[j] = std::clamp(by_use, 1.0 / kMaxRateFactor, kMaxRateFactor) / tuning_.gear_dwell;
   }
   sigma_v_ = std::max(model ? model->sigma_speed : 0.0, tuning_.min_speed_sigma);
-  habits_.load_gear_revs(model, model_gear_, gears_);
+  habits_.load_gear_revs(extras_, model_gear_, gears_);
   // A gear predicted above the model's top is run as that top gear is: cruising (insert_upper_gears).
   for (int j = 1, top = 0; j <= gears_; ++j) {
     if (model_gear_[j] > 0) top = j;
@@ -254,16 +235,14 @@ void SpeedSynthesizer::insert_gap_gears() noexcept {
 // too few for BIC), those join the ladder, each with the least share of use and no number in the model: the
 // fit's evidence of where they are, where the ladder's steps only predict it (insert_predicted_gears,
 // which goes on below them while the ladder still lacks first gear).
-void SpeedSynthesizer::insert_fitted_lower_gears(const GearModel* model) noexcept {
-  if (tuning_.fitted_lower_gears <= 0.0 || model == nullptr || gears_ == 0 || !lacks_first_gear()) return;
-  const auto it = model->extra.is_object() ? model->extra.find("lower_gears") : model->extra.end();
-  if (it == model->extra.end() || !it->is_array()) return;
+void SpeedSynthesizer::insert_fitted_lower_gears() noexcept {
+  if (tuning_.fitted_lower_gears <= 0.0 || model_ == nullptr || gears_ == 0 || !lacks_first_gear()) return;
   const double below = theta_[1] * std::exp(-2.0 * kGearWindow);  // off the lowest by a gearbox step
   std::array<double, kMaxGears> lower{};
   int n = 0;
-  for (const auto& v : *it)
-    if (v.is_number() && v.get<double>() > 0.0 && v.get<double>() < below && n < kMaxGears - gears_)
-      lower[static_cast<std::size_t>(n++)] = v.get<double>();
+  for (std::size_t i = 0; i < extras_.lower_count; ++i)
+    if (const double theta = extras_.lower_gears[i]; theta < below && n < kMaxGears - gears_)
+      lower[static_cast<std::size_t>(n++)] = theta;
   std::sort(lower.begin(), lower.begin() + n);
   insert_below_ladder({lower.data(), static_cast<std::size_t>(n)});
 }
@@ -380,8 +359,8 @@ void SpeedSynthesizer::read_top_gear_revs() noexcept {
   constexpr double kMinSamples = 5.0;  // the fewest a fit accepts a gear on
   const std::size_t m = model_ ? model_->gears.size() : 0;
   top_gear_below_band_ =
-      m >= 2 && fitted_revs_top(*model_, m - 1, kMinSamples) <= fitted_revs_top(*model_, m - 2, kMinSamples);
-  top_gear_samples_ = m >= 1 ? fitted_revs(*model_, m - 1, "samples") : 0.0;
+      m >= 2 && fitted_revs_top(extras_, m - 1, kMinSamples) <= fitted_revs_top(extras_, m - 2, kMinSamples);
+  top_gear_samples_ = m >= 1 ? extras_.revs[m - 1].samples : 0.0;
   if (!std::isfinite(top_gear_samples_)) top_gear_samples_ = 0.0;
 }
 
@@ -413,6 +392,7 @@ void SpeedSynthesizer::insert_upper_gears() noexcept {
 bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcept {
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
   model_ = std::move(model);
+  extras_ = read_model_extras(model_.get());
   read_top_gear_revs();
   std::array<double, kMaxGears> thetas{};
   seen_.forget_learned(thetas_of(model_.get(), thetas));

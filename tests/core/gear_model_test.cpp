@@ -10,6 +10,7 @@
 
 #include "core/gear_model.hpp"
 #include "core/json_depth.hpp"
+#include "core/model_extras.hpp"
 #include "core/sample.hpp"
 #include "core/speed_synth.hpp"
 #include "tests/test_util.hpp"
@@ -194,4 +195,36 @@ TEST_CASE("model: a mangled model file is a model that holds or std::invalid_arg
   INFO("parsed " << parsed << ", refused " << refused);
   CHECK(parsed > 0);
   CHECK(refused > 0);
+}
+
+TEST_CASE("model: the extras the synthesis reads come out as numbers, the malformed ones unknown") {
+  GearModel m;
+  m.gears = {{0.043, 0.5, 0.0}, {0.072, 0.5, 0.0}};
+  m.extra = nlohmann::json::parse(R"({"speed_lag": 0.4, "idle": {"freq": 27.5, "sd": 1.2},
+      "rolling_idle": {"freq": "fast"}, "idle_braking": {"accel": -0.7, "seconds": 90},
+      "revs": [{"mean_log": 3.9, "sd_log": 0.2, "samples": 300}, {"mean_log": 4.1}],
+      "lower_gears": [0.021, "x", -1, 0.031]})");
+  const gearpulse::ModelExtras x = gearpulse::read_model_extras(&m);
+  CHECK(x.speed_lag == Approx(0.4));
+  CHECK(x.idle_freq == Approx(27.5));
+  CHECK(x.idle_sd == Approx(1.2));
+  CHECK(std::isnan(x.rolling_idle));
+  CHECK(x.idle_braking_accel == Approx(-0.7));
+  CHECK(x.idle_braking_seconds == Approx(90.0));
+  REQUIRE(x.has_revs);
+  CHECK(x.revs[0].samples == Approx(300.0));
+  CHECK(x.revs[1].mean_log == Approx(4.1));
+  CHECK(std::isnan(x.revs[1].sd_log));
+  REQUIRE(x.lower_count == 2);
+  CHECK(x.lower_gears[1] == Approx(0.031));
+  // Revs for another count of gears belong to another ladder: none is read.
+  m.gears.push_back({0.1, 0.2, 0.0});
+  CHECK_FALSE(gearpulse::read_model_extras(&m).has_revs);
+  // No model, or an extra that is no object: nothing known, no lag.
+  CHECK(std::isnan(gearpulse::read_model_extras(nullptr).idle_freq));
+  m.extra = nlohmann::json::array({1, 2});
+  const gearpulse::ModelExtras none = gearpulse::read_model_extras(&m);
+  CHECK(none.speed_lag == 0.0);
+  CHECK_FALSE(none.has_revs);
+  CHECK(none.lower_count == 0);
 }

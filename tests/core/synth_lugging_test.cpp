@@ -113,11 +113,12 @@ TEST_CASE("synth lugging: a young model's few samples of its gears' revs move th
   const auto lugged_at = [&](double samples) {
     const auto model = model_with_revs(2.0, samples);
     SynthHabits habits;
-    habits.load_engine(model.get(), tuning);
+    habits.load_engine(gearpulse::read_model_extras(model.get()), tuning);
     SynthHabits::GearNumbers numbers{};
     for (int j = 1; j <= static_cast<int>(kHatch.size()); ++j)
       numbers[static_cast<std::size_t>(j)] = j;
-    habits.load_gear_revs(model.get(), numbers, static_cast<int>(kHatch.size()));
+    habits.load_gear_revs(gearpulse::read_model_extras(model.get()), numbers,
+                          static_cast<int>(kHatch.size()));
     return habits.lugged(1.35 * kIdle, static_cast<int>(kHatch.size()), tuning);
   };
   CHECK(lugged_at(5) < 0.35);
