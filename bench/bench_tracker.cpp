@@ -6,6 +6,7 @@
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
 //   bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S]
+//                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
 //                 [--hop S] [--offset S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
@@ -15,6 +16,9 @@
 // between f and 2 f, automatic gain, clipping, launches) at 10, 0 and -5 dB over one of two fixed seed
 // sets: "tuning" (seeds 101-106, for choosing constants), "report" (seeds 201-206, for figures only) or
 // "check" (seeds 301-306, a second unseen set for a change's side effects, not for choosing constants).
+// --scene-without switches components of the scenes off (agc, clipping, resonance, spikes, fan, pump,
+// mains, whine, half, swap, third; see sim::scene_without), the noise level unchanged; --scene-snr scores
+// one SNR instead of the three.
 // --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
 // is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
@@ -472,7 +476,38 @@ double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& 
 // 25-30 Hz), where a hop tracked within 5 % is right and any other tracked hop is wrong.
 constexpr double kScoredLoHz = 50.0, kScoredHiHz = 200.0, kIdleLoHz = 20.0;
 
-int scenes(const std::string& set, const TrackerConfig& base) {
+// Whether the hop at t lies within 2 s of a gear shift (the truth moving faster than 60 Hz/s over 0.2 s:
+// a shift, a rev blip) or of the line's entry into the band.
+bool after_shift_or_entry(const sim::FrequencyTrajectory& truth, double t) {
+  constexpr double kWithinS = 2.0, kStepS = 0.05, kSpanS = 0.2, kShiftHzPerS = 60.0;
+  for (double s = 0.0; s <= kWithinS + 1e-9; s += kStepS) {
+    const double a = truth(t - s), b = truth(t - s - kSpanS);
+    if (!(a >= kScoredLoHz && a <= kScoredHiHz)) return true;
+    if (!std::isfinite(b) || std::abs(a - b) > kShiftHzPerS * kSpanS) return true;
+  }
+  return false;
+}
+
+// In-band hops tracked right within 2 s of a shift or entry, and later.
+struct ShiftSplit {
+  std::size_t hops[2] = {}, right_n[2] = {};
+  void add(const TrackPoint& p, double truth, bool after_shift) {
+    if (!(std::isfinite(truth) && truth >= kScoredLoHz && truth <= kScoredHiHz)) return;
+    ++hops[after_shift];
+    right_n[after_shift] += p.tracked && right(p.freq, truth);
+  }
+  void print() const {
+    const std::size_t all = hops[0] + hops[1];
+    std::printf(
+        "      tracked right (points of coverage lost): within 2 s of a shift or entry %5.1f %% of %zu"
+        " (%4.1f), later %5.1f %% of %zu (%4.1f)\n",
+        Score::pct(right_n[1], hops[1]), hops[1], Score::pct(hops[1] - right_n[1], all),
+        Score::pct(right_n[0], hops[0]), hops[0], Score::pct(hops[0] - right_n[0], all));
+  }
+};
+
+int scenes(const std::string& set, const TrackerConfig& base, const std::vector<std::string>& without,
+           const std::vector<double>& snrs) {
   constexpr double kDurationS = 120.0;
   const std::uint64_t first = set == "tuning" ? 101 : set == "check" ? 301 : 201;
   constexpr int kSeeds = 6;
@@ -483,13 +518,23 @@ int scenes(const std::string& set, const TrackerConfig& base) {
       set.c_str(), static_cast<unsigned long long>(first),
       static_cast<unsigned long long>(first + kSeeds - 1), kDurationS, base.band_lo_hz, base.band_hi_hz,
       base.window_s, base.hop_s);
+  if (!without.empty()) {
+    std::printf("without:");
+    for (const std::string& w : without)
+      std::printf(" %s", w.c_str());
+    std::printf("\n");
+  }
   double spent = 0.0, audio = 0.0;
-  for (double snr : {10.0, 0.0, -5.0}) {
+  for (const double snr : snrs) {
     OrderScore pooled, pooled_idle;
+    ShiftSplit split;
     for (int i = 0; i < kSeeds; ++i) {
       const std::uint64_t seed = first + static_cast<std::uint64_t>(i);
       const auto trajectory = sim::launch_drive_trajectory(kDurationS, seed);
-      const sim::LighterSceneConfig cfg = sim::scene_for_seed(seed, snr);
+      sim::LighterSceneConfig cfg = sim::scene_for_seed(seed, snr);
+      for (const std::string& w : without)
+        if (!sim::scene_without(cfg, w, trajectory, kDurationS))
+          throw std::runtime_error("--scene-without: no component " + w);
       const std::vector<float> x = sim::make_lighter_scene(cfg, trajectory, kDurationS);
       TrackerConfig tc = base;
       SlidingDftTracker tracker(tc);
@@ -506,6 +551,7 @@ int scenes(const std::string& set, const TrackerConfig& base) {
                       trajectory(p.t), p.freq, p.snr_db, p.tracked, p.confidence);
         s.add(p, trajectory(p.t));
         idle.add(p, trajectory(p.t));
+        split.add(p, trajectory(p.t), after_shift_or_entry(trajectory, p.t));
       });
       audio += kDurationS;
       char label[64];
@@ -521,6 +567,7 @@ int scenes(const std::string& set, const TrackerConfig& base) {
     std::printf("      idle (%g-%g Hz): %5.1f %% of %zu hops tracked right, %5.1f %% wrong\n", kIdleLoHz,
                 kScoredLoHz, Score::pct(pooled_idle.right_n, pooled_idle.in_band), pooled_idle.in_band,
                 Score::pct(pooled_idle.gross, pooled_idle.in_band));
+    split.print();
   }
   std::printf("CPU: %.2f s for %.0f s of 48 kHz audio (%.3f %% of one core)\n", spent, audio,
               100.0 * spent / audio);
@@ -626,12 +673,15 @@ int main(int argc, char** argv) {
   bool with_cpu = true;
   bool quick = false;
   std::string scene_set;
+  std::vector<std::string> without;
+  std::vector<double> scene_snr = {10.0, 0.0, -5.0};
   WavOptions wav;
   const auto usage = [] {
     std::fprintf(stderr,
                  "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
                  "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
                  "       bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S]\n"
+                 "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]\n"
                  "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
                  "                     [--window S] [--hop S] [--offset S] [--dump]\n");
     return 2;
@@ -643,6 +693,21 @@ int main(int argc, char** argv) {
     if (a == "--scenes" && more) {
       scene_set = argv[++i];
       if (scene_set != "tuning" && scene_set != "report" && scene_set != "check") return usage();
+    } else if (a == "--scene-without" && more) {
+      // A comma-separated list of components.
+      std::string list = argv[++i];
+      for (std::size_t from = 0; from <= list.size();) {
+        const std::size_t comma = std::min(list.find(',', from), list.size());
+        const std::string name = list.substr(from, comma - from);
+        if (std::find(std::begin(sim::kSceneComponents), std::end(sim::kSceneComponents), name) ==
+            std::end(sim::kSceneComponents))
+          return usage();
+        without.push_back(name);
+        from = comma + 1;
+      }
+    } else if (a == "--scene-snr" && more) {
+      if (!parse_number(argv[++i], number)) return usage();
+      scene_snr = {number};
     } else if (a == "--wav" && more) {
       wav.wav = argv[++i];
     } else if (a == "--tacho" && more) {
@@ -686,7 +751,7 @@ int main(int argc, char** argv) {
       if (wav.wav.empty() || wav.tacho.empty()) return usage();
       return score_wav(wav);
     }
-    if (!scene_set.empty()) return scenes(scene_set, wav.config);
+    if (!scene_set.empty()) return scenes(scene_set, wav.config, without, scene_snr);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_tracker: %s\n", e.what());
     return 2;

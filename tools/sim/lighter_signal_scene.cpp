@@ -74,7 +74,7 @@ LighterScene::LighterScene(const LighterSceneConfig& config, FrequencyTrajectory
       (1.0 + body_a2_) / ((1.0 - body_a2_) * ((1.0 + body_a2_) * (1.0 + body_a2_) - body_a1_ * body_a1_));
   body_gain_ = config_.body * std::sqrt(a2) / std::sqrt(var);
   envelope_ = config_.amplitude;
-  gain_ = config_.agc_s > 0.0 ? config_.agc_level / envelope_ : 1.0;
+  gain_ = config_.agc_s > 0.0 ? config_.agc_level / envelope_ : config_.fixed_gain;
   fan_running_ = std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < 0.5;
   fan_next_s_ = std::exponential_distribution<double>(1.0 / config_.fan_on_s)(rng_);
 }
@@ -136,6 +136,8 @@ void LighterScene::generate(std::span<float> out) {
       envelope_ = agc_keep * envelope_ + (1.0 - agc_keep) * std::abs(v);
       gain_ = c.agc_level / std::max(envelope_, 1e-9);
       v *= gain_;
+    } else {
+      v *= c.fixed_gain;
     }
     sample = static_cast<float>(std::clamp(v, -c.clip, c.clip));
     ++n_;
@@ -149,6 +151,48 @@ std::vector<float> make_lighter_scene(const LighterSceneConfig& config, const Fr
   LighterScene scene(config, trajectory);
   scene.generate(out);
   return out;
+}
+
+bool scene_without(LighterSceneConfig& config, std::string_view component,
+                   const FrequencyTrajectory& trajectory, double duration_s) {
+  LighterSceneConfig& c = config;
+  if (component == "agc") {
+    // The envelope is a running mean of |v|: a fixed gain of level / mean |v| holds its mean.
+    LighterSceneConfig raw = c;
+    raw.agc_s = 0.0;
+    raw.fixed_gain = 1.0;
+    raw.clip = std::numeric_limits<double>::infinity();
+    const std::vector<float> x = make_lighter_scene(raw, trajectory, duration_s);
+    double sum = 0.0;
+    for (const float v : x)
+      sum += std::abs(static_cast<double>(v));
+    c.fixed_gain = x.empty() || !(sum > 0.0) ? 1.0 : c.agc_level * static_cast<double>(x.size()) / sum;
+    c.agc_s = 0.0;
+  } else if (component == "clipping") {
+    c.clip = std::numeric_limits<double>::infinity();
+  } else if (component == "resonance") {
+    c.body = 0.0;
+  } else if (component == "spikes") {
+    c.spike_amplitude = 0.0;
+  } else if (component == "fan") {
+    c.fan = 0.0;
+  } else if (component == "pump") {
+    c.pump = 0.0;
+  } else if (component == "mains") {
+    c.mains = 0.0;
+  } else if (component == "whine") {
+    c.alternator = 0.0;
+  } else if (component == "half") {
+    c.half_order = 0.0;
+    c.order_1_5 = 0.0;
+  } else if (component == "swap") {
+    c.load_swing = 0.0;
+  } else if (component == "third") {
+    c.harmonic3 = 0.0;
+  } else {
+    return false;
+  }
+  return true;
 }
 
 FrequencyTrajectory launch_drive_trajectory(double duration_s, std::uint64_t seed) {

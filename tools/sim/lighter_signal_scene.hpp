@@ -21,6 +21,7 @@
 #include <limits>
 #include <random>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "tools/sim/lighter_signal.hpp"
@@ -57,12 +58,26 @@ struct LighterSceneConfig {
   double noise_lo_hz = 50.0;
   double noise_hi_hz = 200.0;
   // Automatic gain: the output's envelope is held near agc_level (full scale 1.0) with this time
-  // constant; 0 = no automatic gain (the output keeps the generator's scale).
+  // constant; 0 = no automatic gain (the output is the generator's scale times fixed_gain).
   double agc_s = 1.5;
   double agc_level = 0.1;
+  double fixed_gain = 1.0;
   double clip = 0.25;  // symmetric clipping after the gain (the card's full scale is 1.0)
   std::uint64_t seed = 1;
 };
+
+// The components scene_without() can switch off, by name: agc, clipping, resonance, spikes, fan, pump,
+// mains, whine (the alternator), half (the 0.5 and 1.5 orders), swap (the load's swap of f and 2 f) and
+// third (the 3rd harmonic).
+inline constexpr std::string_view kSceneComponents[] = {
+    "agc", "clipping", "resonance", "spikes", "fan", "pump", "mains", "whine", "half", "swap", "third"};
+
+// `config` with one component switched off: its level set to 0 (the noise and every other component's
+// draw unchanged, the noise level being set by the fundamental). The automatic gain is replaced by the
+// fixed gain that holds the recording's mean envelope at agc_level (hence `trajectory` and the duration).
+// False for an unknown name.
+[[nodiscard]] bool scene_without(LighterSceneConfig& config, std::string_view component,
+                                 const FrequencyTrajectory& trajectory, double duration_s);
 
 // A scene whose levels and frequencies are drawn from `seed` (within the ranges in the header comment),
 // at the given SNR and sample rate.
