@@ -75,6 +75,12 @@ constexpr double kHalfObserveRight = 0.95;
 constexpr double kThirdMemoryS = 10.0;
 constexpr double kThirdPriorS = 0.5;
 constexpr double kThirdSpreadFloorDb = 2.0;
+// A bin's long-run level below the noise floor scales the floor down to its noise (ToneMap::background())
+// while the track's line stands less than 30 dB over the noise per bin. A louder line leaks through the Hann
+// window's sidelobes (31 dB down, falling 18 dB an octave) over much of a floor's block: the floor is then
+// the leakage's, not a biased noise level (a clean line 50 dB over the noise was held at twice the engine
+// for 0.9 s with the floor scaled there too; see docs/algorithms/tracker-method.md).
+constexpr double kLeakRho = 1000.0;
 // Memory (per hop) of the band's noise level behind the reported SNR.
 constexpr double kNoiseMemory = 0.9;
 // Uncertainty (Hz) of the track's prediction one hop ahead (about the slew of a ramping engine over a
@@ -160,6 +166,7 @@ struct SlidingDftTracker::Impl {
   std::optional<TrackModel> track;
   std::vector<double> at_loglik;  // at()'s candidates, apart from the track's
   double rho_track = kDefaultRho;
+  bool floor_is_noise = true;    // rho_track below kLeakRho (this hop)
   std::optional<ToneMap> tones;  // fixed tones of other equipment, counted as background
 
   TrackOutputs outputs;
@@ -183,9 +190,11 @@ struct SlidingDftTracker::Impl {
   bool analyse(std::uint64_t centre) noexcept;
   [[nodiscard]] double noise_at(double fine_bin) const noexcept;
   // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
-  // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot).
+  // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot), and a
+  // floor read over the bin's noise scaled back to it while the floor is the noise's (floor_is_noise).
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
-    return power()[k] / (noise()[k] * tones->background(k));
+    const double b = tones->background(k);
+    return power()[k] / (noise()[k] * (b < 1.0 && !floor_is_noise ? 1.0 : b));
   }
   void learn_tones(double freq, double right) noexcept;
   // `overrun`, when given, gets what a line on the overrun adds to it (HarmonicEvidence::second_overrun()),
@@ -617,6 +626,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   }
   track->predict();
   tones->mark();
+  floor_is_noise = rho_track < kLeakRho;
   candidate_likelihoods(track->evidence(), track->overrun_layers() ? &track->overrun_excess() : nullptr,
                         track->power_layers() ? &track->power_excess() : nullptr);
   const double level = std::min(1.0, kDefaultRho / rho_track);

@@ -83,7 +83,8 @@ void ToneMap::learn(const double* power, const double* noise, double freq_hz, st
     // not yet tracked) stays in a bin a few windows, a tone stays for good. Until it has persisted it may
     // raise the bin's mean to half the fit level (nothing is left out for it yet, and a tone that stays is
     // learned soon after); fainter readings are learned over many windows anyway.
-    const double next = std::max(1.0, keep_ * tone_[i] + (1.0 - keep_) * std::min(z, 1e3));
+    // Below 1 the mean says the floor stands over this bin's noise (see background()).
+    const double next = keep_ * tone_[i] + (1.0 - keep_) * std::min(z, 1e3);
     tone_[i] = loud(z) && time_[i] < kPersist ? std::min(next, std::max(tone_[i], 0.5 * kFitLevel)) : next;
   }
 }

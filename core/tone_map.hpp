@@ -1,9 +1,10 @@
 #pragma once
 // Fixed tones of other equipment (a fan's or a pump's line) that the engine-frequency tracker counts as
 // background: per fine spectral bin, the mean normalised power (1 on noise) over the last tens of
-// seconds. A line that stays put while the engine moves raises its bin's mean; the bins near the
-// track's orders are not learned while the track holds them, so a cruising engine does not become a
-// tone. Sized at construction; nothing allocates, locks or throws afterwards.
+// seconds. The same mean corrects a noise floor set above a bin's noise. A line that stays put while the
+// engine moves raises its bin's mean; the bins near the track's orders are not learned while the track holds
+// them, so a cruising engine does not become a tone. Sized at construction; nothing allocates, locks or
+// throws afterwards.
 #include <algorithm>
 #include <cstddef>
 #include <span>
@@ -15,6 +16,10 @@ class ToneMap {
  public:
   // Mean normalised power from which a learned tone counts (and is fitted along with the engine's orders).
   static constexpr double kFitLevel = 4.0;
+  // The lowest background: a bin's mean below 1 is a floor read over its noise, which the lower quartile of
+  // a block does when a resonance's skirt or other lines fill part of it (1-2 dB on the generated scenes);
+  // a floor more than 3 dB over a bin's readings is the leakage of loud lines, not a biased noise level.
+  static constexpr double kLowestNoise = 0.5;
 
   // bins: fine bins of the spectrum; learned over first..last; lobe fine bins to a resolution bin of
   // df_hz x lobe Hz; one window every hop_s.
@@ -25,8 +30,12 @@ class ToneMap {
   // The bin's mean normalised power.
   [[nodiscard]] double mean(std::size_t k) const noexcept { return tone_[k]; }
   // What a reading of the bin is divided by: the tone's level where it stands above the noise on average
-  // (a moving engine raises a bin's mean a little, not a lot), else 1.
-  [[nodiscard]] double background(std::size_t k) const noexcept { return std::max(1.0, tone_[k] - 1.0); }
+  // (a moving engine raises a bin's mean a little, not a lot); the mean itself (from kLowestNoise) where it
+  // is below 1: lines only add power, so a bin that reads under the floor on average lies under a floor
+  // set too high, and its readings divided by that mean read as noise again; else 1.
+  [[nodiscard]] double background(std::size_t k) const noexcept {
+    return tone_[k] < 1.0 ? std::max(tone_[k], kLowestNoise) : std::max(1.0, tone_[k] - 1.0);
+  }
   // Within one resolution bin of a learned tone, as marked by mark() for this hop.
   [[nodiscard]] bool near(std::size_t k) const noexcept { return near_[k] != 0; }
   void mark() noexcept;
