@@ -17,7 +17,7 @@ class ToneMap {
   // Mean normalised power from which a learned tone counts (and is fitted along with the engine's orders).
   static constexpr double kFitLevel = 4.0;
   // The lowest background: a bin's mean below 1 is a floor read over its noise, which the lower quartile of
-  // a block does when a resonance's skirt or other lines fill part of it (1-2 dB on the generated scenes);
+  // a block does when a resonance's skirt or other lines fill part of it (1-2.5 dB on the generated scenes);
   // a floor more than 3 dB over a bin's readings is the leakage of loud lines, not a biased noise level.
   static constexpr double kLowestNoise = 0.5;
 
