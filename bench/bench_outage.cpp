@@ -15,10 +15,12 @@
 //     the road: skip downshifts under braking, heavy-tailed (Student t, 3 degrees of freedom) speed and
 //     frequency noise, a cold engine, and at the GPS cadences GPS speed 0.2-1.0 s late (drawn per drive) and
 //     the frequency tracker's gaps and readings on another line (bench/outage/simulated.cpp); --easy-sim
-//     gives every drive's GPS 0.5 s late and no tracker failures instead. Cadences: the daemon's (frequency
-//     every 0.1 s, a 1 Hz fix given at each hop until the next), 1 Hz, OBD polled every 2 s, a phone OBD app
-//     every 5 s. Seeds: tuning 1..N, report 1001..1000+N; --first-seed S takes S..S+N-1 instead (random
-//     vehicles S+500..), for seeds never used by any decision (a fresh report).
+//     gives every drive's GPS 0.5 s late and no tracker failures instead. --sim-observation lag|gaps|lines
+//     turns on one part of the harder observation alone (the others as --easy-sim has them, the part drawn
+//     as with every part on), `all` (the default) every part, `none` none (= --easy-sim). Cadences: the
+//     daemon's (frequency every 0.1 s, a 1 Hz fix given at each hop until the next), 1 Hz, OBD polled every 2
+//     s, a phone OBD app every 5 s. Seeds: tuning 1..N, report 1001..1000+N; --first-seed S takes S..S+N-1
+//     instead (random vehicles S+500..), for seeds never used by any decision (a fresh report).
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // --synth KEY=VALUE sets a SynthTuning field of the daemon's synthesis for the run (repeatable; VALUE a
 // number, "inf", or another field's name). --ablate runs the set once as tuned and once per rule of the
@@ -39,8 +41,8 @@
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--first-seed S] [--cadence K]
 // [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
-//                     [--fit-minutes M] [--easy-sim] [--worst PCT] [--debug CAR STYLE FROM TO]
-//                     [--log FILE]... [--row-seconds S] [DATA_DIR]
+//                     [--fit-minutes M] [--easy-sim] [--sim-observation PART] [--worst PCT]
+//                     [--debug CAR STYLE FROM TO] [--log FILE]... [--row-seconds S] [DATA_DIR]
 //
 // The bench's parts are in bench/outage/ (outage.hpp: the shared types and which file does what).
 #include <chrono>
@@ -113,7 +115,16 @@ int main(int argc, char** argv) {
     } else if (a == "--fits") {
       opt.fits = true;
     } else if (a == "--easy-sim") {
-      opt.easy_sim = true;
+      opt.sim_lag = opt.sim_gaps = opt.sim_lines = false;
+    } else if (a == "--sim-observation" && i + 1 < argc) {
+      const std::string_view parts = argv[++i];
+      opt.sim_lag = parts == "all" || parts == "lag";
+      opt.sim_gaps = parts == "all" || parts == "gaps";
+      opt.sim_lines = parts == "all" || parts == "lines";
+      if (parts != "none" && !opt.sim_lag && !opt.sim_gaps && !opt.sim_lines) {
+        std::fprintf(stderr, "--sim-observation wants lag, gaps, lines, all or none: %s\n", argv[i]);
+        return 2;
+      }
     } else if (a == "--fit-minutes" && i + 1 < argc) {
       opt.fit_minutes = std::atof(argv[++i]);
     } else if (a == "--log" && i + 1 < argc) {

@@ -58,16 +58,23 @@ struct TrackerRun {
   TrackerLine line = TrackerLine::kHalf;
 };
 
+// Which parts of the harder observation are on (--sim-observation; none of them is --easy-sim).
+struct Parts {
+  bool lag = true, gaps = true, lines = true;
+  [[nodiscard]] bool none() const noexcept { return !lag && !gaps && !lines; }
+};
+
 // How one drive is observed beyond the readings' noise, drawn from the observation's seed: how late its GPS
 // speed is (receivers differ: 0.2-1.0 s) and where its frequency tracker fails. With --easy-sim every drive's
-// GPS is 0.5 s late and the tracker never fails.
+// GPS is 0.5 s late and the tracker never fails; a part switched off by --sim-observation is as --easy-sim
+// has it, the others are drawn as with every part on.
 struct DriveObservation {
   double gps_latency = kEasyGpsLatency;  // s
   double resonance = 0.0, hum = 0.0;     // Hz, the drive's loud tones
   std::vector<TrackerRun> runs;          // in time order
 
-  DriveObservation(double end, std::uint64_t seed, bool easy) {
-    if (easy) return;
+  DriveObservation(double end, std::uint64_t seed, Parts parts) {
+    if (parts.none()) return;
     std::mt19937_64 rng(seed ^ 0x5DEECE66DULL);  // apart from the readings' noise, which stays --easy-sim's
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     gps_latency = 0.2 + 0.8 * unit(rng);
@@ -88,9 +95,11 @@ struct DriveObservation {
       const int(&hops)[2] = gap ? kGapHops : kWrongHops;
       const int n = hops[0] + static_cast<int>(unit(rng) * (hops[1] - hops[0] + 1));
       const TrackerLine line = static_cast<TrackerLine>(std::min(3, static_cast<int>(4.0 * unit(rng))));
-      runs.push_back({(k - 0.5) * kTrackerHop, (k + n - 0.5) * kTrackerHop, gap, line});
+      if (gap ? parts.gaps : parts.lines)
+        runs.push_back({(k - 0.5) * kTrackerHop, (k + n - 0.5) * kTrackerHop, gap, line});
       k += n;
     }
+    if (!parts.lag) gps_latency = kEasyGpsLatency;
   }
 
   // The tracker's reading at `t` of an engine turning at `freq` (Hz), before the noise; NaN in a gap.
@@ -115,11 +124,11 @@ struct DriveObservation {
 };
 
 // GPS-like rows: the frequency every freq_period, a fix every fix_period given at every row until the next.
-std::vector<Row> observe_gps(const sim::Drive& drive, const Cadence& c, std::uint64_t seed, bool easy) {
+std::vector<Row> observe_gps(const sim::Drive& drive, const Cadence& c, std::uint64_t seed, Parts parts) {
   std::mt19937_64 rng(seed);
   std::vector<Row> rows;
   const double end = drive.truth.back().t;
-  const DriveObservation how(end, seed, easy);
+  const DriveObservation how(end, seed, parts);
   double fix = gearpulse::kMissing;
   long fix_index = -1;
   std::size_t run = 0;
@@ -156,8 +165,8 @@ std::vector<Row> observe_obd(const sim::Drive& drive, const Cadence& c, std::uin
   return rows;
 }
 
-std::vector<Row> observe(const sim::Drive& drive, const Cadence& c, std::uint64_t seed, bool easy) {
-  return c.obd_refresh > 0.0 ? observe_obd(drive, c, seed) : observe_gps(drive, c, seed, easy);
+std::vector<Row> observe(const sim::Drive& drive, const Cadence& c, std::uint64_t seed, Parts parts) {
+  return c.obd_refresh > 0.0 ? observe_obd(drive, c, seed) : observe_gps(drive, c, seed, parts);
 }
 
 sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double duration, std::uint64_t seed) {
@@ -174,12 +183,12 @@ sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double dur
 // The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a mixed drive of
 // `minutes` (40 unless --fit-minutes).
 GearModel fit_model(const sim::Vehicle& car, const Cadence& c, double minutes, std::uint64_t seed,
-                    bool easy) {
+                    Parts parts) {
   const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 60.0 * minutes, seed);
   Cadence fit = c;
   if (fit.obd_refresh == 0.0) fit.freq_period = 1.0, fit.fix_period = 1.0;
   std::vector<Sample> samples;
-  for (const Row& r : observe(d, fit, seed + 7, easy))
+  for (const Row& r : observe(d, fit, seed + 7, parts))
     samples.push_back({r.t, r.gps, r.freq});
   return gearpulse::fit_gear_model(samples, {}).model;
 }
@@ -191,6 +200,17 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
                              : report_set       ? 1000
                                                 : 0;
   char title[300];
+  const Parts parts{opt.sim_lag, opt.sim_gaps, opt.sim_lines};
+  char observed[120];
+  if (parts.none())
+    std::snprintf(observed, sizeof observed, "--easy-sim: GPS 0.5 s late, no tracker failures");
+  else
+    std::snprintf(observed, sizeof observed, "GPS %s, tracker %s",
+                  parts.lag ? "0.2-1.0 s late per drive" : "0.5 s late",
+                  parts.gaps && parts.lines ? "gaps and wrong lines"
+                  : parts.gaps              ? "gaps only"
+                  : parts.lines             ? "wrong lines only"
+                                            : "without failures");
   std::snprintf(title, sizeof title,
                 "Simulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
                 "style; %s)",
@@ -199,8 +219,7 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
                                    : "TUNING",
                 static_cast<unsigned long long>(base + 1),
                 static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), opt.fit_minutes,
-                opt.easy_sim ? "--easy-sim: GPS 0.5 s late, no tracker failures"
-                             : "GPS 0.2-1.0 s late per drive, tracker gaps and wrong lines");
+                observed);
   std::vector<sim::Vehicle> cars;
   for (const sim::Vehicle& v : sim::vehicle_presets())
     if (!v.is_cvt()) cars.push_back(v);
@@ -214,8 +233,8 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
     for (const sim::Vehicle& car : cars)
       for (int s = 1; s <= seeds; ++s) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s);
-        const auto model = std::make_shared<const GearModel>(
-            fit_model(car, c, opt.fit_minutes, seed * 31 + 3, opt.easy_sim));
+        const auto model =
+            std::make_shared<const GearModel>(fit_model(car, c, opt.fit_minutes, seed * 31 + 3, parts));
         if (opt.fits) {
           std::fprintf(stderr, "%s %s seed %llu fit", c.key, car.name.c_str(),
                        static_cast<unsigned long long>(seed));
@@ -232,8 +251,8 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
                                               sim::DrivingStyle::kTrafficJam, sim::DrivingStyle::kHighway}) {
           w.cases.push_back(
               {w.lines.size() - 1, k, car.name,
-               observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k, opt.easy_sim),
-               model, c.obd_refresh == 0.0, car.theta, static_cast<int>(seed)});
+               observe(drive_of(car, style, 1200.0, seed * 31 + 11 + k), c, seed * 31 + 13 + k, parts), model,
+               c.obd_refresh == 0.0, car.theta, static_cast<int>(seed)});
           ++k;
         }
       }
