@@ -65,6 +65,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(pull_transfer),
     GEARPULSE_FIELD(gps_accel_clip),
     GEARPULSE_FIELD(lost_gear_cost),
+    GEARPULSE_FIELD(gap_one_step),
     GEARPULSE_FIELD(launch_fade),
     GEARPULSE_FIELD(rest_output),
     GEARPULSE_FIELD(seen_gear_fixes),

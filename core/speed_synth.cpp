@@ -79,6 +79,8 @@ void SpeedSynthesizer::reset() noexcept {
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   freq_seen_t_ = -std::numeric_limits<double>::infinity();
   lost_for_ = 0.0;
+  hop_ = 0.0;
+  in_gap_ = false;
   habits_.end_flat_stretch();
   unlearned_fix_ = {};
   launches_.abort();
@@ -121,6 +123,10 @@ constexpr double kFreeRise = 0.2;  // 1/s, relative; above the tracker's hop-to-
 // A step shorter than this share of accel_time (0.3 s) is the tracker's hop, not a GPS or OBD row: one
 // reading to the next is shorter than a shift.
 constexpr double kShortStep = 0.1;
+// s: the tracker refuses hops in gaps of a few tenths of a second (docs/tracker.md: 4-11 % of the in-band
+// hops at 0-10 dB), and a log's row may fall on such a hop: a reading lost for this long or less says
+// nothing of the mode. Lost for longer, the engine's line is gone.
+constexpr double kTrackerGap = 1.0;
 
 // Log-cost of a departure of z2 squared sigmas as an event: what lies beyond the dead zone, paid once.
 constexpr double jump_cost(double z2) noexcept {
@@ -239,7 +245,7 @@ void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double
     // clutch or for a neighbour: up as the revs pass this driver's upshift point, down as they sag.
     constexpr double kToClutch = 0.5, kToNeighbour = 0.25;
     const double base = leave_rate_[from];
-    const bool long_step = dt >= kShortStep * tuning_.accel_time;  // not the tracker's hops
+    const bool long_step = hop_ >= kShortStep * tuning_.accel_time;  // not the tracker's hops
     const double shift_base = base * kToNeighbour;
     double up = from < gears_ ? shift_base * habits_.upshift_factor(from, freq, tuning_) *
                                     shift_comfort(from, from + 1, freq)
@@ -373,11 +379,8 @@ void SpeedSynthesizer::predict(Track& x, int to, double dt) const noexcept {
 double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
                                       bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
-    // The tracker refuses a hop now and then, in gaps of a few tenths of a second (docs/tracker.md: 4-11 %
-    // of the in-band hops at 0-10 dB), and a log's row may fall on such a hop: a reading lost for 1 s or
-    // less (one row of a 1 Hz log) says nothing of the mode. Lost for longer, the engine's line is gone and
-    // a gear fades.
-    constexpr double kTrackerGap = 1.0;  // s
+    // A reading lost for kTrackerGap or less (one row of a 1 Hz log) says nothing of the mode. Lost for
+    // longer, a gear fades.
     const double lost = lost_for_ > kTrackerGap + 1e-6 ? tuning_.lost_gear_cost : 0.0;
     if (is_gear(mode)) return -weight * lost;
     // Moving off is told by the revs: without them it is as unsupported as a gear, and at speed not a
@@ -445,9 +448,10 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   const bool have_gps = std::isfinite(gps);
   const bool measure_gps = have_gps && gps_new;  // a repeated fix is not measured again
   const int modes = gears_ + 2;
-  // Share of a second of evidence this step carries (states are scored per second, see log_evidence).
-  const double weight = std::clamp(dt / tuning_.evidence_time, 0.0, 1.0);
-  const bool short_step = dt < kShortStep * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
+  // Share of a second of evidence this step carries (states are scored per second, see log_evidence): one
+  // reading's, the hop's (a step over a tracker gap has one reading too).
+  const double weight = std::clamp(hop_ / tuning_.evidence_time, 0.0, 1.0);
+  const bool short_step = hop_ < kShortStep * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
   const double gps_var = sigma_v_ * sigma_v_;
   // A fix is the speed of `lag` s before this step (SpeedLag, from the fix's stamp), and each track is held
   // to it less what the car gained since, as far as it was measured: over the steps before this one, the gain
@@ -688,11 +692,39 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
                                    {model_gear_.data(), n}, mode_, tuning_);
 }
 
+SynthOutput SpeedSynthesizer::in_gap_output(double elapsed) const noexcept {
+  const int modes = gears_ + 2;
+  ModeArray speed{}, speed_var{};
+  for (int j = 0; j < modes; ++j) {
+    Track x = track_[j];
+    predict(x, j, elapsed);
+    speed[j] = std::max(x.v, 0.0);
+    speed_var[j] = x.pvv;
+  }
+  const auto n = static_cast<std::size_t>(modes);
+  return SynthOutputPolicy::outage({prob_.data(), n}, {speed.data(), n}, {speed_var.data(), n}, gears_,
+                                   {model_gear_.data(), n}, mode_, tuning_);
+}
+
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new,
                                    double gps_age) noexcept {
   if (!std::isfinite(t)) return last_;
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
+  if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
+  // Through an outage, a hop the tracker refused, within a gap no longer than the tracker's (kTrackerGap),
+  // is no step of the filter: a gap says nothing of the mode, and stepped hop by hop the transitions over
+  // it would merge every mode's history with the histories entering it, which only the reading after the
+  // gap can tell apart (a gear held through the gap, its track carried unchanged, from a gear entered from
+  // the clutch's). The next reading takes the gap as one step (the motion and the rates are continuous in
+  // time); meanwhile the output is the belief's, each track predicted to this hop. Not while GPS gives a
+  // speed: deferred there too, the daemon's cadence erred more (synthesis-experiments.md).
+  if (started_ && informed_ && gears_ > 0 && tuning_.gap_one_step > 0.0 && !std::isfinite(freq) &&
+      !std::isfinite(gps_speed) && dt > 0.0 && t - freq_seen_t_ <= kTrackerGap + 1e-6) {
+    in_gap_ = true;
+    last_ = in_gap_output(dt);
+    return last_;
+  }
   if (!started_ || t > t_) t_ = t;
   started_ = true;
   if (dt > tuning_.max_gap) {
@@ -705,7 +737,8 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     launches_.abort();  // the launch's shifts in the gap are unseen
     dt = 0.0;
   }
-  if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
+  if (!in_gap_) hop_ = dt;
+  in_gap_ = false;
   lost_for_ = std::isfinite(freq) ? 0.0 : t_ - freq_seen_t_;
   if (std::isfinite(freq)) freq_seen_t_ = t_;
   const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;

@@ -166,6 +166,10 @@ struct SynthTuning {
   // 1/s: log-cost of being in a gear while the frequency is lost for longer than 1 s, longer than the
   // tracker's gaps (0: a lost reading says nothing).
   double lost_gear_cost = 3.0;
+  // 1: through an outage, a hop the tracker refuses (within a gap of 1 s or less) is no step of the filter:
+  // the next reading takes the whole gap as one step, every mode's history scored against it from where it
+  // stood before the gap (0: every hop of a gap is a step of its own).
+  double gap_one_step = 1.0;
   // 1: moving off grows less plausible as the car gains speed (0: as plausible at any speed).
   double launch_fade = 1.0;
   // 1: declutched slower than stationary_speed, the output is 0 (0: the belief's speed, however slow).
@@ -353,6 +357,9 @@ class SpeedSynthesizer {
   SynthOutput filter_step(double dt, double gps, double freq, bool gps_new, double gps_age) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
+  // The output at a hop of a tracker gap in an outage, `elapsed` s after the last step: the belief of that
+  // step, every mode's track predicted over `elapsed` under its own motion.
+  [[nodiscard]] SynthOutput in_gap_output(double elapsed) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
@@ -421,6 +428,10 @@ class SpeedSynthesizer {
   double prev_freq_ = 0.0;    // frequency of the previous step (NaN if lost): the revs a shift left
   double freq_seen_t_ = 0.0;  // time of the latest frequency reading (-inf before the first)
   double lost_for_ = 0.0;     // s since then at this step, 0 with a reading
+  // s: the spacing of the readings the filter is fed at (the tracker's hop, a log's row): the step's own
+  // length, or after a tracker gap taken as one step (gap_one_step), the hop before the gap.
+  double hop_ = 0.0;
+  bool in_gap_ = false;       // the hops since the last step were a tracker gap, not stepped
   double climb_ = 0.0;        // how fast the revs climb this step, 0..1 (filter_step)
   SynthOutputPolicy output_;  // how the output is chosen from the belief, and held without a ladder
   SynthOutput last_{};

@@ -49,6 +49,7 @@ constexpr Rule kRules[] = {
     {"pull transfer: acceleration scaled at a shift", "pull_transfer=0"},
     {"GPS acceleration clip", "gps_accel_clip=0"},
     {"lost gear cost: a gear fades without revs", "lost_gear_cost=0"},
+    {"a tracker gap stepped over with the next reading", "gap_one_step=0"},
     {"launch fade: no move-off at speed", "launch_fade=0"},
     {"rest output: slow declutched output is 0", "rest_output=0"},
     {"seen gears: a steady ratio off the model is a gear", "seen_gear_fixes=inf"},
