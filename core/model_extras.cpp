@@ -1,12 +1,16 @@
 #include "core/model_extras.hpp"
 
 namespace gearpulse {
+namespace {
 
+// A number under `key` of a JSON object; NaN if absent or not a number.
 double extra_number(const nlohmann::json& j, const char* key) noexcept {
   if (!j.is_object()) return std::numeric_limits<double>::quiet_NaN();
   const auto it = j.find(key);
   return it != j.end() && it->is_number() ? it->get<double>() : std::numeric_limits<double>::quiet_NaN();
 }
+
+}  // namespace
 
 ModelExtras read_model_extras(const GearModel* model) noexcept {
   ModelExtras x;
@@ -14,8 +18,10 @@ ModelExtras read_model_extras(const GearModel* model) noexcept {
   const nlohmann::json& extra = model->extra;
   if (const auto it = extra.find("speed_lag"); it != extra.end() && it->is_number())
     x.speed_lag = it->get<double>();
-  if (const auto idle = extra.find("idle"); idle != extra.end())
-    x.idle_freq = extra_number(*idle, "freq"), x.idle_sd = extra_number(*idle, "sd");
+  if (const auto idle = extra.find("idle"); idle != extra.end()) {
+    x.idle_freq = extra_number(*idle, "freq");
+    x.idle_sd = extra_number(*idle, "sd");
+  }
   if (const auto rolling = extra.find("rolling_idle"); rolling != extra.end())
     x.rolling_idle = extra_number(*rolling, "freq");
   if (const auto braking = extra.find("idle_braking"); braking != extra.end()) {

@@ -25,14 +25,11 @@ struct ModelExtras {
   // Per gear of the model, in its order; all unknown unless extra.revs holds one entry per gear.
   std::array<GearRevs, GearModel::kMaxGears> revs{};
   bool has_revs = false;
-  // The positive thetas of extra.lower_gears (gears below the ladder a ladder of more gears held), as
-  // given, at most kMaxGears.
+  // The positive thetas of extra.lower_gears (gears below the ladder a ladder of more gears held), in the
+  // order given, the first kMaxGears of them (a fit writes fewer).
   std::array<double, GearModel::kMaxGears> lower_gears{};
   std::size_t lower_count = 0;
 };
-
-// A number under `key` of a JSON object; NaN if absent or not a number.
-[[nodiscard]] double extra_number(const nlohmann::json& j, const char* key) noexcept;
 
 // The extras of `model` (none without one). Anything missing or malformed is left unknown: a hand-edited
 // or older model.json still loads.

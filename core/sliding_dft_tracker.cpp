@@ -78,8 +78,8 @@ constexpr double kThirdSpreadFloorDb = 2.0;
 // A bin's long-run level below the noise floor scales the floor down to its noise (ToneMap::background())
 // while the track's line stands less than 30 dB over the noise per bin. A louder line leaks through the Hann
 // window's sidelobes (31 dB down, falling 18 dB an octave) over much of a floor's block: the floor is then
-// the leakage's, not a biased noise level (a clean line 50 dB over the noise was held at twice the engine
-// for 0.9 s with the floor scaled there too; see docs/algorithms/tracker-method.md).
+// the leakage's, not a biased noise level, and scaled down there it lets a clean line's 2nd harmonic
+// outweigh the line (docs/algorithms/tracker-method.md, "A floor read over the noise").
 constexpr double kLeakRho = 1000.0;
 // Memory (per hop) of the band's noise level behind the reported SNR.
 constexpr double kNoiseMemory = 0.9;

@@ -56,7 +56,7 @@ SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
   extras_ = read_model_extras(model_.get());
   read_top_gear_revs();
-  load_model(model_.get());
+  load_model();
   reset();
 }
 
@@ -712,15 +712,17 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
+  const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
   // Through an outage, a hop the tracker refused, within a gap no longer than the tracker's (kTrackerGap),
   // is no step of the filter: a gap says nothing of the mode, and stepped hop by hop the transitions over
   // it would merge every mode's history with the histories entering it, which only the reading after the
   // gap can tell apart (a gear held through the gap, its track carried unchanged, from a gear entered from
   // the clutch's). The next reading takes the gap as one step (the motion and the rates are continuous in
   // time); meanwhile the output is the belief's, each track predicted to this hop. Not while GPS gives a
-  // speed: deferred there too, the daemon's cadence erred more (synthesis-experiments.md).
+  // speed: deferred there too, the daemon's cadence erred more (synthesis-experiments.md). The step after
+  // the gap carries the hop's evidence, so a gap is deferred only after a step of some length.
   if (started_ && informed_ && gears_ > 0 && tuning_.gap_one_step > 0.0 && !std::isfinite(freq) &&
-      !std::isfinite(gps_speed) && dt > 0.0 && t - freq_seen_t_ <= kTrackerGap + 1e-6) {
+      !have_gps && dt > 0.0 && hop_ > 0.0 && t - freq_seen_t_ <= kTrackerGap + 1e-6) {
     in_gap_ = true;
     last_ = in_gap_output(dt);
     return last_;
@@ -741,7 +743,6 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
   in_gap_ = false;
   lost_for_ = std::isfinite(freq) ? 0.0 : t_ - freq_seen_t_;
   if (std::isfinite(freq)) freq_seen_t_ = t_;
-  const bool have_gps = std::isfinite(gps_speed) && gps_speed >= 0.0;
   if (have_gps) {
     output_.note_gps(t, gps_speed);  // for an outage without a ladder, whenever the ladder went
   }

@@ -330,7 +330,7 @@ class SpeedSynthesizer {
 
   static void keep_covariance(Track& x) noexcept;
   [[nodiscard]] static Track moment_match(const Track& x, double wx, const Track& y, double wy) noexcept;
-  void load_model(const GearModel* model) noexcept;
+  void load_model() noexcept;
   void insert_seen_gears() noexcept;
   void insert_gap_gears() noexcept;
   [[nodiscard]] bool seen_gear_near(double theta, double half) const noexcept;

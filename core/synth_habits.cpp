@@ -32,7 +32,6 @@ void accumulate(double x, double& mean, double& var, double& count, double memor
 
 }  // namespace
 
-// Anything missing or malformed is left unknown (a hand-edited or older model.json still loads).
 void SynthHabits::load_engine(const ModelExtras& extras, const SynthTuning& tuning) noexcept {
   warm_idle_ = std::numeric_limits<double>::quiet_NaN();
   const double f = extras.idle_freq, sd = extras.idle_sd;

@@ -44,7 +44,8 @@ std::span<const double> thetas_of(const GearModel* model,
 
 }  // namespace
 
-void SpeedSynthesizer::load_model(const GearModel* model) noexcept {
+void SpeedSynthesizer::load_model() noexcept {
+  const GearModel* model = model_.get();
   gears_ = model ? static_cast<int>(model->gears.size()) : 0;
   theta_.fill(0.0);
   theta_se_.fill(0.0);
@@ -449,7 +450,7 @@ void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
   const int old_gears = gears_;
   const ModeArray old_theta = theta_, old_prob = prob_, old_age = age_;
   const TrackArray old_track = track_;
-  load_model(model_.get());
+  load_model();
   if (!new_model) {
     // The same gears keep what was learned of them (their shift revs) under their new numbers.
     std::array<int, kModes> to{};  // new number of each old gear, 0 = gone

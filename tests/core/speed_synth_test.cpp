@@ -111,24 +111,34 @@ TEST_CASE("synth: a frequency reading lost now and then keeps the gear through a
 TEST_CASE("synth: a lost row in an outage is stepped over with the next reading") {
   const auto car = gearpulse::sim::vehicle_preset("compact-4");
   const auto fitted = gearpulse::sim::simulate_drive(car, {.duration = 2400.0, .seed = 102});
-  SpeedSynthesizer synth(std::make_shared<const GearModel>(
-      gearpulse::fit_gear_model(gearpulse::sim::to_samples(gearpulse::sim::observe(fitted, {})), {}).model));
+  const auto model = std::make_shared<const GearModel>(
+      gearpulse::fit_gear_model(gearpulse::sim::to_samples(gearpulse::sim::observe(fitted, {})), {}).model);
   const auto drive = gearpulse::sim::simulate_drive(car, {.style = gearpulse::sim::DrivingStyle::kTrafficJam,
                                                           .duration = 1200.0,
                                                           .dt = 0.1,
                                                           .seed = 2,
                                                           .skip_downshift = 0.3});
-  std::mt19937_64 rng(2);
-  std::uniform_real_distribution<double> unit(0.0, 1.0);
-  double driven = 0.0, synthesized = 0.0;
-  for (int t = 0; t <= 180; ++t) {
-    const auto truth = gearpulse::sim::truth_at(drive, t);
-    const double freq = unit(rng) < 0.1 ? kMissing : truth.freq;
-    const SynthOutput o = synth.step(t, t < 120 ? truth.speed : kMissing, freq);
-    if (t >= 120) driven += truth.speed, synthesized += o.speed;
-  }
-  INFO("outage distance " << synthesized << " m of " << driven << " m");
-  CHECK(std::abs(synthesized - driven) < 0.02 * driven);
+  // The outage's distance error (synthesized / driven - 1) with the rows as the tuning has them.
+  const auto outage_error = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    std::mt19937_64 rng(2);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    double driven = 0.0, synthesized = 0.0;
+    for (int t = 0; t <= 180; ++t) {
+      const auto truth = gearpulse::sim::truth_at(drive, t);
+      const double freq = unit(rng) < 0.1 ? kMissing : truth.freq;
+      const SynthOutput o = synth.step(t, t < 120 ? truth.speed : kMissing, freq);
+      if (t >= 120) driven += truth.speed, synthesized += o.speed;
+    }
+    return synthesized / driven - 1.0;
+  };
+  gearpulse::SynthTuning row_by_row;
+  row_by_row.gap_one_step = 0.0;
+  const double stepped_over = outage_error({}), each_row = outage_error(row_by_row);
+  INFO("outage distance error " << 100.0 * stepped_over << " % stepped over, " << 100.0 * each_row
+                                << " % row by row");
+  CHECK(std::abs(stepped_over) < 0.02);
+  CHECK(each_row < -0.3);
 }
 
 TEST_CASE("synth: the belief's spread is none under GPS, small in a gear, larger coasting declutched") {
