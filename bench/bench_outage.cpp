@@ -115,13 +115,12 @@ int main(int argc, char** argv) {
     } else if (a == "--fits") {
       opt.fits = true;
     } else if (a == "--easy-sim") {
-      opt.sim_lag = opt.sim_gaps = opt.sim_lines = false;
+      opt.observation = {false, false, false};
     } else if (a == "--sim-observation" && i + 1 < argc) {
       const std::string_view parts = argv[++i];
-      opt.sim_lag = parts == "all" || parts == "lag";
-      opt.sim_gaps = parts == "all" || parts == "gaps";
-      opt.sim_lines = parts == "all" || parts == "lines";
-      if (parts != "none" && !opt.sim_lag && !opt.sim_gaps && !opt.sim_lines) {
+      opt.observation = {parts == "all" || parts == "lag", parts == "all" || parts == "gaps",
+                         parts == "all" || parts == "lines"};
+      if (parts != "none" && opt.observation.none()) {
         std::fprintf(stderr, "--sim-observation wants lag, gaps, lines, all or none: %s\n", argv[i]);
         return 2;
       }

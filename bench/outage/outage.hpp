@@ -24,23 +24,28 @@ namespace gearpulse::bench::outage {
 inline constexpr int kMethods = 5;
 
 // What a run does beside scoring the set, from the command line.
+// Which parts of the harder simulated observation are on (--sim-observation; all three by default; none of
+// them is --easy-sim: GPS 0.5 s late on every drive, no tracker failures). A part off is as --easy-sim has
+// it; the parts on are drawn exactly as with all three.
+struct SimObservation {
+  bool lag = true;    // GPS 0.2-1.0 s late, drawn per drive (off: 0.5 s)
+  bool gaps = true;   // the tracker's gaps
+  bool lines = true;  // the tracker's readings on another line
+  [[nodiscard]] bool none() const noexcept { return !lag && !gaps && !lines; }
+};
+
 struct Options {
   std::FILE* trace = nullptr;  // --trace FILE: every outage row
   long cadence = -1;           // --cadence K: only the K-th simulated cadence
   std::string debug_car;       // --debug CAR STYLE FROM TO: both filters' beliefs, per row
   int debug_style = -1;
   double debug_from = 0.0, debug_to = 0.0;
-  bool fits = false;          // --fits: each fitted ladder beside the true one, on stderr
-  double fit_minutes = 40.0;  // --fit-minutes M: the length of the drive the model is fitted on
-  // --sim-observation: which parts of the harder simulated observation are on (all three by default; none
-  // of them is --easy-sim: GPS 0.5 s late on every drive, no tracker failures). A part off is as --easy-sim
-  // has it; the parts on are drawn exactly as with all three.
-  bool sim_lag = true;    // GPS 0.2-1.0 s late, drawn per drive (off: 0.5 s)
-  bool sim_gaps = true;   // the tracker's gaps
-  bool sim_lines = true;  // the tracker's readings on another line
-  bool candidate = true;  // the candidate IMM filter runs beside the daemon's synthesis
-  double worst = 0.0;     // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
-  long first_seed = -1;   // --first-seed N: simulated seeds N.., random vehicles N+500.. (else the set's)
+  bool fits = false;           // --fits: each fitted ladder beside the true one, on stderr
+  double fit_minutes = 40.0;   // --fit-minutes M: the length of the drive the model is fitted on
+  SimObservation observation;  // --sim-observation, --easy-sim
+  bool candidate = true;       // the candidate IMM filter runs beside the daemon's synthesis
+  double worst = 0.0;          // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
+  long first_seed = -1;  // --first-seed N: simulated seeds N.., random vehicles N+500.. (else the set's)
 };
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the

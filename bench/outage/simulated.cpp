@@ -58,12 +58,6 @@ struct TrackerRun {
   TrackerLine line = TrackerLine::kHalf;
 };
 
-// Which parts of the harder observation are on (--sim-observation; none of them is --easy-sim).
-struct Parts {
-  bool lag = true, gaps = true, lines = true;
-  [[nodiscard]] bool none() const noexcept { return !lag && !gaps && !lines; }
-};
-
 // How one drive is observed beyond the readings' noise, drawn from the observation's seed: how late its GPS
 // speed is (receivers differ: 0.2-1.0 s) and where its frequency tracker fails. With --easy-sim every drive's
 // GPS is 0.5 s late and the tracker never fails; a part switched off by --sim-observation is as --easy-sim
@@ -73,7 +67,7 @@ struct DriveObservation {
   double resonance = 0.0, hum = 0.0;     // Hz, the drive's loud tones
   std::vector<TrackerRun> runs;          // in time order
 
-  DriveObservation(double end, std::uint64_t seed, Parts parts) {
+  DriveObservation(double end, std::uint64_t seed, SimObservation parts) {
     if (parts.none()) return;
     std::mt19937_64 rng(seed ^ 0x5DEECE66DULL);  // apart from the readings' noise, which stays --easy-sim's
     std::uniform_real_distribution<double> unit(0.0, 1.0);
@@ -124,7 +118,8 @@ struct DriveObservation {
 };
 
 // GPS-like rows: the frequency every freq_period, a fix every fix_period given at every row until the next.
-std::vector<Row> observe_gps(const sim::Drive& drive, const Cadence& c, std::uint64_t seed, Parts parts) {
+std::vector<Row> observe_gps(const sim::Drive& drive, const Cadence& c, std::uint64_t seed,
+                             SimObservation parts) {
   std::mt19937_64 rng(seed);
   std::vector<Row> rows;
   const double end = drive.truth.back().t;
@@ -165,7 +160,8 @@ std::vector<Row> observe_obd(const sim::Drive& drive, const Cadence& c, std::uin
   return rows;
 }
 
-std::vector<Row> observe(const sim::Drive& drive, const Cadence& c, std::uint64_t seed, Parts parts) {
+std::vector<Row> observe(const sim::Drive& drive, const Cadence& c, std::uint64_t seed,
+                         SimObservation parts) {
   return c.obd_refresh > 0.0 ? observe_obd(drive, c, seed) : observe_gps(drive, c, seed, parts);
 }
 
@@ -183,7 +179,7 @@ sim::Drive drive_of(const sim::Vehicle& car, sim::DrivingStyle style, double dur
 // The model the daemon would have: fitted on the 1 Hz pairs (or the OBD rows) of a mixed drive of
 // `minutes` (40 unless --fit-minutes).
 GearModel fit_model(const sim::Vehicle& car, const Cadence& c, double minutes, std::uint64_t seed,
-                    Parts parts) {
+                    SimObservation parts) {
   const sim::Drive d = drive_of(car, sim::DrivingStyle::kMixed, 60.0 * minutes, seed);
   Cadence fit = c;
   if (fit.obd_refresh == 0.0) fit.freq_period = 1.0, fit.fix_period = 1.0;
@@ -200,7 +196,7 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
                              : report_set       ? 1000
                                                 : 0;
   char title[300];
-  const Parts parts{opt.sim_lag, opt.sim_gaps, opt.sim_lines};
+  const SimObservation parts = opt.observation;
   char observed[120];
   if (parts.none())
     std::snprintf(observed, sizeof observed, "--easy-sim: GPS 0.5 s late, no tracker failures");
