@@ -18,21 +18,24 @@
 //     gives every drive's GPS 0.5 s late and no tracker failures instead. --sim-observation lag|gaps|lines
 //     turns on one part of the harder observation alone (the others as --easy-sim has them, the part drawn
 //     as with every part on), `all` (the default) every part, `none` none (= --easy-sim). Cadences: the
-//     daemon's (frequency every 0.1 s, a 1 Hz fix given at each hop until the next), 1 Hz, OBD polled every 2
-//     s, a phone OBD app every 5 s. Seeds: tuning 1..N, report 1001..1000+N; --first-seed S takes S..S+N-1
-//     instead (random vehicles S+500..), for seeds never used by any decision (a fresh report).
+//     daemon's (frequency every 0.1 s, a 1 Hz fix given at each hop until the next), 1 Hz, OBD polled every 1
+//     s (a logging app's rows: integer km/h and rpm, each polled at its own instant within the round's first
+//     half), every 2 s, a phone OBD app every 5 s. Seeds: tuning 1..N, report 1001..1000+N; --first-seed S
+//     takes S..S+N-1 instead (random vehicles S+500..), for seeds never used by any decision (a fresh
+//     report).
 // With --require NAME<=VALUE (bench/requirements.hpp) the daemon's synthesis' figures are held to thresholds.
 // --synth KEY=VALUE sets a SynthTuning field of the daemon's synthesis for the run (repeatable; VALUE a
 // number, "inf", or another field's name). --ablate runs the set once as tuned and once per rule of the
 // synthesis with that rule absent (kRules: the setting that switches it off), and prints one row per rule:
 // the per-outage distance error, median / p95, on every real car and cadence of the set, and its change;
 // --rule SETTING (repeatable) keeps only the rules switched off by that setting. --fits prints each
-// simulated vehicle's fitted thetas beside the true ones on stderr; --fit-minutes fits the simulated
-// vehicles' models on a mixed drive of M minutes instead of 40. --worst PCT lists every outage of the
-// daemon's synthesis erring beyond PCT % with its failure mode (outage_cause) and, per line, each mode's
-// share of the error. --debug CAR STYLE FROM TO prints both filters' beliefs per row from FROM to TO s of
-// that drive, and the daemon's synthesis' track (speed, acceleration) at each position of its ladder (CAR
-// a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
+// simulated vehicle's fitted thetas beside the true ones on stderr, and per cadence how many fits found
+// another gear count than the car's; --fit-minutes fits the simulated vehicles' models on a mixed drive of
+// M minutes instead of 40. --worst PCT lists every outage of the daemon's synthesis erring beyond PCT %
+// with its failure mode (outage_cause) and, per line, each mode's share of the error. --debug CAR STYLE
+// FROM TO prints both filters' beliefs per row from FROM to TO s of that drive, and the daemon's
+// synthesis' track (speed, acceleration) at each position of its ladder (CAR a simulated car's name, or
+// NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
 //
 // --log FILE (repeatable) scores the logs of one car of the user's instead of the set's real cars (any
 // format `gearpulse fit` reads; --row-seconds S for logs without a time column): fitted on the logs in

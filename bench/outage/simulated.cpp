@@ -27,6 +27,7 @@ struct Cadence {
 constexpr Cadence kCadences[] = {
     {"daemon 10 Hz/1 Hz", "daemon", 0.1, 1.0, 0.0},
     {"1 Hz", "1hz", 1.0, 1.0, 0.0},
+    {"OBD 1 s", "obd1s", 0.0, 0.0, 1.0},
     {"OBD 2 s", "obd2s", 0.0, 0.0, 2.0},
     {"phone OBD 5 s", "obd5s", 0.0, 0.0, 5.0},
 };
@@ -223,6 +224,7 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
     cars.push_back(sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
   bool first = true;
   for (const Cadence& c : kCadences) {
+    int fits = 0, fits_off = 0;  // fits, and those with another gear count than the car's
     if (opt.cadence >= 0 && &c - kCadences != opt.cadence) continue;
     w.lines.push_back({first ? title : "", c.name, std::string("sim_") + c.key, true});
     first = false;
@@ -241,6 +243,8 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
             std::fprintf(stderr, " %.4f", th);
           std::fprintf(stderr, "\n");
         }
+        ++fits;
+        fits_off += model->gears.size() != car.theta.size() ? 1 : 0;
         if (model->gears.empty()) continue;
         int k = 0;
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
@@ -252,6 +256,9 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
           ++k;
         }
       }
+    if (opt.fits && fits > 0)
+      std::fprintf(stderr, "%s: %d of %d fits with another gear count than the car's\n", c.key, fits_off,
+                   fits);
   }
 }
 
