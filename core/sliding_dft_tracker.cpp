@@ -564,7 +564,10 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, st
     double overrun_second = 0.0;  // the overrun's 2nd harmonic term less the usual one
     double power_second = 0.0;    // the same under power
     if (cfg.require_harmonics) {
+      // The fundamental's level that scales the other orders: the track's under a learned tone, else read
+      // from this bin, whose scatter the orders' terms average over (HarmonicEvidence::Level).
       const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
+      const auto level = on_tone ? HarmonicEvidence::Level::kTrack : HarmonicEvidence::Level::kRead;
       for (int o = 0; o < kOrders; ++o) {
         if (o == 1) continue;
         const double pos = kOrder[o] * k;
@@ -572,11 +575,11 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, st
         const auto b = static_cast<std::size_t>(std::lround(pos));
         if (tones->near(b)) continue;
         const double z = z_at(b);
-        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent)
-                             : o == 2 ? evidence.second(z, rho)
-                                      : evidence.order(z, rho);
-        if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho) - fixed;
-        if (o == 2 && power) power_second = evidence.second_power(z, rho) - fixed;
+        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent, level)
+                             : o == 2 ? evidence.second(z, rho, level)
+                                      : evidence.order(z, rho, level);
+        if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho, level) - fixed;
+        if (o == 2 && power) power_second = evidence.second_power(z, rho, level) - fixed;
         if (o != 3 || third_w <= 0.0) {
           l += fixed;
           continue;

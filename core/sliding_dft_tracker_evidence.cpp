@@ -112,12 +112,19 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   const double log_tone = std::log(tone_prior), log_no_tone = std::log1p(-tone_prior);
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
-  ladder_.assign(fund_.size(), 0.0);
-  second_.assign(fund_.size(), 0.0);
-  second_overrun_.assign(fund_.size(), 0.0);
-  second_power_.assign(fund_.size(), 0.0);
+  constexpr auto kTrack = static_cast<std::size_t>(Level::kTrack),
+                 kRead = static_cast<std::size_t>(Level::kRead);
+  std::vector<double>& ladder = ladder_[kTrack];
+  std::vector<double>& second_usual = second_[kTrack];
+  std::vector<double>& second_overrun = second_overrun_[kTrack];
+  std::vector<double>& second_power = second_power_[kTrack];
+  std::vector<std::vector<double>>& half = half_[kTrack];
+  ladder.assign(fund_.size(), 0.0);
+  second_usual.assign(fund_.size(), 0.0);
+  second_overrun.assign(fund_.size(), 0.0);
+  second_power.assign(fund_.size(), 0.0);
   lower_.assign(fund_.size(), 0.0);
-  half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
+  half.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   profile_.assign(kProfileTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
@@ -136,20 +143,20 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       const auto log_ratio = [&](double hi) {
         return log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
       };
-      ladder_[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
+      ladder[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
       const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
                                         [z, rho](double r) { return log_rice(z, rho * r); });
       const double usual = log_ratio(kRatioHi);
       const auto second = [&](double share) {
         return with_absent(log_add(std::log1p(-share) + usual, std::log(share) + loud), kOrderAbsent);
       };
-      second_[at] = second(kLoudSecond);
-      second_overrun_[at] = second(kLoudSecondOverrun);
-      second_power_[at] = second(kLoudSecondPower);
+      second_usual[at] = second(kLoudSecond);
+      second_overrun[at] = second(kLoudSecondOverrun);
+      second_power[at] = second(kLoudSecondPower);
       lower_[at] = with_absent(log_ratio(kLowerRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
-        half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
+        half[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
       // A ratio normal in dB about 0 dB, over +-4 spreads: the mean over ln r of Rice x the normal density,
       // times the range (a uniform mean over it).
       for (int n = 0; n < kProfileTables; ++n) {
@@ -164,6 +171,32 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       }
     }
   }
+  // The same terms for a level read from one bin (Level::kRead): the mean of each term's likelihood over
+  // the reading's scatter, the line's amplitude sqrt(rho) normal about the reading's with a standard
+  // deviation of sqrt(1/2) (a complex Gaussian noise of unit power), by the three-point Gauss-Hermite rule
+  // (nodes at 0 and +-sqrt(3) standard deviations, weights 2/3 and 1/6); a level below the table's lowest
+  // (0.1) is read there.
+  const auto over_scatter = [&](const std::vector<double>& table) {
+    std::vector<double> out(table.size());
+    for (int i = 0; i <= kRhoSteps; ++i) {
+      const double rho = rho_of(i), amp = std::sqrt(rho), d = std::sqrt(3.0 * 0.5);
+      const double lo = std::max((amp - d) * std::max(amp - d, 0.0), rho_of(0)), hi = (amp + d) * (amp + d);
+      for (int j = 0; j <= kUSteps; ++j) {
+        const double u = kUMax * j / kUSteps, z = u * u;
+        const std::size_t at = static_cast<std::size_t>(i) * cols + static_cast<std::size_t>(j);
+        const double a = lookup(table, z, lo), m = table[at], b = lookup(table, z, hi);
+        const double top = std::max({a, m, b});
+        out[at] = top + std::log((std::exp(a - top) + 4.0 * std::exp(m - top) + std::exp(b - top)) / 6.0);
+      }
+    }
+    return out;
+  };
+  ladder_[kRead] = over_scatter(ladder);
+  second_[kRead] = over_scatter(second_usual);
+  second_overrun_[kRead] = over_scatter(second_overrun);
+  second_power_[kRead] = over_scatter(second_power);
+  for (const std::vector<double>& table : half)
+    half_[kRead].push_back(over_scatter(table));
 }
 
 double HarmonicEvidence::lookup(const std::vector<double>& table, double z, double rho) const noexcept {
@@ -189,20 +222,20 @@ double HarmonicEvidence::fundamental(double z, double rho_track) const noexcept 
   return lookup(fund_, z, rho_track);
 }
 
-double HarmonicEvidence::order(double z, double rho_fundamental) const noexcept {
-  return lookup(ladder_, z, rho_fundamental);
+double HarmonicEvidence::order(double z, double rho_fundamental, Level level) const noexcept {
+  return lookup(ladder_[static_cast<std::size_t>(level)], z, rho_fundamental);
 }
 
-double HarmonicEvidence::second(double z, double rho_fundamental) const noexcept {
-  return lookup(second_, z, rho_fundamental);
+double HarmonicEvidence::second(double z, double rho_fundamental, Level level) const noexcept {
+  return lookup(second_[static_cast<std::size_t>(level)], z, rho_fundamental);
 }
 
-double HarmonicEvidence::second_overrun(double z, double rho_fundamental) const noexcept {
-  return lookup(second_overrun_, z, rho_fundamental);
+double HarmonicEvidence::second_overrun(double z, double rho_fundamental, Level level) const noexcept {
+  return lookup(second_overrun_[static_cast<std::size_t>(level)], z, rho_fundamental);
 }
 
-double HarmonicEvidence::second_power(double z, double rho_fundamental) const noexcept {
-  return lookup(second_power_, z, rho_fundamental);
+double HarmonicEvidence::second_power(double z, double rho_fundamental, Level level) const noexcept {
+  return lookup(second_power_[static_cast<std::size_t>(level)], z, rho_fundamental);
 }
 
 double HarmonicEvidence::lower_root(double z, double rho_line) const noexcept {
@@ -222,8 +255,9 @@ double HarmonicEvidence::between(const std::vector<std::vector<double>>& tables,
   return (1.0 - w) * lookup(tables[i], z, rho) + w * lookup(tables[i + 1], z, rho);
 }
 
-double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
-  return between(half_, kHalfAbsent, absent, z, rho_fundamental);
+double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent,
+                                    Level level) const noexcept {
+  return between(half_[static_cast<std::size_t>(level)], kHalfAbsent, absent, z, rho_fundamental);
 }
 
 double HarmonicEvidence::profiled(double z, double rho, double spread_db) const noexcept {

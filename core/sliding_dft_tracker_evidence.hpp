@@ -24,6 +24,13 @@ namespace gearpulse {
 
 class HarmonicEvidence {
  public:
+  // How the fundamental's per-bin SNR, which scales the other orders' level priors, is known: the track's
+  // level (smoothed over hops), or read from the candidate's own bin in this window (z - 1). A reading
+  // scatters by the bin's noise: its amplitude sqrt(z) about the line's sqrt(rho) with a standard deviation
+  // of about sqrt(1/2) (Rice), so at -5 dB (rho about 5) one window's reading lies anywhere from 1 to 12,
+  // and an order scaled by a low reading (a fundamental faded at light load under a loud 2nd harmonic)
+  // is judged too loud. For a read level the terms average their likelihood over that scatter.
+  enum class Level { kTrack, kRead };
   // Prior probability that an order other than the fundamental is absent (half_order() takes a learned one).
   static constexpr double kOrderAbsent = 0.03;
   // The tables for the default tone prior, built once (thread-safe) and shared by every tracker.
@@ -34,23 +41,24 @@ class HarmonicEvidence {
   [[nodiscard]] double fundamental(double z, double rho_track) const noexcept;
   // Log likelihood ratio of a harmonic's bin (2f, 3f), given the per-bin SNR of the candidate's
   // fundamental.
-  [[nodiscard]] double order(double z, double rho_fundamental) const noexcept;
+  [[nodiscard]] double order(double z, double rho_fundamental, Level level) const noexcept;
   // The same for the 2nd harmonic's bin, which may stand up to 15 dB over the fundamental (light load,
   // overrun).
-  [[nodiscard]] double second(double z, double rho_fundamental) const noexcept;
+  [[nodiscard]] double second(double z, double rho_fundamental, Level level) const noexcept;
   // The same on the overrun (engine braking: a line falling fast), where the 2nd harmonic is as likely to
   // stand over the fundamental as not.
-  [[nodiscard]] double second_overrun(double z, double rho_fundamental) const noexcept;
+  [[nodiscard]] double second_overrun(double z, double rho_fundamental, Level level) const noexcept;
   // The same under power (a line rising fast: the engine drives the car hard), where the fundamental
   // takes the firing energy and a 2nd harmonic over it is rare.
-  [[nodiscard]] double second_power(double z, double rho_fundamental) const noexcept;
+  [[nodiscard]] double second_power(double z, double rho_fundamental, Level level) const noexcept;
   // The same for a bin below a candidate's line that is an order of a lower engine of which the candidate
   // is a harmonic (f / 4 and 3 f / 4 when it is the 4th), given the per-bin SNR of the candidate's line:
   // the ratio spans 0.05 .. 20 (-13 to +13 dB).
   [[nodiscard]] double lower_root(double z, double rho_line) const noexcept;
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
-  [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
+  [[nodiscard]] double half_order(double z, double rho_fundamental, double absent,
+                                  Level level) const noexcept;
   // The same for an order's bin whose level is known: its per-bin SNR normal in dB about rho_expected
   // (the fundamental's times a ratio learned from this engine) with `spread_db` (clamped to
   // kProfileSpreadDb's range), or the order absent (kOrderAbsent).
@@ -64,15 +72,15 @@ class HarmonicEvidence {
   // clamped to their range.
   [[nodiscard]] double between(const std::vector<std::vector<double>>& tables, std::span<const double> keys,
                                double key, double z, double rho) const noexcept;
-  std::vector<double> fund_;            // over (log10 rho, sqrt z)
-  std::vector<double> ladder_;          // over (log10 rho, sqrt z)
-  std::vector<double> second_;          // over (log10 rho, sqrt z)
-  std::vector<double> second_overrun_;  // over (log10 rho, sqrt z)
-  std::vector<double> second_power_;    // over (log10 rho, sqrt z)
-  std::vector<double> lower_;           // over (log10 rho, sqrt z)
-  // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), over
-  // (log10 rho, sqrt z).
-  std::vector<std::vector<double>> half_;
+  std::vector<double> fund_;   // over (log10 rho, sqrt z)
+  std::vector<double> lower_;  // over (log10 rho, sqrt z)
+  // Per Level (kTrack, kRead), over (log10 rho, sqrt z):
+  std::vector<double> ladder_[2];
+  std::vector<double> second_[2];
+  std::vector<double> second_overrun_[2];
+  std::vector<double> second_power_[2];
+  // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent).
+  std::vector<std::vector<double>> half_[2];
   // One table per kProfileSpreadDb, the ratio's mean at 0 dB, over (log10 rho, sqrt z).
   std::vector<std::vector<double>> profile_;
 };
