@@ -17,6 +17,7 @@
 // given as learned (half_order()).
 //
 // Everything is tabulated at construction; lookups are noexcept and allocation-free.
+#include <array>
 #include <span>
 #include <vector>
 
@@ -75,12 +76,12 @@ class HarmonicEvidence {
   std::vector<double> fund_;   // over (log10 rho, sqrt z)
   std::vector<double> lower_;  // over (log10 rho, sqrt z)
   // Per Level (kTrack, kRead), over (log10 rho, sqrt z):
-  std::vector<double> ladder_[2];
-  std::vector<double> second_[2];
-  std::vector<double> second_overrun_[2];
-  std::vector<double> second_power_[2];
+  std::array<std::vector<double>, 2> ladder_;
+  std::array<std::vector<double>, 2> second_;
+  std::array<std::vector<double>, 2> second_overrun_;
+  std::array<std::vector<double>, 2> second_power_;
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent).
-  std::vector<std::vector<double>> half_[2];
+  std::array<std::vector<std::vector<double>>, 2> half_;
   // One table per kProfileSpreadDb, the ratio's mean at 0 dB, over (log10 rho, sqrt z).
   std::vector<std::vector<double>> profile_;
 };
