@@ -575,7 +575,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, st
         const auto b = static_cast<std::size_t>(std::lround(pos));
         if (tones->near(b)) continue;
         const double z = z_at(b);
-        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent, level)
+        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent)
                              : o == 2 ? evidence.second(z, rho, level)
                                       : evidence.order(z, rho, level);
         if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho, level) - fixed;

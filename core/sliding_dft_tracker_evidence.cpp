@@ -118,13 +118,12 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   std::vector<double>& second_usual = second_[kTrack];
   std::vector<double>& second_overrun = second_overrun_[kTrack];
   std::vector<double>& second_power = second_power_[kTrack];
-  std::vector<std::vector<double>>& half = half_[kTrack];
   ladder.assign(fund_.size(), 0.0);
   second_usual.assign(fund_.size(), 0.0);
   second_overrun.assign(fund_.size(), 0.0);
   second_power.assign(fund_.size(), 0.0);
   lower_.assign(fund_.size(), 0.0);
-  half.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
+  half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   profile_.assign(kProfileTables, std::vector<double>(fund_.size(), 0.0));
   for (int j = 0; j <= kUSteps; ++j) {
     const double u = kUMax * j / kUSteps, z = u * u;
@@ -156,7 +155,7 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       lower_[at] = with_absent(log_ratio(kLowerRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
-        half[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
+        half_[static_cast<std::size_t>(n)][at] = with_absent(half_ratio, kHalfAbsent[n]);
       // A ratio normal in dB about 0 dB, over +-4 spreads: the mean over ln r of Rice x the normal density,
       // times the range (a uniform mean over it).
       for (int n = 0; n < kProfileTables; ++n) {
@@ -195,8 +194,6 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   second_[kRead] = over_scatter(second_usual);
   second_overrun_[kRead] = over_scatter(second_overrun);
   second_power_[kRead] = over_scatter(second_power);
-  for (const std::vector<double>& table : half)
-    half_[kRead].push_back(over_scatter(table));
 }
 
 double HarmonicEvidence::lookup(const std::vector<double>& table, double z, double rho) const noexcept {
@@ -255,9 +252,8 @@ double HarmonicEvidence::between(const std::vector<std::vector<double>>& tables,
   return (1.0 - w) * lookup(tables[i], z, rho) + w * lookup(tables[i + 1], z, rho);
 }
 
-double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent,
-                                    Level level) const noexcept {
-  return between(half_[static_cast<std::size_t>(level)], kHalfAbsent, absent, z, rho_fundamental);
+double HarmonicEvidence::half_order(double z, double rho_fundamental, double absent) const noexcept {
+  return between(half_, kHalfAbsent, absent, z, rho_fundamental);
 }
 
 double HarmonicEvidence::profiled(double z, double rho, double spread_db) const noexcept {

@@ -58,8 +58,7 @@ class HarmonicEvidence {
   [[nodiscard]] double lower_root(double z, double rho_line) const noexcept;
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].
-  [[nodiscard]] double half_order(double z, double rho_fundamental, double absent,
-                                  Level level) const noexcept;
+  [[nodiscard]] double half_order(double z, double rho_fundamental, double absent) const noexcept;
   // The same for an order's bin whose level is known: its per-bin SNR normal in dB about rho_expected
   // (the fundamental's times a ratio learned from this engine) with `spread_db` (clamped to
   // kProfileSpreadDb's range), or the order absent (kOrderAbsent).
@@ -80,8 +79,11 @@ class HarmonicEvidence {
   std::array<std::vector<double>, 2> second_;
   std::array<std::vector<double>, 2> second_overrun_;
   std::array<std::vector<double>, 2> second_power_;
-  // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent).
-  std::array<std::vector<std::vector<double>>, 2> half_;
+  // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), for a
+  // level known either way: averaged over a read level's scatter too, a drive with weak orders and a loud
+  // fixed tone was read off every order of its engine for two seconds (docs/algorithms/tracker-method.md,
+  // "The orders' level read with its scatter").
+  std::vector<std::vector<double>> half_;
   // One table per kProfileSpreadDb, the ratio's mean at 0 dB, over (log10 rho, sqrt z).
   std::vector<std::vector<double>> profile_;
 };
