@@ -176,6 +176,9 @@ class LadderJudge {
     if (const auto idle = estimate_idle(work, kMinIdleSamples)) idle_freq_ = idle->freq;
   }
 
+  // Hz: the idle frequency of the standstill samples; 0 when the log has too few of them.
+  double idle_freq() const { return idle_freq_; }
+
   LadderCheck check(const MixtureParams& p) const {
     const int m = p.gears();
     double gear_total = 0.0;
@@ -670,6 +673,36 @@ void record_lower_gears(const std::vector<double>& largest, GearModel& fitted) {
   if (!lower.empty()) fitted.extra["lower_gears"] = lower;
 }
 
+// A manual car moves off in first gear, which carries it at the warm idle at kFirstGearIdleSpeed at most.
+// A chosen ladder whose lowest gear carries it faster lacks first gear: that gear exists whatever the number
+// of its pairs, and what BIC weighs (whether a gear's pairs pay for its parameters) is then no question. A
+// launch passes first gear in a second or two, and where the pairs of those seconds are spread (OBD values
+// polled apart while the car gains 2-3 m/s^2 spread its ratios by 20-30 %) the gear gains less than BIC
+// asks. Where a plausible ladder met on the way down (every check passed: support, steps, valleys, clutch
+// slip) holds the chosen ladder's gears and more below them, the lowest of which can be first gear, the
+// best of those by BIC is the fit. A ladder whose lowest gear can be first gear stays as BIC chose it, and
+// nothing is added that the checks rejected.
+Candidate with_first_gear(const Candidate& best, const std::vector<Candidate>& plausible, double idle_freq) {
+  const std::vector<double>& chosen_theta = best.params.theta;
+  if (chosen_theta.size() < 2 || !(idle_freq > 0.0) ||
+      chosen_theta.front() * idle_freq <= kFirstGearIdleSpeed)
+    return best;
+  const double below = chosen_theta.front() * std::exp(-2.0 * kGearWindow);  // a gearbox step below
+  const Candidate* completed = nullptr;
+  for (const Candidate& c : plausible) {
+    const std::vector<double>& theta = c.params.theta;
+    if (theta.size() <= chosen_theta.size() || theta.front() * idle_freq > kFirstGearIdleSpeed) continue;
+    const auto lower = static_cast<std::size_t>(std::lower_bound(theta.begin(), theta.end(), below) -
+                                                theta.begin());  // gears below the chosen
+    if (theta.size() - lower != chosen_theta.size()) continue;
+    bool same = true;
+    for (std::size_t i = 0; i < chosen_theta.size(); ++i)
+      same = same && std::abs(std::log(theta[lower + i] / chosen_theta[i])) < kGearWindow;
+    if (same && (completed == nullptr || c.bic < completed->bic)) completed = &c;
+  }
+  return completed != nullptr ? *completed : best;
+}
+
 }  // namespace
 
 GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
@@ -722,7 +755,8 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
   std::string last_reason = "no discrete gear ladder in the data";
   LadderCheck forced;  // what the physics says of a forced count's ladder
   Candidate more;      // with a forced count: the best plausible ladder of more gears met on the way down
-  std::vector<double> largest;  // the thetas of the plausible ladder of most gears met on the way down
+  std::vector<double> largest;       // the thetas of the plausible ladder of most gears met on the way down
+  std::vector<Candidate> plausible;  // the plausible ladders met on the way down
   while (true) {
     const double ll = run_em(work, p, kEmIterations, 1e-6);
     const LadderCheck verdict = judge.check(p);
@@ -736,6 +770,7 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
     if (verdict.offender < 0 && m >= 2) {
       if (largest.empty()) largest = p.theta;
       const double bic = bic_of(ll, m, work.size());
+      if (gears == 0) plausible.push_back({p, ll, bic});
       if (bic < best.bic) best = {p, ll, bic};
     } else if (!verdict.reason.empty()) {
       last_reason = verdict.reason;
@@ -746,6 +781,7 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
     p = without(p, drop);
   }
   if (best.params.gears() == 0 && single_gear && gears == 0) best = single_cluster(work, steady, judge, vmax);
+  if (gears == 0) best = with_first_gear(best, plausible, judge.idle_freq());
   if (best.params.gears() == 0) {
     model.reason = last_reason;
     return model;
