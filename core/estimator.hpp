@@ -48,8 +48,8 @@ struct FitResult {
 inline constexpr double kGearWindow = 0.029;
 
 // m/s: the most first gear carries a car at the warm idle (overall ratios of 12-16:1, tyres of 1.9-2 m,
-// idle at 600-1000 rpm: 1.3-2.6 m/s). A ladder whose lowest gear carries it faster lacks first gear. The
-// synthesis' default first_gear_idle_speed is this bound.
+// idle at 600-1000 rpm: 1.3-2.6 m/s). A ladder whose lowest gear carries it faster lacks first gear (the
+// fit's ladder and the synthesis' first_gear_idle_speed).
 inline constexpr double kFirstGearIdleSpeed = 2.6;
 
 // Whether two log(speed / frequency) readings next to each other in time, the later at `speed` (m/s), show

@@ -51,6 +51,7 @@
 #include <span>
 #include <string_view>
 
+#include "core/estimator.hpp"
 #include "core/gear_model.hpp"
 #include "core/launch_gears.hpp"
 #include "core/model_extras.hpp"
@@ -188,13 +189,13 @@ struct SynthTuning {
   // worth before GPS shows this drive's (0: none; the drive starts from the deceleration declutched at
   // large).
   double idle_braking_prior = 3.0;
-  // m/s: the most first gear carries a car at idle (overall ratios of 12-16:1, tyres of 1.9-2 m, idle at
-  // 600-1000 rpm: 1.3-2.6 m/s). A model whose lowest gear carries it faster at the warm idle lacks first
-  // gear (a young model has not seen the launch gears steady): a move-off's clutch then bites in a gear
+  // m/s: the most first gear carries a car at idle (kFirstGearIdleSpeed, the fit's bound). A model whose
+  // lowest gear carries it faster at the warm idle lacks first gear (a young model has not seen the launch
+  // gears steady): a move-off's clutch then bites in a gear
   // below the ladder, so its speed is not given the spread up to a gear's reading as it would be were
   // that gear first (bite_gap), and moving off stands for driving below the ladder, as plausible at speed
   // as at a walking pace (launch_fade does not apply) (inf: the lowest gear is always first).
-  double first_gear_idle_speed = 2.6;
+  double first_gear_idle_speed = kFirstGearIdleSpeed;
   // Share of the deceleration a declutch carries that is its spread: with the clutch out the driver may
   // keep braking, ease off or stop braking (a downshift under braking), so the deceleration GPS measured
   // in gear is known no better than its own size once the clutch goes out. A gear the revs show next is
