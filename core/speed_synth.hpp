@@ -40,8 +40,10 @@
 // then the ones predicted from the ladder's own steps, as many as the idle and the launches from rest seen
 // under GPS show (launch_gears.hpp).
 //
-// This file is the mode filter; what it learns of the engine and driver is SynthHabits (synth_habits.hpp),
-// and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
+// This file is the mode filter: its step and motion are in speed_synth.cpp, its mode changes in
+// synth_rates.cpp, the scores of the frequency in each mode in synth_evidence.cpp and its ladder in
+// synth_ladder.cpp. What it learns of the engine and driver is SynthHabits (synth_habits.hpp), and how its
+// output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
 //
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
@@ -350,12 +352,38 @@ class SpeedSynthesizer {
   [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
+  // What one step of the filter gives every history it scores (filter_step, step_input).
+  struct StepInput {
+    double dt = 0.0;
+    double gps = 0.0;   // m/s, NaN without a fix
+    double freq = 0.0;  // Hz, NaN without a reading
+    bool have_gps = false;
+    bool measure_gps = false;  // a fix not measured at an earlier step
+    bool short_step = false;   // the tracker's hops, not GPS or OBD rows
+    bool lacks_first = false;  // lacks_first_gear()
+    double weight = 0.0;       // share of a second of evidence this step carries
+    double gps_var = 0.0;      // (m/s)^2: the fix's variance
+    double lag = 0.0;          // s: how much older than the step the fix's speed is (fix_lag)
+    double gained = 0.0;       // m/s: the filter's speed gained between the fix and the step before this one
+    ModeArray revs_gain{};     // Hz gained in each gear within the step
+  };
+
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
                         double& caught_share) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
   [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
                                     bool short_step) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq, bool gps_new, double gps_age) noexcept;
+  [[nodiscard]] StepInput step_input(double dt, double gps, double freq, bool gps_new,
+                                     double gps_age) const noexcept;
+  void read_revs(const StepInput& in) noexcept;
+  [[nodiscard]] Track entering(int i, int j, bool moving_off, bool have_gps) const noexcept;
+  [[nodiscard]] Track propagate(const StepInput& in, Track y, int i, int j, bool moving_off, double caught,
+                                double& score) const noexcept;
+  [[nodiscard]] Track with_brakes(const StepInput& in, const Track& x, int j, Track held,
+                                  double& score) const noexcept;
+  void merge_histories(double dt) noexcept;
+  void prune_histories(bool short_step, bool have_gps) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
   // The output at a hop of a tracker gap in an outage, `elapsed` s after the last step: the belief of that
