@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-#include "core/speed_synth.hpp"
+#include "core/synth_tuning.hpp"
 
 namespace gearpulse {
 namespace {

@@ -4,7 +4,7 @@
 #include <array>
 #include <cmath>
 
-#include "core/speed_synth.hpp"
+#include "core/synth_tuning.hpp"
 
 namespace gearpulse {
 
