@@ -1,6 +1,7 @@
 #pragma once
 // Constants the files of the mode filter (SpeedSynthesizer, core/speed_synth.hpp) share: speed_synth.cpp
-// (the step and the motion), synth_rates.cpp (the mode changes) and synth_evidence.cpp (the scores).
+// (its state, time and tracker gaps), synth_step.cpp (one step), synth_rates.cpp (the mode changes) and
+// synth_evidence.cpp (the scores).
 #include <algorithm>
 
 namespace gearpulse::synth {
