@@ -177,6 +177,10 @@ class SpeedSynthesizer {
 
   void transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
                         double& caught_share) const noexcept;
+  void gear_transitions(int from, double dt, double freq, ModeArray& row,
+                        double& caught_share) const noexcept;
+  void clutch_transitions(double dt, double speed, ModeArray& row) const noexcept;
+  void launch_transitions(double dt, ModeArray& row) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
   [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
                                     bool short_step) const noexcept;
