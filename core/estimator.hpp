@@ -47,11 +47,6 @@ struct FitResult {
 // step between adjacent gears the fit accepts (a factor of 1.06).
 inline constexpr double kGearWindow = 0.029;
 
-// m/s: the most first gear carries a car at the warm idle (overall ratios of 12-16:1, tyres of 1.9-2 m,
-// idle at 600-1000 rpm: 1.3-2.6 m/s). A ladder whose lowest gear carries it faster lacks first gear (the
-// fit's ladder and the synthesis' first_gear_idle_speed).
-inline constexpr double kFirstGearIdleSpeed = 2.6;
-
 // Whether two log(speed / frequency) readings next to each other in time, the later at `speed` (m/s), show
 // one gear: within 3 % (the revs' jitter and the tracker's), widened at low speed, where a few tenths of
 // m/s of speed error (GPS noise, integer km/h) move the ratio. The steady-pair rule of the auto fit and of

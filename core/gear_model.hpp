@@ -17,6 +17,13 @@ struct Gear {
   double std_error = 0.0;  // standard error of theta from the observed information ("stderr" in JSON)
 };
 
+// m/s: the most first gear carries a car at the warm idle. Overall ratios of 12-16:1, tyres of 1.9-2 m
+// round and an idle of 600-1000 rpm give 1.2-2.8 m/s at their extremes; the bound is the 2.6 m/s the
+// synthesis' young ladders were decided with (docs/cold-start.md, "A ladder that lacks first gear"). A
+// ladder whose lowest gear carries the car faster lacks first gear: the fit's ladder
+// (docs/algorithms/estimator.md) and the synthesis' first_gear_idle_speed.
+inline constexpr double kFirstGearIdleSpeed = 2.6;
+
 struct GearModel {
   static constexpr int kVersion = 1;
   static constexpr std::size_t kMaxGears = 12;  // the most the estimator fits and the synthesis carries

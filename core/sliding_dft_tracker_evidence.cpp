@@ -112,16 +112,16 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
   const double log_tone = std::log(tone_prior), log_no_tone = std::log1p(-tone_prior);
   const auto cols = static_cast<std::size_t>(kUSteps + 1);
   fund_.assign(static_cast<std::size_t>(kRhoSteps + 1) * cols, 0.0);
-  constexpr auto kTrack = static_cast<std::size_t>(Level::kTrack),
-                 kRead = static_cast<std::size_t>(Level::kRead);
-  std::vector<double>& ladder = ladder_[kTrack];
-  std::vector<double>& second_usual = second_[kTrack];
-  std::vector<double>& second_overrun = second_overrun_[kTrack];
-  std::vector<double>& second_power = second_power_[kTrack];
-  ladder.assign(fund_.size(), 0.0);
-  second_usual.assign(fund_.size(), 0.0);
-  second_overrun.assign(fund_.size(), 0.0);
-  second_power.assign(fund_.size(), 0.0);
+  constexpr auto track = static_cast<std::size_t>(Level::kTrack),
+                 read = static_cast<std::size_t>(Level::kRead);
+  std::vector<double>& ladder_table = ladder_[track];
+  std::vector<double>& usual_table = second_[track];
+  std::vector<double>& overrun_table = second_overrun_[track];
+  std::vector<double>& power_table = second_power_[track];
+  ladder_table.assign(fund_.size(), 0.0);
+  usual_table.assign(fund_.size(), 0.0);
+  overrun_table.assign(fund_.size(), 0.0);
+  power_table.assign(fund_.size(), 0.0);
   lower_.assign(fund_.size(), 0.0);
   half_.assign(kHalfTables, std::vector<double>(fund_.size(), 0.0));
   profile_.assign(kProfileTables, std::vector<double>(fund_.size(), 0.0));
@@ -142,16 +142,16 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
       const auto log_ratio = [&](double hi) {
         return log_mean_over(kRatioLo, hi, kRatioSteps, [z, rho](double r) { return log_rice(z, rho * r); });
       };
-      ladder[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
+      ladder_table[at] = with_absent(log_ratio(kRatioHi), kOrderAbsent);
       const double loud = log_mean_over(kRatioHi, kSecondRatioHi, kRatioSteps,
                                         [z, rho](double r) { return log_rice(z, rho * r); });
       const double usual = log_ratio(kRatioHi);
       const auto second = [&](double share) {
         return with_absent(log_add(std::log1p(-share) + usual, std::log(share) + loud), kOrderAbsent);
       };
-      second_usual[at] = second(kLoudSecond);
-      second_overrun[at] = second(kLoudSecondOverrun);
-      second_power[at] = second(kLoudSecondPower);
+      usual_table[at] = second(kLoudSecond);
+      overrun_table[at] = second(kLoudSecondOverrun);
+      power_table[at] = second(kLoudSecondPower);
       lower_[at] = with_absent(log_ratio(kLowerRatioHi), kOrderAbsent);
       const double half_ratio = log_ratio(kHalfRatioHi);
       for (int n = 0; n < kHalfTables; ++n)
@@ -190,10 +190,10 @@ HarmonicEvidence::HarmonicEvidence(double tone_prior) {
     }
     return out;
   };
-  ladder_[kRead] = over_scatter(ladder);
-  second_[kRead] = over_scatter(second_usual);
-  second_overrun_[kRead] = over_scatter(second_overrun);
-  second_power_[kRead] = over_scatter(second_power);
+  ladder_[read] = over_scatter(ladder_table);
+  second_[read] = over_scatter(usual_table);
+  second_overrun_[read] = over_scatter(overrun_table);
+  second_power_[read] = over_scatter(power_table);
 }
 
 double HarmonicEvidence::lookup(const std::vector<double>& table, double z, double rho) const noexcept {

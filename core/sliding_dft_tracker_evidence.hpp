@@ -80,8 +80,8 @@ class HarmonicEvidence {
   std::array<std::vector<double>, 2> second_overrun_;
   std::array<std::vector<double>, 2> second_power_;
   // The half order's, one table per probability of its absence (kHalfAbsent, the first kOrderAbsent), for a
-  // level known either way: averaged over a read level's scatter too, a drive with weak orders and a loud
-  // fixed tone was read off every order of its engine for two seconds (docs/algorithms/tracker-method.md,
+  // level known either way: averaged over a read level's scatter too, it lets a drive with weak orders and a
+  // loud fixed tone be read off every order of its engine for seconds (docs/algorithms/tracker-method.md,
   // "The orders' level read with its scatter").
   std::vector<std::vector<double>> half_;
   // One table per kProfileSpreadDb, the ratio's mean at 0 dB, over (log10 rho, sqrt z).

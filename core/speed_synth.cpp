@@ -8,7 +8,6 @@
 #include <limits>
 #include <utility>
 
-#include "core/estimator.hpp"
 #include "core/synth_constants.hpp"
 
 namespace gearpulse {

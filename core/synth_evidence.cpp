@@ -18,9 +18,11 @@ using namespace synth;
 // gear turns a given uncertainty of speed into the narrowest spread of revs, and self-consistent histories
 // in other gears would gain on the true one with every steady sample. A frequency that no gear explains
 // within kFreeRevs sigmas is as well explained by an engine running free.
+namespace {
 constexpr double kFreeRevs = 3.0;
 constexpr double kFreeRevsCost = 0.5 * kFreeRevs * kFreeRevs;  // a second of free revs, log-units
 constexpr double kLaunchRevs = 2.5;  // moving off: likelier than free revs with the car at rest
+}  // namespace
 
 double SpeedSynthesizer::freq_sigma(double freq) const noexcept {
   return std::max(sigma_s_, tuning_.min_freq_rel * freq);

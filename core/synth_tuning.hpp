@@ -1,7 +1,7 @@
 #pragma once
 // The constants of the speed synthesis (SpeedSynthesizer, core/speed_synth.hpp), each with the physical
 // argument or the measurement it rests on.
-#include "core/estimator.hpp"
+#include "core/gear_model.hpp"
 #include "core/speed_lag.hpp"
 
 namespace gearpulse {
@@ -134,10 +134,10 @@ struct SynthTuning {
   double idle_braking_prior = 3.0;
   // m/s: the most first gear carries a car at idle (kFirstGearIdleSpeed, the fit's bound). A model whose
   // lowest gear carries it faster at the warm idle lacks first gear (a young model has not seen the launch
-  // gears steady): a move-off's clutch then bites in a gear
-  // below the ladder, so its speed is not given the spread up to a gear's reading as it would be were
-  // that gear first (bite_gap), and moving off stands for driving below the ladder, as plausible at speed
-  // as at a walking pace (launch_fade does not apply) (inf: the lowest gear is always first).
+  // gears steady): a move-off's clutch then bites in a gear below the ladder, so its speed is not given the
+  // spread up to a gear's reading as it would be were that gear first (bite_gap), and moving off stands for
+  // driving below the ladder, as plausible at speed as at a walking pace (launch_fade does not apply) (inf:
+  // the lowest gear is always first).
   double first_gear_idle_speed = kFirstGearIdleSpeed;
   // Share of the deceleration a declutch carries that is its spread: with the clutch out the driver may
   // keep braking, ease off or stop braking (a downshift under braking), so the deceleration GPS measured
