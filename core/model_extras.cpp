@@ -1,5 +1,7 @@
 #include "core/model_extras.hpp"
 
+#include <cmath>
+
 namespace gearpulse {
 namespace {
 
@@ -16,8 +18,7 @@ ModelExtras read_model_extras(const GearModel* model) noexcept {
   ModelExtras x;
   if (model == nullptr || !model->extra.is_object()) return x;
   const nlohmann::json& extra = model->extra;
-  if (const auto it = extra.find("speed_lag"); it != extra.end() && it->is_number())
-    x.speed_lag = it->get<double>();
+  if (const double lag = extra_number(extra, "speed_lag"); std::isfinite(lag)) x.speed_lag = lag;
   if (const auto idle = extra.find("idle"); idle != extra.end()) {
     x.idle_freq = extra_number(*idle, "freq");
     x.idle_sd = extra_number(*idle, "sd");

@@ -155,10 +155,9 @@ std::vector<float> make_lighter_scene(const LighterSceneConfig& config, const Fr
 
 bool scene_without(LighterSceneConfig& config, std::string_view component,
                    const FrequencyTrajectory& trajectory, double duration_s) {
-  LighterSceneConfig& c = config;
   if (component == "agc") {
     // The envelope is a running mean of |v|: a fixed gain of level / mean |v| holds its mean.
-    LighterSceneConfig raw = c;
+    LighterSceneConfig raw = config;
     raw.agc_s = 0.0;
     raw.fixed_gain = 1.0;
     raw.clip = std::numeric_limits<double>::infinity();
@@ -166,29 +165,30 @@ bool scene_without(LighterSceneConfig& config, std::string_view component,
     double sum = 0.0;
     for (const float v : x)
       sum += std::abs(static_cast<double>(v));
-    c.fixed_gain = x.empty() || !(sum > 0.0) ? 1.0 : c.agc_level * static_cast<double>(x.size()) / sum;
-    c.agc_s = 0.0;
+    config.fixed_gain =
+        x.empty() || !(sum > 0.0) ? 1.0 : config.agc_level * static_cast<double>(x.size()) / sum;
+    config.agc_s = 0.0;
   } else if (component == "clipping") {
-    c.clip = std::numeric_limits<double>::infinity();
+    config.clip = std::numeric_limits<double>::infinity();
   } else if (component == "resonance") {
-    c.body = 0.0;
+    config.body = 0.0;
   } else if (component == "spikes") {
-    c.spike_amplitude = 0.0;
+    config.spike_amplitude = 0.0;
   } else if (component == "fan") {
-    c.fan = 0.0;
+    config.fan = 0.0;
   } else if (component == "pump") {
-    c.pump = 0.0;
+    config.pump = 0.0;
   } else if (component == "mains") {
-    c.mains = 0.0;
+    config.mains = 0.0;
   } else if (component == "whine") {
-    c.alternator = 0.0;
+    config.alternator = 0.0;
   } else if (component == "half") {
-    c.half_order = 0.0;
-    c.order_1_5 = 0.0;
+    config.half_order = 0.0;
+    config.order_1_5 = 0.0;
   } else if (component == "swap") {
-    c.load_swing = 0.0;
+    config.load_swing = 0.0;
   } else if (component == "third") {
-    c.harmonic3 = 0.0;
+    config.harmonic3 = 0.0;
   } else {
     return false;
   }
