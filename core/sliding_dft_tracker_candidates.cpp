@@ -1,0 +1,116 @@
+// The evidence of one window for every candidate fundamental (a state of the track): the log likelihood
+// ratio of its harmonic ladder, and the checks on a line's shoulder and on a comb's root.
+#include "core/sliding_dft_tracker_impl.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace gearpulse {
+
+// A ladder at f is also what an engine at f / 4 shows when its ignition spikes give it every harmonic (a
+// comb): f is then its 4th order, and an idle's 4th harmonic scores as well as the idle when the window
+// is long enough for the comb's upper lines to reach the evidence's bound. The two roots predict the
+// same lines at f's orders and differ at f / 4 and 3 f / 4: background under root f, the lower engine's
+// fundamental and 3rd order under root f / 4. The log likelihood ratio S of those two bins (each an order
+// of the lower engine, at -13 to +13 dB of f's line) gives, with the two roots equally likely beforehand,
+// the posterior of root f; the state at f loses the log odds by which it is the less likely root,
+// ln((1 + e^S) / 2) when S > 0, and nothing otherwise. Only the 4th order is judged so: f / 2 and 3 f / 2
+// are a four-stroke's own half orders (the half order's level prior and the track's continuity tell f
+// from f / 2), and f / 3 and 2 f / 3 lie a third of f apart, both inside a cabin's body resonance
+// (20-40 Hz) for an engine at 60-120 Hz (see docs/algorithms/tracker-experiments.md).
+double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const noexcept {
+  double s = 0.0;
+  for (const int m : {1, 3}) {
+    const double pos = 0.25 * m * k;
+    const auto b = static_cast<std::size_t>(std::lround(pos));
+    if (pos < noise_lo || tones->near(b)) return 0.0;  // unseen, or under a learned tone: says nothing
+    s += evidence.lower_root(z_at(b), rho_line);
+  }
+  return s > 0.0 ? std::log(0.5 * (1.0 + std::exp(s))) : 0.0;
+}
+
+// Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
+// normalised power at each of its orders.
+void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, std::vector<double>* overrun,
+                                                    std::vector<double>* power) const noexcept {
+  const double half_absent = 1.0 - (1.0 - HarmonicEvidence::kOrderAbsent) * half_present;
+  // The 3rd harmonic's learned level: its weight in the prior, its mean (a ratio) and spread (dB).
+  const double third_w = third_n / (third_n + third_prior);
+  const double third_ratio = std::pow(10.0, 0.1 * third_mean_db);
+  const double third_spread = std::sqrt(third_var_db + kThirdSpreadFloorDb * kThirdSpreadFloorDb);
+  for (int k = s_lo; k <= k_hi; ++k) {
+    const double z1 = z_at(static_cast<std::size_t>(k));
+    // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one
+    // resolution bin is penalised by the amplitude mismatch (sqrt z has unit-order noise).
+    double peak = z1;
+    for (int j = std::max(0, k - lobe); j <= std::min(nfft / 2, k + lobe); ++j)
+      if (!tones->near(static_cast<std::size_t>(j))) peak = std::max(peak, z_at(static_cast<std::size_t>(j)));
+    // On a loud line the mismatch is counted against the line's shape error (kShoulderShape of its
+    // amplitude) as well as the noise.
+    const double mismatch =
+        (std::sqrt(peak) - std::sqrt(z1)) / std::sqrt(1.0 + kShoulderShape * kShoulderShape * peak);
+    // A bin within a resolution bin of a learned tone says nothing either way: the engine may or may
+    // not be under the tone or its shoulders.
+    const bool on_tone = tones->near(static_cast<std::size_t>(k));
+    double l = on_tone ? 0.0 : evidence.fundamental(z1, rho_track) - mismatch * mismatch;
+    double overrun_second = 0.0;  // the overrun's 2nd harmonic term less the usual one
+    double power_second = 0.0;    // the same under power
+    if (cfg.require_harmonics) {
+      // The fundamental's level that scales the other orders: the track's under a learned tone, else read
+      // from this bin, whose scatter the orders' terms average over (HarmonicEvidence::Level).
+      const double rho = on_tone ? rho_track : std::max(z1 - 1.0, 0.1);
+      const auto level = on_tone ? HarmonicEvidence::Level::kTrack : HarmonicEvidence::Level::kRead;
+      for (int o = 0; o < kOrders; ++o) {
+        if (o == 1) continue;
+        const double pos = kOrder[o] * k;
+        if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
+        const auto b = static_cast<std::size_t>(std::lround(pos));
+        if (tones->near(b)) continue;
+        const double z = z_at(b);
+        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent)
+                             : o == 2 ? evidence.second(z, rho, level)
+                                      : evidence.order(z, rho, level);
+        if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho, level) - fixed;
+        if (o == 2 && power) power_second = evidence.second_power(z, rho, level) - fixed;
+        if (o != 3 || third_w <= 0.0) {
+          l += fixed;
+          continue;
+        }
+        // The mixture of the two priors, whose ratios to background add with the priors' weights.
+        const double learned = evidence.profiled(z, rho * third_ratio, third_spread);
+        const double m = std::max(fixed, learned);
+        l += m + std::log((1.0 - third_w) * std::exp(fixed - m) + third_w * std::exp(learned - m));
+      }
+      // The line's level (its peak's, not the state's on its shoulder) sets the lower root's expected level.
+      const double lo = l + overrun_second;
+      const double lp = l + power_second;
+      const double penalty = l > 0.0 || (overrun && lo > 0.0) || (power && lp > 0.0)
+                                 ? comb_root_penalty(k, on_tone ? rho_track : std::max(peak - 1.0, 0.1))
+                                 : 0.0;
+      const double usual = l > 0.0 ? l - penalty : l;
+      if (overrun)
+        (*overrun)[static_cast<std::size_t>(k - s_lo)] = temper * ((lo > 0.0 ? lo - penalty : lo) - usual);
+      if (power)
+        (*power)[static_cast<std::size_t>(k - s_lo)] = temper * ((lp > 0.0 ? lp - penalty : lp) - usual);
+      l = usual;
+    }
+    out[static_cast<std::size_t>(k - s_lo)] = temper * l;
+  }
+}
+
+// Squared mismatch (sqrt of normalised power) between the strongest fundamental peak one to two
+// resolution bins from f (learned tones left out) and the power at f; 0 when f holds its neighbourhood.
+double SlidingDftTracker::Impl::sweep_mismatch(double f) const noexcept {
+  const int kc = static_cast<int>(std::lround(f / df));
+  if (kc < s_lo || kc > nfft / 2 - 1) return 0.0;
+  const double z_est = z_at(static_cast<std::size_t>(kc));
+  double z_peak = z_est;
+  for (int k = std::max(s_lo, kc - 2 * lobe); k <= std::min(nfft / 2 - 1, kc + 2 * lobe); ++k)
+    if (std::abs(k - kc) > lobe && !tones->near(static_cast<std::size_t>(k)))
+      z_peak = std::max(z_peak, z_at(static_cast<std::size_t>(k)));
+  const double m = std::sqrt(z_peak) - std::sqrt(z_est);
+  return m * m;
+}
+
+}  // namespace gearpulse
