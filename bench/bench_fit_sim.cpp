@@ -178,16 +178,18 @@ void accuracy_table(int first_seed, int seeds, bench::Requirements& required) {
 
 // Auto mode on vehicles drawn at random, one 40-minute drive at 1 Hz each, the styles in turn.
 // Vehicle k (from first_vehicle on) is driven with seed 1 + k - 5000.
-void random_vehicles(int first_vehicle, int count, bench::Requirements& required) {
-  std::printf("\n== random vehicles (sim::random_vehicle %d..%d), 40 min at 1 Hz, styles in turn\n",
-              first_vehicle, first_vehicle + count - 1);
+// With wide, the vehicles are sim::wide_vehicle's (3-9 gears, diesels, motorcycles, irregular ladders).
+void random_vehicles(int first_vehicle, int count, bool wide, bench::Requirements& required) {
+  std::printf("\n== random vehicles (sim::%s %d..%d), 40 min at 1 Hz, styles in turn\n",
+              wide ? "wide_vehicle" : "random_vehicle", first_vehicle, first_vehicle + count - 1);
   int ok = 0;
   int right_count = 0;
   int used_rarely = 0;
   std::string misses;
   for (int r = 0; r < count; ++r) {
     const int k = first_vehicle + r;
-    const sim::Vehicle car = sim::random_vehicle(static_cast<std::uint64_t>(k));
+    const sim::Vehicle car = wide ? sim::wide_vehicle(static_cast<std::uint64_t>(k))
+                                  : sim::random_vehicle(static_cast<std::uint64_t>(k));
     const sim::DrivingStyle style = kStyles[r % 4];
     const auto observed =
         sim::simulate_observations(car, style, 2400.0, 1, static_cast<std::uint64_t>(1 + k - 5000));
@@ -421,20 +423,28 @@ void monte_carlo(int runs) {
 
 int main(int argc, char** argv) {
   // Options before the positional arguments: --first-seed N (the accuracy table's seeds start at N, 1
-  // by default), --first-vehicle K (the random vehicles start at K, 5000 by default), --require (above).
+  // by default), --first-vehicle K (the random vehicles start at K, 5000 by default), --wide (the random
+  // vehicles drawn by sim::wide_vehicle instead of sim::random_vehicle), --require (above).
   bench::Requirements required;
   if (!required.parse(argc, argv)) return 2;
   int first_seed = 1;
   int first_vehicle = 5000;
+  bool wide = false;
   int shift = 0;
-  for (; 1 + shift + 1 < argc; shift += 2) {
+  while (1 + shift < argc) {
     const std::string a = argv[1 + shift];
-    if (a == "--first-seed")
+    if (a == "--wide") {
+      wide = true;
+      shift += 1;
+    } else if (a == "--first-seed" && 2 + shift < argc) {
       first_seed = std::atoi(argv[2 + shift]);
-    else if (a == "--first-vehicle")
+      shift += 2;
+    } else if (a == "--first-vehicle" && 2 + shift < argc) {
       first_vehicle = std::atoi(argv[2 + shift]);
-    else
+      shift += 2;
+    } else {
       break;
+    }
   }
   argc -= shift;
   argv += shift;
@@ -447,7 +457,7 @@ int main(int argc, char** argv) {
       "condition = %d]\n",
       seeds, runs, random, conditions);
   if (seeds > 0) accuracy_table(first_seed, seeds, required);
-  if (random > 0) random_vehicles(first_vehicle, random, required);
+  if (random > 0) random_vehicles(first_vehicle, random, wide, required);
   if (conditions > 0) logging_conditions(conditions);
   if (conditions > 0) speed_lag_table(conditions);
   if (runs > 0) monte_carlo(runs);

@@ -31,11 +31,13 @@
 // --rule SETTING (repeatable) keeps only the rules switched off by that setting. --fits prints each
 // simulated vehicle's fitted thetas beside the true ones on stderr, and per cadence how many fits found
 // another gear count than the car's; --fit-minutes fits the simulated vehicles' models on a mixed drive of
-// M minutes instead of 40. --worst PCT lists every outage of the daemon's synthesis erring beyond PCT %
-// with its failure mode (outage_cause) and, per line, each mode's share of the error. --debug CAR STYLE
-// FROM TO prints both filters' beliefs per row from FROM to TO s of that drive, and the daemon's
-// synthesis' track (speed, acceleration) at each position of its ladder (CAR a simulated car's name, or
-// NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
+// M minutes instead of 40. --wide draws the random vehicles from sim::wide_vehicle (3-9 gears, diesels,
+// motorcycles, irregular ladders) instead of sim::random_vehicle, for robustness; --random-only leaves the
+// presets out (the random vehicles' figures alone). --worst PCT lists every outage of the daemon's
+// synthesis erring beyond PCT % with its failure mode (outage_cause) and, per line, each mode's share of
+// the error. --debug CAR STYLE FROM TO prints both filters' beliefs per row from FROM to TO s of that drive,
+// and the daemon's synthesis' track (speed, acceleration) at each position of its ladder
+// (CAR a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
 //
 // --log FILE (repeatable) scores the logs of one car of the user's instead of the set's real cars (any
 // format `gearpulse fit` reads; --row-seconds S for logs without a time column): fitted on the logs in
@@ -44,8 +46,8 @@
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--first-seed S] [--cadence K]
 // [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
-//                     [--fit-minutes M] [--easy-sim] [--sim-observation PART] [--worst PCT]
-//                     [--debug CAR STYLE FROM TO] [--log FILE]... [--row-seconds S] [DATA_DIR]
+//                     [--fit-minutes M] [--wide] [--random-only] [--easy-sim] [--sim-observation PART]
+//                     [--worst PCT] [--debug CAR STYLE FROM TO] [--log FILE]... [--row-seconds S] [DATA_DIR]
 //
 // The bench's parts are in bench/outage/ (outage.hpp: the shared types and which file does what).
 #include <chrono>
@@ -115,6 +117,10 @@ int main(int argc, char** argv) {
       only.emplace_back(argv[++i]);
     } else if (a == "--worst" && i + 1 < argc) {
       opt.worst = std::atof(argv[++i]);
+    } else if (a == "--wide") {
+      opt.wide = true;
+    } else if (a == "--random-only") {
+      opt.presets = false;
     } else if (a == "--fits") {
       opt.fits = true;
     } else if (a == "--easy-sim") {

@@ -46,6 +46,8 @@ struct Options {
   bool candidate = true;       // the candidate IMM filter runs beside the daemon's synthesis
   double worst = 0.0;          // --worst PCT: the daemon's synthesis' outages erring beyond PCT %
   long first_seed = -1;  // --first-seed N: simulated seeds N.., random vehicles N+500.. (else the set's)
+  bool wide = false;     // --wide: the random vehicles drawn by sim::wide_vehicle, not sim::random_vehicle
+  bool presets = true;   // the manual presets beside the random vehicles (--random-only: none)
 };
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the

@@ -210,21 +210,23 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
                                             : "without failures");
   std::snprintf(title, sizeof title,
                 "Simulated vehicles, %s seeds %llu..%llu (fit on a %g-min mixed drive, replay 20 min of each "
-                "style; %s)",
+                "style; %s%s%s)",
                 opt.first_seed > 0 ? "GIVEN"
                 : report_set       ? "REPORT"
                                    : "TUNING",
                 static_cast<unsigned long long>(base + 1),
                 static_cast<unsigned long long>(base + static_cast<std::uint64_t>(seeds)), opt.fit_minutes,
-                observed);
+                observed, opt.wide ? "; random vehicles of the wide family" : "",
+                opt.presets ? "" : ", no presets");
   std::vector<sim::Vehicle> cars;
   for (const sim::Vehicle& v : sim::vehicle_presets())
-    if (!v.is_cvt()) cars.push_back(v);
+    if (!v.is_cvt() && opt.presets) cars.push_back(v);
   for (int k = 1; k <= randoms; ++k)
-    cars.push_back(sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
+    cars.push_back(opt.wide ? sim::wide_vehicle(base + 500 + static_cast<std::uint64_t>(k))
+                            : sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
   bool first = true;
   for (const Cadence& c : kCadences) {
-    int fits = 0, fits_off = 0;  // fits, and those with another gear count than the car's
+    int fits = 0, fits_off = 0, fits_empty = 0;  // fits, those with another gear count, those with none
     if (opt.cadence >= 0 && &c - kCadences != opt.cadence) continue;
     w.lines.push_back({first ? title : "", c.name, std::string("sim_") + c.key, true});
     first = false;
@@ -245,6 +247,7 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
         }
         ++fits;
         fits_off += model->gears.size() != car.theta.size() ? 1 : 0;
+        fits_empty += model->gears.empty() ? 1 : 0;  // no ladder: the car's outages go unscored
         if (model->gears.empty()) continue;
         int k = 0;
         for (const sim::DrivingStyle style : {sim::DrivingStyle::kMixed, sim::DrivingStyle::kUrban,
@@ -257,8 +260,8 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
         }
       }
     if (opt.fits && fits > 0)
-      std::fprintf(stderr, "%s: %d of %d fits with another gear count than the car's\n", c.key, fits_off,
-                   fits);
+      std::fprintf(stderr, "%s: %d of %d fits with another gear count than the car's (%d without a ladder)\n",
+                   c.key, fits_off, fits, fits_empty);
   }
 }
 

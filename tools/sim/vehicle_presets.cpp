@@ -115,6 +115,69 @@ Vehicle random_vehicle(std::uint64_t seed) {
   return v;
 }
 
+Vehicle wide_vehicle(std::uint64_t seed) {
+  std::mt19937_64 rng(seed ^ 0x77696465ULL);  // a stream of its own: wide-N is no relative of random-N
+  auto uniform = [&rng](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  auto pick = [&rng](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+  // The kind of engine and gearbox: a petrol car (3-speed to 9-speed), a diesel car or light van (low
+  // idle, low rev limit), a motorcycle (high idle and rev limit, 5-6 close gears).
+  const int kind = pick(0, 2);
+  // The component tracked, in multiples of the crank frequency: the crank itself, or the firing
+  // frequency of cylinders / 2 fires per turn (a single 0.5, a triple 1.5, a five 2.5, a V8 4).
+  static constexpr double kCarMultiples[] = {1.0, 1.5, 2.0, 2.5, 3.0, 4.0};
+  static constexpr double kBikeMultiples[] = {0.5, 1.0, 1.5, 2.0};
+  const double multiple = kind == 2 ? kBikeMultiples[pick(0, 3)] : kCarMultiples[pick(0, kind == 1 ? 4 : 5)];
+  // Idle and rev limit, rpm: a petrol car 650-1000 / 5000-7000, a diesel 600-850 / 3800-4800, a
+  // motorcycle 1100-1500 / 8500-12500.
+  const double idle_rpm = kind == 0   ? uniform(650, 1000)
+                          : kind == 1 ? uniform(600, 850)
+                                      : uniform(1100, 1500);
+  const double max_rpm = kind == 0   ? uniform(5000, 7000)
+                         : kind == 1 ? uniform(3800, 4800)
+                                     : uniform(8500, 12500);
+  const int gears = kind == 0 ? pick(3, 9) : kind == 1 ? pick(5, 8) : pick(5, 6);
+  // Spread first / top: a car's first gear launches it (about 13-18:1 overall) and its top cruises
+  // (2.5-4:1), so 2.8x at least, up to 8x with a crawler first; adjacent steps of 1.2-1.8 bound it by the
+  // gear count. A motorcycle's power to weight lets first be tall: 2.3-3.2x.
+  const double spread =
+      kind == 2 ? uniform(2.3, 3.2)
+                : uniform(std::max(2.8, std::pow(1.2, gears - 1)), std::min(8.0, std::pow(1.8, gears - 1)));
+  // Log-steps from the bottom: progressive (shrinking toward the top) as random_vehicle's, each moved by
+  // up to 30 %, and one in two ladders with a quirk: a crawler first, two close top gears, a tall overdrive.
+  std::vector<double> weight(static_cast<std::size_t>(gears - 1));
+  const double progression = uniform(0.0, 1.0);
+  for (int i = 0; i + 1 < gears; ++i)
+    weight[static_cast<std::size_t>(i)] =
+        std::pow(1.0 + progression, -static_cast<double>(i) / (gears - 1)) * uniform(0.7, 1.3);
+  const int quirk = pick(0, 5);
+  if (quirk == 0) weight.front() *= 2.5;              // crawler first
+  if (quirk == 1 && gears > 3) weight.back() *= 0.3;  // two close top gears
+  if (quirk == 2 && gears > 3) weight.back() *= 1.8;  // tall overdrive
+  double weight_sum = 0.0;
+  for (double w : weight)
+    weight_sum += w;
+  // Top gear's road speed per 1000 rpm: a petrol car's 28-45 km/h, a diesel's overdrive 35-55 km/h, a
+  // motorcycle's 18-28 km/h (what cruising at 130 km/h and the top speed near the rev limit ask).
+  const double kmh_per_1000 = kind == 0 ? uniform(28, 45) : kind == 1 ? uniform(35, 55) : uniform(18, 28);
+  const double top_theta = kmh_per_1000 / 3.6 / (1000.0 / 60.0 * multiple);  // m/s per Hz of the component
+  Vehicle v;
+  v.name = "wide-family-" + std::to_string(seed);
+  v.theta.assign(static_cast<std::size_t>(gears), top_theta);
+  // Each step between 1.07 (the closest gearboxes' top pairs) and 2.5 (a crawler under a wide first).
+  for (int i = gears - 2; i >= 0; --i)
+    v.theta[static_cast<std::size_t>(i)] =
+        v.theta[static_cast<std::size_t>(i + 1)] /
+        std::clamp(std::exp(std::log(spread) * weight[static_cast<std::size_t>(i)] / weight_sum), 1.07, 2.5);
+  v.idle_freq = idle_rpm / 60.0 * multiple;
+  v.max_freq = max_rpm / 60.0 * multiple;
+  // Shift points relative to idle as random_vehicle's (up at 2.2-4x idle, down at 1.35-2x), the upshift
+  // below 70 % of the rev limit (a diesel's narrow band).
+  v.upshift_freq = std::min(uniform(2.2, 4.0) * v.idle_freq, 0.7 * v.max_freq);
+  v.downshift_freq = std::min(uniform(1.35, 2.0) * v.idle_freq, 0.67 * v.upshift_freq);
+  v.max_accel = kind == 2 ? uniform(3.0, 5.0) : kind == 1 ? uniform(1.4, 2.6) : uniform(1.8, 3.4);
+  return v;
+}
+
 Vehicle vehicle_preset(std::string_view name) {
   for (Vehicle& v : vehicle_presets()) {
     if (v.name == name) return std::move(v);

@@ -46,6 +46,12 @@ struct Vehicle {
 // idle, rev limit, the driver's shift points and the car's pull drawn from plausible ranges. The same
 // seed gives the same vehicle ("random-SEED").
 [[nodiscard]] Vehicle random_vehicle(std::uint64_t seed);
+// A wider family than random_vehicle's, for robustness beyond the ranges the design was tuned on: petrol
+// cars of 3-9 gears, diesels and light vans (idle 600-850 rpm, limit 3800-4800), motorcycles (idle
+// 1100-1500 rpm, limit 8500-12500, 5-6 close gears); irregular ladders (a crawler first, two close top
+// gears, a tall overdrive; spread up to 8); the crank or a firing frequency of 1-8 cylinders (0.5x-4x).
+// random_vehicle is left as it was. The same seed gives the same vehicle ("wide-family-SEED").
+[[nodiscard]] Vehicle wide_vehicle(std::uint64_t seed);
 
 enum class DrivingStyle { kMixed, kUrban, kHighway, kTrafficJam };
 [[nodiscard]] std::string_view style_name(DrivingStyle style) noexcept;
