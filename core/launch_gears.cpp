@@ -74,18 +74,18 @@ bool LaunchGears::same_base(double base_theta) const noexcept {
          std::abs(std::log(base_theta / base_theta_)) < 2.0 * kGearWindow;
 }
 
-int LaunchGears::gears_below(double base_theta, int at_least, double off_share) const noexcept {
-  if (at_least >= kMaxBelow || !same_base(base_theta)) return at_least;
+int LaunchGears::gears_below(double base_theta, int idle_count, double off_share) const noexcept {
+  if (idle_count >= kMaxBelow || !same_base(base_theta)) return idle_count;
   const double off = std::clamp(off_share, 1e-6, 0.5);
   const double log_on = std::log(1.0 - off), log_off = std::log(off / kMaxBelow);
   double total = 0.0;
   for (double c : counts_)
     total += c;
-  int best = at_least;
+  int best = idle_count;
   double best_score = -std::numeric_limits<double>::infinity();
-  for (int k = std::max(at_least, 0); k <= kMaxBelow; ++k) {
+  for (int k = 0; k <= kMaxBelow; ++k) {
     const double on = counts_[static_cast<std::size_t>(k)];
-    const double score = (k - at_least) * std::log(off) + on * log_on + (total - on) * log_off;
+    const double score = std::abs(k - idle_count) * std::log(off) + on * log_on + (total - on) * log_off;
     if (score > best_score) best = k, best_score = score;
   }
   return best;

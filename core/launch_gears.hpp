@@ -12,8 +12,9 @@
 // Each launch so counted is a reading of the gears below the base, off by one at times (a launch in
 // second gear, a shift missed or a fall of the revs that was none): with `off_share` the share of such
 // readings, the count k has a posterior under which a reading equal to k has likelihood 1 - off_share and
-// any other off_share / kMaxBelow; its prior is off_share^j for j gears beyond those the idle requires
-// (each gear more as unlikely as a reading that is off), so one launch against none decides, and readings
+// any other off_share / kMaxBelow; its prior is off_share^j for j gears more or fewer than the idle
+// requires (each as unlikely as a reading that is off: the idle's bound is a car's, and a motorcycle's
+// high idle or a tall first gear carries it faster), so one launch against none decides, and readings
 // that disagree weigh against each other. The counts belong to one base: a new one starts them afresh.
 //
 // Fixed capacity, no allocation.
@@ -38,9 +39,9 @@ class LaunchGears {
   // counted.
   void abort() noexcept { state_ = State::kIdle; }
 
-  // The most probable count of gears below a base of `base_theta`, at least `at_least` (the gears the idle
-  // requires below it): at_least when no launch was counted on that base.
-  [[nodiscard]] int gears_below(double base_theta, int at_least, double off_share) const noexcept;
+  // The most probable count of gears below a base of `base_theta`, the prior centred on `idle_count` (the
+  // gears the idle requires below it): idle_count when no launch was counted on that base.
+  [[nodiscard]] int gears_below(double base_theta, int idle_count, double off_share) const noexcept;
   // Launches counted on the current base with k upshifts before it (k = kMaxBelow: that many or more; 0
   // for any k outside 0..kMaxBelow).
   [[nodiscard]] double launches(int k) const noexcept {

@@ -206,9 +206,12 @@ class SpeedSynthesizer {
   [[nodiscard]] double idle_sd() const noexcept { return habits_.idle_sd(); }
   [[nodiscard]] double rolling_idle() const noexcept { return habits_.rolling_idle(tuning_); }
   [[nodiscard]] double idle_ceiling() const noexcept;
-  // The ladder's lowest gear carries the car at the warm idle faster than any first gear does.
+  // The ladder's lowest gear carries the car at the warm idle faster than any first gear does, and the
+  // launches seen under GPS do not show it is first after all (none upshifts before it: a motorcycle's
+  // high idle, a tall first; launch_gears.hpp).
   [[nodiscard]] bool lacks_first_gear() const noexcept {
-    return gears_ >= 1 && habits_.lacks_first_gear(theta_[1], tuning_);
+    return gears_ >= 1 && habits_.lacks_first_gear(theta_[1], tuning_) &&
+           !(tuning_.launch_gears > 0.0 && launches_.gears_below(theta_[1], 1, tuning_.launch_second) == 0);
   }
   [[nodiscard]] double shift_comfort(int from, int to, double freq) const noexcept {
     return habits_.shift_comfort(from, to, theta_[from], theta_[to], freq, tuning_);

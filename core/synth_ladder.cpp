@@ -274,9 +274,11 @@ void SpeedSynthesizer::insert_below_ladder(std::span<const double> thetas) noexc
 // the ladder's two lowest steps: the next step down grows by the factor the lowest step grew by over the
 // one above it (1 with only one step known), between a factor of 1.06 (the smallest step a fit accepts)
 // and 2 (the largest gearbox step, first to second in a four-speed box). Gears are predicted until the
-// lowest carries the car at the warm idle no faster than first gear does, and on down to as many below
-// the base as the launches seen under GPS show (launch_gears.hpp). The ladder's gears from position `base`
-// up are the ones known; the predicted thetas go to `theta`, lowest last. Returns how many.
+// lowest carries the car at the warm idle no faster than first gear does, and then as many below the base
+// as the launches seen under GPS show (launch_gears.hpp): more, or fewer where they show the base is first
+// though the idle says otherwise (the idle's bound is a car's: a motorcycle idles higher). The ladder's gears
+// from position `base` up are the ones known; the predicted thetas go to `theta`, lowest last. Returns how
+// many.
 int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noexcept {
   const int known = gears_ - base + 1;
   if (tuning_.predict_lower_gears <= 0.0 || known < 2) return 0;
@@ -301,7 +303,7 @@ int SpeedSynthesizer::predict_lower_gears(int base, ModeArray& theta) const noex
     theta[static_cast<std::size_t>(n)] = lowest;
     ++n;
   }
-  return n;
+  return wanted >= 0 ? std::min(n, wanted) : n;  // the launches may show fewer than the idle asks
 }
 
 // The predicted gears (predict_lower_gears) join the ladder below its lowest gear, each with the least share

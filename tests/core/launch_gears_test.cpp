@@ -87,10 +87,25 @@ TEST_CASE("launch gears: the count most probable weighs launches against each ot
   climb(below, 180.0, 200.0, 10);
   launch(gears, t, below, 0);  // one launch against three: off by one
   CHECK(gears.gears_below(kBase, 0, 0.1) == 0);
-  CHECK(gears.gears_below(kBase, 2, 0.1) == 2);  // never fewer than the idle requires
+  CHECK(gears.gears_below(kBase, 2, 0.1) == 0);  // four launches outweigh the idle's two gears
   for (int k = 0; k < 3; ++k)
     launch(gears, t, below, 0);
   CHECK(gears.gears_below(kBase, 0, 0.1) == 1);  // four against three
+}
+
+TEST_CASE("launch gears: launches from the base overrule the idle's bound only as evidence outweighs it") {
+  // A motorcycle idles at 1100-1500 rpm: its first gear carries it faster at idle than a car's bound, and
+  // the idle asks gears below a base that is first. Its launches show none: no upshift before the base.
+  std::vector<double> from_base;
+  climb(from_base, 80.0, 250.0, 20);
+  LaunchGears gears;
+  double t = 0.0;
+  CHECK(gears.gears_below(kBase, 1, 0.1) == 1);  // nothing counted: the idle decides
+  launch(gears, t, from_base, 0);
+  CHECK(gears.gears_below(kBase, 1, 0.1) == 0);  // one launch against the idle's one gear
+  CHECK(gears.gears_below(kBase, 2, 0.1) == 2);  // not against two
+  launch(gears, t, from_base, 0);
+  CHECK(gears.gears_below(kBase, 2, 0.1) == 0);  // two launches do
 }
 
 TEST_CASE("launch gears: a launch that loses GPS or crawls past the launch time is not counted") {

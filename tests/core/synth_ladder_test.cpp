@@ -503,6 +503,33 @@ TEST_CASE("synth: launches seen under GPS from a ladder's lowest gear add no gea
   CHECK(synth.ladder_gears() == 7);
 }
 
+TEST_CASE("synth: launches seen under GPS from a motorcycle's first gear take back the gear the idle adds") {
+  // A motorcycle idles at 1300 rpm (the crank line at 21.7 Hz) and its first gear carries it at 3.2 m/s
+  // there, faster than a car's first gear does: once GPS shows the idle, a gear is predicted below first.
+  // Its launches under GPS reach first gear with no upshift: the gear predicted goes.
+  const std::vector<double> six = {0.1475, 0.1991, 0.2429, 0.2866, 0.3210, 0.3531};
+  constexpr double kBikeIdle = 21.7, kDt = 0.1, kAccel = 2.5, kShift = 0.3;
+  SpeedSynthesizer synth(model_of(six));
+  double t = 0.0;
+  int idle_ladder = 0;
+  for (int launch = 0; launch < 3; ++launch) {
+    double v = 0.0;
+    for (const double end = t + 10.0; t < end; t += kDt)
+      synth.step(t, 0.0, kBikeIdle);
+    if (launch == 0) idle_ladder = synth.ladder_gears();
+    for (std::size_t gear = 0; gear < 3; ++gear) {
+      for (; v / six[gear] < 4.0 * kBikeIdle; t += kDt, v += kAccel * kDt)
+        synth.step(t, v, std::max(1.6 * kBikeIdle, v / six[gear]));  // the clutch slips at first
+      for (double s = 0.0; s < kShift; s += kDt, t += kDt)
+        synth.step(t, v, v / six[gear] + (s / kShift) * (v / six[gear + 1] - v / six[gear]));
+    }
+    for (; v > 0.0; t += kDt, v = std::max(0.0, v - 2.0 * kDt))  // declutched, the revs at idle
+      synth.step(t, v, kBikeIdle);
+  }
+  CHECK(idle_ladder == 7);
+  CHECK(synth.ladder_gears() == 6);
+}
+
 TEST_CASE("synth: a launch from rest partly unseen counts no gears below the ladder") {
   // The young 7-speed model without first gear above: a launch under GPS shows first gear below its
   // lowest. The car then stands under GPS and moves off through first unseen (no steps for longer than
