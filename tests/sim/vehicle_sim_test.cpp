@@ -139,6 +139,41 @@ TEST_CASE("sim: random vehicles are plausible manual cars and repeat by seed") {
   CHECK(sim::random_vehicle(1).theta != sim::random_vehicle(2).theta);
 }
 
+TEST_CASE("sim: the wide family spans more gearboxes and engines, drivable, and repeats by seed") {
+  std::set<int> gear_counts;
+  double widest = 0.0, closest = 1e9;
+  for (std::uint64_t seed = 1; seed <= 80; ++seed) {
+    const sim::Vehicle v = sim::wide_vehicle(seed);
+    INFO(v.name);
+    CHECK(v.name == "wide-family-" + std::to_string(seed));
+    REQUIRE(v.gears() >= 3);
+    REQUIRE(v.gears() <= 9);
+    gear_counts.insert(v.gears());
+    for (int i = 1; i < v.gears(); ++i) {
+      const double step = v.theta[static_cast<std::size_t>(i)] / v.theta[static_cast<std::size_t>(i - 1)];
+      CHECK(step >= 1.07 - 1e-9);  // what a fit can tell apart (it takes 1.06)
+      CHECK(step <= 2.5 + 1e-9);
+      closest = std::min(closest, step);
+    }
+    widest = std::max(widest, v.theta.back() / v.theta.front());
+    CHECK(v.idle_freq * 1.3 < v.downshift_freq);
+    CHECK(v.downshift_freq < v.upshift_freq);
+    CHECK(v.upshift_freq < v.max_freq);
+    // The rev limit over the idle, whatever multiple of the crank the component is: an engine's band.
+    CHECK(v.max_freq / v.idle_freq > 4.0);
+    const double top_at_idle_kmh = v.theta.back() * v.idle_freq * 3.6;
+    CHECK(top_at_idle_kmh > 15.0);
+    CHECK(top_at_idle_kmh < 60.0);
+    const sim::Drive d = sim::simulate_drive(v, {sim::DrivingStyle::kMixed, 300.0, 1.0, seed});
+    CHECK(d.truth.size() == 301);
+    CHECK(sim::wide_vehicle(seed).theta == v.theta);
+  }
+  CHECK(gear_counts.size() == 7);  // 3 to 9 gears all drawn
+  CHECK(widest > 6.0);             // a crawler first
+  CHECK(closest < 1.12);           // two close top gears
+  CHECK(sim::wide_vehicle(1).theta != sim::random_vehicle(1).theta);
+}
+
 TEST_CASE("sim: the driver does not hunt between two gears") {
   // An upshift followed within a few seconds by a downshift back into the gear just left, at about the
   // same speed, is hunting: the driver shifted up into a gear too low on revs. Braking for a stop after an
