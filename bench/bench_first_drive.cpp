@@ -13,12 +13,14 @@
 // Per outage: distance error |integral of the output - integral of the true speed| over the 60 s, in m.
 // Targets: a model within 3 minutes of moving; from minute 5, per-outage distance error within 2x the
 // pre-trained one.
-// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--trace MINUTE]
+// Usage: bench_first_drive [--tuning | --report | --seeds A B] [--wide] [--verbose] [--trace MINUTE]
 //        [--synth KEY=VALUE[,...]] [--require NAME<=VALUE]...
 //   --require (bench/requirements.hpp) holds the figures first_model_worst_min (min of moving),
 //   cold_over_pretrained_from_min5 and known_gears_cold_over_pretrained_from_min5 (ratios), cold_m_from_min5
 //   and known_gears_cold_m_from_min5 (m per outage) to thresholds.
 //   --tuning: seeds 1-10 (the seeds the schedule's defaults were chosen on); --report (default): 101-120.
+//   --wide: the vehicles drawn by sim::wide_vehicle(seed) (3-9 gears, diesels, motorcycles, irregular
+//   ladders) instead, a robustness check.
 //   --synth sets SynthTuning fields of both runs' synthesis (bench/synth_settings.hpp), e.g. a rule off.
 //   --verbose adds each fit's ladder, each outage, for an outage in gears the model lacks the seconds in
 //   them below, inside and above its ladder, and the outages in a gear not learned yet split by where.
@@ -264,14 +266,16 @@ double mean(const std::vector<double>& v) {
 int main(int argc, char** argv) {
   std::uint64_t first = 101, last = 120;
   const char* which = "report";
-  bool verbose = false;
+  bool verbose = false, wide = false;
   Trace trace;
   gearpulse::SynthTuning tuning;  // the daemon's defaults unless --synth KEY=VALUE sets a field
   gearpulse::bench::Requirements required;
   if (!required.parse(argc, argv)) return 2;
   for (int i = 1; i < argc; ++i) {
     const std::string_view a = argv[i];
-    if (a == "--tuning") {
+    if (a == "--wide") {
+      wide = true;
+    } else if (a == "--tuning") {
       first = 1, last = 10, which = "tuning";
     } else if (a == "--report") {
       first = 101, last = 120, which = "report";
@@ -287,18 +291,18 @@ int main(int argc, char** argv) {
     } else if (a == "--synth" && i + 1 < argc && gearpulse::bench::apply_settings(tuning, argv[i + 1])) {
       ++i;
     } else {
-      std::fprintf(
-          stderr,
-          "usage: bench_first_drive [--tuning | --report | --seeds A B] [--verbose] [--trace MINUTE] "
-          "[--synth KEY=VALUE] [--require NAME<=VALUE]...\n");
+      std::fprintf(stderr,
+                   "usage: bench_first_drive [--tuning | --report | --seeds A B] [--wide] [--verbose] "
+                   "[--trace MINUTE] "
+                   "[--synth KEY=VALUE] [--require NAME<=VALUE]...\n");
       return 2;
     }
   }
   std::printf(
-      "first drive from an empty state: seeds %llu-%llu (%s set), sim::random_vehicle(seed), mixed, "
+      "first drive from an empty state: seeds %llu-%llu (%s set), sim::%s(seed), mixed, "
       "%.0f min, 60 s outage every 3 min from minute 2\n",
       static_cast<unsigned long long>(first), static_cast<unsigned long long>(last), which,
-      kDriveLength / 60.0);
+      wide ? "wide_vehicle" : "random_vehicle", kDriveLength / 60.0);
   std::vector<std::vector<double>> cold_err, pre_err, truth_m;  // per outage index, over seeds
   std::vector<double> first_moving, first_drive;
   std::size_t never = 0, late = 0;
@@ -313,7 +317,7 @@ int main(int argc, char** argv) {
   std::array<double, 3> lacked_cold{}, lacked_pre{};
   std::array<std::size_t, 3> lacked_n{};
   for (std::uint64_t seed = first; seed <= last; ++seed) {
-    const sim::Vehicle car = sim::random_vehicle(seed);
+    const sim::Vehicle car = wide ? sim::wide_vehicle(seed) : sim::random_vehicle(seed);
     sim::DriveOptions options;
     options.style = sim::DrivingStyle::kMixed;
     options.duration = kDriveLength;
