@@ -95,3 +95,22 @@ TEST_CASE("lighter scene: the automatic gain holds the level whatever the input'
                                        [](float a, float b) { return std::abs(a) < std::abs(b); });
   CHECK(std::abs(peak) == Approx(0.05).epsilon(1e-6));
 }
+
+TEST_CASE("lighter scene: every component scene_without names changes the recording and is named once") {
+  constexpr double kDuration = 10.0;                // s
+  const auto truth = [](double) { return 100.0; };  // the engine runs throughout
+  sim::LighterSceneConfig base = sim::scene_for_seed(7, 10.0);
+  base.fan_on_s = 1.0;  // the fan runs for part of the recording, whatever its first draw
+  const auto full = sim::make_lighter_scene(base, truth, kDuration);
+  for (const sim::SceneComponent& component : sim::kSceneComponents) {
+    INFO(component.name);
+    CHECK(std::count(std::begin(sim::kSceneComponents), std::end(sim::kSceneComponents), component.name) ==
+          1);
+    sim::LighterSceneConfig c = base;
+    REQUIRE(sim::scene_without(c, component.name, truth, kDuration));
+    const bool changed = sim::make_lighter_scene(c, truth, kDuration) != full;
+    CHECK(changed);
+  }
+  sim::LighterSceneConfig c = base;
+  CHECK_FALSE(sim::scene_without(c, "exhaust", truth, kDuration));
+}

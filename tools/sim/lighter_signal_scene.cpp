@@ -153,45 +153,65 @@ std::vector<float> make_lighter_scene(const LighterSceneConfig& config, const Fr
   return out;
 }
 
+namespace {
+
+// The automatic gain's fixed stand-in: the envelope is a running mean of |v|, so a fixed gain of level /
+// mean |v| holds its mean.
+void switch_off_agc(LighterSceneConfig& config, const FrequencyTrajectory& trajectory, double duration_s) {
+  LighterSceneConfig raw = config;
+  raw.agc_s = 0.0;
+  raw.fixed_gain = 1.0;
+  raw.clip = std::numeric_limits<double>::infinity();
+  const std::vector<float> x = make_lighter_scene(raw, trajectory, duration_s);
+  double sum = 0.0;
+  for (const float v : x)
+    sum += std::abs(static_cast<double>(v));
+  config.fixed_gain =
+      x.empty() || !(sum > 0.0) ? 1.0 : config.agc_level * static_cast<double>(x.size()) / sum;
+  config.agc_s = 0.0;
+}
+
+// Short names for the signatures of the table's switch-offs.
+using Config = LighterSceneConfig;
+using Trajectory = FrequencyTrajectory;
+
+}  // namespace
+
+// Names as bench_tracker's --scene-without takes them; what each is, where not plain, above it.
+constexpr std::array<SceneComponent, 11> kSceneComponents = {{
+    // The automatic gain.
+    {"agc", &switch_off_agc},
+    {"clipping",
+     [](Config& c, const Trajectory&, double) { c.clip = std::numeric_limits<double>::infinity(); }},
+    // The body/cabin resonance.
+    {"resonance", [](Config& c, const Trajectory&, double) { c.body = 0.0; }},
+    // The ignition spikes.
+    {"spikes", [](Config& c, const Trajectory&, double) { c.spike_amplitude = 0.0; }},
+    {"fan", [](Config& c, const Trajectory&, double) { c.fan = 0.0; }},
+    {"pump", [](Config& c, const Trajectory&, double) { c.pump = 0.0; }},
+    {"mains", [](Config& c, const Trajectory&, double) { c.mains = 0.0; }},
+    // The alternator's whine.
+    {"whine", [](Config& c, const Trajectory&, double) { c.alternator = 0.0; }},
+    // The half orders: 0.5 f and 1.5 f.
+    {"half",
+     [](Config& c, const Trajectory&, double) {
+       c.half_order = 0.0;
+       c.order_1_5 = 0.0;
+     }},
+    // The load's swap of energy between f and 2 f.
+    {"swap", [](Config& c, const Trajectory&, double) { c.load_swing = 0.0; }},
+    // The 3rd harmonic.
+    {"third", [](Config& c, const Trajectory&, double) { c.harmonic3 = 0.0; }},
+}};
+static_assert(std::ranges::none_of(kSceneComponents,
+                                   [](const SceneComponent& c) { return c.name.empty() || !c.switch_off; }),
+              "an entry of kSceneComponents left empty");
+
 bool scene_without(LighterSceneConfig& config, std::string_view component,
                    const FrequencyTrajectory& trajectory, double duration_s) {
-  if (component == "agc") {
-    // The envelope is a running mean of |v|: a fixed gain of level / mean |v| holds its mean.
-    LighterSceneConfig raw = config;
-    raw.agc_s = 0.0;
-    raw.fixed_gain = 1.0;
-    raw.clip = std::numeric_limits<double>::infinity();
-    const std::vector<float> x = make_lighter_scene(raw, trajectory, duration_s);
-    double sum = 0.0;
-    for (const float v : x)
-      sum += std::abs(static_cast<double>(v));
-    config.fixed_gain =
-        x.empty() || !(sum > 0.0) ? 1.0 : config.agc_level * static_cast<double>(x.size()) / sum;
-    config.agc_s = 0.0;
-  } else if (component == "clipping") {
-    config.clip = std::numeric_limits<double>::infinity();
-  } else if (component == "resonance") {
-    config.body = 0.0;
-  } else if (component == "spikes") {
-    config.spike_amplitude = 0.0;
-  } else if (component == "fan") {
-    config.fan = 0.0;
-  } else if (component == "pump") {
-    config.pump = 0.0;
-  } else if (component == "mains") {
-    config.mains = 0.0;
-  } else if (component == "whine") {
-    config.alternator = 0.0;
-  } else if (component == "half") {
-    config.half_order = 0.0;
-    config.order_1_5 = 0.0;
-  } else if (component == "swap") {
-    config.load_swing = 0.0;
-  } else if (component == "third") {
-    config.harmonic3 = 0.0;
-  } else {
-    return false;
-  }
+  const auto found = std::ranges::find(kSceneComponents, component, &SceneComponent::name);
+  if (found == kSceneComponents.end()) return false;
+  found->switch_off(config, trajectory, duration_s);
   return true;
 }
 

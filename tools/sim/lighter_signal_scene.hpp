@@ -17,6 +17,7 @@
 //     noise_hi_hz]);
 //   - a USB card's automatic gain (the level follows the signal's envelope over agc_s) and clipping.
 // Seeded and reproducible; scene_for_seed() draws every level and frequency from its seed.
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <random>
@@ -66,16 +67,23 @@ struct LighterSceneConfig {
   std::uint64_t seed = 1;
 };
 
-// The components scene_without() can switch off, by name: agc, clipping, resonance, spikes, fan, pump,
-// mains, whine (the alternator), half (the 0.5 and 1.5 orders), swap (the load's swap of f and 2 f) and
-// third (the 3rd harmonic).
-inline constexpr std::string_view kSceneComponents[] = {
-    "agc", "clipping", "resonance", "spikes", "fan", "pump", "mains", "whine", "half", "swap", "third"};
+// A component of the scene that scene_without() can switch off: its name (as bench_tracker's
+// --scene-without takes it) and how it is switched off in a config.
+struct SceneComponent {
+  std::string_view name;
+  void (*switch_off)(LighterSceneConfig& config, const FrequencyTrajectory& trajectory, double duration_s);
+  // A component is found by its name (std::find over kSceneComponents).
+  friend bool operator==(const SceneComponent& c, std::string_view name) noexcept { return c.name == name; }
+};
 
-// `config` with one component switched off: its level set to 0 (the noise and every other component's
-// draw unchanged, the noise level being set by the fundamental). The automatic gain is replaced by the
-// fixed gain that holds the recording's mean envelope at agc_level (hence `trajectory` and the duration).
-// False for an unknown name.
+// Every component scene_without() can switch off, the one list of their names (what each is: beside its
+// entry in lighter_signal_scene.cpp).
+extern const std::array<SceneComponent, 11> kSceneComponents;
+
+// `config` with one component of kSceneComponents switched off: its level set to 0 (the noise and every
+// other component's draw unchanged, the noise level being set by the fundamental). The automatic gain is
+// replaced by the fixed gain that holds the recording's mean envelope at agc_level (hence `trajectory` and
+// the duration). False for an unknown name.
 [[nodiscard]] bool scene_without(LighterSceneConfig& config, std::string_view component,
                                  const FrequencyTrajectory& trajectory, double duration_s);
 
