@@ -45,7 +45,7 @@ void clear_stale_socket(const std::string& path) {
   if (!S_ISSOCK(st.st_mode))
     throw std::runtime_error("control socket path " + path + " exists and is not a socket; not touching it");
   UniqueFd probe(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
-  if (!probe) throw_errno("socket");
+  if (!probe) throw_errno("cannot create a socket to probe " + path);
   const sockaddr_un addr = make_address(path);
   const int rc = ::connect(probe.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr);
   const int err = errno;
@@ -107,7 +107,7 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
   }
   clear_stale_socket(path_);
   listen_fd_.reset(::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
-  if (!listen_fd_) throw_errno("socket");
+  if (!listen_fd_) throw_errno("cannot create the control socket " + path_);
   const sockaddr_un addr = make_address(path_);
   try {
     if (::bind(listen_fd_.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0)
@@ -117,9 +117,9 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
     if (::chmod(path_.c_str(), 0660) != 0) throw_errno("cannot chmod control socket " + path_);
     if (::listen(listen_fd_.get(), 16) != 0) throw_errno("cannot listen on " + path_);
     epoll_fd_.reset(::epoll_create1(EPOLL_CLOEXEC));
-    if (!epoll_fd_) throw_errno("epoll_create1");
+    if (!epoll_fd_) throw_errno("control socket " + path_ + ": epoll_create1");
     wake_fd_.reset(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
-    if (!wake_fd_) throw_errno("eventfd");
+    if (!wake_fd_) throw_errno("control socket " + path_ + ": eventfd");
   } catch (...) {
     ::unlink(path_.c_str());  // the descriptors close as the members go
     throw;
@@ -228,7 +228,8 @@ void ControlServer::run() noexcept {
   };
 
   if (!add_fd(listen_fd_.get(), EPOLLIN) || !add_fd(wake_fd_.get(), EPOLLIN)) {
-    spdlog::error("control: epoll registration failed: {}; control socket unavailable", std::strerror(errno));
+    spdlog::error("control: epoll registration failed: {}; {} is not served (restart the daemon)",
+                  std::strerror(errno), path_);
     return;
   }
   epoll_event events[32];
@@ -240,7 +241,8 @@ void ControlServer::run() noexcept {
   while (running_.load()) {
     const int n = ::epoll_wait(epoll_fd_.get(), events, 32, accept_paused ? 100 : 1000);
     if (n < 0 && errno != EINTR) {
-      spdlog::error("control: epoll_wait failed: {}", std::strerror(errno));
+      spdlog::error("control: epoll_wait failed: {}; {} is no longer served (restart the daemon)",
+                    std::strerror(errno), path_);
       break;
     }
     const auto now = std::chrono::steady_clock::now();

@@ -271,9 +271,9 @@ bool Pipeline::Impl::track_audio(Tracking& k, double now) {
         tracker.skip(b.hole);
         if (b.hole_lost)
           faults.report("audio-hole", spdlog::level::warn,
-                        "audio: " + std::to_string(b.hole) +
-                            " frames lost before the ring (overrun, device restart or a stalled source); "
-                            "tracking resumes after the hole");
+                        fmt::format("audio: {} frames from {} lost before the ring (overrun, device "
+                                    "restart or a stalled source); tracking resumes after the hole",
+                                    b.hole, config.audio.device));
       }
       tracker.retime(b.t0);
     }

@@ -29,7 +29,7 @@ class SynthesisStage {
   // stamped as the training pairs are, its receive time less `gps_latency` (s): the model's speed lag is
   // its lag against that stamp, and the synthesis is told how much older than `t` the stamp is (or newer).
   Step step(double t, double freq, double snr_db, bool tracked, const std::optional<GpsReport>& fix,
-            double min_snr_db, double gps_latency = 0.0) {
+            double min_snr_db, double gps_latency = 0.0) noexcept {
     constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
     const double gps_speed = fix ? fix->speed : kNan;
     const bool gps_new = fix && fixes_.is_new(*fix);

@@ -158,7 +158,8 @@ const char* to_string(PcmFormat format) noexcept {
 
 AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
     : config_(std::move(config)), ring_(ring) {
-  if (config_.period_frames == 0) throw std::runtime_error("ALSA capture: period_frames must be positive");
+  if (config_.period_frames == 0)
+    throw std::runtime_error("ALSA capture '" + config_.device + "': period_frames must be positive");
   Negotiated got;
   std::string why;
   if (open_pcm(config_, pcm_, got, why) < 0)

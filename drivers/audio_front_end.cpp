@@ -59,7 +59,7 @@ bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepar
       return fail(std::move(why));
     capture->start();
   } catch (const std::exception& e) {
-    return fail(std::string("cannot start the capture: ") + e.what());
+    return fail("cannot start the capture from " + capture->describe() + ": " + e.what());
   }
   std::lock_guard lock(mutex_);
   ring_ = std::move(ring);

@@ -143,6 +143,7 @@ void GpsdClient::set_error(std::string message, bool connection_lost) {
 
 void GpsdClient::run() {
   std::chrono::milliseconds backoff = config_.backoff_min;
+  const std::string server = config_.host + ":" + config_.port;  // for the errors of a lost connection
   auto stopping = [this] {
     std::lock_guard lock(mutex_);
     return stop_requested_;
@@ -168,8 +169,8 @@ void GpsdClient::run() {
       beat();
       errno = 0;
       if (!::gps_waiting(&conn.data(), kPollUs)) {
-        if (errno != 0 && errno != EINTR && errno != EAGAIN) {
-          set_error(std::string("waiting for gpsd: ") + std::strerror(errno), true);
+        if (const int err = errno; err != 0 && err != EINTR && err != EAGAIN) {
+          set_error("waiting for gpsd at " + server + ": " + std::strerror(err), true);
           break;
         }
         continue;
@@ -231,8 +232,8 @@ void GpsdClient::run() {
       }
       if (lost) {
         const int err = errno;
-        set_error(err ? std::string("reading from gpsd: ") + std::strerror(err)
-                      : std::string("gpsd closed the connection"),
+        set_error(err ? "reading from gpsd at " + server + ": " + std::strerror(err)
+                      : "gpsd at " + server + " closed the connection",
                   true);
         break;
       }
