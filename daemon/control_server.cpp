@@ -137,6 +137,7 @@ ControlServer::~ControlServer() {
 }
 
 void ControlServer::start() {
+  if (thread_.joinable()) return;  // serving already
   running_.store(true);
   thread_ = std::thread([this] { run(); });
 }

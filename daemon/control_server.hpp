@@ -49,7 +49,7 @@ class ControlServer {
   ControlServer(const ControlServer&) = delete;
   ControlServer& operator=(const ControlServer&) = delete;
 
-  void start();
+  void start();  // serves on a thread of its own; once serving, a second start() does nothing
   void stop() noexcept;
 
   [[nodiscard]] std::size_t clients() const noexcept { return clients_.load(std::memory_order_relaxed); }

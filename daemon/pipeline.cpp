@@ -190,7 +190,7 @@ void Pipeline::Impl::open_output_device() {
     return;
   }
   const std::string name = device->describe();
-  output.attach(std::move(device));
+  if (!output.attach(std::move(device))) return;  // attached already (service() checks attached() first)
   bool was_failing = false;
   {
     std::lock_guard lock(output_mutex);

@@ -12,12 +12,15 @@ namespace gearpulse {
 
 // What the pulse thread drives: the device once it is open; until then a stand-in that counts the pulses.
 // The device is attached once, by the main thread, while the pulse thread runs: the thread finds it
-// through an atomic pointer at its next edge, and it is freed only after the thread has stopped.
+// through an atomic pointer at its next edge, and it is freed only after the thread has stopped. A second
+// device is refused (false, and it is closed at once): the pulse thread may be driving the first.
 class LateOutput final : public PulseOutput {
  public:
-  void attach(std::unique_ptr<PulseOutput> device) noexcept {
+  [[nodiscard]] bool attach(std::unique_ptr<PulseOutput> device) noexcept {
+    if (device_ || !device) return false;
     device_ = std::move(device);
     current_.store(device_.get(), std::memory_order_release);
+    return true;
   }
   [[nodiscard]] bool attached() const noexcept { return current_.load(std::memory_order_acquire) != &none_; }
   void rise() noexcept override { current_.load(std::memory_order_acquire)->rise(); }

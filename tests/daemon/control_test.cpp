@@ -77,6 +77,18 @@ TEST_CASE("control: answers one JSON line per request with the protocol version"
   CHECK(json::parse(*c.read_line())["echo"] == "b");
 }
 
+TEST_CASE("control: a second start() while serving leaves the server as it was") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.connected());
+  CHECK(ask(c, R"({"cmd":"status"})")["echo"] == "status");
+  server.stop();
+  server.stop();
+}
+
 TEST_CASE("control: bad requests get error replies and the connection stays usable") {
   TempDir dir;
   ControlServer server((dir / "ctl.sock").string(), EchoHandler{});

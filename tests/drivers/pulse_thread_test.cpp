@@ -1,9 +1,11 @@
 #include <catch2/catch.hpp>
 
 #include <chrono>
+#include <memory>
 #include <thread>
 
 #include "drivers/clock.hpp"
+#include "drivers/late_output.hpp"
 #include "drivers/pulse_output.hpp"
 #include "drivers/pulse_thread.hpp"
 
@@ -103,4 +105,23 @@ TEST_CASE("pulse: starting a running thread again keeps the one train") {
   CHECK(out.rises() == thread.pulses());
   CHECK(out.falls() == out.rises());
   CHECK_FALSE(thread.status().running);
+}
+
+TEST_CASE("pulse: a late output takes its device once and refuses a second while driving the first") {
+  gearpulse::LateOutput late;
+  gearpulse::PulseThread thread(late, pulse_a_metre());
+  thread.start();
+  thread.set_speed(200.0);
+  auto first = std::make_unique<gearpulse::NullPulseOutput>();
+  gearpulse::NullPulseOutput* driven = first.get();
+  CHECK_FALSE(late.attached());
+  CHECK_FALSE(late.attach(nullptr));
+  CHECK(late.attach(std::move(first)));
+  CHECK(late.attached());
+  CHECK_FALSE(late.attach(std::make_unique<gearpulse::NullPulseOutput>()));
+  std::this_thread::sleep_for(30ms);
+  thread.stop();
+  // The first device is still the one driven, and alive: it carries the pulses after the refused attach.
+  CHECK(driven->rises() > 0);
+  CHECK(driven->rises() == driven->falls());
 }
