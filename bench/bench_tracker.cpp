@@ -5,10 +5,10 @@
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
-//   bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S]
+//   bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S] [--lag S]
 //                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
-//                 [--hop S] [--offset S] [--dump]
+//                 [--hop S] [--lag S] [--offset S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
 // vehicle simulator's preset NAME (bmw-520i, hatch-5, close-6, wide-4, van-6, sport-7, compact-4)
 // instead of the built-in drive ("drive").
@@ -22,6 +22,7 @@
 // --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
 // is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
+// --lag S: the tracker's fixed-lag decision (TrackerConfig::decision_lag_s) for the scenes or the recording.
 // The bench's parts beside main(): bench/tracker/tracker.hpp says which file does what.
 #include <algorithm>
 #include <cmath>
@@ -64,13 +65,14 @@ int main(int argc, char** argv) {
   std::vector<double> scene_snr = {10.0, 0.0, -5.0};
   WavOptions wav;
   const auto usage = [] {
-    std::fprintf(stderr,
-                 "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
-                 "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
-                 "       bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S]\n"
-                 "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]\n"
-                 "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
-                 "                     [--window S] [--hop S] [--offset S] [--dump]\n");
+    std::fprintf(
+        stderr,
+        "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
+        "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
+        "       bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S] [--lag S]\n"
+        "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]\n"
+        "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
+        "                     [--window S] [--hop S] [--lag S] [--offset S] [--dump]\n");
     return 2;
   };
   for (int i = 1; i < argc; ++i) {
@@ -113,6 +115,8 @@ int main(int argc, char** argv) {
     } else if (a == "--band" && more) {
       if (std::sscanf(argv[++i], "%lf:%lf", &wav.config.band_lo_hz, &wav.config.band_hi_hz) != 2)
         return usage();
+    } else if (a == "--lag" && more) {
+      if (!parse_number(argv[++i], wav.config.decision_lag_s)) return usage();
     } else if (a == "--dump") {
       wav.dump = true;
     } else if (a == "--seed" && i + 1 < argc) {

@@ -35,6 +35,11 @@ struct TrackerConfig {
   double max_slew_hz_per_s = 60.0;     // fastest engine-frequency change followed without a re-acquisition
   double shift_slew_hz_per_s = 250.0;  // fastest change at a gear shift, followed while the line is strong
   double history_s = 2.0;              // input kept for at() (windows centred up to this far back)
+  // Fixed-lag decision: each hop's output is queued this much later (rounded to whole hops), its confidence
+  // decided with the windows after it: raised to the latest hop's when the estimates between continue its
+  // line. Its estimate and time stamp are its own hop's. 0: every output as soon as its window is analysed.
+  // Tuning scenes at 0.5 s: -5 dB coverage 81.9 -> 88.0 %, gross 0.82 -> 1.04 % (docs/tracker.md).
+  double decision_lag_s = 0.0;
   // Acquire only a line with a harmonic ladder (f/2, 2f or 3f present). A fan or pump tone has none;
   // set false for a signal whose engine component is a pure sinusoid.
   bool require_harmonics = true;
@@ -89,15 +94,20 @@ class SlidingDftTracker {
   // Feeds mono frames. Every completed hop appends one TrackPoint to an internal queue (capacity
   // queue_capacity(); if nobody pops, the oldest are dropped and counted).
   void push(std::span<const float> frames) noexcept;
-  // Next output in time order; false when none is pending.
+  // The stream ends: the outputs held back for the fixed-lag decision (TrackerConfig::decision_lag_hops)
+  // are queued as they stand.
+  void finish() noexcept;
+  // Next output in time order; false when none is pending. With a decision lag the latest hops' outputs
+  // are held back until the lag has passed (or finish()).
   bool pop(TrackPoint& out) noexcept;
 
   // Estimate from a window centred at time t, computed now from retained input (the daemon asks at GPS
   // fix times). Uses the surrounding hops' track as the prior. Not tracked when t is too old (beyond
   // history_s), too recent (its window is not complete yet) or inside a hole.
   [[nodiscard]] TrackPoint at(double t) noexcept;
-  // The hop output whose centre is closest to t among the last history_size() hops; not tracked (with
-  // t as given) when there is none within half a hop.
+  // The hop output whose centre is closest to t among the last history_size() hops and those held back
+  // for the decision lag (as the hop gave them); not tracked (with t as given) when there is none within
+  // half a hop.
   [[nodiscard]] TrackPoint nearest(double t) const noexcept;
   // Time of the latest window centre that at() can serve now (NaN before the first complete window).
   [[nodiscard]] double latest_time() const noexcept;

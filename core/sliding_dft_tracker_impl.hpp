@@ -1,7 +1,8 @@
 #pragma once
 // The sliding-DFT tracker's state and its constants, shared by the tracker's translation units (not part of
 // the public API; core/sliding_dft_tracker.hpp says what the tracker does). What each file holds:
-//   sliding_dft_tracker.cpp             the public API: configuration, input, outputs, at() and nearest()
+//   sliding_dft_tracker.cpp             the public API: configuration, input, outputs (with the fixed-lag
+//                                       decision), at() and nearest()
 //   sliding_dft_tracker_estimate.cpp    one window: its spectrum, the sub-bin estimate and its SNR
 //   sliding_dft_tracker_candidates.cpp  the evidence of every candidate fundamental in one window
 //   sliding_dft_tracker_hop.cpp         one hop: the filter's update, the estimate and its confidence, and
@@ -139,6 +140,22 @@ struct SlidingDftTracker::Impl {
   std::optional<ToneMap> tones;  // fixed tones of other equipment, counted as background
 
   TrackOutputs outputs;
+  // The fixed-lag decision (TrackerConfig::decision_lag_s): the latest hops' outputs, held back until
+  // `lag` more hops have been analysed (a ring of lag + 1, oldest first from held_head).
+  int lag = 0;
+  std::vector<TrackPoint> held;
+  std::size_t held_head = 0, held_size = 0;
+  [[nodiscard]] const TrackPoint& held_at(std::size_t i) const noexcept {
+    return held[(held_head + i) % held.size()];
+  }
+  // Takes a hop's output; queues the one `lag` hops older, its confidence decided with the hops after it.
+  void deliver(const TrackPoint& p) noexcept;
+  void release_held() noexcept;  // queues every held output as it stands
+  // The outputs at() and nearest() look back on, oldest first: the history, then the held ones.
+  [[nodiscard]] std::size_t recent_count() const noexcept { return outputs.held() + held_size; }
+  [[nodiscard]] const TrackPoint& recent(std::size_t k) const noexcept {
+    return k < outputs.held() ? outputs.recent(k) : held_at(k - outputs.held());
+  }
 
   struct Evidence {
     double freq = kNaN;

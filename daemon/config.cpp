@@ -163,6 +163,7 @@ void read_tracker(Section& s, TrackerSection& t) {
   s.number("band_high", t.band_high, 1.0, 20000.0);
   s.number("window", t.window, 0.01, 2.0);
   s.number("hop", t.hop, 0.005, 2.0);
+  s.number("decision_lag", t.decision_lag, 0.0, 2.0);
   s.number("min_snr_db", t.min_snr_db, -30.0, 60.0);
 }
 
@@ -333,6 +334,7 @@ gearpulse::TrackerConfig tracker_config_of(const TrackerSection& t, double sampl
   tc.sample_rate_hz = sample_rate_hz;
   tc.window_s = t.window;
   tc.hop_s = t.hop;
+  tc.decision_lag_s = t.decision_lag;
   tc.band_lo_hz = t.band_low;
   tc.band_hi_hz = t.band_high;
   // at() serves GPS fixes up to a few seconds old, with the latency on top: the largest the config
@@ -390,8 +392,9 @@ std::vector<std::string> restart_required_changes(const Config& a, const Config&
             a.audio.ring_seconds != b.audio.ring_seconds,
         "[audio]");
   check(a.tracker.band_low != b.tracker.band_low || a.tracker.band_high != b.tracker.band_high ||
-            a.tracker.window != b.tracker.window || a.tracker.hop != b.tracker.hop,
-        "[tracker] band/window/hop");
+            a.tracker.window != b.tracker.window || a.tracker.hop != b.tracker.hop ||
+            a.tracker.decision_lag != b.tracker.decision_lag,
+        "[tracker] band/window/hop/decision_lag");
   check(a.gps.host != b.gps.host || a.gps.port != b.gps.port || a.gps.timeout != b.gps.timeout,
         "gps.host/port/timeout");
   check(a.output.kind != b.output.kind || a.output.path != b.output.path || a.output.chip != b.output.chip ||

@@ -61,6 +61,7 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
       set.c_str(), static_cast<unsigned long long>(first),
       static_cast<unsigned long long>(first + kSeeds - 1), kDurationS, base.band_lo_hz, base.band_hi_hz,
       base.window_s, base.hop_s);
+  if (base.decision_lag_s > 0.0) std::printf("decision lag %g s\n", base.decision_lag_s);
   if (!without.empty()) {
     std::printf("without:");
     for (const std::string& w : without)

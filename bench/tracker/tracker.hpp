@@ -222,6 +222,9 @@ double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& 
     while (tracker.pop(p))
       sink(p);
   }
+  tracker.finish();
+  while (tracker.pop(p))
+    sink(p);
   return spent;
 }
 
