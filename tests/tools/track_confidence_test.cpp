@@ -92,3 +92,38 @@ TEST_CASE("track: --confidence adds a column and keeps low-confidence estimates"
   CHECK(with_freq >= 0.9 * static_cast<double>(v.size()));
   CHECK(plain_freq < with_freq);
 }
+
+TEST_CASE(
+    "track: --decision-lag keeps one row per hop, each estimate its own, and never lowers a confidence") {
+  TempDir dir;
+  // A launch through three gears at -5 dB: the windows after each shift decide the hops the filter doubted.
+  const sim::FrequencyTrajectory truth = [](double t) {
+    const double in_gear = std::fmod(t, 4.0);
+    return 60.0 + 25.0 * in_gear - 8.0 * std::floor(t / 4.0);
+  };
+  sim::LighterSignalConfig g;
+  g.sample_rate_hz = 8000.0;
+  g.amplitude = 0.05;
+  g.snr_db = -5.0;
+  g.seed = 37;
+  const auto x = sim::make_lighter_signal(g, truth, 12.0);
+  std::string error;
+  const std::string wav = (dir / "launch.wav").string();
+  REQUIRE(sim::write_wav_pcm16(wav, x, 1, 8000, error));
+
+  std::vector<std::string> at_once, later;
+  REQUIRE(run_track(dir, "--confidence '" + wav + "'", at_once) == 0);
+  REQUIRE(run_track(dir, "--confidence --decision-lag 0.5 '" + wav + "'", later) == 0);
+  REQUIRE(later.size() == at_once.size());  // the held hops come out at the end of the file too
+  const auto a = rows(at_once), b = rows(later);
+  std::size_t raised = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(b[i].t == a[i].t);
+    CHECK((b[i].freq == a[i].freq || (std::isnan(a[i].freq) && std::isnan(b[i].freq))));
+    CHECK(b[i].confidence >= a[i].confidence - 1e-9);
+    raised += b[i].confidence > a[i].confidence + 1e-9;
+  }
+  CHECK(raised > 0);
+  std::vector<std::string> refused;
+  CHECK(run_track(dir, "--decision-lag 3 '" + wav + "'", refused) != 0);
+}

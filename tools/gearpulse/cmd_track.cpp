@@ -30,6 +30,7 @@ struct TrackOptions {
   double window_s = TrackerConfig{}.window_s;
   int channel = -1;  // -1: mix all channels
   double max_slew = TrackerConfig{}.max_slew_hz_per_s;
+  double decision_lag_s = TrackerConfig{}.decision_lag_s;
   bool any_line = false;
   bool confidence = false;
   std::string file;
@@ -110,12 +111,23 @@ void print_point(const TrackPoint& p, bool with_confidence) {
     std::printf("%.4f,%s,%s\n", p.t, freq, snr);
 }
 
+// Prints what the tracker has output, the header with the first row (a file too short for one window is an
+// error with nothing on stdout); `rows` counts the rows printed.
+void print_outputs(SlidingDftTracker& tracker, bool with_confidence, std::size_t& rows) {
+  TrackPoint p;
+  while (tracker.pop(p)) {
+    if (rows++ == 0) std::printf(with_confidence ? "t,freq,snr_db,confidence\n" : "t,freq,snr_db\n");
+    print_point(p, with_confidence);
+  }
+}
+
 int run_track(const TrackOptions& o) {
   TrackerConfig config;
   parse_band(o.band, config);
   config.hop_s = o.hop_s;
   config.window_s = o.window_s;
   config.max_slew_hz_per_s = o.max_slew;
+  config.decision_lag_s = o.decision_lag_s;
   config.require_harmonics = !o.any_line;
   config.history_s = 0.0;  // offline: no queries into the past
 
@@ -160,14 +172,11 @@ int run_track(const TrackOptions& o) {
     const std::size_t step = tracker->max_push_frames();
     for (std::size_t at = 0; at < frames; at += step) {
       tracker->push(std::span<const float>(mono.data() + at, std::min(step, frames - at)));
-      TrackPoint p;
-      while (tracker->pop(p)) {
-        // The header with the first row: a file too short for one window is an error with nothing on stdout.
-        if (rows++ == 0) std::printf(o.confidence ? "t,freq,snr_db,confidence\n" : "t,freq,snr_db\n");
-        print_point(p, o.confidence);
-      }
+      print_outputs(*tracker, o.confidence, rows);
     }
   }
+  tracker->finish();  // the hops held back for --decision-lag
+  print_outputs(*tracker, o.confidence, rows);
   if (sf_error(file.get()) != SF_ERR_NO_ERROR)
     throw UsageError(o.file + ": read error after " + std::to_string(total) +
                      " frames: " + sf_strerror(file.get()));
@@ -200,6 +209,11 @@ void add_track(CLI::App& app, int& status) {
       ->check(CLI::Range(0, 1023));
   cmd->add_option("--max-slew", options->max_slew, "fastest followed frequency change (Hz/s)")
       ->capture_default_str();
+  cmd->add_option("--decision-lag", options->decision_lag_s,
+                  "decide each hop's confidence with the windows of the next S seconds (0-2; the daemon's "
+                  "tracker.decision_lag)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 2.0));
   cmd->add_flag("--any-line", options->any_line, "also acquire lines without harmonics (pure-sine ripple)");
   cmd->add_flag("--confidence", options->confidence,
                 "add a confidence column (probability the estimate is the engine) and print every estimate");
