@@ -143,6 +143,7 @@ int main(int argc, char** argv) {
       return score_wav(wav);
     }
     if (!scene_set.empty()) return scenes(scene_set, wav.config, without, scene_snr);
+    if (wav.config.decision_lag_s != 0.0) return usage();  // the generated drives run the tracker as it is
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_tracker: %s\n", e.what());
     return 2;

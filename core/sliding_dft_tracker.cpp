@@ -51,8 +51,9 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
     : cfg(c),
       fs(c.sample_rate_hz),
       input(c.sample_rate_hz, 3.0 * c.band_hi_hz),  // up to the highest scored harmonic
-      outputs(256, std::max<std::size_t>(
-                       8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)) {
+      outputs(kOutputQueue,
+              std::max<std::size_t>(
+                  8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)) {
   fd = input.rate_hz();
   harmonic_limit_hz = input.limit_hz();
   n_win = static_cast<int>(std::lround(cfg.window_s * fd));
@@ -87,13 +88,13 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
   track.emplace(cfg, s_lo, k_hi, df, lobe);
   tones.emplace(bins, noise_lo, noise_hi, lobe, df, cfg.hop_s);
   lag = static_cast<int>(std::lround(cfg.decision_lag_s / cfg.hop_s));
-  held.assign(static_cast<std::size_t>(lag) + 1, TrackPoint{});
+  lagged.assign(static_cast<std::size_t>(lag) + 1, TrackPoint{});
   reset_track();
 }
 
 // An engine's line is continuous: when the estimates of the `lag` hops after this one continue its
 // estimate, each within the slew of the one before (the gate of the track's drift, TrackModel::observe()),
-// and the last of them is at least as confident, the engine was on this hop's line with the confidence
+// and the last of them is more confident, the engine was on this hop's line with the confidence
 // the later windows give the line they follow. The estimate stays; only its confidence is decided later.
 // After a gear shift at -5 dB the new line's windows give about 1.2 nats a hop, and the posterior reaches
 // 0.8 on a line whose estimates were right for a second or two before (docs/tracker.md, "What limits it").
@@ -102,28 +103,28 @@ void SlidingDftTracker::Impl::deliver(const TrackPoint& p) noexcept {
     outputs.emit(p);
     return;
   }
-  held[(held_head + held_size) % held.size()] = p;
-  if (++held_size < held.size()) return;
-  TrackPoint& first = held[held_head];
+  lagged[(lagged_head + lagged_size) % lagged.size()] = p;
+  if (++lagged_size < lagged.size()) return;
+  TrackPoint& first = lagged[lagged_head];
   const double gate = cfg.max_slew_hz_per_s * cfg.hop_s + 2.0 * df;
   bool continued = true;
-  for (std::size_t i = 0; i + 1 < held_size && continued; ++i) {
-    const double a = held_at(i).freq, b = held_at(i + 1).freq;
+  for (std::size_t i = 0; i + 1 < lagged_size && continued; ++i) {
+    const double a = lagged_at(i).freq, b = lagged_at(i + 1).freq;
     continued = std::isfinite(a) && std::isfinite(b) && std::abs(b - a) <= gate;
   }
-  if (const TrackPoint& last = held_at(held_size - 1); continued && last.confidence > first.confidence) {
+  if (const TrackPoint& last = lagged_at(lagged_size - 1); continued && last.confidence > first.confidence) {
     first.confidence = last.confidence;
     first.tracked = last.tracked;
   }
   outputs.emit(first);
-  held_head = (held_head + 1) % held.size();
-  --held_size;
+  lagged_head = (lagged_head + 1) % lagged.size();
+  --lagged_size;
 }
 
-void SlidingDftTracker::Impl::release_held() noexcept {
-  for (std::size_t i = 0; i < held_size; ++i)
-    outputs.emit(held_at(i));
-  held_head = held_size = 0;
+void SlidingDftTracker::Impl::release_lagged() noexcept {
+  for (std::size_t i = 0; i < lagged_size; ++i)
+    outputs.emit(lagged_at(i));
+  lagged_head = lagged_size = 0;
 }
 
 // ---- public ----
@@ -166,6 +167,11 @@ std::string SlidingDftTracker::validate(const TrackerConfig& c) {
   // second or two after a shift) and would hold a queue of outputs back.
   if (!finite(c.decision_lag_s) || c.decision_lag_s < 0 || c.decision_lag_s > 2.0)
     return format("decision lag %g s is outside [0, 2] s", c.decision_lag_s);
+  // The lagged outputs are queued at once at a hole or the stream's end, after at most half a queue of hops
+  // pushed (max_push_frames()): they must fit in the rest of the queue, or outputs would be dropped.
+  if (std::lround(c.decision_lag_s / c.hop_s) > static_cast<long>(kOutputQueue / 4))
+    return format("decision lag %g s is more than %zu hops of %g s", c.decision_lag_s, kOutputQueue / 4,
+                  c.hop_s);
   return {};
 }
 
@@ -201,7 +207,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.third_n = s.third_mean_db = s.third_var_db = 0.0;  // so is the 3rd harmonic's level
   s.log_noise = kNaN;
   s.outputs.clear();
-  s.held_head = s.held_size = 0;
+  s.lagged_head = s.lagged_size = 0;
 }
 
 void SlidingDftTracker::retime(double t_next) noexcept {
@@ -212,7 +218,7 @@ void SlidingDftTracker::skip(std::uint64_t frames) noexcept {
   Impl& s = *impl_;
   if (frames == 0) return;
   s.input.skip(frames);
-  s.release_held();
+  s.release_lagged();
   s.reset_track();
   // Hops whose windows overlap the hole give no output; resume on the hop grid after it.
   const auto h = static_cast<std::uint64_t>(s.hop_frames);
@@ -235,7 +241,7 @@ void SlidingDftTracker::push(std::span<const float> frames) noexcept {
 }
 
 void SlidingDftTracker::finish() noexcept {
-  impl_->release_held();
+  impl_->release_lagged();
 }
 
 bool SlidingDftTracker::pop(TrackPoint& out) noexcept {

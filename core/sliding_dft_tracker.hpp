@@ -92,9 +92,10 @@ class SlidingDftTracker {
   void skip(std::uint64_t frames) noexcept;
 
   // Feeds mono frames. Every completed hop appends one TrackPoint to an internal queue (capacity
-  // queue_capacity(); if nobody pops, the oldest are dropped and counted).
+  // queue_capacity(); if nobody pops, the oldest are dropped and counted): its own, or with a decision lag
+  // the one that many hops older (rounded to whole hops, at most a quarter of the queue).
   void push(std::span<const float> frames) noexcept;
-  // The stream ends: the outputs held back for the fixed-lag decision (TrackerConfig::decision_lag_hops)
+  // The stream ends: the outputs held back for the fixed-lag decision (TrackerConfig::decision_lag_s)
   // are queued as they stand.
   void finish() noexcept;
   // Next output in time order; false when none is pending. With a decision lag the latest hops' outputs

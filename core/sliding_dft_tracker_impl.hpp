@@ -28,6 +28,7 @@ namespace gearpulse {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kPi = std::numbers::pi;
+constexpr std::size_t kOutputQueue = 256;  // hops of output queued for the caller to pop
 
 // Orders of the engine component scored and refined: half-order, fundamental, 2nd and 3rd harmonic.
 constexpr int kOrders = 4;
@@ -141,20 +142,20 @@ struct SlidingDftTracker::Impl {
 
   TrackOutputs outputs;
   // The fixed-lag decision (TrackerConfig::decision_lag_s): the latest hops' outputs, held back until
-  // `lag` more hops have been analysed (a ring of lag + 1, oldest first from held_head).
+  // `lag` more hops have been analysed (a ring of lag + 1, oldest first from lagged_head).
   int lag = 0;
-  std::vector<TrackPoint> held;
-  std::size_t held_head = 0, held_size = 0;
-  [[nodiscard]] const TrackPoint& held_at(std::size_t i) const noexcept {
-    return held[(held_head + i) % held.size()];
+  std::vector<TrackPoint> lagged;
+  std::size_t lagged_head = 0, lagged_size = 0;
+  [[nodiscard]] const TrackPoint& lagged_at(std::size_t i) const noexcept {
+    return lagged[(lagged_head + i) % lagged.size()];
   }
   // Takes a hop's output; queues the one `lag` hops older, its confidence decided with the hops after it.
   void deliver(const TrackPoint& p) noexcept;
-  void release_held() noexcept;  // queues every held output as it stands
+  void release_lagged() noexcept;  // queues every held output as it stands
   // The outputs at() and nearest() look back on, oldest first: the history, then the held ones.
-  [[nodiscard]] std::size_t recent_count() const noexcept { return outputs.held() + held_size; }
+  [[nodiscard]] std::size_t recent_count() const noexcept { return outputs.held() + lagged_size; }
   [[nodiscard]] const TrackPoint& recent(std::size_t k) const noexcept {
-    return k < outputs.held() ? outputs.recent(k) : held_at(k - outputs.held());
+    return k < outputs.held() ? outputs.recent(k) : lagged_at(k - outputs.held());
   }
 
   struct Evidence {

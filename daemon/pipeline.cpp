@@ -329,7 +329,9 @@ void Pipeline::Impl::tracker_loop() noexcept {
   // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
   // period and more), and a step stamped "now" would run ahead of every point still to come.
   const double no_audio_step_s = 2.0 * config.tracker.hop + config.tracker.window;
-  double audio_stall_s = no_audio_step_s;
+  // A decision lag holds the points back as many hops more (at the stream's start and after a hole).
+  const double lag_s = std::round(config.tracker.decision_lag / config.tracker.hop) * config.tracker.hop;
+  double audio_stall_s = no_audio_step_s + lag_s;
 
   while (!stop.load(std::memory_order_relaxed)) {
     const std::int64_t now_ns = monotonic_ns();
@@ -339,7 +341,8 @@ void Pipeline::Impl::tracker_loop() noexcept {
     if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(k.tracker)) {
       k.block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
       // Audio arrives a period at a time: only a wait longer than two of them is a stall.
-      audio_stall_s = no_audio_step_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
+      audio_stall_s =
+          no_audio_step_s + lag_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
       k.last_points_at = now;
     }
     const bool got_points = k.tracker && track_audio(k, now);

@@ -443,6 +443,12 @@ TEST_CASE("tracker: invalid configurations are rejected with a reason") {
   c = config_at(48000.0);
   c.decision_lag_s = -0.1;
   rejected(c, "decision lag");
+  c = config_at(48000.0);
+  c.hop_s = 0.01;
+  c.decision_lag_s = 0.65;  // 65 hops held back: more than the queue keeps beside a push's hops
+  rejected(c, "decision lag");
+  c.decision_lag_s = 0.64;
+  CHECK(SlidingDftTracker::validate(c).empty());
   std::string error;
   CHECK(SlidingDftTracker::create(config_at(5100.0), error) != nullptr);
   CHECK(error.empty());

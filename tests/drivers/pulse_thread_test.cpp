@@ -111,13 +111,13 @@ TEST_CASE("pulse: a late output takes its device once and refuses a second while
   gearpulse::LateOutput late;
   gearpulse::PulseThread thread(late, pulse_a_metre());
   thread.start();
-  thread.set_speed(200.0);
   auto first = std::make_unique<gearpulse::NullPulseOutput>();
   gearpulse::NullPulseOutput* driven = first.get();
   CHECK_FALSE(late.attached());
   CHECK_FALSE(late.attach(nullptr));
   CHECK(late.attach(std::move(first)));
   CHECK(late.attached());
+  thread.set_speed(200.0);  // every pulse on the attached device, so its rises and falls pair
   CHECK_FALSE(late.attach(std::make_unique<gearpulse::NullPulseOutput>()));
   std::this_thread::sleep_for(30ms);
   thread.stop();
