@@ -155,14 +155,101 @@ TEST_CASE("simulate: the same seed gives the same drive and another seed another
   CHECK(slurp(dir.path() / "a" / "truth.csv") != slurp(dir.path() / "c" / "truth.csv"));
 }
 
+// The value of KEY=VALUE in drive.env's text, or "" if absent.
+std::string env_value(const std::string& env, const std::string& key) {
+  const auto at = env.find(key + "=");
+  if (at == std::string::npos) return {};
+  const auto from = at + key.size() + 1;
+  return env.substr(from, env.find('\n', from) - from);
+}
+
+TEST_CASE("simulate: --outage-at-skip starts the outage at the first braking skip-downshift", "[simulate]") {
+  TempDir dir;
+  const auto sim = [&](const std::string& sub, const std::string& args) {
+    return run(kCli + " simulate --no-audio --out " + (dir.path() / sub).string() + " " + args);
+  };
+  const Result r = sim("skip", "--seed 1 --duration 150 --skip-downshift 1 --outage-at-skip 60");
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("outage at the braking skip") != std::string::npos);
+  const std::string env = slurp(dir.path() / "skip" / "drive.env");
+  const double clutch_out = std::stod(env_value(env, "skip_clutch_out_s"));
+  const double start = std::stod(env_value(env, "outage_start_s"));
+  CHECK(start == std::ceil(clutch_out));
+  CHECK(std::stod(env_value(env, "outage_length_s")) == 60.0);
+  const std::string gears = env_value(env, "skip_gears");  // FROM:TO
+  const int from = std::stoi(gears), to = std::stoi(gears.substr(gears.find(':') + 1));
+  CHECK(to <= from - 2);
+
+  // The truth: FROM engaged and the car braking before the clutch goes out, TO engaged after it.
+  const auto truth = csv_rows(dir.path() / "skip" / "truth.csv");
+  double before = -1.0, at_out = -1.0;
+  int gear_before = -1, gear_after = -1;
+  for (std::size_t i = 1; i < truth.size(); ++i) {
+    const double t = std::stod(truth[i][0]);
+    if (std::abs(t - (clutch_out - 1.0)) < 0.05) before = std::stod(truth[i][1]);
+    if (std::abs(t - clutch_out) < 0.05) at_out = std::stod(truth[i][1]);
+    if (gear_before < 0 && t >= clutch_out - 0.15) gear_before = std::stoi(truth[i][3]);
+    if (gear_after < 0 && t >= clutch_out + 1.7) gear_after = std::stoi(truth[i][3]);
+  }
+  CHECK(gear_before == from);
+  CHECK(gear_after == to);
+  CHECK(before - at_out > 1.0);  // m/s lost over the second before: braking
+
+  // The samples blank the speed over the outage, as with --outage START:LEN; the drive is repeatable.
+  for (const auto& row : csv_rows(dir.path() / "skip" / "samples.csv")) {
+    if (row[0] == "t") continue;
+    const double t = std::stod(row[0]);
+    CHECK(row[1].empty() == (t >= start && t < start + 60.0));
+  }
+  REQUIRE(sim("again", "--seed 1 --duration 150 --skip-downshift 1 --outage-at-skip 60").status == 0);
+  CHECK(slurp(dir.path() / "again" / "truth.csv") == slurp(dir.path() / "skip" / "truth.csv"));
+
+  // --skip-drive-on: a skip after which the lower gear stays engaged for 10 s.
+  const Result on = sim("on",
+                        "--style highway --seed 1 --duration 150 --skip-downshift 1 --outage-at-skip 60 "
+                        "--skip-drive-on");
+  INFO(on.out);
+  REQUIRE(on.status == 0);
+  const std::string on_env = slurp(dir.path() / "on" / "drive.env");
+  const double on_out = std::stod(env_value(on_env, "skip_clutch_out_s"));
+  const int on_to = std::stoi(env_value(on_env, "skip_gears").substr(2));
+  int engaged = 0;
+  for (const auto& row : csv_rows(dir.path() / "on" / "truth.csv")) {
+    if (row[0] == "t") continue;
+    const double t = std::stod(row[0]);
+    if (t > on_out + 1.7 && t < on_out + 11.0) engaged += std::stoi(row[3]) == on_to ? 1 : -1000;
+  }
+  CHECK(engaged > 80);
+
+  // Without a skip that leaves room for the outage before the drive's end: refused.
+  CHECK(sim("none", "--seed 1 --duration 60 --skip-downshift 1 --outage-at-skip 60").status == 2);
+}
+
 TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
   TempDir dir;
   const std::string out = " --out " + (dir.path() / "x").string();
-  for (const std::string args :
-       {" --outage 20", " --outage a:5", " --outage 10:-3", " --outage 10:1e308", " --vehicle nosuchcar",
-        " --style racing", " --duration 2", " --duration 1e308", " --rate 10", " --snr nan", " --tone 1e9",
-        " --tone nan", " --pulses-per-km -5", " --duration 60 --outage 1000:10", " --seed -1",
-        " --seed 99999999999999999999"}) {
+  for (const std::string args : {" --outage 20",
+                                 " --outage a:5",
+                                 " --outage 10:-3",
+                                 " --outage 10:1e308",
+                                 " --vehicle nosuchcar",
+                                 " --style racing",
+                                 " --duration 2",
+                                 " --duration 1e308",
+                                 " --rate 10",
+                                 " --snr nan",
+                                 " --tone 1e9",
+                                 " --tone nan",
+                                 " --pulses-per-km -5",
+                                 " --duration 60 --outage 1000:10",
+                                 " --seed -1",
+                                 " --seed 99999999999999999999",
+                                 " --skip-downshift 2",
+                                 " --outage-at-skip 60",
+                                 " --skip-downshift 1 --outage-at-skip 60 --outage 10:5",
+                                 " --skip-drive-on",
+                                 " --skip-downshift nan"}) {
     const Result r = run(kCli + " simulate" + out + args);
     INFO(args << ": " << r.out);
     CHECK(r.status == 2);

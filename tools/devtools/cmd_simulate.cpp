@@ -39,6 +39,9 @@ struct SimulateOptions {
   double idle_start = 8.0;
   double tone_hz = 0.0;
   int gps_lead = 8;
+  double skip_downshift = 0.0;  // share of braking downshifts that skip a gear (DriveOptions::skip_downshift)
+  double outage_at_skip = 0.0;  // s; > 0: an outage this long from the first braking skip-downshift
+  bool skip_drive_on = false;   // that skip: one after which the car drives on in the lower gear
 };
 
 constexpr double kDriveStartUtc = 12 * 3600.0;  // UTC time of day of the drive's t = 0 in drive.nmea
@@ -97,6 +100,47 @@ void prepend_idle(sim::Drive& drive, double seconds) {
     drive.truth[k].t = static_cast<double>(k) * drive.options.dt;
 }
 
+// A downshift under braking that skips a gear (4 -> 2, 5 -> 3): when the clutch went out, for how long.
+struct BrakingSkip {
+  double clutch_out = -1.0;  // s; < 0: none
+  double declutched = 0.0;   // s
+  int from = 0, to = 0;
+};
+
+// The first braking skip-downshift whose clutch goes out at or after `after` s: the engaged gear, the
+// clutch out for at most a shift's length, then a gear two or more lower, the car slowing by more than
+// 1 m/s^2 over the second before (the simulator's driver skips only while braking). With `drive_on` the
+// lower gear must then stay engaged for kDriveOn s (braking to a lower speed, not to a stop).
+BrakingSkip first_braking_skip(const sim::Drive& drive, double after, bool drive_on) {
+  constexpr double kDriveOn = 10.0;      // s in the lower gear: the car drives on, it does not stop
+  constexpr double kBraking = 1.0;       // m/s^2, the simulator's braking threshold for a skip
+  constexpr double kLongestShift = 1.6;  // s, the simulator's longest clutch-out (1.5 s) and a step
+  const auto& truth = drive.truth;
+  const auto second = static_cast<std::size_t>(std::lround(1.0 / drive.options.dt));
+  std::size_t out = 0;
+  int engaged = 0;
+  for (std::size_t i = 1; i < truth.size(); ++i) {
+    const int prev = truth[i - 1].gear, gear = truth[i].gear;
+    if (prev > 0 && gear == 0) {
+      engaged = prev;
+      out = i;
+    } else if (prev == 0 && gear > 0) {
+      const double declutched = truth[i].t - truth[out].t;
+      const bool skip = engaged > 0 && gear <= engaged - 2 && declutched <= kLongestShift;
+      const bool braking = out >= second && truth[out - second].speed - truth[out].speed > kBraking * 1.0;
+      std::size_t end = i;
+      while (drive_on && end < truth.size() && truth[end].gear == gear &&
+             truth[end].t - truth[i].t < kDriveOn)
+        ++end;
+      const bool drives_on = !drive_on || (end < truth.size() && truth[end].gear == gear);
+      if (skip && braking && drives_on && truth[out].t >= after)
+        return {truth[out].t, declutched, engaged, gear};
+      engaged = 0;
+    }
+  }
+  return {};
+}
+
 int count_shifts(const std::vector<sim::TruthRow>& rows, const sim::Outage& outage) {
   int shifts = 0;
   int last_gear = -1;
@@ -120,6 +164,14 @@ int run_simulate(const SimulateOptions& o) {
   if (!(o.idle_start >= 0.0 && o.idle_start < o.duration)) {
     throw UsageError("simulate: --idle-start must be 0 or more and below --duration");
   }
+  if (!(o.skip_downshift >= 0.0 && o.skip_downshift <= 1.0))
+    throw UsageError("simulate: --skip-downshift must be 0..1");
+  if (!(o.outage_at_skip >= 0.0 && o.outage_at_skip <= o.duration))
+    throw UsageError("simulate: --outage-at-skip must be 0 (off) to --duration s");
+  if (o.outage_at_skip > 0.0 && (!o.outage.empty() || o.skip_downshift <= 0.0))
+    throw UsageError("simulate: --outage-at-skip takes --skip-downshift above 0 and no --outage");
+  if (o.skip_drive_on && o.outage_at_skip <= 0.0)
+    throw UsageError("simulate: --skip-drive-on goes with --outage-at-skip");
   if (o.rate < 4000 || o.rate > 192000) throw UsageError("simulate: --rate must be 4000..192000 Hz");
   if (!std::isfinite(o.tone_hz) || o.tone_hz < 0.0 || o.tone_hz >= 0.5 * o.rate)
     throw UsageError("simulate: --tone must be 0 (none) or a frequency below half of --rate");
@@ -146,6 +198,7 @@ int run_simulate(const SimulateOptions& o) {
   drive_options.duration = o.duration + o.stop_search;
   drive_options.dt = kSignalStep;
   drive_options.seed = o.seed;
+  drive_options.skip_downshift = o.skip_downshift;
   sim::Drive drive = sim::simulate_drive(vehicle, drive_options);
   drive.truth.resize(end_at_standstill(drive, o.duration - o.idle_start, o.stop_search));
   prepend_idle(drive, o.idle_start);
@@ -154,6 +207,22 @@ int run_simulate(const SimulateOptions& o) {
                  o.stop_search, o.duration);
   }
   const double length = drive.truth.back().t;
+
+  // The outage from the first fix missed after the clutch went out for a braking skip: the last fix is
+  // the higher gear's, the lower gear is found from the engine alone. The daemon has driven with GPS
+  // for kSkipAfter s before, and gets fixes again for kSkipTail s before the drive ends.
+  BrakingSkip skip;
+  if (o.outage_at_skip > 0.0) {
+    constexpr double kSkipAfter = 30.0, kSkipTail = 10.0;
+    skip = first_braking_skip(drive, o.idle_start + kSkipAfter, o.skip_drive_on);
+    if (skip.clutch_out < 0.0 || std::ceil(skip.clutch_out) + o.outage_at_skip + kSkipTail > length) {
+      throw UsageError("simulate: --outage-at-skip: no braking skip-downshift from " +
+                       std::to_string(static_cast<int>(o.idle_start + kSkipAfter)) +
+                       " s that leaves the outage and " + std::to_string(static_cast<int>(kSkipTail)) +
+                       " s of fixes before the drive's end: a longer --duration or another --seed");
+    }
+    outage = {std::ceil(skip.clutch_out), o.outage_at_skip};
+  }
 
   std::filesystem::create_directories(o.out);
   const std::filesystem::path dir(o.out);
@@ -202,7 +271,7 @@ int run_simulate(const SimulateOptions& o) {
   const double distance = sim::distance_m(truth_rows);
   const int shifts = count_shifts(truth_rows, outage);
   // The same figures for scripts (shell-sourceable).
-  const std::vector<std::string> summary = {
+  std::vector<std::string> summary = {
       "duration_s=" + std::to_string(length),
       "distance_m=" + std::to_string(distance),
       "pulses_per_km=" + std::to_string(o.pulses_per_km),
@@ -213,6 +282,11 @@ int run_simulate(const SimulateOptions& o) {
       "gps_lead_s=" + std::to_string(o.gps_lead),
       "gps_t0_utc=12:00:00",
   };
+  if (skip.clutch_out >= 0.0) {
+    summary.push_back("skip_clutch_out_s=" + std::to_string(skip.clutch_out));
+    summary.push_back("skip_declutched_s=" + std::to_string(skip.declutched));
+    summary.push_back("skip_gears=" + std::to_string(skip.from) + ":" + std::to_string(skip.to));
+  }
   sim::write_lines(dir / "drive.env", summary);
   std::printf(
       "simulate: %s %s seed %llu: %.1f s, %.3f km, %.0f pulses at %.1f/km, outage %.0f-%.0f s with %d "
@@ -220,6 +294,12 @@ int run_simulate(const SimulateOptions& o) {
       vehicle.name.c_str(), o.style.c_str(), static_cast<unsigned long long>(o.seed), length,
       distance / 1000.0, distance / 1000.0 * o.pulses_per_km, o.pulses_per_km, outage.start,
       outage.start + outage.length, shifts, o.out.c_str());
+  if (skip.clutch_out >= 0.0) {
+    std::printf(
+        "simulate: outage at the braking skip %d -> %d: clutch out at %.2f s for %.2f s at %.1f km/h\n",
+        skip.from, skip.to, skip.clutch_out, skip.declutched,
+        3.6 * sim::truth_at(drive, skip.clutch_out).speed);
+  }
   return 0;
 }
 
@@ -258,6 +338,15 @@ void add_simulate(CLI::App& app, int& status) {
   cmd->add_option("--gps-lead", opts->gps_lead, "Seconds of GPS fixes at rest before the drive's t = 0")
       ->capture_default_str()
       ->check(CLI::Range(0, 600));
+  cmd->add_option("--skip-downshift", opts->skip_downshift,
+                  "Share of downshifts under braking that skip a gear (4 -> 2, 5 -> 3), 0..1")
+      ->capture_default_str();
+  cmd->add_option(
+      "--outage-at-skip", opts->outage_at_skip,
+      "GPS outage of LEN s from the first braking skip-downshift after 30 s (needs --skip-downshift)");
+  cmd->add_flag("--skip-drive-on", opts->skip_drive_on,
+                "--outage-at-skip: a skip after which the car drives on in the lower gear (10 s), not one "
+                "braking to a stop");
   cmd->add_flag("--no-audio", opts->no_audio, "Only the CSVs and NMEA (a training drive for fit)");
   cmd->callback([opts, &status] { status = run_simulate(*opts); });
 }
