@@ -281,14 +281,18 @@ class SpeedSynthesizer {
 };
 
 // Steps a synthesizer over the samples of a log, in order, as `gearpulse replay` and the benches do: a
-// sample that only repeats a held rpm (repeats_held_freq) answers with the last output instead of a step.
+// sample that only repeats a held rpm (repeats_held_freq) answers with the last output instead of a step,
+// and a speed that repeats the last fix within kHeldSpan is that fix held, not measured again (as the
+// daemon holds a fix over the tracker's hops until the next, and a logger its last value).
 class LogReplayer {
  public:
   explicit LogReplayer(SpeedSynthesizer& synth) noexcept : synth_(synth) {}
 
   const SynthOutput& step(const Sample& s) noexcept {
     if (!repeats_held_freq(last_, s)) {
-      out_ = synth_.step(s.t, s.speed, s.freq);
+      const bool new_fix = !(s.has_speed() && s.speed == fix_.speed && s.t - fix_.t <= kHeldSpan);
+      out_ = synth_.step(s.t, s.speed, s.freq, new_fix);
+      if (new_fix && s.has_speed()) fix_ = s;
       last_ = s;
     }
     return out_;
@@ -297,6 +301,7 @@ class LogReplayer {
  private:
   SpeedSynthesizer& synth_;
   Sample last_;  // the last sample stepped
+  Sample fix_;   // the last sample whose speed was a new fix
   SynthOutput out_;
 };
 

@@ -565,3 +565,25 @@ TEST_CASE("synth: with the frequency lost from the start the speed coasts down, 
   INFO("highest outage speed " << top << " m/s after GPS's " << gps);
   CHECK(top <= gps + 0.5);
 }
+
+// A log written at the tracker's hop holds each 1 Hz fix on the rows until the next, as the daemon holds it:
+// `gearpulse replay` measures a held fix once, as the daemon does, and so answers as the daemon's steps do.
+TEST_CASE("synth: replaying a log with held fixes steps as the daemon does, each fix measured once") {
+  const auto fixes = script(0.0, {{0, 0.0, 5}, {1, 1.5, 4}, {2, 1.0, 6}, {3, 0.4, 8}, {3, -1.2, 6}}, kHatch);
+  SpeedSynthesizer live(model_of(kHatch)), logged(model_of(kHatch));
+  gearpulse::LogReplayer replayer(logged);
+  const double outage_from = 24.0;
+  for (std::size_t i = 0; i + 1 < fixes.size(); ++i) {
+    for (int k = 0; k < 10; ++k) {
+      const double t = fixes[i].t + 0.1 * k;
+      const double freq = fixes[i].freq + (fixes[i + 1].freq - fixes[i].freq) * 0.1 * k;
+      const double gps = t < outage_from ? fixes[i].speed : kMissing;
+      const SynthOutput a = live.step(t, gps, freq, k == 0);
+      const SynthOutput b = replayer.step({t, gps, freq});
+      INFO("t = " << t);
+      REQUIRE(b.speed == a.speed);
+      REQUIRE(b.gear == a.gear);
+      REQUIRE(b.source == a.source);
+    }
+  }
+}
