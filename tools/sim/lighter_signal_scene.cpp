@@ -203,9 +203,9 @@ constexpr std::array<SceneComponent, 11> kSceneComponents = {{
     // The 3rd harmonic.
     {"third", [](Config& c, const Trajectory&, double) { c.harmonic3 = 0.0; }},
 }};
-static_assert(std::ranges::none_of(kSceneComponents,
-                                   [](const SceneComponent& c) { return c.name.empty() || !c.switch_off; }),
-              "an entry of kSceneComponents left empty");
+// (A lambda's function pointer is never null, and comparing one is no constant expression in every build.)
+static_assert(std::ranges::none_of(kSceneComponents, [](const SceneComponent& c) { return c.name.empty(); }),
+              "an entry of kSceneComponents left without a name");
 
 bool scene_without(LighterSceneConfig& config, std::string_view component,
                    const FrequencyTrajectory& trajectory, double duration_s) {
