@@ -12,7 +12,7 @@
 # built gearpulse, gearpulse-devtools, gearpulsectl and gearpulsed. GEARPULSE_KEEP=1 keeps the drives'
 # directories (bench/daemon_outage_figures.py --offline recomputes a drive's figures from one).
 #
-# TUNING SET: mixed seeds 1-3 (skips braking to a stop) and highway seed 1 (the issue's case: braking,
+# TUNING SET: mixed seeds 1-3 (skips braking to a stop) and highway seed 1 (braking,
 # a skip 5 -> 3 at 40 km/h, then a minute in 3rd). Decide on these only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
