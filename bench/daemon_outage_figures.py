@@ -18,7 +18,12 @@ import json
 import os
 import shutil
 import subprocess
+import sys
 import time
+
+# The demo's monitor polls and reads the truth the same way.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scripts", "lib"))
+from monitor import alive, at, status  # noqa: E402
 
 
 def load_truth(path):
@@ -41,11 +46,6 @@ def driven(truth, a, b):
         if hi > lo:
             d += 0.5 * (vs[i] + vs[i - 1]) * (hi - lo)
     return d
-
-
-def speed_at(truth, t):
-    ts, vs = truth[0], truth[1]
-    return vs[max(0, min(len(ts) - 1, bisect.bisect_right(ts, t) - 1))]
 
 
 def nmea_fixes(path):
@@ -105,23 +105,6 @@ def replay_outage(work, cli, model, outage, gps_timeout, held):
             began = t
         last_t, last_v = t, v
     return None
-
-
-def status(ctl, sock):
-    try:
-        out = subprocess.run([ctl, "--socket", sock, "status", "--json"], capture_output=True, text=True,
-                             timeout=2).stdout
-        return json.loads(out)
-    except (subprocess.TimeoutExpired, json.JSONDecodeError):
-        return None
-
-
-def alive(pid):
-    try:
-        os.kill(pid, 0)
-        return True
-    except OSError:
-        return False
 
 
 def poll(a, truth, started, out_start, model):
@@ -190,7 +173,7 @@ def main():
         live = (back[1] - lost[1]) / a.ppk * 1000.0
         live_truth = driven(truth, lost[0], back[0])
         # What the car covers between two polls at the daemon's edges and a tracker hop or two of lag.
-        edges = (edge_gap + 0.3) * (speed_at(truth, lost[0]) + speed_at(truth, back[0]))
+        edges = (edge_gap + 0.3) * (at(truth[0], truth[1], lost[0]) + at(truth[0], truth[1], back[0]))
         figures.update(daemon_from_s=lost[0], daemon_to_s=back[0], daemon_m=live, daemon_driven_m=live_truth,
                        daemon_err_pct=pct(live, live_truth), daemon_err_m=live - live_truth,
                        edges_pct=100.0 * edges / live_truth)
