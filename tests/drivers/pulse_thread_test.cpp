@@ -32,7 +32,11 @@ TEST_CASE("pulse: the thread leaves the output low whenever it is stopped") {
     gearpulse::PulseThread thread(out, cfg);
     thread.start();
     thread.set_speed(100.0);
-    std::this_thread::sleep_for(std::chrono::milliseconds(30 + 7 * i));
+    // The first pulse, then a varied time so the stop lands at different phases of the pulse.
+    const auto set_at = std::chrono::steady_clock::now();
+    while (thread.pulses() == 0 && std::chrono::steady_clock::now() - set_at < 5s)
+      std::this_thread::sleep_for(1ms);
+    std::this_thread::sleep_for(std::chrono::milliseconds(3 + 7 * i));
     thread.stop();
     CHECK(out.rises() == thread.pulses());
     CHECK(out.falls() == out.rises());
@@ -119,7 +123,11 @@ TEST_CASE("pulse: a late output takes its device once and refuses a second while
   CHECK(late.attached());
   thread.set_speed(200.0);  // every pulse on the attached device, so its rises and falls pair
   CHECK_FALSE(late.attach(std::make_unique<gearpulse::NullPulseOutput>()));
-  std::this_thread::sleep_for(30ms);
+  // Wait for pulses rather than a fixed time: the speed is taken up within the speed poll, which a
+  // sanitized build on a loaded machine may stretch past any short sleep.
+  const auto set_at = std::chrono::steady_clock::now();
+  while (thread.pulses() < 3 && std::chrono::steady_clock::now() - set_at < 5s)
+    std::this_thread::sleep_for(1ms);
   thread.stop();
   // The first device is still the one driven, and alive: it carries the pulses after the refused attach.
   CHECK(driven->rises() > 0);
