@@ -96,17 +96,12 @@ void GpsdClient::stop() {
   status_.state = GpsdState::kStopped;
 }
 
-std::optional<GpsReport> GpsdClient::latest() const {
-  std::lock_guard lock(mutex_);
-  return latest_;
-}
-
-std::optional<GpsReport> GpsdClient::fresh(std::int64_t now_ns) const {
-  std::lock_guard lock(mutex_);
-  if (!latest_ || !latest_->usable()) return std::nullopt;
+std::optional<GpsReport> GpsdClient::fresh(std::int64_t now_ns) const noexcept {
+  const std::optional<GpsReport> latest = latest_.read();
+  if (!latest || !latest->usable()) return std::nullopt;
   const std::int64_t timeout_ns = std::chrono::nanoseconds(config_.no_fix_timeout).count();
-  if (now_ns - latest_->rx_ns > timeout_ns) return std::nullopt;
-  return latest_;
+  if (now_ns - latest->rx_ns > timeout_ns) return std::nullopt;
+  return latest;
 }
 
 GpsdStatus GpsdClient::status() const {
@@ -213,9 +208,9 @@ void GpsdClient::run() {
           refused = newest->speed;
           newest->speed = std::nan("");
         }
+        latest_.publish(newest);
         {
           std::lock_guard lock(mutex_);
-          latest_ = newest;
           ++status_.reports;
           status_.superseded += drained;
           status_.bad_reads += bad;

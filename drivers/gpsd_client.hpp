@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "core/gps_speed_gate.hpp"
+#include "core/published.hpp"
 #include "drivers/gps_report.hpp"
 
 namespace gearpulse {
@@ -56,13 +57,13 @@ class GpsdClient final {
   void start();  // starts the thread (idempotent); never throws for an absent gpsd: it keeps trying
   void stop();   // joins the thread within ~100 ms
 
-  // The newest report, if any arrived yet.
-  [[nodiscard]] std::optional<GpsReport> latest() const;
+  // The newest report, if any arrived yet. Lock-free (Published), for the real-time thread's every hop.
+  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return latest_.read(); }
   // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
-  // and its freshness judged on that one report).
-  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const;
-  [[nodiscard]] bool has_gps(std::int64_t now_ns) const { return fresh(now_ns).has_value(); }
-  [[nodiscard]] GpsdStatus status() const;
+  // and its freshness judged on that one report). Lock-free as latest().
+  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const noexcept;
+  [[nodiscard]] bool has_gps(std::int64_t now_ns) const noexcept { return fresh(now_ns).has_value(); }
+  [[nodiscard]] GpsdStatus status() const;  // under the lock: for status queries, not a real-time path
   // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
   // turn of its loop, at least every 100 ms while connected and every kBeatNs while backing off, so an
   // absent gpsd is not a hung thread. Inside gps_open() it counts as alive: a connect to a host that
@@ -81,12 +82,12 @@ class GpsdClient final {
   const GpsdConfig config_;
   const Callback on_report_;
   std::thread thread_;
-  mutable std::mutex mutex_;
+  mutable std::mutex mutex_;  // stop_requested_ and status_; never taken by latest() or fresh()
   std::condition_variable wake_;
   bool stop_requested_ = false;
   std::atomic<std::int64_t> beat_ns_{0};
   std::atomic<bool> connecting_{false};
-  std::optional<GpsReport> latest_;
+  Published<std::optional<GpsReport>> latest_;  // written by the client thread only
   GpsdStatus status_;
   GpsSpeedGate gate_;  // client thread only
 };
