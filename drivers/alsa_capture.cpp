@@ -47,19 +47,20 @@ struct Negotiated {
   unsigned period = 0;
 };
 
-// Opens and configures the PCM into `out`; on failure returns the negative ALSA error and a reason in
-// `why` (a PCM opened on the way is closed: a device left open would be busy for every later attempt).
-int open_pcm(const AlsaCaptureConfig& c, PcmHandle& out, Negotiated& got, std::string& why) noexcept {
+// Opens and configures the PCM into `out`; on failure returns the negative ALSA error and in `failed`
+// the step that failed (a PCM opened on the way is closed: a device left open would be busy for every
+// later attempt). Builds no string: the capture thread reopens a lost device with it.
+int open_pcm(const AlsaCaptureConfig& c, PcmHandle& out, Negotiated& got, const char*& failed) noexcept {
   snd_pcm_t* opened = nullptr;
   int err = ::snd_pcm_open(&opened, c.device.c_str(), SND_PCM_STREAM_CAPTURE, SND_PCM_NONBLOCK);
   if (err < 0) {
-    why = std::string("cannot open: ") + ::snd_strerror(err);
+    failed = "cannot open";
     return err;
   }
   PcmHandle handle(opened);
   snd_pcm_t* const pcm = handle.get();
   auto bail = [&](const char* what, int e) {
-    why = std::string(what) + ": " + ::snd_strerror(e);
+    failed = what;
     return e;
   };
   snd_pcm_hw_params_t* hw = nullptr;
@@ -161,9 +162,9 @@ AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
   if (config_.period_frames == 0)
     throw std::runtime_error("ALSA capture '" + config_.device + "': period_frames must be positive");
   Negotiated got;
-  std::string why;
-  if (open_pcm(config_, pcm_, got, why) < 0)
-    throw std::runtime_error("ALSA capture '" + config_.device + "': " + why);
+  const char* failed = "";
+  if (const int err = open_pcm(config_, pcm_, got, failed); err < 0)
+    throw std::runtime_error("ALSA capture '" + config_.device + "': " + failed + ": " + ::snd_strerror(err));
   rate_ = got.rate;
   channels_ = got.channels;
   format_ = got.format;
@@ -363,9 +364,9 @@ void AlsaCapture::run() noexcept {
       pause(backoff);
       if (stopping()) break;
       Negotiated got;
-      std::string why;
+      const char* failed = "";
       PcmHandle fresh;
-      const int err = open_pcm(config_, fresh, got, why);
+      const int err = open_pcm(config_, fresh, got, failed);
       if (err < 0 || got.rate != rate_ || got.channels != channels_ || got.format != format_ ||
           got.period != period_frames_) {
         last_error_.store(err < 0 ? err : -EINVAL, std::memory_order_relaxed);
