@@ -22,36 +22,86 @@ void FaultReporter::clear(const std::string& key, const std::string& text) {
   spdlog::info("{}", text);
 }
 
-void FaultReporter::audio(const AlsaCaptureStats& s, std::chrono::steady_clock::time_point at) {
-  std::uint64_t starts = 0;
-  const auto meanwhile = [&starts](std::string_view what) {
-    return starts > 1 ? fmt::format(" ({} {} time(s) more since the last report)", what, starts - 1)
-                      : std::string();
-  };
+void FaultReporter::audio(const AlsaCaptureStats& s, std::chrono::steady_clock::time_point at) noexcept {
+  using Kind = FaultNote::Kind;
   using Say = StateFault::Say;
+  std::uint64_t starts = 0;
   if (s.running) {
-    const Say say = lost_.update(!s.streaming, at, starts);
-    if (say == Say::kStart)
-      spdlog::warn("audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it{}",
-                   device_, s.last_error, alsa_error_text(s.last_error), meanwhile("lost"));
+    if (const Say say = lost_.update(!s.streaming, at, starts); say == Say::kStart)
+      post({Kind::kAudioLost, starts, s.last_error});
     else if (say == Say::kEnd)
-      spdlog::info("audio: capture from {} resumed ({} reopen(s) so far)", device_, s.reopens);
+      post({Kind::kAudioBack, s.reopens});
   }
   if (const Say say = frozen_.update(s.frozen, at, starts); say == Say::kStart)
-    spdlog::warn(
-        "audio: {} gives the same samples period after period (a source that has stopped, or digital "
-        "silence); they are not used, and speed follows GPS (without a fix it coasts down from the last "
-        "speed), until they change{}",
-        device_, meanwhile("frozen"));
+    post({Kind::kAudioFrozen, starts});
   else if (say == Say::kEnd)
-    spdlog::info("audio: samples from {} change again", device_);
+    post({Kind::kAudioThawed});
   if (const Say say = stalled_.update(s.stalled, at, starts); say == Say::kStart)
-    spdlog::warn(
-        "audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); speed follows "
-        "GPS (without a fix it coasts down from the last speed) until they come again{}",
-        device_, s.silent_s, meanwhile("stalled"));
+    post({Kind::kAudioStalled, starts, 0, s.silent_s});
   else if (say == Say::kEnd)
-    spdlog::info("audio: samples from {} come again", device_);
+    post({Kind::kAudioFlowing});
+}
+
+void FaultReporter::say_notes() {
+  const std::lock_guard lock(saying_);
+  while (const FaultNote* note = notes_.front()) {
+    const FaultNote copy = *note;
+    notes_.pop();
+    say(copy);
+  }
+  if (const std::uint64_t dropped = notes_.dropped(); dropped != dropped_said_) {
+    spdlog::warn(
+        "faults: {} report(s) of the tracker thread lost (the main thread did not take them in time)",
+        dropped - dropped_said_);
+    dropped_said_ = dropped;
+  }
+}
+
+void FaultReporter::say(const FaultNote& n) {
+  const auto meanwhile = [&n](std::string_view what) {
+    return n.count > 1 ? fmt::format(" ({} {} time(s) more since the last report)", what, n.count - 1)
+                       : std::string();
+  };
+  switch (n.kind) {
+    case FaultNote::Kind::kAudioLost:
+      spdlog::warn("audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it{}",
+                   device_, n.error, alsa_error_text(n.error), meanwhile("lost"));
+      break;
+    case FaultNote::Kind::kAudioBack:
+      spdlog::info("audio: capture from {} resumed ({} reopen(s) so far)", device_, n.count);
+      break;
+    case FaultNote::Kind::kAudioFrozen:
+      spdlog::warn(
+          "audio: {} gives the same samples period after period (a source that has stopped, or digital "
+          "silence); they are not used, and speed follows GPS (without a fix it coasts down from the last "
+          "speed), until they change{}",
+          device_, meanwhile("frozen"));
+      break;
+    case FaultNote::Kind::kAudioThawed:
+      spdlog::info("audio: samples from {} change again", device_);
+      break;
+    case FaultNote::Kind::kAudioStalled:
+      spdlog::warn(
+          "audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); speed follows "
+          "GPS (without a fix it coasts down from the last speed) until they come again{}",
+          device_, n.seconds, meanwhile("stalled"));
+      break;
+    case FaultNote::Kind::kAudioFlowing:
+      spdlog::info("audio: samples from {} come again", device_);
+      break;
+    case FaultNote::Kind::kAudioHole:
+      report("audio-hole", spdlog::level::warn,
+             fmt::format("audio: {} frames from {} lost before the ring (overrun, device restart or a "
+                         "stalled source); tracking resumes after the hole",
+                         n.count, device_));
+      break;
+    case FaultNote::Kind::kModelRejected:
+      report("model", spdlog::level::err,
+             fmt::format("synthesis: cannot use the new model ({} gears is more than it supports); keeping "
+                         "the previous one",
+                         n.count));
+      break;
+  }
 }
 
 }  // namespace gearpulse::daemon

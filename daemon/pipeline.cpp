@@ -127,14 +127,15 @@ struct Pipeline::Impl {
     std::unique_ptr<SlidingDftTracker> tracker;  // while audio is open
     std::vector<float> block;                    // one read of the ring
     FixPairer fixes{kPairWait};
-    std::int64_t last_rx = 0;     // receive time of the last GPS report looked at
-    double last_points_at = 0.0;  // CLOCK_MONOTONIC s when the tracker last gave points
+    std::uint64_t model_generation = 0;  // ModelHolder::generation() when `model` was taken
+    std::int64_t last_rx = 0;            // receive time of the last GPS report looked at
+    double last_points_at = 0.0;         // CLOCK_MONOTONIC s when the tracker last gave points
   };
   bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
-  void adopt_model(Tracking& k);
-  bool track_audio(Tracking& k, double now);
-  void step(Tracking& k, double t, double freq, double snr, bool tracked);
-  void pair_fixes(Tracking& k, double now);
+  void adopt_model(Tracking& k) noexcept;
+  bool track_audio(Tracking& k, double now) noexcept;
+  void step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept;
+  void pair_fixes(Tracking& k, double now) noexcept;
   void tracker_loop() noexcept;
 };
 
@@ -226,9 +227,10 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
 }
 
 // Publishes one step of the synthesis: to the pulse thread and to the snapshot.
-void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked) {
+void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept {
   // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
-  // disagreement between the sound card's clock and the GPS cannot hide a good fix).
+  // disagreement between the sound card's clock and the GPS cannot hide a good fix). Lock-free: the
+  // gpsd thread never holds up a hop.
   const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
   const SynthesisStage::Step s =
       k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed),
@@ -243,20 +245,21 @@ void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool t
   source.store(s.out.source, std::memory_order_relaxed);
 }
 
-// A retrained model takes over between two steps.
-void Pipeline::Impl::adopt_model(Tracking& k) {
+// A retrained model takes over between two steps. The holder's lock (which the idle-priority retrainer
+// takes to swap the model) is taken only when its generation says the model changed, not at every turn.
+void Pipeline::Impl::adopt_model(Tracking& k) noexcept {
+  const std::uint64_t generation = model.generation();
+  if (generation == k.model_generation) return;
+  k.model_generation = generation;
   auto m = model.get();
   if (m == k.model) return;
   k.model = std::move(m);
-  if (!k.synthesis.set_model(k.model))
-    faults.report("model", spdlog::level::err,
-                  "synthesis: cannot use the new model (" + std::to_string(k.model->gears.size()) +
-                      " gears is more than it supports); keeping the previous one");
+  if (!k.synthesis.set_model(k.model)) faults.post({FaultNote::Kind::kModelRejected, k.model->gears.size()});
 }
 
 // Reads what the ring holds (at most 64 blocks) into the tracker and steps the synthesis at each point
 // it gives. True if it gave any.
-bool Pipeline::Impl::track_audio(Tracking& k, double now) {
+bool Pipeline::Impl::track_audio(Tracking& k, double now) noexcept {
   bool got_points = false;
   SlidingDftTracker& tracker = *k.tracker;
   for (int burst = 0; burst < 64; ++burst) {
@@ -269,11 +272,7 @@ bool Pipeline::Impl::track_audio(Tracking& k, double now) {
       // differences are drift corrections).
       if (b.hole > 0) {
         tracker.skip(b.hole);
-        if (b.hole_lost)
-          faults.report("audio-hole", spdlog::level::warn,
-                        fmt::format("audio: {} frames from {} lost before the ring (overrun, device "
-                                    "restart or a stalled source); tracking resumes after the hole",
-                                    b.hole, config.audio.device));
+        if (b.hole_lost) faults.post({FaultNote::Kind::kAudioHole, b.hole});
       }
       tracker.retime(b.t0);
     }
@@ -297,7 +296,7 @@ bool Pipeline::Impl::track_audio(Tracking& k, double now) {
 }
 
 // Training pairs: each new usable GPS fix waits in the FixPairer for the window centred on its time.
-void Pipeline::Impl::pair_fixes(Tracking& k, double now) {
+void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
   if (gps) {
     if (const auto rep = gps->latest(); rep && rep->rx_ns != k.last_rx) {
       k.last_rx = rep->rx_ns;
@@ -322,6 +321,7 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) {
 // pulse thread, and GPS fixes -> fix pairer -> training pairs for the main thread.
 void Pipeline::Impl::tracker_loop() noexcept {
   Tracking k;
+  k.model_generation = model.generation();
   k.model = model.get();
   k.synthesis.set_model(k.model);
   // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
@@ -385,6 +385,7 @@ void Pipeline::start() {
 
 void Pipeline::service() {
   Impl& d = *impl_;
+  d.faults.say_notes();
   if (d.pulses && d.config.output.kind != OutputKind::kNone && !d.output.attached() &&
       std::chrono::steady_clock::now() >= d.next_output_try)
     d.open_output_device();
@@ -425,6 +426,10 @@ void Pipeline::stop() noexcept {
       spdlog::warn("stop: the audio capture has not returned from the device for {} s ({}); still waiting",
                    kPatience.count(), d.config.audio.device);
     d.tracker_thread.join();
+  }
+  try {
+    d.faults.say_notes();  // what the tracker thread posted last
+  } catch (...) {          // a line that cannot be formatted (no memory) must not end the daemon's stop
   }
   if (d.gps) d.gps->stop();
 }

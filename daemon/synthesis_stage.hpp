@@ -21,7 +21,7 @@ class SynthesisStage {
   };
 
   // The model from the next step on; false when the synthesizer cannot take it (it keeps the previous).
-  bool set_model(const ModelPtr& model) { return synth_.set_model(model); }
+  bool set_model(const ModelPtr& model) noexcept { return synth_.set_model(model); }
 
   // One step at `t` (s, CLOCK_MONOTONIC; a step never goes back before the last) with the tracker's
   // estimate and the newest fresh GPS fix, if any. Each fix is measured once, however often it is given
