@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The one test command: installs what is missing, checks formatting, builds with warnings as errors, runs
 # every test and the benches' accuracy checks, then every test again under AddressSanitizer+
-# UndefinedBehaviorSanitizer, and the threaded parts (the ring, capture, gpsd client, pulse thread, log
-# queue, control server, persistence, the in-process pipeline and the daemon's process) under
-# ThreadSanitizer. Exit status is non-zero if anything fails, and if a test skipped that must run here:
-# every test that needs the real logs (../shared/data/real) or a program setup.sh installs runs; only the
-# skips listed in may_skip below are allowed. docs/testing.md says what each stage runs and how long it takes.
+# UndefinedBehaviorSanitizer, and the threaded parts (the ring, the newest-value snapshot, capture, gpsd
+# client, pulse thread, log queue, control server, persistence, the in-process pipeline, its fault notes
+# and the daemon's process) under ThreadSanitizer. Exit status is non-zero if anything fails, and if a
+# test skipped that must run here: every test that needs the real logs (../shared/data/real) or a program
+# setup.sh installs runs; only the skips listed in may_skip below are allowed. docs/testing.md says what
+# each stage runs and how long it takes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=$(nproc 2>/dev/null || echo 2)
@@ -118,10 +119,10 @@ stage "ASan+UBSan build done"
 cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DGEARPULSE_SANITIZE=thread -DGEARPULSE_BENCH=OFF \
   "${launcher[@]}" >/dev/null
-"${busy[@]}" cmake --build build-tsan -j"$jobs" --target spsc_ring_test alsa_capture_test gpsd_client_test \
-  pulse_thread_test log_queue_test control_test persistence_test training_store_test retrainer_test \
-  pipeline_test audio_front_end_test gearpulsed gearpulsectl daemon_run_test daemon_state_test \
-  gearpulsectl_test
+"${busy[@]}" cmake --build build-tsan -j"$jobs" --target spsc_ring_test published_test alsa_capture_test \
+  gpsd_client_test pulse_thread_test log_queue_test control_test persistence_test training_store_test \
+  retrainer_test pipeline_test fault_reporter_test audio_front_end_test gearpulsed gearpulsectl \
+  daemon_run_test daemon_state_test gearpulsectl_test
 stage "TSan build done"
 finish_tests release-paced "$may_skip"
 stage "release tree's paced tests passed"
@@ -136,7 +137,7 @@ stage "package installed, verified and purged"
 
 # The three-minute drive in real time runs in the release tree only: under the sanitizers its daemon runs
 # the same code the pipeline and daemon tests drive through the same ALSA, gpsd and PTY paths.
-tsan_tests="^(ring|alsa|audio|gpsd|pulse|log queue|control|daemon|pipeline):"
+tsan_tests="^(ring|published|alsa|audio|gpsd|pulse|log queue|control|daemon|pipeline|faults):"
 start_tests asan-paced build-asan "$paced_jobs_sanitized" -L paced -E "^e2e: pulses match"
 start_tests asan build-asan "$jobs" -LE paced
 finish_tests asan "$may_skip_sanitized"
