@@ -1,5 +1,6 @@
 // `gearpulse-devtools simulate` and `gearpulse-devtools feed`, run as the built binary.
 #include <fcntl.h>
+#include <poll.h>
 #include <stdlib.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -7,6 +8,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -295,6 +297,49 @@ TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-
   CHECK(got.find_first_not_of('\0', data.size()) == std::string::npos);
   // Paced: the last period cannot be out before its deadline (a lower bound, never flaky).
   CHECK(elapsed >= 15.0 * 256 / 8000);
+}
+
+// The harness opens the capture before the drive starts: whatever the feeder writes before the capture
+// reads waits in the FIFO, unseen by ALSA, and read at once it set the capture's sample clock ahead of
+// real time, which then held the audio back 1.5 s for the whole drive (bench/daemon_outages.sh). With
+// --wait-start nothing is written before SIGUSR1, and the FIFO holds at most a page.
+TEST_CASE("feed: with --wait-start nothing is written before SIGUSR1, and the FIFO holds a page", "[feed]") {
+  TempDir dir;
+  const fs::path in = dir.path() / "in.raw", fifo = dir.path() / "fifo", pid = dir.path() / "pid";
+  std::ofstream(in, std::ios::binary) << std::string(8 * 256 * 2, '\x11');  // 8 periods, 0.256 s at 8 kHz
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  std::FILE* feeder = ::popen(
+      ("sh -c 'echo $$ >" + pid.string() + "; exec " + kCli +
+       " feed --quiet --wait-start --period 256 --rate 8000 " + in.string() + " " + fifo.string() + "' 2>&1")
+          .c_str(),
+      "r");
+  REQUIRE(feeder != nullptr);
+  const int fd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  REQUIRE(fd >= 0);
+  // The FIFO's writer opens once a reader has: waited for, as the capture blocks in its first read.
+  pollfd p{fd, POLLIN, 0};
+  CHECK(::poll(&p, 1, 500) == 0);  // half a second after both ends are open: nothing written
+  const int size = ::fcntl(fd, F_GETPIPE_SZ);
+  CHECK(size > 0);
+  CHECK(size <= 4096);
+  REQUIRE(fs::exists(pid));
+  const pid_t feeder_pid = std::stoi(slurp(pid));
+  REQUIRE(::kill(feeder_pid, SIGUSR1) == 0);
+  const auto start = std::chrono::steady_clock::now();
+  std::string got;
+  char buf[8192];
+  while (::poll(&p, 1, 2000) > 0) {
+    const ssize_t n = ::read(fd, buf, sizeof buf);
+    if (n <= 0) break;  // the writer closed
+    got.append(buf, static_cast<std::size_t>(n));
+  }
+  ::close(fd);
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const int rc = ::pclose(feeder);
+  CHECK(WIFEXITED(rc));
+  CHECK(WEXITSTATUS(rc) == 0);
+  CHECK(got == slurp(in));
+  CHECK(elapsed >= 7.0 * 256 / 8000);  // paced from the signal
 }
 
 TEST_CASE("feed: a missing input or a bad format is an error", "[feed]") {

@@ -4,6 +4,15 @@
 // transfer; a write of any other size leaves holes in the captured stream. So every write here is
 // exactly one period, and the writes are paced from one fixed start with clock_nanosleep(TIMER_ABSTIME)
 // so the stream never drifts from the wall clock however long it runs.
+//
+// A sound card holds at most its ALSA buffer, whose frames the capture's time stamps count; a FIFO holds
+// what the plugin has not read yet unseen by ALSA. So the FIFO is shrunk to its smallest (two periods of
+// mono s16 at 1024 frames), and with --wait-start nothing is written before SIGUSR1, so that a capture
+// opened early reads the first period the moment it is written: the audio then reaches the capture as
+// it would from a card. Written at once on open instead, the periods played before the capture's first
+// read (the daemon's start-up) wait in the FIFO: read all at once, they set the capture's sample clock
+// ahead of real time, which then holds the stream back (AlsaCapture's hold_to_clock), and the audio
+// reached gearpulsed 1.5 s after its drive time for the whole drive (bench/daemon_outages.sh).
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -34,6 +43,7 @@ struct FeedOptions {
   int channels = 1;
   std::string format = "s16";
   bool quiet = false;
+  bool wait_start = false;  // write nothing before SIGUSR1 (the FIFO opened first)
 };
 
 int bytes_per_sample(const std::string& format) {
@@ -100,9 +110,21 @@ int run_feed(const FeedOptions& o) {
   data.resize(periods * period_bytes, 0);
 
   std::signal(SIGPIPE, SIG_IGN);
+  // Blocked before the open, so a SIGUSR1 sent meanwhile waits for sigwait.
+  sigset_t start_signal;
+  sigemptyset(&start_signal);
+  sigaddset(&start_signal, SIGUSR1);
+  if (o.wait_start) ::sigprocmask(SIG_BLOCK, &start_signal, nullptr);
   const gearpulse::UniqueFd fifo(::open(o.fifo.c_str(), O_WRONLY));  // blocks until the capture side opens it
   if (!fifo) throw UsageError(o.fifo + ": " + std::strerror(errno));
   const int fd = fifo.get();
+  // The smallest FIFO the kernel gives (a page): unread audio the capture cannot see stays below it.
+  (void)::fcntl(fd, F_SETPIPE_SZ, static_cast<int>(period_bytes));
+  if (o.wait_start) {
+    int got = 0;
+    while (::sigwait(&start_signal, &got) != 0) {
+    }
+  }
 
   timespec start{};
   clock_gettime(CLOCK_MONOTONIC, &start);
@@ -141,6 +163,9 @@ void add_feed(CLI::App& app, int& status) {
   cmd->add_option("--format", opts->format, "Sample format: s16, s32 or float (little endian)")
       ->capture_default_str();
   cmd->add_flag("--quiet", opts->quiet, "No summary line");
+  cmd->add_flag(
+      "--wait-start", opts->wait_start,
+      "Open the FIFO, then write nothing until SIGUSR1 (the stream's start, for a capture opened early)");
   cmd->add_option("FILE", opts->input, "Raw interleaved PCM file")->required();
   cmd->add_option("FIFO", opts->fifo, "FIFO named as the ALSA file plugin's infile")->required();
   cmd->callback([opts, &status] { status = run_feed(*opts); });
