@@ -145,7 +145,8 @@ def main():
 
     work = a.work
     truth = load_truth(os.path.join(work, "drive", "truth.csv"))
-    started = float(open(os.path.join(work, "daemon.started")).read())
+    # The drive's t = 0: when the harness started the audio (scripts/lib/harness.sh, hs_start_audio).
+    started = float(open(os.path.join(work, "drive.t0")).read())
     out_start, out_len = (float(x) for x in a.outage.split(":"))
     model = os.path.join(work, "model-at-loss.json")
     if not a.offline:

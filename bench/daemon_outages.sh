@@ -22,11 +22,9 @@ drives=("$@")
 [ ${#drives[@]} -gt 0 ] || drives=(mixed:1:150 mixed:2:200 mixed:3:150 highway:1:150:on)
 outage_len=60     # s of GPS outage from the skip
 skip_share=1      # every braking downshift that can skip does (gearpulse-devtools simulate --skip-downshift)
-# The daemon starts this long after gpsd reports the fix before the drive's t = 0. At the harness' 0.9 s
-# the fixes reached the daemon 0.6-0.8 s before their drive time (measured from the polls against the
-# NMEA log), a receiver's fix never does: under braking the early fix read as a declutch and seed 3 erred
-# -16 % (-1.8 % at 0.2 s, the fixes then 0-0.3 s late, as a receiver's are).
-export GEARPULSE_GPS_ALIGN=${GEARPULSE_GPS_ALIGN:-0.2}
+# The audio starts GEARPULSE_GPS_ALIGN (the harness' 0.9 s) after gpsd reports the fix before the drive's
+# t = 0: each fix reaches the daemon within 0.1 s of the audio of its moment, later by about 0.3 s per 100 s
+# of drive (gpsfake's pace), as a receiver's fix comes at or after its moment.
 
 # shellcheck source=scripts/lib/harness.sh
 source scripts/lib/harness.sh

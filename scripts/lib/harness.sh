@@ -7,7 +7,7 @@
 # As a library: `source scripts/lib/harness.sh`, then the hs_* functions.
 # As a command (the test uses this; every step keeps its state in the work directory):
 #   harness.sh prepare WORK BUILD [gearpulse simulate options for the drive...]
-#   harness.sh start WORK        feeder, gpsfake, gearpulsed, pulse reader
+#   harness.sh start WORK        feeder, gpsfake, gearpulsed, pulse reader, then the audio (WORK/drive.t0)
 #   harness.sh status WORK       `gearpulsectl status --json`
 #   harness.sh pulses WORK       bytes (= pulses) read from the PTY so far
 #   harness.sh resources WORK    gearpulsed's peak/current RSS and CPU share so far
@@ -19,7 +19,8 @@
 # (bmw-520i), GEARPULSE_LOG_LEVEL (info), GEARPULSE_COLD (0; 1: no training drive, the daemon starts from
 # an empty state directory), GEARPULSE_REALTIME (false: [audio] realtime, SCHED_FIFO threads
 # and locked memory; true needs root or CAP_SYS_NICE and CAP_IPC_LOCK); read by start: GEARPULSE_GPS_ALIGN
-# (0.9 s).
+# (0.9 s: the audio starts this long after gpsd reported the fix before the drive's t = 0, whose time
+# WORK/drive.t0 holds).
 
 hs_die() {
   echo "harness: $*" >&2
@@ -158,9 +159,10 @@ hs_alive() {
   pid=$(hs_pid "$1") && [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null
 }
 
+# hs_start_feeder [feed options]: the drive's audio into the FIFO (--wait-start: from SIGUSR1 on).
 hs_start_feeder() {
   hs_spawn feeder "$GEARPULSE_DEVTOOLS" feed --period "$GEARPULSE_PERIOD" --rate "$GEARPULSE_RATE" --channels 1 --format s16 \
-    "$GEARPULSE_WORK/drive/drive.raw" "$GEARPULSE_WORK/audio.fifo"
+    "$@" "$GEARPULSE_WORK/drive/drive.raw" "$GEARPULSE_WORK/audio.fifo"
 }
 
 # gpsfake plays the log at once (-n); the log starts some seconds before the drive's t = 0, which is
@@ -173,24 +175,42 @@ hs_start_gpsfake() {
   hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$GEARPULSE_WORK" gpsfake -q -n -1 -P "$GEARPULSE_PORT" -c 0.5 "$GEARPULSE_WORK/drive/drive.nmea"
 }
 
-# Blocks until gpsd reports the fix of 11:59:59, one epoch before the drive's t = 0, then waits out the
-# rest of that second: gearpulsed started now opens the audio at t = 0 and its next fix is t = 0's, so
-# audio and GPS are aligned as in a car (to within the daemon's start-up time).
-hs_wait_gps_t0() {
-  local t0 deadline
+# hs_wait_gps_tpv SECOND: blocks until gpsd reports the fix of 11:59:SECOND (the drive's t = 0 is 12:00:00)
+# and sets HS_TPV_AT to the wall-clock time it was seen.
+hs_wait_gps_tpv() {
+  local t0 deadline seen="$GEARPULSE_WORK/tpv.seen"
   t0=$(date +%s)
   deadline=$((t0 + 30))
+  rm -f "$seen"
   # gpsd may not listen yet: try again until the deadline. gpspipe ends by SIGPIPE once grep has its
-  # line, so only grep's status counts.
+  # line, at its next write, an epoch later: the time is taken as grep finds the line.
   until { timeout 10 env PATH="/usr/bin:$PATH" gpspipe -w "127.0.0.1:$GEARPULSE_PORT" 2>/dev/null || true; } |
-    grep -q -m1 '"class":"TPV".*"time":"[0-9-]*T11:59:59'; do
+    { grep -q -m1 "\"class\":\"TPV\".*\"time\":\"[0-9-]*T11:59:$1" && date +%s.%N >"$seen"; }; do
     [ "$(date +%s)" -lt "$deadline" ] ||
       hs_die "gpsd did not report the drive's first fixes within 30 s: $(tail -n 3 "$GEARPULSE_WORK/gpsfake.log")"
     hs_alive gpsfake || hs_die "gpsfake exited: $(tail -n 3 "$GEARPULSE_WORK/gpsfake.log")"
     sleep 0.2
   done
-  sleep "${GEARPULSE_GPS_ALIGN:-0.9}"
-  echo "harness: GPS at the drive's start after $(($(date +%s) - t0)) s" >>"$GEARPULSE_WORK/harness.log"
+  HS_TPV_AT=$(cat "$seen")
+  echo "harness: the fix of 11:59:$1 after $(($(date +%s) - t0)) s" >>"$GEARPULSE_WORK/harness.log"
+}
+
+# Starts the audio (the feeder waits for SIGUSR1 with the FIFO open) GEARPULSE_GPS_ALIGN s after gpsd
+# reported the fix of 11:59:59 (three of gpsfake's one-second epochs after HS_TPV_AT, the fix of 11:59:56),
+# whose next fix is t = 0's: each fix reaches the daemon 1 - GEARPULSE_GPS_ALIGN s after the audio of its
+# moment, as a receiver's fix comes a little after its moment. WORK/drive.t0 holds the wall-clock time of
+# the drive's t = 0. The daemon is running by then, its capture waiting on the FIFO: started with the
+# audio, its start-up played into the FIFO unread and the audio reached it 1.5 s after its drive time for
+# the whole drive (gearpulse-devtools feed).
+hs_start_audio() {
+  local at now
+  at=$(awk -v a="$HS_TPV_AT" -v d="${GEARPULSE_GPS_ALIGN:-0.9}" 'BEGIN { printf "%.6f", a + 3 + d }')
+  now=$(date +%s.%N)
+  awk -v a="$at" -v n="$now" 'BEGIN { exit !(n > a) }' &&
+    echo "harness: the daemon was ready $(awk -v a="$at" -v n="$now" 'BEGIN { printf "%.2f", n - a }') s after the audio's start time: the audio starts late" >>"$GEARPULSE_WORK/harness.log"
+  sleep "$(awk -v a="$at" -v n="$now" 'BEGIN { d = a - n; printf "%.6f", (d > 0 ? d : 0) }')"
+  kill -USR1 "$(hs_pid feeder)" || hs_die "the feeder is not running: $(tail -n 3 "$GEARPULSE_WORK/feeder.log")"
+  date +%s.%N >"$GEARPULSE_WORK/drive.t0"
 }
 
 hs_start_daemon() {
@@ -226,15 +246,17 @@ hs_wait_socket() {
   hs_die "gearpulsed does not answer on $GEARPULSE_SOCKET"
 }
 
+# The daemon starts with the fix of 11:59:56, three seconds before the audio's start (hs_start_audio).
 hs_start() {
   hs_check_tools
   hs_write_asound
-  hs_start_feeder
+  hs_start_feeder --wait-start
   hs_start_gpsfake
-  hs_wait_gps_t0
+  hs_wait_gps_tpv 56
   hs_start_daemon
   hs_start_reader
   hs_wait_socket
+  hs_start_audio
 }
 
 hs_restart() {

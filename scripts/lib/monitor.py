@@ -87,7 +87,7 @@ def main():
     work = a.work
     sock = os.path.join(work, "control.sock")
     ts, speeds, dist = load_truth(os.path.join(work, "drive", "truth.csv"))
-    t0 = float(open(os.path.join(work, "daemon.started")).read())
+    t0 = float(open(os.path.join(work, "drive.t0")).read())  # the drive's t = 0 (harness.sh)
     out_start, out_len = (float(x) for x in a.outage.split(":")) if a.outage else (None, 0.0)
 
     last_print = -1e9

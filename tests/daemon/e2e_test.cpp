@@ -251,7 +251,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   REQUIRE(feeder > 0);
   while (::kill(feeder, 0) == 0) {
     const json s = work.status();
-    const double t = seconds_since(work.dir / "daemon.started");
+    const double t = seconds_since(work.dir / "drive.t0");
     if (s.is_object()) {
       const std::string source = s.value("source", "?");
       const double pulses = s.value("pulses", 0.0);
