@@ -332,7 +332,7 @@ TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") 
         const auto r = client.latest();
         return r && r->usable() && std::fabs(r->speed - 4.125) < 1e-9;
       },
-      5s);
+      20s);
   const auto st = client.status();
   client.stop();
   done = true;
@@ -364,15 +364,19 @@ TEST_CASE("gpsd: a gpsd that greets and hangs up is retried with a growing delay
   GpsdClient client(cfg);
   client.start();
   std::this_thread::sleep_for(3s);
+  const int in_3s = accepted.load();
+  // That it retries at all is waited for: a loaded machine may be slow to make the first few attempts.
+  const bool retried = wait_for([&] { return accepted.load() >= 3; }, 20s);
   client.stop();
   ::shutdown(listener, SHUT_RDWR);
   ::close(listener);
   server.join();
   // With the delay reset by the banner the client would reconnect every 50 ms plus the 20 ms the server
-  // holds the line (about 40 times in 3 s); growing to 400 ms it connects about 10 times.
-  INFO("connections accepted: " << accepted.load());
-  CHECK(accepted.load() >= 3);
-  CHECK(accepted.load() <= 16);
+  // holds the line (about 40 times in 3 s); growing to 400 ms it connects about 10 times. A slow machine
+  // only makes fewer attempts: the upper bound holds whatever the load.
+  INFO("connections accepted in 3 s: " << in_3s);
+  CHECK(retried);
+  CHECK(in_3s <= 16);
 }
 
 TEST_CASE("gpsd: the heartbeat goes on through a reconnect backoff while gpsd is absent") {
@@ -426,10 +430,13 @@ TEST_CASE("gpsd: an absent gpsd is retried with a growing delay, not hammered") 
   client.start();
   std::this_thread::sleep_for(2s);
   const auto st = client.status();
+  // That it retries at all is waited for: a loaded machine may be slow to make the first few attempts.
+  const bool retried = wait_for([&] { return client.status().failures >= 3; }, 20s);
   client.stop();
-  // At a fixed 50 ms it would try about 40 times in 2 s; growing to 400 ms, about 8.
-  INFO("failed attempts: " << st.failures);
-  CHECK(st.failures >= 3);
+  // At a fixed 50 ms it would try about 40 times in 2 s; growing to 400 ms, about 8. A slow machine only
+  // makes fewer attempts: the upper bound holds whatever the load.
+  INFO("failed attempts in 2 s: " << st.failures);
+  CHECK(retried);
   CHECK(st.failures <= 12);
 }
 
@@ -439,18 +446,18 @@ TEST_CASE("gpsd: after a working connection a lost one is retried at the shortes
   // Bound but not listening: connections are refused until the test listens.
   const auto [listener, port] = loopback_bound();
   GpsdConfig cfg = config_for(port);
-  cfg.backoff_max = 3200ms;
+  cfg.backoff_max = 6400ms;
   GpsdClient client(cfg);
   client.start();
-  // Five refusals: the delay has grown to 1.6 s.
-  REQUIRE(wait_for([&] { return client.status().failures >= 5; }, 10s));
+  // Six refusals: the delay has grown to 3.2 s.
+  REQUIRE(wait_for([&] { return client.status().failures >= 6; }, 20s));
   REQUIRE(::listen(listener, 4) == 0);
   const int first = ::accept(listener, nullptr, nullptr);
   REQUIRE(first >= 0);
   const std::string tpv =
       "{\"class\":\"TPV\",\"device\":\"x\",\"mode\":3,\"time\":\"2026-01-15T12:00:00.000Z\",\"speed\":6.5}\n";
   (void)!::write(first, tpv.data(), tpv.size());
-  REQUIRE(wait_for([&] { return client.latest().has_value(); }, 5s));
+  REQUIRE(wait_for([&] { return client.latest().has_value(); }, 20s));
   const auto lost_at = std::chrono::steady_clock::now();
   ::close(first);  // gpsd goes away
   const int second = ::accept(listener, nullptr, nullptr);
@@ -461,7 +468,9 @@ TEST_CASE("gpsd: after a working connection a lost one is retried at the shortes
   ::close(listener);
   INFO("reconnected after " << std::chrono::duration_cast<std::chrono::milliseconds>(waited).count()
                             << " ms");
-  CHECK(waited < 1s);
+  // At the shortest delay it is back 50 ms after the loss; at the grown one, 3.2 s or more. Between the
+  // two, 2 s leaves a sanitized build on a loaded machine forty times the 50 ms.
+  CHECK(waited < 2s);
 }
 
 // A gpsd that dies is said at once: the status (and the daemon's "disconnected") must not go on saying
@@ -473,12 +482,14 @@ TEST_CASE("gpsd: a lost connection is shown as connecting during the wait before
   GpsFake fake(log, port, 0.05, false);
   REQUIRE(GpsFake::wait_listening(port, 10s));
   GpsdConfig cfg = config_for(port);
-  cfg.backoff_min = cfg.backoff_max = 3000ms;
+  cfg.backoff_min = cfg.backoff_max = 10'000ms;  // stop() wakes the wait: the test does not sit it out
   GpsdClient client(cfg);
   client.start();
   REQUIRE(wait_for([&] { return client.has_gps(gearpulse::monotonic_ns()); }, 20s));
   fake.kill();
-  CHECK(wait_for([&] { return client.status().state == GpsdState::kConnecting; }, 1s));
+  // Said at once; a client that stayed "connected" through the wait would say so for 10 s. Half of that
+  // is room for a sanitized build on a loaded machine to see the connection close.
+  CHECK(wait_for([&] { return client.status().state == GpsdState::kConnecting; }, 5s));
   // The error names the gpsd that was lost, as a failed connect does.
   CHECK(client.status().last_error.find(std::to_string(port)) != std::string::npos);
   client.stop();
