@@ -320,7 +320,7 @@ TEST_CASE("control: stray bytes keep no slot: a trickling connection goes before
   REQUIRE(trickler.send_all("\n{\"cmd\":"));
   LineClient next((dir / "ctl.sock").string());
   CHECK(ask(next, R"({"cmd":"y"})")["echo"] == "y");
-  CHECK(trickler.closed_by_peer(2'000));
+  CHECK(trickler.closed_by_peer());
   CHECK(ask(talker, R"({"cmd":"z"})")["echo"] == "z");
   // Alone, a trickle of blank lines and bytes does not renew the first-request timeout either.
   LineClient slow((dir / "ctl.sock").string());
@@ -421,11 +421,13 @@ TEST_CASE("control: connections that never ask anything give their slots back so
   TempDir dir;
   ControlServer server(
       (dir / "ctl.sock").string(), EchoHandler{},
-      ControlLimits{.max_clients = 2, .idle_timeout_ms = 60'000, .first_request_timeout_ms = 300});
+      ControlLimits{.max_clients = 2, .idle_timeout_ms = 60'000, .first_request_timeout_ms = 1'000});
   server.start();
   LineClient talker((dir / "ctl.sock").string()), mute((dir / "ctl.sock").string());
   CHECK(ask(talker, R"({"cmd":"x"})")["ok"] == true);
-  // The silent one is closed after the short timeout; the one that spoke keeps its slot (a minute).
+  // The silent one is closed after the short timeout; the one that spoke keeps its slot (a minute). The
+  // second is room for the talker's first request on a loaded machine (from its connect it must beat the
+  // timeout) and well inside the wait for the close below.
   CHECK(mute.closed_by_peer(5'000));
   LineClient next((dir / "ctl.sock").string());
   CHECK(ask(next, R"({"cmd":"y"})")["echo"].get<std::string>() == "y");
@@ -506,10 +508,9 @@ TEST_CASE("control: a stuck client never blocks the others") {
     REQUIRE(other.connected());
     CHECK(ask(other, R"({"cmd":"status"})")["ok"] == true);
   }
-  // The server dropped it rather than buffering without bound.
-  for (int i = 0; i < 200 && server.dropped_clients() == 0; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  CHECK(server.dropped_clients() >= 1);
+  // The server dropped it rather than buffering without bound (waited for: a sanitized server on a
+  // loaded machine may take a while to fill the buffer's limit).
+  CHECK(gearpulse::test::wait_for([&] { return server.dropped_clients() >= 1; }, std::chrono::seconds(20)));
   LineClient after((dir / "ctl.sock").string());
   CHECK(ask(after, R"({"cmd":"status"})")["ok"] == true);
 }
