@@ -314,7 +314,7 @@ TEST_CASE("daemon: a state directory it cannot write in is said at start and in 
   CHECK(status["model"]["problems"][0].get<std::string>().find("cannot create") != std::string::npos);
   CHECK(status["model"]["problems"].size() == 1);  // not also a model.json "ignored" under a file
   // The log goes through its own thread: the line may come a moment after status shows the problem.
-  CHECK(log_says(dir, "will not survive a restart", std::chrono::seconds(5)));
+  CHECK(log_says(dir, "will not survive a restart", std::chrono::seconds(15)));
   // The plain status shows it as it shows a GPS or audio problem.
   Process table(
       {GEARPULSE_BINARY_DIR "/tools/gearpulsectl", "--socket", (dir / "ctl.sock").string(), "status"},
