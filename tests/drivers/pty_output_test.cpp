@@ -7,6 +7,7 @@
 #include <termios.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -153,37 +154,67 @@ TEST_CASE("pty: a reader that does not read never blocks the pulse thread") {
 // Pulses older than max_age are dropped instead; a reader that keeps up loses none.
 TEST_CASE("pty: a reader that resumes after a stall gets no pulses older than max_age") {
   using namespace std::chrono_literals;
+  using Clock = std::chrono::steady_clock;
   TempDir dir;
   PtyOutput out(dir / "pulse", 200ms);
   Reader reader(dir / "pulse");
-  // Pulses at 1 kHz for `length`, the reader draining every 20 ms or not at all; returns the pulses sent.
-  const auto pulse_for = [&](std::chrono::milliseconds length, bool read, std::string& got) {
-    const auto start = std::chrono::steady_clock::now();
+  // Pulses at 1 kHz for `length`, the reader draining every 20 ms or not at all; returns the pulses sent,
+  // their write times in `written` and, reading, the longest time the loop went without a read.
+  const auto pulse_for = [&](std::chrono::milliseconds length, bool read, std::string& got,
+                             std::vector<Clock::time_point>& written, Clock::duration& unread) {
+    const auto start = Clock::now();
     auto next_read = start;
+    auto last_read = start;
     std::size_t sent = 0;
     for (auto t = start; t < start + length; t += 1ms) {
       std::this_thread::sleep_until(t);
       out.rise();
+      const auto now = Clock::now();
+      written.push_back(now);
       ++sent;
-      if (read && std::chrono::steady_clock::now() >= next_read) {
+      if (read && now >= next_read) {
+        unread = std::max(unread, now - last_read);
         got += reader.read_once(0ms);
+        last_read = now;
         next_read += 20ms;
       }
     }
     return sent;
   };
   std::string got;
-  const std::size_t kept_up = pulse_for(1000ms, true, got);
+  std::vector<Clock::time_point> written;
+  Clock::duration unread{};
+  const std::size_t kept_up = pulse_for(1000ms, true, got, written, unread);
   got += reader.drain();
-  CHECK(got.size() == kept_up);
-  CHECK(out.overflowed() == 0);
+  // Every pulse is read or counted as dropped. None is dropped while the reader keeps up: a pulse waits
+  // from its write to the next read. It keeps up while no read comes more than half of max_age after the
+  // one before (the other half for a byte the kernel moves to the reader's side only after a read). A
+  // loaded machine can hold the loop, the writer and the reader both, for longer: then the reader did not
+  // keep up, and dropping what aged is right.
+  const auto unread_ms = std::chrono::duration_cast<std::chrono::milliseconds>(unread).count();
+  INFO("longest time without a read while keeping up: " << unread_ms << " ms");
+  CHECK(got.size() + out.overflowed() == kept_up);
+  if (unread < 100ms) {
+    CHECK(got.size() == kept_up);
+    CHECK(out.overflowed() == 0);
+  } else {
+    WARN("the loop was held " << unread_ms << " ms: the reader did not keep up, its count is not checked");
+  }
 
   std::string none;
-  const std::size_t stalled = pulse_for(1000ms, false, none);
+  written.clear();
+  const std::uint64_t dropped_before = out.overflowed();
+  const std::size_t stalled = pulse_for(1000ms, false, none, written, unread);
   const std::string resumed = reader.drain();
-  INFO(stalled << " pulses while the reader stalled, " << resumed.size() << " read when it resumed");
-  CHECK(resumed.size() < stalled / 2);  // about the last 200-300 ms of them
-  CHECK(out.overflowed() + resumed.size() == stalled);
+  // What it gets is about the last 200-300 ms of them (max_age and up to two looks' lag), not the whole
+  // second: fewer than were written in the last 500 ms. Judged by the write times, not the count alone:
+  // a loop a loaded machine holds late catches up in a burst, which may all be recent.
+  const auto recent = static_cast<std::size_t>(
+      written.end() - std::lower_bound(written.begin(), written.end(), written.back() - 500ms));
+  INFO(stalled << " pulses while the reader stalled, " << recent << " in the last 500 ms, " << resumed.size()
+               << " read when it resumed");
+  CHECK(resumed.size() < recent);
+  CHECK(out.overflowed() - dropped_before + resumed.size() == stalled);
   CHECK(out.errors() == 0);
 }
 
