@@ -499,13 +499,14 @@ TEST_CASE("alsa: an open device that delivers nothing for seconds is stalled, un
   const auto fifo = make_paced_pcm(dir);
   constexpr unsigned kPeriod = 480, kRate = 48000;
   const auto src = numbered(kPeriod, 200);  // 2 s
-  FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kStall, 50, 4000ms});
+  // 6 s without frames: stalled for the last 4 of them, time for a loaded machine to look.
+  FifoFeeder feeder(fifo, src, kPeriod, kRate, {WriterBreak::kStall, 50, 6000ms});
   SpscRing<float> ring(1 << 18);
   AlsaCapture cap(paced_config(kPeriod), ring);
   cap.start();
   feeder.go();
   CHECK_FALSE(cap.stats().stalled);
-  REQUIRE(wait_for([&] { return cap.stats().stalled; }, 5s));
+  REQUIRE(wait_for([&] { return cap.stats().stalled; }, 10s));
   CHECK(cap.stats().silent_s > 2.0);
   CHECK(cap.stats().streaming);
   const auto got = read_frames(ring, src.size());
