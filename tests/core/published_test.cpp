@@ -60,22 +60,26 @@ TEST_CASE("published: readers on other threads see whole reports, in order, whil
   Published<std::optional<GpsReport>> latest;
   std::atomic<bool> done{false};
   std::atomic<std::int64_t> torn{0}, backwards{0}, reads{0};
+  std::atomic<int> started{0};  // readers that have read once: the writer waits for both
   auto reader = [&] {
     std::int64_t last = -1, n = 0;
-    while (!done.load(std::memory_order_acquire)) {
+    do {
       const std::optional<GpsReport> r = latest.read();
-      ++n;
+      if (++n == 1) started.fetch_add(1);
       if (!r) continue;
       if (!whole(*r)) torn.fetch_add(1);
       if (r->rx_ns < last) backwards.fetch_add(1);
       last = r->rx_ns;
-    }
+    } while (!done.load(std::memory_order_acquire));
     reads.fetch_add(n);
   };
   std::vector<std::thread> readers;
   for (int i = 0; i < 2; ++i)
     readers.emplace_back(reader);
   std::thread writer([&] {
+    // A sanitized build on a loaded machine may start the readers late: publish while they read.
+    while (started.load() < 2)
+      std::this_thread::yield();
     for (std::int64_t n = 0; n < kReports; ++n)
       latest.publish(report(n));
     done.store(true, std::memory_order_release);
