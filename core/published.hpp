@@ -4,8 +4,9 @@
 // Two slots, each a seqlock, and the index of the one written last: the writer fills the slot not
 // published, then publishes it, so a writer stopped half-way through a write (preempted, or held up by
 // a lower priority than the reader's) leaves the published slot whole. A read is retried only when the
-// writer has meanwhile published once and begun the next write into the very slot being read, that is,
-// only when the writer made progress; at the rates a GPS fix comes, practically never.
+// writer has meanwhile published (the count changed, or the slot being read is being written again), that
+// is, only when the writer made progress; at the rates a GPS fix comes, practically never. Reads of one
+// thread never go back in time: a read returns the value of the publish count it saw, no later one.
 // The slots hold the value as words of std::atomic (no fences, no data race on a torn copy), so
 // ThreadSanitizer checks it as it is: the writer's release stores of the words keep the odd sequence
 // number before them, the reader's acquire loads of them keep its second look at the sequence after them.
@@ -38,12 +39,16 @@ class Published {
   [[nodiscard]] T read() const noexcept {
     Words words{};
     for (;;) {
-      const Slot& slot = slots_[published_.load(std::memory_order_acquire) % 2];
+      const std::uint64_t p = published_.load(std::memory_order_acquire);
+      const Slot& slot = slots_[p % 2];
       const std::uint64_t s1 = slot.seq.load(std::memory_order_acquire);
       for (std::size_t i = 0; i < kWords; ++i)
         words[i] = slot.words[i].load(std::memory_order_acquire);
       const std::uint64_t s2 = slot.seq.load(std::memory_order_relaxed);
-      if (s1 == s2 && (s1 & 1u) == 0) break;
+      // Still the slot published as p: a reader held up between its look at published_ and the words could
+      // otherwise read, whole, the slot of publish p + 2 before published_ says so, and its next read the
+      // older p + 1 (a value going back in time).
+      if (s1 == s2 && (s1 & 1u) == 0 && published_.load(std::memory_order_relaxed) == p) break;
     }
     T value;
     std::memcpy(static_cast<void*>(&value), words.data(), sizeof(T));  // T is trivially copyable
