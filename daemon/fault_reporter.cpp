@@ -30,29 +30,36 @@ void FaultReporter::audio(const AlsaCaptureStats& s, std::chrono::steady_clock::
     if (const Say say = lost_.update(!s.streaming, at, starts); say == Say::kStart)
       post({Kind::kAudioLost, starts, s.last_error});
     else if (say == Say::kEnd)
-      post({Kind::kAudioBack, s.reopens});
+      post({Kind::kAudioLostEnd, s.reopens});
   }
   if (const Say say = frozen_.update(s.frozen, at, starts); say == Say::kStart)
     post({Kind::kAudioFrozen, starts});
   else if (say == Say::kEnd)
-    post({Kind::kAudioThawed});
+    post({Kind::kAudioFrozenEnd});
   if (const Say say = stalled_.update(s.stalled, at, starts); say == Say::kStart)
     post({Kind::kAudioStalled, starts, 0, s.silent_s});
   else if (say == Say::kEnd)
-    post({Kind::kAudioFlowing});
+    post({Kind::kAudioStalledEnd});
 }
 
-void FaultReporter::say_notes() {
+void FaultReporter::say_notes() noexcept {
   const std::lock_guard lock(saying_);
   while (const FaultNote* note = notes_.front()) {
     const FaultNote copy = *note;
     notes_.pop();
-    say(copy);
+    try {
+      say(copy);
+    } catch (...) {  // no memory to format the line: the fault is in the status, the journal misses a line
+    }
   }
   if (const std::uint64_t dropped = notes_.dropped(); dropped != dropped_said_) {
-    spdlog::warn(
-        "faults: {} report(s) of the tracker thread lost (the main thread did not take them in time)",
-        dropped - dropped_said_);
+    try {
+      report("faults-lost", spdlog::level::warn,
+             fmt::format("faults: {} report(s) of the tracker thread lost (the main thread did not take "
+                         "them in time)",
+                         dropped - dropped_said_));
+    } catch (...) {
+    }
     dropped_said_ = dropped;
   }
 }
@@ -67,7 +74,7 @@ void FaultReporter::say(const FaultNote& n) {
       spdlog::warn("audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it{}",
                    device_, n.error, alsa_error_text(n.error), meanwhile("lost"));
       break;
-    case FaultNote::Kind::kAudioBack:
+    case FaultNote::Kind::kAudioLostEnd:
       spdlog::info("audio: capture from {} resumed ({} reopen(s) so far)", device_, n.count);
       break;
     case FaultNote::Kind::kAudioFrozen:
@@ -77,7 +84,7 @@ void FaultReporter::say(const FaultNote& n) {
           "speed), until they change{}",
           device_, meanwhile("frozen"));
       break;
-    case FaultNote::Kind::kAudioThawed:
+    case FaultNote::Kind::kAudioFrozenEnd:
       spdlog::info("audio: samples from {} change again", device_);
       break;
     case FaultNote::Kind::kAudioStalled:
@@ -86,7 +93,7 @@ void FaultReporter::say(const FaultNote& n) {
           "GPS (without a fix it coasts down from the last speed) until they come again{}",
           device_, n.seconds, meanwhile("stalled"));
       break;
-    case FaultNote::Kind::kAudioFlowing:
+    case FaultNote::Kind::kAudioStalledEnd:
       spdlog::info("audio: samples from {} come again", device_);
       break;
     case FaultNote::Kind::kAudioHole:

@@ -2,7 +2,9 @@
 // The live chain's faults in the journal: a fault is said when it happens, then at most once a minute
 // with how often it happened meanwhile, and its end once. report() and clear() are thread-safe
 // (LogLimiter). The tracker thread neither formats nor logs on its hops: it posts a FaultNote (a few
-// numbers, into a lock-free ring) and the main thread says it (say_notes(), from Pipeline::service()).
+// numbers, into a lock-free ring) and the main thread says it (say_notes(), from Pipeline::service()), so
+// these lines are stamped up to one turn of the main loop (a third of the watchdog interval, or 1 s)
+// after the event. What the tracker thread says outside its hops (opening the capture) is logged at once.
 #include <chrono>
 #include <cstdint>
 #include <mutex>
@@ -19,14 +21,14 @@ namespace gearpulse::daemon {
 // One thing the tracker thread has to say, in numbers only.
 struct FaultNote {
   enum class Kind : std::uint8_t {
-    kAudioLost,      // count: starts since the last said; error: the ALSA error
-    kAudioBack,      // count: reopens so far
-    kAudioFrozen,    // count: starts since the last said
-    kAudioThawed,    //
-    kAudioStalled,   // count: starts since the last said; seconds: silent for
-    kAudioFlowing,   //
-    kAudioHole,      // count: frames lost before the ring
-    kModelRejected,  // count: the new model's gears
+    kAudioLost,        // count: starts since the last said; error: the ALSA error
+    kAudioLostEnd,     // count: reopens so far
+    kAudioFrozen,      // count: starts since the last said
+    kAudioFrozenEnd,   //
+    kAudioStalled,     // count: starts since the last said; seconds: silent for
+    kAudioStalledEnd,  //
+    kAudioHole,        // count: frames lost before the ring
+    kModelRejected,    // count: the new model's gears
   };
   Kind kind = Kind::kAudioHole;
   std::uint64_t count = 0;
@@ -51,8 +53,9 @@ class FaultReporter {
   // The tracker thread's: `note` is said at the main thread's next say_notes(). A note that does not fit
   // (the main thread held up for long) is counted, and the count is said.
   void post(const FaultNote& note) noexcept { (void)notes_.try_push(note); }
-  // Logs the notes posted since the last call (any thread but the tracker's; one at a time).
-  void say_notes();
+  // Logs the notes posted since the last call (any thread but the tracker's; one at a time). A note that
+  // cannot be said (no memory to format it) is skipped: the daemon's loop goes on.
+  void say_notes() noexcept;
 
  private:
   void say(const FaultNote& note);

@@ -427,10 +427,7 @@ void Pipeline::stop() noexcept {
                    kPatience.count(), d.config.audio.device);
     d.tracker_thread.join();
   }
-  try {
-    d.faults.say_notes();  // what the tracker thread posted last
-  } catch (...) {          // a line that cannot be formatted (no memory) must not end the daemon's stop
-  }
+  d.faults.say_notes();  // what the tracker thread posted last
   if (d.gps) d.gps->stop();
 }
 

@@ -208,6 +208,8 @@ void GpsdClient::run() {
           refused = newest->speed;
           newest->speed = std::nan("");
         }
+        // Published before the status counts it: a status query in between shows the report with the
+        // count before it, which nothing compares.
         latest_.publish(newest);
         {
           std::lock_guard lock(mutex_);

@@ -19,7 +19,7 @@ TEST_CASE("faults: what the tracker thread posts is said only by say_notes, in o
   std::thread tracker([&] {
     faults.post({Kind::kAudioHole, 480});
     faults.post({Kind::kAudioStalled, 3, 0, 2.5});
-    faults.post({Kind::kAudioFlowing});
+    faults.post({Kind::kAudioStalledEnd});
     faults.post({Kind::kModelRejected, 12});
   });
   tracker.join();
@@ -61,7 +61,7 @@ TEST_CASE("faults: notes posted while the main thread says them all arrive, and 
   std::atomic<bool> done{false};
   std::thread tracker([&] {
     for (int i = 0; i < kNotes; ++i)
-      faults.post({Kind::kAudioThawed});
+      faults.post({Kind::kAudioFrozenEnd});
     done.store(true);
   });
   while (!done.load())
@@ -71,7 +71,7 @@ TEST_CASE("faults: notes posted while the main thread says them all arrive, and 
   CHECK(log.count("audio: samples from hw:9 change again") == kNotes);
   CHECK(log.count("lost (the main thread did not take them in time)") == 0);
   for (int i = 0; i < 300; ++i)
-    faults.post({Kind::kAudioThawed});
+    faults.post({Kind::kAudioFrozenEnd});
   faults.say_notes();
   CHECK(log.count("faults: 44 report(s) of the tracker thread lost") == 1);
 }
