@@ -1,6 +1,7 @@
 // Auto fit, the chosen ladder completed: one gear for a model still learning where no ladder passes
-// (single_cluster), first gear restored where BIC dropped it (with_first_gear), and the lower gears of a
-// larger plausible ladder recorded for the synthesis (record_lower_gears).
+// (single_cluster), first gear restored where BIC dropped it (with_first_gear: a ladder that starts too
+// fast at idle or spans too little for a gearbox), and the lower gears of a larger plausible ladder
+// recorded for the synthesis (record_lower_gears).
 #include <algorithm>
 #include <cmath>
 #include <span>
@@ -64,6 +65,12 @@ void record_lower_gears(const std::vector<double>& largest, GearModel& fitted) {
   if (!lower.empty()) fitted.extra["lower_gears"] = lower;
 }
 
+// The smallest spread (top gear's theta over first gear's) of a road vehicle's gearbox: a car's first gear
+// launches it (13-18:1 overall) and its top gear cruises (2.5-4:1), so 2.8x at least; a motorcycle's power
+// to weight lets its first gear be tall, 2.3-3.2x. A ratio of thetas, so whatever multiple of the crank the
+// frequency is, and known without the idle.
+constexpr double kMinSpread = 2.3;
+
 // A manual car moves off in first gear, which carries it at the warm idle at kFirstGearIdleSpeed at most.
 // A chosen ladder whose lowest gear carries it faster lacks first gear: that gear exists whatever the number
 // of its pairs, and what BIC weighs (whether a gear's pairs pay for its parameters) is then no question. A
@@ -71,26 +78,41 @@ void record_lower_gears(const std::vector<double>& largest, GearModel& fitted) {
 // polled apart while the car gains 2-3 m/s^2 spread its ratios by 20-30 %) the gear gains less than BIC
 // asks. Where a plausible ladder met on the way down (every check passed: support, steps, valleys, clutch
 // slip) holds the chosen ladder's gears and more below them, the lowest of which can be first gear, the
-// best of those by BIC is the fit. A ladder whose lowest gear can be first gear stays as BIC chose it, and
-// nothing is added that the checks rejected.
+// best of those by BIC is the fit. A ladder spanning less than kMinSpread lacks its lowest gears likewise:
+// where no ladder completes it by the idle (a motorcycle's first gear carries it at idle at 2.9-3.9 m/s,
+// above a car's bound, and a log may have no standstill), the best plausible one spanning kMinSpread that
+// holds it and more below is the fit. A ladder whose lowest gear can be first gear and that spans a gearbox
+// stays as BIC chose it, and nothing is added that the checks rejected.
 Candidate with_first_gear(const Candidate& best, const std::vector<Candidate>& plausible, double idle_freq) {
   const std::vector<double>& chosen_theta = best.params.theta;
-  if (chosen_theta.size() < 2 || !(idle_freq > 0.0) ||
-      chosen_theta.front() * idle_freq <= kFirstGearIdleSpeed)
-    return best;
+  if (chosen_theta.size() < 2) return best;
+  auto starts_fast = [&](const std::vector<double>& theta) {
+    return idle_freq > 0.0 && theta.front() * idle_freq > kFirstGearIdleSpeed;
+  };
+  auto narrow = [](const std::vector<double>& theta) { return theta.back() < kMinSpread * theta.front(); };
   const double below = chosen_theta.front() * std::exp(-2.0 * kGearWindow);  // a gearbox step below
+  // The best by BIC of the plausible ladders that hold the chosen one's gears and more below them and that
+  // `complete` takes to reach first gear; null if none.
+  auto completion = [&](auto complete) {
+    const Candidate* found = nullptr;
+    for (const Candidate& c : plausible) {
+      const std::vector<double>& theta = c.params.theta;
+      if (theta.size() <= chosen_theta.size() || !complete(theta)) continue;
+      const auto lower = static_cast<std::size_t>(std::lower_bound(theta.begin(), theta.end(), below) -
+                                                  theta.begin());  // gears below the chosen
+      if (theta.size() - lower != chosen_theta.size()) continue;
+      bool same = true;
+      for (std::size_t i = 0; i < chosen_theta.size(); ++i)
+        same = same && std::abs(std::log(theta[lower + i] / chosen_theta[i])) < kGearWindow;
+      if (same && (found == nullptr || c.bic < found->bic)) found = &c;
+    }
+    return found;
+  };
   const Candidate* completed = nullptr;
-  for (const Candidate& c : plausible) {
-    const std::vector<double>& theta = c.params.theta;
-    if (theta.size() <= chosen_theta.size() || theta.front() * idle_freq > kFirstGearIdleSpeed) continue;
-    const auto lower = static_cast<std::size_t>(std::lower_bound(theta.begin(), theta.end(), below) -
-                                                theta.begin());  // gears below the chosen
-    if (theta.size() - lower != chosen_theta.size()) continue;
-    bool same = true;
-    for (std::size_t i = 0; i < chosen_theta.size(); ++i)
-      same = same && std::abs(std::log(theta[lower + i] / chosen_theta[i])) < kGearWindow;
-    if (same && (completed == nullptr || c.bic < completed->bic)) completed = &c;
-  }
+  if (starts_fast(chosen_theta))
+    completed = completion([&](const std::vector<double>& theta) { return !starts_fast(theta); });
+  if (completed == nullptr && narrow(chosen_theta))
+    completed = completion([&](const std::vector<double>& theta) { return !narrow(theta); });
   return completed != nullptr ? *completed : best;
 }
 

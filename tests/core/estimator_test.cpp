@@ -218,6 +218,33 @@ TEST_CASE("estimator: a ladder that lacks first gear at OBD polls 1 s apart take
   }
 }
 
+TEST_CASE(
+    "estimator: a motorcycle's ladder narrower than any gearbox takes its first gear from a larger one") {
+  // A motorcycle (wide-family-501: 5 close gears, spread 2.42, first gear at idle 2.9 m/s) logged by OBD
+  // polls 1 s apart: BIC drops first gear, and the four gears left span about 1.6x, less than any road
+  // vehicle's gearbox (kMinSpread). Its first gear carries it at idle faster than a car's can
+  // (kFirstGearIdleSpeed), so only the spread tells that the ladder lacks it; a plausible ladder met on the
+  // way down held it.
+  const sim::Vehicle car = sim::wide_vehicle(501);
+  for (const std::uint64_t seed : {1, 2, 4}) {
+    sim::ObservationOptions obd;
+    obd.obd = true;
+    obd.period = 0.5;
+    obd.obd_refresh = 1.0;
+    obd.obd_skew = 0.5;
+    obd.seed = seed + 7;
+    const FitResult fit = fit_gear_model(
+        sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kMixed, 2400.0, 1, seed, obd)),
+        {});
+    INFO("seed " << seed << ": " << serialize_model(fit.model));
+    REQUIRE(fit.model.gears.size() == car.theta.size());
+    check_ordered(fit.model);
+    CHECK(fit.model.gears[0].theta == Approx(car.theta[0]).epsilon(0.02));
+    for (std::size_t i = 1; i < car.theta.size(); ++i)
+      CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.01));
+  }
+}
+
 TEST_CASE("estimator: a log without stops or clutch-out samples still gets standard errors") {
   // Moving samples on three gear lines only: the standstill and clutch-out weights go to their bound,
   // which must not take the standard errors of theta with them.
