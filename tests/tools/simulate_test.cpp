@@ -302,7 +302,7 @@ TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-
 // The harness opens the capture before the drive starts: whatever the feeder writes before the capture
 // reads waits in the FIFO, unseen by ALSA, and read at once it set the capture's sample clock ahead of
 // real time, which then held the audio back 1.5 s for the whole drive (bench/daemon_outages.sh). With
-// --wait-start nothing is written before SIGUSR1, and the FIFO holds at most a page.
+// --wait-start nothing is written before SIGUSR1, and the FIFO holds one page.
 TEST_CASE("feed: with --wait-start nothing is written before SIGUSR1, and the FIFO holds a page", "[feed]") {
   TempDir dir;
   const fs::path in = dir.path() / "in.raw", fifo = dir.path() / "fifo", pid = dir.path() / "pid";
@@ -316,12 +316,16 @@ TEST_CASE("feed: with --wait-start nothing is written before SIGUSR1, and the FI
   REQUIRE(feeder != nullptr);
   const int fd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
   REQUIRE(fd >= 0);
-  // The FIFO's writer opens once a reader has: waited for, as the capture blocks in its first read.
+  // The feeder says when it has opened and shrunk the FIFO and waits for the signal (EOF if it failed).
+  char line[512] = {};
+  REQUIRE(std::fgets(line, sizeof line, feeder) != nullptr);
+  INFO(line);
+  REQUIRE(std::string(line).find("FIFO open, waiting for SIGUSR1") != std::string::npos);
   pollfd p{fd, POLLIN, 0};
-  CHECK(::poll(&p, 1, 500) == 0);  // half a second after both ends are open: nothing written
+  CHECK(::poll(&p, 1, 200) == 0);  // nothing written before the signal
   const int size = ::fcntl(fd, F_GETPIPE_SZ);
   CHECK(size > 0);
-  CHECK(size <= 4096);
+  CHECK(size <= ::sysconf(_SC_PAGESIZE));
   REQUIRE(fs::exists(pid));
   const pid_t feeder_pid = std::stoi(slurp(pid));
   REQUIRE(::kill(feeder_pid, SIGUSR1) == 0);

@@ -6,14 +6,19 @@
 // so the stream never drifts from the wall clock however long it runs.
 //
 // A sound card holds at most its ALSA buffer, whose frames the capture's time stamps count; a FIFO holds
-// what the plugin has not read yet unseen by ALSA. So the FIFO is shrunk to its smallest (two periods of
-// mono s16 at 1024 frames), and with --wait-start nothing is written before SIGUSR1, so that a capture
-// opened early reads the first period the moment it is written: the audio then reaches the capture as
-// it would from a card. Written at once on open instead, the periods played before the capture's first
-// read (the daemon's start-up) wait in the FIFO: read all at once, they set the capture's sample clock
-// ahead of real time, which then holds the stream back (AlsaCapture's hold_to_clock), and the audio
-// reached gearpulsed 1.5 s after its drive time for the whole drive (bench/daemon_outages.sh).
+// what the plugin has not read yet unseen by ALSA. So the FIFO is shrunk to the kernel's smallest, one
+// page, when a period fits in PIPE_BUF (4096 bytes; mono s16 at 1024 frames is 2048): a write of at
+// most PIPE_BUF bytes is atomic, so a small pipe never splits a period. A larger period keeps the
+// default size: the kernel rounds a pipe's size up to a power of two of pages, and a period that fills
+// one only in part could be written in two pieces, the plugin reading the first as a whole period. With
+// --wait-start nothing is written before SIGUSR1, so that a capture opened early reads the first period
+// the moment it is written: the audio then reaches the capture as it would from a card. Written at once
+// on open instead, the periods played before the capture's first read (the daemon's start-up) wait in
+// the FIFO: read all at once, they set the capture's sample clock ahead of real time, which then holds
+// the stream back (AlsaCapture's hold_to_clock), and the audio reached gearpulsed 1.5 s after its drive
+// time for the whole drive (bench/daemon_outages.sh).
 #include <fcntl.h>
+#include <limits.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -24,6 +29,7 @@
 #include <ctime>
 #include <filesystem>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -89,6 +95,13 @@ bool write_all(int fd, const std::uint8_t* buf, std::size_t len) {
 }
 
 int run_feed(const FeedOptions& o) {
+  // Blocked first, before the file is read and the FIFO opened, so a SIGUSR1 sent meanwhile waits for
+  // sigwait instead of ending the process.
+  sigset_t start_signal;
+  sigemptyset(&start_signal);
+  sigaddset(&start_signal, SIGUSR1);
+  if (o.wait_start && ::sigprocmask(SIG_BLOCK, &start_signal, nullptr) != 0)
+    throw std::runtime_error(std::string("cannot block SIGUSR1: ") + std::strerror(errno));
   // ALSA's own limits: at most 1024 channels; a period of at most a few seconds of audio.
   const auto within = [](const char* name, long long v, long long hi) {
     if (v < 1 || v > hi)
@@ -110,17 +123,18 @@ int run_feed(const FeedOptions& o) {
   data.resize(periods * period_bytes, 0);
 
   std::signal(SIGPIPE, SIG_IGN);
-  // Blocked before the open, so a SIGUSR1 sent meanwhile waits for sigwait.
-  sigset_t start_signal;
-  sigemptyset(&start_signal);
-  sigaddset(&start_signal, SIGUSR1);
-  if (o.wait_start) ::sigprocmask(SIG_BLOCK, &start_signal, nullptr);
   const gearpulse::UniqueFd fifo(::open(o.fifo.c_str(), O_WRONLY));  // blocks until the capture side opens it
   if (!fifo) throw UsageError(o.fifo + ": " + std::strerror(errno));
   const int fd = fifo.get();
-  // The smallest FIFO the kernel gives (a page): unread audio the capture cannot see stays below it.
-  (void)::fcntl(fd, F_SETPIPE_SZ, static_cast<int>(period_bytes));
+  // One page (the kernel's smallest pipe) when a period's write is atomic; see the top of this file.
+  if (period_bytes <= PIPE_BUF && ::fcntl(fd, F_SETPIPE_SZ, static_cast<int>(period_bytes)) < 0) {
+    std::fprintf(stderr,
+                 "gearpulse-devtools feed: %s: cannot shrink the FIFO (%s): unread audio may pile up\n",
+                 o.fifo.c_str(), std::strerror(errno));
+  }
   if (o.wait_start) {
+    // Said once the FIFO is open and shrunk: a caller may wait for this line before it signals.
+    std::fprintf(stderr, "gearpulse-devtools feed: %s: FIFO open, waiting for SIGUSR1\n", o.fifo.c_str());
     int got = 0;
     while (::sigwait(&start_signal, &got) != 0) {
     }
@@ -165,7 +179,8 @@ void add_feed(CLI::App& app, int& status) {
   cmd->add_flag("--quiet", opts->quiet, "No summary line");
   cmd->add_flag(
       "--wait-start", opts->wait_start,
-      "Open the FIFO, then write nothing until SIGUSR1 (the stream's start, for a capture opened early)");
+      "Open the FIFO, say so on stderr, then write nothing until SIGUSR1 (the stream's start, for a capture "
+      "opened early)");
   cmd->add_option("FILE", opts->input, "Raw interleaved PCM file")->required();
   cmd->add_option("FIFO", opts->fifo, "FIFO named as the ALSA file plugin's infile")->required();
   cmd->callback([opts, &status] { status = run_feed(*opts); });
