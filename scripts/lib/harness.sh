@@ -12,7 +12,7 @@
 #   harness.sh pulses WORK       bytes (= pulses) read from the PTY so far
 #   harness.sh resources WORK    gearpulsed's peak/current RSS and CPU share so far
 #   harness.sh kill-daemon WORK  SIGKILL to gearpulsed (power cut)
-#   harness.sh restart WORK      gearpulsed again (with a fresh feeder and reader)
+#   harness.sh restart WORK      gearpulsed again (with a fresh feeder and reader; see hs_restart)
 #   harness.sh stop WORK         stops everything it started
 # Settings (environment, read by prepare): GEARPULSE_RATE (48000), GEARPULSE_PERIOD (1024 frames),
 # GEARPULSE_PPK (2485), GEARPULSE_TRAIN_SEED (11), GEARPULSE_TRAIN_DURATION (2400 s), GEARPULSE_VEHICLE
@@ -160,7 +160,10 @@ hs_alive() {
 }
 
 # hs_start_feeder [feed options]: the drive's audio into the FIFO (--wait-start: from SIGUSR1 on).
+# HS_FEEDER_FROM: the first line of WORK/feeder.log this feeder writes (a restart appends to it).
 hs_start_feeder() {
+  touch "$GEARPULSE_WORK/feeder.log"
+  HS_FEEDER_FROM=$(($(wc -l <"$GEARPULSE_WORK/feeder.log") + 1))
   hs_spawn feeder "$GEARPULSE_DEVTOOLS" feed --period "$GEARPULSE_PERIOD" --rate "$GEARPULSE_RATE" --channels 1 --format s16 \
     "$@" "$GEARPULSE_WORK/drive/drive.raw" "$GEARPULSE_WORK/audio.fifo"
 }
@@ -175,48 +178,76 @@ hs_start_gpsfake() {
   hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$GEARPULSE_WORK" gpsfake -q -n -1 -P "$GEARPULSE_PORT" -c 0.5 "$GEARPULSE_WORK/drive/drive.nmea"
 }
 
-# hs_wait_gps_tpv SECOND: blocks until gpsd reports the fix of 11:59:SECOND (the drive's t = 0 is 12:00:00)
-# and sets HS_TPV_AT to the wall-clock time it was seen.
+# hs_wait_gps_tpv FIRST LAST: blocks until gpsd reports a fix of 11:59:FIRST to 11:59:LAST (the drive's
+# t = 0 is 12:00:00); sets HS_TPV_SECOND to the second of the fix it saw and HS_TPV_AT to the wall-clock
+# time it saw it.
 hs_wait_gps_tpv() {
-  local t0 deadline seen="$GEARPULSE_WORK/tpv.seen"
+  local t0 deadline seen="$GEARPULSE_WORK/tpv.seen" seconds match
   t0=$(date +%s)
   deadline=$((t0 + 30))
-  rm -f "$seen"
+  seconds=$(seq -w -s '|' "$1" "$2")
+  rm -f "$seen" "$seen.match"
   # gpsd may not listen yet: try again until the deadline. gpspipe ends by SIGPIPE once grep has its
   # line, at its next write, an epoch later: the time is taken as grep finds the line.
   until { timeout 10 env PATH="/usr/bin:$PATH" gpspipe -w "127.0.0.1:$GEARPULSE_PORT" 2>/dev/null || true; } |
-    { grep -q -m1 "\"class\":\"TPV\".*\"time\":\"[0-9-]*T11:59:$1" && date +%s.%N >"$seen"; }; do
+    { grep -E -o -m1 "\"class\":\"TPV\".*\"time\":\"[0-9-]*T11:59:($seconds)" >"$seen.match" &&
+      date +%s.%N >"$seen"; }; do
     [ "$(date +%s)" -lt "$deadline" ] ||
       hs_die "gpsd did not report the drive's first fixes within 30 s: $(tail -n 3 "$GEARPULSE_WORK/gpsfake.log")"
     hs_alive gpsfake || hs_die "gpsfake exited: $(tail -n 3 "$GEARPULSE_WORK/gpsfake.log")"
     sleep 0.2
   done
   HS_TPV_AT=$(cat "$seen")
-  echo "harness: the fix of 11:59:$1 after $(($(date +%s) - t0)) s" >>"$GEARPULSE_WORK/harness.log"
+  match=$(cat "$seen.match")
+  HS_TPV_SECOND=$((10#${match: -2}))
+  echo "harness: the fix of 11:59:${match: -2} after $(($(date +%s) - t0)) s" >>"$GEARPULSE_WORK/harness.log"
 }
 
-# Starts the audio (the feeder waits for SIGUSR1 with the FIFO open) GEARPULSE_GPS_ALIGN s after gpsd
-# reported the fix of 11:59:59 (three of gpsfake's one-second epochs after HS_TPV_AT, the fix of 11:59:56),
-# whose next fix is t = 0's: each fix reaches the daemon 1 - GEARPULSE_GPS_ALIGN s after the audio of its
-# moment, as a receiver's fix comes a little after its moment. WORK/drive.t0 holds the wall-clock time of
-# the drive's t = 0. The daemon is running by then, its capture waiting on the FIFO: started with the
-# audio, its start-up played into the FIFO unread and the audio reached it 1.5 s after its drive time for
-# the whole drive (gearpulse-devtools feed).
-hs_start_audio() {
-  local at now
-  at=$(awk -v a="$HS_TPV_AT" -v d="${GEARPULSE_GPS_ALIGN:-0.9}" 'BEGIN { printf "%.6f", a + 3 + d }')
-  now=$(date +%s.%N)
-  awk -v a="$at" -v n="$now" 'BEGIN { exit !(n > a) }' &&
-    echo "harness: the daemon was ready $(awk -v a="$at" -v n="$now" 'BEGIN { printf "%.2f", n - a }') s after the audio's start time: the audio starts late" >>"$GEARPULSE_WORK/harness.log"
-  sleep "$(awk -v a="$at" -v n="$now" 'BEGIN { d = a - n; printf "%.6f", (d > 0 ? d : 0) }')"
+# hs_wait_feeder_open: blocks until the feeder started last says it has the FIFO open (the capture opened
+# it) and waits for SIGUSR1 (gearpulse-devtools feed --wait-start); HS_FIFO_OPEN_AT: when it saw the line.
+hs_wait_feeder_open() {
+  local i
+  for i in $(seq 200); do
+    if tail -n +"$HS_FEEDER_FROM" "$GEARPULSE_WORK/feeder.log" | grep -q "FIFO open, waiting for SIGUSR1"; then
+      HS_FIFO_OPEN_AT=$(date +%s.%N)
+      return 0
+    fi
+    hs_alive feeder || hs_die "the feeder exited: $(tail -n 3 "$GEARPULSE_WORK/feeder.log")"
+    sleep 0.05
+  done
+  hs_die "the FIFO was not opened within 10 s (gearpulsed's capture opens it): $(tail -n 3 "$GEARPULSE_WORK/gearpulsed.log")"
+}
+
+hs_signal_feeder() {
   kill -USR1 "$(hs_pid feeder)" || hs_die "the feeder is not running: $(tail -n 3 "$GEARPULSE_WORK/feeder.log")"
+}
+
+# hs_sleep_until AT: sleeps until the wall-clock time AT (s since the epoch); prints how late it is if AT
+# has passed already (nothing otherwise).
+hs_sleep_until() {
+  awk -v a="$1" -v n="$(date +%s.%N)" 'BEGIN { if (n > a) printf "%.2f", n - a }'
+  sleep "$(awk -v a="$1" -v n="$(date +%s.%N)" 'BEGIN { d = a - n; printf "%.6f", (d > 0 ? d : 0) }')"
+}
+
+# hs_start_audio AT: starts the drive's audio at the wall-clock time AT (the feeder waits for SIGUSR1
+# with the FIFO open) and writes the time it did to WORK/drive.t0. A daemon ready after AT starts the
+# audio late, which puts every fix that much earlier against the audio: said on stderr and in the log.
+hs_start_audio() {
+  local late
+  hs_wait_feeder_open
+  late=$(hs_sleep_until "$1")
+  [ -z "$late" ] ||
+    echo "harness: gearpulsed was ready $late s after the audio's start time: the audio starts late" |
+    tee -a "$GEARPULSE_WORK/harness.log" >&2
+  hs_signal_feeder
   date +%s.%N >"$GEARPULSE_WORK/drive.t0"
+  echo "harness: the capture waited $(awk -v o="$HS_FIFO_OPEN_AT" -v t="$(cat "$GEARPULSE_WORK/drive.t0")" \
+    'BEGIN { printf "%.2f", t - o }') s for the audio" >>"$GEARPULSE_WORK/harness.log"
 }
 
 hs_start_daemon() {
   hs_write_config
   "$GEARPULSE_DAEMON" --config "$GEARPULSE_CONFIG" --check-config >/dev/null || hs_die "generated config refused"
-  date +%s.%N >"$GEARPULSE_WORK/daemon.started"
   hs_spawn gearpulsed env ALSA_CONFIG_PATH="/usr/share/alsa/alsa.conf:$GEARPULSE_WORK/asound.conf" \
     "$GEARPULSE_DAEMON" --config "$GEARPULSE_CONFIG"
 }
@@ -246,27 +277,48 @@ hs_wait_socket() {
   hs_die "gearpulsed does not answer on $GEARPULSE_SOCKET"
 }
 
-# The daemon starts with the fix of 11:59:56, three seconds before the audio's start (hs_start_audio).
+# The audio starts GEARPULSE_GPS_ALIGN s after gpsd reported the fix of 11:59:59, reckoned from the first
+# fix of 11:59 it reports and gpsfake's one-second epochs; the next fix is t = 0's: each fix then reaches the
+# daemon 1 - GEARPULSE_GPS_ALIGN s after the audio of its moment, as a receiver's fix comes a little after
+# its moment. gearpulsed starts daemon_lead before the audio: its start-up fits (it answered on its socket
+# about 0.5 s after its start here), and its capture, open and waiting on the FIFO, gets the first period
+# within its stall limit (2 s, kStallS in drivers/alsa_capture.cpp): no drive starts with the audio said
+# stalled. Started with the audio instead, its start-up played into the FIFO unread and the audio reached
+# it 1.5 s after its drive time for the whole drive (gearpulse-devtools feed).
 hs_start() {
+  local audio_at started late
+  local -r daemon_lead=1.2  # s
   hs_check_tools
   hs_write_asound
   hs_start_feeder --wait-start
   hs_start_gpsfake
-  hs_wait_gps_tpv 56
+  hs_wait_gps_tpv 00 59
+  audio_at=$(awk -v a="$HS_TPV_AT" -v s="$HS_TPV_SECOND" -v d="${GEARPULSE_GPS_ALIGN:-0.9}" \
+    'BEGIN { printf "%.6f", a + 59 - s + d }')
+  late=$(hs_sleep_until "$(awk -v a="$audio_at" -v l="$daemon_lead" 'BEGIN { printf "%.6f", a - l }')")
+  [ -z "$late" ] || echo "harness: gearpulsed starts $late s late" >>"$GEARPULSE_WORK/harness.log"
+  started=$(date +%s.%N)
   hs_start_daemon
   hs_start_reader
   hs_wait_socket
-  hs_start_audio
+  echo "harness: gearpulsed answered $(awk -v s="$started" -v n="$(date +%s.%N)" 'BEGIN { printf "%.2f", n - s }') s after its start" >>"$GEARPULSE_WORK/harness.log"
+  hs_start_audio "$audio_at"
 }
 
+# A second gearpulsed on the state the first left (after kill-daemon), with a fresh feeder and reader. The
+# audio plays the drive again from its start once the daemon answers and its capture has the FIFO open,
+# with no fixes aligned to it (gpsfake plays its log once). WORK/drive.t0 stays the first start's: the
+# end-to-end test reads only the daemon's state after a restart.
 hs_restart() {
   hs_stop_one reader
   hs_stop_one feeder
   hs_write_asound
-  hs_start_feeder
+  hs_start_feeder --wait-start
   hs_start_daemon
   hs_start_reader
   hs_wait_socket
+  hs_wait_feeder_open
+  hs_signal_feeder
 }
 
 # The daemon's resources so far: peak and current resident memory, CPU of all its threads over its life.
