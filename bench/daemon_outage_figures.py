@@ -107,7 +107,7 @@ def replay_outage(work, cli, model, outage, gps_timeout, held):
     return None
 
 
-def poll(a, truth, started, out_start, model):
+def poll(a, truth, t0, out_start, model):
     """Every status while the drive plays, to WORK/polls.csv; the model on disk where GPS is lost."""
     sock = os.path.join(a.work, "control.sock")
     shutil.copy(os.path.join(a.work, "state", "model.json"), model)
@@ -116,7 +116,7 @@ def poll(a, truth, started, out_start, model):
         polls.write("t,source,gear,speed,true_speed,true_gear,pulses,track_freq,true_freq\n")
         while alive(a.until_pid):
             s = status(a.ctl, sock)
-            t = time.time() - started
+            t = time.time() - t0
             if s is not None:
                 source = s.get("source", "?")
                 i = max(0, bisect.bisect_right(truth[0], t) - 1)
@@ -146,11 +146,11 @@ def main():
     work = a.work
     truth = load_truth(os.path.join(work, "drive", "truth.csv"))
     # The drive's t = 0: when the harness started the audio (scripts/lib/harness.sh, hs_start_audio).
-    started = float(open(os.path.join(work, "drive.t0")).read())
+    t0 = float(open(os.path.join(work, "drive.t0")).read())
     out_start, out_len = (float(x) for x in a.outage.split(":"))
     model = os.path.join(work, "model-at-loss.json")
     if not a.offline:
-        poll(a, truth, started, out_start, model)
+        poll(a, truth, t0, out_start, model)
 
     lost = back = None  # (drive time, pulses)
     edge_gap, last_poll = 0.0, 0.0
