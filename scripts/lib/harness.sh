@@ -286,13 +286,17 @@ hs_wait_socket() {
 # stalled. Started with the audio instead, its start-up played into the FIFO unread and the audio reached
 # it 1.5 s after its drive time for the whole drive (gearpulse-devtools feed).
 hs_start() {
-  local audio_at started late
+  local audio_at started late lead from
   local -r daemon_lead=1.2  # s
   hs_check_tools
   hs_write_asound
   hs_start_feeder --wait-start
   hs_start_gpsfake
-  hs_wait_gps_tpv 00 59
+  # gpsd reports the log's first fix (12:00:00 - gps_lead) at its first sentence too, half an epoch before
+  # the rhythm of the rest (gpsfake -c 0.5, two sentences a fix): the fix after it is the first on time.
+  lead=$(sed -n 's/^gps_lead_s=//p' "$GEARPULSE_WORK/drive/drive.env")
+  from=$((61 - ${lead:-8}))
+  hs_wait_gps_tpv "$((from < 0 ? 0 : from > 59 ? 59 : from))" 59
   audio_at=$(awk -v a="$HS_TPV_AT" -v s="$HS_TPV_SECOND" -v d="${GEARPULSE_GPS_ALIGN:-0.9}" \
     'BEGIN { printf "%.6f", a + 59 - s + d }')
   late=$(hs_sleep_until "$(awk -v a="$audio_at" -v l="$daemon_lead" 'BEGIN { printf "%.6f", a - l }')")
