@@ -66,6 +66,13 @@ std::uint32_t le32(const std::string& s, std::size_t at) {
   return v;
 }
 
+// Waits for a feeder started with popen and requires that it exited with status 0.
+void check_exit_ok(std::FILE* feeder) {
+  const int rc = ::pclose(feeder);
+  CHECK(WIFEXITED(rc));
+  CHECK(WEXITSTATUS(rc) == 0);
+}
+
 }  // namespace
 
 TEST_CASE("simulate: writes a drive whose files agree with each other", "[simulate]") {
@@ -288,9 +295,7 @@ TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-
     got.append(buf, static_cast<std::size_t>(n));
   ::close(fd);
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const int rc = ::pclose(feeder);
-  CHECK(WIFEXITED(rc));
-  CHECK(WEXITSTATUS(rc) == 0);
+  check_exit_ok(feeder);
   // 16 whole periods: the file, then silence up to the period boundary.
   REQUIRE(got.size() == 16u * 256 * 3 * 2);
   CHECK(got.substr(0, data.size()) == data);
@@ -339,9 +344,7 @@ TEST_CASE("feed: with --wait-start nothing is written before SIGUSR1, and the FI
   }
   ::close(fd);
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const int rc = ::pclose(feeder);
-  CHECK(WIFEXITED(rc));
-  CHECK(WEXITSTATUS(rc) == 0);
+  check_exit_ok(feeder);
   CHECK(got == slurp(in));
   CHECK(elapsed >= 7.0 * 256 / 8000);  // paced from the signal
 }
