@@ -426,12 +426,14 @@ TEST_CASE("pipeline: a receiver that goes quiet is no fix after gps.timeout and 
 TEST_CASE("pipeline: through a GPS outage the status keeps the last fix's speed and its growing age") {
   GpsOnly chain;
   gearpulse::daemon::Pipeline& pipeline = chain.start();
-  std::vector<double> speeds(10, 14.0);
-  speeds.resize(50, std::nan(""));  // 8 s without a fix at 0.2 s per epoch
+  // 5 s of fixes, then 8 s without, at 0.2 s per epoch, repeated: a fix phase long enough to be seen by a
+  // client that connects late on a loaded machine (2 s of it was missed under a sanitizer build).
+  std::vector<double> speeds(25, 14.0);
+  speeds.resize(65, std::nan(""));
   auto fake = chain.gpsd(speeds, 0.2);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_mode == 1; }, 10s));  // reports without a fix
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_age > 2.0; }, 5s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 30s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_mode == 1; }, 15s));  // reports without a fix
+  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_age > 2.0; }, 10s));
   const auto s = pipeline.snapshot();
   CHECK(s.gps_state == GpsState::kNoFix);
   CHECK(s.gps_mode == 1);
