@@ -77,6 +77,10 @@ GEARPULSE_FIELDS(AudioStatus) void fields(R& r, F&& f) {
   f("xruns", r.xruns);
   f("ring_drops", r.ring_drops);
   f("error", r.error);
+  f("failed_step", r.failed_step);
+  f("open_attempts", r.open_attempts);
+  f("last_attempt", r.last_attempt);
+  f("reopens", r.reopens);
 }
 
 GEARPULSE_FIELDS(TrackerStatus) void fields(R& r, F&& f) {

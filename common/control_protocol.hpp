@@ -140,6 +140,12 @@ struct AudioStatus {
   std::uint64_t xruns = 0;
   std::uint64_t ring_drops = 0;
   std::string error;
+  // While the audio is down (recovering, retrying): the ALSA step that failed last, the attempts to open
+  // the device since it went and the last one's wall time; "", 0 and null while a device streams.
+  std::string failed_step;
+  std::uint64_t open_attempts = 0;
+  std::optional<double> last_attempt;  // UNIX seconds
+  std::uint64_t reopens = 0;           // lost devices reopened since the capture opened
 };
 
 struct TrackerStatus {

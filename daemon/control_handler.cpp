@@ -87,7 +87,11 @@ control::StatusReply status_reply(const StatusInputs& in) {
                  .rate = config.audio.rate,
                  .xruns = p.xruns,
                  .ring_drops = p.ring_drops,
-                 .error = p.audio_error};
+                 .error = p.audio_error,
+                 .failed_step = p.audio_failed_step,
+                 .open_attempts = p.audio_attempts,
+                 .last_attempt = number_if(p.audio_last_attempt, p.audio_last_attempt >= 0),
+                 .reopens = p.audio_reopens};
   reply.tracker = {.freq = number_if(p.tracker_freq, p.tracker_freq >= 0),
                    .snr_db = number_if(p.tracker_snr_db, p.tracker_freq >= 0),
                    .confident = p.tracker_confident};

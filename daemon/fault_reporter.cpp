@@ -28,7 +28,7 @@ void FaultReporter::audio(const AlsaCaptureStats& s, std::chrono::steady_clock::
   std::uint64_t starts = 0;
   if (s.running) {
     if (const Say say = lost_.update(!s.streaming, at, starts); say == Say::kStart)
-      post({Kind::kAudioLost, starts, s.last_error});
+      post({Kind::kAudioLost, starts, s.last_error, 0.0, s.failed_step});
     else if (say == Say::kEnd)
       post({Kind::kAudioLostEnd, s.reopens});
   }
@@ -71,8 +71,10 @@ void FaultReporter::say(const FaultNote& n) {
   };
   switch (n.kind) {
     case FaultNote::Kind::kAudioLost:
-      spdlog::warn("audio: capture from {} interrupted (ALSA error {}: {}); the driver keeps reopening it{}",
-                   device_, n.error, alsa_error_text(n.error), meanwhile("lost"));
+      spdlog::warn(
+          "audio: capture from {} interrupted (ALSA error {}: {}{}{}); the driver keeps reopening it{}",
+          device_, n.error, alsa_error_text(n.error), n.step == AlsaStep::kNone ? "" : ", in ",
+          to_string(n.step), meanwhile("lost"));
       break;
     case FaultNote::Kind::kAudioLostEnd:
       spdlog::info("audio: capture from {} resumed ({} reopen(s) so far)", device_, n.count);

@@ -21,7 +21,7 @@ namespace gearpulse::daemon {
 // One thing the tracker thread has to say, in numbers only.
 struct FaultNote {
   enum class Kind : std::uint8_t {
-    kAudioLost,        // count: starts since the last said; error: the ALSA error
+    kAudioLost,        // count: starts since the last said; error: the ALSA error; step: whose it was
     kAudioLostEnd,     // count: reopens so far
     kAudioFrozen,      // count: starts since the last said
     kAudioFrozenEnd,   //
@@ -34,6 +34,7 @@ struct FaultNote {
   std::uint64_t count = 0;
   int error = 0;
   double seconds = 0.0;
+  AlsaStep step = AlsaStep::kNone;
 };
 
 class FaultReporter {

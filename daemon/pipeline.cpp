@@ -511,17 +511,22 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     // Its errors are about the connection: once connected again they are history.
     if (s.gps_state != GpsState::kDisconnected) s.gps_error.clear();
   }
-  if (const AudioFrontEndStatus a = d.audio.status(); a.open) {
+  const AudioFrontEndStatus a = d.audio.status();
+  if (a.open) {
     s.audio_state = !a.stats.streaming ? AudioState::kRecovering
                     : a.stats.frozen   ? AudioState::kFrozen
                     : a.stats.stalled  ? AudioState::kStalled
                                        : AudioState::kRunning;
     s.xruns = a.stats.xruns;
     s.audio_error = a.error;
+    s.audio_reopens = a.stats.reopens;
   } else {
     s.audio_state = AudioState::kRetrying;
     s.audio_error = a.error;
   }
+  s.audio_failed_step = to_string(a.failed_step);
+  s.audio_attempts = a.attempts;
+  s.audio_last_attempt = a.last_attempt > 0.0 ? a.last_attempt : -1.0;
   s.ring_drops = d.ring_drops.load(std::memory_order_relaxed);
   const double f = d.track_freq.load(std::memory_order_relaxed);
   s.tracker_freq = std::isfinite(f) ? f : -1.0;

@@ -47,20 +47,26 @@ struct Negotiated {
   unsigned period = 0;
 };
 
+// Why an open failed: the step (for status) and what was refused in it (for the constructor's message).
+struct OpenFailure {
+  AlsaStep step = AlsaStep::kNone;
+  const char* what = "";
+};
+
 // Opens and configures the PCM into `out`; on failure returns the negative ALSA error and in `failed`
 // the step that failed (a PCM opened on the way is closed: a device left open would be busy for every
 // later attempt). Builds no string: the capture thread reopens a lost device with it.
-int open_pcm(const AlsaCaptureConfig& c, PcmHandle& out, Negotiated& got, const char*& failed) noexcept {
+int open_pcm(const AlsaCaptureConfig& c, PcmHandle& out, Negotiated& got, OpenFailure& failed) noexcept {
   snd_pcm_t* opened = nullptr;
   int err = ::snd_pcm_open(&opened, c.device.c_str(), SND_PCM_STREAM_CAPTURE, SND_PCM_NONBLOCK);
   if (err < 0) {
-    failed = "cannot open";
+    failed = {AlsaStep::kOpen, "cannot open"};
     return err;
   }
   PcmHandle handle(opened);
   snd_pcm_t* const pcm = handle.get();
-  auto bail = [&](const char* what, int e) {
-    failed = what;
+  auto bail = [&](const char* what, int e, AlsaStep step = AlsaStep::kHwParams) {
+    failed = {step, what};
     return e;
   };
   snd_pcm_hw_params_t* hw = nullptr;
@@ -97,12 +103,14 @@ int open_pcm(const AlsaCaptureConfig& c, PcmHandle& out, Negotiated& got, const 
 
   snd_pcm_sw_params_t* sw = nullptr;
   snd_pcm_sw_params_alloca(&sw);
-  if ((err = ::snd_pcm_sw_params_current(pcm, sw)) < 0) return bail("no software parameters", err);
+  if ((err = ::snd_pcm_sw_params_current(pcm, sw)) < 0)
+    return bail("no software parameters", err, AlsaStep::kSwParams);
   ::snd_pcm_sw_params_set_avail_min(pcm, sw, period);
   // Timestamps on CLOCK_MONOTONIC, the daemon's time base.
   ::snd_pcm_sw_params_set_tstamp_mode(pcm, sw, SND_PCM_TSTAMP_ENABLE);
   ::snd_pcm_sw_params_set_tstamp_type(pcm, sw, SND_PCM_TSTAMP_TYPE_MONOTONIC);
-  if ((err = ::snd_pcm_sw_params(pcm, sw)) < 0) return bail("software parameters refused", err);
+  if ((err = ::snd_pcm_sw_params(pcm, sw)) < 0)
+    return bail("software parameters refused", err, AlsaStep::kSwParams);
 
   got.rate = rate;
   got.channels = channels;
@@ -145,6 +153,30 @@ const char* to_string(AlsaRecovery recovery) noexcept {
   return "?";
 }
 
+const char* to_string(AlsaStep step) noexcept {
+  switch (step) {
+    case AlsaStep::kNone:
+      return "";
+    case AlsaStep::kOpen:
+      return "open";
+    case AlsaStep::kHwParams:
+      return "hw-params";
+    case AlsaStep::kSwParams:
+      return "sw-params";
+    case AlsaStep::kParamsChanged:
+      return "params-changed";
+    case AlsaStep::kPrepare:
+      return "prepare";
+    case AlsaStep::kStart:
+      return "start";
+    case AlsaStep::kWait:
+      return "wait";
+    case AlsaStep::kRead:
+      return "read";
+  }
+  return "?";
+}
+
 const char* to_string(PcmFormat format) noexcept {
   switch (format) {
     case PcmFormat::kS16:
@@ -162,9 +194,10 @@ AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
   if (config_.period_frames == 0)
     throw std::runtime_error("ALSA capture '" + config_.device + "': period_frames must be positive");
   Negotiated got;
-  const char* failed = "";
+  OpenFailure failed;
   if (const int err = open_pcm(config_, pcm_, got, failed); err < 0)
-    throw std::runtime_error("ALSA capture '" + config_.device + "': " + failed + ": " + ::snd_strerror(err));
+    throw AlsaOpenError("ALSA capture '" + config_.device + "': " + failed.what + ": " + ::snd_strerror(err),
+                        failed.step, err);
   rate_ = got.rate;
   channels_ = got.channels;
   format_ = got.format;
@@ -207,6 +240,9 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.repeated = repeated_.load(std::memory_order_relaxed);
   s.frozen = frozen_.load(std::memory_order_relaxed);
   s.last_error = last_error_.load(std::memory_order_relaxed);
+  s.failed_step = failed_step_.load(std::memory_order_relaxed);
+  s.reopen_attempts = reopen_attempts_.load(std::memory_order_relaxed);
+  s.last_attempt = last_attempt_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
   s.fifo = fifo_.load(std::memory_order_relaxed);
   s.memory_locked = thread_.memory_locked();
@@ -218,6 +254,11 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
     s.stalled = s.silent_s > std::max(kStallS, 4.0 * period_s);
   }
   return s;
+}
+
+void AlsaCapture::note_failure(AlsaStep step, int error) noexcept {
+  failed_step_.store(step, std::memory_order_relaxed);
+  last_error_.store(error, std::memory_order_relaxed);
 }
 
 void AlsaCapture::publish_anchor(const Anchor& a) noexcept {
@@ -311,16 +352,22 @@ void AlsaCapture::run() noexcept {
   };
 
   PcmHandle pcm = std::move(pcm_);  // the thread's while it runs
+  // Prepares and starts the stream; a step that fails is noted (last_error_ and failed_step_).
   auto restart = [&]() noexcept {
-    int err = ::snd_pcm_prepare(pcm.get());
-    if (err == 0) err = ::snd_pcm_start(pcm.get());
+    if (const int err = ::snd_pcm_prepare(pcm.get()); err < 0) {
+      note_failure(AlsaStep::kPrepare, err);
+      return err;
+    }
+    const int err = ::snd_pcm_start(pcm.get());
+    if (err < 0) note_failure(AlsaStep::kStart, err);
     return err;
   };
-  // Recovery as recovery_for() decides; a failed restart or resume falls through to a reopen.
-  auto recover = [&](int err) noexcept {
+  // Recovery from `err`, which `step` returned, as recovery_for() decides; a failed restart or resume
+  // falls through to a reopen.
+  auto recover = [&](AlsaStep step, int err) noexcept {
     const AlsaRecovery action = recovery_for(err);
     if (action == AlsaRecovery::kRetry) return;  // a signal woke the wait: no frame was lost
-    last_error_.store(err, std::memory_order_relaxed);
+    note_failure(step, err);
     discontinuity = true;
     if (action == AlsaRecovery::kRestart) {
       xruns_.fetch_add(1, std::memory_order_relaxed);
@@ -333,13 +380,15 @@ void AlsaCapture::run() noexcept {
       if (e == 0 || restart() == 0) return;
     }
     pcm.reset();
+    reopen_attempts_.store(0, std::memory_order_relaxed);
+    last_attempt_.store(0.0, std::memory_order_relaxed);
     streaming_.store(false, std::memory_order_relaxed);
   };
 
   last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
   streaming_.store(pcm != nullptr, std::memory_order_relaxed);
-  if (pcm) {
-    if (const int err = restart(); err < 0) recover(err);
+  if (pcm) {  // restart() has noted the step that failed
+    if (const int err = restart(); err < 0) recover(failed_step_.load(std::memory_order_relaxed), err);
   }
   std::int64_t backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
   const std::int64_t backoff_max =
@@ -364,12 +413,15 @@ void AlsaCapture::run() noexcept {
       pause(backoff);
       if (stopping()) break;
       Negotiated got;
-      const char* failed = "";
+      OpenFailure failed;
       PcmHandle fresh;
+      reopen_attempts_.fetch_add(1, std::memory_order_relaxed);
+      last_attempt_.store(wall_now(), std::memory_order_relaxed);
       const int err = open_pcm(config_, fresh, got, failed);
-      if (err < 0 || got.rate != rate_ || got.channels != channels_ || got.format != format_ ||
-          got.period != period_frames_) {
-        last_error_.store(err < 0 ? err : -EINVAL, std::memory_order_relaxed);
+      const bool changed = err == 0 && (got.rate != rate_ || got.channels != channels_ ||
+                                        got.format != format_ || got.period != period_frames_);
+      if (err < 0 || changed) {
+        note_failure(changed ? AlsaStep::kParamsChanged : failed.step, changed ? -EINVAL : err);
         backoff = std::min(backoff * 2, backoff_max);
         continue;
       }
@@ -379,12 +431,12 @@ void AlsaCapture::run() noexcept {
       streaming_.store(true, std::memory_order_relaxed);
       reopens_.fetch_add(1, std::memory_order_relaxed);
       backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
-      if (const int e = ::snd_pcm_start(pcm.get()); e < 0) recover(e);
+      if (const int e = ::snd_pcm_start(pcm.get()); e < 0) recover(AlsaStep::kStart, e);
       continue;
     }
     const int ready = ::snd_pcm_wait(pcm.get(), wait_ms);
     if (ready < 0) {
-      recover(ready);
+      recover(AlsaStep::kWait, ready);
       continue;
     }
     if (ready == 0) continue;  // timeout: look at stop_ again
@@ -394,7 +446,7 @@ void AlsaCapture::run() noexcept {
       continue;
     }
     if (n < 0) {
-      recover(static_cast<int>(n));
+      recover(AlsaStep::kRead, static_cast<int>(n));
       continue;
     }
     const double measured = measure(pcm.get(), n);

@@ -19,6 +19,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,37 @@ enum class AlsaRecovery : std::uint8_t {
 [[nodiscard]] AlsaRecovery recovery_for(int alsa_error) noexcept;
 [[nodiscard]] const char* to_string(AlsaRecovery recovery) noexcept;
 
+// The step of opening or running the capture that failed with an ALSA error (AlsaCaptureStats), so
+// status can say where a lost device fails without the capture thread building a string.
+enum class AlsaStep : std::uint8_t {
+  kNone,           // nothing has failed
+  kOpen,           // snd_pcm_open: no such device, busy, no permission
+  kHwParams,       // the hardware parameters: access, format, channels, rate, period or buffer refused
+  kSwParams,       // the software parameters
+  kParamsChanged,  // reopened, but the device now gives another rate, format, channel count or period
+  kPrepare,        // snd_pcm_prepare
+  kStart,          // snd_pcm_start
+  kWait,           // snd_pcm_wait
+  kRead,           // snd_pcm_readi
+};
+
+// "open", "hw-params", "sw-params", "params-changed", "prepare", "start", "wait", "read"; "" for kNone.
+[[nodiscard]] const char* to_string(AlsaStep step) noexcept;
+
+// The capture could not be opened: what() is the one-line message AlsaCapture's constructor documents,
+// step() and error() (the negative ALSA code) say where and why.
+class AlsaOpenError : public std::runtime_error {
+ public:
+  AlsaOpenError(const std::string& what, AlsaStep step, int error)
+      : std::runtime_error(what), step_(step), error_(error) {}
+  [[nodiscard]] AlsaStep step() const noexcept { return step_; }
+  [[nodiscard]] int error() const noexcept { return error_; }
+
+ private:
+  AlsaStep step_;
+  int error_;
+};
+
 struct AlsaCaptureConfig {
   std::string device = "default";
   unsigned rate = 48000;               // requested; the nearest the device offers is used
@@ -79,7 +111,12 @@ struct AlsaCaptureStats {
   std::uint64_t clock_resets = 0;  // anchors placed after a discontinuity or a large clock error
   std::uint64_t repeated = 0;      // frames of periods identical to the period before (not pushed)
   int last_error = 0;              // last negative ALSA error code seen, 0 if none
-  bool realtime_ok = false;        // SCHED_FIFO granted at start
+  AlsaStep failed_step = AlsaStep::kNone;  // the step that returned last_error
+  // Attempts to reopen the device since it was last lost, and the wall-clock time (wall_now(), s) of the
+  // last of them (0 if none yet).
+  std::uint64_t reopen_attempts = 0;
+  double last_attempt = 0.0;
+  bool realtime_ok = false;  // SCHED_FIFO granted at start
   // The capture thread runs under SCHED_FIFO now: not while it reopens a lost device, since opening one
   // (ALSA parses its configuration and allocates) is no real-time work, and at the FIFO priority it would
   // hold the tracker off its core at every attempt.
@@ -101,8 +138,9 @@ struct AlsaCaptureStats {
 class AlsaCapture final {
  public:
   // Opens and configures the PCM now, so a bad name or a refused format fails here with a one-line
-  // std::runtime_error ("ALSA capture 'foo': cannot open: No such file or directory"). `ring` is
-  // borrowed and must outlive this object; this object is its only producer.
+  // AlsaOpenError ("ALSA capture 'foo': cannot open: No such file or directory"; other faults of the
+  // configuration are a std::runtime_error). `ring` is borrowed and must outlive this object; this object
+  // is its only producer.
   AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring);
   ~AlsaCapture();  // stop()
   AlsaCapture(const AlsaCapture&) = delete;
@@ -131,6 +169,7 @@ class AlsaCapture final {
  private:
   void run() noexcept;
   void publish_anchor(const Anchor& anchor) noexcept;
+  void note_failure(AlsaStep step, int error) noexcept;  // last_error_ and failed_step_
 
   static constexpr std::size_t kAnchors = 64;
   struct alignas(kCacheLine) AnchorSlot {
@@ -156,6 +195,9 @@ class AlsaCapture final {
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
       clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
+  std::atomic<AlsaStep> failed_step_{AlsaStep::kNone};
+  std::atomic<std::uint64_t> reopen_attempts_{0};
+  std::atomic<double> last_attempt_{0.0};
   std::atomic<bool> fifo_{false}, frozen_{false};
   std::atomic<std::int64_t> last_frames_ns_{0};  // monotonic time of the last frames read (or of the start)
   DeviceThread thread_;                          // last: stopped before the members it uses go

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "drivers/clock.hpp"
+
 namespace gearpulse {
 namespace {
 
@@ -33,10 +35,14 @@ bool AudioFrontEnd::open_due(std::chrono::steady_clock::time_point now) const no
 }
 
 bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepare& prepare) {
-  const auto fail = [&](std::string why) {
+  const double attempt = wall_now();
+  const auto fail = [&](std::string why, AlsaStep step = AlsaStep::kNone) {
     {
       std::lock_guard lock(mutex_);
       error_ = std::move(why);
+      failed_step_ = step;
+      ++failed_opens_;
+      last_attempt_ = attempt;
     }
     last_delay_ = backoff_;
     next_try_ = now + backoff_;
@@ -49,6 +55,8 @@ bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepar
     ring = std::make_unique<SpscRing<float>>(
         static_cast<std::size_t>(std::max(1.0, ring_seconds_ * config_.rate)));
     capture = std::make_unique<AlsaCapture>(config_, *ring);
+  } catch (const AlsaOpenError& e) {
+    return fail(e.what(), e.step());
   } catch (const std::exception& e) {
     return fail(e.what());
   }
@@ -65,6 +73,9 @@ bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepar
   ring_ = std::move(ring);
   capture_ = std::move(capture);
   error_.clear();
+  failed_step_ = AlsaStep::kNone;
+  failed_opens_ = 0;
+  last_attempt_ = 0.0;
   backoff_ = kFirstRetry;
   read_frames_ = 0;
   stream_started_ = false;
@@ -149,8 +160,16 @@ AudioFrontEndStatus AudioFrontEnd::status() const {
     if (s.stats.last_error != 0 && !s.stats.streaming)
       s.error =
           "ALSA error " + std::to_string(s.stats.last_error) + ": " + alsa_error_text(s.stats.last_error);
+    if (!s.stats.streaming) {
+      s.failed_step = s.stats.failed_step;
+      s.attempts = s.stats.reopen_attempts;
+      s.last_attempt = s.stats.last_attempt;
+    }
   } else {
     s.error = error_;
+    s.failed_step = failed_step_;
+    s.attempts = failed_opens_;
+    s.last_attempt = last_attempt_;
   }
   return s;
 }

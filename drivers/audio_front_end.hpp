@@ -33,6 +33,13 @@ struct AudioFrontEndStatus {
   bool open = false;       // a capture is open (its stats below); otherwise it is being retried
   AlsaCaptureStats stats;  // when open
   std::string error;       // the ALSA error of a device lost and being reopened, or why an open failed
+  // While there is no audio (no capture open, or its device lost): the ALSA step that failed last
+  // (kNone when what failed was no ALSA step: the stream refused, no thread), the attempts to open the
+  // device since the audio went, and the wall-clock time (wall_now(), s) of the last one (0 none yet).
+  // None, 0 and 0 while a device streams.
+  AlsaStep failed_step = AlsaStep::kNone;
+  std::uint64_t attempts = 0;
+  double last_attempt = 0.0;
 };
 
 class AudioFrontEnd {
@@ -76,10 +83,13 @@ class AudioFrontEnd {
   std::chrono::milliseconds backoff_ = kFirstRetry;
   std::chrono::milliseconds last_delay_ = kFirstRetry;
 
-  mutable std::mutex mutex_;  // capture_ and ring_ as status() sees them, error_
+  mutable std::mutex mutex_;  // capture_ and ring_ as status() sees them, error_ and the three below
   std::unique_ptr<SpscRing<float>> ring_;
   std::unique_ptr<AlsaCapture> capture_;
   std::string error_;
+  AlsaStep failed_step_ = AlsaStep::kNone;  // of the last failed open
+  std::uint64_t failed_opens_ = 0;          // since the last open that succeeded
+  double last_attempt_ = 0.0;               // wall_now() of the last failed open
 
   // The ring's read side.
   std::uint64_t read_frames_ = 0;  // ring frame index of the next frame to read

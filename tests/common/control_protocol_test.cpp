@@ -27,7 +27,8 @@ StatusReply full_status() {
   s.uptime = 61.5;
   s.output = {"pty", "no-reader", "", 7, 8, 2485.0, std::string("/run/gearpulse/pulse")};
   s.gps = {"no-fix", std::nullopt, 3, 4.5, 2, 1, "127.0.0.1:2947", "gone"};
-  s.audio = {"running", "hw:1", 48000, 5, 6, ""};
+  s.audio = {"recovering", "hw:1", 48000, 5, 6, "ALSA error -2: No such file or directory",
+             "open",       9,      1.7e9, 3};
   s.tracker = {88.0, 12.0, true};
   s.model.state = ModelState::kTrained;
   s.model.gears = 2;
@@ -84,12 +85,16 @@ TEST_CASE("control: a status reply is written with the fields and types of docs/
         {"server", "127.0.0.1:2947"},
         {"error", "gone"}}},
       {"audio",
-       {{"state", "running"},
+       {{"state", "recovering"},
         {"device", "hw:1"},
         {"rate", 48000},
         {"xruns", 5},
         {"ring_drops", 6},
-        {"error", ""}}},
+        {"error", "ALSA error -2: No such file or directory"},
+        {"failed_step", "open"},
+        {"open_attempts", 9},
+        {"last_attempt", 1.7e9},
+        {"reopens", 3}}},
       {"tracker", {{"freq", 88.0}, {"snr_db", 12.0}, {"confident", true}}},
       {"model",
        {{"state", "trained"},

@@ -62,6 +62,9 @@ TEST_CASE("control: status says what is not available as null and where the outp
   CHECK_FALSE(s.gps.age.has_value());
   CHECK_FALSE(s.tracker.freq.has_value());
   CHECK_FALSE(s.tracker.snr_db.has_value());
+  CHECK(s.audio.failed_step.empty());  // nothing failed: no step, no attempt
+  CHECK(s.audio.open_attempts == 0);
+  CHECK_FALSE(s.audio.last_attempt.has_value());
   CHECK(s.model_state == control::ModelState::kLearning);
   CHECK(s.model.problems == std::vector<std::string>{"training.bin discarded"});
   CHECK(s.config.restart_pending == std::vector<std::string>{"audio.rate"});
@@ -73,7 +76,19 @@ TEST_CASE("control: status says what is not available as null and where the outp
   p.gps_speed = 12.0;
   p.gps_age = 0.4;
   p.tracker_freq = 88.0;
+  p.audio_state = gearpulse::daemon::AudioState::kRecovering;
+  p.audio_error = "ALSA error -5: Input/output error";
+  p.audio_failed_step = "read";
+  p.audio_attempts = 4;
+  p.audio_last_attempt = 1.7e9;
+  p.audio_reopens = 2;
   s = status_reply(inputs(config, path, p));
+  CHECK(s.audio.state == "recovering");
+  CHECK(s.audio.error == "ALSA error -5: Input/output error");
+  CHECK(s.audio.failed_step == "read");
+  CHECK(s.audio.open_attempts == 4);
+  CHECK(s.audio.last_attempt == 1.7e9);
+  CHECK(s.audio.reopens == 2);
   CHECK_FALSE(s.output.path.has_value());
   CHECK(s.gps.speed == 12.0);
   CHECK(s.gps.age == 0.4);

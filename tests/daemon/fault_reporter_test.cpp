@@ -41,6 +41,7 @@ TEST_CASE("faults: a lost capture is posted when it starts and when it ends, sai
   s.running = true;
   s.streaming = false;
   s.last_error = -5;
+  s.failed_step = gearpulse::AlsaStep::kRead;
   s.reopens = 2;
   const auto t0 = std::chrono::steady_clock::now();
   faults.audio(s, t0);
@@ -49,6 +50,7 @@ TEST_CASE("faults: a lost capture is posted when it starts and when it ends, sai
   faults.audio(s, t0 + std::chrono::milliseconds(20));
   faults.say_notes();
   CHECK(log.count("audio: capture from hw:9 interrupted (ALSA error -5: ") == 1);
+  CHECK(log.count("Input/output error, in read); the driver keeps reopening it") == 1);
   CHECK(log.count("audio: capture from hw:9 resumed (2 reopen(s) so far)") == 1);
 }
 

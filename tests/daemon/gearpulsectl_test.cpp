@@ -26,9 +26,11 @@ using gearpulse::test::LineClient;
 using gearpulse::test::Process;
 using gearpulse::test::read_text;
 using gearpulse::test::TempDir;
+using gearpulse::test::wait_for;
 using gearpulse::test::wait_for_status;
 using gearpulse::test::write_text;
 using nlohmann::json;
+using namespace std::chrono_literals;
 
 TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly without a daemon") {
   TempDir dir;
@@ -48,11 +50,16 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   REQUIRE(wait_for_status(dir, daemon).is_object());
 
+  // The daemon's PCM does not exist: the audio is retried, and status says where it fails.
+  REQUIRE(wait_for([&] { return wait_for_status(dir, daemon)["audio"]["open_attempts"] >= 1; }, 20s));
   Process table({ctl, "--socket", sock, "status"}, dir / "table.txt");
   CHECK(table.wait() == 0);
   const std::string text = read_text(dir / "table.txt");
   CHECK(text.find("source") != std::string::npos);
   CHECK(text.find("model        learning") != std::string::npos);
+  CHECK(text.find("! audio: ALSA capture 'gearpulse_test_no_such_pcm': cannot open") != std::string::npos);
+  CHECK(text.find("! audio: failed at open; ") != std::string::npos);
+  CHECK(text.find(" attempt(s) to open it, the last ") != std::string::npos);
 
   Process full({ctl, "--socket", sock, "status"}, "/dev/full");  // a reply that cannot be written
   CHECK(full.wait() == 2);
@@ -62,6 +69,11 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
   const json parsed = json::parse(read_text(dir / "raw.txt"));
   CHECK(parsed["ok"] == true);
   CHECK(parsed.contains("pulses"));
+  CHECK(parsed["audio"]["state"] == "retrying");
+  CHECK(parsed["audio"]["failed_step"] == "open");
+  CHECK(parsed["audio"]["open_attempts"] >= 1);
+  CHECK(parsed["audio"]["last_attempt"].is_number());
+  CHECK(parsed["audio"]["reopens"] == 0);
 
   Process refuse({ctl, "--socket", sock, "reset-model"}, dir / "refuse.txt");
   CHECK(refuse.wait() == 2);

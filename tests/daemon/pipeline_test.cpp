@@ -361,6 +361,20 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
     CHECK(s.audio_state == AudioState::kRecovering);
     CHECK_FALSE(s.audio_error.empty());
   }
+  // Where it fails and how long it has been tried, as status shows it: at the open, attempt after
+  // attempt, the last one just now.
+  const auto gone = pipeline.snapshot();
+  CHECK(gone.audio_failed_step == "open");
+  CHECK(gone.audio_attempts >= 1);
+  CHECK(gone.audio_last_attempt > 0.0);
+  CHECK(gone.audio_last_attempt <= gearpulse::wall_now());
+  CHECK(gone.audio_reopens >= 1);  // the flaps before it was gone
+  REQUIRE(wait_for(
+      [&] {
+        const auto s = pipeline.snapshot();
+        return s.audio_attempts > gone.audio_attempts && s.audio_last_attempt > gone.audio_last_attempt;
+      },
+      10s));
   std::filesystem::remove(sink);
   std::filesystem::create_symlink("/dev/null", sink);
   std::filesystem::rename(chain.dir / "unplugged.raw", infile);
@@ -370,11 +384,49 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
         return s.audio_state == AudioState::kRunning && near(s.tracker_freq, kTone, kWander + 0.5);
       },
       20s));
-  CHECK(pipeline.snapshot().audio_error.empty());
+  const auto back = pipeline.snapshot();
+  CHECK(back.audio_error.empty());
+  CHECK(back.audio_failed_step.empty());
+  CHECK(back.audio_attempts == 0);
+  CHECK(back.audio_last_attempt < 0.0);
+  CHECK(back.audio_reopens > gone.audio_reopens);
   pipeline.service();
   // The journal said it was lost (a flap or the loss after them) and, as often, that it was back.
   CHECK(log.count(kLost) >= 1);
   CHECK(log.count(kBack) == log.count(kLost));
+}
+
+// A sound card that is not there when the daemon starts (its PCM fails to open: the file plugin's infile
+// is missing) is retried; status says the open fails, how often it was tried and when last, and nothing
+// of it once the card is there.
+TEST_CASE(
+    "pipeline: a sound card absent at start is retrying at its open, and running with no fault once there") {
+  GpsOnly chain;
+  const auto infile = chain.dir / "ripple.raw";
+  gearpulse::test::use_alsa_config(chain.dir, "late", infile);
+  chain.config.audio.device = "late";
+  chain.config.audio.rate = kRate;
+  chain.config.audio.format = "S16_LE";
+  chain.config.audio.period_frames = 512;
+  const double started = gearpulse::wall_now();
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  // Retried with a delay that doubles from 0.5 s: a second attempt within a few seconds.
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_attempts >= 2; }, 20s));
+  const auto absent = pipeline.snapshot();
+  CHECK(absent.audio_state == AudioState::kRetrying);
+  CHECK(absent.audio_failed_step == "open");
+  CHECK(absent.audio_error.find("cannot open") != std::string::npos);
+  CHECK(absent.audio_last_attempt >= started);
+  CHECK(absent.audio_last_attempt <= gearpulse::wall_now());
+  gearpulse::test::write_raw(chain.dir / "next.raw", ripple(60.0));
+  std::filesystem::rename(chain.dir / "next.raw", infile);
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kRunning; }, 30s));
+  const auto there = pipeline.snapshot();
+  CHECK(there.audio_error.empty());
+  CHECK(there.audio_failed_step.empty());
+  CHECK(there.audio_attempts == 0);
+  CHECK(there.audio_last_attempt < 0.0);
+  CHECK(there.audio_reopens == 0);
 }
 
 // The status a user reads after gpsd comes up late and after it restarts: the connection's old error is

@@ -286,6 +286,14 @@ TEST_CASE("alsa: an unknown PCM name is a clear error") {
   cfg.device = "no_such_pcm_gearpulse";
   CHECK_THROWS_WITH(AlsaCapture(cfg, ring),
                     Catch::Contains("no_such_pcm_gearpulse") && Catch::Contains("cannot open"));
+  // The step and the code, for status.
+  try {
+    AlsaCapture cap(cfg, ring);
+    FAIL("opened a PCM that does not exist");
+  } catch (const gearpulse::AlsaOpenError& e) {
+    CHECK(e.step() == gearpulse::AlsaStep::kOpen);
+    CHECK(e.error() < 0);
+  }
 }
 
 TEST_CASE("alsa: a source faster than real time is held to the clock instead of spinning") {
@@ -449,20 +457,34 @@ TEST_CASE("alsa: a device lost while capturing is closed and reopened, and its f
   REQUIRE(wait_for(
       [&] {
         drain();
-        return cap.stats().reopens >= 2 && cap.stats().last_error == -EIO;
+        const auto s = cap.stats();
+        return s.reopens >= 2 && s.last_error == -EIO && s.failed_step == gearpulse::AlsaStep::kRead;
       },
       10s));
-  // Gone: no device to open.
+  // Gone: no device to open. Each attempt is counted and timed, and fails at the open.
+  const double gone_at = gearpulse::wall_now();
   std::filesystem::remove(infile);
   REQUIRE(wait_for(
       [&] {
         drain();
-        return cap.stats().last_error == -ENOENT;
+        const auto s = cap.stats();
+        return s.last_error == -ENOENT && s.last_attempt > gone_at;
       },
       10s));
   const auto lost = cap.stats();
   CHECK_FALSE(lost.streaming);
   CHECK(lost.running);
+  CHECK(lost.failed_step == gearpulse::AlsaStep::kOpen);
+  CHECK(std::string(gearpulse::to_string(lost.failed_step)) == "open");
+  CHECK(lost.reopen_attempts >= 1);
+  CHECK(lost.last_attempt <= gearpulse::wall_now());
+  REQUIRE(wait_for(
+      [&] {
+        drain();
+        const auto s = cap.stats();
+        return s.reopen_attempts > lost.reopen_attempts && s.last_attempt > lost.last_attempt;
+      },
+      10s));
   // Reopening is no real-time work: the thread leaves SCHED_FIFO for it and takes it back once the device
   // is open again.
   if (!lost.realtime_ok) WARN("SCHED_FIFO not granted here: the capture thread's policy is not checked");

@@ -5,7 +5,9 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <iostream>
@@ -151,7 +153,8 @@ void print_status(const control::StatusReply& s) {
             << "gps          " << gps.state << "  speed " << num(gps.speed, 2, " m/s") << "  age "
             << num(gps.age, 1, " s") << "  (" << gps.server << ")\n"
             << "audio        " << audio.state << "  " << audio.device << " @ " << audio.rate << " Hz  xruns "
-            << audio.xruns << "  ring drops " << audio.ring_drops << "\n"
+            << audio.xruns << "  ring drops " << audio.ring_drops
+            << (audio.reopens > 0 ? "  reopens " + std::to_string(audio.reopens) : std::string()) << "\n"
             << "tracker      " << num(s.tracker.freq, 2, " Hz") << "  SNR " << num(s.tracker.snr_db, 1, " dB")
             << (s.tracker.confident ? "  confident" : "") << "\n"
             << "model        " << control::to_string(model.state) << "  " << model.gears << " gears, "
@@ -176,6 +179,17 @@ void print_status(const control::StatusReply& s) {
   for (const auto& [name, error] :
        {std::pair{"output", s.output.error}, {"gps", gps.error}, {"audio", audio.error}})
     if (!error.empty()) std::cout << "! " << name << ": " << error << "\n";
+  // Where the audio fails while it is down, and how long the daemon has been trying to get it back.
+  if (!audio.failed_step.empty() || audio.open_attempts > 0) {
+    std::string line = audio.failed_step.empty() ? "" : "failed at " + audio.failed_step;
+    if (audio.open_attempts > 0) {
+      line += (line.empty() ? "" : "; ") + std::to_string(audio.open_attempts) + " attempt(s) to open it";
+      const auto now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch());
+      if (audio.last_attempt)
+        line += ", the last " + num(std::max(0.0, now.count() - *audio.last_attempt), 1, " s") + " ago";
+    }
+    std::cout << "! audio: " << line << "\n";
+  }
   // The state directory's problems (a file set aside, a save that fails) and the configuration's (a
   // reload refused, settings waiting for a restart): shown as the others, not only in the JSON.
   for (const std::string& p : model.problems)
