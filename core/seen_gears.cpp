@@ -10,11 +10,17 @@ namespace {
 
 constexpr double kMovingSpeed = 1.0;  // m/s: fixes above this tell a gear's ratio (the fit's rule)
 constexpr double kMaxFixGap = 6.0;    // s: two fixes further apart are not neighbours in time
-// Per second, the most the speed may change between two fixes of a sighting: GPS reports the speed up to a
-// second late (0.5 s typically), so a ratio read while the car gains or loses speed is off by the lag times
-// the rate; at 2 % a second and 0.5 s that is 1 %, the floor of a reading's noise. Read during a launch, a
-// gear's ratio came out 7-9 % low, a gear of its own beside the true one.
-constexpr double kSteadySpeed = 0.02;
+// The most a fix's lateness may move a sighting's ratio (the floor of a reading's noise): a fix `lag` late,
+// read while the car gains or loses speed at a share g a second, gives a ratio off by lag x g, so the speed
+// may change between two fixes of a sighting by at most this share over the lag a second (2 % a second at
+// 0.5 s late, 1.1 % at 0.9 s). Read during a launch with no such bound, a gear's ratio came out 7-9 % low
+// (GPS 0.5 s late), a gear of its own beside the true one.
+constexpr double kLagBias = 0.01;
+// s: the least lateness a sighting is judged at. The lag measured is a fix's mean lateness; each fix's own
+// timing against the revs scatters about it by up to half a second (a logger polls speed and rpm each at its
+// own instant within its round, a receiver reports within its period), so a fix said to be current is no
+// licence for a faster change (with no floor, OBD rows at 2 s erred 3.45 / 42.90 -> 3.90 / 44.88 %).
+constexpr double kLeastLag = 0.5;
 // Floor on the spread of a gear's ratios for its standard error: the tracker's jitter and driveline slip
 // leave about 1 % on every reading.
 constexpr double kMinRatioSd = 0.01;
@@ -33,7 +39,7 @@ bool SeenGears::is_seen(const Sighting& s) const noexcept {
 }
 
 bool SeenGears::observe(double t, double speed, double freq, double idle_ceiling,
-                        std::span<const double> model_thetas) noexcept {
+                        std::span<const double> model_thetas, double lag) noexcept {
   bool changed = false;
   for (Sighting& s : slots_) {
     if (s.count > 0.0 && t - s.last_t > kForgetTime) {
@@ -48,9 +54,9 @@ bool SeenGears::observe(double t, double speed, double freq, double idle_ceiling
     return changed;
   }
   const double r = std::log(speed / freq);
-  const bool steady = have_prev_ && t - prev_t_ <= kMaxFixGap && t > prev_t_ &&
-                      steady_ratios_agree(r, prev_ratio_, speed) &&
-                      std::abs(std::log(speed / prev_speed_)) < kSteadySpeed * (t - prev_t_);
+  const bool steady =
+      have_prev_ && t - prev_t_ <= kMaxFixGap && t > prev_t_ && steady_ratios_agree(r, prev_ratio_, speed) &&
+      std::abs(std::log(speed / prev_speed_)) * std::max(lag, kLeastLag) < kLagBias * (t - prev_t_);
   have_prev_ = true;
   prev_t_ = t;
   prev_ratio_ = r;

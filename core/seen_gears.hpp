@@ -2,12 +2,13 @@
 // Gears the synthesis measures under GPS that its model lacks. While GPS gives the speed and the engine
 // frequency is tracked, the ratio v / f of a car in gear is that gear's theta (eq. (3)). A fix whose ratio
 // agrees with the fix before it (the fit's steady-pair rule, steady_ratios_agree), at a speed that changed
-// by under 2 % a second since (GPS speed lags), and that lies off every gear of the model (none within a
-// gearbox step, a factor of 1.06) is a sighting of a gear the model lacks; sightings within half a gear
-// window (kGearWindow) of each other are one gear. Once a gear has been sighted on `min_fixes` fixes in a row
-// it is *seen*: its theta is the mean ratio of all its sightings, with the standard error of that mean, and
-// its share of use that of its sightings among all steady fixes; the synthesis carries it as a gear until a
-// model has it or it has not been sighted for kForgetTime. Readings at idle revs are no sightings:
+// since by less than the fix's lateness (half a second at least) can bias a ratio by 1 % (2 % a second
+// with GPS 0.5 s late or less, 1.1 % at 0.9 s), and that lies off every gear of the model (none
+// within a gearbox step, a factor of 1.06) is a sighting of a gear the model lacks; sightings within half a
+// gear window (kGearWindow) of each other are one gear. Once a gear has been sighted on `min_fixes` fixes in
+// a row it is *seen*: its theta is the mean ratio of all its sightings, with the standard error of that mean,
+// and its share of use that of its sightings among all steady fixes; the synthesis carries it as a gear until
+// a model has it or it has not been sighted for kForgetTime. Readings at idle revs are no sightings:
 // declutched, the car rolls at a slowly changing ratio.
 //
 // Fixed capacity, no allocation.
@@ -31,10 +32,11 @@ class SeenGears {
   explicit SeenGears(double min_fixes = 0.0) noexcept : min_fixes_(min_fixes) {}
 
   // One fix (GPS speed, m/s) with the engine frequency at its time (Hz), at step time t (s). model_thetas:
-  // the model's gears; idle_ceiling: revs at or below this are idle (Hz, 0 = unknown). Returns true when the
-  // set of seen gears changed (one became seen or was forgotten); a seen gear's theta may move without that.
-  bool observe(double t, double speed, double freq, double idle_ceiling,
-               std::span<const double> model_thetas) noexcept;
+  // the model's gears; idle_ceiling: revs at or below this are idle (Hz, 0 = unknown); lag: how late the
+  // fix's speed is against the revs (s). Returns true when the set of seen gears changed (one became seen or
+  // was forgotten); a seen gear's theta may move without that.
+  bool observe(double t, double speed, double freq, double idle_ceiling, std::span<const double> model_thetas,
+               double lag) noexcept;
   // Forgets every gear within a gearbox step of one of `model_thetas` (a model that has learned it). Returns
   // true when the set of seen gears changed.
   bool forget_learned(std::span<const double> model_thetas) noexcept;

@@ -199,7 +199,8 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
                       gps_age);
     observe_launch(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
     if (have_gps && gps_new) {
-      observe_gear(gps_speed, freq);
+      // How late the fix is against the revs, as measured whether or not the steps correct for it.
+      observe_gear(gps_speed, freq, std::max(0.0, speed_lag_.lag() + gps_age));
       unlearned_fix_ = {t_ - gps_age, gps_speed};
     }
     // A fix teaches the lag once the revs at its stamp are noted: at once, or at the first step at or after

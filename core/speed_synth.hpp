@@ -153,7 +153,7 @@ class SpeedSynthesizer {
   void insert_upper_gears() noexcept;
   void read_top_gear_revs() noexcept;
   void change_ladder(bool new_model) noexcept;
-  void observe_gear(double gps, double freq) noexcept;
+  void observe_gear(double gps, double freq, double lag) noexcept;
   void observe_launch(double dt, double gps, double freq, bool gps_new) noexcept;
   // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
   [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }

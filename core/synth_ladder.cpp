@@ -410,10 +410,10 @@ double SpeedSynthesizer::idle_ceiling() const noexcept {
 }
 
 // A gear seen under GPS that the model lacks (seen_) joins the ladder or leaves it.
-void SpeedSynthesizer::observe_gear(double gps, double freq) noexcept {
+void SpeedSynthesizer::observe_gear(double gps, double freq, double lag) noexcept {
   if (gears_ == 0 || model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
-  bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas));
+  bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas), lag);
   // The idle and the launches seen under GPS decide how many gears are missing below the ladder: the idle
   // may be learned, or fall as the engine warms, and a launch be counted, after the ladder was loaded.
   if (!changed && tuning_.predict_lower_gears > 0.0) {
