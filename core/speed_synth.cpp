@@ -86,6 +86,9 @@ void SpeedSynthesizer::reset() noexcept {
   habits_.end_flat_stretch();
   unlearned_fix_ = {};
   launches_.abort();
+  launch_revs_ = 0.0;
+  launch_speed_ = 0.0;
+  launch_revs_t_ = std::numeric_limits<double>::infinity();
   last_ = {};
 }
 
@@ -197,7 +200,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     if (!std::isfinite(gps_age)) gps_age = 0.0;
     out = filter_step(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new,
                       gps_age);
-    observe_launch(dt, have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
+    observe_launch(have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
     if (have_gps && gps_new) {
       // How late the fix is against the revs, as measured whether or not the steps correct for it.
       observe_gear(gps_speed, freq, std::max(0.0, speed_lag_.lag() + gps_age));

@@ -154,7 +154,7 @@ class SpeedSynthesizer {
   void read_top_gear_revs() noexcept;
   void change_ladder(bool new_model) noexcept;
   void observe_gear(double gps, double freq, double lag) noexcept;
-  void observe_launch(double dt, double gps, double freq, bool gps_new) noexcept;
+  void observe_launch(double gps, double freq, bool gps_new) noexcept;
   // The model's number of a gear of the ladder (0: a gear seen under GPS that the model lacks, or no gear).
   [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
@@ -238,7 +238,11 @@ class SpeedSynthesizer {
   bool top_gear_below_band_ = false;  // the fit saw the model's top gear run no higher than the one below
   double top_gear_samples_ = 0.0;     // pairs the fit saw in the model's top gear (extra.revs)
   SeenGears seen_;
-  LaunchGears launches_;  // how many gears the launches seen under GPS pass below the lowest measured
+  LaunchGears launches_;       // how many gears the launches seen under GPS pass below the lowest measured
+  double launch_revs_ = 0.0;   // Hz: the revs last read, for the launches
+  double launch_speed_ = 0.0;  // m/s: the GPS speed of the last step
+  double launch_revs_t_ = std::numeric_limits<double>::infinity();  // s: when (+inf: never)
+  double revs_interval_ = 0.0;  // s: the mean interval between readings of the revs (0: none yet)
   // The newest fix not yet taught to speed_lag_: its stamp (s; +inf: none) and speed.
   struct UnlearnedFix {
     double t = std::numeric_limits<double>::infinity();

@@ -428,12 +428,34 @@ void SpeedSynthesizer::observe_gear(double gps, double freq, double lag) noexcep
 }
 
 // Under GPS, at every step: the launches from rest, counted by the upshifts they make before the filter holds
-// the lowest gear of the ladder that is not predicted (the base; launch_gears.hpp). Only
-// revs read at steps no longer than a shift's clutch-out time (declutch_time) show every shift of a launch,
-// whose gears are held a second or two: a launch with a longer step is not counted.
-void SpeedSynthesizer::observe_launch(double dt, double gps, double freq, bool gps_new) noexcept {
+// the lowest gear of the ladder that is not predicted (the base; launch_gears.hpp). A launch's shifts show in
+// its revs where every gear it holds is read at least once: an upshift lowers the revs by a gearbox step, and
+// a gear passed between two readings deepens the fall by its own step (counted so), but a first gear passed
+// unread leaves no fall at all (the revs climb from the idle straight into second). A launch holds first
+// gear about kFirstGearHeld, so a launch whose revs above the idle are read further apart than that is not
+// counted. A step reads the revs where they changed, or where the speed did not either: a logger writes a row
+// when a value changes, a row for a new speed with the revs of its last poll (its rows, not its polls, are
+// the steps), and a step that repeats both values comes from a feed that reads both at every step.
+void SpeedSynthesizer::observe_launch(double gps, double freq, bool gps_new) noexcept {
+  // s: a launch's first gear is held about this long (the geometric mean of 412 stints in first gear ended by
+  // second, under GPS on the simulated drives; synthesis-experiments.md, "At sparse readings").
+  constexpr double kFirstGearHeld = 1.5;
+  // The feed's reading interval: the mean over about the last ten readings (a logger's polls scatter within
+  // its rounds, so one interval is no measure of them).
+  constexpr double kReadingsMeant = 10.0;
+  const bool revs_read = std::isfinite(freq) && (freq != launch_revs_ || gps == launch_speed_);
+  launch_speed_ = gps;
+  if (revs_read) {
+    const double interval = t_ - launch_revs_t_;  // not finite at the first reading
+    if (std::isfinite(interval))
+      revs_interval_ =
+          revs_interval_ > 0.0 ? revs_interval_ + (interval - revs_interval_) / kReadingsMeant : interval;
+    launch_revs_ = freq;
+    launch_revs_t_ = t_;
+  }
+  const bool read_apart = !(revs_interval_ > 0.0 && revs_interval_ <= kFirstGearHeld);
   const int base = predicted_ + 1;
-  if (!std::isfinite(gps) || tuning_.launch_gears <= 0.0 || base > gears_ || dt > tuning_.declutch_time) {
+  if (!std::isfinite(gps) || tuning_.launch_gears <= 0.0 || base > gears_ || read_apart) {
     launches_.abort();
     return;
   }
