@@ -28,9 +28,11 @@ class DeviceThread {
   }
   // Asks the thread to stop and joins it.
   void stop() {
-    stop_.store(true);
+    ask_stop();
     if (thread_.joinable()) thread_.join();
   }
+  // Asks the thread to stop without joining it: for an owner that then wakes the thread's wait.
+  void ask_stop() noexcept { stop_.store(true); }
 
   [[nodiscard]] bool started() const noexcept { return thread_.joinable(); }
   // On the thread: whether stop() was asked.

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <memory>
 #include <thread>
+#include <vector>
 
 #include "drivers/clock.hpp"
 #include "drivers/late_output.hpp"
@@ -62,37 +63,64 @@ TEST_CASE("pulse: the thread refuses a bad configuration before starting") {
   CHECK_FALSE(thread.status().running);
 }
 
-// The daemon starts the train at standstill and sets a speed later: it must be taken up within
-// speed_poll, not when the thread next happens to wake.
-TEST_CASE(
-    "pulse: a start from standstill is taken up within the speed poll, and the thread beats meanwhile") {
+// The daemon starts the train at standstill and sets a speed later: the thread must wake for it, not
+// when it next happens to wake. The heartbeat goes on meanwhile.
+TEST_CASE("pulse: a start after a long standstill is taken up at once, and the thread beats meanwhile") {
   gearpulse::NullPulseOutput out;
   gearpulse::PulseThreadConfig cfg = pulse_a_metre();
-  cfg.speed_poll = 5ms;
-  gearpulse::PulseThread thread(out, cfg);
+  std::vector<gearpulse::RiseRecord> log(16);
+  gearpulse::PulseThread thread(out, cfg, log);
   thread.start();
-  // At standstill it still turns its loop: the heartbeat start() set moves on, beat after beat. The age is
-  // read right after a beat was seen, so 500 ms (a hundred polls) is room for the scheduling of a loaded
-  // machine, not for a loop that stopped turning.
+  // At standstill it still turns its loop: the heartbeat start() set moves on, beat after beat (each a
+  // heartbeat, 250 ms, apart: no edge is due). The age is read right after a beat was seen, so 1 s (four
+  // heartbeats) is room for the scheduling of a loaded machine, not for a loop that stopped turning.
+  std::int64_t beat_ns = 0;
   for (int beat = 0; beat < 3; ++beat) {
     const std::int64_t h0 = thread.status().heartbeat_ns;
     REQUIRE(within_5s([&] { return thread.status().heartbeat_ns > h0; }));
+    beat_ns = thread.status().heartbeat_ns;
   }
-  CHECK(gearpulse::monotonic_ns() - thread.status().heartbeat_ns < 500'000'000);
-  const auto set_at = std::chrono::steady_clock::now();
-  thread.set_speed(100.0);  // 100 Hz
-  const bool pulsing = within_5s([&] { return thread.pulses() > 0; });
-  const auto waited = std::chrono::steady_clock::now() - set_at;
+  CHECK(gearpulse::monotonic_ns() - beat_ns < 1'000'000'000);
+  // Set right after a beat: a thread that only looked at the speed when its heartbeat woke it would take
+  // it up nearly a heartbeat (250 ms) later.
+  const std::int64_t set_ns = gearpulse::monotonic_ns();
+  thread.set_speed(1000.0);  // 1 kHz: the first rise is due a millisecond after the speed is taken up
+  const bool pulsing = within_5s([&] { return thread.logged() > 0; });
   thread.stop();
-  CHECK(pulsing);
-  // The first pulse is due a poll (5 ms) and a period (10 ms) after the speed is set. At standstill the
-  // thread has no edge to wake for (the next one is never): one that did not look at the speed at each
-  // poll would not start at all, or only at some longer wake-up. The bound leaves a sanitized build on a
-  // loaded machine over thirty times the nominal 15 ms, all of it wake-up latency, which the sanitizers
-  // do not stretch; a poll of half a second or more still fails it.
-  INFO("first pulse after " << std::chrono::duration_cast<std::chrono::milliseconds>(waited).count()
-                            << " ms");
-  CHECK(waited < 500ms);
+  REQUIRE(pulsing);
+  // The first rise is written a millisecond (a period) and a wake-up after set_speed. The bound leaves a
+  // sanitized build on a loaded machine a hundred times that, all of it wake-up latency, which the
+  // sanitizers do not stretch; it is under half the heartbeat, so a thread woken only by the heartbeat
+  // fails it.
+  const std::int64_t waited = log[0].written_ns - set_ns;
+  INFO("first rise " << waited / 1000 << " us after set_speed (set " << (set_ns - beat_ns) / 1000
+                     << " us after a beat)");
+  CHECK(waited < 100'000'000);
+}
+
+// The thread wakes for its edges, not to look at the speed: at a constant 10 Hz (20 edges a second)
+// it turns its loop about once an edge, where a thread polling the speed every 5 ms turned 200 times
+// a second.
+TEST_CASE("pulse: at a constant speed the thread wakes once an edge, not to poll the speed") {
+  gearpulse::NullPulseOutput out;
+  gearpulse::PulseThread thread(out, pulse_a_metre());
+  thread.start();
+  thread.set_speed(10.0);  // 10 Hz
+  REQUIRE(within_5s([&] { return thread.pulses() >= 2; }));
+  const gearpulse::PulseThreadStatus s0 = thread.status();
+  const std::uint64_t edges0 = out.rises() + out.falls();
+  // Five periods, 0.5 s: waited for, as a loaded machine may take longer.
+  REQUIRE(within_5s([&] { return thread.pulses() >= s0.pulses + 5; }));
+  const gearpulse::PulseThreadStatus s1 = thread.status();
+  const std::uint64_t edges1 = out.rises() + out.falls();
+  thread.stop();
+  const std::uint64_t turns = s1.turns - s0.turns;
+  const std::uint64_t edges = edges1 - edges0;
+  INFO(turns << " turns for " << edges << " edges");
+  CHECK(edges >= 9);
+  // A turn per edge, and a few to spare (a wake-up of the status reads' timing, a signal's EINTR): a
+  // 5 ms poll would add a hundred.
+  CHECK(turns <= edges + 4);
 }
 
 // late_edges is how the status says the pulses were not on time: edges a little after their time (the
@@ -143,8 +171,8 @@ TEST_CASE("pulse: a late output takes its device once and refuses a second while
   CHECK(late.attached());
   thread.set_speed(200.0);  // every pulse on the attached device, so its rises and falls pair
   CHECK_FALSE(late.attach(std::make_unique<gearpulse::NullPulseOutput>()));
-  // Wait for pulses rather than a fixed time: the speed is taken up within the speed poll, which a
-  // sanitized build on a loaded machine may stretch past any short sleep.
+  // Wait for pulses rather than a fixed time: a sanitized build on a loaded machine may stretch the
+  // wake-up for the new speed past any short sleep.
   CHECK(within_5s([&] { return thread.pulses() >= 3; }));
   thread.stop();
   // The first device is still the one driven, and alive: it carries the pulses after the refused attach.
