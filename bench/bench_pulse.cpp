@@ -146,8 +146,8 @@ Exactness exactness(std::uint64_t seed) {
     exact.set_speed(changes[next].first, changes[next].second);
     ++next;
   }
-  // A caller that wakes every 5 ms (the thread's speed poll) and commits overdue edges late; speed
-  // changes carry their own time stamps.
+  // A coarse caller that wakes only every 5 ms and commits overdue edges late; speed changes carry their
+  // own time stamps.
   PulseScheduler late(cfg, 0);
   next = 0;
   for (std::int64_t now = 0; now <= kEnd; now += 5'000'000) {
@@ -158,9 +158,10 @@ Exactness exactness(std::uint64_t seed) {
   }
   while (late.pop_due(kEnd).kind != EdgeKind::kNone) {
   }
-  // The pulse thread's own loop: it sleeps until the next edge or the 5 ms speed poll, wakes 20-120 us
-  // late and once every 10 s 30 ms late (no real-time priority on a busy machine), and writes each edge
-  // when it wakes (emit_due): the pulses' shortest high and low times on the line.
+  // The pulse thread's own loop: it sleeps until the next edge, or 5 ms at most (the thread wakes for a
+  // new speed instead, at its time: a change is seen no later there than here), wakes 20-120 us late and
+  // once every 10 s 30 ms late (no real-time priority on a busy machine), and writes each edge when it
+  // wakes (emit_due): the pulses' shortest high and low times on the line.
   PulseScheduler writer(cfg, 0);
   std::mt19937_64 wake_rng(seed);
   std::uniform_int_distribution<std::int64_t> wake_late(20'000, 120'000);
