@@ -98,17 +98,46 @@ std::optional<std::size_t> find_column(const std::vector<std::string>& header, s
   return std::nullopt;
 }
 
+namespace {
+
+// Whether `word` is a 12-hour clock's "AM" or "PM" (any case); `pm` says which.
+bool meridiem(std::string_view word, bool& pm) noexcept {
+  if (word.size() != 2 || std::tolower(static_cast<unsigned char>(word[1])) != 'm') return false;
+  const int c = std::tolower(static_cast<unsigned char>(word[0]));
+  pm = c == 'p';
+  return c == 'a' || c == 'p';
+}
+
+}  // namespace
+
 std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
+  // The time is the last word holding a colon that starts with a digit ("GMT+08:00" in Torque's GPS Time
+  // is a zone, not the time); "AM" or "PM", as a word or the end of that one, makes it a 12-hour clock.
   std::string_view token;
+  std::optional<bool> pm;
   std::size_t start = 0;
   while (start <= text.size()) {
     std::size_t end = text.find(' ', start);
     if (end == std::string_view::npos) end = text.size();
-    const std::string_view word = text.substr(start, end - start);
-    if (word.find(':') != std::string_view::npos) token = word;
+    std::string_view word = text.substr(start, end - start);
     start = end + 1;
+    if (bool p = false; meridiem(word, p)) {
+      pm = p;
+      continue;
+    }
+    if (word.find(':') == std::string_view::npos || !std::isdigit(static_cast<unsigned char>(word.front())))
+      continue;
+    if (bool p = false; meridiem(word.substr(word.size() - 2), p)) {  // "1:05:00PM"
+      pm = p;
+      word.remove_suffix(2);
+    }
+    // ISO 8601 ("2022-02-23T06:34:27.403Z", "...27.403+08:00"): the time after the T, without its zone.
+    if (const std::size_t t = word.find_first_of("Tt"); t != std::string_view::npos)
+      word.remove_prefix(t + 1);
+    if (const std::size_t zone = word.find_first_of("Zz+-"); zone != std::string_view::npos)
+      word = word.substr(0, zone);
+    token = word;
   }
-  if (token.empty()) return std::nullopt;
   double parts[3] = {0, 0, 0};
   int count = 0;
   std::size_t pos = 0;
@@ -130,6 +159,11 @@ std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
   if (parts[count - 1] >= 60.0 || (count >= 2 && parts[count - 2] >= 60.0) ||
       (count == 3 && parts[0] >= 24.0))
     return std::nullopt;
+  if (pm) {  // hh:mm[:ss] AM/PM: 12 AM is midnight, 12 PM noon
+    if (parts[0] < 1.0 || parts[0] > 12.0) return std::nullopt;
+    parts[0] = std::fmod(parts[0], 12.0) + (*pm ? 12.0 : 0.0);
+    return std::make_pair(parts[0] * 3600.0 + parts[1] * 60.0 + parts[2], 86400.0);
+  }
   if (count == 2) return std::make_pair(parts[0] * 60.0 + parts[1], 3600.0);
   if (count == 3) return std::make_pair(parts[0] * 3600.0 + parts[1] * 60.0 + parts[2], 86400.0);
   return std::nullopt;

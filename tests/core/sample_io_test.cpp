@@ -518,6 +518,41 @@ TEST_CASE("io: Torque's column names are read whatever their spacing, GPS speed 
   CHECK(kmh.samples[0].speed == Approx(10));
 }
 
+TEST_CASE("io: clock cells with a zone, in ISO 8601 or on a 12-hour clock read as times of day") {
+  SECTION("Torque's GPS Time with a GMT offset word, the only time column") {
+    const SampleLog log = read_text(
+        "GPS Time,Engine RPM(rpm),Speed (OBD)(km/h)\n"
+        "Wed Feb 23 06:42:46 GMT+08:00 2022,1200,36\n"
+        "-,1250,37\n"
+        "Wed Feb 23 06:42:48 GMT+08:00 2022,1300,38\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.skipped_count == 1);  // the row without a GPS fix has no time
+    CHECK(log.samples[1].t == Approx(2));
+  }
+  SECTION("ISO 8601 date-times, with Z or an offset, across midnight") {
+    for (const std::string zone : {"Z", "+08:00", "-05:00", ""}) {
+      std::string text = "timestamp,rpm,speed (km/h)\n2022-02-23T23:59:59.5";
+      text += zone;
+      text += ",1200,36\n2022-02-24T00:00:01.0";
+      text += zone;
+      text += ",1300,36\n";
+      const SampleLog log = read_text(text);
+      REQUIRE(log.samples.size() == 2);
+      CHECK(log.samples[1].t == Approx(1.5));
+    }
+  }
+  SECTION("a 12-hour clock runs on from 12:59 PM to 1:00 PM and from 11:59 PM past midnight") {
+    const SampleLog log = read_text(
+        "Time,Engine RPM,Speed (km/h)\n12:59:59 PM,1200,36\n1:00:01 PM,1300,37\n11:59:59PM,1400,38\n"
+        "12:00:01 am,1500,39\n");
+    REQUIRE(log.samples.size() == 4);
+    CHECK(log.samples[1].t == Approx(2));
+    CHECK(log.samples[2].t == Approx(11 * 3600.0));
+    CHECK(log.samples[3].t == Approx(11 * 3600.0 + 2));
+    CHECK(log.skipped_count == 0);
+  }
+}
+
 TEST_CASE("io: another app's log is read by its column names: rpm, speed with a unit, a time") {
   SECTION("an OBD data set's export: a clock, km/h, held values dropped") {
     const SampleLog log = read_text(
