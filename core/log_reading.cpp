@@ -17,12 +17,34 @@ std::string_view trim(std::string_view s) noexcept {
   return s;
 }
 
+namespace {
+
+// Where the cell starting at `start` ends if it opens with a double quote (after spaces) that closes on the
+// line: just past its closing quote, for a delimiter inside it is text ("Speed, km/h"); else `start`. A quote
+// that never closes clears `quotes` (the rest of the line is split as if unquoted: each cell is then scanned
+// once, and a line of a million quotes costs a million steps, not a million per cell).
+std::size_t quoted_cell_end(std::string_view line, std::size_t start, char delimiter, bool& quotes) noexcept {
+  std::size_t at = start;
+  while (at < line.size() && line[at] != delimiter && std::isspace(static_cast<unsigned char>(line[at])))
+    ++at;
+  if (!quotes || at == line.size() || line[at] != '"') return start;
+  for (std::size_t close = line.find('"', at + 1); close != std::string_view::npos;
+       close = line.find('"', close + 2)) {
+    if (close + 1 == line.size() || line[close + 1] != '"') return close + 1;  // "" is a quote inside
+  }
+  quotes = false;  // a stray quote, not a quoted cell
+  return start;
+}
+
+}  // namespace
+
 bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit,
                  char delimiter) {
   cells.clear();
   std::size_t start = 0;
+  bool quotes = true;
   while (cells.size() < limit) {
-    const std::size_t comma = line.find(delimiter, start);
+    const std::size_t comma = line.find(delimiter, quoted_cell_end(line, start, delimiter, quotes));
     if (comma == std::string_view::npos) {
       cells.push_back(trim(line.substr(start)));
       return true;

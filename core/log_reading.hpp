@@ -28,9 +28,9 @@ inline constexpr double kSecondsPerMinute = 60.0;  // freq = rpm / 60
 std::string_view trim(std::string_view s) noexcept;
 
 // Splits on the file's delimiter (Carloop uses ", " and a trailing comma: trimming handles the first, the
-// second only adds an empty cell past the last column). At most `limit` cells are kept, so that a row of
-// millions of commas costs no more than the columns read from it; returns false when cells were left
-// unsplit.
+// second only adds an empty cell past the last column); a quoted cell keeps the delimiters inside it. At most
+// `limit` cells are kept, so that a row of millions of commas costs no more than the columns read from it;
+// returns false when cells were left unsplit.
 bool split_cells(std::string_view line, std::vector<std::string_view>& cells, std::size_t limit,
                  char delimiter);
 
@@ -206,11 +206,19 @@ struct LineReader {
     if (delimiter != ',') std::replace(line.begin(), line.end(), ',', '.');
     return true;
   }
+  // From the header line: what lies inside double quotes is a name, not a delimiter.
   void detect_delimiter() noexcept {
-    if (line.find(',') != std::string::npos) return;
-    if (line.find(';') != std::string::npos)
+    bool quoted = false, semicolon = false, tab = false;
+    for (char c : line) {
+      if (c == '"') quoted = !quoted;
+      if (quoted) continue;
+      if (c == ',') return;
+      semicolon = semicolon || c == ';';
+      tab = tab || c == '\t';
+    }
+    if (semicolon)
       delimiter = ';';
-    else if (line.find('\t') != std::string::npos)
+    else if (tab)
       delimiter = '\t';
   }
   bool cells(std::vector<std::string_view>& out, std::size_t limit) const {

@@ -702,6 +702,29 @@ TEST_CASE("io: a log saved with semicolons reads its decimal commas") {
   CHECK(tabs.samples[1].speed == Approx(5));
 }
 
+TEST_CASE("io: a quoted cell keeps the delimiter inside it, in the header and in the data") {
+  const SampleLog commas = read_text(
+      "\"Time (s)\",\"Engine speed, rpm\",\"Vehicle speed, km/h\",\"Note\"\n"
+      "0,600,0,\"idle, \"\"warm\"\"\"\n1,1200,18,\"a, b\"\n");
+  CHECK(commas.format == SampleFileFormat::kColumns);
+  CHECK(commas.speed_column == "Vehicle speed, km/h");
+  CHECK(commas.skipped_count == 0);
+  REQUIRE(commas.samples.size() == 2);
+  CHECK(commas.samples[1].speed == Approx(5));
+  CHECK(commas.samples[1].freq == Approx(20));
+  // Commas inside a quoted name do not make the header comma-separated.
+  const SampleLog semicolons =
+      read_text("\"Time\";\"Engine RPM, rpm\";\"Speed, km/h\"\n0;600;0\n\"1,5\";1200;\"18,0\"\n");
+  CHECK(semicolons.format == SampleFileFormat::kColumns);
+  REQUIRE(semicolons.samples.size() == 2);
+  CHECK(semicolons.samples[1].t == Approx(1.5));
+  CHECK(semicolons.samples[1].speed == Approx(5));
+  // A quote that never closes is a character like any other: the cells split as before.
+  const SampleLog stray = read_text("t,speed,freq,note\n0,1,20,5\" screen\n1,2,21,x\n");
+  REQUIRE(stray.samples.size() == 2);
+  CHECK(stray.samples[0].freq == Approx(20));
+}
+
 TEST_CASE("io: the wheel speed of a Torque export read from GPS, row for row, and of nothing else") {
   const std::string both =
       "GPS Time, Device Time,GPS Speed (Meters/second),Engine RPM(rpm),Speed (OBD)(mph)\n"
