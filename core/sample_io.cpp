@@ -111,9 +111,19 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     throw std::invalid_argument("ReadOptions::row_seconds must be finite and above 0");
   LineReader reader{in, {}, 0};
   LogBuilder out(name, options);
+  // Before the header: blank lines, comment lines ('#') and a spreadsheet's "sep=;" line, which sets the
+  // delimiter.
   bool got_header = false;
+  std::optional<char> stated_delimiter;
   while (reader.next()) {
-    if (!blank(reader.line)) {
+    const std::string_view line = trim(reader.line);
+    if (reader.number == 1 && (line.starts_with("\xFF\xFE") || line.starts_with("\xFE\xFF")))
+      throw SampleFileError(std::string(name) + ":1: UTF-16 text: save the log as UTF-8 or ASCII text");
+    if (reader.line.size() == 5 && reader.line.starts_with("sep=") && !stated_delimiter) {
+      stated_delimiter = reader.line.back();
+      continue;
+    }
+    if (!line.empty() && line.front() != '#') {
       got_header = true;
       break;
     }
@@ -123,7 +133,10 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     throw SampleFileError(std::string(name) + ": empty file");
   }
   std::vector<std::string_view> views;
-  reader.detect_delimiter();
+  if (stated_delimiter)
+    reader.delimiter = *stated_delimiter;
+  else
+    reader.detect_delimiter();
   if (!reader.cells(views, kMaxColumns))
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
                           ": header has more than " + std::to_string(kMaxColumns) + " columns");

@@ -177,8 +177,25 @@ TEST_CASE("io: empty, headerless and useless files are one-line errors") {
   CHECK(error_of("t,speed,freq\n").find("no data rows") != std::string::npos);
   CHECK(error_of("t,speed,freq\n0,x,1\n").find("log.csv:2: not a number") != std::string::npos);
   CHECK(error_of("t,speed,freq\n0,,\n1,,\n").find("no usable samples") != std::string::npos);
+  CHECK(error_of("# only a comment\n") == "log.csv: empty file");
+  CHECK(error_of(std::string("\xFF\xFEt\0,\0", 6)) ==
+        "log.csv:1: UTF-16 text: save the log as UTF-8 or ASCII text");
   for (const std::string& e : {error_of(""), error_of("t,speed,freq\n0,x,1\n")})
     CHECK(e.find('\n') == std::string::npos);
+}
+
+TEST_CASE("io: comment lines and a spreadsheet's sep= line before the header are passed over") {
+  const SampleLog log = read_text("# logger 1.2\n\n# car: test\nt,speed,freq\n0,1,20\n1,2,21\n");
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.skipped_count == 0);
+  const SampleLog sep = read_text("sep=;\r\nTime;Engine RPM;Speed (km/h)\r\n0;600;0\r\n0,5;1200;18\r\n");
+  CHECK(sep.format == SampleFileFormat::kColumns);
+  REQUIRE(sep.samples.size() == 2);
+  CHECK(sep.samples[1].t == Approx(0.5));
+  CHECK(sep.samples[1].speed == Approx(5));
+  const SampleLog tab = read_text("sep=\t\nt\tspeed\tfreq\n0\t1,5\t20\n");
+  REQUIRE(tab.samples.size() == 1);
+  CHECK(tab.samples[0].speed == Approx(1.5));
 }
 
 TEST_CASE("io: a header of thousands of columns is an error, a row of millions of commas only its columns") {
