@@ -199,9 +199,21 @@ struct LineReader {
   std::size_t number = 0;
   char delimiter = ',';
   bool next() {
-    if (!std::getline(in, line)) return false;
+    if (cr_at < cr_lines.size()) {
+      const std::size_t end = std::min(cr_lines.find('\r', cr_at), cr_lines.size());
+      line.assign(cr_lines, cr_at, end - cr_at);
+      cr_at = end + 1;
+    } else {
+      if (!std::getline(in, line)) return false;
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      // Lines ended by a CR alone (a spreadsheet's "CSV (Macintosh)") arrive as one: handed out one by one.
+      if (const std::size_t cr = line.find('\r'); cr != std::string::npos) {
+        cr_lines.swap(line);
+        line.assign(cr_lines, 0, cr);
+        cr_at = cr + 1;
+      }
+    }
     ++number;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
     if (number == 1 && line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
     if (delimiter != ',') std::replace(line.begin(), line.end(), ',', '.');
     return true;
@@ -237,6 +249,8 @@ struct LineReader {
     return false;
   }
   std::size_t rows = 0;
+  std::string cr_lines{};  // a run of CR-ended lines read as one, and where its next line starts
+  std::size_t cr_at = 0;
 };
 
 // A column name folded for matching: lower case, no spaces or underscores.

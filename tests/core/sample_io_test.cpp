@@ -198,6 +198,17 @@ TEST_CASE("io: comment lines and a spreadsheet's sep= line before the header are
   CHECK(tab.samples[0].speed == Approx(1.5));
 }
 
+TEST_CASE("io: lines ended by a CR alone read as lines, numbered as such") {
+  const SampleLog log = read_text("Time (s),Engine RPM,Speed (mph)\r0,600,0\r1,1200,10\rx,1,1\r2,1300,11\r");
+  CHECK(log.format == SampleFileFormat::kColumns);
+  REQUIRE(log.samples.size() == 3);
+  CHECK(log.samples[2].t == Approx(2));
+  CHECK(log.samples[2].speed == Approx(11 * 0.44704));
+  REQUIRE(log.skipped.size() == 1);
+  CHECK(log.skipped[0].rfind("log.csv:4: not a number", 0) == 0);
+  CHECK(read_text("t,speed,freq\r\n0,1,20\r\r\n1,2,21\n").samples.size() == 2);
+}
+
 TEST_CASE("io: a header of thousands of columns is an error, a row of millions of commas only its columns") {
   CHECK(error_of("t,speed,freq" + std::string(5000, ',') + "\n0,1,2\n") ==
         "log.csv:1: header has more than 4096 columns");
