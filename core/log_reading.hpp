@@ -316,6 +316,10 @@ struct ObdLayout {
   std::string speed_column;
 };
 
+// The seconds per unit of a time column, from its folded name (time, timestamp, seconds or t; in
+// milliseconds when it ends in ms, (ms) or [ms]), or 0 when the name is not a time's.
+double time_unit(std::string_view folded_name);
+
 // A named-column log's layout (core/obd_logs.cpp says how columns are found): none when the header has no
 // rpm or no speed column. Throws SampleFileError when the only speed column states no unit.
 std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,

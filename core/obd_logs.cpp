@@ -132,6 +132,17 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
 
 }  // namespace
 
+double time_unit(std::string_view folded_name) {
+  std::string base(folded_name.substr(0, folded_name.find_first_of("([")));
+  bool ms = folded_name.substr(base.size()) == "(ms)" || folded_name.substr(base.size()) == "[ms]";
+  if (!ms && base.size() > 2 && base.ends_with("ms")) {
+    base.resize(base.size() - 2);
+    ms = true;
+  }
+  if (base == "time" || base == "timestamp" || base == "seconds" || base == "t") return ms ? 1e-3 : 1.0;
+  return 0.0;
+}
+
 // Logs of other OBD apps and data sets, found by their column names (see folded()): the first column
 // whose name holds "rpm"; a speed column, whose name holds "speed" and states its unit, a GPS one (its name
 // holds "gps") or another as `--speed` asks (auto: GPS when there is one); a time column named time,
@@ -148,15 +159,9 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
       if (!rpm && !summary_column(f)) rpm = i;
       continue;
     }
-    std::string base = f.substr(0, f.find_first_of("(["));
-    bool ms = f.substr(base.size()) == "(ms)" || f.substr(base.size()) == "[ms]";
-    if (!ms && base.size() > 2 && base.ends_with("ms")) {
-      base.resize(base.size() - 2);
-      ms = true;
-    }
-    if (!layout.time && (base == "time" || base == "timestamp" || base == "seconds" || base == "t")) {
+    if (const double to_s = time_unit(f); to_s > 0.0 && !layout.time) {
       layout.time = i;
-      layout.time_to_s = ms ? 1e-3 : 1.0;
+      layout.time_to_s = to_s;
       continue;
     }
     if (f.find("speed") == std::string::npos || summary_column(f)) continue;
@@ -198,6 +203,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   out.log().format = format;
   out.log().time_from_rows = !it.has_value();
   const std::size_t need = std::max({it.value_or(0), irpm, ispeed}) + 1;
+  // A time column found by its name (time_unit()): seconds, milliseconds or clock cells.
+  const bool named = format == SampleFileFormat::kColumns || format == SampleFileFormat::kSpeedRpm;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
   while (reader.next_row(cells, need, out)) {
@@ -213,11 +220,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
       // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber)
-        t.value *=
-            format == SampleFileFormat::kColumns && t.value >= kMillisecondsAtLeast ? 1e-3 : layout.time_to_s;
-      const auto clock = format == SampleFileFormat::kColumns && t.kind == CellKind::kBad
-                             ? parse_clock(cells[*it])
-                             : std::nullopt;
+        t.value *= named && t.value >= kMillisecondsAtLeast ? 1e-3 : layout.time_to_s;
+      const auto clock = named && t.kind == CellKind::kBad ? parse_clock(cells[*it]) : std::nullopt;
       if (clock) {
         t = Cell{CellKind::kNumber, clock->first, {}};
         period = clock->second;

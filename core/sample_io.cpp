@@ -159,9 +159,19 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     if (!carloop.time) carloop.time = find_column(header, "ENGINE_RUN_TIME ()");
     read_obd(reader, out, carloop);
   } else if (header.size() >= 2 && has("speed") && has("rpm")) {
-    read_obd(reader, out,
-             ObdLayout{SampleFileFormat::kSpeedRpm, *find_column(header, "rpm"),
-                       *find_column(header, "speed"), std::nullopt, kKmhToMs, 1.0, "speed"});
+    ObdLayout layout{SampleFileFormat::kSpeedRpm,
+                     *find_column(header, "rpm"),
+                     *find_column(header, "speed"),
+                     std::nullopt,
+                     kKmhToMs,
+                     1.0,
+                     "speed"};
+    for (std::size_t i = 0; i < header.size() && !layout.time; ++i)  // a time column, as named columns'
+      if (const double to_s = time_unit(folded(header[i])); to_s > 0.0) {
+        layout.time = i;
+        layout.time_to_s = to_s;
+      }
+    read_obd(reader, out, layout);
   } else if (has("SECONDS") && has("PID") && has("VALUE")) {
     read_pid_rows(reader, header, out, options.torque_speed);
   } else if (auto layout = named_layout(header, options.torque_speed, std::string(name))) {

@@ -347,6 +347,22 @@ TEST_CASE("io: speed and rpm logs use the row counter as time") {
   CHECK(log.samples[1].t == Approx(2));
   CHECK(log.samples[1].speed == Approx(1 / 3.6));
   CHECK(log.samples[1].freq == Approx(917.0 / 60));
+  CHECK(log.time_from_rows);
+}
+
+TEST_CASE("io: a speed and rpm log with a time column takes its times from it") {
+  const SampleLog log = read_text("time,speed,rpm\n10.0,7,898\n10.5,7,898\n11.0,1,917\n");
+  CHECK(log.format == SampleFileFormat::kSpeedRpm);
+  CHECK_FALSE(log.time_from_rows);
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.samples[1].t == Approx(1.0));
+  CHECK(log.samples[1].speed == Approx(1 / 3.6));
+  const SampleLog ms = read_text("rpm,speed,Time (ms)\n898,7,5000\n917,1,5250\n");
+  REQUIRE(ms.samples.size() == 2);
+  CHECK(ms.samples[1].t == Approx(0.25));
+  const SampleLog clock = read_text("Time,speed,rpm\n10:59:59.5,7,898\n11:00:00.0,1,917\n");
+  REQUIRE(clock.samples.size() == 2);
+  CHECK(clock.samples[1].t == Approx(0.5));
 }
 
 TEST_CASE("io: row_seconds is the row counter's unit in logs without a time column, and only there") {
