@@ -314,4 +314,21 @@ TEST_CASE("track: a WAV whose header gives no length is read with a warning") {
   CHECK(r.out == reference.out);
   CHECK(r.err.find("streamed.wav") != std::string::npos);
   CHECK(r.err.find("no length") != std::string::npos);
+
+  // A recorder stopped before it went back to write the length: the sizes still 0, the audio after them.
+  for (std::size_t i = 0; i < 4; ++i) {
+    bytes[4 + i] = '\0';
+    bytes[data + 4 + i] = '\0';
+  }
+  std::ofstream((dir / "unfinished.wav").string(), std::ios::binary) << bytes;
+  const Result unfinished = run(dir, std::string("'") + (dir / "unfinished.wav").string() + "'");
+  CHECK(unfinished.status == 0);
+  CHECK(unfinished.out == reference.out);
+  CHECK(unfinished.err.find("unfinished.wav") != std::string::npos);
+  CHECK(unfinished.err.find("no length") != std::string::npos);
+  // The header alone, sizes 0: no audio, as before.
+  std::ofstream((dir / "empty.wav").string(), std::ios::binary) << bytes.substr(0, data + 8);
+  const Result empty = run(dir, std::string("'") + (dir / "empty.wav").string() + "'");
+  CHECK(empty.status == 2);
+  CHECK(empty.err.find("no audio frames") != std::string::npos);
 }

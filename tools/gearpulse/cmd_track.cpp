@@ -2,8 +2,11 @@
 // --confidence, a fourth column and the estimate of every hop, trusted or not).
 #include <sndfile.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 #include <string>
 #include <vector>
@@ -98,6 +101,76 @@ bool truncated(SNDFILE* file, long long& declared, long long& actual, bool& stre
   return false;
 }
 
+// A WAV whose data chunk still declares 0 bytes while audio follows it: a recorder stopped before it went
+// back to write the length (libsndfile itself writes 0 until it closes a file). libsndfile reads no frames
+// from it; it is read through a view of the file in which the chunk declares what the file holds, as a
+// header that gives no length is.
+class UnfinishedWav {
+ public:
+  // The view of `path` when it is such a WAV, else none.
+  static std::unique_ptr<UnfinishedWav> open(const std::string& path) {
+    std::unique_ptr<UnfinishedWav> wav(new UnfinishedWav);
+    wav->file_ = std::fopen(path.c_str(), "rb");
+    if (!wav->file_ || std::fseek(wav->file_, 0, SEEK_END) != 0) return nullptr;
+    wav->length_ = ftello(wav->file_);
+    unsigned char head[12];
+    if (!wav->read_at(0, head, 12) || std::memcmp(head, "RIFF", 4) != 0 ||
+        std::memcmp(head + 8, "WAVE", 4) != 0)
+      return nullptr;
+    for (sf_count_t at = 12; at + 8 <= wav->length_;) {  // the chunks, to the data chunk
+      unsigned char chunk[8];
+      if (!wav->read_at(at, chunk, 8)) return nullptr;
+      const std::uint32_t size =
+          chunk[4] | chunk[5] << 8 | chunk[6] << 16 | static_cast<std::uint32_t>(chunk[7]) << 24;
+      if (std::memcmp(chunk, "data", 4) == 0) {
+        const sf_count_t held = std::min<sf_count_t>(wav->length_ - at - 8, 0xFFFFFFF0);
+        if (size != 0 || held <= 0) return nullptr;
+        wav->size_at_ = at + 4;
+        for (int i = 0; i < 4; ++i)
+          wav->size_[i] = static_cast<unsigned char>(held >> (8 * i));
+        return std::fseek(wav->file_, 0, SEEK_SET) == 0 ? std::move(wav) : nullptr;
+      }
+      at += 8 + static_cast<sf_count_t>(size) + (size & 1);
+    }
+    return nullptr;
+  }
+  ~UnfinishedWav() {
+    if (file_) std::fclose(file_);
+  }
+  UnfinishedWav(const UnfinishedWav&) = delete;
+  UnfinishedWav& operator=(const UnfinishedWav&) = delete;
+
+  SNDFILE* open_sndfile(SF_INFO& info) { return sf_open_virtual(&io_, SFM_READ, &info, this); }
+
+ private:
+  UnfinishedWav() = default;
+  bool read_at(sf_count_t at, unsigned char* out, std::size_t n) {
+    return fseeko(file_, at, SEEK_SET) == 0 && std::fread(out, 1, n, file_) == n;
+  }
+  static UnfinishedWav& self(void* user) { return *static_cast<UnfinishedWav*>(user); }
+  static sf_count_t length(void* user) { return self(user).length_; }
+  static sf_count_t seek(sf_count_t offset, int whence, void* user) {
+    std::FILE* f = self(user).file_;
+    return fseeko(f, offset, whence) == 0 ? ftello(f) : -1;
+  }
+  static sf_count_t tell(void* user) { return ftello(self(user).file_); }
+  static sf_count_t write(const void*, sf_count_t, void*) { return 0; }
+  // The file's bytes, with the data chunk's size as the file holds it.
+  static sf_count_t read(void* out, sf_count_t count, void* user) {
+    UnfinishedWav& wav = self(user);
+    const sf_count_t at = ftello(wav.file_);
+    const auto got = static_cast<sf_count_t>(std::fread(out, 1, static_cast<std::size_t>(count), wav.file_));
+    auto* bytes = static_cast<unsigned char*>(out);
+    for (sf_count_t i = std::max(at, wav.size_at_); i < std::min(at + got, wav.size_at_ + 4); ++i)
+      bytes[i - at] = wav.size_[i - wav.size_at_];
+    return got;
+  }
+  std::FILE* file_ = nullptr;
+  sf_count_t length_ = 0, size_at_ = 0;
+  unsigned char size_[4] = {};
+  SF_VIRTUAL_IO io_{length, seek, read, write, tell};
+};
+
 // Without `with_confidence`, freq is empty unless the hop is tracked (the contract of `track`); with it,
 // every estimate is printed and the confidence column says how far to trust it.
 void print_point(const TrackPoint& p, bool with_confidence) {
@@ -132,15 +205,22 @@ int run_track(const TrackOptions& o) {
   config.history_s = 0.0;  // offline: no queries into the past
 
   SF_INFO info{};
+  std::unique_ptr<UnfinishedWav> unfinished;  // outlives `file`, which reads through it
   std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.file.c_str(), SFM_READ, &info));
   if (!file) throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr));
+  if (info.frames == 0 && (info.format & SF_FORMAT_TYPEMASK) == SF_FORMAT_WAV &&
+      (unfinished = UnfinishedWav::open(o.file))) {
+    info = SF_INFO{};
+    file.reset(unfinished->open_sndfile(info));
+    if (!file) throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr));
+  }
   if (!readable_encoding(info.format))
     throw UsageError(o.file + ": unsupported sample encoding (PCM, float or G.711 expected)");
   bool streamed = false;
   if (long long declared = 0, actual = 0; truncated(file.get(), declared, actual, streamed))
     throw UsageError(o.file + ": truncated: the data chunk declares " + std::to_string(declared) +
                      " bytes, the file holds " + std::to_string(actual));
-  if (streamed)
+  if (streamed || unfinished)
     std::fprintf(stderr,
                  "gearpulse: warning: %s: the header gives no length (a streamed or interrupted recording): "
                  "reading the %lld frames the file holds\n",
