@@ -123,7 +123,11 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
       stated_delimiter = reader.line.back();
       continue;
     }
-    if (!line.empty() && line.front() != '#') {
+    // "#,Time,..." is a header naming its row-number column "#", not a comment.
+    const bool comment =
+        line.starts_with('#') &&
+        (line.size() == 1 || std::string_view(",;\t").find(line[1]) == std::string_view::npos);
+    if (!line.empty() && !comment) {
       got_header = true;
       break;
     }

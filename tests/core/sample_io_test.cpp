@@ -193,6 +193,10 @@ TEST_CASE("io: comment lines and a spreadsheet's sep= line before the header are
   REQUIRE(sep.samples.size() == 2);
   CHECK(sep.samples[1].t == Approx(0.5));
   CHECK(sep.samples[1].speed == Approx(5));
+  const SampleLog numbered = read_text("#,Time,Engine RPM,Speed (km/h)\n1,0,600,0\n2,1,1200,18\n");
+  CHECK(numbered.format == SampleFileFormat::kColumns);
+  REQUIRE(numbered.samples.size() == 2);
+  CHECK(numbered.samples[1].speed == Approx(5));
   const SampleLog tab = read_text("sep=\t\nt\tspeed\tfreq\n0\t1,5\t20\n");
   REQUIRE(tab.samples.size() == 1);
   CHECK(tab.samples[0].speed == Approx(1.5));
