@@ -218,20 +218,21 @@ struct LineReader {
     if (delimiter != ',') std::replace(line.begin(), line.end(), ',', '.');
     return true;
   }
-  // From the header line: what lies inside double quotes is a name, not a delimiter.
+  // From the header line: what lies inside double quotes is a name, not a delimiter (unless a quote is
+  // left open: then a stray one, `Wheel (17")`, and every character counts).
   void detect_delimiter() noexcept {
-    bool quoted = false, semicolon = false, tab = false;
-    for (char c : line) {
-      if (c == '"') quoted = !quoted;
-      if (quoted) continue;
-      if (c == ',') return;
-      semicolon = semicolon || c == ';';
-      tab = tab || c == '\t';
-    }
-    if (semicolon)
-      delimiter = ';';
-    else if (tab)
-      delimiter = '\t';
+    const auto count = [&](bool skip_quoted) {
+      bool quoted = false, comma = false, semicolon = false, tab = false;
+      for (char c : line) {
+        if (c == '"' && skip_quoted) quoted = !quoted;
+        if (quoted) continue;
+        comma = comma || c == ',';
+        semicolon = semicolon || c == ';';
+        tab = tab || c == '\t';
+      }
+      return quoted ? std::optional<char>() : comma ? ',' : semicolon ? ';' : tab ? '\t' : ',';
+    };
+    delimiter = count(true).value_or(*count(false));
   }
   bool cells(std::vector<std::string_view>& out, std::size_t limit) const {
     return split_cells(line, out, limit, delimiter);

@@ -767,6 +767,10 @@ TEST_CASE("io: a quoted cell keeps the delimiter inside it, in the header and in
   REQUIRE(semicolons.samples.size() == 2);
   CHECK(semicolons.samples[1].t == Approx(1.5));
   CHECK(semicolons.samples[1].speed == Approx(5));
+  const SampleLog stray_name =
+      read_text("Wheel (17\");Time;Engine RPM;Speed (km/h)\n1;0;600;0\n1;1;1200;18\n");
+  REQUIRE(stray_name.samples.size() == 2);
+  CHECK(stray_name.samples[1].speed == Approx(5));
   // A quote that never closes is a character like any other: the cells split as before.
   const SampleLog stray = read_text("t,speed,freq,note\n0,1,20,5\" screen\n1,2,21,x\n");
   REQUIRE(stray.samples.size() == 2);
