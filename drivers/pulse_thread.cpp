@@ -96,8 +96,8 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
   thread_.set_running(true);
 
   PulseScheduler sched(config_.pulse, t0_ns);  // validated in start(): cannot throw here
-  const std::int64_t heartbeat_ns = std::max<std::int64_t>(
-      1'000'000, std::chrono::duration_cast<std::chrono::nanoseconds>(config_.heartbeat).count());
+  const std::int64_t heartbeat_period_ns = std::max<std::int64_t>(
+      1'000'000, std::chrono::duration_cast<std::chrono::nanoseconds>(config_.heartbeat_period).count());
   double applied = 0.0;
   bool high = false;
   std::int64_t max_late = 0;
@@ -140,7 +140,7 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
       applied = target;
       emit_due(now);
     }
-    wait_until(wake_fd_.get(), std::min(sched.next_edge().t_ns, now + heartbeat_ns));
+    wait_until(wake_fd_.get(), std::min(sched.next_edge().t_ns, now + heartbeat_period_ns));
   }
   if (high) output_.fall();  // leave the line low
   thread_.set_running(false);

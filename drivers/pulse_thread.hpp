@@ -21,7 +21,7 @@ struct PulseThreadConfig {
   // Longest sleep without an edge or a new speed: the period of the heartbeat the daemon's watchdog judges
   // (daemon/watchdog.hpp, kStallNs = 5 s). A twentieth of that limit: a thread at standstill wakes four
   // times a second, and only a wait stretched twenty-fold past its time reads as hung.
-  std::chrono::milliseconds heartbeat{250};
+  std::chrono::milliseconds heartbeat_period{250};
   bool realtime = false;  // request SCHED_FIFO (failure is reported, not fatal)
   int rt_priority = 80;
   bool lock_memory = false;  // mlockall, as make_realtime does (failure reported)
