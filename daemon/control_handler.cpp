@@ -89,7 +89,7 @@ control::StatusReply status_reply(const StatusInputs& in) {
                  .ring_drops = p.ring_drops,
                  .error = p.audio_error,
                  .failed_step = p.audio_failed_step,
-                 .open_attempts = p.audio_attempts,
+                 .open_attempts = p.audio_open_attempts,
                  .last_attempt = number_if(p.audio_last_attempt, p.audio_last_attempt >= 0),
                  .reopens = p.audio_reopens};
   reply.tracker = {.freq = number_if(p.tracker_freq, p.tracker_freq >= 0),

@@ -525,7 +525,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     s.audio_error = a.error;
   }
   s.audio_failed_step = to_string(a.failed_step);
-  s.audio_attempts = a.attempts;
+  s.audio_open_attempts = a.open_attempts;
   s.audio_last_attempt = a.last_attempt > 0.0 ? a.last_attempt : -1.0;
   s.ring_drops = d.ring_drops.load(std::memory_order_relaxed);
   const double f = d.track_freq.load(std::memory_order_relaxed);

@@ -45,7 +45,7 @@ struct PipelineSnapshot {
   // the attempts to open the device since the audio went, and the wall-clock time of the last (s, < 0
   // none). "", 0 and -1 while a device streams.
   std::string audio_failed_step;
-  std::uint64_t audio_attempts = 0;
+  std::uint64_t audio_open_attempts = 0;
   double audio_last_attempt = -1.0;
   std::uint64_t audio_reopens = 0;  // lost devices the open capture has reopened
   std::uint64_t xruns = 0;

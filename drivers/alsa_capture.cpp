@@ -241,7 +241,7 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.frozen = frozen_.load(std::memory_order_relaxed);
   s.last_error = last_error_.load(std::memory_order_relaxed);
   s.failed_step = failed_step_.load(std::memory_order_relaxed);
-  s.reopen_attempts = reopen_attempts_.load(std::memory_order_relaxed);
+  s.open_attempts = open_attempts_.load(std::memory_order_relaxed);
   s.last_attempt = last_attempt_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
   s.fifo = fifo_.load(std::memory_order_relaxed);
@@ -380,7 +380,7 @@ void AlsaCapture::run() noexcept {
       if (e == 0 || restart() == 0) return;
     }
     pcm.reset();
-    reopen_attempts_.store(0, std::memory_order_relaxed);
+    open_attempts_.store(0, std::memory_order_relaxed);
     last_attempt_.store(0.0, std::memory_order_relaxed);
     streaming_.store(false, std::memory_order_relaxed);
   };
@@ -415,7 +415,7 @@ void AlsaCapture::run() noexcept {
       Negotiated got;
       OpenFailure failed;
       PcmHandle fresh;
-      reopen_attempts_.fetch_add(1, std::memory_order_relaxed);
+      open_attempts_.fetch_add(1, std::memory_order_relaxed);
       last_attempt_.store(wall_now(), std::memory_order_relaxed);
       const int err = open_pcm(config_, fresh, got, failed);
       const bool changed = err == 0 && (got.rate != rate_ || got.channels != channels_ ||

@@ -114,7 +114,7 @@ struct AlsaCaptureStats {
   AlsaStep failed_step = AlsaStep::kNone;  // the step that returned last_error
   // Attempts to reopen the device since it was last lost, and the wall-clock time (wall_now(), s) of the
   // last of them (0 if none yet).
-  std::uint64_t reopen_attempts = 0;
+  std::uint64_t open_attempts = 0;
   double last_attempt = 0.0;
   bool realtime_ok = false;  // SCHED_FIFO granted at start
   // The capture thread runs under SCHED_FIFO now: not while it reopens a lost device, since opening one
@@ -196,7 +196,7 @@ class AlsaCapture final {
       clock_resets_{0}, repeated_{0};
   std::atomic<int> last_error_{0};
   std::atomic<AlsaStep> failed_step_{AlsaStep::kNone};
-  std::atomic<std::uint64_t> reopen_attempts_{0};
+  std::atomic<std::uint64_t> open_attempts_{0};
   std::atomic<double> last_attempt_{0.0};
   std::atomic<bool> fifo_{false}, frozen_{false};
   std::atomic<std::int64_t> last_frames_ns_{0};  // monotonic time of the last frames read (or of the start)

@@ -41,7 +41,7 @@ bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepar
       std::lock_guard lock(mutex_);
       error_ = std::move(why);
       failed_step_ = step;
-      ++failed_opens_;
+      ++open_attempts_;
       last_attempt_ = attempt;
     }
     last_delay_ = backoff_;
@@ -74,7 +74,7 @@ bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepar
   capture_ = std::move(capture);
   error_.clear();
   failed_step_ = AlsaStep::kNone;
-  failed_opens_ = 0;
+  open_attempts_ = 0;
   last_attempt_ = 0.0;
   backoff_ = kFirstRetry;
   read_frames_ = 0;
@@ -162,13 +162,13 @@ AudioFrontEndStatus AudioFrontEnd::status() const {
           "ALSA error " + std::to_string(s.stats.last_error) + ": " + alsa_error_text(s.stats.last_error);
     if (!s.stats.streaming) {
       s.failed_step = s.stats.failed_step;
-      s.attempts = s.stats.reopen_attempts;
+      s.open_attempts = s.stats.open_attempts;
       s.last_attempt = s.stats.last_attempt;
     }
   } else {
     s.error = error_;
     s.failed_step = failed_step_;
-    s.attempts = failed_opens_;
+    s.open_attempts = open_attempts_;
     s.last_attempt = last_attempt_;
   }
   return s;

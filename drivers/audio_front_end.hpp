@@ -38,7 +38,7 @@ struct AudioFrontEndStatus {
   // device since the audio went, and the wall-clock time (wall_now(), s) of the last one (0 none yet).
   // None, 0 and 0 while a device streams.
   AlsaStep failed_step = AlsaStep::kNone;
-  std::uint64_t attempts = 0;
+  std::uint64_t open_attempts = 0;
   double last_attempt = 0.0;
 };
 
@@ -88,7 +88,7 @@ class AudioFrontEnd {
   std::unique_ptr<AlsaCapture> capture_;
   std::string error_;
   AlsaStep failed_step_ = AlsaStep::kNone;  // of the last failed open
-  std::uint64_t failed_opens_ = 0;          // since the last open that succeeded
+  std::uint64_t open_attempts_ = 0;         // since the last open that succeeded
   double last_attempt_ = 0.0;               // wall_now() of the last failed open
 
   // The ring's read side.

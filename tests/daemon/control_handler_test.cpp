@@ -79,7 +79,7 @@ TEST_CASE("control: status says what is not available as null and where the outp
   p.audio_state = gearpulse::daemon::AudioState::kRecovering;
   p.audio_error = "ALSA error -5: Input/output error";
   p.audio_failed_step = "read";
-  p.audio_attempts = 4;
+  p.audio_open_attempts = 4;
   p.audio_last_attempt = 1.7e9;
   p.audio_reopens = 2;
   s = status_reply(inputs(config, path, p));

@@ -365,14 +365,15 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
   // attempt, the last one just now.
   const auto gone = pipeline.snapshot();
   CHECK(gone.audio_failed_step == "open");
-  CHECK(gone.audio_attempts >= 1);
+  CHECK(gone.audio_open_attempts >= 1);
   CHECK(gone.audio_last_attempt > 0.0);
   CHECK(gone.audio_last_attempt <= gearpulse::wall_now());
   CHECK(gone.audio_reopens >= 1);  // the flaps before it was gone
   REQUIRE(wait_for(
       [&] {
         const auto s = pipeline.snapshot();
-        return s.audio_attempts > gone.audio_attempts && s.audio_last_attempt > gone.audio_last_attempt;
+        return s.audio_open_attempts > gone.audio_open_attempts &&
+               s.audio_last_attempt > gone.audio_last_attempt;
       },
       10s));
   std::filesystem::remove(sink);
@@ -387,7 +388,7 @@ TEST_CASE("pipeline: a sound card lost while capturing is recovering with its er
   const auto back = pipeline.snapshot();
   CHECK(back.audio_error.empty());
   CHECK(back.audio_failed_step.empty());
-  CHECK(back.audio_attempts == 0);
+  CHECK(back.audio_open_attempts == 0);
   CHECK(back.audio_last_attempt < 0.0);
   CHECK(back.audio_reopens > gone.audio_reopens);
   pipeline.service();
@@ -411,7 +412,7 @@ TEST_CASE(
   const double started = gearpulse::wall_now();
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   // Retried with a delay that doubles from 0.5 s: a second attempt within a few seconds.
-  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_attempts >= 2; }, 20s));
+  REQUIRE(wait_for([&] { return pipeline.snapshot().audio_open_attempts >= 2; }, 20s));
   const auto absent = pipeline.snapshot();
   CHECK(absent.audio_state == AudioState::kRetrying);
   CHECK(absent.audio_failed_step == "open");
@@ -424,7 +425,7 @@ TEST_CASE(
   const auto there = pipeline.snapshot();
   CHECK(there.audio_error.empty());
   CHECK(there.audio_failed_step.empty());
-  CHECK(there.audio_attempts == 0);
+  CHECK(there.audio_open_attempts == 0);
   CHECK(there.audio_last_attempt < 0.0);
   CHECK(there.audio_reopens == 0);
 }

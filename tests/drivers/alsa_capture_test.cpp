@@ -476,13 +476,13 @@ TEST_CASE("alsa: a device lost while capturing is closed and reopened, and its f
   CHECK(lost.running);
   CHECK(lost.failed_step == gearpulse::AlsaStep::kOpen);
   CHECK(std::string(gearpulse::to_string(lost.failed_step)) == "open");
-  CHECK(lost.reopen_attempts >= 1);
+  CHECK(lost.open_attempts >= 1);
   CHECK(lost.last_attempt <= gearpulse::wall_now());
   REQUIRE(wait_for(
       [&] {
         drain();
         const auto s = cap.stats();
-        return s.reopen_attempts > lost.reopen_attempts && s.last_attempt > lost.last_attempt;
+        return s.open_attempts > lost.open_attempts && s.last_attempt > lost.last_attempt;
       },
       10s));
   // Reopening is no real-time work: the thread leaves SCHED_FIFO for it and takes it back once the device
