@@ -14,6 +14,14 @@
 namespace gearpulse {
 namespace {
 
+// AlsaCapture::failure_ unpacked (note_failure() packs it).
+int failure_error(std::uint64_t failure) noexcept {
+  return static_cast<std::int32_t>(static_cast<std::uint32_t>(failure & 0xffff'ffffU));
+}
+AlsaStep failure_step(std::uint64_t failure) noexcept {
+  return static_cast<AlsaStep>(static_cast<std::uint8_t>(failure >> 32));
+}
+
 // No frame for this long (or 4 periods, if longer) from an open device is a stall (AlsaCaptureStats).
 constexpr double kStallS = 2.0;
 
@@ -239,8 +247,9 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.clock_resets = clock_resets_.load(std::memory_order_relaxed);
   s.repeated = repeated_.load(std::memory_order_relaxed);
   s.frozen = frozen_.load(std::memory_order_relaxed);
-  s.last_error = last_error_.load(std::memory_order_relaxed);
-  s.failed_step = failed_step_.load(std::memory_order_relaxed);
+  const std::uint64_t failure = failure_.load(std::memory_order_relaxed);
+  s.last_error = failure_error(failure);
+  s.failed_step = failure_step(failure);
   s.open_attempts = open_attempts_.load(std::memory_order_relaxed);
   s.last_attempt = last_attempt_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
@@ -257,8 +266,9 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
 }
 
 void AlsaCapture::note_failure(AlsaStep step, int error) noexcept {
-  failed_step_.store(step, std::memory_order_relaxed);
-  last_error_.store(error, std::memory_order_relaxed);
+  const auto code = static_cast<std::uint32_t>(error);  // two's complement: failure_error() undoes it
+  failure_.store(static_cast<std::uint64_t>(code) | static_cast<std::uint64_t>(step) << 32,
+                 std::memory_order_relaxed);
 }
 
 void AlsaCapture::publish_anchor(const Anchor& a) noexcept {
@@ -308,7 +318,7 @@ void AlsaCapture::run() noexcept {
   fifo_.store(rt.fifo);
   snd_pcm_status_t* status_block = nullptr;
   if (::snd_pcm_status_malloc(&status_block) < 0) {
-    last_error_.store(-ENOMEM);
+    note_failure(AlsaStep::kNone, -ENOMEM);
     return;
   }
   const std::unique_ptr<snd_pcm_status_t, decltype(&::snd_pcm_status_free)> status(status_block,
@@ -352,7 +362,7 @@ void AlsaCapture::run() noexcept {
   };
 
   PcmHandle pcm = std::move(pcm_);  // the thread's while it runs
-  // Prepares and starts the stream; a step that fails is noted (last_error_ and failed_step_).
+  // Prepares and starts the stream; a step that fails is noted (failure_).
   auto restart = [&]() noexcept {
     if (const int err = ::snd_pcm_prepare(pcm.get()); err < 0) {
       note_failure(AlsaStep::kPrepare, err);
@@ -388,7 +398,8 @@ void AlsaCapture::run() noexcept {
   last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
   streaming_.store(pcm != nullptr, std::memory_order_relaxed);
   if (pcm) {  // restart() has noted the step that failed
-    if (const int err = restart(); err < 0) recover(failed_step_.load(std::memory_order_relaxed), err);
+    if (const int err = restart(); err < 0)
+      recover(failure_step(failure_.load(std::memory_order_relaxed)), err);
   }
   std::int64_t backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
   const std::int64_t backoff_max =

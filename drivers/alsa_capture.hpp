@@ -169,7 +169,7 @@ class AlsaCapture final {
  private:
   void run() noexcept;
   void publish_anchor(const Anchor& anchor) noexcept;
-  void note_failure(AlsaStep step, int error) noexcept;  // last_error_ and failed_step_
+  void note_failure(AlsaStep step, int error) noexcept;  // failure_
 
   static constexpr std::size_t kAnchors = 64;
   struct alignas(kCacheLine) AnchorSlot {
@@ -194,8 +194,10 @@ class AlsaCapture final {
   std::atomic<std::uint64_t> anchor_count_{0};
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
       clock_resets_{0}, repeated_{0};
-  std::atomic<int> last_error_{0};
-  std::atomic<AlsaStep> failed_step_{AlsaStep::kNone};
+  // The last failure: its error code (low 32 bits) and its step (the 8 above), one word written once per
+  // failure, so stats() never pairs one failure's error with another's step.
+  std::atomic<std::uint64_t> failure_{0};
+  static_assert(std::atomic<std::uint64_t>::is_always_lock_free);
   std::atomic<std::uint64_t> open_attempts_{0};
   std::atomic<double> last_attempt_{0.0};
   std::atomic<bool> fifo_{false}, frozen_{false};
