@@ -335,13 +335,26 @@ TEST_CASE("pty: the pulse thread writes one byte per pulse and stops low") {
     while (std::chrono::steady_clock::now() < end)
       got += reader.read_once(std::chrono::milliseconds(10));
   };
+  // Reads until `done` holds and returns whether it did. The 5 s only bound a failing test: what takes
+  // a hundred milliseconds here may take a sanitized build on a loaded machine far longer.
+  auto read_until = [&](auto done) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    while (!done() && std::chrono::steady_clock::now() < end)
+      got += reader.read_once(std::chrono::milliseconds(10));
+    return done();
+  };
   thread.set_speed(20.0);  // 200 Hz
-  read_for(std::chrono::milliseconds(300));
+  REQUIRE(read_until([&] { return thread.pulses() >= 20; }));
   thread.set_speed(5.0);  // 50 Hz
-  read_for(std::chrono::milliseconds(200));
+  const auto pulses_fast = thread.pulses();
+  REQUIRE(read_until([&] { return thread.pulses() >= pulses_fast + 5; }));
   thread.set_speed(std::nan(""));  // standstill
-  read_for(std::chrono::milliseconds(50));
+  // The turn after the set_speed loads the standstill (edges overdue under the old speed first); once
+  // the turn after that has begun, no rise can come.
+  const auto turns_set = thread.status().turns;
+  REQUIRE(read_until([&] { return thread.status().turns >= turns_set + 2; }));
   const auto pulses_stopped = thread.pulses();
+  // An absence has no condition to wait for: a loaded machine only makes this window see less.
   read_for(std::chrono::milliseconds(100));
   CHECK(thread.pulses() == pulses_stopped);  // no pulse at standstill
   thread.stop();
