@@ -106,13 +106,18 @@ bool truncated(SNDFILE* file, long long& declared, long long& actual, bool& stre
 // from it; it is read through a view of the file in which the chunk declares what the file holds, as a
 // header that gives no length is.
 class UnfinishedWav {
+  struct Key {  // the constructor's passkey: a view is made by open() alone
+    explicit Key() = default;
+  };
+
  public:
-  // The view of `path` when it is such a WAV, else none.
+  // The view of `path` when it is such a WAV, else none. It stays where it was made: libsndfile holds its
+  // address.
   static std::unique_ptr<UnfinishedWav> open(const std::string& path) {
-    std::unique_ptr<UnfinishedWav> wav(new UnfinishedWav);
-    wav->file_ = std::fopen(path.c_str(), "rb");
-    if (!wav->file_ || std::fseek(wav->file_, 0, SEEK_END) != 0) return nullptr;
-    wav->length_ = ftello(wav->file_);
+    auto wav = std::make_unique<UnfinishedWav>(Key{});
+    wav->file_.reset(std::fopen(path.c_str(), "rb"));
+    if (!wav->file_ || std::fseek(wav->file_.get(), 0, SEEK_END) != 0) return nullptr;
+    wav->length_ = ftello(wav->file_.get());
     unsigned char head[12];
     if (!wav->read_at(0, head, 12) || std::memcmp(head, "RIFF", 4) != 0 ||
         std::memcmp(head + 8, "WAVE", 4) != 0)
@@ -128,44 +133,45 @@ class UnfinishedWav {
         wav->size_at_ = at + 4;
         for (int i = 0; i < 4; ++i)
           wav->size_[i] = static_cast<unsigned char>(held >> (8 * i));
-        return std::fseek(wav->file_, 0, SEEK_SET) == 0 ? std::move(wav) : nullptr;
+        return std::fseek(wav->file_.get(), 0, SEEK_SET) == 0 ? std::move(wav) : nullptr;
       }
       at += 8 + static_cast<sf_count_t>(size) + (size & 1);
     }
     return nullptr;
   }
-  ~UnfinishedWav() {
-    if (file_) std::fclose(file_);
-  }
+  explicit UnfinishedWav(Key) {}
   UnfinishedWav(const UnfinishedWav&) = delete;
   UnfinishedWav& operator=(const UnfinishedWav&) = delete;
 
   SNDFILE* open_sndfile(SF_INFO& info) { return sf_open_virtual(&io_, SFM_READ, &info, this); }
 
  private:
-  UnfinishedWav() = default;
+  struct FileCloser {
+    void operator()(std::FILE* f) const noexcept { std::fclose(f); }
+  };
   bool read_at(sf_count_t at, unsigned char* out, std::size_t n) {
-    return fseeko(file_, at, SEEK_SET) == 0 && std::fread(out, 1, n, file_) == n;
+    return fseeko(file_.get(), at, SEEK_SET) == 0 && std::fread(out, 1, n, file_.get()) == n;
   }
   static UnfinishedWav& self(void* user) { return *static_cast<UnfinishedWav*>(user); }
   static sf_count_t length(void* user) { return self(user).length_; }
   static sf_count_t seek(sf_count_t offset, int whence, void* user) {
-    std::FILE* f = self(user).file_;
+    std::FILE* f = self(user).file_.get();
     return fseeko(f, offset, whence) == 0 ? ftello(f) : -1;
   }
-  static sf_count_t tell(void* user) { return ftello(self(user).file_); }
+  static sf_count_t tell(void* user) { return ftello(self(user).file_.get()); }
   static sf_count_t write(const void*, sf_count_t, void*) { return 0; }
   // The file's bytes, with the data chunk's size as the file holds it.
   static sf_count_t read(void* out, sf_count_t count, void* user) {
     UnfinishedWav& wav = self(user);
-    const sf_count_t at = ftello(wav.file_);
-    const auto got = static_cast<sf_count_t>(std::fread(out, 1, static_cast<std::size_t>(count), wav.file_));
+    std::FILE* f = wav.file_.get();
+    const sf_count_t at = ftello(f);
+    const auto got = static_cast<sf_count_t>(std::fread(out, 1, static_cast<std::size_t>(count), f));
     auto* bytes = static_cast<unsigned char*>(out);
     for (sf_count_t i = std::max(at, wav.size_at_); i < std::min(at + got, wav.size_at_ + 4); ++i)
       bytes[i - at] = wav.size_[i - wav.size_at_];
     return got;
   }
-  std::FILE* file_ = nullptr;
+  std::unique_ptr<std::FILE, FileCloser> file_;
   sf_count_t length_ = 0, size_at_ = 0;
   unsigned char size_[4] = {};
   SF_VIRTUAL_IO io_{length, seek, read, write, tell};
