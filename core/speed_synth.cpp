@@ -89,6 +89,7 @@ void SpeedSynthesizer::reset() noexcept {
   launch_revs_ = 0.0;
   launch_speed_ = 0.0;
   launch_revs_t_ = std::numeric_limits<double>::infinity();
+  // Kept: speed_lag_ and revs_interval_, properties of the feed.
   last_ = {};
 }
 
@@ -202,8 +203,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
                       gps_age);
     observe_launch(have_gps ? gps_speed : std::numeric_limits<double>::quiet_NaN(), freq, gps_new);
     if (have_gps && gps_new) {
-      // How late the fix is against the revs, as measured whether or not the steps correct for it.
-      observe_gear(gps_speed, freq, std::max(0.0, speed_lag_.lag() + gps_age));
+      observe_gear(gps_speed, freq, measured_fix_lag(gps_age));
       unlearned_fix_ = {t_ - gps_age, gps_speed};
     }
     // A fix teaches the lag once the revs at its stamp are noted: at once, or at the first step at or after

@@ -93,14 +93,20 @@ class SpeedSynthesizer {
   // after its stamp.
   SynthOutput step(double t, double gps_speed, double freq, bool gps_new = true,
                    double gps_age = 0.0) noexcept;
-  // s: how much older than its step the speed of a fix given with `gps_age` is (the speed lag against the
-  // stamps plus the age, at least 0; 0 with the rule off).
+  // s: how much older than its step the speed of a fix given with `gps_age` is, as the steps correct for
+  // it: measured_fix_lag(), or 0 with the rule off.
   [[nodiscard]] double fix_lag(double gps_age) const noexcept {
-    return tuning_.speed_lag > 0.0 ? std::max(0.0, speed_lag_.lag() + gps_age) : 0.0;
+    return tuning_.speed_lag > 0.0 ? measured_fix_lag(gps_age) : 0.0;
+  }
+  // s: the same lag as measured, whether or not the steps correct for it (the speed lag against the stamps
+  // plus the age, at least 0).
+  [[nodiscard]] double measured_fix_lag(double gps_age) const noexcept {
+    return std::max(0.0, speed_lag_.lag() + gps_age);
   }
 
-  // Forget all state except the model, the gears measured under GPS that it lacks, and the speed lag learned
-  // (the receiver's and the logger's, not the drive's) (e.g. after the engine was off).
+  // Forget all state except the model, the gears measured under GPS that it lacks, and what was learned of
+  // the feed (the receiver's and the logger's, not the drive's): the speed lag and the mean interval between
+  // readings of the revs (e.g. after the engine was off).
   void reset() noexcept;
 
   [[nodiscard]] const SynthOutput& last() const noexcept { return last_; }
