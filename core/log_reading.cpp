@@ -134,25 +134,32 @@ bool meridiem(std::string_view word, bool& pm) noexcept {
 
 std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
   // The time is the last word holding a colon that starts with a digit ("GMT+08:00" in Torque's GPS Time
-  // is a zone, not the time); "AM" or "PM", as a word or the end of that one, makes it a 12-hour clock.
+  // is a zone, not the time); "AM" or "PM" as the word right after it or the end of it makes it a 12-hour
+  // clock (not elsewhere: "am 23.02.2022 14:42:46" is German for "on").
   std::string_view token;
-  std::optional<bool> pm;
+  bool twelve_hour = false, pm = false;
+  bool after_clock = false;  // the word before was the time
   std::size_t start = 0;
   while (start <= text.size()) {
     std::size_t end = text.find(' ', start);
     if (end == std::string_view::npos) end = text.size();
     std::string_view word = text.substr(start, end - start);
     start = end + 1;
+    if (word.empty()) continue;
     if (bool p = false; meridiem(word, p)) {
-      pm = p;
+      if (after_clock) {
+        twelve_hour = true;
+        pm = p;
+      }
+      after_clock = false;
       continue;
     }
+    after_clock = false;
     if (word.find(':') == std::string_view::npos || !std::isdigit(static_cast<unsigned char>(word.front())))
       continue;
-    if (bool p = false; meridiem(word.substr(word.size() - 2), p)) {  // "1:05:00PM"
-      pm = p;
-      word.remove_suffix(2);
-    }
+    after_clock = true;
+    twelve_hour = meridiem(word.substr(word.size() - 2), pm);  // "1:05:00PM"
+    if (twelve_hour) word.remove_suffix(2);
     // ISO 8601 ("2022-02-23T06:34:27.403Z", "...27.403+08:00"): the time after the T, without its zone.
     if (const std::size_t t = word.find_first_of("Tt"); t != std::string_view::npos)
       word.remove_prefix(t + 1);
@@ -181,9 +188,9 @@ std::optional<std::pair<double, double>> parse_clock(std::string_view text) {
   if (parts[count - 1] >= 60.0 || (count >= 2 && parts[count - 2] >= 60.0) ||
       (count == 3 && parts[0] >= 24.0))
     return std::nullopt;
-  if (pm) {  // hh:mm[:ss] AM/PM: 12 AM is midnight, 12 PM noon
+  if (twelve_hour) {  // hh:mm[:ss] AM/PM: 12 AM is midnight, 12 PM noon
     if (parts[0] < 1.0 || parts[0] > 12.0) return std::nullopt;
-    parts[0] = std::fmod(parts[0], 12.0) + (*pm ? 12.0 : 0.0);
+    parts[0] = std::fmod(parts[0], 12.0) + (pm ? 12.0 : 0.0);
     return std::make_pair(parts[0] * 3600.0 + parts[1] * 60.0 + parts[2], 86400.0);
   }
   if (count == 2) return std::make_pair(parts[0] * 60.0 + parts[1], 3600.0);

@@ -59,8 +59,8 @@ std::optional<std::size_t> find_column(const std::vector<std::string>& header, s
 // Clock time of day from Torque's time columns: "06:37.7" (mm:ss.s, as a spreadsheet re-saved it),
 // "19:06:38" inside "Thu Jan 11 19:06:38 EST 2018" or "Wed Feb 23 06:42:46 GMT+08:00 2022", "06:34:27.403"
 // inside "23-Feb-2022 06:34:27.403" or ISO 8601 "2022-02-23T06:34:27.403Z" (its zone dropped), "1:05:09 PM"
-// (a 12-hour clock, hh:mm[:ss] with AM or PM). Returns seconds and the period after which the clock wraps
-// (an hour or a day).
+// (a 12-hour clock, hh:mm[:ss] with AM or PM right after it). Returns seconds and the period after which the
+// clock wraps (an hour or a day).
 std::optional<std::pair<double, double>> parse_clock(std::string_view text);
 
 // The rows of a log (their times, in file order) to drop so that its time never runs backwards, each

@@ -119,14 +119,22 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     const std::string_view line = trim(reader.line);
     if (reader.number == 1 && (line.starts_with("\xFF\xFE") || line.starts_with("\xFE\xFF")))
       throw SampleFileError(std::string(name) + ":1: UTF-16 text: save the log as UTF-8 or ASCII text");
-    if (reader.line.size() == 5 && reader.line.starts_with("sep=") && !stated_delimiter) {
-      stated_delimiter = reader.line.back();
-      continue;
+    // "sep=;", spaces or quotes around it aside: the character after the '=' is the delimiter, a tab or a
+    // space too (which trimming took off the line: it is read from the untrimmed one).
+    if (!stated_delimiter && line.starts_with("sep=") && line.size() <= 5) {
+      const std::size_t at = static_cast<std::size_t>(line.data() - reader.line.data()) + 4;
+      if (line.size() == 5 ||
+          (at < reader.line.size() && std::isspace(static_cast<unsigned char>(reader.line[at])))) {
+        stated_delimiter = reader.line[at];
+        continue;
+      }
     }
-    // "#,Time,..." is a header naming its row-number column "#", not a comment.
+    // "#,Time,..." is a header naming its row-number column "#", not a comment: '#' and the delimiter (the
+    // one stated by "sep=", or one the header may be split on).
+    const std::string_view delimiters =
+        stated_delimiter ? std::string_view(&*stated_delimiter, 1) : std::string_view(",;\t");
     const bool comment =
-        line.starts_with('#') &&
-        (line.size() == 1 || std::string_view(",;\t").find(line[1]) == std::string_view::npos);
+        line.starts_with('#') && (line.size() == 1 || delimiters.find(line[1]) == std::string_view::npos);
     if (!line.empty() && !comment) {
       got_header = true;
       break;

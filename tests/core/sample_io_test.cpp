@@ -202,6 +202,26 @@ TEST_CASE("io: comment lines and a spreadsheet's sep= line before the header are
   CHECK(tab.samples[0].speed == Approx(1.5));
 }
 
+TEST_CASE("io: a sep= line with spaces after it states the delimiter") {
+  const SampleLog spaced = read_text("sep=; \nt;speed;freq\n0;1,5;20\n");
+  REQUIRE(spaced.samples.size() == 1);
+  CHECK(spaced.samples[0].speed == Approx(1.5));
+  const SampleLog tab = read_text("sep=\t \nt\tspeed\tfreq\n0\t1,5\t20\n");
+  REQUIRE(tab.samples.size() == 1);
+  CHECK(tab.samples[0].speed == Approx(1.5));
+}
+
+TEST_CASE("io: under a sep= line, '#' and the delimiter it states start a header, not a comment") {
+  // Only the stated delimiter makes "#" a column's name: "#|..." under "sep=|", not "#;..." under it.
+  const SampleLog piped = read_text("sep=|\n#|Time|Engine RPM|Speed (km/h)\n1|0|600|0\n2|1|1200|18\n");
+  CHECK(piped.format == SampleFileFormat::kColumns);
+  REQUIRE(piped.samples.size() == 2);
+  CHECK(piped.samples[1].speed == Approx(5));
+  const SampleLog commented = read_text("sep=|\n#;note\nt|speed|freq\n0|1|20\n");
+  CHECK(commented.format == SampleFileFormat::kGeneric);
+  CHECK(commented.samples.size() == 1);
+}
+
 TEST_CASE("io: lines ended by a CR alone read as lines, numbered as such") {
   const SampleLog log = read_text("Time (s),Engine RPM,Speed (mph)\r0,600,0\r1,1200,10\rx,1,1\r2,1300,11\r");
   CHECK(log.format == SampleFileFormat::kColumns);
@@ -597,6 +617,14 @@ TEST_CASE("io: clock cells with a zone, in ISO 8601 or on a 12-hour clock read a
     CHECK(log.samples[1].t == Approx(2));
     CHECK(log.samples[2].t == Approx(11 * 3600.0));
     CHECK(log.samples[3].t == Approx(11 * 3600.0 + 2));
+    CHECK(log.skipped_count == 0);
+  }
+  SECTION("\"am\" or \"pm\" elsewhere in the cell than right after the time is not a 12-hour clock") {
+    // German "am" ("on") before a date and a 24-hour time.
+    const SampleLog log = read_text(
+        "Time,Engine RPM,Speed (km/h)\nam 23.02.2022 14:42:46,1200,36\nam 23.02.2022 14:42:48,1300,37\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].t == Approx(2));
     CHECK(log.skipped_count == 0);
   }
 }
