@@ -35,6 +35,7 @@ void accumulate(double x, double& mean, double& var, double& count, double memor
 void SynthHabits::load_engine(const ModelExtras& extras, const SynthTuning& tuning) noexcept {
   warm_idle_ = std::numeric_limits<double>::quiet_NaN();
   const double f = extras.idle_freq, sd = extras.idle_sd;
+  idle_readable_ = !(std::isfinite(f) && f > 0.0 && f < tuning.reading_floor);
   if (std::isfinite(f) && f > 0.0) {
     warm_idle_ = f;
     if (idle_count_ <= 0.0 && std::isfinite(sd) && sd >= 0.0) {
@@ -166,9 +167,11 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
     }
   }
   if (gps < tuning.stationary_speed || idling_moving) {
-    // A warming engine's idle only falls: a reading below the idle learned so far is followed sooner.
+    // A warming engine's idle only falls: a reading below the idle learned so far is followed sooner. No
+    // reading is the idle of an engine idling below the readings' floor (SynthTuning::reading_floor).
     constexpr double kIdleFallMemory = 15.0;  // s
-    add(idle_mean_, idle_var_, idle_count_, freq < idle_mean_ ? kIdleFallMemory : kIdleMemory);
+    if (idle_readable_)
+      add(idle_mean_, idle_var_, idle_count_, freq < idle_mean_ ? kIdleFallMemory : kIdleMemory);
   } else if (in_gear && belief > kSureGear && gps > 10.0 * tuning.stationary_speed) {
     add(drive_mean_, drive_var_, drive_count_, kDriveMemory);
   }

@@ -98,7 +98,8 @@ class SynthHabits {
   [[nodiscard]] double shift_urge(double freq) const noexcept;
 
   double idle_mean_ = 0.0, idle_var_ = 0.0, idle_count_ = 0.0;
-  double warm_idle_ = 0.0;  // NaN if unknown (load_engine())
+  double warm_idle_ = 0.0;     // NaN if unknown (load_engine())
+  bool idle_readable_ = true;  // readings can show the idle (SynthTuning::reading_floor)
   // Per gear, the log engine frequency this driver runs at (the model's extra.revs; sd 0 = unknown).
   GearArray revs_mean_{}, revs_sd_{};
   GearArray revs_count_{};                                         // samples the fit saw each gear's revs on

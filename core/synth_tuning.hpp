@@ -49,7 +49,11 @@ struct SynthTuning {
   double min_speed_sigma = 0.15;  // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
   double min_freq_rel = 0.01;     // floor on sigma_s as a fraction of the frequency (tracking jitter)
   double stationary_speed = 0.3;  // m/s: GPS speed below this is "standing" (idle is learned there)
-  double max_gap = 30.0;          // s: a longer gap between steps forgets the speed track
+  // Hz: the lowest frequency a reading can show (the tracker's band, tracker.band_low; 0: any). An engine
+  // whose warm idle the fit saw below it idles where no reading reaches: what is read with the car at rest
+  // is then a slipping clutch, a blip or a harmonic, never the idle, and the standing idle stays the fit's.
+  double reading_floor = 0.0;
+  double max_gap = 30.0;  // s: a longer gap between steps forgets the speed track
   // Without a gear ladder (no model yet, an automatic or CVT) the frequency says nothing of the speed: an
   // outage holds the last GPS speed this long (a tunnel's speed is most likely the speed going in), then
   // comes down to rest at coast_accel (a long outage most likely ends parked).

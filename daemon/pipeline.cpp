@@ -321,6 +321,7 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
 // pulse thread, and GPS fixes -> fix pairer -> training pairs for the main thread.
 void Pipeline::Impl::tracker_loop() noexcept {
   Tracking k;
+  k.synthesis = SynthesisStage(config.tracker.band_low);
   k.model_generation = model.generation();
   k.model = model.get();
   k.synthesis.set_model(k.model);

@@ -20,6 +20,9 @@ class SynthesisStage {
     bool confident = false;  // the frequency was used: tracked, finite and at least the SNR threshold
   };
 
+  // `band_low` (Hz): the lowest frequency the tracker reads (SynthTuning::reading_floor); 0: any.
+  explicit SynthesisStage(double band_low = 0.0) : synth_(nullptr, tuning_of(band_low)) {}
+
   // The model from the next step on; false when the synthesizer cannot take it (it keeps the previous).
   bool set_model(const ModelPtr& model) noexcept { return synth_.set_model(model); }
 
@@ -43,6 +46,12 @@ class SynthesisStage {
   [[nodiscard]] double last_step_time() const noexcept { return last_t_; }
 
  private:
+  static SynthTuning tuning_of(double band_low) noexcept {
+    SynthTuning t;
+    t.reading_floor = band_low;
+    return t;
+  }
+
   SpeedSynthesizer synth_;
   FixNovelty fixes_;
   double last_t_ = 0.0;

@@ -340,3 +340,22 @@ TEST_CASE("synth: the fit's idle braking brakes an outage's first stop before GP
   check_braked_over_coasted(last_stop(drive, SpeedSynthesizer(fitted)),
                             last_stop(drive, SpeedSynthesizer(model_of(kHatch))));
 }
+
+TEST_CASE("synth: an idle below the readings' floor is not learned from what is read at rest") {
+  // The fit saw the engine idle below the tracker's band: with the car at rest nothing the tracker reads
+  // is the idle (here a clutch slipping at half as much again, the fix still at rest). The idle stays the
+  // fit's; with the idle inside the band the same readings are learned as a high idle.
+  auto model = std::make_shared<GearModel>(*model_of(kHatch));
+  model->extra["idle"] = {{"freq", kIdle}, {"sd", 0.3}, {"samples", 500}};
+  const auto idle_after = [&](double floor) {
+    gearpulse::SynthTuning tuning;
+    tuning.reading_floor = floor;
+    SpeedSynthesizer synth(model, tuning);
+    for (double t = 0.0; t < 10.0; t += 0.1)
+      synth.step(t, 0.0, 1.5 * kIdle);
+    return synth.idle_freq();
+  };
+  CHECK(idle_after(1.2 * kIdle) == Approx(kIdle));
+  CHECK(idle_after(0.9 * kIdle) > 1.4 * kIdle);
+  CHECK(idle_after(0.0) > 1.4 * kIdle);
+}
