@@ -87,8 +87,10 @@ def replay_outage(work, cli, model, outage, gps_timeout, held):
             speed = fix_v if (t - fix_t <= gps_timeout if held else not given) else ""
             given = True
             out.write(f"{row[0]},{speed},{row[1]}\n")
-    rows = subprocess.run([cli, "replay", "--model", model, merged], capture_output=True, text=True,
-                          check=True).stdout
+    # --band-low: the daemon's tracker.band_low (its default, which the harness' config leaves), the low end
+    # of `track`'s default band above: what the readings can show.
+    rows = subprocess.run([cli, "replay", "--band-low", "50", "--model", model, merged], capture_output=True,
+                          text=True, check=True).stdout
     with open(os.path.join(work, "replay-held.csv" if held else "replay.csv"), "w") as f:
         f.write(rows)
     start, end = outage

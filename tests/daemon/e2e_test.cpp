@@ -188,7 +188,9 @@ Outage replay_outage(const fs::path& work, double after, double gps_timeout) {
       out << ',' << f_cell << '\n';
     }
   }
-  const Result replay = run(quote(kBuild + "/tools/gearpulse") + " replay --model " +
+  // --band-low: the daemon's tracker.band_low (its default: the harness' config leaves it), so that replay
+  // knows what the readings can show as the daemon does.
+  const Result replay = run(quote(kBuild + "/tools/gearpulse") + " replay --band-low 50 --model " +
                             quote((work / "state" / "model.json").string()) + " " + quote(merged.string()));
   if (replay.status != 0) return {};
   std::stringstream rows(replay.out);

@@ -328,7 +328,9 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
                                   "fit --row-seconds nan " + log,
                                   "fit --row-seconds inf " + log,
                                   "fit --row-seconds 2s " + log,
-                                  "replay --model " + log + " --row-seconds 3601 " + log}) {
+                                  "replay --model " + log + " --row-seconds 3601 " + log,
+                                  "replay --model " + log + " --band-low -1 " + log,
+                                  "replay --model " + log + " --band-low 50Hz " + log}) {
     INFO(args);
     const Result r = run(dir, args);
     CHECK(r.status == 2);
@@ -531,6 +533,9 @@ TEST_CASE(
   }
   const gearpulse::SampleLog input = read_log(test);
   std::vector<std::vector<std::string>> rows = replay(dir, model, test).rows;
+  // --band-low 0 is the default: any reading can show the idle.
+  CHECK(run(dir, "replay --band-low 0 --model " + model + " " + test).out ==
+        run(dir, "replay --model " + model + " " + test).out);
   REQUIRE(rows.size() == input.samples.size());
   for (auto& row : rows)
     row.erase(row.begin());  // speed,gear,source: what the row answers

@@ -28,6 +28,7 @@ struct ReplayCommand {
   std::string model;
   std::string speed = "auto";
   std::optional<double> row_seconds;  // --row-seconds, unset when not given (the reader's default)
+  double band_low = 0.0;              // --band-low: the lowest frequency the log's readings can show (0: any)
   std::string file;
 };
 
@@ -58,7 +59,9 @@ int run_replay(const ReplayCommand& cmd) {
   // One output row per accepted input row: a sample steps the synthesis once, at its first row; an OBD
   // row repeating held values answers with the output of the sample it repeats, and so does a sample
   // without speed that only repeats the held rpm (repeats_held_freq).
-  SpeedSynthesizer synth(model);
+  SynthTuning tuning;
+  tuning.reading_floor = cmd.band_low;  // as the daemon's tracker.band_low
+  SpeedSynthesizer synth(model, tuning);
   LogReplayer replayer(synth);
   std::string out = "t,speed,gear,source\n";
   SynthOutput o;
@@ -95,6 +98,11 @@ void add_replay(CLI::App& app, int& status) {
                   "Torque Pro logs: speed column to use, auto (GPS if any), gps or obd")
       ->capture_default_str();
   add_row_seconds_option(*sub, cmd->row_seconds);
+  sub->add_option("--band-low", cmd->band_low,
+                  "Hz: the lowest frequency the log's readings can show, as the daemon's tracker.band_low "
+                  "(0: any; a log of gearpulsed's tracker readings: its band's low end)")
+      ->check(CLI::Range(0.0, 10000.0))
+      ->capture_default_str();
   sub->add_option("file", cmd->file, "Sample log; rows with an empty speed are GPS outages")->required();
   sub->callback([cmd, &status] { status = run_replay(*cmd); });
 }
