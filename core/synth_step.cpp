@@ -197,7 +197,10 @@ SpeedSynthesizer::Track SpeedSynthesizer::propagate(const StepInput& in, Track y
     y.pvv *= 1.0 - k;
     keep_covariance(y);
   }
-  double evidence = log_evidence(y, j, freq, in.weight, in.short_step);
+  // The clutch's history held over the step ages; one that enters it within the step starts at 0, and under
+  // GPS none ages (free_share).
+  const double clutch_age = j == 0 && i == 0 && !in.have_gps ? age_[0] + in.dt : 0.0;
+  double evidence = log_evidence(y, j, freq, in.weight, in.short_step, clutch_age);
   // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
   // reading, scores its revs on their way down from the gear's line (log_declutching) where that
   // explains them better than free revs.
