@@ -47,7 +47,10 @@ class SynthHabits {
   // The next fix starts afresh (after a reset or a gap): no speed before it to measure a deceleration by.
   void forget_last_fix() noexcept { last_gps_ = -1.0; }
   // A flat stretch of revs (rolling idle) and a run of free revs count only if GPS saw them whole.
-  void end_flat_stretch() noexcept { roll_span_ = -1.0, free_run_ = 0.0; }
+  void end_flat_stretch() noexcept {
+    roll_span_ = -1.0;
+    free_run_ = 0.0;
+  }
   // The ladder changed: the gear at old position i is at position to[i] (0 = gone), for old positions
   // 1..old_gears; or, with a new model of another ladder, the shift revs per gear are forgotten.
   void renumber_gears(const GearNumbers& to, int old_gears) noexcept;
