@@ -64,13 +64,29 @@ std::string quoted(std::string_view cell) {
   return out + "'";
 }
 
-Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet_missing) {
+namespace {
+
+bool same_letters(std::string_view a, std::string_view b) noexcept {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+           return std::tolower(static_cast<unsigned char>(x)) == std::tolower(static_cast<unsigned char>(y));
+         });
+}
+
+bool spells_missing(std::string_view text) noexcept {
+  return text.empty() || text == "-" || text.front() == '#' || same_letters(text, "NA") ||
+         same_letters(text, "N/A") || same_letters(text, "null");
+}
+
+}  // namespace
+
+Cell parse_cell(std::string_view text, std::string_view column) {
   Cell cell;
-  if (text.empty()) return cell;
-  if (spreadsheet_missing && (text == "-" || text.front() == '#' || text == "N/A")) return cell;
+  if (spells_missing(text)) return cell;
   double value = 0.0;
-  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (ec != std::errc() || ptr != text.data() + text.size()) {
+  const bool plus = text.starts_with('+');  // "+3.5", as some loggers write a signed value
+  const std::string_view number = plus ? text.substr(1) : text;
+  const auto [ptr, ec] = std::from_chars(number.data(), number.data() + number.size(), value);
+  if (ec != std::errc() || ptr != number.data() + number.size() || (plus && number.starts_with('-'))) {
     cell.kind = CellKind::kBad;
     cell.problem = "not a number in column " + std::string(column) + ": " + quoted(text);
     return cell;
@@ -78,6 +94,7 @@ Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet
   if (!std::isfinite(value)) {
     cell.kind = CellKind::kBad;
     cell.problem = "non-finite value in column " + std::string(column) + ": " + quoted(text);
+    if (std::isnan(value)) cell.problem += " (an empty cell is a missing value)";
     return cell;
   }
   // A log's clock stays far below this, even in milliseconds since 1970 (read, and warned about as a
@@ -227,11 +244,16 @@ std::string cells_problem(std::size_t have, std::size_t need) {
   return "too few cells (" + std::to_string(have) + ", need " + std::to_string(need) + ")";
 }
 
-std::string folded(std::string_view name) {
-  std::string out;
+void fold(std::string_view name, std::string& out) {
+  out.clear();
   for (char c : name)
     if (!std::isspace(static_cast<unsigned char>(c)) && c != '_')
       out += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+}
+
+std::string folded(std::string_view name) {
+  std::string out;
+  fold(name, out);
   return out;
 }
 
@@ -248,6 +270,17 @@ double speed_unit(std::string_view name) noexcept {
   if (holds(name, {"km/h", "kmh", "kph", "km/hr", "kmph"})) return kKmhToMs;  // before mph: "kmph" holds it
   if (holds(name, {"mph", "mi/h"})) return kMphToMs;
   if (holds(name, {"m/s", "mps", "meters/second", "metres/second"})) return 1.0;
+  if (holds(name, {"knot"})) return kKnotToMs;
+  // kn, kt and kts only as the name's last word: the whole unit, after a bracket or right after "speed"
+  // (folded, "speed kt" is "speedkt"), not the end of a longer word.
+  if (name.ends_with(')') || name.ends_with(']')) name.remove_suffix(1);
+  for (std::string_view unit : {"kts", "kn", "kt"}) {
+    if (!name.ends_with(unit)) continue;
+    const std::string_view before = name.substr(0, name.size() - unit.size());
+    if (before.empty() || !std::isalpha(static_cast<unsigned char>(before.back())) ||
+        before.ends_with("speed"))
+      return kKnotToMs;
+  }
   return 0.0;
 }
 

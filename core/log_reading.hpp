@@ -1,15 +1,15 @@
 #pragma once
 
 // What every log reader is made of (cells, column names, clocks, time order, the builder that collects a
-// log's samples and bad rows, the line reader) and the readers of the OBD and Torque layouts, which
-// core/sample_io.cpp picks by a log's header. Internal to core: the contract is core/sample_io.hpp.
+// log's samples and bad rows; the line reader is core/line_reader.hpp) and the readers of the OBD and
+// Torque layouts, which core/sample_io.cpp picks by a log's header. Internal to core: the contract is
+// core/sample_io.hpp.
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
 #include <initializer_list>
-#include <istream>
 #include <optional>
 #include <span>
 #include <string>
@@ -17,13 +17,15 @@
 #include <utility>
 #include <vector>
 
+#include "core/line_reader.hpp"
 #include "core/sample_io.hpp"
 
 namespace gearpulse::log_reading {
 
 inline constexpr double kKmhToMs = 1.0 / 3.6;
 inline constexpr double kMphToMs = 0.44704;
-inline constexpr double kSecondsPerMinute = 60.0;  // freq = rpm / 60
+inline constexpr double kKnotToMs = 1852.0 / 3600.0;  // a nautical mile (1852 m) an hour
+inline constexpr double kSecondsPerMinute = 60.0;     // freq = rpm / 60
 
 std::string_view trim(std::string_view s) noexcept;
 
@@ -47,8 +49,9 @@ struct Cell {
   std::string problem;  // set when kind == kBad
 };
 
-// `spreadsheet_missing`: tokens that Torque and spreadsheets write for "no value" ("-", "#N/A", "#DIV/0!").
-Cell parse_cell(std::string_view text, std::string_view column, bool spreadsheet_missing);
+// A cell that is empty or spells "no value" is missing: "-" (Torque), "NA", "N/A" or "null" (any case), a
+// spreadsheet's error ("#N/A", "#DIV/0!"). NaN is not: a number no computation should give, a bad cell.
+Cell parse_cell(std::string_view text, std::string_view column);
 
 // Header names compare without case and without spaces: Torque writes "Engine RPM(rpm)" in one version and
 // "Engine RPM (rpm)" in another, "GPS Speed(km/h)" beside "GPS Speed (Meters/second)".
@@ -191,71 +194,10 @@ inline bool blank(std::string_view line) {
 
 std::string cells_problem(std::size_t have, std::size_t need);
 
-// A log's lines. The delimiter is a comma unless the header has none and has semicolons or tabs (a
-// spreadsheet saved where the comma is the decimal mark): then a comma in a data line is a decimal mark.
-struct LineReader {
-  std::istream& in;
-  std::string line;
-  std::size_t number = 0;
-  char delimiter = ',';
-  bool next() {
-    if (cr_at < cr_lines.size()) {
-      const std::size_t end = std::min(cr_lines.find('\r', cr_at), cr_lines.size());
-      line.assign(cr_lines, cr_at, end - cr_at);
-      cr_at = end + 1;
-    } else {
-      if (!std::getline(in, line)) return false;
-      if (!line.empty() && line.back() == '\r') line.pop_back();
-      // Lines ended by a CR alone (a spreadsheet's "CSV (Macintosh)") arrive as one: handed out one by one.
-      if (const std::size_t cr = line.find('\r'); cr != std::string::npos) {
-        cr_lines.swap(line);
-        line.assign(cr_lines, 0, cr);
-        cr_at = cr + 1;
-      }
-    }
-    ++number;
-    if (number == 1 && line.size() >= 3 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
-    if (delimiter != ',') std::replace(line.begin(), line.end(), ',', '.');
-    return true;
-  }
-  // From the header line: what lies inside double quotes is a name, not a delimiter (unless a quote is
-  // left open: then a stray one, `Wheel (17")`, and every character counts).
-  void detect_delimiter() noexcept {
-    const auto count = [&](bool skip_quoted) {
-      bool quoted = false, comma = false, semicolon = false, tab = false;
-      for (char c : line) {
-        if (c == '"' && skip_quoted) quoted = !quoted;
-        if (quoted) continue;
-        comma = comma || c == ',';
-        semicolon = semicolon || c == ';';
-        tab = tab || c == '\t';
-      }
-      return quoted ? std::optional<char>() : comma ? ',' : semicolon ? ';' : tab ? '\t' : ',';
-    };
-    delimiter = count(true).value_or(*count(false));
-  }
-  bool cells(std::vector<std::string_view>& out, std::size_t limit) const {
-    return split_cells(line, out, limit, delimiter);
-  }
-  // The next data line that is not blank, split into its first `need` cells; one with fewer is reported
-  // and passed over. False at the end. `rows` counts the lines that are not blank, short ones included.
-  bool next_row(std::vector<std::string_view>& out, std::size_t need, LogBuilder& log) {
-    while (next()) {
-      if (blank(line)) continue;
-      ++rows;
-      cells(out, need);
-      if (out.size() >= need) return true;
-      log.skip(number, cells_problem(out.size(), need));
-    }
-    return false;
-  }
-  std::size_t rows = 0;
-  std::string cr_lines{};  // a run of CR-ended lines read as one, and where its next line starts
-  std::size_t cr_at = 0;
-};
-
 // A column name folded for matching: lower case, no spaces or underscores.
 std::string folded(std::string_view name);
+// The same into `out` (its storage reused).
+void fold(std::string_view name, std::string& out);
 
 // Whether `text` holds any of `parts`.
 bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept;
@@ -332,6 +274,10 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout);
 // Logs of one reading per row (SECONDS, PID, VALUE, UNITS).
 void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
                    TorqueSpeed choice);
+
+// Whether a header is a Torque Pro export's: its rpm column and one of its speed columns (another app that
+// names its rpm column as Torque does is read by named_layout()).
+[[nodiscard]] bool torque_header(const std::vector<std::string>& header);
 
 // Torque Pro exports.
 void read_torque(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,

@@ -183,7 +183,7 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
                             (choice == TorqueSpeed::kGps ? ", and 'GPS')" : ", without 'GPS')"));
     if (unitless)
       throw SampleFileError(name + ":1: speed column " + quoted(header[*unitless]) +
-                            " states no unit: name it with km/h, mph or m/s");
+                            " states no unit: name it with km/h, mph, m/s or knots");
     return std::nullopt;
   }
   layout.rpm = *rpm;
@@ -210,13 +210,13 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
     double period = 0.0;  // of a clock cell's time of day
-    const Cell rpm = parse_cell(cells[irpm], "rpm", false);
-    const Cell speed = parse_cell(cells[ispeed], "speed", false);
+    const Cell rpm = parse_cell(cells[irpm], "rpm");
+    const Cell speed = parse_cell(cells[ispeed], "speed");
     Cell t;
     t.kind = CellKind::kNumber;
     t.value = counter * out.row_seconds();
     if (it) {
-      t = parse_cell(cells[*it], "time", false);
+      t = parse_cell(cells[*it], "time");
       // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber)
@@ -282,8 +282,8 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   constexpr double kDay = 86400.0;
   double last_t = -1.0, offset = 0.0;
   while (reader.next_row(cells, need, out)) {
-    const Cell t = parse_cell(cells[it], "time", false);
-    const Cell value = parse_cell(cells[ivalue], "value", false);
+    const Cell t = parse_cell(cells[it], "time");
+    const Cell value = parse_cell(cells[ivalue], "value");
     if (t.kind != CellKind::kNumber) {
       out.skip(reader.number, t.kind == CellKind::kMissing ? "missing time" : t.problem);
       continue;
@@ -333,7 +333,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
                           (choice == TorqueSpeed::kGps   ? "GPS speed"
                            : choice == TorqueSpeed::kObd ? "OBD speed"
                                                          : "speed") +
-                          " among the PIDs (a PID whose name holds 'speed', in km/h, mph or m/s)");
+                          " among the PIDs (a PID whose name holds 'speed', in km/h, mph, m/s or knots)");
   ObdLayout layout;
   layout.format = SampleFileFormat::kPidRows;
   layout.time = it;

@@ -29,9 +29,9 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   std::vector<std::size_t> lines;
   std::vector<Sample> rows;
   while (reader.next_row(cells, need, out)) {
-    const Cell t = parse_cell(cells[it], "t", false);
-    const Cell v = parse_cell(cells[is], "speed", false);
-    const Cell f = parse_cell(cells[iff], "freq", false);
+    const Cell t = parse_cell(cells[it], "t");
+    const Cell v = parse_cell(cells[is], "speed");
+    const Cell f = parse_cell(cells[iff], "freq");
     if (t.kind == CellKind::kMissing) {
       out.skip(reader.number, "missing t");
       continue;
@@ -109,7 +109,7 @@ void warn_units(SampleLog& log) {
 SampleLog read_samples(std::istream& in, std::string_view name, const ReadOptions& options) {
   if (!(std::isfinite(options.row_seconds) && options.row_seconds > 0.0))
     throw std::invalid_argument("ReadOptions::row_seconds must be finite and above 0");
-  LineReader reader{in, {}, 0};
+  LineReader reader(in);
   LogBuilder out(name, options);
   // Before the header: blank lines, comment lines ('#') and a spreadsheet's "sep=;" line, which sets the
   // delimiter.
@@ -146,19 +146,20 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   }
   std::vector<std::string_view> views;
   if (stated_delimiter)
-    reader.delimiter = *stated_delimiter;
+    reader.set_delimiter(*stated_delimiter);
   else
     reader.detect_delimiter();
   if (!reader.cells(views, kMaxColumns))
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
                           ": header has more than " + std::to_string(kMaxColumns) + " columns");
   std::vector<std::string> header(views.begin(), views.end());
+  reader.set_header(header);
   const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
 
   // The generic header first: its further columns are ignored, whatever their names.
   if (has("t") && has("speed") && has("freq")) {
     read_generic(reader, header, out);
-  } else if (has("Engine RPM(rpm)")) {
+  } else if (torque_header(header)) {
     read_torque(reader, header, out, options.torque_speed);
   } else if (has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()")) {
     ObdLayout carloop{SampleFileFormat::kCarloop,
@@ -188,6 +189,8 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     read_pid_rows(reader, header, out, options.torque_speed);
   } else if (auto layout = named_layout(header, options.torque_speed, std::string(name))) {
     read_obd(reader, out, *layout);
+  } else if (has("Engine RPM(rpm)")) {
+    read_torque(reader, header, out, options.torque_speed);  // an export without speed: its own error
   } else {
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) + ": unrecognised header " +
                           quoted(reader.line) +

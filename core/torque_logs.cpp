@@ -66,10 +66,10 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
       row.clock = clock->first;
       row.period = clock->second;
     }
-    const Cell rpm = parse_cell(cells[irpm], header[irpm], true);
+    const Cell rpm = parse_cell(cells[irpm], header[irpm]);
     Cell gps, obd;
-    if (igps) gps = parse_cell(cells[*igps], header[*igps], true);
-    if (iobd) obd = parse_cell(cells[*iobd], header[*iobd], true);
+    if (igps) gps = parse_cell(cells[*igps], header[*igps]);
+    if (iobd) obd = parse_cell(cells[*iobd], header[*iobd]);
     const Cell* bad = rpm.kind == CellKind::kBad ? &rpm : gps.kind == CellKind::kBad ? &gps : &obd;
     if (bad->kind == CellKind::kBad) {
       out.skip(reader.number, bad->problem);
@@ -97,6 +97,12 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
     out.add(r.line, Sample{r.t - *t0, use_gps ? r.gps : r.obd, r.freq});
   }
 }
+bool torque_header(const std::vector<std::string>& header) {
+  return find_column(header, "Engine RPM(rpm)") &&
+         std::any_of(std::begin(kTorqueSpeeds), std::end(kTorqueSpeeds),
+                     [&](const SpeedColumn& c) { return find_column(header, c.header).has_value(); });
+}
+
 bool torque_gps_column(std::string_view column) noexcept {
   return std::any_of(std::begin(kTorqueSpeeds), std::end(kTorqueSpeeds),
                      [&](const SpeedColumn& c) { return c.gps && column == c.header; });

@@ -1,0 +1,76 @@
+#pragma once
+
+// A log's records: its lines, a quoted cell that holds line breaks joined into one record (RFC 4180), its
+// delimiter, and the data rows after its header. Internal to core (core/log_reading.hpp's readers).
+
+#include <array>
+#include <cstddef>
+#include <deque>
+#include <istream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace gearpulse::log_reading {
+
+class LogBuilder;
+
+// A log's lines. The delimiter is a comma unless the header has none and has semicolons or tabs (a
+// spreadsheet saved where the comma is the decimal mark): then a comma in a data line is a decimal mark.
+class LineReader {
+ public:
+  explicit LineReader(std::istream& in) : in_(in) {}
+
+  // The next record: one line, or several when a cell opened by a double quote at its start holds line
+  // breaks (they are kept as '\n'). `number` is its first line's. A byte-order mark at a record's start (a
+  // file's, or one joined on end to end) is dropped. False at the end.
+  bool next();
+  // The record read last, and the number of its first line (from 1).
+  std::string line;
+  std::size_t number = 0;
+
+  // From the header line: what lies inside double quotes is a name, not a delimiter (unless a quote is
+  // left open: then a stray one, `Wheel (17")`, and every character counts). Sets the delimiter.
+  void detect_delimiter() noexcept;
+  // A delimiter the file states (a spreadsheet's "sep=;" line).
+  void set_delimiter(char delimiter) noexcept {
+    delimiter_ = delimiter;
+    delimiter_known_ = true;
+  }
+  [[nodiscard]] char delimiter() const noexcept { return delimiter_; }
+
+  // The record's cells, at most `limit` of them; false when cells were left unsplit.
+  bool cells(std::vector<std::string_view>& out, std::size_t limit) const;
+
+  // The log's header, once read: a record that repeats it (a logger that restarted writes it again) is
+  // no data row.
+  void set_header(const std::vector<std::string>& header);
+
+  // The next data record that is not blank, split into its first `need` cells; one with fewer, or one
+  // that repeats the header, is reported and passed over. False at the end. Throws SampleFileError at a
+  // header whose columns lie elsewhere than the log's (the rows after it would be misread). `rows` counts
+  // the records read as rows, short ones included.
+  bool next_row(std::vector<std::string_view>& out, std::size_t need, LogBuilder& log);
+  std::size_t rows = 0;
+
+ private:
+  // One line as the file holds it, without its end (LF, CR LF or CR alone); false at the end.
+  bool physical(std::string& out);
+  // Whether the record's cells hold the header's names: none (0), the header's own (1) or names in other
+  // places (2).
+  [[nodiscard]] int header_names(const std::vector<std::string_view>& cells) const;
+
+  std::istream& in_;
+  char delimiter_ = ',';
+  bool delimiter_known_ = false;   // until the header is read, any of ",;\t" may end a quoted cell
+  std::size_t lines_ = 0;          // physical lines handed out
+  std::deque<std::string> ahead_;  // lines read ahead for a quoted cell that did not close, in order
+  std::string cr_lines_;           // a run of CR-ended lines read as one, and where its next line starts
+  std::size_t cr_at_ = 0;
+  std::vector<std::string> header_;         // its names folded (folded()), in order
+  std::vector<std::string> header_sorted_;  // and sorted
+  std::array<bool, 256> initials_{};        // the characters they start with
+  mutable std::string name_;                // a cell's name being matched against them
+};
+
+}  // namespace gearpulse::log_reading

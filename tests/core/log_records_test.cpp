@@ -1,0 +1,247 @@
+// The log readers on what other people's exports hold: quoted cells over several lines, speeds in knots,
+// cells that spell "no value", and what loggers and spreadsheets write around the data (byte-order marks,
+// trailing delimiters, a header repeated after a restart, long lines). tests/core/sample_io_test.cpp
+// holds the formats themselves.
+#include <catch2/catch.hpp>
+
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/sample_io.hpp"
+
+using gearpulse::read_samples;
+using gearpulse::SampleFileError;
+using gearpulse::SampleFileFormat;
+using gearpulse::SampleLog;
+
+namespace {
+
+SampleLog read_text(const std::string& text, const gearpulse::ReadOptions& options = {}) {
+  std::istringstream in(text);
+  return read_samples(in, "log.csv", options);
+}
+
+std::string error_of(const std::string& text) {
+  try {
+    (void)read_text(text);
+  } catch (const SampleFileError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+constexpr double kKnot = 1852.0 / 3600.0;  // m/s: a nautical mile (1852 m) an hour
+
+}  // namespace
+
+TEST_CASE("io: a quoted cell holding line breaks is one cell, its row numbered by its first line") {
+  SECTION("a note over two and three lines in a generic log") {
+    const SampleLog log = read_text(
+        "t,speed,freq,note\n"
+        "0,1,20,\"stopped at the lights,\nthen off\"\n"
+        "1,2,21,\"a \"\"quoted\"\" word\non\nthree lines\"\n"
+        "2,x,22,\n"
+        "3,4,23,plain\n");
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[1].t == 1.0);
+    CHECK(log.samples[1].speed == 2.0);
+    CHECK(log.samples[2].t == 3.0);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:7: not a number in column speed", 0) == 0);
+  }
+  SECTION("column names broken over lines, as a spreadsheet wraps them") {
+    const SampleLog log = read_text(
+        "\"Time\n(s)\",\"Engine\nRPM\",\"Vehicle speed\r\n(km/h)\"\r\n"
+        "0,600,0\r\n1,1200,18\r\nx,1,1\r\n");
+    CHECK(log.format == SampleFileFormat::kColumns);
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].speed == Approx(5));
+    CHECK(log.samples[1].freq == Approx(20));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:7: not a number", 0) == 0);
+  }
+  SECTION("in a semicolon log with decimal commas and in one whose lines end in a CR alone") {
+    const SampleLog semi =
+        read_text("Time;Engine RPM;Speed (km/h);Note\n0;600;0;\"a; b\nc\"\n0,5;1200;18;\n");
+    REQUIRE(semi.samples.size() == 2);
+    CHECK(semi.samples[1].t == Approx(0.5));
+    const SampleLog cr = read_text("t,speed,freq,note\r0,1,20,\"x\ry\"\r1,2,21,\rz,1,1\r");
+    REQUIRE(cr.samples.size() == 2);
+    REQUIRE(cr.skipped.size() == 1);
+    CHECK(cr.skipped[0].rfind("log.csv:5: not a number", 0) == 0);
+  }
+  SECTION("a quote in a cell's text, not at its start, opens nothing") {
+    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,17\" wheels\n1,2,21,x\n2,3,22,y\"\n");
+    CHECK(log.samples.size() == 3);
+    CHECK(log.skipped_count == 0);
+  }
+}
+
+TEST_CASE("io: a quote opened at a cell's start that does not close as a cell does is a character") {
+  SECTION("never closed: each line is a row of its own, as without quotes") {
+    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,\"screen\n1,2,21,x\n2,3,22,y\n");
+    CHECK(log.samples.size() == 3);
+    CHECK(log.skipped_count == 0);
+  }
+  SECTION("a later quote with text after it is no closing quote: no rows are joined") {
+    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,\"a\n1,2,21,x\"y\n2,3,22,z\n");
+    CHECK(log.samples.size() == 3);
+    CHECK(log.skipped_count == 0);
+  }
+  SECTION("a cell longer than any note: its lines are rows, each bad one reported, none joined silently") {
+    std::string text = "t,speed,freq,note\n0,1,20,\"start\n";
+    for (int i = 0; i < 40; ++i)
+      text += "more text\n";
+    text += "end\"\n1,2,21,x\n";
+    const SampleLog log = read_text(text);
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].t == 1.0);
+    CHECK(log.skipped_count == 41);
+    REQUIRE_FALSE(log.skipped.empty());
+    CHECK(log.skipped[0].rfind("log.csv:3: too few cells", 0) == 0);
+  }
+}
+
+TEST_CASE("io: a speed in knots is converted, from a column's name or a PID's unit") {
+  for (const std::string name :
+       {"Speed (knots)", "GPS speed [kn]", "speed kt", "Speed (kts)", "speed_knots", "Speed (knot)"}) {
+    INFO(name);
+    const SampleLog log = read_text("time,rpm," + name + "\n0,800,10\n1,900,20\n");
+    CHECK(log.format == SampleFileFormat::kColumns);
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].speed == Approx(20 * kKnot));
+  }
+  // Words that hold the letters are no unit: the column states none.
+  CHECK(error_of("time,rpm,Speed knock\n0,800,10\n").find("states no unit") != std::string::npos);
+  const SampleLog pid = read_text(
+      "SECONDS;PID;VALUE;UNITS\n0;Speed (GPS);10;kn\n1;Engine RPM;800;rpm\n2;Speed (GPS);20;knots\n");
+  REQUIRE(pid.samples.size() == 1);
+  CHECK(pid.samples[0].speed == Approx(15 * kKnot));
+}
+
+TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad cell") {
+  SECTION("generic: -, NA, N/A, null and spreadsheet errors are empty cells; the row is kept") {
+    const SampleLog log =
+        read_text("t,speed,freq\n0,-,50\n1,NA,51\n2,n/a,52\n3,null,53\n4,#N/A,54\n5,3,#DIV/0!\n6,4,-\n");
+    REQUIRE(log.samples.size() == 7);
+    CHECK(log.skipped_count == 0);
+    for (int i = 0; i < 5; ++i) {
+      CHECK_FALSE(log.samples[i].has_speed());
+      CHECK(log.samples[i].freq == 50.0 + i);
+    }
+    CHECK_FALSE(log.samples[5].has_freq());
+    CHECK_FALSE(log.samples[6].has_freq());
+  }
+  SECTION("NaN is a number no computation should give: the row is bad, and the message says so") {
+    const SampleLog log = read_text("t,speed,freq\n0,1,50\n1,NaN,51\n2,1,nan\n3,1,52\n");
+    REQUIRE(log.samples.size() == 2);
+    REQUIRE(log.skipped.size() == 2);
+    CHECK(log.skipped[0].rfind("log.csv:3: non-finite value in column speed: 'NaN'", 0) == 0);
+    CHECK(log.skipped[0].find("an empty cell is a missing value") != std::string::npos);
+    CHECK(log.skipped[1].rfind("log.csv:4: non-finite value in column freq", 0) == 0);
+  }
+  SECTION("a missing time is a bad row, whatever spells it") {
+    const SampleLog log = read_text("t,speed,freq\n0,1,50\n-,1,50\nN/A,1,50\n3,1,50\n");
+    REQUIRE(log.samples.size() == 2);
+    REQUIRE(log.skipped.size() == 2);
+    CHECK(log.skipped[0] == "log.csv:3: missing t");
+    CHECK(log.skipped[1] == "log.csv:4: missing t");
+  }
+  SECTION("named columns: a speed or rpm that spells no value is missing, as an empty one is") {
+    const SampleLog log =
+        read_text("time,Engine RPM,Speed (km/h)\n0,800,-\n1,-,36\n2,N/A,\n3,,N/A\n4,1000,#N/A\n5,1100,40\n");
+    REQUIRE(log.samples.size() == 5);  // rows 2 and 3 both carry nothing: the second repeats the first
+    CHECK(log.skipped_count == 0);
+    CHECK_FALSE(log.samples[0].has_speed());
+    CHECK_FALSE(log.samples[1].has_freq());
+    CHECK(log.samples[1].speed == Approx(10));
+    CHECK_FALSE(log.samples[3].has_speed());
+  }
+  SECTION("a PID reading of no value is a PID the car did not answer") {
+    const SampleLog log = read_text(
+        "SECONDS;PID;VALUE;UNITS\n0;Vehicle speed;36;km/h\n1;Engine RPM;-;rpm\n2;Engine RPM;800;rpm\n"
+        "3;Vehicle speed;36;km/h\n");
+    REQUIRE(log.samples.size() == 1);
+    CHECK(log.skipped_count == 0);
+  }
+}
+
+TEST_CASE("io: what exports write around the data") {
+  SECTION("a Torque Pro export, its header repeated where logging resumed") {
+    const std::string header =
+        "GPS Time, Device Time, Longitude, Latitude,GPS Speed (Meters/second), Horizontal Dilution of "
+        "Precision, Altitude, Bearing, G(x), G(y), G(z), G(calibrated),Engine RPM(rpm),Speed (OBD)(km/h)\n";
+    const SampleLog log = read_text(header +
+                                    "Thu Jan 11 19:06:38 EST 2018,11-Jan-2018 19:06:38.112,-85.7,38.2,10,"
+                                    "4.0,150,90,0.1,0.2,9.8,0.0,2000,36\n" +
+                                    header +
+                                    "Thu Jan 11 19:06:40 EST 2018,11-Jan-2018 19:06:40.112,-85.7,38.2,11,"
+                                    "4.0,150,90,0.1,0.2,9.8,0.0,2100,40\n");
+    CHECK(log.format == SampleFileFormat::kTorque);
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].t == Approx(2));
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0] == "log.csv:3: the header again (a logger restarted?)");
+  }
+  SECTION("a header repeated with a byte-order mark, as two files joined end to end") {
+    const SampleLog log =
+        read_text("\xEF\xBB\xBFt,speed,freq\n0,1,20\n1,2,21\n\xEF\xBB\xBFt,speed,freq\n2,3,22\n");
+    REQUIRE(log.samples.size() == 3);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0] == "log.csv:4: the header again (a logger restarted?)");
+  }
+  SECTION("a header again with columns added after the ones read: its rows read as before") {
+    const SampleLog log = read_text(
+        "Time,Engine RPM,Speed (km/h)\n0,800,10\nTime,Engine RPM,Speed (km/h),Throttle (%)\n1,900,20,15\n");
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].speed == Approx(20 / 3.6));
+    CHECK(log.skipped_count == 1);
+  }
+  SECTION("a column named as Torque names its rpm, in another app's log: read by its names") {
+    const SampleLog log = read_text("Time,Engine RPM (rpm),Speed (knots)\n0,800,10\n");
+    CHECK(log.format == SampleFileFormat::kColumns);
+    REQUIRE(log.samples.size() == 1);
+    CHECK(log.samples[0].speed == Approx(10 * kKnot));
+    CHECK(error_of("Device Time,Engine RPM(rpm)\n10:00.0,800\n") ==
+          "log.csv:1: no speed values (no OBD speed column and no GPS speed value)");
+  }
+  SECTION("a value written with a plus sign; a file saved with two byte-order marks") {
+    const SampleLog log = read_text("\xEF\xBB\xBF\xEF\xBB\xBFt,speed,freq\n+0,+1.5,+20\n1,+-2,21\n");
+    REQUIRE(log.samples.size() == 1);
+    CHECK(log.samples[0].speed == 1.5);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:3: not a number in column speed: '+-2'", 0) == 0);
+  }
+  SECTION("a header with its columns elsewhere is an error at its line: its rows would be misread") {
+    CHECK(error_of("Time,Engine RPM,Speed (km/h)\n0,800,10\nTime,Speed (km/h),Engine RPM\n1,20,900\n") ==
+          "log.csv:3: a header with other columns (a logger restarted?): the rows after it would be "
+          "misread; split the log at this line");
+  }
+  SECTION("trailing delimiters, a byte-order mark and quoted names, decimal commas") {
+    const SampleLog log = read_text(
+        "\xEF\xBB\xBF\"time\";\"Engine RPM (rpm)\";\"Vehicle speed (km/h)\";\n"
+        "\"0,0\";\"800\";\"0\";\n\"0,5\";\"1200\";\"18\";;;\n");
+    CHECK(log.format == SampleFileFormat::kColumns);
+    REQUIRE(log.samples.size() == 2);
+    CHECK(log.samples[1].t == Approx(0.5));
+    CHECK(log.samples[1].speed == Approx(5));
+    const SampleLog sep = read_text(
+        "\xEF\xBB\xBFsep=,\nTime (sec),Engine RPM (RPM),Vehicle speed (MPH),\n"
+        "0.00,800,0,\n1.00,1200,10,\n");
+    REQUIRE(sep.samples.size() == 2);
+    CHECK(sep.samples[1].speed == Approx(10 * 0.44704));
+  }
+  SECTION("a note of a megabyte on one line, and one quoted over lines of 64 KiB") {
+    const std::string long_note(1 << 20, 'x');
+    std::string quoted_note = "\"";
+    for (int i = 0; i < 8; ++i)
+      quoted_note += std::string(1 << 16, 'y') + "\n";
+    quoted_note += "\"";
+    const SampleLog log = read_text("t,speed,freq,note\n0,1,20," + long_note + "\n1,2,21," + quoted_note +
+                                    "\n2,3,22,\nx,1,1\n");
+    REQUIRE(log.samples.size() == 3);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0].rfind("log.csv:13: not a number", 0) == 0);
+  }
+}
