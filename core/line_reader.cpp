@@ -20,14 +20,16 @@ constexpr std::string_view kUtf8Mark = "\xEF\xBB\xBF";
 enum class Quotes {
   kClosed,  // the line ends outside any quoted cell
   kOpen,    // inside one: the record goes on over the next line
-  kStray,   // a cell begun on an earlier line "closes" with text after its quote: it was no quoted cell
+  kStray,   // a cell begun on an earlier line "closes" with text after its quote, or holds a line with a
+            // row's delimiters (a row, not text): it was no quoted cell
 };
 
 // Scans one line of a record on from `open` (whether a quoted cell was open at its start; RFC 4180: a
 // quote opens a cell only at its start, spaces aside, and "" inside is a quote). It steps from quote to
-// quote: a line without one costs a search.
+// quote: a line without one costs a search. `row_delimiters`: as many as a row of the log holds (none
+// known before its header), more than a note's line holds.
 template <class IsDelimiter>
-Quotes scan_quotes(std::string_view text, bool& open, IsDelimiter is_delimiter) {
+Quotes scan_quotes(std::string_view text, bool& open, IsDelimiter is_delimiter, std::size_t row_delimiters) {
   const auto space = [](char c) { return std::isspace(static_cast<unsigned char>(c)) != 0; };
   // Past the closing quote of the cell open at `from`, or npos when it does not close on this line.
   const auto close = [&](std::size_t from) {
@@ -38,6 +40,9 @@ Quotes scan_quotes(std::string_view text, bool& open, IsDelimiter is_delimiter) 
   std::size_t at = 0;  // where the scan goes on: the line's start or just past a quote
   if (open) {          // a cell begun on an earlier line: only spaces may lie between its end and a delimiter
     at = close(0);
+    const std::string_view inside = text.substr(0, at);
+    if (static_cast<std::size_t>(std::count_if(inside.begin(), inside.end(), is_delimiter)) >= row_delimiters)
+      return Quotes::kStray;
     if (at == std::string_view::npos) return Quotes::kOpen;
     open = false;
     std::size_t next = at;
@@ -87,6 +92,10 @@ bool LineReader::physical(std::string& out) {
 }
 
 bool LineReader::next() {
+  if (held_) {
+    held_ = false;
+    return true;
+  }
   if (!physical(line)) return false;
   number = lines_;
   std::size_t marks = 0;  // a file saved twice by a tool that adds one each time has two
@@ -99,15 +108,16 @@ bool LineReader::next() {
   // A comment before the header holds no cells (`# speed, "fast` opens none).
   const std::size_t lead = line.find_first_not_of(" \t");
   const bool comment = header_.empty() && lead != std::string::npos && line[lead] == '#';
+  const std::size_t row_delimiters = header_.size() >= 2 ? header_.size() - 1 : std::string::npos;
   bool open = false;
   if (!comment && line.find('"') != std::string::npos &&
-      scan_quotes(line, open, is_delimiter) == Quotes::kOpen) {
+      scan_quotes(line, open, is_delimiter, row_delimiters) == Quotes::kOpen) {
     std::vector<std::string> more;  // the lines the open cell goes on over
     std::size_t bytes = 0;
     Quotes quotes = Quotes::kOpen;
     for (std::string next_line; quotes == Quotes::kOpen && more.size() < kMaxCellLines &&
                                 bytes <= kMaxCellBytes && physical(next_line);) {
-      quotes = scan_quotes(next_line, open, is_delimiter);
+      quotes = scan_quotes(next_line, open, is_delimiter, row_delimiters);
       bytes += next_line.size();
       more.push_back(std::move(next_line));
     }

@@ -25,6 +25,8 @@ class LineReader {
   // breaks (they are kept as '\n'). `number` is its first line's. A byte-order mark at a record's start (a
   // file's, or one joined on end to end) is dropped. False at the end.
   bool next();
+  // Has next() give the record read last again (a record looked at before its reader takes it).
+  void unread() noexcept { held_ = true; }
   // The record read last, and the number of its first line (from 1).
   std::string line;
   std::size_t number = 0;
@@ -37,13 +39,12 @@ class LineReader {
     delimiter_ = delimiter;
     delimiter_known_ = true;
   }
-  [[nodiscard]] char delimiter() const noexcept { return delimiter_; }
 
   // The record's cells, at most `limit` of them; false when cells were left unsplit.
   bool cells(std::vector<std::string_view>& out, std::size_t limit) const;
 
   // The log's header, once read: a record that repeats it (a logger that restarted writes it again) is
-  // no data row.
+  // no data row, and a line with as many delimiters as it is a row, not the text of a quoted cell.
   void set_header(const std::vector<std::string>& header);
 
   // The next data record that is not blank, split into its first `need` cells; one with fewer, or one
@@ -63,6 +64,7 @@ class LineReader {
   std::istream& in_;
   char delimiter_ = ',';
   bool delimiter_known_ = false;   // until the header is read, any of ",;\t" may end a quoted cell
+  bool held_ = false;              // unread()
   std::size_t lines_ = 0;          // physical lines handed out
   std::deque<std::string> ahead_;  // lines read ahead for a quoted cell that did not close, in order
   std::string cr_lines_;           // a run of CR-ended lines read as one, and where its next line starts

@@ -48,6 +48,44 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   for (std::size_t i = 0; i < rows.size(); ++i)
     if (order.keep(i, lines[i], out)) out.add(lines[i], rows[i]);
 }
+
+// A row of units right under the header (`Time,Engine speed,Speed` then `s,rpm,km/h`, as data loggers write
+// it): no cell a number, a speed unit among them. Each unit joins its column's name ("Speed (km/h)"). A
+// record that is no such row is left to the reader.
+bool read_units_row(LineReader& reader, std::vector<std::string>& header) {
+  while (reader.next()) {
+    if (blank(reader.line)) continue;
+    std::vector<std::string_view> cells;
+    reader.cells(cells, header.size());
+    const bool units =
+        std::none_of(cells.begin(), cells.end(),
+                     [](std::string_view c) { return parse_cell(c, "").kind == CellKind::kNumber; }) &&
+        std::any_of(cells.begin(), cells.end(),
+                    [](std::string_view c) { return speed_unit(folded(c)) > 0.0; });
+    if (!units) {
+      reader.unread();
+      return false;
+    }
+    for (std::size_t i = 0; i < cells.size(); ++i)
+      if (!cells[i].empty()) header[i] += " (" + std::string(cells[i]) + ")";
+    return true;
+  }
+  return false;
+}
+
+// named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row.
+std::optional<ObdLayout> named_columns(LineReader& reader, std::vector<std::string>& header,
+                                       TorqueSpeed choice, const std::string& name) {
+  try {
+    if (auto layout = named_layout(header, choice, name)) return layout;
+  } catch (const SampleFileError&) {
+    if (!read_units_row(reader, header)) throw;
+    return named_layout(header, choice, name);
+  }
+  if (!read_units_row(reader, header)) return std::nullopt;
+  return named_layout(header, choice, name);
+}
+
 }  // namespace
 
 std::string_view format_name(SampleFileFormat format) noexcept {
@@ -153,6 +191,8 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
                           ": header has more than " + std::to_string(kMaxColumns) + " columns");
   std::vector<std::string> header(views.begin(), views.end());
+  const std::string header_line = reader.line;  // for the error below: a units row may be read after it
+  const std::size_t header_number = reader.number;
   reader.set_header(header);
   const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
 
@@ -187,13 +227,13 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     read_obd(reader, out, layout);
   } else if (has("SECONDS") && has("PID") && has("VALUE")) {
     read_pid_rows(reader, header, out, options.torque_speed);
-  } else if (auto layout = named_layout(header, options.torque_speed, std::string(name))) {
+  } else if (auto layout = named_columns(reader, header, options.torque_speed, std::string(name))) {
     read_obd(reader, out, *layout);
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);  // an export without speed: its own error
   } else {
-    throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) + ": unrecognised header " +
-                          quoted(reader.line) +
+    throw SampleFileError(std::string(name) + ":" + std::to_string(header_number) + ": unrecognised header " +
+                          quoted(header_line) +
                           " (expected t,speed,freq, a Torque Pro, Carloop or speed,rpm log, or columns "
                           "named rpm and speed with a unit)");
   }

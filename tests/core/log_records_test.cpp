@@ -89,6 +89,11 @@ TEST_CASE("io: a quote opened at a cell's start that does not close as a cell do
     CHECK(log.samples.size() == 3);
     CHECK(log.skipped_count == 0);
   }
+  SECTION("a line inside it with a row's delimiters is a row: the quote was a character") {
+    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,\"a\n1,2,21,x\n2,3,22,y\"\n3,4,23,z\n");
+    CHECK(log.samples.size() == 4);
+    CHECK(log.skipped_count == 0);
+  }
   SECTION("a cell longer than any note: its lines are rows, each bad one reported, none joined silently") {
     std::string text = "t,speed,freq,note\n0,1,20,\"start\n";
     for (int i = 0; i < 40; ++i)
@@ -118,6 +123,26 @@ TEST_CASE("io: a speed in knots is converted, from a column's name or a PID's un
       "SECONDS;PID;VALUE;UNITS\n0;Speed (GPS);10;kn\n1;Engine RPM;800;rpm\n2;Speed (GPS);20;knots\n");
   REQUIRE(pid.samples.size() == 1);
   CHECK(pid.samples[0].speed == Approx(15 * kKnot));
+}
+
+TEST_CASE("io: a row of units under the header names the units its columns' names do not") {
+  const SampleLog log =
+      read_text("Time,Engine speed,Vehicle speed,Throttle\ns,rpm,kn,%\n0,800,0,5\n1,900,20,6\n");
+  CHECK(log.format == SampleFileFormat::kColumns);
+  CHECK(log.speed_column == "Vehicle speed (kn)");
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.samples[1].t == 1.0);
+  CHECK(log.samples[1].speed == Approx(20 * kKnot));
+  CHECK(log.samples[1].freq == Approx(15));
+  CHECK(log.skipped_count == 0);
+  const SampleLog ms = read_text("Time,Engine RPM,GPS speed\n\nms,,km/h\n0,800,0\n500,900,18\n");
+  REQUIRE(ms.samples.size() == 2);
+  CHECK(ms.samples[1].t == Approx(0.5));
+  // A first data row is no units row: the speed states no unit, as without one.
+  CHECK(error_of("Time,Engine RPM,Vehicle speed\n0,800,-\n") ==
+        "log.csv:1: speed column 'Vehicle speed' states no unit: name it with km/h, mph, m/s or knots");
+  CHECK(error_of("Time,Mode,Note\ns,-,text\n").rfind("log.csv:1: unrecognised header 'Time,Mode,Note'", 0) ==
+        0);
 }
 
 TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad cell") {
