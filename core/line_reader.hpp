@@ -39,6 +39,11 @@ class LineReader {
     delimiter_ = delimiter;
     delimiter_known_ = true;
   }
+  // None known again: a line taken for the header was none.
+  void forget_delimiter() noexcept {
+    delimiter_ = ',';
+    delimiter_known_ = false;
+  }
 
   // The record's cells, at most `limit` of them; false when cells were left unsplit.
   bool cells(std::vector<std::string_view>& out, std::size_t limit) const;

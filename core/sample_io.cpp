@@ -49,6 +49,16 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
     if (order.keep(i, lines[i], out)) out.add(lines[i], rows[i]);
 }
 
+// Whether a header names a column a log is read by: one whose name holds "rpm" or "speed", or a PID-row
+// log's PID and VALUE.
+bool names_a_log(const std::vector<std::string>& header) {
+  return std::any_of(header.begin(), header.end(),
+                     [](const std::string& name) {
+                       return holds(folded(name), {"rpm", "speed"});
+                     }) ||
+         (find_column(header, "PID") && find_column(header, "VALUE"));
+}
+
 // A row of units right under the header (`Time,Engine speed,Speed` then `s,rpm,km/h`, as data loggers write
 // it): no cell a number, a speed unit among them. Each unit joins its column's name ("Speed (km/h)"). A
 // record that is no such row is left to the reader.
@@ -150,49 +160,71 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   LineReader reader(in);
   LogBuilder out(name, options);
   // Before the header: blank lines, comment lines ('#') and a spreadsheet's "sep=;" line, which sets the
-  // delimiter.
-  bool got_header = false;
+  // delimiter. False at the end.
   std::optional<char> stated_delimiter;
-  while (reader.next()) {
-    const std::string_view line = trim(reader.line);
-    if (reader.number == 1 && (line.starts_with("\xFF\xFE") || line.starts_with("\xFE\xFF")))
-      throw SampleFileError(std::string(name) + ":1: UTF-16 text: save the log as UTF-8 or ASCII text");
-    // "sep=;", spaces or quotes around it aside: the character after the '=' is the delimiter, a tab or a
-    // space too (which trimming took off the line: it is read from the untrimmed one).
-    if (!stated_delimiter && line.starts_with("sep=") && line.size() <= 5) {
-      const std::size_t at = static_cast<std::size_t>(line.data() - reader.line.data()) + 4;
-      if (line.size() == 5 ||
-          (at < reader.line.size() && std::isspace(static_cast<unsigned char>(reader.line[at])))) {
-        stated_delimiter = reader.line[at];
-        continue;
+  const auto next_header = [&] {
+    while (reader.next()) {
+      const std::string_view line = trim(reader.line);
+      if (reader.number == 1 && (line.starts_with("\xFF\xFE") || line.starts_with("\xFE\xFF")))
+        throw SampleFileError(std::string(name) + ":1: UTF-16 text: save the log as UTF-8 or ASCII text");
+      // "sep=;", spaces or quotes around it aside: the character after the '=' is the delimiter, a tab or a
+      // space too (which trimming took off the line: it is read from the untrimmed one).
+      if (!stated_delimiter && line.starts_with("sep=") && line.size() <= 5) {
+        const std::size_t at = static_cast<std::size_t>(line.data() - reader.line.data()) + 4;
+        if (line.size() == 5 ||
+            (at < reader.line.size() && std::isspace(static_cast<unsigned char>(reader.line[at])))) {
+          stated_delimiter = reader.line[at];
+          continue;
+        }
       }
+      // "#,Time,..." is a header naming its row-number column "#", not a comment: '#' and the delimiter (the
+      // one stated by "sep=", or one the header may be split on).
+      const std::string_view delimiters =
+          stated_delimiter ? std::string_view(&*stated_delimiter, 1) : std::string_view(",;\t");
+      const bool comment =
+          line.starts_with('#') && (line.size() == 1 || delimiters.find(line[1]) == std::string_view::npos);
+      if (!line.empty() && !comment) return true;
     }
-    // "#,Time,..." is a header naming its row-number column "#", not a comment: '#' and the delimiter (the
-    // one stated by "sep=", or one the header may be split on).
-    const std::string_view delimiters =
-        stated_delimiter ? std::string_view(&*stated_delimiter, 1) : std::string_view(",;\t");
-    const bool comment =
-        line.starts_with('#') && (line.size() == 1 || delimiters.find(line[1]) == std::string_view::npos);
-    if (!line.empty() && !comment) {
-      got_header = true;
+    return false;
+  };
+  // Lines of an app's notes on the drive (a title, a date, the car) may come before the header: a line
+  // that names no speed or rpm column, when one that does follows within this many lines.
+  constexpr std::size_t kMaxNotes = 32;
+  std::vector<std::string> header;
+  std::string header_line;  // for the error below: the first line taken for the header
+  std::size_t header_number = 0;
+  for (std::size_t notes = 0;; ++notes) {
+    if (!next_header()) {
+      if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
+      if (notes == 0) throw SampleFileError(std::string(name) + ": empty file");
+      header.clear();  // notes alone: the first line is the unrecognised header
       break;
     }
+    std::vector<std::string_view> views;
+    if (stated_delimiter)
+      reader.set_delimiter(*stated_delimiter);
+    else
+      reader.detect_delimiter();
+    const bool narrow = reader.cells(views, kMaxColumns);
+    if (!narrow && notes == 0)
+      throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
+                            ": header has more than " + std::to_string(kMaxColumns) + " columns");
+    header.assign(views.begin(), views.end());
+    if (notes == 0) {
+      header_line = reader.line;
+      header_number = reader.number;
+    }
+    if (narrow && names_a_log(header)) {
+      header_line = reader.line;
+      header_number = reader.number;
+      break;
+    }
+    if (notes + 1 == kMaxNotes) {
+      header.clear();
+      break;
+    }
+    reader.forget_delimiter();
   }
-  if (!got_header) {
-    if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
-    throw SampleFileError(std::string(name) + ": empty file");
-  }
-  std::vector<std::string_view> views;
-  if (stated_delimiter)
-    reader.set_delimiter(*stated_delimiter);
-  else
-    reader.detect_delimiter();
-  if (!reader.cells(views, kMaxColumns))
-    throw SampleFileError(std::string(name) + ":" + std::to_string(reader.number) +
-                          ": header has more than " + std::to_string(kMaxColumns) + " columns");
-  std::vector<std::string> header(views.begin(), views.end());
-  const std::string header_line = reader.line;  // for the error below: a units row may be read after it
-  const std::size_t header_number = reader.number;
   reader.set_header(header);
   const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
 

@@ -145,6 +145,25 @@ TEST_CASE("io: a row of units under the header names the units its columns' name
         0);
 }
 
+TEST_CASE("io: lines of an app's notes before the header are passed over, up to 32") {
+  const std::string notes =
+      "This file is created using a lap timer v7.4\nFormat,3\nSession title,\"Evening, dry\"\n"
+      "Created,15/03/2023,13:26\n\n";
+  const SampleLog log = read_text(notes + "Time (s);Engine RPM;Speed (km/h)\n0;800;0\n1;900;18\nx;1;1\n");
+  CHECK(log.format == SampleFileFormat::kColumns);
+  REQUIRE(log.samples.size() == 2);
+  CHECK(log.samples[1].speed == Approx(5));
+  REQUIRE(log.skipped.size() == 1);
+  CHECK(log.skipped[0].rfind("log.csv:9: not a number", 0) == 0);
+  // Without a header after them, or past 32 lines, the first line is the unrecognised header.
+  CHECK(error_of(notes).rfind("log.csv:1: unrecognised header 'This file is created", 0) == 0);
+  std::string many;
+  for (int i = 0; i < 32; ++i)
+    many += "Note," + std::to_string(i) + "\n";
+  CHECK(error_of(many + "t,speed,freq\n0,1,20\n").rfind("log.csv:1: unrecognised header 'Note,0'", 0) == 0);
+  CHECK(read_text(many.substr(many.find('\n') + 1) + "t,speed,freq\n0,1,20\n").samples.size() == 1);
+}
+
 TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad cell") {
   SECTION("generic: -, NA, N/A, null and spreadsheet errors are empty cells; the row is kept") {
     const SampleLog log =
@@ -261,7 +280,7 @@ TEST_CASE("io: what exports write around the data") {
     const std::string long_note(1 << 20, 'x');
     std::string quoted_note = "\"";
     for (int i = 0; i < 8; ++i)
-      quoted_note += std::string(1 << 16, 'y') + "\n";
+      quoted_note.append(1 << 16, 'y').push_back('\n');
     quoted_note += "\"";
     const SampleLog log = read_text("t,speed,freq,note\n0,1,20," + long_note + "\n1,2,21," + quoted_note +
                                     "\n2,3,22,\nx,1,1\n");
