@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -482,6 +483,27 @@ TEST_CASE("cli: replay prints t speed gear source for every row") {
   CHECK(rows == input.samples.size());
   CHECK(outage_rows >= 50);
   CHECK(engine_rows > 0);
+}
+
+TEST_CASE("cli: replay answers rows whose speed spells no value as outages, and says a header again") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string original = simulated_log(dir, 24, 300.0);
+  const std::size_t samples = read_log(original).samples.size();
+  // The outage's empty speed cells written as NA, and the header written again as line 101.
+  std::string text = slurp(original);
+  for (std::size_t at = text.find(",,"); at != std::string::npos; at = text.find(",,", at))
+    text.replace(at, 2, ",NA,");
+  std::size_t line_end = 0;
+  for (int i = 0; i < 100; ++i)
+    line_end = text.find('\n', line_end) + 1;
+  text.insert(line_end, "t,speed,freq\n");
+  const std::string path = (dir / "spelled.csv").string();
+  write(path, text);
+  const Replay r = replay(dir, model, path);
+  CHECK(r.rows.size() == samples);
+  CHECK(std::count_if(r.rows.begin(), r.rows.end(), [](const auto& row) { return row[3] != "gps"; }) >= 50);
+  CHECK(r.result.err.find(path + ":101: the header again") != std::string::npos);
 }
 
 TEST_CASE(
