@@ -1,12 +1,6 @@
 #include "drivers/pulse_thread.hpp"
 
-#include <poll.h>
-#include <sys/eventfd.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
-#include <system_error>
 
 #include "drivers/clock.hpp"
 #include "drivers/realtime.hpp"
@@ -16,23 +10,6 @@ namespace {
 
 constexpr std::int64_t kLateNs = 1'000'000;  // an edge more than this behind schedule counts as late
 
-// Waits until CLOCK_MONOTONIC `t_ns` or until `fd` (an eventfd) is signalled, whose counter is then read
-// back to zero. ppoll on the eventfd rather than clock_nanosleep and a futex: one wait covers both, and
-// what the edges need of it holds. The relative timeout is taken from the clock right here and the kernel
-// turns it back into an absolute hrtimer expiry on entry, so an edge is off by the microsecond between
-// the two clock reads, as against clock_nanosleep(TIMER_ABSTIME). The wake-up is as precise: under
-// SCHED_FIFO ppoll's timer slack is 0 (select_estimate_accuracy waives it for real-time tasks, as
-// clock_nanosleep does). Otherwise it is the larger of the thread's timer slack (50 us, clock_nanosleep's
-// alone) and a thousandth of the wait: at most 0.25 ms, for an edge a heartbeat away, well inside kLateNs
-// (a niced thread gets a two-hundredth, over kLateNs only for an edge over 200 ms away: below 2.5 Hz).
-void wait_until(int fd, std::int64_t t_ns) noexcept {
-  pollfd pfd{fd, POLLIN, 0};
-  const timespec rel = to_timespec(std::max<std::int64_t>(0, t_ns - monotonic_ns()));
-  if (::ppoll(&pfd, 1, &rel, nullptr) <= 0 || !(pfd.revents & POLLIN)) return;  // the time, or EINTR
-  std::uint64_t count = 0;
-  [[maybe_unused]] const ssize_t n = ::read(fd, &count, sizeof count);  // nonblocking: never waits
-}
-
 // What the thread applies for a requested speed: NaN and negatives are standstill.
 double applicable(double speed_mps) noexcept {
   return speed_mps > 0.0 ? speed_mps : 0.0;
@@ -41,12 +18,7 @@ double applicable(double speed_mps) noexcept {
 }  // namespace
 
 PulseThread::PulseThread(PulseOutput& output, PulseThreadConfig config, std::span<RiseRecord> rise_log)
-    : output_(output),
-      config_(std::move(config)),
-      rise_log_(rise_log),
-      wake_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
-  if (!wake_fd_) throw std::system_error(errno, std::generic_category(), "pulse thread: eventfd");
-}
+    : output_(output), config_(std::move(config)), rise_log_(rise_log) {}
 
 PulseThread::~PulseThread() {
   stop();
@@ -62,20 +34,15 @@ void PulseThread::start() {
 
 void PulseThread::stop() {
   thread_.ask_stop();
-  wake();  // after the flag: the thread sees it when its wait returns, or does not wait at all
+  wake_.signal();  // after the flag: the thread sees it when its wait returns, or does not wait at all
   thread_.stop();
 }
 
 void PulseThread::set_speed(double speed_mps) noexcept {
-  // The store comes before the write, and the thread reads the eventfd back before it loads the speed:
-  // a change it has not loaded leaves the eventfd signalled, so its next wait returns at once.
+  // The store comes before the signal, and the thread's wait takes the signals before it loads the speed:
+  // a change it has not loaded leaves a signal, so its next wait returns at once.
   const double before = target_.exchange(speed_mps, std::memory_order_acq_rel);
-  if (applicable(before) != applicable(speed_mps)) wake();
-}
-
-void PulseThread::wake() noexcept {
-  const std::uint64_t one = 1;
-  [[maybe_unused]] const ssize_t n = ::write(wake_fd_.get(), &one, sizeof one);  // nonblocking
+  if (applicable(before) != applicable(speed_mps)) wake_.signal();
 }
 
 PulseThreadStatus PulseThread::status() const noexcept {
@@ -140,7 +107,10 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
       applied = target;
       emit_due(now);
     }
-    wait_until(wake_fd_.get(), std::min(sched.next_edge().t_ns, now + heartbeat_period_ns));
+    // Woken on time to the microsecond under SCHED_FIFO; otherwise within a thousandth of the wait
+    // (WakeEvent::wait_until): at most 0.25 ms for an edge a heartbeat away, well inside kLateNs (a niced
+    // thread gets a two-hundredth, over kLateNs only for an edge over 200 ms away: below 2.5 Hz).
+    wake_.wait_until(std::min(sched.next_edge().t_ns, now + heartbeat_period_ns));
   }
   if (high) output_.fall();  // leave the line low
   thread_.set_running(false);

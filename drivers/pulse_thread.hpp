@@ -1,7 +1,7 @@
 #pragma once
 // The real-time pulse thread: sleeps to each edge the PulseScheduler computes and calls the output's
-// rise()/fall(). The target speed comes from another thread through an atomic; set_speed() signals an
-// eventfd when the speed changes, and the thread waits on it with ppoll until the next edge, so it wakes
+// rise()/fall(). The target speed comes from another thread through an atomic; set_speed() signals a
+// WakeEvent (an eventfd) when the speed changes, and the thread waits on it until the next edge, so it wakes
 // for an edge or a new speed (a start from standstill is taken up at once), and at least every heartbeat
 // to show the watchdog it turns. The loop never allocates, locks, logs or throws.
 #include <atomic>
@@ -12,7 +12,7 @@
 #include "core/pulse_scheduler.hpp"
 #include "drivers/device_thread.hpp"
 #include "drivers/pulse_output.hpp"
-#include "drivers/unique_fd.hpp"
+#include "drivers/wake_event.hpp"
 
 namespace gearpulse {
 
@@ -69,7 +69,6 @@ class PulseThread {
 
  private:
   void run(std::int64_t t0_ns) noexcept;
-  void wake() noexcept;  // makes the thread's wait return
 
   PulseOutput& output_;
   const PulseThreadConfig config_;
@@ -81,7 +80,7 @@ class PulseThread {
   std::atomic<std::int64_t> max_late_ns_{0};
   std::atomic<std::size_t> logged_{0};
   std::atomic<std::uint64_t> turns_{0};
-  UniqueFd wake_fd_;     // eventfd: set_speed() and stop() write it, the thread waits on it
+  WakeEvent wake_;       // set_speed() and stop() signal it, the thread waits on it
   DeviceThread thread_;  // last: stopped before the members it uses go
 };
 
