@@ -28,13 +28,16 @@
 #include "drivers/pty_output.hpp"
 #include "drivers/pulse_output.hpp"
 #include "drivers/pulse_thread.hpp"
+#include "drivers/wake_event.hpp"
 
 namespace gearpulse::daemon {
 namespace {
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
-// The tracker thread wakes at least this often, with or without audio.
-constexpr auto kTrackerPoll = std::chrono::milliseconds(10);
+// Longest wait of the tracker thread without work (audio, a GPS report, a step on GPS alone, an open of
+// the capture, stop()): the period of its heartbeat, which the watchdog judges (kStallNs = 5 s). A
+// twentieth of that limit, as the pulse thread's: only a wait stretched twenty-fold reads as hung.
+constexpr double kTrackerBeat = 0.25;  // s
 // GPS fixes wait this long for the audio window centred on them before they are given up (FixPairer).
 constexpr double kPairWait = 3.0;
 
@@ -72,7 +75,7 @@ struct Pipeline::Impl {
         model(m),
         store(s),
         faults(config.audio.device),
-        audio(capture_config_of(config.audio), config.audio.ring_seconds) {}
+        audio(capture_config_of(config.audio), config.audio.ring_seconds, &work) {}
 
   const Config config;
   ModelHolder& model;
@@ -93,6 +96,9 @@ struct Pipeline::Impl {
   mutable std::atomic<std::int64_t> dropped_at_ns{0};
   std::chrono::steady_clock::time_point next_output_try;
 
+  // The tracker thread waits on it; the capture thread signals it after each push into the audio ring,
+  // the gpsd client's thread after each report, halt() once it has set `stop`.
+  WakeEvent work;
   AudioFrontEnd audio;  // opened, read and closed by the tracker thread; its status() read by any
 
   std::thread tracker_thread;
@@ -101,6 +107,7 @@ struct Pipeline::Impl {
 
   // Published by the tracker thread.
   std::atomic<std::int64_t> tracker_beat{0};
+  std::atomic<std::uint64_t> tracker_turns{0};
   std::atomic<double> speed{0.0};
   std::atomic<double> speed_sd{0.0};
   std::atomic<int> gear{0};
@@ -317,8 +324,10 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
   }
 }
 
-// The live data flow, one turn every hop or kTrackerPoll: audio front end -> tracker -> synthesis ->
-// pulse thread, and GPS fixes -> fix pairer -> training pairs for the main thread.
+// The live data flow, one turn for each piece of work: audio front end -> tracker -> synthesis -> pulse
+// thread, and GPS fixes -> fix pairer -> training pairs for the main thread. Between turns the thread
+// waits on `work` until the next thing it does by the clock: a step on GPS alone, an open of the capture,
+// its heartbeat.
 void Pipeline::Impl::tracker_loop() noexcept {
   Tracking k;
   k.synthesis = SynthesisStage(config.tracker.band_low);
@@ -337,6 +346,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
   while (!stop.load(std::memory_order_relaxed)) {
     const std::int64_t now_ns = monotonic_ns();
     tracker_beat.store(now_ns, std::memory_order_relaxed);
+    tracker_turns.fetch_add(1, std::memory_order_relaxed);
     const double now = now_ns * 1e-9;
     adopt_model(k);
     if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(k.tracker)) {
@@ -353,7 +363,20 @@ void Pipeline::Impl::tracker_loop() noexcept {
       step(k, now - config.tracker.window / 2.0, kNan, kNan, false);
     pair_fixes(k, now);
     if (k.tracker) faults.audio(audio.stats(), std::chrono::steady_clock::now());
-    if (!got_points) std::this_thread::sleep_for(kTrackerPoll);
+    if (k.tracker && audio.has_frames()) continue;  // more than one turn's reading was waiting
+    // The wait took the signals given before it, and this turn then read the ring and the newest GPS
+    // report and looked at `stop`: what was pushed, reported or asked since has signalled `work` again.
+    double until = now + kTrackerBeat;
+    // The next step on GPS alone (the conditions above, as times).
+    const double gps_step_at = k.synthesis.last_step_time() + no_audio_step_s;
+    until =
+        std::min(until, k.tracker ? std::max(gps_step_at, k.last_points_at + audio_stall_s) : gps_step_at);
+    if (!audio.is_open()) {
+      const auto to_open = audio.next_open() - std::chrono::steady_clock::now();
+      until = std::min(until, now + std::chrono::duration<double>(to_open).count());
+    }
+    // A microsecond past it: the comparisons above are strict.
+    work.wait_until(static_cast<std::int64_t>(std::ceil(until * 1e9)) + 1000);
   }
   audio.close();
   tracker_done.store(true);
@@ -376,7 +399,7 @@ void Pipeline::start() {
   gc.host = d.config.gps.host;
   gc.port = std::to_string(d.config.gps.port);
   gc.no_fix_timeout = std::chrono::milliseconds(static_cast<long>(d.config.gps.timeout * 1000));
-  d.gps = std::make_unique<GpsdClient>(gc);
+  d.gps = std::make_unique<GpsdClient>(gc, [&d](const GpsReport&) { d.work.signal(); });
   d.gps->start();
   d.stop.store(false);
   d.tracker_done.store(false);
@@ -411,6 +434,7 @@ void Pipeline::halt() noexcept {
     d.pulses->stop();  // leaves the output low
   }
   d.stop.store(true);
+  d.work.signal();  // after the flag: the tracker thread sees it when its wait returns, or does not wait
 }
 
 void Pipeline::stop() noexcept {
@@ -537,6 +561,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   s.pairs_lost = d.pairs_lost.load(std::memory_order_relaxed);
   if (d.tracker_thread.joinable())
     beats.push_back({"tracker", d.tracker_beat.load(std::memory_order_relaxed)});
+  s.tracker_turns = d.tracker_turns.load(std::memory_order_relaxed);
   s.stalled = stalled_threads(beats, now);
   return s;
 }

@@ -51,6 +51,9 @@ struct PipelineSnapshot {
   std::uint64_t xruns = 0;
   std::uint64_t ring_drops = 0;
   double tracker_freq = -1.0;  // Hz, < 0 not tracked
+  // Turns of the tracker thread's loop: one per wake-up (audio pushed, a GPS report, a step on GPS alone,
+  // an open of the capture, its heartbeat or stop()), for tests.
+  std::uint64_t tracker_turns = 0;
   double tracker_snr_db = 0.0;
   bool tracker_confident = false;
   // Training.

@@ -14,7 +14,7 @@
 namespace gearpulse::daemon {
 
 // A heartbeat older than this is a hung thread. Well above every loop's longest regular wait (the
-// GPS backoff beats every 0.5 s, the tracker polls every 10 ms, the pulse thread every 250 ms at least),
+// GPS backoff beats every 0.5 s, the tracker and the pulse thread every 250 ms at least),
 // and below any sensible WatchdogSec.
 inline constexpr std::int64_t kStallNs = 5'000'000'000;
 

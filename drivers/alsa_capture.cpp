@@ -197,8 +197,8 @@ const char* to_string(PcmFormat format) noexcept {
   return "?";
 }
 
-AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring)
-    : config_(std::move(config)), ring_(ring) {
+AlsaCapture::AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring, WakeEvent* pushed)
+    : config_(std::move(config)), ring_(ring), pushed_signal_(pushed) {
   if (config_.period_frames == 0)
     throw std::runtime_error("ALSA capture '" + config_.device + "': period_frames must be positive");
   Negotiated got;
@@ -545,6 +545,9 @@ void AlsaCapture::run() noexcept {
       publish_anchor({ring_index, static_cast<std::int64_t>(std::llround(clock_at(c))), npf});
     }
     const std::size_t pushed = ring_.try_push_bulk(std::span<const float>(mono_.data(), frames));
+    // After the push (its release store of the ring's write index): a consumer whose wait took this
+    // signal finds the frames.
+    if (pushed > 0 && pushed_signal_) pushed_signal_->signal();
     ring_index += pushed;
     pushed_.store(ring_index, std::memory_order_relaxed);
     // Frames the ring had no room for are the block's tail: the next frame pushed needs a fresh anchor.

@@ -25,6 +25,7 @@
 
 #include "core/spsc_ring.hpp"
 #include "drivers/device_thread.hpp"
+#include "drivers/wake_event.hpp"
 
 struct _snd_pcm;  // ALSA's snd_pcm_t, kept opaque so users need no ALSA headers
 
@@ -140,8 +141,9 @@ class AlsaCapture final {
   // Opens and configures the PCM now, so a bad name or a refused format fails here with a one-line
   // AlsaOpenError ("ALSA capture 'foo': cannot open: No such file or directory"; other faults of the
   // configuration are a std::runtime_error). `ring` is borrowed and must outlive this object; this object
-  // is its only producer.
-  AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring);
+  // is its only producer. `pushed` (optional, borrowed) is signalled after every push into the ring, so
+  // the consumer can wait for frames instead of polling (WakeEvent: a wake-up is never lost).
+  AlsaCapture(AlsaCaptureConfig config, SpscRing<float>& ring, WakeEvent* pushed = nullptr);
   ~AlsaCapture();  // stop()
   AlsaCapture(const AlsaCapture&) = delete;
   AlsaCapture& operator=(const AlsaCapture&) = delete;
@@ -181,6 +183,7 @@ class AlsaCapture final {
 
   AlsaCaptureConfig config_;
   SpscRing<float>& ring_;
+  WakeEvent* pushed_signal_;
   PcmHandle pcm_;  // the device while the capture thread does not run (it holds it meanwhile)
   unsigned rate_ = 0;
   unsigned channels_ = 0;

@@ -23,8 +23,8 @@ std::string alsa_error_text(int code) {
   return ::snd_strerror(code);
 }
 
-AudioFrontEnd::AudioFrontEnd(AlsaCaptureConfig config, double ring_seconds)
-    : config_(std::move(config)), ring_seconds_(ring_seconds) {}
+AudioFrontEnd::AudioFrontEnd(AlsaCaptureConfig config, double ring_seconds, WakeEvent* pushed)
+    : config_(std::move(config)), ring_seconds_(ring_seconds), pushed_signal_(pushed) {}
 
 AudioFrontEnd::~AudioFrontEnd() {
   close();
@@ -54,7 +54,7 @@ bool AudioFrontEnd::open(std::chrono::steady_clock::time_point now, const Prepar
   try {
     ring = std::make_unique<SpscRing<float>>(
         static_cast<std::size_t>(std::max(1.0, ring_seconds_ * config_.rate)));
-    capture = std::make_unique<AlsaCapture>(config_, *ring);
+    capture = std::make_unique<AlsaCapture>(config_, *ring, pushed_signal_);
   } catch (const AlsaOpenError& e) {
     return fail(e.what(), e.step());
   } catch (const std::exception& e) {

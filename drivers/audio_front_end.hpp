@@ -51,7 +51,9 @@ class AudioFrontEnd {
   static constexpr std::chrono::milliseconds kFirstRetry{500};   // doubled after each failure ...
   static constexpr std::chrono::milliseconds kMaxRetry{10'000};  // ... up to this
 
-  AudioFrontEnd(AlsaCaptureConfig config, double ring_seconds);
+  // `pushed` (optional, borrowed, must outlive this object) is signalled by the capture thread after every
+  // push into the ring (AlsaCapture), so the reader can wait on it for the next block.
+  AudioFrontEnd(AlsaCaptureConfig config, double ring_seconds, WakeEvent* pushed = nullptr);
   ~AudioFrontEnd();  // close()
   AudioFrontEnd(const AudioFrontEnd&) = delete;
   AudioFrontEnd& operator=(const AudioFrontEnd&) = delete;
@@ -59,6 +61,8 @@ class AudioFrontEnd {
   [[nodiscard]] bool is_open() const noexcept { return capture_ != nullptr; }
   // Whether an open is due: nothing open and the backoff since the last failure has passed.
   [[nodiscard]] bool open_due(std::chrono::steady_clock::time_point now) const noexcept;
+  // When the backoff after the last failed open ends (the past before the first).
+  [[nodiscard]] std::chrono::steady_clock::time_point next_open() const noexcept { return next_try_; }
   // Opens the device, its ring and its capture thread. On failure, false: error() says why, retry_delay()
   // how long until the next try (the delay then grows).
   bool open(std::chrono::steady_clock::time_point now, const Prepare& prepare);
@@ -66,6 +70,8 @@ class AudioFrontEnd {
 
   // Reads the next block (at most into.size() frames) and times it.
   AudioBlock read(std::span<float> into) noexcept;
+  // Frames wait in the ring (the reader's side: exact).
+  [[nodiscard]] bool has_frames() const noexcept { return ring_ && !ring_->empty(); }
 
   [[nodiscard]] std::string error() const;
   [[nodiscard]] std::chrono::milliseconds retry_delay() const noexcept { return last_delay_; }
@@ -79,6 +85,7 @@ class AudioFrontEnd {
  private:
   AlsaCaptureConfig config_;
   double ring_seconds_;
+  WakeEvent* pushed_signal_;
   std::chrono::steady_clock::time_point next_try_{};
   std::chrono::milliseconds backoff_ = kFirstRetry;
   std::chrono::milliseconds last_delay_ = kFirstRetry;
