@@ -129,7 +129,8 @@ struct Pipeline::Impl {
   void open_output_device();
   // The tracker thread's state between two turns of its loop.
   struct Tracking {
-    SynthesisStage synthesis;
+    explicit Tracking(double band_low) : synthesis(band_low) {}
+    SynthesisStage synthesis;                    // told the tracker's band floor (tracker.band_low)
     ModelPtr model;                              // the one the synthesis uses
     std::unique_ptr<SlidingDftTracker> tracker;  // while audio is open
     std::vector<float> block;                    // one read of the ring
@@ -329,8 +330,7 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
 // waits on `work` until the next thing it does by the clock: a step on GPS alone, an open of the capture,
 // its heartbeat.
 void Pipeline::Impl::tracker_loop() noexcept {
-  Tracking k;
-  k.synthesis = SynthesisStage(config.tracker.band_low);
+  Tracking k(config.tracker.band_low);
   k.model_generation = model.generation();
   k.model = model.get();
   k.synthesis.set_model(k.model);

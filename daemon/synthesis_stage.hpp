@@ -44,6 +44,8 @@ class SynthesisStage {
   }
 
   [[nodiscard]] double last_step_time() const noexcept { return last_t_; }
+  // Hz, the engine's idle as the synthesis holds it now (SpeedSynthesizer::idle_freq).
+  [[nodiscard]] double idle_freq() const noexcept { return synth_.idle_freq(); }
 
  private:
   static SynthTuning tuning_of(double band_low) noexcept {

@@ -66,3 +66,22 @@ TEST_CASE("synthesis: a fix is stamped at its receive time less gps.latency, as 
   INFO("outage distance error " << error << " % (" << run(0.0) << " % with gps.latency 0)");
   CHECK(std::abs(error) < 2.0);
 }
+
+TEST_CASE("synthesis: the stage's band_low is the readings' floor, also for a model set after it") {
+  // The daemon builds the stage once with tracker.band_low and sets the model after: an idle the fit put
+  // below the band is then not learned from what is read at rest (a clutch slipping at half as much
+  // again, the fix at rest). A stage built without the floor learns it as a high idle.
+  auto model = std::make_shared<gearpulse::GearModel>(*gearpulse::test::hatch_model());
+  const double idle = gearpulse::test::kIdle;
+  model->extra["idle"] = {{"freq", idle}, {"sd", 0.3}, {"samples", 500}};
+  const auto idle_after = [&](SynthesisStage stage) {
+    REQUIRE(stage.set_model(model));
+    for (int i = 0; i < 100; ++i) {
+      const double t = 10.0 + 0.1 * i;
+      (void)stage.step(t, 1.5 * idle, 30.0, true, fix(0.0, t), -10.0);
+    }
+    return stage.idle_freq();
+  };
+  CHECK(idle_after(SynthesisStage(1.2 * idle)) == Approx(idle));
+  CHECK(idle_after(SynthesisStage()) > 1.4 * idle);
+}
