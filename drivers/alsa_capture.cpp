@@ -14,14 +14,6 @@
 namespace gearpulse {
 namespace {
 
-// AlsaCapture::failure_ unpacked (note_failure() packs it).
-int failure_error(std::uint64_t failure) noexcept {
-  return static_cast<std::int32_t>(static_cast<std::uint32_t>(failure & 0xffff'ffffU));
-}
-AlsaStep failure_step(std::uint64_t failure) noexcept {
-  return static_cast<AlsaStep>(static_cast<std::uint8_t>(failure >> 32));
-}
-
 // No frame for this long (or 4 periods, if longer) from an open device is a stall (AlsaCaptureStats).
 constexpr double kStallS = 2.0;
 
@@ -185,6 +177,16 @@ const char* to_string(AlsaStep step) noexcept {
   return "?";
 }
 
+std::uint64_t AlsaFailure::word() const noexcept {
+  const auto code = static_cast<std::uint32_t>(error);  // two's complement: from_word() undoes it
+  return static_cast<std::uint64_t>(code) | static_cast<std::uint64_t>(step) << 32;
+}
+
+AlsaFailure AlsaFailure::from_word(std::uint64_t word) noexcept {
+  return {static_cast<AlsaStep>(static_cast<std::uint8_t>(word >> 32)),
+          static_cast<std::int32_t>(static_cast<std::uint32_t>(word & 0xffff'ffffU))};
+}
+
 const char* to_string(PcmFormat format) noexcept {
   switch (format) {
     case PcmFormat::kS16:
@@ -247,9 +249,9 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.clock_resets = clock_resets_.load(std::memory_order_relaxed);
   s.repeated = repeated_.load(std::memory_order_relaxed);
   s.frozen = frozen_.load(std::memory_order_relaxed);
-  const std::uint64_t failure = failure_.load(std::memory_order_relaxed);
-  s.last_error = failure_error(failure);
-  s.failed_step = failure_step(failure);
+  const AlsaFailure failure = AlsaFailure::from_word(failure_.load(std::memory_order_relaxed));
+  s.last_error = failure.error;
+  s.failed_step = failure.step;
   s.open_attempts = open_attempts_.load(std::memory_order_relaxed);
   s.last_attempt = last_attempt_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
@@ -265,10 +267,8 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   return s;
 }
 
-void AlsaCapture::note_failure(AlsaStep step, int error) noexcept {
-  const auto code = static_cast<std::uint32_t>(error);  // two's complement: failure_error() undoes it
-  failure_.store(static_cast<std::uint64_t>(code) | static_cast<std::uint64_t>(step) << 32,
-                 std::memory_order_relaxed);
+void AlsaCapture::note_failure(AlsaFailure failure) noexcept {
+  failure_.store(failure.word(), std::memory_order_relaxed);
 }
 
 void AlsaCapture::publish_anchor(const Anchor& a) noexcept {
@@ -318,7 +318,7 @@ void AlsaCapture::run() noexcept {
   fifo_.store(rt.fifo);
   snd_pcm_status_t* status_block = nullptr;
   if (::snd_pcm_status_malloc(&status_block) < 0) {
-    note_failure(AlsaStep::kNone, -ENOMEM);
+    note_failure({AlsaStep::kNone, -ENOMEM});
     return;
   }
   const std::unique_ptr<snd_pcm_status_t, decltype(&::snd_pcm_status_free)> status(status_block,
@@ -362,32 +362,32 @@ void AlsaCapture::run() noexcept {
   };
 
   PcmHandle pcm = std::move(pcm_);  // the thread's while it runs
-  // Prepares and starts the stream; a step that fails is noted (failure_).
+  // Prepares and starts the stream: the step that failed, noted (failure_), or none (error 0).
   auto restart = [&]() noexcept {
-    if (const int err = ::snd_pcm_prepare(pcm.get()); err < 0) {
-      note_failure(AlsaStep::kPrepare, err);
-      return err;
-    }
-    const int err = ::snd_pcm_start(pcm.get());
-    if (err < 0) note_failure(AlsaStep::kStart, err);
-    return err;
+    AlsaFailure failure;
+    if (const int err = ::snd_pcm_prepare(pcm.get()); err < 0)
+      failure = {AlsaStep::kPrepare, err};
+    else if (const int e = ::snd_pcm_start(pcm.get()); e < 0)
+      failure = {AlsaStep::kStart, e};
+    if (failure.error < 0) note_failure(failure);
+    return failure;
   };
-  // Recovery from `err`, which `step` returned, as recovery_for() decides; a failed restart or resume
-  // falls through to a reopen.
-  auto recover = [&](AlsaStep step, int err) noexcept {
-    const AlsaRecovery action = recovery_for(err);
+  // Recovery from `failure` as recovery_for() decides by its error; a failed restart or resume falls
+  // through to a reopen.
+  auto recover = [&](AlsaFailure failure) noexcept {
+    const AlsaRecovery action = recovery_for(failure.error);
     if (action == AlsaRecovery::kRetry) return;  // a signal woke the wait: no frame was lost
-    note_failure(step, err);
+    note_failure(failure);
     discontinuity = true;
     if (action == AlsaRecovery::kRestart) {
       xruns_.fetch_add(1, std::memory_order_relaxed);
-      if (restart() == 0) return;
+      if (restart().error == 0) return;
     } else if (action == AlsaRecovery::kResume) {
       suspends_.fetch_add(1, std::memory_order_relaxed);
       int e;
       while ((e = ::snd_pcm_resume(pcm.get())) == -EAGAIN && !stopping())
         pause(100'000'000);
-      if (e == 0 || restart() == 0) return;
+      if (e == 0 || restart().error == 0) return;
     }
     pcm.reset();
     open_attempts_.store(0, std::memory_order_relaxed);
@@ -397,9 +397,8 @@ void AlsaCapture::run() noexcept {
 
   last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
   streaming_.store(pcm != nullptr, std::memory_order_relaxed);
-  if (pcm) {  // restart() has noted the step that failed
-    if (const int err = restart(); err < 0)
-      recover(failure_step(failure_.load(std::memory_order_relaxed)), err);
+  if (pcm) {
+    if (const AlsaFailure failure = restart(); failure.error < 0) recover(failure);
   }
   std::int64_t backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
   const std::int64_t backoff_max =
@@ -432,7 +431,8 @@ void AlsaCapture::run() noexcept {
       const bool changed = err == 0 && (got.rate != rate_ || got.channels != channels_ ||
                                         got.format != format_ || got.period != period_frames_);
       if (err < 0 || changed) {
-        note_failure(changed ? AlsaStep::kParamsChanged : failed.step, changed ? -EINVAL : err);
+        note_failure(changed ? AlsaFailure{AlsaStep::kParamsChanged, -EINVAL}
+                             : AlsaFailure{failed.step, err});
         backoff = std::min(backoff * 2, backoff_max);
         continue;
       }
@@ -442,12 +442,12 @@ void AlsaCapture::run() noexcept {
       streaming_.store(true, std::memory_order_relaxed);
       reopens_.fetch_add(1, std::memory_order_relaxed);
       backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
-      if (const int e = ::snd_pcm_start(pcm.get()); e < 0) recover(AlsaStep::kStart, e);
+      if (const int e = ::snd_pcm_start(pcm.get()); e < 0) recover({AlsaStep::kStart, e});
       continue;
     }
     const int ready = ::snd_pcm_wait(pcm.get(), wait_ms);
     if (ready < 0) {
-      recover(AlsaStep::kWait, ready);
+      recover({AlsaStep::kWait, ready});
       continue;
     }
     if (ready == 0) continue;  // timeout: look at stop_ again
@@ -457,7 +457,7 @@ void AlsaCapture::run() noexcept {
       continue;
     }
     if (n < 0) {
-      recover(AlsaStep::kRead, static_cast<int>(n));
+      recover({AlsaStep::kRead, static_cast<int>(n)});
       continue;
     }
     const double measured = measure(pcm.get(), n);

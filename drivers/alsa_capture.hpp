@@ -72,6 +72,16 @@ enum class AlsaStep : std::uint8_t {
 // "open", "hw-params", "sw-params", "params-changed", "prepare", "start", "wait", "read"; "" for kNone.
 [[nodiscard]] const char* to_string(AlsaStep step) noexcept;
 
+// A failed ALSA call: its step and the negative error code it returned (kNone and 0: nothing failed).
+struct AlsaFailure {
+  AlsaStep step = AlsaStep::kNone;
+  int error = 0;
+
+  // In one word, so that one atomic holds a failure whole: the error's 32 bits low, the step above them.
+  [[nodiscard]] std::uint64_t word() const noexcept;
+  [[nodiscard]] static AlsaFailure from_word(std::uint64_t word) noexcept;
+};
+
 // The capture could not be opened: what() is the one-line message AlsaCapture's constructor documents,
 // step() and error() (the negative ALSA code) say where and why.
 class AlsaOpenError : public std::runtime_error {
@@ -171,7 +181,7 @@ class AlsaCapture final {
  private:
   void run() noexcept;
   void publish_anchor(const Anchor& anchor) noexcept;
-  void note_failure(AlsaStep step, int error) noexcept;  // failure_
+  void note_failure(AlsaFailure failure) noexcept;  // failure_
 
   static constexpr std::size_t kAnchors = 64;
   struct alignas(kCacheLine) AnchorSlot {
@@ -197,8 +207,8 @@ class AlsaCapture final {
   std::atomic<std::uint64_t> anchor_count_{0};
   std::atomic<std::uint64_t> frames_{0}, pushed_{0}, dropped_{0}, xruns_{0}, suspends_{0}, reopens_{0},
       clock_resets_{0}, repeated_{0};
-  // The last failure: its error code (low 32 bits) and its step (the 8 above), one word written once per
-  // failure, so stats() never pairs one failure's error with another's step.
+  // The last failure (AlsaFailure::word()), one word written once per failure, so stats() never pairs one
+  // failure's error with another's step.
   std::atomic<std::uint64_t> failure_{0};
   static_assert(std::atomic<std::uint64_t>::is_always_lock_free);
   std::atomic<std::uint64_t> open_attempts_{0};

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <span>
 #include <thread>
@@ -329,6 +330,24 @@ TEST_CASE("alsa: recovery is chosen by the error: overrun restarts, suspend resu
   CHECK(recovery_for(-EINTR) == AlsaRecovery::kRetry);
   CHECK(recovery_for(-EAGAIN) == AlsaRecovery::kRetry);
   CHECK(std::string(gearpulse::to_string(recovery_for(-EPIPE))) == "restart");
+}
+
+// stats() reads the last failure from one atomic word: each step comes back with its own error, whatever
+// the error's sign and size.
+TEST_CASE("alsa: a failure held in one word comes back whole: its step and its negative error") {
+  using gearpulse::AlsaFailure;
+  using gearpulse::AlsaStep;
+  for (int s = static_cast<int>(AlsaStep::kNone); s <= static_cast<int>(AlsaStep::kRead); ++s) {
+    for (const int error : {0, -EIO, -EPIPE, -ENODEV, -1, std::numeric_limits<int>::min()}) {
+      const AlsaFailure failure{static_cast<AlsaStep>(s), error};
+      INFO("step " << gearpulse::to_string(failure.step) << ", error " << error);
+      const AlsaFailure back = AlsaFailure::from_word(failure.word());
+      CHECK(back.step == failure.step);
+      CHECK(back.error == failure.error);
+    }
+  }
+  CHECK(AlsaFailure{}.word() == 0);  // the atomic's initial value is "nothing failed"
+  CHECK(AlsaFailure{AlsaStep::kRead, -EIO}.word() != AlsaFailure{AlsaStep::kWait, -EIO}.word());
 }
 
 // The file plugin's own answer to a writer that stalls: its read() on the FIFO blocks, so the capture
