@@ -3,126 +3,22 @@
 #include <fcntl.h>
 #include <unistd.h>
 
-#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
-#include <memory>
 #include <vector>
 
 #include <catch2/catch.hpp>
 
-#include "daemon/pipeline.hpp"
+#include "tests/daemon/live_chain.hpp"
 #include "tests/daemon/log_lines.hpp"
-#include "tests/drivers/alsa_fifo.hpp"
-#include "tests/drivers/gpsfake.hpp"
-#include "tests/test_util.hpp"
-#include "tools/sim/lighter_signal.hpp"
-#include "tools/sim/nmea.hpp"
 
 using namespace std::chrono_literals;
+using namespace gearpulse::test;
 using gearpulse::SpeedSource;
 using gearpulse::daemon::AudioState;
 using gearpulse::daemon::GpsState;
 using gearpulse::daemon::OutputState;
-using gearpulse::test::FifoFeeder;
-using gearpulse::test::GpsFake;
-using gearpulse::test::TempDir;
-using gearpulse::test::wait_for;
-
-namespace {
-
-constexpr unsigned kRate = 8000;
-constexpr double kTone = 80.0;   // Hz: the ripple, inside the tracker's default band
-constexpr double kWander = 1.5;  // Hz: revs wander (a line fixed to the hertz is other equipment's)
-constexpr double kTheta = 0.2;   // (m/s)/Hz of the one gear
-constexpr double kSpeed = 16.0;  // m/s: the speed GPS reports, kTheta x kTone
-constexpr double kSpeedTol = kTheta * kWander + 0.05 * kSpeed;
-
-// `seconds` of the lighter's ripple around kTone, as the simulator makes it, in S16.
-std::vector<std::int16_t> ripple(double seconds) {
-  gearpulse::sim::LighterSignalConfig g;
-  g.sample_rate_hz = kRate;
-  g.amplitude = 0.2;
-  g.snr_db = 20.0;
-  g.seed = 5;
-  const auto x = gearpulse::sim::make_lighter_signal(
-      g, [](double t) { return kTone + kWander * std::sin(2.0 * M_PI * t / 6.0); }, seconds);
-  std::vector<std::int16_t> out(x.size());
-  for (std::size_t i = 0; i < x.size(); ++i)
-    out[i] = static_cast<std::int16_t>(std::lround(std::clamp(x[i], -1.0f, 1.0f) * 32767.0f));
-  return out;
-}
-
-// A model of one gear that turns kTone into kSpeed.
-std::shared_ptr<const gearpulse::GearModel> one_gear() {
-  auto m = std::make_shared<gearpulse::GearModel>();
-  m->gears = {{kTheta, 1.0, 0.0}};
-  m->sigma_speed = 0.3;
-  m->sigma_freq = 0.5;
-  m->outlier_weight = 0.1;
-  m->method = "auto";
-  return m;
-}
-
-// GPS at kSpeed for `epochs` 1 Hz epochs, played at `cycle` s each, then gone (gpsfake ends with its log).
-struct Gps {
-  TempDir dir;
-  int port = gearpulse::test::free_port();
-  std::unique_ptr<GpsFake> fake;
-  Gps(std::size_t epochs, double cycle) {
-    const std::vector<double> speeds(epochs, kSpeed);
-    const auto log = dir / "drive.nmea";
-    gearpulse::sim::write_nmea_log(log, gearpulse::sim::epochs_at_1hz(speeds));
-    fake = std::make_unique<GpsFake>(log, port, cycle, true);
-  }
-};
-
-// The chain under test: ripple fed at `period` frames per write, GPS at kSpeed for `epochs` epochs, and
-// the pipeline over them. Stopped before its feeder, so the capture's blocking read always returns.
-struct LiveChain {
-  TempDir dir;
-  std::filesystem::path fifo = gearpulse::test::make_paced_pcm(dir);
-  FifoFeeder feeder;
-  Gps gps;
-  gearpulse::daemon::ModelHolder model;
-  gearpulse::daemon::TrainingStore store{3600.0, 100000};
-  gearpulse::daemon::Config config;
-  std::unique_ptr<gearpulse::daemon::Pipeline> pipeline;
-
-  LiveChain(unsigned period, std::size_t epochs, double cycle, gearpulse::test::WriterBreak pause = {})
-      : feeder(fifo, ripple(60.0), period, kRate, pause), gps(epochs, cycle) {
-    REQUIRE(GpsFake::wait_listening(gps.port, 10s));
-    config.audio.device = "paced";
-    config.audio.rate = kRate;
-    config.audio.format = "S16_LE";
-    config.audio.period_frames = period;
-    config.gps.port = static_cast<unsigned>(gps.port);
-    config.output.kind = gearpulse::daemon::OutputKind::kNone;
-    config.model.state_dir = dir.path().string();
-    config.log.level = "off";
-  }
-  ~LiveChain() {
-    if (pipeline) pipeline->stop();
-  }
-  LiveChain(const LiveChain&) = delete;
-  LiveChain& operator=(const LiveChain&) = delete;
-
-  // Starts the pipeline and, once its capture runs, the feeder.
-  gearpulse::daemon::Pipeline& start() {
-    pipeline = std::make_unique<gearpulse::daemon::Pipeline>(config, model, store);
-    pipeline->start();
-    REQUIRE(wait_for([&] { return pipeline->snapshot().audio_state == AudioState::kRunning; }, 10s));
-    feeder.go();
-    return *pipeline;
-  }
-};
-
-bool near(double x, double want, double tol) {
-  return std::abs(x - want) <= tol;
-}
-
-}  // namespace
 
 TEST_CASE(
     "pipeline: with capture periods of half a second the synthesis runs on the engine through an outage") {
@@ -288,45 +184,6 @@ TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the ou
   ::close(fd);
   CHECK(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kNoReader; }, 5s));
 }
-
-namespace {
-
-// The pipeline on GPS alone (no sound card: speed follows GPS), gpsd to be started by the test at `port`.
-struct GpsOnly {
-  TempDir dir;
-  int port = gearpulse::test::free_port();
-  gearpulse::daemon::ModelHolder model;
-  gearpulse::daemon::TrainingStore store{3600.0, 1000};
-  gearpulse::daemon::Config config;
-  std::unique_ptr<gearpulse::daemon::Pipeline> pipeline;
-
-  GpsOnly() {
-    config.audio.device = "gearpulse_test_no_such_pcm";
-    config.gps.port = static_cast<unsigned>(port);
-    config.output.kind = gearpulse::daemon::OutputKind::kNone;
-    config.model.state_dir = dir.path().string();
-    config.log.level = "off";
-  }
-  ~GpsOnly() {
-    if (pipeline) pipeline->stop();
-  }
-  GpsOnly(const GpsOnly&) = delete;
-  GpsOnly& operator=(const GpsOnly&) = delete;
-
-  gearpulse::daemon::Pipeline& start() {
-    pipeline = std::make_unique<gearpulse::daemon::Pipeline>(config, model, store);
-    pipeline->start();
-    return *pipeline;
-  }
-  // gpsfake playing `speeds` at 1 Hz of log time (NaN = no fix), `cycle` s per epoch, repeated.
-  std::unique_ptr<GpsFake> gpsd(const std::vector<double>& speeds, double cycle) {
-    const auto log = dir / "drive.nmea";
-    gearpulse::sim::write_nmea_log(log, gearpulse::sim::epochs_at_1hz(speeds));
-    return std::make_unique<GpsFake>(log, port, cycle, false);
-  }
-};
-
-}  // namespace
 
 // A sound card that fails while capturing, again and again, is then gone, and is back later. The file
 // plugin writes what it captures to its sink, here first a link to /dev/full: each open reads a little,
@@ -506,53 +363,4 @@ TEST_CASE("pipeline: a speed whose pulses would be below output.min_frequency sh
   const auto s = pipeline.snapshot();
   CHECK(s.pulse_frequency == 0.0);
   CHECK(s.pulses == 0);
-}
-
-// The tracker thread waits for its work (a block of audio pushed, a GPS report, a step on GPS alone)
-// instead of polling the ring every 10 ms: 8 kHz in periods of 512 (15.6 a second) and two reports a
-// second wake it about 18 times a second (a poll woke it about 100 times).
-TEST_CASE("pipeline: the tracker thread wakes for each period of audio and each GPS report, not to poll") {
-  LiveChain chain(512, 60, 0.5);  // about 30 s of GPS
-  chain.model.set(one_gear());
-  gearpulse::daemon::Pipeline& pipeline = chain.start();
-  REQUIRE(wait_for(
-      [&] {
-        const auto s = pipeline.snapshot();
-        return s.source == SpeedSource::kGps && near(s.tracker_freq, kTone, kWander + 0.5);
-      },
-      20s));
-  const auto before = pipeline.snapshot();
-  const auto t0 = std::chrono::steady_clock::now();
-  std::this_thread::sleep_for(3s);
-  const auto after = pipeline.snapshot();
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const double per_second = static_cast<double>(after.tracker_turns - before.tracker_turns) / seconds;
-  INFO("tracker turns per second " << per_second);
-  CHECK(per_second < 40.0);
-  // Still on every block: the engine is tracked and the speed is GPS's.
-  CHECK(near(after.tracker_freq, kTone, kWander + 0.5));
-  CHECK(after.source == SpeedSource::kGps);
-}
-
-// Without audio or GPS it wakes for its steps on GPS alone (one every 0.28 s at the default hop and
-// window), its heartbeat and the capture's opens; stop() wakes it at once rather than after its wait.
-TEST_CASE("pipeline: without audio or GPS the tracker thread wakes a few times a second and stops at once") {
-  for (int round = 0; round < 3; ++round) {
-    GpsOnly chain;
-    gearpulse::daemon::Pipeline& pipeline = chain.start();
-    std::this_thread::sleep_for(200ms);
-    const auto before = pipeline.snapshot();
-    std::this_thread::sleep_for(1s);
-    const auto after = pipeline.snapshot();
-    const std::uint64_t turns = after.tracker_turns - before.tracker_turns;
-    INFO("round " << round << ": " << turns << " tracker turns in 1 s");
-    CHECK(turns < 20);
-    CHECK(after.stalled.empty());
-    const auto t0 = std::chrono::steady_clock::now();
-    pipeline.stop();
-    const double took_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    INFO("stop() took " << took_ms << " ms");
-    CHECK(took_ms < 150.0);
-  }
 }
