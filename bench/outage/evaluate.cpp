@@ -158,7 +158,7 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
   int kept_gear = -1;
   double dist[kMethods + 1] = {};  // the methods', then the truth's
   double value[kMethods] = {};
-  bool was_out = false;
+  bool was_out = false, debug_head = false;
   gearpulse::SynthOutput o, o_imm;
   gearpulse::LogReplayer replayer(synth);
   std::vector<Step> steps(opt.worst > 0.0 ? rows.size() : 0);
@@ -189,23 +189,28 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
       o_imm = live ? imm.step(r.t, gps, r.freq, r.gps_new) : imm_replayer.step({r.t, gps, r.freq});
     if (opt.debug_from < debug_to && r.t - t0 >= opt.debug_from && r.t - t0 <= debug_to) {
       const auto& flt = imm.filter();
-      if (r.t - t0 - opt.debug_from < 0.15) {
+      if (!debug_head) {
+        debug_head = true;
         const auto& h = imm.habits();
         std::fprintf(stderr, "idle %.1f/%.2f bands:", h.idle, h.idle_sd);
         for (int g = 1; g <= static_cast<int>(model.gears.size()); ++g)
           std::fprintf(stderr, " %.1f/%.2f", std::exp(h.gear_revs_mean[static_cast<std::size_t>(g)]),
                        h.gear_revs_sd[static_cast<std::size_t>(g)]);
-        std::fprintf(stderr, " sigma_freq %.2f\n", model.sigma_freq);
+        std::fprintf(stderr, " sigma_freq %.2f synth ladder:", model.sigma_freq);
+        for (int m = 1; m <= synth.ladder_gears(); ++m)
+          std::fprintf(stderr, " %.4f", synth.ladder_theta(m));
+        std::fprintf(stderr, "\n");
       }
       std::fprintf(stderr, "t %.1f %s truth %.1f g %d f %.1f | out %.1f p:", r.t - t0, out ? "OUT" : "gps",
                    r.truth, r.gear, r.freq, o_imm.speed);
       for (int m = 0; m < flt.modes(); ++m)
         std::fprintf(stderr, " %.2f(%.1f~%.1f)", flt.probability(m), flt.track(m).v,
                      std::sqrt(flt.track(m).pvv));
-      // The daemon's synthesis: its output and its belief (0 = no gear, then gears 1..M).
+      // The daemon's synthesis: its output and its belief at each position of its ladder (0 = no gear,
+      // then its gears, then moving off).
       std::fprintf(stderr, " || synth %.1f g%d p:", o.speed, o.gear);
-      for (int m = 0; m <= static_cast<int>(model.gears.size()); ++m)
-        std::fprintf(stderr, " %.2f", synth.mode_probability(m));
+      for (int m = 0; m <= synth.ladder_gears() + 1; ++m)
+        std::fprintf(stderr, " %.2f", synth.position_probability(m));
       // ... and what it carries at each position of its ladder: speed m/s, acceleration ~ its sd m/s^2.
       for (int m = 0; m <= synth.ladder_gears() + 1; ++m) {
         const auto x = synth.mode_track(m);
