@@ -70,6 +70,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(launch_fade),
     GEARPULSE_FIELD(rest_output),
     GEARPULSE_FIELD(seen_gear_fixes),
+    GEARPULSE_FIELD(creep_gears),
     GEARPULSE_FIELD(idle_braking),
     GEARPULSE_FIELD(idle_braking_prior),
     GEARPULSE_FIELD(first_gear_idle_speed),

@@ -39,7 +39,7 @@ bool SeenGears::is_seen(const Sighting& s) const noexcept {
 }
 
 bool SeenGears::observe(double t, double speed, double freq, double idle_ceiling,
-                        std::span<const double> model_thetas, double lag) noexcept {
+                        std::span<const double> model_thetas, double lag, bool lugged) noexcept {
   bool changed = false;
   for (Sighting& s : slots_) {
     if (s.count > 0.0 && t - s.last_t > kForgetTime) {
@@ -82,16 +82,19 @@ bool SeenGears::observe(double t, double speed, double freq, double idle_ceiling
     run_slot_ = -1;
   }
   const bool was_seen = is_seen(*slot);
+  const bool was_creep = slot->above <= 0.0;
   const int index = static_cast<int>(slot - slots_.data());
   run_length_ = index == run_slot_ ? run_length_ + 1.0 : 1.0;
   run_slot_ = index;
   slot->longest_run = std::max(slot->longest_run, run_length_);
   slot->count += 1.0;
+  if (!lugged) slot->above += 1.0;
   const double d = r - slot->mean;
   slot->mean += d / slot->count;
   slot->m2 += d * (r - slot->mean);
   slot->last_t = t;
-  return changed || (!was_seen && is_seen(*slot));
+  // A seen gear sighted for the first time at revs not lugged is a gear, no longer a possible creep.
+  return changed || (!was_seen && is_seen(*slot)) || (was_seen && was_creep && !lugged);
 }
 
 bool SeenGears::forget_learned(std::span<const double> model_thetas) noexcept {
@@ -119,7 +122,8 @@ int SeenGears::seen(std::array<Gear, kCapacity>& out) const noexcept {
     if (shadowed) continue;
     const double sd = std::max(std::sqrt(s.m2 / std::max(s.count - 1.0, 1.0)), kMinRatioSd);
     const double theta = std::exp(s.mean);
-    out[static_cast<std::size_t>(n++)] = {theta, theta * sd / std::sqrt(s.count), s.count / steady_fixes_};
+    out[static_cast<std::size_t>(n++)] = {theta, theta * sd / std::sqrt(s.count), s.count / steady_fixes_,
+                                          s.above <= 0.0};
   }
   return n;
 }

@@ -9,7 +9,9 @@
 // a row it is *seen*: its theta is the mean ratio of all its sightings, with the standard error of that mean,
 // and its share of use that of its sightings among all steady fixes; the synthesis carries it as a gear until
 // a model has it or it has not been sighted for kForgetTime. Readings at idle revs are no sightings:
-// declutched, the car rolls at a slowly changing ratio.
+// declutched, the car rolls at a slowly changing ratio. A gear sighted only at lugged revs (below those the
+// driver holds any gear above first at) is marked a possible *creep*: a car crawling in a queue on a
+// slipping clutch, the revs held just above the idle, shows a steady ratio that is no gear's.
 //
 // Fixed capacity, no allocation.
 #include <array>
@@ -26,6 +28,7 @@ class SeenGears {
     double theta = 0.0;      // (m/s)/Hz
     double std_error = 0.0;  // (m/s)/Hz
     double share = 0.0;      // its sightings' share of all steady fixes observed
+    bool creep = false;      // sighted only at lugged revs: perhaps a clutch slipping at held revs
   };
 
   // min_fixes: sightings in a row before a gear counts as seen (not finite or <= 0: never).
@@ -33,10 +36,11 @@ class SeenGears {
 
   // One fix (GPS speed, m/s) with the engine frequency at its time (Hz), at step time t (s). model_thetas:
   // the model's gears; idle_ceiling: revs at or below this are idle (Hz, 0 = unknown); lag: how late the
-  // fix's speed is against the revs (s). Returns true when the set of seen gears changed (one became seen or
-  // was forgotten); a seen gear's theta may move without that.
+  // fix's speed is against the revs (s); lugged: the revs are ones this driver holds no gear above first
+  // at. Returns true when the set of seen gears changed (one became seen or was forgotten, or a seen gear
+  // was sighted at revs not lugged for the first time); a seen gear's theta may move without that.
   bool observe(double t, double speed, double freq, double idle_ceiling, std::span<const double> model_thetas,
-               double lag) noexcept;
+               double lag, bool lugged = false) noexcept;
   // Forgets every gear within a gearbox step of one of `model_thetas` (a model that has learned it). Returns
   // true when the set of seen gears changed.
   bool forget_learned(std::span<const double> model_thetas) noexcept;
@@ -51,6 +55,7 @@ class SeenGears {
     double m2 = 0.0;     // sum of squared departures from the mean
     double last_t = 0.0;
     double longest_run = 0.0;  // most steady fixes sighted in a row
+    double above = 0.0;        // of them, at revs not lugged
   };
   [[nodiscard]] bool is_seen(const Sighting& s) const noexcept;
 

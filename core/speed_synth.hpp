@@ -151,7 +151,8 @@ class SpeedSynthesizer {
   void insert_seen_gears() noexcept;
   void insert_gap_gears() noexcept;
   [[nodiscard]] bool seen_gear_near(double theta, double half) const noexcept;
-  void insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
+  // Returns the ladder position the gear took (0: none, the ladder is full).
+  int insert_in_ladder(double theta, double theta_se, double weight, int model_gear) noexcept;
   void insert_fitted_lower_gears() noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;
@@ -259,6 +260,7 @@ class SpeedSynthesizer {
   SpeedLag speed_lag_;      // how late GPS speed is against the revs, learned from the fixes
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
+  ModeArray creep_{};       // 1: a gear seen under GPS only at lugged revs (SeenGears::Gear::creep)
   double sigma_v_ = 0.0;
   double sigma_s_ = 0.0;
 

@@ -110,9 +110,14 @@ double SpeedSynthesizer::log_launch(double freq, double speed) const noexcept {
 }
 
 // Relative chance of driving in `gear` with this step's frequency: below the revs this driver holds his gears
-// at (SynthHabits::lugged) he declutches rather than lug the engine, except when creeping in first gear.
+// at (SynthHabits::lugged) he declutches rather than lug the engine, except when creeping in first gear. A
+// gear seen under GPS only at such revs (creep_) may be a creep on a slipping clutch, whose ratio holds only
+// while the revs are held there: above them it is as unlikely as a gear driven lugged. Carried as a gear
+// up the revs, a queue's creep at a third of first gear's ratio took the move-off after it, and the filter
+// climbed a ladder of such ratios at half the car's speed (`compact-4/s2`, jam, from 302 s, OBD 1 s).
 double SpeedSynthesizer::lugging(int gear) const noexcept {
   const double floor = gear == 1 ? tuning_.lugging_first : tuning_.lugging_other;
+  if (creep_[gear] > 0.0) return tuning_.lugging_other + (1.0 - tuning_.lugging_other) * lugged_;
   return 1.0 - (1.0 - floor) * lugged_;
 }
 

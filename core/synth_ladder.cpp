@@ -51,6 +51,7 @@ void SpeedSynthesizer::load_model() noexcept {
   theta_se_.fill(0.0);
   model_gear_.fill(0);
   weight_.fill(0.0);
+  creep_.fill(0.0);
   for (int j = 1; j <= gears_; ++j) {
     const Gear& g = model->gears[static_cast<std::size_t>(j - 1)];
     theta_[j] = g.theta;  // its standard error stays 0: a fit's is well under the 1 % floor on a reading
@@ -93,7 +94,8 @@ void SpeedSynthesizer::load_model() noexcept {
 }
 
 // The gears seen under GPS that the model lacks (seen_) join its ladder in theta order, each used for its
-// share of the steady fixes seen, while there is room and the model has a ladder at all.
+// share of the steady fixes seen, while there is room and the model has a ladder at all; one seen only at
+// lugged revs as a possible creep (creep_, lugging()).
 void SpeedSynthesizer::insert_seen_gears() noexcept {
   if (gears_ == 0) return;
   std::array<SeenGears::Gear, SeenGears::kCapacity> seen{};
@@ -103,15 +105,17 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
     bool known = false;
     for (int j = 1; j <= gears_; ++j)
       known = known || std::abs(std::log(g.theta / theta_[j])) < 2.0 * kGearWindow;
-    if (!known) insert_in_ladder(g.theta, g.std_error, std::max(g.share, kMinGearShare), 0);
+    if (known) continue;
+    const int at = insert_in_ladder(g.theta, g.std_error, std::max(g.share, kMinGearShare), 0);
+    if (at > 0 && g.creep && tuning_.creep_gears > 0.0) creep_[at] = 1.0;
   }
 }
 
 // One gear joins the ladder in theta order; a full ladder (kMaxGears) takes none: its gears and the
 // moving-off mode above them fill the mode arrays.
-void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double weight,
-                                        int model_gear) noexcept {
-  if (gears_ >= kMaxGears) return;
+int SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double weight,
+                                       int model_gear) noexcept {
+  if (gears_ >= kMaxGears) return 0;
   int at = gears_ + 1;  // ladder position it takes
   for (int j = gears_; j >= 1 && theta < theta_[j]; --j)
     at = j;
@@ -120,12 +124,15 @@ void SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double we
     theta_se_[j + 1] = theta_se_[j];
     weight_[j + 1] = weight_[j];
     model_gear_[j + 1] = model_gear_[j];
+    creep_[j + 1] = creep_[j];
   }
+  creep_[at] = 0.0;
   theta_[at] = theta;
   theta_se_[at] = theta_se;
   weight_[at] = weight;
   model_gear_[at] = model_gear;
   ++gears_;
+  return at;
 }
 
 // Whether a gear seen under GPS that the model lacks lies within `half` (in log theta) of `theta`: such a
@@ -413,7 +420,8 @@ double SpeedSynthesizer::idle_ceiling() const noexcept {
 void SpeedSynthesizer::observe_gear(double gps, double freq, double lag) noexcept {
   if (gears_ == 0 || model_ == nullptr) return;
   std::array<double, kMaxGears> thetas{};
-  bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas), lag);
+  bool changed = seen_.observe(t_, gps, freq, idle_ceiling(), thetas_of(model_.get(), thetas), lag,
+                               tuning_.creep_gears > 0.0 && habits_.lugged(freq, gears_, tuning_) >= 0.5);
   // The idle and the launches seen under GPS decide how many gears are missing below the ladder: the idle
   // may be learned, or fall as the engine warms, and a launch be counted, after the ladder was loaded.
   if (!changed && tuning_.predict_lower_gears > 0.0) {

@@ -132,6 +132,11 @@ struct SynthTuning {
   // fixes after a first are a gear held for two readings' time at one speed: no shift or clutch biting
   // holds the revs at a gear's ratio that long.
   double seen_gear_fixes = 2.0;
+  // 1: a gear seen under GPS only at lugged revs (SynthHabits::lugged: below those this driver holds any
+  // gear above first at) may be a creep, a clutch slipping at held revs, whose ratio of speed to revs is no
+  // gear's: at revs that are not lugged it is scored as a gear driven lugged is (lugging_other) (0: as
+  // any gear).
+  double creep_gears = 1.0;
   // 1: declutched on the move with the engine at idle (not in a shift), the car slows at the deceleration
   // GPS showed in that state, a driver's habit of braking to a stop or rolling (0: at the deceleration
   // learned declutched at large, shifts included, whatever the revs).

@@ -54,6 +54,7 @@ constexpr Rule kRules[] = {
     {"launch fade: no move-off at speed", "launch_fade=0"},
     {"rest output: slow declutched output is 0", "rest_output=0"},
     {"seen gears: a steady ratio off the model is a gear", "seen_gear_fixes=inf"},
+    {"creep gears: a gear seen only at lugged revs held there", "creep_gears=0"},
     {"idle braking: declutched at idle brakes as learned", "idle_braking=0"},
     {"idle braking prior: the fit's idle braking", "idle_braking_prior=0"},
     {"first gear at idle: a ladder too tall at idle lacks first", "first_gear_idle_speed=inf"},

@@ -49,3 +49,22 @@ TEST_CASE("seen gears: a fix later than half a second sights a gear only at a sp
   // A lag below half a second is no licence for a faster change: a fix's own timing scatters by that much.
   CHECK(sight(0.03, 0.0, 0.0, theta) == 0);
 }
+
+TEST_CASE("seen gears: a gear sighted only at lugged revs is a possible creep until sighted above them") {
+  // A car crawling in a queue at 1.1 m/s, its clutch slipping with the revs held at 15.8 Hz (lugged: below
+  // the revs the driver holds any gear above first at): a steady ratio of 0.07, off every gear of the model.
+  SeenGears seen(2.0);
+  // The first fix has no neighbour; the next two are sightings in a row, and the gear is seen at the second.
+  for (int k = 0; k < 4; ++k)
+    CHECK(seen.observe(k, 1.1, 15.8, 15.0, kModel, 0.5, true) == (k == 2));
+  std::array<SeenGears::Gear, SeenGears::kCapacity> gears{};
+  REQUIRE(seen.seen(gears) == 1);
+  CHECK(gears[0].theta == Approx(1.1 / 15.8).epsilon(0.001));
+  CHECK(gears[0].creep);
+  // The same ratio held at revs not lugged is a gear's: its first such sighting changes the gears seen.
+  CHECK_FALSE(seen.observe(4.0, 2.2, 31.6, 15.0, kModel, 0.5, false));  // the speed changed: no sighting
+  CHECK(seen.observe(5.0, 2.2, 31.6, 15.0, kModel, 0.5, false));
+  CHECK_FALSE(seen.observe(6.0, 2.2, 31.6, 15.0, kModel, 0.5, false));
+  REQUIRE(seen.seen(gears) == 1);
+  CHECK_FALSE(gears[0].creep);
+}

@@ -132,8 +132,12 @@ TEST_CASE("synth: a lost row in an outage is stepped over with the next reading"
     }
     return synthesized / driven - 1.0;
   };
+  // The row-by-row failure took the pull-away in a creep's ratio seen under GPS as a gear; a gear seen only
+  // at lugged revs (creep_gears) no longer takes it (-0.12 % row by row), so it is switched off here to keep
+  // the gaps' own part in view.
   gearpulse::SynthTuning row_by_row;
   row_by_row.gap_one_step = 0.0;
+  row_by_row.creep_gears = 0.0;
   const double stepped_over = outage_error({}), each_row = outage_error(row_by_row);
   INFO("outage distance error " << 100.0 * stepped_over << " % stepped over, " << 100.0 * each_row
                                 << " % row by row");

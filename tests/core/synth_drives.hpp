@@ -11,6 +11,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "core/gear_model.hpp"
@@ -66,9 +67,9 @@ inline std::shared_ptr<GearModel> recorded_model(const std::string& name) {
 
 // Steps `synth` through a drive recorded from the simulator at RATE ("10hz", "1hz"; tests/core/data/
 // NAME_RATE.csv: t, GPS speed or blank, frequency, true speed), calling check(t, true speed, output) after
-// every row.
-template <class Check>
-void replay_rows(const std::string& name, const std::string& rate, SpeedSynthesizer& synth, Check check) {
+// every row. `synth` a SpeedSynthesizer, or a LogReplayer stepping one as `gearpulse replay` does a log.
+template <class Synth, class Check>
+void replay_rows(const std::string& name, const std::string& rate, Synth& synth, Check check) {
   std::ifstream rows(GEARPULSE_SOURCE_DIR "/tests/core/data/" + name + "_" + rate + ".csv");
   REQUIRE(rows);
   std::string line;
@@ -83,7 +84,10 @@ void replay_rows(const std::string& name, const std::string& rate, SpeedSynthesi
     REQUIRE(cells.size() == 4);
     const double t = std::stod(cells[0]), freq = std::stod(cells[2]), truth = std::stod(cells[3]);
     const double gps = cells[1].empty() ? kMissing : std::stod(cells[1]);
-    check(t, truth, synth.step(t, gps, freq));
+    if constexpr (std::is_same_v<Synth, LogReplayer>)
+      check(t, truth, synth.step(Sample{t, gps, freq}));
+    else
+      check(t, truth, synth.step(t, gps, freq));
   }
 }
 
