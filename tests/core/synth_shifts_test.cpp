@@ -324,14 +324,15 @@ TEST_CASE(
   CHECK(std::abs(followed) < 5.0);
 }
 
-TEST_CASE("synth: at OBD 1 s rows a creep seen under GPS does not take the move-off after it") {
-  // Recorded from the simulator (tests/core/data/creep_then_launch_obd.csv): a 4-speed hatch in a jam, an OBD
-  // logger's rows at 1 s. From 240 s the car crawls in first gear at 1.1-1.2 m/s on a slipping clutch, the
-  // revs held at 15.8 Hz; GPS sees that steady ratio (0.07, against first gear's 0.12) on rows in a row, and
-  // the synthesis carries it as a gear the model lacks. GPS is lost at 302 s; at 311 s the car moves off in
-  // first, then climbs to fourth at 22 m/s. Carried as a gear at any revs, the creep's ratio took the
+TEST_CASE("synth: at OBD 1 s rows a creep seen under GPS is not climbed as a gear after a move-off") {
+  // Recorded from the simulator (tests/core/data/creep_then_launch_obd.csv): the compact-4 preset in a jam,
+  // an OBD logger's rows at 1 s. From 240 s the car crawls in first gear at 1.1-1.2 m/s on a slipping clutch,
+  // the revs held at 15.8 Hz; GPS sees that steady ratio (0.07, against first gear's 0.12) on rows in a row,
+  // and the synthesis carries it as a gear the model lacks. GPS is lost at 302 s; at 311 s the car moves off
+  // in first, then climbs to fourth at 22 m/s. Carried as a gear at any revs, the creep's ratio took the
   // move-off and the filter climbed a ladder of such ratios at half the car's speed (-73 %); seen only at
-  // lugged revs, it is as unlikely above them as a gear driven lugged (-29 %: the move-off still lags).
+  // lugged revs, it is as unlikely above them as a gear driven lugged (-29 %: the creep's ratio still keeps
+  // the move-off's first 2 s, and the filter climbs the gearbox one gear low from there).
   const auto outage = [](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(gearpulse::test::recorded_model("creep_then_launch"), tuning);
     gearpulse::LogReplayer replayer(synth);
