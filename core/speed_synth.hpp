@@ -156,6 +156,7 @@ class SpeedSynthesizer {
   void insert_fitted_lower_gears() noexcept;
   [[nodiscard]] int predict_lower_gears(int base, ModeArray& theta) const noexcept;
   void insert_below_ladder(std::span<const double> thetas) noexcept;
+  void shift_ladder(int from, int by) noexcept;
   void insert_predicted_gears() noexcept;
   [[nodiscard]] int predict_upper_gears(ModeArray& theta) const noexcept;
   void insert_upper_gears() noexcept;

@@ -111,6 +111,17 @@ void SpeedSynthesizer::insert_seen_gears() noexcept {
   }
 }
 
+// The ladder's gears from position `from` up move `by` positions higher, with everything kept per position.
+void SpeedSynthesizer::shift_ladder(int from, int by) noexcept {
+  for (int j = gears_; j >= from; --j) {
+    theta_[j + by] = theta_[j];
+    theta_se_[j + by] = theta_se_[j];
+    weight_[j + by] = weight_[j];
+    model_gear_[j + by] = model_gear_[j];
+    creep_[j + by] = creep_[j];
+  }
+}
+
 // One gear joins the ladder in theta order; a full ladder (kMaxGears) takes none: its gears and the
 // moving-off mode above them fill the mode arrays.
 int SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double weight,
@@ -119,13 +130,7 @@ int SpeedSynthesizer::insert_in_ladder(double theta, double theta_se, double wei
   int at = gears_ + 1;  // ladder position it takes
   for (int j = gears_; j >= 1 && theta < theta_[j]; --j)
     at = j;
-  for (int j = gears_; j >= at; --j) {
-    theta_[j + 1] = theta_[j];
-    theta_se_[j + 1] = theta_se_[j];
-    weight_[j + 1] = weight_[j];
-    model_gear_[j + 1] = model_gear_[j];
-    creep_[j + 1] = creep_[j];
-  }
+  shift_ladder(at, 1);
   creep_[at] = 0.0;
   theta_[at] = theta;
   theta_se_[at] = theta_se;
@@ -260,17 +265,13 @@ void SpeedSynthesizer::insert_fitted_lower_gears() noexcept {
 void SpeedSynthesizer::insert_below_ladder(std::span<const double> thetas) noexcept {
   const int n = static_cast<int>(thetas.size());
   if (n == 0) return;
-  for (int j = gears_; j >= 1; --j) {
-    theta_[j + n] = theta_[j];
-    theta_se_[j + n] = theta_se_[j];
-    weight_[j + n] = weight_[j];
-    model_gear_[j + n] = model_gear_[j];
-  }
+  shift_ladder(1, n);
   for (int k = 0; k < n; ++k) {
     theta_[k + 1] = thetas[static_cast<std::size_t>(k)];
     theta_se_[k + 1] = 0.0;
     weight_[k + 1] = kMinGearShare;
     model_gear_[k + 1] = 0;
+    creep_[k + 1] = 0.0;
   }
   gears_ += n;
 }
