@@ -195,6 +195,7 @@ bool LineReader::next_row(std::vector<std::string_view>& out, std::size_t need, 
     cells(out, need);
     if (const int header = header_names(out); header == 1) {
       log.skip(number, "the header again (a logger restarted?)");
+      restarts.push_back(number);
       continue;
     } else if (header == 2) {
       throw SampleFileError(log.log().name + ":" + std::to_string(number) +

@@ -55,9 +55,10 @@ class LineReader {
   // The next data record that is not blank, split into its first `need` cells; one with fewer, or one
   // that repeats the header, is reported and passed over. False at the end. Throws SampleFileError at a
   // header whose columns lie elsewhere than the log's (the rows after it would be misread). `rows` counts
-  // the records read as rows, short ones included.
+  // the records read as rows, short ones included; `restarts` the lines of the headers repeated, in order.
   bool next_row(std::vector<std::string_view>& out, std::size_t need, LogBuilder& log);
   std::size_t rows = 0;
+  std::vector<std::size_t> restarts;
 
  private:
   // One line as the file holds it, without its end (LF, CR LF or CR alone); false at the end.

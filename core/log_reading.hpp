@@ -78,6 +78,29 @@ struct TimeDrop {
 };
 std::vector<TimeDrop> time_order_drops(std::span<const double> t);
 
+// A header repeated mid-file (LineReader::restarts, the lines of the repeats) whose first row's time lies
+// behind the last row's before it is a logger that restarted and counts its time from the start again:
+// its rows, and those after them, are put on so that its first row comes kRestartGap after that last
+// row (a new drive; counted in SampleLog::restarts). A repeat whose times go on is left as it is. Rows
+// in file order: line(i) their lines, time(i) a reference to their times (in seconds).
+template <class Line, class Time>
+void join_restarts(std::size_t n, const std::vector<std::size_t>& restarts, Line line, Time time,
+                   SampleLog& log) {
+  auto repeat = restarts.begin();
+  double offset = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    bool after_repeat = false;
+    for (; repeat != restarts.end() && *repeat < line(i); ++repeat)
+      after_repeat = true;
+    double& t = time(i);
+    if (after_repeat && i > 0 && t + offset < time(i - 1)) {
+      offset = time(i - 1) + kRestartGap - t;
+      ++log.restarts;
+    }
+    t += offset;
+  }
+}
+
 // Collects samples and skip reports; enforces the rules common to every format.
 class LogBuilder {
  public:

@@ -253,6 +253,9 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     });
     if (clocks) unwrap_clock(parsed, out);
   }
+  join_restarts(
+      parsed.size(), reader.restarts, [&](std::size_t i) { return parsed[i].line; },
+      [&](std::size_t i) -> double& { return parsed[i].t; }, out.log());
   add_obd_rows(parsed, out, layout);
 }
 
@@ -307,6 +310,9 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     readings.push_back(
         {reader.number, seconds, value.value, pid, unit.empty() ? -1.0 : speed_unit(unit), value.problem});
   }
+  join_restarts(
+      readings.size(), reader.restarts, [&](std::size_t i) { return readings[i].line; },
+      [&](std::size_t i) -> double& { return readings[i].t; }, out.log());
   const auto find_pid = [&](auto&& good) -> std::optional<std::size_t> {
     for (std::size_t i = 0; i < names.size(); ++i)
       if (good(i)) return i;

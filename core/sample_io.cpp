@@ -44,6 +44,9 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
     lines.push_back(reader.number);
     rows.push_back(Sample{t.value, v.value, f.value});
   }
+  join_restarts(
+      rows.size(), reader.restarts, [&](std::size_t i) { return lines[i]; },
+      [&](std::size_t i) -> double& { return rows[i].t; }, out.log());
   TimeOrder order(rows, [](const Sample& r) { return r.t; });
   for (std::size_t i = 0; i < rows.size(); ++i)
     if (order.keep(i, lines[i], out)) out.add(lines[i], rows[i]);

@@ -48,6 +48,13 @@ struct InputRow {
   std::size_t sample = 0;
 };
 
+// The pause put between a logger's restarts in one file (SampleLog::restarts): ten minutes, beyond every
+// gap the logs' users bridge, so that no pair, lag, outage or habit spans it: the synthesis forgets the
+// speed after 30 s (SynthTuning::max_gap, ImmSpeedSynthesizer::kMaxGap), the fit pairs rows at most 5 s
+// apart (and three median row steps in its lag search), a clock's jump is 60 s (unwrap_clock), a driver's
+// habits average over 600 s.
+inline constexpr double kRestartGap = 600.0;  // s
+
 struct SampleLog {
   std::string name;
   SampleFileFormat format = SampleFileFormat::kGeneric;
@@ -58,6 +65,9 @@ struct SampleLog {
   std::size_t repeated_rows = 0;     // OBD rows dropped because nothing was refreshed (not errors)
   std::vector<InputRow> rows;        // with ReadOptions::keep_rows: every accepted row, in file order
   bool time_from_rows = false;       // no time column: t is the row counter times ReadOptions::row_seconds
+  // Headers repeated mid-file whose rows' times start again (from 0, or back): a logger that restarted. Each
+  // begins a new drive, its times put kRestartGap after the last row before it (join_restarts()).
+  std::size_t restarts = 0;
   // "name: ..." lines for a log that reads but looks wrong (a generic log's speed in km/h, its time in ms).
   std::vector<std::string> warnings;
 };

@@ -82,6 +82,9 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
     rows.push_back(row);
   }
   if (itime) unwrap_clock(rows, out);
+  join_restarts(
+      rows.size(), reader.restarts, [&](std::size_t i) { return rows[i].line; },
+      [&](std::size_t i) -> double& { return rows[i].t; }, out.log());
   const bool use_gps = choice == TorqueSpeed::kGps || (choice == TorqueSpeed::kAuto && gps_count > 0);
   if (!use_gps && !iobd)
     throw SampleFileError(out.log().name +

@@ -289,3 +289,77 @@ TEST_CASE("io: what exports write around the data") {
     CHECK(log.skipped[0].rfind("log.csv:13: not a number", 0) == 0);
   }
 }
+
+TEST_CASE("io: a header repeated where the time starts again begins a new drive, the pause put between") {
+  using gearpulse::kRestartGap;
+  // The samples of two halves read as files of their own, the second's times put on as a restart puts them.
+  const auto halves = [](const std::string& first, const std::string& second) {
+    SampleLog a = read_text(first);
+    const SampleLog b = read_text(second);
+    const double on = a.samples.back().t + kRestartGap - b.samples.front().t;
+    for (gearpulse::Sample s : b.samples) {
+      s.t += on;
+      a.samples.push_back(s);
+    }
+    return a.samples;
+  };
+  const auto same = [](const std::vector<gearpulse::Sample>& a, const std::vector<gearpulse::Sample>& b) {
+    REQUIRE(a.size() == b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      CHECK(a[i].t == Approx(b[i].t));
+      CHECK(a[i].speed == Approx(b[i].speed));
+      CHECK(a[i].freq == Approx(b[i].freq));
+    }
+  };
+  SECTION("a generic log whose time starts again from 0, and one whose time jumps back") {
+    const std::string first = "t,speed,freq\n0,1,20\n1,2,21\n2,3,22\n";
+    const std::string second = "t,speed,freq\n0,4,23\n1,5,24\n";
+    const SampleLog log = read_text(first + second);
+    same(log.samples, halves(first, second));
+    CHECK(log.samples[3].t == 2 + kRestartGap);
+    CHECK(log.restarts == 1);
+    REQUIRE(log.skipped.size() == 1);
+    CHECK(log.skipped[0] == "log.csv:5: the header again (a logger restarted?)");
+    const SampleLog back =
+        read_text("t,speed,freq\n100,1,20\n101,2,21\nt,speed,freq\n50,3,22\n51,4,23\n" + second + "2,6,25\n");
+    REQUIRE(back.samples.size() == 7);
+    CHECK(back.samples[2].t == 101 + kRestartGap);
+    CHECK(back.samples[3].t == 102 + kRestartGap);
+    CHECK(back.samples[4].t == 102 + 2 * kRestartGap);
+    CHECK(back.samples[6].t == 104 + 2 * kRestartGap);
+    CHECK(back.restarts == 2);
+    CHECK(back.skipped_count == 2);
+  }
+  SECTION("named columns, a Carloop log's engine run time and PID rows") {
+    same(read_text("Time,Engine RPM,Speed (km/h)\n0,800,10\n1,900,20\n"
+                   "Time,Engine RPM,Speed (km/h)\n0,1000,30\n1,1100,40\n")
+             .samples,
+         halves("Time,Engine RPM,Speed (km/h)\n0,800,10\n1,900,20\n",
+                "Time,Engine RPM,Speed (km/h)\n0,1000,30\n1,1100,40\n"));
+    const std::string carloop = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),\n";
+    const SampleLog run =
+        read_text(carloop + "7,800,10,\n8,900,20,\n" + carloop + "1,1000,30,\n2,1100,40,\n");
+    CHECK(run.restarts == 1);
+    REQUIRE(run.samples.size() == 4);
+    CHECK(run.samples[2].t >= run.samples[1].t + kRestartGap - 3.0);  // a run-time counter is up to 3 s old
+    const std::string pid = "SECONDS;PID;VALUE;UNITS\n";
+    const SampleLog pids = read_text(pid + "5;Engine RPM;800;rpm\n5;Speed;10;km/h\n" + pid +
+                                     "1;Engine RPM;900;rpm\n1;Speed;20;km/h\n");
+    CHECK(pids.restarts == 1);
+    REQUIRE(pids.samples.size() == 2);
+    CHECK(pids.samples[1].t == Approx(pids.samples[0].t + kRestartGap));
+    CHECK(pids.samples[1].speed == Approx(20 / 3.6));
+  }
+  SECTION("a header repeated where the time goes on, and a time running backwards without one") {
+    const SampleLog on = read_text("t,speed,freq\n0,1,20\n1,2,21\nt,speed,freq\n2,3,22\n");
+    CHECK(on.restarts == 0);
+    REQUIRE(on.samples.size() == 3);
+    CHECK(on.samples[2].t == 2);
+    const SampleLog back = read_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n1,4,23\n");
+    CHECK(back.restarts == 0);
+    REQUIRE(back.samples.size() == 2);
+    CHECK(back.skipped_count == 2);
+    CHECK(back.skipped[0] == "log.csv:4: time goes backwards (0 after 11)");
+    CHECK(back.skipped[1] == "log.csv:5: time goes backwards (1 after 11)");
+  }
+}

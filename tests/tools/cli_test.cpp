@@ -688,3 +688,44 @@ TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothi
         std::string::npos);
   CHECK(run(dir, "fit " + log).err.empty());
 }
+
+TEST_CASE("cli: a log whose header and time start again is fitted and replayed as a second drive") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string first = simulated_log(dir, 24, 300.0), second = simulated_log(dir, 25, 500.0);
+  const std::string restarted = (dir / "restarted.csv").string();
+  write(restarted, slurp(first) + slurp(second));
+  // The same drives in one file without the restart: the second's times written already put on.
+  const gearpulse::SampleLog a = read_log(first);
+  gearpulse::SampleLog b = read_log(second);
+  const double on = a.samples.back().t + gearpulse::kRestartGap - b.samples.front().t;
+  for (gearpulse::Sample& s : b.samples)
+    s.t += on;
+  std::vector<gearpulse::Sample> both = a.samples;
+  both.insert(both.end(), b.samples.begin(), b.samples.end());
+  const std::string joined = (dir / "joined.csv").string();
+  {
+    std::ofstream out(joined, std::ios::binary);
+    gearpulse::write_samples(out, both);
+  }
+
+  const Result fit = run(dir, "fit " + restarted), halves = run(dir, "fit " + first + " " + second);
+  REQUIRE(fit.status == 0);
+  REQUIRE(halves.status == 0);
+  CHECK(fit.out == halves.out);
+  const std::string said = restarted + ": 1 logger restart (the header again, the time from the start again)";
+  CHECK(fit.err.find(said) != std::string::npos);
+  CHECK(fit.err.find(said, fit.err.find(said) + 1) == std::string::npos);  // once, not per row
+  CHECK(fit.err.find("time goes backwards") == std::string::npos);
+
+  const Replay r = replay(dir, model, restarted), j = replay(dir, model, joined),
+               one = replay(dir, model, first);
+  REQUIRE(r.rows.size() == both.size());
+  CHECK(r.rows == j.rows);
+  REQUIRE(one.rows.size() == a.samples.size());
+  CHECK(std::equal(one.rows.begin(), one.rows.end(), r.rows.begin()));
+  CHECK(std::count_if(r.rows.begin() + static_cast<std::ptrdiff_t>(one.rows.size()), r.rows.end(),
+                      [](const auto& row) { return row[3] == "engine"; }) > 0);
+  CHECK(r.result.err.find(restarted + ":" + std::to_string(lines(slurp(first)) + 1) + ": the header again") !=
+        std::string::npos);
+}

@@ -83,6 +83,11 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
           path.c_str(), std::string(format_name(log.format)).c_str());
     for (const std::string& warning : log.warnings)
       std::fprintf(stderr, "gearpulse: warning: %s\n", warning.c_str());
+    if (log.restarts > 0)
+      std::fprintf(stderr,
+                   "gearpulse: %s: %zu logger restart%s (the header again, the time from the start again): "
+                   "each read as a new drive, %.0f s after the rows before it\n",
+                   path.c_str(), log.restarts, log.restarts == 1 ? "" : "s", kRestartGap);
     for (std::size_t i = 0; i < log.skipped.size() && i < kMaxPrintedSkips; ++i)
       std::fprintf(stderr, "%s\n", log.skipped[i].c_str());
     if (log.skipped_count > 0) {
