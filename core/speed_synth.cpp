@@ -175,7 +175,8 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
     habits_.forget_last_fix();
-    launches_.abort();  // the launch's shifts in the gap are unseen
+    habits_.end_flat_stretch();  // a flat stretch or a run of free revs is not seen whole across the gap
+    launches_.abort();           // the launch's shifts in the gap are unseen
     dt = 0.0;
   }
   if (!in_gap_) hop_ = dt;

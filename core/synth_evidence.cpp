@@ -41,6 +41,7 @@ double SpeedSynthesizer::free_share(double speed, double age) const noexcept {
   if (speed <= kMovingOffSpeed) return kStandingFree;
   const double moving = 1.0 - tuning_.idle_weight;
   if (!(tuning_.free_revs_fade > 0.0 && age > 0.0)) return moving;
+  // The floor only guards a declutch_time of 0 set with no run seen: the fade is then a step at once.
   const double fade = std::exp(-age / std::max(habits_.free_revs_time(tuning_), 1e-3));
   return kStandingFree + (moving - kStandingFree) * (lugged_ + (1.0 - lugged_) * fade);
 }
@@ -51,7 +52,7 @@ double SpeedSynthesizer::free_share(double speed, double age) const noexcept {
 double SpeedSynthesizer::log_declutched(double freq, double speed, double age) const noexcept {
   const double free = -kFreeRevsCost;
   if (!habits_.idle_known()) return free;
-  const double free_share = this->free_share(speed, age);
+  const double share = free_share(speed, age);
   // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
   // still cold) and the warm idle the fit saw are the idle now.
   const double floor = std::isfinite(habits_.warm_idle()) && tuning_.warm_floor > 0.0
@@ -60,7 +61,7 @@ double SpeedSynthesizer::log_declutched(double freq, double speed, double age) c
   // Rolling, many engines are held above their standing idle (the rolling idle, learned under GPS).
   const double top = speed > kMovingOffSpeed ? rolling_idle() : habits_.idle_mean();
   const double z = freq > top ? (freq - top) / idle_sd() : freq < floor ? (floor - freq) / idle_sd() : 0.0;
-  return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
+  return std::log((1.0 - share) * std::exp(-0.5 * z * z) + share * std::exp(free));
 }
 
 // Score of the frequency read inside the declutch of an upshift from `gear` that began within this step,
