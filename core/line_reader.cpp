@@ -115,7 +115,7 @@ bool LineReader::next() {
     std::vector<std::string> more;  // the lines the open cell goes on over
     std::size_t bytes = 0;
     Quotes quotes = Quotes::kOpen;
-    for (std::string next_line; quotes == Quotes::kOpen && more.size() < kMaxCellLines &&
+    for (std::string next_line; quotes == Quotes::kOpen && more.size() + 1 < kMaxCellLines &&
                                 bytes <= kMaxCellBytes && physical(next_line);) {
       quotes = scan_quotes(next_line, open, is_delimiter, row_delimiters);
       bytes += next_line.size();

@@ -85,6 +85,11 @@ struct Pipeline::Impl {
   std::atomic<double> gps_latency{PipelineTunables{}.gps_latency};
   std::atomic<double> min_snr_db{PipelineTunables{}.min_snr_db};
 
+  // The tracker thread waits on it; the capture thread signals it after each push into the audio ring,
+  // the gpsd client's thread after each report, halt() once it has set `stop`. Declared before the devices
+  // whose threads signal it, so it outlives them.
+  WakeEvent work;
+
   // Devices.
   LateOutput output;
   std::unique_ptr<PulseThread> pulses;
@@ -96,9 +101,6 @@ struct Pipeline::Impl {
   mutable std::atomic<std::int64_t> dropped_at_ns{0};
   std::chrono::steady_clock::time_point next_output_try;
 
-  // The tracker thread waits on it; the capture thread signals it after each push into the audio ring,
-  // the gpsd client's thread after each report, halt() once it has set `stop`.
-  WakeEvent work;
   AudioFrontEnd audio;  // opened, read and closed by the tracker thread; its status() read by any
 
   std::thread tracker_thread;

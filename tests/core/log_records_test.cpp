@@ -9,27 +9,16 @@
 #include <vector>
 
 #include "core/sample_io.hpp"
+#include "tests/core/read_log_text.hpp"
 
 using gearpulse::read_samples;
 using gearpulse::SampleFileError;
 using gearpulse::SampleFileFormat;
 using gearpulse::SampleLog;
+using gearpulse::test::error_of;
+using gearpulse::test::read_log_text;
 
 namespace {
-
-SampleLog read_text(const std::string& text, const gearpulse::ReadOptions& options = {}) {
-  std::istringstream in(text);
-  return read_samples(in, "log.csv", options);
-}
-
-std::string error_of(const std::string& text) {
-  try {
-    (void)read_text(text);
-  } catch (const SampleFileError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
 
 constexpr double kKnot = 1852.0 / 3600.0;  // m/s: a nautical mile (1852 m) an hour
 
@@ -37,7 +26,7 @@ constexpr double kKnot = 1852.0 / 3600.0;  // m/s: a nautical mile (1852 m) an h
 
 TEST_CASE("io: a quoted cell holding line breaks is one cell, its row numbered by its first line") {
   SECTION("a note over two and three lines in a generic log") {
-    const SampleLog log = read_text(
+    const SampleLog log = read_log_text(
         "t,speed,freq,note\n"
         "0,1,20,\"stopped at the lights,\nthen off\"\n"
         "1,2,21,\"a \"\"quoted\"\" word\non\nthree lines\"\n"
@@ -51,7 +40,7 @@ TEST_CASE("io: a quoted cell holding line breaks is one cell, its row numbered b
     CHECK(log.skipped[0].rfind("log.csv:7: not a number in column speed", 0) == 0);
   }
   SECTION("column names broken over lines, as a spreadsheet wraps them") {
-    const SampleLog log = read_text(
+    const SampleLog log = read_log_text(
         "\"Time\n(s)\",\"Engine\nRPM\",\"Vehicle speed\r\n(km/h)\"\r\n"
         "0,600,0\r\n1,1200,18\r\nx,1,1\r\n");
     CHECK(log.format == SampleFileFormat::kColumns);
@@ -63,16 +52,16 @@ TEST_CASE("io: a quoted cell holding line breaks is one cell, its row numbered b
   }
   SECTION("in a semicolon log with decimal commas and in one whose lines end in a CR alone") {
     const SampleLog semi =
-        read_text("Time;Engine RPM;Speed (km/h);Note\n0;600;0;\"a; b\nc\"\n0,5;1200;18;\n");
+        read_log_text("Time;Engine RPM;Speed (km/h);Note\n0;600;0;\"a; b\nc\"\n0,5;1200;18;\n");
     REQUIRE(semi.samples.size() == 2);
     CHECK(semi.samples[1].t == Approx(0.5));
-    const SampleLog cr = read_text("t,speed,freq,note\r0,1,20,\"x\ry\"\r1,2,21,\rz,1,1\r");
+    const SampleLog cr = read_log_text("t,speed,freq,note\r0,1,20,\"x\ry\"\r1,2,21,\rz,1,1\r");
     REQUIRE(cr.samples.size() == 2);
     REQUIRE(cr.skipped.size() == 1);
     CHECK(cr.skipped[0].rfind("log.csv:5: not a number", 0) == 0);
   }
   SECTION("a quote in a cell's text, not at its start, opens nothing") {
-    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,17\" wheels\n1,2,21,x\n2,3,22,y\"\n");
+    const SampleLog log = read_log_text("t,speed,freq,note\n0,1,20,17\" wheels\n1,2,21,x\n2,3,22,y\"\n");
     CHECK(log.samples.size() == 3);
     CHECK(log.skipped_count == 0);
   }
@@ -80,17 +69,17 @@ TEST_CASE("io: a quoted cell holding line breaks is one cell, its row numbered b
 
 TEST_CASE("io: a quote opened at a cell's start that does not close as a cell does is a character") {
   SECTION("never closed: each line is a row of its own, as without quotes") {
-    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,\"screen\n1,2,21,x\n2,3,22,y\n");
+    const SampleLog log = read_log_text("t,speed,freq,note\n0,1,20,\"screen\n1,2,21,x\n2,3,22,y\n");
     CHECK(log.samples.size() == 3);
     CHECK(log.skipped_count == 0);
   }
   SECTION("a later quote with text after it is no closing quote: no rows are joined") {
-    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,\"a\n1,2,21,x\"y\n2,3,22,z\n");
+    const SampleLog log = read_log_text("t,speed,freq,note\n0,1,20,\"a\n1,2,21,x\"y\n2,3,22,z\n");
     CHECK(log.samples.size() == 3);
     CHECK(log.skipped_count == 0);
   }
   SECTION("a line inside it with a row's delimiters is a row: the quote was a character") {
-    const SampleLog log = read_text("t,speed,freq,note\n0,1,20,\"a\n1,2,21,x\n2,3,22,y\"\n3,4,23,z\n");
+    const SampleLog log = read_log_text("t,speed,freq,note\n0,1,20,\"a\n1,2,21,x\n2,3,22,y\"\n3,4,23,z\n");
     CHECK(log.samples.size() == 4);
     CHECK(log.skipped_count == 0);
   }
@@ -99,7 +88,7 @@ TEST_CASE("io: a quote opened at a cell's start that does not close as a cell do
     for (int i = 0; i < 40; ++i)
       text += "more text\n";
     text += "end\"\n1,2,21,x\n";
-    const SampleLog log = read_text(text);
+    const SampleLog log = read_log_text(text);
     REQUIRE(log.samples.size() == 2);
     CHECK(log.samples[1].t == 1.0);
     CHECK(log.skipped_count == 41);
@@ -112,14 +101,14 @@ TEST_CASE("io: a speed in knots is converted, from a column's name or a PID's un
   for (const std::string name :
        {"Speed (knots)", "GPS speed [kn]", "speed kt", "Speed (kts)", "speed_knots", "Speed (knot)"}) {
     INFO(name);
-    const SampleLog log = read_text("time,rpm," + name + "\n0,800,10\n1,900,20\n");
+    const SampleLog log = read_log_text("time,rpm," + name + "\n0,800,10\n1,900,20\n");
     CHECK(log.format == SampleFileFormat::kColumns);
     REQUIRE(log.samples.size() == 2);
     CHECK(log.samples[1].speed == Approx(20 * kKnot));
   }
   // Words that hold the letters are no unit: the column states none.
   CHECK(error_of("time,rpm,Speed knock\n0,800,10\n").find("states no unit") != std::string::npos);
-  const SampleLog pid = read_text(
+  const SampleLog pid = read_log_text(
       "SECONDS;PID;VALUE;UNITS\n0;Speed (GPS);10;kn\n1;Engine RPM;800;rpm\n2;Speed (GPS);20;knots\n");
   REQUIRE(pid.samples.size() == 1);
   CHECK(pid.samples[0].speed == Approx(15 * kKnot));
@@ -127,7 +116,7 @@ TEST_CASE("io: a speed in knots is converted, from a column's name or a PID's un
 
 TEST_CASE("io: a row of units under the header names the units its columns' names do not") {
   const SampleLog log =
-      read_text("Time,Engine speed,Vehicle speed,Throttle\ns,rpm,kn,%\n0,800,0,5\n1,900,20,6\n");
+      read_log_text("Time,Engine speed,Vehicle speed,Throttle\ns,rpm,kn,%\n0,800,0,5\n1,900,20,6\n");
   CHECK(log.format == SampleFileFormat::kColumns);
   CHECK(log.speed_column == "Vehicle speed (kn)");
   REQUIRE(log.samples.size() == 2);
@@ -135,7 +124,7 @@ TEST_CASE("io: a row of units under the header names the units its columns' name
   CHECK(log.samples[1].speed == Approx(20 * kKnot));
   CHECK(log.samples[1].freq == Approx(15));
   CHECK(log.skipped_count == 0);
-  const SampleLog ms = read_text("Time,Engine RPM,GPS speed\n\nms,,km/h\n0,800,0\n500,900,18\n");
+  const SampleLog ms = read_log_text("Time,Engine RPM,GPS speed\n\nms,,km/h\n0,800,0\n500,900,18\n");
   REQUIRE(ms.samples.size() == 2);
   CHECK(ms.samples[1].t == Approx(0.5));
   // A first data row is no units row: the speed states no unit, as without one.
@@ -149,7 +138,7 @@ TEST_CASE("io: lines of an app's notes before the header are passed over, up to 
   const std::string notes =
       "This file is created using a lap timer v7.4\nFormat,3\nSession title,\"Evening, dry\"\n"
       "Created,15/03/2023,13:26\n\n";
-  const SampleLog log = read_text(notes + "Time (s);Engine RPM;Speed (km/h)\n0;800;0\n1;900;18\nx;1;1\n");
+  const SampleLog log = read_log_text(notes + "Time (s);Engine RPM;Speed (km/h)\n0;800;0\n1;900;18\nx;1;1\n");
   CHECK(log.format == SampleFileFormat::kColumns);
   REQUIRE(log.samples.size() == 2);
   CHECK(log.samples[1].speed == Approx(5));
@@ -161,13 +150,13 @@ TEST_CASE("io: lines of an app's notes before the header are passed over, up to 
   for (int i = 0; i < 32; ++i)
     many += "Note," + std::to_string(i) + "\n";
   CHECK(error_of(many + "t,speed,freq\n0,1,20\n").rfind("log.csv:1: unrecognised header 'Note,0'", 0) == 0);
-  CHECK(read_text(many.substr(many.find('\n') + 1) + "t,speed,freq\n0,1,20\n").samples.size() == 1);
+  CHECK(read_log_text(many.substr(many.find('\n') + 1) + "t,speed,freq\n0,1,20\n").samples.size() == 1);
 }
 
 TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad cell") {
   SECTION("generic: -, NA, N/A, null and spreadsheet errors are empty cells; the row is kept") {
     const SampleLog log =
-        read_text("t,speed,freq\n0,-,50\n1,NA,51\n2,n/a,52\n3,null,53\n4,#N/A,54\n5,3,#DIV/0!\n6,4,-\n");
+        read_log_text("t,speed,freq\n0,-,50\n1,NA,51\n2,n/a,52\n3,null,53\n4,#N/A,54\n5,3,#DIV/0!\n6,4,-\n");
     REQUIRE(log.samples.size() == 7);
     CHECK(log.skipped_count == 0);
     for (int i = 0; i < 5; ++i) {
@@ -178,7 +167,7 @@ TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad
     CHECK_FALSE(log.samples[6].has_freq());
   }
   SECTION("NaN is a number no computation should give: the row is bad, and the message says so") {
-    const SampleLog log = read_text("t,speed,freq\n0,1,50\n1,NaN,51\n2,1,nan\n3,1,52\n");
+    const SampleLog log = read_log_text("t,speed,freq\n0,1,50\n1,NaN,51\n2,1,nan\n3,1,52\n");
     REQUIRE(log.samples.size() == 2);
     REQUIRE(log.skipped.size() == 2);
     CHECK(log.skipped[0].rfind("log.csv:3: non-finite value in column speed: 'NaN'", 0) == 0);
@@ -186,15 +175,15 @@ TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad
     CHECK(log.skipped[1].rfind("log.csv:4: non-finite value in column freq", 0) == 0);
   }
   SECTION("a missing time is a bad row, whatever spells it") {
-    const SampleLog log = read_text("t,speed,freq\n0,1,50\n-,1,50\nN/A,1,50\n3,1,50\n");
+    const SampleLog log = read_log_text("t,speed,freq\n0,1,50\n-,1,50\nN/A,1,50\n3,1,50\n");
     REQUIRE(log.samples.size() == 2);
     REQUIRE(log.skipped.size() == 2);
     CHECK(log.skipped[0] == "log.csv:3: missing t");
     CHECK(log.skipped[1] == "log.csv:4: missing t");
   }
   SECTION("named columns: a speed or rpm that spells no value is missing, as an empty one is") {
-    const SampleLog log =
-        read_text("time,Engine RPM,Speed (km/h)\n0,800,-\n1,-,36\n2,N/A,\n3,,N/A\n4,1000,#N/A\n5,1100,40\n");
+    const SampleLog log = read_log_text(
+        "time,Engine RPM,Speed (km/h)\n0,800,-\n1,-,36\n2,N/A,\n3,,N/A\n4,1000,#N/A\n5,1100,40\n");
     REQUIRE(log.samples.size() == 5);  // rows 2 and 3 both carry nothing: the second repeats the first
     CHECK(log.skipped_count == 0);
     CHECK_FALSE(log.samples[0].has_speed());
@@ -203,7 +192,7 @@ TEST_CASE("io: a cell that spells no value is missing in every format, NaN a bad
     CHECK_FALSE(log.samples[3].has_speed());
   }
   SECTION("a PID reading of no value is a PID the car did not answer") {
-    const SampleLog log = read_text(
+    const SampleLog log = read_log_text(
         "SECONDS;PID;VALUE;UNITS\n0;Vehicle speed;36;km/h\n1;Engine RPM;-;rpm\n2;Engine RPM;800;rpm\n"
         "3;Vehicle speed;36;km/h\n");
     REQUIRE(log.samples.size() == 1);
@@ -216,12 +205,12 @@ TEST_CASE("io: what exports write around the data") {
     const std::string header =
         "GPS Time, Device Time, Longitude, Latitude,GPS Speed (Meters/second), Horizontal Dilution of "
         "Precision, Altitude, Bearing, G(x), G(y), G(z), G(calibrated),Engine RPM(rpm),Speed (OBD)(km/h)\n";
-    const SampleLog log = read_text(header +
-                                    "Thu Jan 11 19:06:38 EST 2018,11-Jan-2018 19:06:38.112,-85.7,38.2,10,"
-                                    "4.0,150,90,0.1,0.2,9.8,0.0,2000,36\n" +
-                                    header +
-                                    "Thu Jan 11 19:06:40 EST 2018,11-Jan-2018 19:06:40.112,-85.7,38.2,11,"
-                                    "4.0,150,90,0.1,0.2,9.8,0.0,2100,40\n");
+    const SampleLog log = read_log_text(header +
+                                        "Thu Jan 11 19:06:38 EST 2018,11-Jan-2018 19:06:38.112,-85.7,38.2,10,"
+                                        "4.0,150,90,0.1,0.2,9.8,0.0,2000,36\n" +
+                                        header +
+                                        "Thu Jan 11 19:06:40 EST 2018,11-Jan-2018 19:06:40.112,-85.7,38.2,11,"
+                                        "4.0,150,90,0.1,0.2,9.8,0.0,2100,40\n");
     CHECK(log.format == SampleFileFormat::kTorque);
     REQUIRE(log.samples.size() == 2);
     CHECK(log.samples[1].t == Approx(2));
@@ -230,20 +219,20 @@ TEST_CASE("io: what exports write around the data") {
   }
   SECTION("a header repeated with a byte-order mark, as two files joined end to end") {
     const SampleLog log =
-        read_text("\xEF\xBB\xBFt,speed,freq\n0,1,20\n1,2,21\n\xEF\xBB\xBFt,speed,freq\n2,3,22\n");
+        read_log_text("\xEF\xBB\xBFt,speed,freq\n0,1,20\n1,2,21\n\xEF\xBB\xBFt,speed,freq\n2,3,22\n");
     REQUIRE(log.samples.size() == 3);
     REQUIRE(log.skipped.size() == 1);
     CHECK(log.skipped[0] == "log.csv:4: the header again (a logger restarted?)");
   }
   SECTION("a header again with columns added after the ones read: its rows read as before") {
-    const SampleLog log = read_text(
+    const SampleLog log = read_log_text(
         "Time,Engine RPM,Speed (km/h)\n0,800,10\nTime,Engine RPM,Speed (km/h),Throttle (%)\n1,900,20,15\n");
     REQUIRE(log.samples.size() == 2);
     CHECK(log.samples[1].speed == Approx(20 / 3.6));
     CHECK(log.skipped_count == 1);
   }
   SECTION("a column named as Torque names its rpm, in another app's log: read by its names") {
-    const SampleLog log = read_text("Time,Engine RPM (rpm),Speed (knots)\n0,800,10\n");
+    const SampleLog log = read_log_text("Time,Engine RPM (rpm),Speed (knots)\n0,800,10\n");
     CHECK(log.format == SampleFileFormat::kColumns);
     REQUIRE(log.samples.size() == 1);
     CHECK(log.samples[0].speed == Approx(10 * kKnot));
@@ -251,7 +240,7 @@ TEST_CASE("io: what exports write around the data") {
           "log.csv:1: no speed values (no OBD speed column and no GPS speed value)");
   }
   SECTION("a value written with a plus sign; a file saved with two byte-order marks") {
-    const SampleLog log = read_text("\xEF\xBB\xBF\xEF\xBB\xBFt,speed,freq\n+0,+1.5,+20\n1,+-2,21\n");
+    const SampleLog log = read_log_text("\xEF\xBB\xBF\xEF\xBB\xBFt,speed,freq\n+0,+1.5,+20\n1,+-2,21\n");
     REQUIRE(log.samples.size() == 1);
     CHECK(log.samples[0].speed == 1.5);
     REQUIRE(log.skipped.size() == 1);
@@ -263,14 +252,14 @@ TEST_CASE("io: what exports write around the data") {
           "misread; split the log at this line");
   }
   SECTION("trailing delimiters, a byte-order mark and quoted names, decimal commas") {
-    const SampleLog log = read_text(
+    const SampleLog log = read_log_text(
         "\xEF\xBB\xBF\"time\";\"Engine RPM (rpm)\";\"Vehicle speed (km/h)\";\n"
         "\"0,0\";\"800\";\"0\";\n\"0,5\";\"1200\";\"18\";;;\n");
     CHECK(log.format == SampleFileFormat::kColumns);
     REQUIRE(log.samples.size() == 2);
     CHECK(log.samples[1].t == Approx(0.5));
     CHECK(log.samples[1].speed == Approx(5));
-    const SampleLog sep = read_text(
+    const SampleLog sep = read_log_text(
         "\xEF\xBB\xBFsep=,\nTime (sec),Engine RPM (RPM),Vehicle speed (MPH),\n"
         "0.00,800,0,\n1.00,1200,10,\n");
     REQUIRE(sep.samples.size() == 2);
@@ -282,8 +271,8 @@ TEST_CASE("io: what exports write around the data") {
     for (int i = 0; i < 8; ++i)
       quoted_note.append(1 << 16, 'y').push_back('\n');
     quoted_note += "\"";
-    const SampleLog log = read_text("t,speed,freq,note\n0,1,20," + long_note + "\n1,2,21," + quoted_note +
-                                    "\n2,3,22,\nx,1,1\n");
+    const SampleLog log = read_log_text("t,speed,freq,note\n0,1,20," + long_note + "\n1,2,21," + quoted_note +
+                                        "\n2,3,22,\nx,1,1\n");
     REQUIRE(log.samples.size() == 3);
     REQUIRE(log.skipped.size() == 1);
     CHECK(log.skipped[0].rfind("log.csv:13: not a number", 0) == 0);
@@ -294,8 +283,8 @@ TEST_CASE("io: a header repeated where the time starts again begins a new drive,
   using gearpulse::kRestartGap;
   // The samples of two halves read as files of their own, the second's times put on as a restart puts them.
   const auto halves = [](const std::string& first, const std::string& second) {
-    SampleLog a = read_text(first);
-    const SampleLog b = read_text(second);
+    SampleLog a = read_log_text(first);
+    const SampleLog b = read_log_text(second);
     const double on = a.samples.back().t + kRestartGap - b.samples.front().t;
     for (gearpulse::Sample s : b.samples) {
       s.t += on;
@@ -314,14 +303,14 @@ TEST_CASE("io: a header repeated where the time starts again begins a new drive,
   SECTION("a generic log whose time starts again from 0, and one whose time jumps back") {
     const std::string first = "t,speed,freq\n0,1,20\n1,2,21\n2,3,22\n";
     const std::string second = "t,speed,freq\n0,4,23\n1,5,24\n";
-    const SampleLog log = read_text(first + second);
+    const SampleLog log = read_log_text(first + second);
     same(log.samples, halves(first, second));
     CHECK(log.samples[3].t == 2 + kRestartGap);
     CHECK(log.restarts == 1);
     REQUIRE(log.skipped.size() == 1);
     CHECK(log.skipped[0] == "log.csv:5: the header again (a logger restarted?)");
-    const SampleLog back =
-        read_text("t,speed,freq\n100,1,20\n101,2,21\nt,speed,freq\n50,3,22\n51,4,23\n" + second + "2,6,25\n");
+    const SampleLog back = read_log_text(
+        "t,speed,freq\n100,1,20\n101,2,21\nt,speed,freq\n50,3,22\n51,4,23\n" + second + "2,6,25\n");
     REQUIRE(back.samples.size() == 7);
     CHECK(back.samples[2].t == 101 + kRestartGap);
     CHECK(back.samples[3].t == 102 + kRestartGap);
@@ -331,31 +320,31 @@ TEST_CASE("io: a header repeated where the time starts again begins a new drive,
     CHECK(back.skipped_count == 2);
   }
   SECTION("named columns, a Carloop log's engine run time and PID rows") {
-    same(read_text("Time,Engine RPM,Speed (km/h)\n0,800,10\n1,900,20\n"
-                   "Time,Engine RPM,Speed (km/h)\n0,1000,30\n1,1100,40\n")
+    same(read_log_text("Time,Engine RPM,Speed (km/h)\n0,800,10\n1,900,20\n"
+                       "Time,Engine RPM,Speed (km/h)\n0,1000,30\n1,1100,40\n")
              .samples,
          halves("Time,Engine RPM,Speed (km/h)\n0,800,10\n1,900,20\n",
                 "Time,Engine RPM,Speed (km/h)\n0,1000,30\n1,1100,40\n"));
     const std::string carloop = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),\n";
     const SampleLog run =
-        read_text(carloop + "7,800,10,\n8,900,20,\n" + carloop + "1,1000,30,\n2,1100,40,\n");
+        read_log_text(carloop + "7,800,10,\n8,900,20,\n" + carloop + "1,1000,30,\n2,1100,40,\n");
     CHECK(run.restarts == 1);
     REQUIRE(run.samples.size() == 4);
     CHECK(run.samples[2].t >= run.samples[1].t + kRestartGap - 3.0);  // a run-time counter is up to 3 s old
     const std::string pid = "SECONDS;PID;VALUE;UNITS\n";
-    const SampleLog pids = read_text(pid + "5;Engine RPM;800;rpm\n5;Speed;10;km/h\n" + pid +
-                                     "1;Engine RPM;900;rpm\n1;Speed;20;km/h\n");
+    const SampleLog pids = read_log_text(pid + "5;Engine RPM;800;rpm\n5;Speed;10;km/h\n" + pid +
+                                         "1;Engine RPM;900;rpm\n1;Speed;20;km/h\n");
     CHECK(pids.restarts == 1);
     REQUIRE(pids.samples.size() == 2);
     CHECK(pids.samples[1].t == Approx(pids.samples[0].t + kRestartGap));
     CHECK(pids.samples[1].speed == Approx(20 / 3.6));
   }
   SECTION("a header repeated where the time goes on, and a time running backwards without one") {
-    const SampleLog on = read_text("t,speed,freq\n0,1,20\n1,2,21\nt,speed,freq\n2,3,22\n");
+    const SampleLog on = read_log_text("t,speed,freq\n0,1,20\n1,2,21\nt,speed,freq\n2,3,22\n");
     CHECK(on.restarts == 0);
     REQUIRE(on.samples.size() == 3);
     CHECK(on.samples[2].t == 2);
-    const SampleLog back = read_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n1,4,23\n");
+    const SampleLog back = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n1,4,23\n");
     CHECK(back.restarts == 0);
     REQUIRE(back.samples.size() == 2);
     CHECK(back.skipped_count == 2);
