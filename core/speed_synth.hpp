@@ -43,9 +43,10 @@
 //
 // This file is the mode filter: its state and the step's handling of time and tracker gaps are in
 // speed_synth.cpp, one step of the filter in synth_step.cpp, its mode changes in synth_rates.cpp, the scores
-// of the frequency in each mode in synth_evidence.cpp, its ladder in synth_ladder.cpp, and its constants are
-// SynthTuning (synth_tuning.hpp). What it learns of the engine and driver is SynthHabits (synth_habits.hpp),
-// and how its output is chosen from the belief is SynthOutputPolicy (synth_output.hpp).
+// of the frequency in each mode in synth_evidence.cpp, its ladder in synth_ladder.cpp (the gears that join it
+// in synth_ladder_insert.cpp), and its constants are SynthTuning (synth_tuning.hpp). What it learns of the
+// engine and driver is SynthHabits (synth_habits.hpp), and how its output is chosen from the belief is
+// SynthOutputPolicy (synth_output.hpp).
 //
 // Real-time use: step() is noexcept and never allocates; all state lives in fixed arrays. set_model()
 // copies the model's few numbers into those arrays, so a model can be swapped between any two steps.
