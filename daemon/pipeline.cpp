@@ -18,6 +18,7 @@
 #include "core/sliding_dft_tracker.hpp"
 #include "core/spsc_ring.hpp"
 #include "daemon/fault_reporter.hpp"
+#include "daemon/pipeline_impl.hpp"
 #include "daemon/synthesis_stage.hpp"
 #include "daemon/watchdog.hpp"
 #include "drivers/audio_front_end.hpp"
@@ -32,14 +33,6 @@
 
 namespace gearpulse::daemon {
 namespace {
-
-constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
-// Longest wait of the tracker thread without work (audio, a GPS report, a step on GPS alone, an open of
-// the capture, stop()): the period of its heartbeat, which the watchdog judges (kStallNs = 5 s). A
-// twentieth of that limit, as the pulse thread's: only a wait stretched twenty-fold reads as hung.
-constexpr double kTrackerBeat = 0.25;  // s
-// GPS fixes wait this long for the audio window centred on them before they are given up (FixPairer).
-constexpr double kPairWait = 3.0;
 
 PcmFormat format_of(const std::string& name) {
   if (name == "S32_LE") return PcmFormat::kS32;
@@ -69,85 +62,12 @@ constexpr std::chrono::nanoseconds kReaderBehind = std::chrono::seconds(5);
 
 }  // namespace
 
-struct Pipeline::Impl {
-  Impl(const Config& c, ModelHolder& m, TrainingStore& s)
-      : config(c),
-        model(m),
-        store(s),
-        faults(config.audio.device),
-        audio(capture_config_of(config.audio), config.audio.ring_seconds, &work) {}
-
-  const Config config;
-  ModelHolder& model;
-  TrainingStore& store;
-  FaultReporter faults;
-
-  std::atomic<double> gps_latency{PipelineTunables{}.gps_latency};
-  std::atomic<double> min_snr_db{PipelineTunables{}.min_snr_db};
-
-  // The tracker thread waits on it; the capture thread signals it after each push into the audio ring,
-  // the gpsd client's thread after each report, halt() once it has set `stop`. Declared before the devices
-  // whose threads signal it, so it outlives them.
-  WakeEvent work;
-
-  // Devices.
-  LateOutput output;
-  std::unique_ptr<PulseThread> pulses;
-  std::unique_ptr<GpsdClient> gps;
-  mutable std::mutex output_mutex;  // output_error: set by the main thread, read by status queries
-  std::string output_error;
-  // Last dropped-pulse count a snapshot saw and when it changed (snapshots come from several threads).
-  mutable std::atomic<std::uint64_t> dropped_seen{0};
-  mutable std::atomic<std::int64_t> dropped_at_ns{0};
-  std::chrono::steady_clock::time_point next_output_try;
-
-  AudioFrontEnd audio;  // opened, read and closed by the tracker thread; its status() read by any
-
-  std::thread tracker_thread;
-  std::atomic<bool> stop{false};
-  std::atomic<bool> tracker_done{false};  // tracker_loop() has returned (its capture closed)
-
-  // Published by the tracker thread.
-  std::atomic<std::int64_t> tracker_beat{0};
-  std::atomic<std::uint64_t> tracker_turns{0};
-  std::atomic<double> speed{0.0};
-  std::atomic<double> speed_sd{0.0};
-  std::atomic<int> gear{0};
-  std::atomic<SpeedSource> source{SpeedSource::kNone};
-  std::atomic<double> track_freq{kNan};
-  std::atomic<double> track_snr{kNan};
-  std::atomic<bool> track_confident{false};
-  std::atomic<std::uint64_t> pairs_added{0};
-  std::atomic<std::uint64_t> pairs_lost{0};  // the main thread did not drain them in time
-  // Training pairs from the tracker thread to the main thread, which adds them to the store: the
-  // tracker never waits for the store's lock (held by the idle-priority retrainer while it copies, or
-  // by a save), so no other process's load can stall it through a priority inversion.
-  SpscRing<Sample> pairs{1024};
-  std::atomic<double> last_fix_speed{kNan};  // m/s of the last usable fix
-  std::atomic<std::int64_t> last_fix_ns{0};  // its receive time, 0 = none yet
-  std::atomic<std::uint64_t> ring_drops{0};
-
-  void open_output();
-  void open_output_device();
-  // The tracker thread's state between two turns of its loop.
-  struct Tracking {
-    explicit Tracking(double band_low) : synthesis(band_low) {}
-    SynthesisStage synthesis;                    // told the tracker's band floor (tracker.band_low)
-    ModelPtr model;                              // the one the synthesis uses
-    std::unique_ptr<SlidingDftTracker> tracker;  // while audio is open
-    std::vector<float> block;                    // one read of the ring
-    FixPairer fixes{kPairWait};
-    std::uint64_t model_generation = 0;  // ModelHolder::generation() when `model` was taken
-    std::int64_t last_rx = 0;            // receive time of the last GPS report looked at
-    double last_points_at = 0.0;         // CLOCK_MONOTONIC s when the tracker last gave points
-  };
-  bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
-  void adopt_model(Tracking& k) noexcept;
-  bool track_audio(Tracking& k, double now) noexcept;
-  void step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept;
-  void pair_fixes(Tracking& k, double now) noexcept;
-  void tracker_loop() noexcept;
-};
+Pipeline::Impl::Impl(const Config& c, ModelHolder& m, TrainingStore& s)
+    : config(c),
+      model(m),
+      store(s),
+      faults(config.audio.device),
+      audio(capture_config_of(config.audio), config.audio.ring_seconds, &work) {}
 
 void Pipeline::Impl::open_output() {
   const OutputConfig& o = config.output;
@@ -213,175 +133,6 @@ void Pipeline::Impl::open_output_device() {
     faults.clear("output", text + " (opened on a retry)");
   else
     spdlog::info("{}", text);
-}
-
-// Opens the capture with backoff (AudioFrontEnd) and, for the rate the device gave, the tracker; the
-// daemon runs on GPS alone while it fails.
-bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
-  const bool opened = audio.open(
-      std::chrono::steady_clock::now(), [&](unsigned rate, const std::string& describe) -> std::string {
-        std::string error;
-        tracker = SlidingDftTracker::create(tracker_config_of(config.tracker, rate), error);
-        return tracker ? std::string() : "tracker cannot run on " + describe + ": " + error;
-      });
-  if (opened) {
-    faults.clear("audio", "audio: capturing from " + audio.describe());
-    return true;
-  }
-  tracker.reset();
-  faults.report("audio", spdlog::level::err,
-                fmt::format("audio: {}; retrying in {:.1f} s (the delay grows to 10 s), speed follows GPS "
-                            "meanwhile (without a fix it coasts down from the last speed)",
-                            audio.error(), static_cast<double>(audio.retry_delay().count()) / 1000.0));
-  return false;
-}
-
-// Publishes one step of the synthesis: to the pulse thread and to the snapshot.
-void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept {
-  // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
-  // disagreement between the sound card's clock and the GPS cannot hide a good fix). Lock-free: the
-  // gpsd thread never holds up a hop.
-  const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
-  const SynthesisStage::Step s =
-      k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed),
-                       gps_latency.load(std::memory_order_relaxed));
-  track_freq.store(tracked ? freq : kNan, std::memory_order_relaxed);
-  track_snr.store(snr, std::memory_order_relaxed);
-  track_confident.store(s.confident, std::memory_order_relaxed);
-  if (pulses) pulses->set_speed(s.out.speed);
-  speed.store(s.out.speed, std::memory_order_relaxed);
-  speed_sd.store(s.out.speed_sd, std::memory_order_relaxed);
-  gear.store(s.out.gear, std::memory_order_relaxed);
-  source.store(s.out.source, std::memory_order_relaxed);
-}
-
-// A retrained model takes over between two steps. The holder's lock (which the idle-priority retrainer
-// takes to swap the model) is taken only when its generation says the model changed, not at every turn.
-void Pipeline::Impl::adopt_model(Tracking& k) noexcept {
-  const std::uint64_t generation = model.generation();
-  if (generation == k.model_generation) return;
-  k.model_generation = generation;
-  auto m = model.get();
-  if (m == k.model) return;
-  k.model = std::move(m);
-  if (!k.synthesis.set_model(k.model)) faults.post({FaultNote::Kind::kModelRejected, k.model->gears.size()});
-}
-
-// Reads what the ring holds (at most 64 blocks) into the tracker and steps the synthesis at each point
-// it gives. True if it gave any.
-bool Pipeline::Impl::track_audio(Tracking& k, double now) noexcept {
-  bool got_points = false;
-  SlidingDftTracker& tracker = *k.tracker;
-  for (int burst = 0; burst < 64; ++burst) {
-    const AudioBlock b = audio.read(std::span<float>(k.block));
-    if (b.frames == 0) break;
-    if (b.first) {
-      tracker.start(b.t0);
-    } else if (b.timed) {
-      // A hole before the block is marked so no window spans it, then the clock is re-anchored (small
-      // differences are drift corrections).
-      if (b.hole > 0) {
-        tracker.skip(b.hole);
-        if (b.hole_lost) faults.post({FaultNote::Kind::kAudioHole, b.hole});
-      }
-      tracker.retime(b.t0);
-    }
-    // Pushed in pieces of at most half the tracker's output queue of hops, drained after each: a backlog
-    // read in one pass (a stall) or a long period at short hops holds more hops than the queue, whose
-    // oldest would be dropped.
-    const std::size_t piece = tracker.max_push_frames();
-    for (std::size_t at = 0; at < b.frames; at += piece) {
-      tracker.push(std::span<const float>(k.block.data() + at, std::min(piece, b.frames - at)));
-      TrackPoint p;
-      while (tracker.pop(p)) {
-        got_points = true;
-        k.last_points_at = now;
-        step(k, p.t, p.freq, p.snr_db, p.tracked);
-      }
-    }
-    if (b.frames < k.block.size()) break;
-  }
-  ring_drops.store(audio.ring_dropped(), std::memory_order_relaxed);
-  return got_points;
-}
-
-// Training pairs: each new usable GPS fix waits in the FixPairer for the window centred on its time.
-void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
-  if (gps) {
-    if (const auto rep = gps->latest(); rep && rep->rx_ns != k.last_rx) {
-      k.last_rx = rep->rx_ns;
-      if (rep->usable()) {
-        last_fix_speed.store(rep->speed, std::memory_order_relaxed);
-        last_fix_ns.store(rep->rx_ns, std::memory_order_relaxed);
-        const double t_fix = rep->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
-        (void)k.fixes.add({t_fix, wall_now() - (now - t_fix), rep->speed});
-      }
-    }
-  }
-  if (k.fixes.waiting() == 0) return;
-  for (const PendingFix& f : k.fixes.take_due(now, k.tracker ? k.tracker->latest_time() : kNan)) {
-    const TrackPoint p = k.tracker->at(f.t);
-    const auto pair =
-        training_pair(f, p.freq, p.snr_db, p.tracked, min_snr_db.load(std::memory_order_relaxed));
-    if (pair && !pairs.try_push(*pair)) pairs_lost.fetch_add(1, std::memory_order_relaxed);
-  }
-}
-
-// The live data flow, one turn for each piece of work: audio front end -> tracker -> synthesis -> pulse
-// thread, and GPS fixes -> fix pairer -> training pairs for the main thread. Between turns the thread
-// waits on `work` until the next thing it does by the clock: a step on GPS alone, an open of the capture,
-// its heartbeat.
-void Pipeline::Impl::tracker_loop() noexcept {
-  Tracking k(config.tracker.band_low);
-  k.model_generation = model.generation();
-  k.model = model.get();
-  k.synthesis.set_model(k.model);
-  // Without audio the synthesis steps on GPS alone, one step per hop and window; with audio only when
-  // the tracker has given no points for longer than audio ever pauses. That silence is judged by the
-  // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
-  // period and more), and a step stamped "now" would run ahead of every point still to come.
-  const double no_audio_step_s = 2.0 * config.tracker.hop + config.tracker.window;
-  // A decision lag holds the points back as many hops more (at the stream's start and after a hole).
-  const double lag_s = std::round(config.tracker.decision_lag / config.tracker.hop) * config.tracker.hop;
-  double audio_stall_s = no_audio_step_s + lag_s;
-
-  while (!stop.load(std::memory_order_relaxed)) {
-    const std::int64_t now_ns = monotonic_ns();
-    tracker_beat.store(now_ns, std::memory_order_relaxed);
-    tracker_turns.fetch_add(1, std::memory_order_relaxed);
-    const double now = now_ns * 1e-9;
-    adopt_model(k);
-    if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(k.tracker)) {
-      k.block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
-      // Audio arrives a period at a time: only a wait longer than two of them is a stall.
-      audio_stall_s =
-          no_audio_step_s + lag_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
-      k.last_points_at = now;
-    }
-    const bool got_points = k.tracker && track_audio(k, now);
-    // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
-    const bool audio_silent = !k.tracker || now - k.last_points_at > audio_stall_s;
-    if (!got_points && audio_silent && now - k.synthesis.last_step_time() > no_audio_step_s)
-      step(k, now - config.tracker.window / 2.0, kNan, kNan, false);
-    pair_fixes(k, now);
-    if (k.tracker) faults.audio(audio.stats(), std::chrono::steady_clock::now());
-    if (k.tracker && audio.has_frames()) continue;  // more than one turn's reading was waiting
-    // The wait took the signals given before it, and this turn then read the ring and the newest GPS
-    // report and looked at `stop`: what was pushed, reported or asked since has signalled `work` again.
-    double until = now + kTrackerBeat;
-    // The next step on GPS alone (the conditions above, as times).
-    const double gps_step_at = k.synthesis.last_step_time() + no_audio_step_s;
-    until =
-        std::min(until, k.tracker ? std::max(gps_step_at, k.last_points_at + audio_stall_s) : gps_step_at);
-    if (!audio.is_open()) {
-      const auto to_open = audio.next_open() - std::chrono::steady_clock::now();
-      until = std::min(until, now + std::chrono::duration<double>(to_open).count());
-    }
-    // A microsecond past it: the comparisons above are strict.
-    work.wait_until(static_cast<std::int64_t>(std::ceil(until * 1e9)) + 1000);
-  }
-  audio.close();
-  tracker_done.store(true);
 }
 
 Pipeline::Pipeline(const Config& config, ModelHolder& model, TrainingStore& store)
