@@ -52,7 +52,6 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(output_quantile),
     GEARPULSE_FIELD(climb_cost),
     GEARPULSE_FIELD(declutch_time),
-    GEARPULSE_FIELD(free_revs_fade),
     GEARPULSE_FIELD(clutch_track_share),
     GEARPULSE_FIELD(leave_cap),
     GEARPULSE_FIELD(bite_gap),

@@ -175,7 +175,7 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
     habits_.forget_last_fix();
-    habits_.end_flat_stretch();  // a flat stretch or a run of free revs is not seen whole across the gap
+    habits_.end_flat_stretch();  // a flat stretch of revs is not seen whole across the gap
     launches_.abort();           // the launch's shifts in the gap are unseen
     dt = 0.0;
   }

@@ -13,8 +13,7 @@
 // In gear i the engine frequency is speed / theta_i (eq. (3)); declutched the car rolls and brakes and
 // the engine falls to idle (learned while GPS says the car stands, or taken from the fit; rolling, the
 // engine may be held above it, at a rolling idle learned while GPS shows the car slowing at flat revs that
-// no gear explains) or runs free (through an outage less and less often the longer the clutch has been out
-// on the move, over the time this driver's declutches hold free revs, learned under GPS);
+// no gear explains) or runs free;
 // moving off, the clutch slips and the car gains speed at a launch acceleration until first gear bites.
 // Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
 // shifts down; out of first gear the sooner the longer it has lasted, since first gear is for moving off). A
@@ -192,8 +191,8 @@ class SpeedSynthesizer {
   void clutch_transitions(double dt, double speed, ModeArray& row) const noexcept;
   void launch_transitions(double dt, ModeArray& row) const noexcept;
   void predict(Track& x, int to, double dt) const noexcept;
-  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight, bool short_step,
-                                    double clutch_age) const noexcept;
+  [[nodiscard]] double log_evidence(Track& x, int mode, double freq, double weight,
+                                    bool short_step) const noexcept;
   SynthOutput filter_step(double dt, double gps, double freq, bool gps_new, double gps_age) noexcept;
   [[nodiscard]] StepInput step_input(double dt, double gps, double freq, bool gps_new,
                                      double gps_age) const noexcept;
@@ -205,8 +204,7 @@ class SpeedSynthesizer {
                                   double& score) const noexcept;
   void merge_histories(double dt) noexcept;
   void prune_histories(bool short_step, bool have_gps) noexcept;
-  [[nodiscard]] double log_declutched(double freq, double speed, double age) const noexcept;
-  [[nodiscard]] double free_share(double speed, double age) const noexcept;
+  [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
   // The output at a hop of a tracker gap in an outage, `elapsed` s after the last step: the belief of that
   // step, every mode's track predicted over `elapsed` under its own motion.

@@ -28,31 +28,15 @@ double SpeedSynthesizer::freq_sigma(double freq) const noexcept {
   return std::max(sigma_s_, tuning_.min_freq_rel * freq);
 }
 
-// Share of the readings declutched at `speed` that are free revs, the clutch's history `age` s old. Revs
-// running free are a shift in progress; with the car at rest they are rare (a blip), and revs held above
-// idle there mean moving off. On the move, free revs that last: a declutched engine's revs fall to idle
-// within a shift's declutch, so through an outage the share fades with the age of the clutch's history
-// toward the standing one, over the time this driver's declutches hold the revs above idle (learned under
-// GPS, SynthHabits::free_revs_time). Not at revs where a gear is lugged (lugged_): there a gear is no real
-// alternative to the clutch, and the revs are a rolling idle held high, not a declutch running out. Under
-// GPS the fix gives every history its speed, and the habits are learned from the belief as it is.
-double SpeedSynthesizer::free_share(double speed, double age) const noexcept {
-  constexpr double kStandingFree = 0.05;
-  if (speed <= kMovingOffSpeed) return kStandingFree;
-  const double moving = 1.0 - tuning_.idle_weight;
-  if (!(tuning_.free_revs_fade > 0.0 && age > 0.0)) return moving;
-  // The floor only guards a declutch_time of 0 set with no run seen: the fade is then a step at once.
-  const double fade = std::exp(-age / std::max(habits_.free_revs_time(tuning_), 1e-3));
-  return kStandingFree + (moving - kStandingFree) * (lugged_ + (1.0 - lugged_) * fade);
-}
-
-// Score of the frequency declutched at `speed`, the clutch's history `age` s old (0: entered within the
-// step, or GPS present): the engine falls to idle (a spike, as the paper's g() has one at standstill,
-// section 3.1) or runs free anywhere in its range (free_share).
-double SpeedSynthesizer::log_declutched(double freq, double speed, double age) const noexcept {
+// Score of the frequency declutched at `speed`: the engine falls to idle (a spike, as the paper's g() has one
+// at standstill, section 3.1) or runs free anywhere in its range.
+double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcept {
   const double free = -kFreeRevsCost;
   if (!habits_.idle_known()) return free;
-  const double share = free_share(speed, age);
+  // Revs running free are a shift in progress; with the car at rest they are rare (a blip), and revs held
+  // above idle there mean moving off.
+  constexpr double kStandingFree = 0.05;
+  const double free_share = speed > kMovingOffSpeed ? 1.0 - tuning_.idle_weight : kStandingFree;
   // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
   // still cold) and the warm idle the fit saw are the idle now.
   const double floor = std::isfinite(habits_.warm_idle()) && tuning_.warm_floor > 0.0
@@ -61,7 +45,7 @@ double SpeedSynthesizer::log_declutched(double freq, double speed, double age) c
   // Rolling, many engines are held above their standing idle (the rolling idle, learned under GPS).
   const double top = speed > kMovingOffSpeed ? rolling_idle() : habits_.idle_mean();
   const double z = freq > top ? (freq - top) / idle_sd() : freq < floor ? (floor - freq) / idle_sd() : 0.0;
-  return std::log((1.0 - share) * std::exp(-0.5 * z * z) + share * std::exp(free));
+  return std::log((1.0 - free_share) * std::exp(-0.5 * z * z) + free_share * std::exp(free));
 }
 
 // Score of the frequency read inside the declutch of an upshift from `gear` that began within this step,
@@ -123,8 +107,8 @@ double SpeedSynthesizer::lugging(int gear) const noexcept {
 }
 
 // Log-score of the frequency under `mode` given the track (updated in place by a gear's reading).
-double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight, bool short_step,
-                                      double clutch_age) const noexcept {
+double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double weight,
+                                      bool short_step) const noexcept {
   if (!std::isfinite(freq)) {
     // A reading lost for kTrackerGap or less (one row of a 1 Hz log) says nothing of the mode. Lost for
     // longer, a gear fades.
@@ -138,7 +122,7 @@ double SpeedSynthesizer::log_evidence(Track& x, int mode, double freq, double we
   if (mode == 0) {
     // Rolling, revs climbing fast cost the clutch up to as much again as free revs (climb_, filter_step).
     const double climb = x.v > kMovingOffSpeed ? tuning_.climb_cost * climb_ * kFreeRevsCost : 0.0;
-    return weight * (log_declutched(freq, x.v, clutch_age) - climb);
+    return weight * (log_declutched(freq, x.v) - climb);
   }
   if (mode == launch_mode()) {
     // The clutch slips: the engine turns faster than the wheels in first gear, so the car is no faster

@@ -130,25 +130,6 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
     last_gps_ = gps;
     last_fix_t_ = t;
   }
-  constexpr double kSureGear = 0.8;
-  // A run of free revs (free_revs_time): declutched on the move with the clutch sure, the revs above the
-  // idle band, from the step that found them there to the last. It ends where the revs reach the idle band
-  // (they fell to idle) or a gear takes the belief (the clutch came back in); a run cut short otherwise (a
-  // lost reading, the clutch's belief in doubt, the car slowing to a crawl) ends unseen.
-  const bool free_revs = was_moving && gps > 5.0 * tuning.stationary_speed && mode == 0 &&
-                         belief > kSureGear && idle_count_ > 0.0 && std::isfinite(freq) && freq > 0.0 &&
-                         !at_idle;
-  if (free_revs) {
-    free_run_ += dt;
-  } else if (free_run_ > 0.0 && std::isfinite(freq) && freq > 0.0 && (at_idle || mode != 0)) {
-    // Some eight minutes of town driving (a shift every ten seconds), as the drive's other memories.
-    constexpr double kFreeMemory = 50.0;  // runs
-    free_count_ = std::min(free_count_ + 1.0, kFreeMemory);
-    free_mean_ += (free_run_ - free_mean_) / free_count_;
-    free_run_ = 0.0;
-  } else {
-    free_run_ = 0.0;
-  }
   if (!std::isfinite(freq) || freq <= 0.0) {
     roll_span_ = -1.0;
     return;
@@ -158,6 +139,7 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
   };
   constexpr double kIdleMemory = 60.0;    // s
   constexpr double kDriveMemory = 600.0;  // s
+  constexpr double kSureGear = 0.8;
   // Declutched on the move the engine idles too; a reading there at or below the idle learned so far
   // follows a warming engine down when the car no longer stops (a cold start's high idle otherwise stays,
   // and a car coasting at warm idle looks in gear).
@@ -283,13 +265,6 @@ double SynthHabits::coast_accel(bool at_idle, const SynthTuning& tuning) const n
                     0.0);
   }
   return mean;
-}
-
-// A declutch in a shift lets the revs fall from one gear's line to the next's within declutch_time; what GPS
-// saw of this driver's own declutches counts against that by how many it has seen.
-double SynthHabits::free_revs_time(const SynthTuning& tuning) const noexcept {
-  constexpr double kFreeRunPrior = 5.0;  // runs: the first minute's shifts outweigh the preset
-  return (free_count_ * free_mean_ + kFreeRunPrior * tuning.declutch_time) / (free_count_ + kFreeRunPrior);
 }
 
 // Scores this step's frequency in each gear by how usual it is there for this driver, against how usual it

@@ -1,12 +1,11 @@
 #pragma once
 // What SpeedSynthesizer knows of this engine and driver beyond the gear ladder: the idle (standing, and
 // rolling declutched), the revs run in gear at large and in each gear of the ladder, how hard the car slows
-// declutched (at large, and with the engine at idle), the revs at which this driver shifts up and down, and
-// how long his declutches on the move hold the revs above idle. Seeded from the fit (the model's extras:
-// load_engine(), load_gear_revs()) and learned while GPS is present (learn(), learn_shift()) as running means
-// with a bounded memory, so they follow a warming engine and a change of road. The queries turn them into
-// what the filter asks: the idle band, the deceleration declutched, and how the revs move the hazards of a
-// shift. Fixed arrays only: nothing here allocates.
+// declutched (at large, and with the engine at idle), and the revs at which this driver shifts up and down.
+// Seeded from the fit (the model's extras: load_engine(), load_gear_revs()) and learned while GPS is present
+// (learn(), learn_shift()) as running means with a bounded memory, so they follow a warming engine and a
+// change of road. The queries turn them into what the filter asks: the idle band, the deceleration
+// declutched, and how the revs move the hazards of a shift. Fixed arrays only: nothing here allocates.
 #include <array>
 
 #include "core/gear_model.hpp"
@@ -46,11 +45,8 @@ class SynthHabits {
 
   // The next fix starts afresh (after a reset or a gap): no speed before it to measure a deceleration by.
   void forget_last_fix() noexcept { last_gps_ = -1.0; }
-  // A flat stretch of revs (rolling idle) and a run of free revs count only if GPS saw them whole.
-  void end_flat_stretch() noexcept {
-    roll_span_ = -1.0;
-    free_run_ = 0.0;
-  }
+  // A flat stretch of revs counts only if GPS saw it whole (rolling idle).
+  void end_flat_stretch() noexcept { roll_span_ = -1.0; }
   // The ladder changed: the gear at old position i is at position to[i] (0 = gone), for old positions
   // 1..old_gears; or, with a new model of another ladder, the shift revs per gear are forgotten.
   void renumber_gears(const GearNumbers& to, int old_gears) noexcept;
@@ -75,9 +71,6 @@ class SynthHabits {
   // m/s^2: the mean deceleration declutched on the move (at_idle: with the engine at idle), before the
   // last metres' braking to a stop.
   [[nodiscard]] double coast_accel(bool at_idle, const SynthTuning& tuning) const noexcept;
-  // s: how long this driver's declutches on the move hold the revs above the idle band (the runs GPS saw
-  // with the clutch sure), shrunk toward a shift's declutch (SynthTuning::declutch_time) by a prior.
-  [[nodiscard]] double free_revs_time(const SynthTuning& tuning) const noexcept;
 
   // Scores `freq` in each gear 1..gears by how usual it is there against gears at large, weighed by their
   // use `weight` (0 for every gear when the revs per gear are unknown): into `out`.
@@ -117,9 +110,6 @@ class SynthHabits {
   // and the current flat stretch (s, -1 = none; its first frequency and GPS speed).
   double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
   double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
-  // The runs of free revs declutched on the move (free_revs_time): their mean (s) and how many, and the
-  // current run (s, 0 = none).
-  double free_mean_ = 0.0, free_count_ = 0.0, free_run_ = 0.0;
   double last_gps_ = -1.0;   // newest fix (-1 = none to measure from)
   double last_fix_t_ = 0.0;  // its step time
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.

@@ -197,11 +197,7 @@ SpeedSynthesizer::Track SpeedSynthesizer::propagate(const StepInput& in, Track y
     y.pvv *= 1.0 - k;
     keep_covariance(y);
   }
-  // The clutch's history held over the step is as old as it is (age_[0], counted under GPS too: through an
-  // outage a declutch that began before it is as old); one that enters it within the step is 0. Under GPS
-  // the fade is not applied (free_share).
-  const double clutch_age = j == 0 && i == 0 && !in.have_gps ? age_[0] + in.dt : 0.0;
-  double evidence = log_evidence(y, j, freq, in.weight, in.short_step, clutch_age);
+  double evidence = log_evidence(y, j, freq, in.weight, in.short_step);
   // Into the clutch from a gear: the part of the way that is an upshift's declutch, caught by this
   // reading, scores its revs on their way down from the gear's line (log_declutching) where that
   // explains them better than free revs.

@@ -80,10 +80,6 @@ struct SynthTuning {
   // s: the clutch is out this long in a shift; between readings further apart than the tracker's hops, a
   // reading falls inside an upshift's declutch with this share of the step (0: never).
   double declutch_time = 0.5;
-  // 1: through an outage, declutched on the move, the share of readings scored as free revs fades with the
-  // clutch history's age toward the standing share, over the time this driver's declutches hold the revs
-  // above idle (SynthHabits::free_revs_time), where no gear is lugged (0: the moving share at any age).
-  double free_revs_fade = 1.0;
   // At the tracker's hops through an outage the clutch keeps no speed history of its own while it holds
   // less than this share of the leading gear's belief (0: it always keeps its own).
   double clutch_track_share = 0.5;

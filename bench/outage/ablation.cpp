@@ -36,7 +36,6 @@ constexpr Rule kRules[] = {
     {"second-gear launches", "launch_second=0"},
     {"climb: climbing revs cost the clutch", "climb_cost=0"},
     {"declutch caught within a long step", "declutch_time=0"},
-    {"free revs fade: a declutch's revs fall to idle", "free_revs_fade=0"},
     {"clutch follows the gear at hops", "clutch_track_share=0"},
     {"leave cap: gear hazard capped", "leave_cap=inf"},
     {"bite gap: biting clutch's spread", "bite_gap=0"},

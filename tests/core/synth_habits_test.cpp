@@ -1,12 +1,11 @@
 // The synthesis with the driver's habits, as GPS shows them and as the fit recorded them (the model's
 // extra): the idle of a cold and a warm engine, the revs held while rolling declutched, the revs each gear
-// is run at, the braking to a stop, and how long a declutch holds the revs above idle.
+// is run at, and the braking to a stop.
 #include <catch2/catch.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
-#include <limits>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -359,43 +358,4 @@ TEST_CASE("synth: an idle below the readings' floor is not learned from what is 
   CHECK(idle_after(1.2 * kIdle) == Approx(kIdle));
   CHECK(idle_after(0.9 * kIdle) > 1.4 * kIdle);
   CHECK(idle_after(0.0) > 1.4 * kIdle);
-}
-
-TEST_CASE("synth: how long a declutch holds the revs above idle is learned from the runs GPS saw") {
-  // Declutched on the move with the clutch sure, the revs above the idle band for 1.5 s, then at idle: each
-  // such run counts once it ends, against a shift's declutch (declutch_time) worth a few runs. A run the
-  // outage cuts short, or a reading lost, is not seen whole and does not count.
-  const gearpulse::SynthTuning tuning;
-  gearpulse::ModelExtras extras;
-  extras.idle_freq = kIdle;
-  extras.idle_sd = 0.3;
-  gearpulse::SynthHabits habits;
-  habits.load_engine(extras, tuning);
-  CHECK(habits.free_revs_time(tuning) == Approx(tuning.declutch_time));
-  constexpr double kDt = 0.1, kRun = 1.5;  // s
-  double t = 0.0;
-  const auto step = [&](double freq, bool at_idle) {
-    t += kDt;
-    habits.learn(t, kDt, 10.0, freq, true, 0, false, 0.95, at_idle, tuning);
-  };
-  step(kIdle, true);  // moving from here on
-  const auto run = [&] {
-    for (int k = 0; k < static_cast<int>(kRun / kDt + 0.5); ++k)
-      step(2.0 * kIdle, false);
-  };
-  run();
-  habits.end_flat_stretch();  // GPS lost: the run is cut short
-  step(kIdle, true);
-  run();
-  step(std::numeric_limits<double>::quiet_NaN(), false);  // a reading lost
-  step(kIdle, true);
-  CHECK(habits.free_revs_time(tuning) == Approx(tuning.declutch_time));
-  constexpr int kRuns = 20;
-  for (int n = 0; n < kRuns; ++n) {
-    run();
-    step(kIdle, true);
-  }
-  constexpr double kPrior = 5.0;  // runs
-  CHECK(habits.free_revs_time(tuning) ==
-        Approx((kRuns * kRun + kPrior * tuning.declutch_time) / (kRuns + kPrior)).epsilon(0.01));
 }
