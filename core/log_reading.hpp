@@ -78,11 +78,15 @@ struct TimeDrop {
 };
 std::vector<TimeDrop> time_order_drops(std::span<const double> t);
 
-// A header repeated mid-file (LineReader::restarts, the lines of the repeats) whose first row's time lies
-// behind the last row's before it is a logger that restarted and counts its time from the start again:
-// its rows, and those after them, are put on so that its first row comes kRestartGap after that last
-// row (a new drive; counted in SampleLog::restarts). A repeat whose times go on is left as it is. Rows
-// in file order: line(i) their lines, time(i) a reference to their times (in seconds).
+// A logger that restarted and counts its time from the start again (or a second drive appended to the file,
+// a clock set back): its rows, and those after them, are put on so that its first row comes kRestartGap
+// after the last row before it (a new drive; counted in SampleLog::restarts). Its first row is one
+// - after a header repeated mid-file (LineReader::restarts, the lines of the repeats) whose time lies
+//   behind the last row's (a repeat whose times go on is left as it is), or
+// - whose time and the next row's lie more than kClockReset behind the two rows before it, each pair in
+//   order: a drive is two rows at least, and a single row out of place (ahead or behind: a corrupt cell) is
+//   left to time_order_drops().
+// Rows in file order: line(i) their lines, time(i) a reference to their times (in seconds).
 template <class Line, class Time>
 void join_restarts(std::size_t n, const std::vector<std::size_t>& restarts, Line line, Time time,
                    SampleLog& log) {
@@ -93,7 +97,10 @@ void join_restarts(std::size_t n, const std::vector<std::size_t>& restarts, Line
     for (; repeat != restarts.end() && *repeat < line(i); ++repeat)
       after_repeat = true;
     double& t = time(i);
-    if (after_repeat && i > 0 && t + offset < time(i - 1)) {
+    // time(i - 1) and time(i - 2) are put on already, t and time(i + 1) not yet.
+    const bool reset = i >= 2 && i + 1 < n && time(i - 2) <= time(i - 1) && t <= time(i + 1) &&
+                       time(i + 1) + offset < time(i - 2) - kClockReset;
+    if (i > 0 && ((after_repeat && t + offset < time(i - 1)) || reset)) {
       offset = time(i - 1) + kRestartGap - t;
       ++log.restarts;
     }

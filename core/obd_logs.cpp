@@ -263,7 +263,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
 // engine's rpm (the PID named Engine RPM, else the first whose unit or name is rpm) and a speed (a PID
 // whose name holds "speed" but no average or maximum, with a speed unit; GPS or OBD as `--speed` asks,
 // auto: GPS when there is one) are read; each rpm reading is a row, with the speed at its time (below). A
-// SECONDS clock that falls back by half a day has passed midnight.
+// SECONDS clock of the time of day (below 86400 s) that falls back by half a day has passed midnight; any
+// other clock that falls back is a new drive or rows out of order (join_restarts).
 void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, LogBuilder& out,
                    TorqueSpeed choice) {
   const std::size_t it = *find_column(header, "SECONDS"), ipid = *find_column(header, "PID"),
@@ -304,9 +305,9 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
       units[pid] = unit;
     }
     double seconds = t.value >= 1e11 ? t.value * 1e-3 : t.value;  // milliseconds since 1970, as above
-    if (last_t >= 0.0 && seconds + offset < last_t - kDay / 2) offset += kDay;
-    seconds += offset;
+    if (last_t >= 0.0 && last_t < kDay && seconds < kDay && seconds < last_t - kDay / 2) offset += kDay;
     last_t = seconds;
+    seconds += offset;
     readings.push_back(
         {reader.number, seconds, value.value, pid, unit.empty() ? -1.0 : speed_unit(unit), value.problem});
   }

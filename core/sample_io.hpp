@@ -55,6 +55,13 @@ struct InputRow {
 // habits average over 600 s.
 inline constexpr double kRestartGap = 600.0;  // s
 
+// A clock that falls back by more than this without a header repeated is a new drive (SampleLog::restarts),
+// not rows out of order. Rows a logger wrote out of order are a sample or two: at most two row steps, and
+// the slowest logs read step 1.8 s (a Carloop counter's refresh), under 4 s. And the costs of misreading
+// either way meet here: rows behind the last one kept are dropped, as much driving as the fall, where a new
+// drive loses only what would span its place, no more than the 5 s over which the fit pairs rows.
+inline constexpr double kClockReset = 5.0;  // s
+
 struct SampleLog {
   std::string name;
   SampleFileFormat format = SampleFileFormat::kGeneric;
@@ -65,8 +72,10 @@ struct SampleLog {
   std::size_t repeated_rows = 0;     // OBD rows dropped because nothing was refreshed (not errors)
   std::vector<InputRow> rows;        // with ReadOptions::keep_rows: every accepted row, in file order
   bool time_from_rows = false;       // no time column: t is the row counter times ReadOptions::row_seconds
-  // Headers repeated mid-file whose rows' times start again (from 0, or back): a logger that restarted. Each
-  // begins a new drive, its times put kRestartGap after the last row before it (join_restarts()).
+  // Places where the time starts again (from 0, or back): after a header repeated mid-file, or falling back
+  // by more than kClockReset without one: a logger that restarted, a second drive appended, a clock set
+  // back. Each begins a new drive, its times put kRestartGap after the last row before it
+  // (log_reading::join_restarts()).
   std::size_t restarts = 0;
   // "name: ..." lines for a log that reads but looks wrong (a generic log's speed in km/h, its time in ms).
   std::vector<std::string> warnings;

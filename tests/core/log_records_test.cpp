@@ -339,16 +339,116 @@ TEST_CASE("io: a header repeated where the time starts again begins a new drive,
     CHECK(pids.samples[1].t == Approx(pids.samples[0].t + kRestartGap));
     CHECK(pids.samples[1].speed == Approx(20 / 3.6));
   }
-  SECTION("a header repeated where the time goes on, and a time running backwards without one") {
+  SECTION("a header repeated where the time goes on") {
     const SampleLog on = read_log_text("t,speed,freq\n0,1,20\n1,2,21\nt,speed,freq\n2,3,22\n");
     CHECK(on.restarts == 0);
     REQUIRE(on.samples.size() == 3);
     CHECK(on.samples[2].t == 2);
-    const SampleLog back = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n1,4,23\n");
-    CHECK(back.restarts == 0);
-    REQUIRE(back.samples.size() == 2);
-    CHECK(back.skipped_count == 2);
-    CHECK(back.skipped[0] == "log.csv:4: time goes backwards (0 after 11)");
-    CHECK(back.skipped[1] == "log.csv:5: time goes backwards (1 after 11)");
   }
+}
+
+TEST_CASE("io: a time falling back over 5 s without a header begins a new drive, rows out of order do not") {
+  using gearpulse::kRestartGap;
+  // The file's samples equal those of its halves read as files of their own, the second's times put on.
+  const auto same_as_halves = [](const std::string& header, const std::string& first,
+                                 const std::string& second, std::size_t restarts = 1) {
+    const SampleLog log = read_log_text(header + first + second);
+    SampleLog a = read_log_text(header + first);
+    const SampleLog b = read_log_text(header + second);
+    CHECK(log.restarts == restarts);
+    CHECK(log.skipped_count == 0);
+    REQUIRE(log.samples.size() == a.samples.size() + b.samples.size());
+    const double on = a.samples.back().t + kRestartGap - b.samples.front().t;
+    for (gearpulse::Sample s : b.samples) {
+      s.t += on;
+      a.samples.push_back(s);
+    }
+    for (std::size_t i = 0; i < a.samples.size(); ++i) {
+      CHECK(log.samples[i].t == Approx(a.samples[i].t));
+      CHECK(log.samples[i].speed == Approx(a.samples[i].speed));
+      CHECK(log.samples[i].freq == Approx(a.samples[i].freq));
+    }
+  };
+  SECTION("a generic log, named columns, clock times, a Torque export: from 0, or back by an hour") {
+    same_as_halves("t,speed,freq\n", "100,1,20\n101,2,21\n102,3,22\n", "0,4,23\n1,5,24\n");
+    same_as_halves("t,speed,freq\n", "10,1,20\n11,2,21\n", "4,4,23\n4.5,5,24\n");  // back by 6 s
+    same_as_halves("Time,Engine RPM,Speed (km/h)\n", "60,800,10\n61,900,20\n", "0,1000,30\n1,1100,40\n");
+    same_as_halves("Time,Engine RPM,Speed (km/h)\n", "10:00:00,800,10\n10:00:01,900,20\n",
+                   "09:00:00,1000,30\n09:00:01,1100,40\n09:00:02,1200,50\n");
+    same_as_halves("Device Time,GPS Speed (Meters/second),Engine RPM(rpm)\n",
+                   "10:00:00,5,800\n10:00:01,6,900\n10:00:02,7,1000\n", "09:00:00,8,1100\n09:00:01,9,1200\n");
+    // Milliseconds since 1970: a second drive of the day before appended.
+    same_as_halves("Time,Engine RPM,Speed (km/h)\n", "1700000000000,800,10\n1700000001000,900,20\n",
+                   "1699900000000,1000,30\n1699900001000,1100,40\n");
+    // Two resets: three drives.
+    same_as_halves("t,speed,freq\n", "50,1,20\n51,2,21\n20,3,22\n21,4,23\n", "0,5,24\n1,6,25\n", 2);
+  }
+  SECTION("a Carloop log whose engine run time starts again") {
+    const std::string carloop = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),\n";
+    const SampleLog run = read_log_text(carloop + "100,800,10,\n101,900,20,\n102,950,25,\n" +
+                                        "1,1000,30,\n2,1100,40,\n3,1200,45,\n");
+    CHECK(run.restarts == 1);
+    CHECK(run.skipped_count == 0);
+    REQUIRE(run.samples.size() == 6);
+    CHECK(run.samples[3].t >= run.samples[2].t + kRestartGap - 3.0);  // a run-time counter is up to 3 s old
+  }
+  SECTION("a small fall is rows out of order, and one row out of place a corrupt cell: bad rows as before") {
+    const SampleLog jitter = read_log_text(
+        "t,speed,freq\n10,1,20\n11,2,21\n12,3,22\n13,4,23\n11.5,5,24\n"
+        "11.7,6,25\n14,7,26\n");
+    CHECK(jitter.restarts == 0);
+    REQUIRE(jitter.samples.size() == 5);
+    CHECK(jitter.skipped_count == 2);
+    CHECK(jitter.skipped[0] == "log.csv:6: time goes backwards (11.5 after 13)");
+    const SampleLog within = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n5.5,3,22\n6,4,23\n");
+    CHECK(within.restarts == 0);  // back by 5 s from the earlier row: no more than kClockReset
+    CHECK(within.skipped_count == 2);
+    const SampleLog one = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n12,4,23\n13,5,24\n");
+    CHECK(one.restarts == 0);
+    REQUIRE(one.skipped.size() == 1);
+    CHECK(one.skipped[0] == "log.csv:4: time goes backwards (0 after 11)");
+    const SampleLog ahead = read_log_text("t,speed,freq\n1,1,20\n2,2,21\n1e9,3,22\n3,4,23\n4,5,24\n");
+    CHECK(ahead.restarts == 0);
+    CHECK(ahead.skipped_count == 1);
+    // The last row alone behind: no drive of two rows follows.
+    const SampleLog last = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n");
+    CHECK(last.restarts == 0);
+    CHECK(last.skipped_count == 1);
+  }
+}
+
+namespace {
+
+// A PID-row log of an rpm and a speed read at each of `seconds`.
+SampleLog pid_log(std::initializer_list<const char*> seconds) {
+  std::string text = "SECONDS;PID;VALUE;UNITS\n";
+  int rpm = 800;
+  for (const char* t : seconds) {
+    text.append(t).append(";Engine RPM;").append(std::to_string(rpm)).append(";rpm\n");
+    text.append(t).append(";Speed;").append(std::to_string(rpm / 40)).append(";km/h\n");
+    rpm += 100;
+  }
+  return read_log_text(text);
+}
+
+}  // namespace
+
+TEST_CASE("io: a PID-row clock falling back by half a day is midnight as a time of day, else a new drive") {
+  using gearpulse::kRestartGap;
+  // Seconds since 1970: a drive of the day before appended (before, a day was added: still behind, dropped).
+  const SampleLog epoch = pid_log({"1700000000", "1700000001", "1699900000", "1699900001"});
+  CHECK(epoch.restarts == 1);
+  CHECK(epoch.skipped_count == 0);
+  REQUIRE(epoch.samples.size() == 4);
+  CHECK(epoch.samples[2].t == Approx(epoch.samples[1].t + kRestartGap));
+  CHECK(epoch.samples[2].speed == Approx(25 / 3.6));
+  // A time of day back by an hour: a new drive; past midnight: the day runs on.
+  const SampleLog hour = pid_log({"36000", "36001", "32400", "32401"});
+  CHECK(hour.restarts == 1);
+  REQUIRE(hour.samples.size() == 4);
+  CHECK(hour.samples[2].t == Approx(1 + kRestartGap));
+  const SampleLog midnight = pid_log({"86398", "86399", "1", "2"});
+  CHECK(midnight.restarts == 0);
+  REQUIRE(midnight.samples.size() == 4);
+  CHECK(midnight.samples[2].t == Approx(3));
 }

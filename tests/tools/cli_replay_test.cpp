@@ -261,7 +261,7 @@ TEST_CASE("cli: a log whose header and time start again is fitted and replayed a
   REQUIRE(fit.status == 0);
   REQUIRE(halves.status == 0);
   CHECK(fit.out == halves.out);
-  const std::string said = restarted + ": 1 logger restart (the header again, the time from the start again)";
+  const std::string said = restarted + ": 1 logger restart (the time from the start again";
   CHECK(fit.err.find(said) != std::string::npos);
   CHECK(fit.err.find(said, fit.err.find(said) + 1) == std::string::npos);  // once, not per row
   CHECK(fit.err.find("time goes backwards") == std::string::npos);
@@ -276,4 +276,24 @@ TEST_CASE("cli: a log whose header and time start again is fitted and replayed a
                       [](const auto& row) { return row[3] == "engine"; }) > 0);
   CHECK(r.result.err.find(restarted + ":" + std::to_string(lines(slurp(first)) + 1) + ": the header again") !=
         std::string::npos);
+}
+
+TEST_CASE("cli: a second drive appended without its header is fitted and replayed as a second drive") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string first = simulated_log(dir, 24, 300.0), second = simulated_log(dir, 25, 500.0);
+  const std::string text = slurp(second);
+  const std::string appended = (dir / "appended.csv").string();
+  write(appended, slurp(first) + text.substr(text.find('\n') + 1));  // its times from 0 again, no header
+  const Result fit = run(dir, "fit " + appended), halves = run(dir, "fit " + first + " " + second);
+  REQUIRE(fit.status == 0);
+  REQUIRE(halves.status == 0);
+  CHECK(fit.out == halves.out);
+  const std::string said = appended + ": 1 logger restart (the time from the start again";
+  CHECK(fit.err.find(said) != std::string::npos);
+  CHECK(fit.err.find(said, fit.err.find(said) + 1) == std::string::npos);  // once, not per row
+  CHECK(fit.err.find("time goes backwards") == std::string::npos);
+  const Replay r = replay(dir, model, appended), one = replay(dir, model, first);
+  REQUIRE(r.rows.size() == read_log(first).samples.size() + read_log(second).samples.size());
+  CHECK(std::equal(one.rows.begin(), one.rows.end(), r.rows.begin()));
 }

@@ -84,10 +84,11 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
     for (const std::string& warning : log.warnings)
       std::fprintf(stderr, "gearpulse: warning: %s\n", warning.c_str());
     if (log.restarts > 0)
-      std::fprintf(stderr,
-                   "gearpulse: %s: %zu logger restart%s (the header again, the time from the start again): "
-                   "each read as a new drive, %.0f s after the rows before it\n",
-                   path.c_str(), log.restarts, log.restarts == 1 ? "" : "s", kRestartGap);
+      std::fprintf(
+          stderr,
+          "gearpulse: %s: %zu logger restart%s (the time from the start again, after the header again or "
+          "falling back over %.0f s): each read as a new drive, %.0f s after the rows before it\n",
+          path.c_str(), log.restarts, log.restarts == 1 ? "" : "s", kClockReset, kRestartGap);
     for (std::size_t i = 0; i < log.skipped.size() && i < kMaxPrintedSkips; ++i)
       std::fprintf(stderr, "%s\n", log.skipped[i].c_str());
     if (log.skipped_count > 0) {
