@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <iterator>
 
 namespace gearpulse::log_reading {
 
@@ -114,6 +115,72 @@ Cell parse_cell(std::string_view text, std::string_view column) {
   cell.kind = CellKind::kNumber;
   cell.value = value;
   return cell;
+}
+
+namespace {
+
+bool digits(std::string_view s) noexcept {
+  return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+}
+
+// Whether `text` is digit groups (DigitGroups); `plain` is it without its commas.
+bool digit_groups(std::string_view text, std::string& plain) {
+  std::string_view s = text;
+  if (s.starts_with('+') || s.starts_with('-')) s.remove_prefix(1);
+  if (const std::size_t point = s.find('.'); point != std::string_view::npos) {
+    if (!digits(s.substr(point + 1))) return false;
+    s = s.substr(0, point);
+  }
+  const std::size_t first = s.find(',');
+  if (first == std::string_view::npos || first == 0 || first > 3 || s.front() == '0' ||
+      !digits(s.substr(0, first)))
+    return false;
+  for (std::size_t at = first; at < s.size(); at += 4)
+    if (s[at] != ',' || !digits(s.substr(at + 1, 3)) || at + 4 > s.size()) return false;
+  plain.clear();
+  std::copy_if(text.begin(), text.end(), std::back_inserter(plain), [](char c) { return c != ','; });
+  return true;
+}
+
+// Whether `text` is a number with a decimal comma and no digit groups ("12,5", "-0,950").
+bool decimal_comma(std::string_view text) noexcept {
+  if (text.starts_with('+') || text.starts_with('-')) text.remove_prefix(1);
+  const std::size_t comma = text.find(',');
+  return comma != std::string_view::npos && digits(text.substr(0, comma)) && digits(text.substr(comma + 1));
+}
+
+}  // namespace
+
+Cell DigitGroups::read(std::string_view text, std::string_view column, std::size_t line) {
+  Cell cell = parse_cell(text, column);
+  if (cell.kind == CellKind::kMissing) return cell;
+  auto at = std::find_if(columns_.begin(), columns_.end(), [&](const Column& c) { return c.name == column; });
+  if (at == columns_.end()) at = columns_.insert(columns_.end(), Column{std::string(column)});
+  std::string plain;
+  if (cell.kind == CellKind::kNumber) {
+    ++at->plain;
+  } else if (digit_groups(text, plain)) {
+    Cell groups = parse_cell(plain, column);
+    if (groups.kind != CellKind::kNumber) return groups;
+    grouped_.push_back({line, static_cast<std::size_t>(at - columns_.begin()), std::string(text)});
+    return groups;
+  } else if (decimal_comma(text)) {
+    ++at->decimal_comma;
+  }
+  return cell;
+}
+
+std::optional<std::string> DigitGroups::problem(std::size_t line) const {
+  auto g = std::lower_bound(grouped_.begin(), grouped_.end(), line,
+                            [](const Grouped& a, std::size_t l) { return a.line < l; });
+  for (; g != grouped_.end() && g->line == line; ++g) {
+    const Column& c = columns_[g->column];
+    if (c.plain > 0 && c.decimal_comma == 0) continue;
+    return "a thousands separator or a decimal comma? in column " + c.name + ": " + quoted(g->text) +
+           (c.decimal_comma > 0 ? " (other cells of the column have decimal commas)"
+                                : " (no other cell of the column is a number without a comma)");
+  }
+  return std::nullopt;
 }
 
 bool same_name(std::string_view a, std::string_view b) noexcept {

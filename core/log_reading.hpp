@@ -218,6 +218,45 @@ class TimeOrder {
   std::vector<TimeDrop>::const_iterator next_;
 };
 
+// Numbers written with thousands separators, as a spreadsheet formats them ("1,200" rpm): a comma reaches a
+// cell only inside quotes in a comma-delimited file (elsewhere it is the decimal mark, LineReader), where it
+// may be either. A cell of digit groups (a sign, one to three digits not starting with 0, then groups of a
+// comma and three digits, then perhaps a decimal point and digits) reads as its number where its column
+// says the comma groups: another cell of it is a number without a comma, and none has a decimal comma
+// (digits, one comma, digits, not groups: "12,5", "0,950"). The column is known once all its cells are read:
+// read() takes each, problem() then says which rows hold a cell their column does not vouch for.
+class DigitGroups {
+ public:
+  // parse_cell(text, column), but a cell of digit groups reads as its number (unless bad without its
+  // commas), kept to be judged with its column. Rows are read in line order.
+  Cell read(std::string_view text, std::string_view column, std::size_t line);
+  // Why the row at `line` holds digit groups its column does not vouch for, or nothing.
+  [[nodiscard]] std::optional<std::string> problem(std::size_t line) const;
+  [[nodiscard]] bool any() const noexcept { return !grouped_.empty(); }
+  // Drops and reports the rows (in line order, each with its `line`) problem() finds.
+  template <class Row>
+  void drop_unvouched(std::vector<Row>& rows, LogBuilder& out) const {
+    if (!any()) return;
+    std::erase_if(rows, [&](const Row& r) {
+      const auto why = problem(r.line);
+      if (why) out.skip(r.line, *why);
+      return why.has_value();
+    });
+  }
+
+ private:
+  struct Column {
+    std::string name;
+    std::size_t plain = 0, decimal_comma = 0;  // cells read as numbers without a comma; cells like "12,5"
+  };
+  struct Grouped {
+    std::size_t line, column;
+    std::string text;
+  };
+  std::vector<Column> columns_;
+  std::vector<Grouped> grouped_;  // in line order
+};
+
 inline bool blank(std::string_view line) {
   return trim(line).empty();
 }

@@ -207,16 +207,17 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const bool named = format == SampleFileFormat::kColumns || format == SampleFileFormat::kSpeedRpm;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
+  DigitGroups groups;
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
     double period = 0.0;  // of a clock cell's time of day
-    const Cell rpm = parse_cell(cells[irpm], "rpm");
-    const Cell speed = parse_cell(cells[ispeed], "speed");
+    const Cell rpm = groups.read(cells[irpm], "rpm", reader.number);
+    const Cell speed = groups.read(cells[ispeed], "speed", reader.number);
     Cell t;
     t.kind = CellKind::kNumber;
     t.value = counter * out.row_seconds();
     if (it) {
-      t = parse_cell(cells[*it], "time");
+      t = groups.read(cells[*it], "time", reader.number);
       // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber)
@@ -240,6 +241,7 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     if (period > 0.0) row.clock = t.value, row.period = period;
     parsed.push_back(row);
   }
+  groups.drop_unvouched(parsed, out);
   // A time column holds numbers or clock times: the fewer kind are bad cells.
   const auto clock_rows = static_cast<std::size_t>(
       std::count_if(parsed.begin(), parsed.end(), [](const ObdRow& r) { return r.period > 0.0; }));
@@ -285,9 +287,10 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   std::vector<std::string_view> cells;
   constexpr double kDay = 86400.0;
   double last_t = -1.0, offset = 0.0;
+  DigitGroups times, values;
   while (reader.next_row(cells, need, out)) {
-    const Cell t = parse_cell(cells[it], "time");
-    const Cell value = parse_cell(cells[ivalue], "value");
+    const Cell t = times.read(cells[it], "time", reader.number);
+    const Cell value = values.read(cells[ivalue], "value", reader.number);
     if (t.kind != CellKind::kNumber) {
       out.skip(reader.number, t.kind == CellKind::kMissing ? "missing time" : t.problem);
       continue;
@@ -311,6 +314,11 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     readings.push_back(
         {reader.number, seconds, value.value, pid, unit.empty() ? -1.0 : speed_unit(unit), value.problem});
   }
+  // Digit groups their column does not vouch for: in a value, a bad value (said for the PIDs used); in the
+  // time, a bad row.
+  for (Reading& r : readings)
+    if (const auto why = values.any() ? values.problem(r.line) : std::nullopt) r.problem = *why;
+  times.drop_unvouched(readings, out);
   join_restarts(
       readings.size(), reader.restarts, [&](std::size_t i) { return readings[i].line; },
       [&](std::size_t i) -> double& { return readings[i].t; }, out.log());

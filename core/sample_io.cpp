@@ -28,10 +28,11 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   std::vector<std::string_view> cells;
   std::vector<std::size_t> lines;
   std::vector<Sample> rows;
+  DigitGroups groups;
   while (reader.next_row(cells, need, out)) {
-    const Cell t = parse_cell(cells[it], "t");
-    const Cell v = parse_cell(cells[is], "speed");
-    const Cell f = parse_cell(cells[iff], "freq");
+    const Cell t = groups.read(cells[it], "t", reader.number);
+    const Cell v = groups.read(cells[is], "speed", reader.number);
+    const Cell f = groups.read(cells[iff], "freq", reader.number);
     if (t.kind == CellKind::kMissing) {
       out.skip(reader.number, "missing t");
       continue;
@@ -43,6 +44,19 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
     }
     lines.push_back(reader.number);
     rows.push_back(Sample{t.value, v.value, f.value});
+  }
+  if (groups.any()) {
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      if (const auto problem = groups.problem(lines[i])) {
+        out.skip(lines[i], *problem);
+        continue;
+      }
+      lines[kept] = lines[i];
+      rows[kept++] = rows[i];
+    }
+    lines.resize(kept);
+    rows.resize(kept);
   }
   join_restarts(
       rows.size(), reader.restarts, [&](std::size_t i) { return lines[i]; },

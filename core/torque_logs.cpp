@@ -53,7 +53,7 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
   for (auto i : {itime, igps, iobd})
     if (i) need = std::max(need, *i + 1);
   std::vector<std::string_view> cells;
-  std::size_t gps_count = 0;
+  DigitGroups groups;
   while (reader.next_row(cells, need, out)) {
     const auto row_time = static_cast<double>(reader.rows - 1);
     Row row{reader.number, row_time, kMissing, kMissing, kMissing};
@@ -66,10 +66,10 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
       row.clock = clock->first;
       row.period = clock->second;
     }
-    const Cell rpm = parse_cell(cells[irpm], header[irpm]);
+    const Cell rpm = groups.read(cells[irpm], header[irpm], reader.number);
     Cell gps, obd;
-    if (igps) gps = parse_cell(cells[*igps], header[*igps]);
-    if (iobd) obd = parse_cell(cells[*iobd], header[*iobd]);
+    if (igps) gps = groups.read(cells[*igps], header[*igps], reader.number);
+    if (iobd) obd = groups.read(cells[*iobd], header[*iobd], reader.number);
     const Cell* bad = rpm.kind == CellKind::kBad ? &rpm : gps.kind == CellKind::kBad ? &gps : &obd;
     if (bad->kind == CellKind::kBad) {
       out.skip(reader.number, bad->problem);
@@ -78,9 +78,11 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
     row.freq = rpm.value / kSecondsPerMinute;
     if (igps) row.gps = gps.value * gps_col->to_ms;
     if (iobd) row.obd = obd.value * obd_col->to_ms;
-    if (std::isfinite(row.gps)) ++gps_count;
     rows.push_back(row);
   }
+  groups.drop_unvouched(rows, out);
+  const auto gps_count = static_cast<std::size_t>(
+      std::count_if(rows.begin(), rows.end(), [](const Row& r) { return std::isfinite(r.gps); }));
   if (itime) unwrap_clock(rows, out);
   join_restarts(
       rows.size(), reader.restarts, [&](std::size_t i) { return rows[i].line; },
