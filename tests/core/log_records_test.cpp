@@ -401,7 +401,7 @@ TEST_CASE("io: a time falling back over 5 s without a header begins a new drive,
     CHECK(jitter.skipped_count == 2);
     CHECK(jitter.skipped[0] == "log.csv:6: time goes backwards (11.5 after 13)");
     const SampleLog within = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n5.5,3,22\n6,4,23\n");
-    CHECK(within.restarts == 0);  // back by 5 s from the earlier row: no more than kClockReset
+    CHECK(within.restarts == 0);  // 6 lies 4 s behind 10: no more than kClockReset
     CHECK(within.skipped_count == 2);
     const SampleLog one = read_log_text("t,speed,freq\n10,1,20\n11,2,21\n0,3,22\n12,4,23\n13,5,24\n");
     CHECK(one.restarts == 0);
