@@ -130,7 +130,11 @@ bool LineReader::next() {
         ahead_.push_front(std::move(*m));
     }
   }
-  if (delimiter_ != ',') std::replace(line.begin(), line.end(), ',', '.');
+  marks_made_points_ = delimiter_ != ',' && line.find(',') != std::string::npos;
+  if (marks_made_points_) {
+    written_ = line;
+    std::replace(line.begin(), line.end(), ',', '.');
+  }
   return true;
 }
 

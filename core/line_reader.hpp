@@ -30,6 +30,15 @@ class LineReader {
   // The record read last, and the number of its first line (from 1).
   std::string line;
   std::size_t number = 0;
+  // Whether the comma is the file's decimal mark (its delimiter is another).
+  [[nodiscard]] bool commas_are_marks() const noexcept { return delimiter_ != ','; }
+  // A cell of `line` as the file writes it: in a file whose decimal mark is the comma, `line` has its commas
+  // made points (as_written("1.5") may be "1,5").
+  [[nodiscard]] std::string_view as_written(std::string_view cell) const noexcept {
+    if (!marks_made_points_) return cell;
+    return std::string_view(written_).substr(static_cast<std::size_t>(cell.data() - line.data()),
+                                             cell.size());
+  }
 
   // From the header line: what lies inside double quotes is a name, not a delimiter (unless a quote is
   // left open: then a stray one, `Wheel (17")`, and every character counts). Sets the delimiter.
@@ -79,6 +88,8 @@ class LineReader {
   std::vector<std::string> header_sorted_;  // and sorted
   std::array<bool, 256> initials_{};        // the characters they start with
   mutable std::string name_;                // a cell's name being matched against them
+  std::string written_;                     // the record before its decimal commas were made points
+  bool marks_made_points_ = false;
 };
 
 }  // namespace gearpulse::log_reading

@@ -123,51 +123,70 @@ bool digits(std::string_view s) noexcept {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
 }
 
-// Whether `text` is digit groups (DigitGroups); `plain` is it without its commas.
-bool digit_groups(std::string_view text, std::string& plain) {
+// Whether `text` is digit groups (DigitGroups) separated by `sep`, perhaps with a decimal part after `mark`
+// (the other of point and comma); `plain` is the number without them, its decimal mark a point, and
+// `groups` the count of separators.
+bool digit_groups(std::string_view text, char sep, char mark, std::string& plain, std::size_t& groups) {
   std::string_view s = text;
   if (s.starts_with('+') || s.starts_with('-')) s.remove_prefix(1);
-  if (const std::size_t point = s.find('.'); point != std::string_view::npos) {
-    if (!digits(s.substr(point + 1))) return false;
-    s = s.substr(0, point);
+  if (const std::size_t at = s.find(mark); at != std::string_view::npos) {
+    if (!digits(s.substr(at + 1))) return false;
+    s = s.substr(0, at);
   }
-  const std::size_t first = s.find(',');
+  const std::size_t first = s.find(sep);
   if (first == std::string_view::npos || first == 0 || first > 3 || s.front() == '0' ||
       !digits(s.substr(0, first)))
     return false;
-  for (std::size_t at = first; at < s.size(); at += 4)
-    if (s[at] != ',' || !digits(s.substr(at + 1, 3)) || at + 4 > s.size()) return false;
+  groups = 0;
+  for (std::size_t at = first; at < s.size(); at += 4, ++groups)
+    if (s[at] != sep || !digits(s.substr(at + 1, 3)) || at + 4 > s.size()) return false;
   plain.clear();
-  std::copy_if(text.begin(), text.end(), std::back_inserter(plain), [](char c) { return c != ','; });
+  for (char c : text)
+    if (c != sep) plain += c == mark ? '.' : c;
   return true;
 }
 
-// Whether `text` is a number with a decimal comma and no digit groups ("12,5", "-0,950").
+// Whether `text` is a number with a decimal comma, no point and no comma groups ("12,5", "-0,950", not
+// "1,200").
 bool decimal_comma(std::string_view text) noexcept {
   if (text.starts_with('+') || text.starts_with('-')) text.remove_prefix(1);
   const std::size_t comma = text.find(',');
-  return comma != std::string_view::npos && digits(text.substr(0, comma)) && digits(text.substr(comma + 1));
+  const bool groups = comma >= 1 && comma <= 3 && text.front() != '0' && text.size() == comma + 4;
+  return comma != std::string_view::npos && digits(text.substr(0, comma)) && digits(text.substr(comma + 1)) &&
+         !groups;
 }
 
 }  // namespace
 
-Cell DigitGroups::read(std::string_view text, std::string_view column, std::size_t line) {
-  Cell cell = parse_cell(text, column);
-  if (cell.kind == CellKind::kMissing) return cell;
+Cell DigitGroups::read(std::string_view cell, std::string_view column) {
+  const Cell read = parse_cell(cell, column);
+  if (read.kind == CellKind::kMissing) return read;
   auto at = std::find_if(columns_.begin(), columns_.end(), [&](const Column& c) { return c.name == column; });
   if (at == columns_.end()) at = columns_.insert(columns_.end(), Column{std::string(column)});
+  const std::string_view written = reader_.as_written(cell);
+  const auto keep = [&](bool points) {
+    grouped_.push_back(
+        {reader_.number, static_cast<std::size_t>(at - columns_.begin()), std::string(written), points});
+  };
+  if (decimal_comma(written)) ++at->decimal_comma;  // "12,5": a bad cell where the point is the mark
   std::string plain;
-  if (cell.kind == CellKind::kNumber) {
-    ++at->plain;
-  } else if (digit_groups(text, plain)) {
-    Cell groups = parse_cell(plain, column);
-    if (groups.kind != CellKind::kNumber) return groups;
-    grouped_.push_back({line, static_cast<std::size_t>(at - columns_.begin()), std::string(text)});
-    return groups;
-  } else if (decimal_comma(text)) {
-    ++at->decimal_comma;
+  std::size_t groups = 0;
+  if (!reader_.commas_are_marks()) {
+    if (read.kind == CellKind::kNumber) {
+      ++at->plain;
+      return read;
+    }
+    if (!digit_groups(written, ',', '.', plain, groups)) return read;
+    Cell number = parse_cell(plain, column);
+    if (number.kind == CellKind::kNumber) keep(false);
+    return number;
   }
-  return cell;
+  if (!digit_groups(written, '.', ',', plain, groups)) return read;
+  if (groups == 1 && written.find(',') == std::string_view::npos) {  // "1.200": 1.2, unless the column says
+    keep(true);
+    return read;
+  }
+  return parse_cell(plain, column);  // "1.234,5", "1.234.567"
 }
 
 std::optional<std::string> DigitGroups::problem(std::size_t line) const {
@@ -175,8 +194,9 @@ std::optional<std::string> DigitGroups::problem(std::size_t line) const {
                             [](const Grouped& a, std::size_t l) { return a.line < l; });
   for (; g != grouped_.end() && g->line == line; ++g) {
     const Column& c = columns_[g->column];
-    if (c.plain > 0 && c.decimal_comma == 0) continue;
-    return "a thousands separator or a decimal comma? in column " + c.name + ": " + quoted(g->text) +
+    if (g->points ? c.decimal_comma == 0 : c.plain > 0 && c.decimal_comma == 0) continue;
+    return std::string("a thousands separator or a decimal ") + (g->points ? "point" : "comma") +
+           "? in column " + c.name + ": " + quoted(g->text) +
            (c.decimal_comma > 0 ? " (other cells of the column have decimal commas)"
                                 : " (no other cell of the column is a number without a comma)");
   }

@@ -218,18 +218,22 @@ class TimeOrder {
   std::vector<TimeDrop>::const_iterator next_;
 };
 
-// Numbers written with thousands separators, as a spreadsheet formats them ("1,200" rpm): a comma reaches a
-// cell only inside quotes in a comma-delimited file (elsewhere it is the decimal mark, LineReader), where it
-// may be either. A cell of digit groups (a sign, one to three digits not starting with 0, then groups of a
-// comma and three digits, then perhaps a decimal point and digits) reads as its number where its column
-// says the comma groups: another cell of it is a number without a comma, and none has a decimal comma
-// (digits, one comma, digits, not groups: "12,5", "0,950"). The column is known once all its cells are read:
-// read() takes each, problem() then says which rows hold a cell their column does not vouch for.
+// Numbers written with thousands separators, as a spreadsheet formats them. Where the point is the decimal
+// mark, a comma reaches a cell only inside quotes in a comma-delimited file, where it may be either: a cell
+// of comma groups (a sign, one to three digits not starting with 0, then groups of a comma and three
+// digits, then perhaps a point and digits: "1,200", "12,345.5") reads as its number where its column says
+// the comma groups: another cell of it is a number without a comma, and none has a decimal comma (digits,
+// one comma, digits, not groups: "12,5", "0,950"). Where the comma is the decimal mark (LineReader), point
+// groups with a decimal comma or more than one point ("1.234,5", "1.234.567") can be nothing else and read;
+// one point and three digits ("1.200") read as a decimal point, as any point there, but in a column with
+// decimal commas, where it is likely thousands, are a bad row. The column is known once all its cells are
+// read: read() takes each, problem() then says which rows hold a cell their column does not vouch for.
 class DigitGroups {
  public:
-  // parse_cell(text, column), but a cell of digit groups reads as its number (unless bad without its
-  // commas), kept to be judged with its column. Rows are read in line order.
-  Cell read(std::string_view text, std::string_view column, std::size_t line);
+  explicit DigitGroups(const LineReader& reader) : reader_(reader) {}
+  // parse_cell(cell, column) of a cell of the reader's record, but digit groups read as their number
+  // (unless bad without their separators), kept to be judged with their column. Rows come in line order.
+  Cell read(std::string_view cell, std::string_view column);
   // Why the row at `line` holds digit groups its column does not vouch for, or nothing.
   [[nodiscard]] std::optional<std::string> problem(std::size_t line) const;
   [[nodiscard]] bool any() const noexcept { return !grouped_.empty(); }
@@ -252,7 +256,9 @@ class DigitGroups {
   struct Grouped {
     std::size_t line, column;
     std::string text;
+    bool points;  // "1.200" where the comma is the decimal mark (else comma groups)
   };
+  const LineReader& reader_;
   std::vector<Column> columns_;
   std::vector<Grouped> grouped_;  // in line order
 };

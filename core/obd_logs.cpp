@@ -207,17 +207,17 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const bool named = format == SampleFileFormat::kColumns || format == SampleFileFormat::kSpeedRpm;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
-  DigitGroups groups;
+  DigitGroups groups(reader);
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
     double period = 0.0;  // of a clock cell's time of day
-    const Cell rpm = groups.read(cells[irpm], "rpm", reader.number);
-    const Cell speed = groups.read(cells[ispeed], "speed", reader.number);
+    const Cell rpm = groups.read(cells[irpm], "rpm");
+    const Cell speed = groups.read(cells[ispeed], "speed");
     Cell t;
     t.kind = CellKind::kNumber;
     t.value = counter * out.row_seconds();
     if (it) {
-      t = groups.read(cells[*it], "time", reader.number);
+      t = groups.read(cells[*it], "time");
       // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber)
@@ -287,10 +287,10 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   std::vector<std::string_view> cells;
   constexpr double kDay = 86400.0;
   double last_t = -1.0, offset = 0.0;
-  DigitGroups times, values;
+  DigitGroups times(reader), values(reader);
   while (reader.next_row(cells, need, out)) {
-    const Cell t = times.read(cells[it], "time", reader.number);
-    const Cell value = values.read(cells[ivalue], "value", reader.number);
+    const Cell t = times.read(cells[it], "time");
+    const Cell value = values.read(cells[ivalue], "value");
     if (t.kind != CellKind::kNumber) {
       out.skip(reader.number, t.kind == CellKind::kMissing ? "missing time" : t.problem);
       continue;

@@ -28,11 +28,11 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   std::vector<std::string_view> cells;
   std::vector<std::size_t> lines;
   std::vector<Sample> rows;
-  DigitGroups groups;
+  DigitGroups groups(reader);
   while (reader.next_row(cells, need, out)) {
-    const Cell t = groups.read(cells[it], "t", reader.number);
-    const Cell v = groups.read(cells[is], "speed", reader.number);
-    const Cell f = groups.read(cells[iff], "freq", reader.number);
+    const Cell t = groups.read(cells[it], "t");
+    const Cell v = groups.read(cells[is], "speed");
+    const Cell f = groups.read(cells[iff], "freq");
     if (t.kind == CellKind::kMissing) {
       out.skip(reader.number, "missing t");
       continue;

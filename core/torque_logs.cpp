@@ -53,7 +53,7 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
   for (auto i : {itime, igps, iobd})
     if (i) need = std::max(need, *i + 1);
   std::vector<std::string_view> cells;
-  DigitGroups groups;
+  DigitGroups groups(reader);
   while (reader.next_row(cells, need, out)) {
     const auto row_time = static_cast<double>(reader.rows - 1);
     Row row{reader.number, row_time, kMissing, kMissing, kMissing};
@@ -66,10 +66,10 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
       row.clock = clock->first;
       row.period = clock->second;
     }
-    const Cell rpm = groups.read(cells[irpm], header[irpm], reader.number);
+    const Cell rpm = groups.read(cells[irpm], header[irpm]);
     Cell gps, obd;
-    if (igps) gps = groups.read(cells[*igps], header[*igps], reader.number);
-    if (iobd) obd = groups.read(cells[*iobd], header[*iobd], reader.number);
+    if (igps) gps = groups.read(cells[*igps], header[*igps]);
+    if (iobd) obd = groups.read(cells[*iobd], header[*iobd]);
     const Cell* bad = rpm.kind == CellKind::kBad ? &rpm : gps.kind == CellKind::kBad ? &gps : &obd;
     if (bad->kind == CellKind::kBad) {
       out.skip(reader.number, bad->problem);

@@ -75,10 +75,30 @@ TEST_CASE(
     for (const std::string& message : log.skipped)
       CHECK(message.find(": not a number in column freq") != std::string::npos);
   }
-  SECTION("a semicolon file's point is its decimal mark, and a point with a comma no number") {
+}
+
+TEST_CASE("io: where the comma is the decimal mark, point groups read where nothing else can be meant") {
+  SECTION("a point with a decimal comma, or more than one point: thousands") {
     const SampleLog log = read_log_text("Time;Engine RPM;Speed (km/h)\n0;800;10\n1;1.200,5;20\n2;900;30\n");
-    REQUIRE(log.samples.size() == 2);
-    REQUIRE(log.skipped.size() == 1);
-    CHECK(log.skipped[0] == "log.csv:3: not a number in column rpm: '1.200.5'");
+    CHECK(log.skipped_count == 0);
+    REQUIRE(log.samples.size() == 3);
+    CHECK(log.samples[1].freq == Approx(1200.5 / 60));
+    const SampleLog times = read_log_text("t;speed;freq\n1.000.000;1;20\n1.000.001;2;21\n");
+    CHECK(times.skipped_count == 0);
+    REQUIRE(times.samples.size() == 2);
+    CHECK(times.samples[1].t == Approx(1000001));
+  }
+  SECTION("one point and three digits: a decimal point as before, but a bad row among decimal commas") {
+    const SampleLog point = read_log_text("Time;Engine RPM;Speed (km/h)\n0;800;10\n1;1.200;20\n");
+    REQUIRE(point.samples.size() == 2);
+    CHECK(point.samples[1].freq == Approx(1.2 / 60));
+    const SampleLog commas =
+        read_log_text("Time;Engine RPM;Speed (km/h)\n0;800,5;10\n1;1.200;20\n2;900;30\n3;1,200;40\n");
+    REQUIRE(commas.samples.size() == 3);
+    CHECK(commas.samples[2].freq == Approx(1.2 / 60));  // "1,200" is 1.2 where the comma is the mark
+    REQUIRE(commas.skipped.size() == 1);
+    CHECK(commas.skipped[0] ==
+          "log.csv:3: a thousands separator or a decimal point? in column rpm: '1.200' (other cells of the "
+          "column have decimal commas)");
   }
 }
