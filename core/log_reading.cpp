@@ -5,7 +5,6 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
-#include <iterator>
 
 namespace gearpulse::log_reading {
 
@@ -159,8 +158,8 @@ bool decimal_comma(std::string_view text) noexcept {
 }  // namespace
 
 Cell DigitGroups::read(std::string_view cell, std::string_view column) {
-  const Cell read = parse_cell(cell, column);
-  if (read.kind == CellKind::kMissing) return read;
+  const Cell as_read = parse_cell(cell, column);
+  if (as_read.kind == CellKind::kMissing) return as_read;
   auto at = std::find_if(columns_.begin(), columns_.end(), [&](const Column& c) { return c.name == column; });
   if (at == columns_.end()) at = columns_.insert(columns_.end(), Column{std::string(column)});
   const std::string_view written = reader_.as_written(cell);
@@ -172,19 +171,19 @@ Cell DigitGroups::read(std::string_view cell, std::string_view column) {
   std::string plain;
   std::size_t groups = 0;
   if (!reader_.commas_are_marks()) {
-    if (read.kind == CellKind::kNumber) {
+    if (as_read.kind == CellKind::kNumber) {
       ++at->plain;
-      return read;
+      return as_read;
     }
-    if (!digit_groups(written, ',', '.', plain, groups)) return read;
+    if (!digit_groups(written, ',', '.', plain, groups)) return as_read;
     Cell number = parse_cell(plain, column);
     if (number.kind == CellKind::kNumber) keep(false);
     return number;
   }
-  if (!digit_groups(written, '.', ',', plain, groups)) return read;
+  if (!digit_groups(written, '.', ',', plain, groups)) return as_read;
   if (groups == 1 && written.find(',') == std::string_view::npos) {  // "1.200": 1.2, unless the column says
-    keep(true);
-    return read;
+    if (as_read.kind == CellKind::kNumber) keep(true);
+    return as_read;
   }
   return parse_cell(plain, column);  // "1.234,5", "1.234.567"
 }
