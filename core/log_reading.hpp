@@ -86,10 +86,12 @@ std::vector<TimeDrop> time_order_drops(std::span<const double> t);
 // - whose time and the next row's lie more than kClockReset behind the two rows before it, each pair in
 //   order: a drive is two rows at least, and a single row out of place (ahead or behind: a corrupt cell) is
 //   left to time_order_drops().
-// Rows in file order: line(i) their lines, time(i) a reference to their times (in seconds).
+// Rows in file order: line(i) their lines, time(i) a reference to their times (in seconds). Returns the
+// rows that begin a drive, in order.
 template <class Line, class Time>
-void join_restarts(std::size_t n, const std::vector<std::size_t>& restarts, Line line, Time time,
-                   SampleLog& log) {
+std::vector<std::size_t> join_restarts(std::size_t n, const std::vector<std::size_t>& restarts, Line line,
+                                       Time time, SampleLog& log) {
+  std::vector<std::size_t> starts;
   auto repeat = restarts.begin();
   double offset = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -103,9 +105,11 @@ void join_restarts(std::size_t n, const std::vector<std::size_t>& restarts, Line
     if (i > 0 && ((after_repeat && t + offset < time(i - 1)) || reset)) {
       offset = time(i - 1) + kRestartGap - t;
       ++log.restarts;
+      starts.push_back(i);
     }
     t += offset;
   }
+  return starts;
 }
 
 // Collects samples and skip reports; enforces the rules common to every format.

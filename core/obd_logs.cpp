@@ -15,16 +15,25 @@ namespace {
 // counter has a resolution of one second and is itself refreshed only once per cycle (~1.8 s). The time of
 // a row is therefore estimated from its row number by a local straight-line fit through the points where
 // the counter changed (middle of its one-second step), which brings the timing error well below a second.
+// The fit stays within a row's drive (`drives`: the counters at which a restart begins one, in order), as
+// if each drive were a log of its own.
 std::vector<double> smooth_row_times(const std::vector<double>& rows, const std::vector<double>& refresh_row,
-                                     const std::vector<double>& refresh_t) {
+                                     const std::vector<double>& refresh_t,
+                                     const std::vector<double>& drives) {
   constexpr std::size_t kHalfWindow = 8;  // refresh points each side (~15 s)
   std::vector<double> out(rows.size());
   double previous = -std::numeric_limits<double>::infinity();
+  const auto refresh_at = [&](double counter) {
+    return static_cast<std::size_t>(std::lower_bound(refresh_row.begin(), refresh_row.end(), counter) -
+                                    refresh_row.begin());
+  };
   for (std::size_t i = 0; i < rows.size(); ++i) {
-    const auto k = static_cast<std::size_t>(
-        std::lower_bound(refresh_row.begin(), refresh_row.end(), rows[i]) - refresh_row.begin());
-    const std::size_t lo = k > kHalfWindow ? k - kHalfWindow : 0;
-    const std::size_t hi = std::min(refresh_row.size(), k + kHalfWindow + 1);
+    const auto k = refresh_at(rows[i]);
+    const auto next = std::upper_bound(drives.begin(), drives.end(), rows[i]);
+    const std::size_t first = next == drives.begin() ? 0 : refresh_at(*(next - 1));
+    const std::size_t end = next == drives.end() ? refresh_row.size() : refresh_at(*next);
+    const std::size_t lo = std::max(first, k > kHalfWindow ? k - kHalfWindow : 0);
+    const std::size_t hi = std::min(end, k + kHalfWindow + 1);
     double sx = 0, sy = 0, sxx = 0, sxy = 0;
     const double n = static_cast<double>(hi - lo);
     for (std::size_t m = lo; m < hi; ++m) {
@@ -48,6 +57,7 @@ struct ObdRow {
   std::size_t line;
   double counter, t, rpm, speed;
   double clock = -1.0, period = 0.0;  // a clock cell's time of day (s) and its wrap (unwrap_clock)
+  bool drive_start = false;           // a restart begins a drive here (join_restarts)
 };
 
 // OBD values held between refreshes, in file order. A row whose rpm and speed both equal the previous
@@ -59,7 +69,7 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
   double last_rpm = kMissing, last_speed = kMissing, last_t = -std::numeric_limits<double>::infinity();
   bool have_last = false;
   std::vector<std::size_t> lines;
-  std::vector<double> rows, refresh_row, refresh_t;
+  std::vector<double> rows, refresh_row, refresh_t, drives;
   std::vector<Sample> kept;
   // Rows repeating held values (kept for SampleLog::rows only): row counter, own time, the kept row.
   struct Repeat {
@@ -77,6 +87,10 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
     if (from_first && !t0) t0 = parsed[i].t;
     ObdRow p = parsed[i];
     if (t0) p.t -= *t0;
+    if (p.drive_start) {  // a new drive: nothing is held from the last
+      drives.push_back(p.counter);
+      have_last = false;
+    }
     if (p.t != last_t) {
       refresh_row.push_back(p.counter);
       refresh_t.push_back(p.t + 0.5);
@@ -100,7 +114,7 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
     // estimate stays within that (it matters only at the ends of a log, where the fit is one-sided).
     constexpr double kMaxCounterAge = 3.0;  // s: one second of resolution plus a polling round
     const auto estimate = [&](const std::vector<double>& at, auto&& own_t, auto&& set_t) {
-      const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t);
+      const std::vector<double> times = smooth_row_times(at, refresh_row, refresh_t, drives);
       double previous = -std::numeric_limits<double>::infinity();
       for (std::size_t i = 0; i < at.size(); ++i) {
         previous = std::max(previous, std::clamp(times[i], own_t(i), own_t(i) + kMaxCounterAge));
@@ -255,9 +269,10 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     });
     if (clocks) unwrap_clock(parsed, out);
   }
-  join_restarts(
-      parsed.size(), reader.restarts, [&](std::size_t i) { return parsed[i].line; },
-      [&](std::size_t i) -> double& { return parsed[i].t; }, out.log());
+  for (std::size_t i : join_restarts(
+           parsed.size(), reader.restarts, [&](std::size_t i) { return parsed[i].line; },
+           [&](std::size_t i) -> double& { return parsed[i].t; }, out.log()))
+    parsed[i].drive_start = true;
   add_obd_rows(parsed, out, layout);
 }
 

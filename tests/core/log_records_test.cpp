@@ -383,14 +383,34 @@ TEST_CASE("io: a time falling back over 5 s without a header begins a new drive,
     // Two resets: three drives.
     same_as_halves("t,speed,freq\n", "50,1,20\n51,2,21\n20,3,22\n21,4,23\n", "0,5,24\n1,6,25\n", 2);
   }
-  SECTION("a Carloop log whose engine run time starts again") {
+  SECTION("a Carloop log whose engine run time starts again: each drive's times as in a log of its own") {
+    // Two rows a second, the counter refreshed every third row; rpm and speed change on every row, and the
+    // first drive's last row and the second's first both stand still (not a held row across the restart).
+    const auto drive = [](int from, int rows) {
+      std::string text;
+      for (int i = 0; i < rows; ++i) {
+        const bool still = i == (from > 0 ? rows - 1 : 0);
+        text += std::to_string(from + (i / 3) * 3 / 2) + ", " + std::to_string(still ? 0 : 1000 + 10 * i) +
+                ", " + std::to_string(still ? 0 : 20 + i) + ",\n";
+      }
+      return text;
+    };
     const std::string carloop = "ENGINE_RUN_TINE (),ENGINE_RPM (),VEHICLE_SPEED (),\n";
-    const SampleLog run = read_log_text(carloop + "100,800,10,\n101,900,20,\n102,950,25,\n" +
-                                        "1,1000,30,\n2,1100,40,\n3,1200,45,\n");
+    const std::string first = drive(100, 40), second = drive(0, 40);
+    const SampleLog run = read_log_text(carloop + first + second);
+    const SampleLog a = read_log_text(carloop + first), b = read_log_text(carloop + second);
     CHECK(run.restarts == 1);
     CHECK(run.skipped_count == 0);
-    REQUIRE(run.samples.size() == 6);
-    CHECK(run.samples[3].t >= run.samples[2].t + kRestartGap - 3.0);  // a run-time counter is up to 3 s old
+    REQUIRE(run.samples.size() == a.samples.size() + b.samples.size());
+    for (std::size_t i = 0; i < a.samples.size(); ++i)
+      CHECK(run.samples[i].t == Approx(a.samples[i].t));
+    const std::size_t n = a.samples.size();
+    CHECK(run.samples[n].t >=
+          run.samples[n - 1].t + kRestartGap - 3.0);  // a run-time counter is up to 3 s old
+    for (std::size_t i = 0; i < b.samples.size(); ++i) {
+      CHECK(run.samples[n + i].t - run.samples[n].t == Approx(b.samples[i].t - b.samples[0].t));
+      CHECK(run.samples[n + i].freq == Approx(b.samples[i].freq));
+    }
   }
   SECTION("a small fall is rows out of order, and one row out of place a corrupt cell: bad rows as before") {
     const SampleLog jitter = read_log_text(
