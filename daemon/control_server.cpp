@@ -2,7 +2,6 @@
 
 #include <fcntl.h>
 #include <sys/epoll.h>
-#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -94,10 +93,22 @@ int slot_to_free(const std::map<int, std::unique_ptr<Client>>& clients, bool for
   return victim;
 }
 
+// The server's wake-up, or an error naming the socket it was for.
+WakeEvent make_wake_event(const std::string& path) {
+  try {
+    return WakeEvent();
+  } catch (const std::system_error& e) {
+    throw std::system_error(e.code(), "control socket " + path + ": eventfd");
+  }
+}
+
 }  // namespace
 
 ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLimits limits)
-    : path_(std::move(socket_path)), handler_(std::move(handler)), limits_(limits) {
+    : path_(std::move(socket_path)),
+      handler_(std::move(handler)),
+      limits_(limits),
+      wake_(make_wake_event(path_)) {
   const std::filesystem::path parent = std::filesystem::path(path_).parent_path();
   if (!parent.empty()) {
     std::error_code ec;
@@ -118,8 +129,6 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
     if (::listen(listen_fd_.get(), 16) != 0) throw_errno("cannot listen on " + path_);
     epoll_fd_.reset(::epoll_create1(EPOLL_CLOEXEC));
     if (!epoll_fd_) throw_errno("control socket " + path_ + ": epoll_create1");
-    wake_fd_.reset(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
-    if (!wake_fd_) throw_errno("control socket " + path_ + ": eventfd");
   } catch (...) {
     ::unlink(path_.c_str());  // the descriptors close as the members go
     throw;
@@ -128,7 +137,6 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
 
 ControlServer::~ControlServer() {
   stop();
-  wake_fd_.reset();
   epoll_fd_.reset();
   if (listen_fd_) {
     listen_fd_.reset();
@@ -145,8 +153,7 @@ void ControlServer::start() {
 void ControlServer::stop() noexcept {
   if (!thread_.joinable()) return;
   running_.store(false);
-  const std::uint64_t one = 1;
-  [[maybe_unused]] const ssize_t n = ::write(wake_fd_.get(), &one, sizeof one);
+  wake_.signal();  // after the flag: the server thread sees it when epoll_wait returns, or does not wait
   thread_.join();
 }
 
@@ -228,7 +235,7 @@ void ControlServer::run() noexcept {
     return c.out.size() <= limits_.max_output_bytes;
   };
 
-  if (!add_fd(listen_fd_.get(), EPOLLIN) || !add_fd(wake_fd_.get(), EPOLLIN)) {
+  if (!add_fd(listen_fd_.get(), EPOLLIN) || !add_fd(wake_.fd(), EPOLLIN)) {
     spdlog::error("control: epoll registration failed: {}; {} is not served (restart the daemon)",
                   std::strerror(errno), path_);
     return;
@@ -250,7 +257,10 @@ void ControlServer::run() noexcept {
     if (accept_paused && now >= accept_resume && add_fd(listen_fd_.get(), EPOLLIN)) accept_paused = false;
     for (int i = 0; i < n; ++i) {
       const int fd = events[i].data.fd;
-      if (fd == wake_fd_.get()) continue;
+      if (fd == wake_.fd()) {
+        wake_.take_signals();  // the loop's condition then reads running_
+        continue;
+      }
       if (fd == listen_fd_.get()) {
         for (;;) {
           UniqueFd cfd(::accept4(listen_fd_.get(), nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));

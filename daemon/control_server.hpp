@@ -18,6 +18,7 @@
 
 #include "common/control_protocol.hpp"
 #include "drivers/unique_fd.hpp"
+#include "drivers/wake_event.hpp"
 
 namespace gearpulse::daemon {
 
@@ -75,7 +76,7 @@ class ControlServer {
   ControlLimits limits_;
   UniqueFd listen_fd_;
   UniqueFd epoll_fd_;
-  UniqueFd wake_fd_;
+  WakeEvent wake_;  // stop() signals it; the server thread waits on it in its epoll set
   std::thread thread_;
   std::atomic<bool> running_{false};
   std::atomic<std::size_t> clients_{0};

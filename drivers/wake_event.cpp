@@ -33,6 +33,10 @@ void WakeEvent::wait_until(std::int64_t t_ns) noexcept {
   pollfd pfd{fd_.get(), POLLIN, 0};
   const timespec rel = to_timespec(std::max<std::int64_t>(0, t_ns - monotonic_ns()));
   if (::ppoll(&pfd, 1, &rel, nullptr) <= 0 || !(pfd.revents & POLLIN)) return;  // the time, or EINTR
+  take_signals();
+}
+
+void WakeEvent::take_signals() noexcept {
   std::uint64_t count = 0;
   [[maybe_unused]] const ssize_t n = ::read(fd_.get(), &count, sizeof count);  // nonblocking: never waits
 }
