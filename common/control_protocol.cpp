@@ -87,6 +87,7 @@ GEARPULSE_FIELDS(TrackerStatus) void fields(R& r, F&& f) {
   f("freq", r.freq);
   f("snr_db", r.snr_db);
   f("confident", r.confident);
+  f("turns", r.turns);
 }
 
 GEARPULSE_FIELDS(LearningStatus) void fields(R& r, F&& f) {

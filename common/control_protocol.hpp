@@ -152,6 +152,7 @@ struct TrackerStatus {
   std::optional<double> freq;  // Hz
   std::optional<double> snr_db;
   bool confident = false;
+  std::uint64_t turns = 0;  // wake-ups of the tracker thread since the daemon started
 };
 
 struct LearningStatus {

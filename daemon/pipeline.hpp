@@ -52,7 +52,7 @@ struct PipelineSnapshot {
   std::uint64_t ring_drops = 0;
   double tracker_freq = -1.0;  // Hz, < 0 not tracked
   // Turns of the tracker thread's loop: one per wake-up (audio pushed, a GPS report, a step on GPS alone,
-  // an open of the capture, its heartbeat or stop()), for tests.
+  // an open of the capture, its heartbeat or stop()); the status's tracker.turns.
   std::uint64_t tracker_turns = 0;
   double tracker_snr_db = 0.0;
   bool tracker_confident = false;

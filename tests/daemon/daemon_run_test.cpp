@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <ctime>
@@ -88,6 +89,16 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   CHECK(daemon.running());
   CHECK(wait_for_status(dir, daemon)["ok"] == true);
+  // The tracker thread turns while the pipeline runs, here for its steps on GPS alone and its heartbeat:
+  // tracker.turns grows (several times a second; the 10 s only bound a failing test).
+  REQUIRE(status["tracker"]["turns"].is_number_unsigned());
+  const auto turns_then = status["tracker"]["turns"].get<std::uint64_t>();
+  CHECK(gearpulse::test::wait_for(
+      [&] {
+        const json now = wait_for_status(dir, daemon)["tracker"]["turns"];
+        return now.is_number_unsigned() && now.get<std::uint64_t>() > turns_then;
+      },
+      std::chrono::seconds(10)));
 
   daemon.signal(SIGHUP);
   CHECK(wait_for_status(dir, daemon)["ok"] == true);
