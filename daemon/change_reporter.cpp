@@ -11,6 +11,7 @@ namespace gearpulse::daemon {
 
 void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot& now) {
   const std::string server = fmt::format("{}:{}", config_.gps.host, config_.gps.port);
+  const std::string output = output_target(config_.output);
   // From the connection itself, not from a change between two snapshots: the first connection is often
   // made before the first snapshot is taken.
   if (const bool up = now.gps_state != GpsState::kDisconnected; up != gps_connected_) {
@@ -67,31 +68,29 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
                             starts)) {
     case StateFault::Say::kStart:
       spdlog::warn(
-          "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}",
-          config_.output.path, now.output_unheard,
-          starts > 1 ? fmt::format(" ({} times since the last report)", starts) : "");
+          "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}", output,
+          now.output_unheard, starts > 1 ? fmt::format(" ({} times since the last report)", starts) : "");
       break;
     case StateFault::Say::kEnd:
-      spdlog::info("output: a reader has {} open ({} pulses went unheard in all)", config_.output.path,
+      spdlog::info("output: a reader has {} open ({} pulses went unheard in all)", output,
                    now.output_unheard);
       break;
     case StateFault::Say::kNothing:
       break;
   }
   if (now.output_state != before.output_state && now.output_state == OutputState::kWriteErrors)
-    spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered",
-                 config_.output.path);
+    spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered", output);
   if (now.output_dropped > before.output_dropped) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("output-dropped", suppressed))
       spdlog::warn(
           "output: the reader of {} is not reading: {} pulse(s) dropped (total {}); pulses that wait in "
           "its queue over 2 s are dropped rather than delivered late",
-          config_.output.path, now.output_dropped - before.output_dropped, now.output_dropped);
+          output, now.output_dropped - before.output_dropped, now.output_dropped);
   } else if (before.output_state == OutputState::kReaderBehind &&
              now.output_state != OutputState::kReaderBehind) {
     limiter_.reset("output-dropped");
-    spdlog::info("output: the reader of {} keeps up again", config_.output.path);
+    spdlog::info("output: the reader of {} keeps up again", output);
   }
   if (now.xruns > before.xruns) {
     std::uint64_t suppressed = 0;

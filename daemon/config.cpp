@@ -319,6 +319,18 @@ Config from_table(const toml::table& root, const std::string& file, const std::f
 
 }  // namespace
 
+std::string output_target(const OutputConfig& o) {
+  switch (o.kind) {
+    case OutputKind::kPty:
+      return o.path;
+    case OutputKind::kGpio:
+      return o.chip + ":" + std::to_string(o.line);
+    case OutputKind::kNone:
+      break;
+  }
+  return "";
+}
+
 PulseConfig pulse_config_of(const OutputConfig& o) noexcept {
   PulseConfig p;
   p.pulses_per_km = o.pulses_per_km;

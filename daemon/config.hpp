@@ -61,6 +61,8 @@ struct OutputConfig {
   double max_frequency = 1000;  // Hz; above it the train clamps
 };
 
+// Where the pulses go, as the status and the log name it: the PTY's path or "chip:line"; "" for none.
+[[nodiscard]] std::string output_target(const OutputConfig& o);
 // The pulse train's settings as the scheduler takes them (fixed width when duty is 0).
 [[nodiscard]] PulseConfig pulse_config_of(const OutputConfig& o) noexcept;
 // The tracker's settings for capture at `sample_rate_hz` (the rate the device gave).

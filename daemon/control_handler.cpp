@@ -71,9 +71,7 @@ control::StatusReply status_reply(const StatusInputs& in) {
                   .unheard = p.output_unheard,
                   .pulses_per_km = config.output.pulses_per_km,
                   .path = std::nullopt};
-  if (config.output.kind == OutputKind::kPty) reply.output.path = config.output.path;
-  if (config.output.kind == OutputKind::kGpio)
-    reply.output.path = fmt::format("{}:{}", config.output.chip, config.output.line);
+  if (config.output.kind != OutputKind::kNone) reply.output.path = output_target(config.output);
   reply.gps = {.state = std::string(to_string(p.gps_state)),
                .speed = number_if(p.gps_speed, p.gps_speed >= 0),
                .mode = p.gps_mode,
