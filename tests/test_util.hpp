@@ -1,8 +1,8 @@
 #pragma once
-// Helpers shared by the tests: skipping a test that cannot run, the real driving logs, unique temp dirs,
-// shell commands, small text files, free TCP ports, polling for a condition, child processes, a
-// line-oriented Unix socket client, and random corruption of a file's text. Everything that names a path
-// or a port is unique per call, so test executables can run in parallel.
+// Helpers shared by the tests: skipping a test that cannot run, a sanitizer build, the real driving logs,
+// unique temp dirs, shell commands, small text files, free TCP ports, polling for a condition, child
+// processes, a line-oriented Unix socket client, and random corruption of a file's text. Everything that
+// names a path or a port is unique per call, so test executables can run in parallel.
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -41,7 +41,26 @@
     return;                             \
   } while (false)
 
+// Defined in a sanitizer build (GEARPULSE_SANITIZE: AddressSanitizer or ThreadSanitizer): GCC says so with
+// __SANITIZE_ADDRESS__ / __SANITIZE_THREAD__, clang through __has_feature.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define GEARPULSE_SANITIZED 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+#define GEARPULSE_SANITIZED 1
+#endif
+#endif
+
 namespace gearpulse::test {
+
+// How many times longer the threads' own work may take in this build than in the release build, for a
+// test that bounds such work in time (a sleep or a timeout is not stretched): ThreadSanitizer's documented
+// slowdown is 5-15 times, its upper end taken (AddressSanitizer's, about 2, lies within it); 1 unsanitized.
+#ifdef GEARPULSE_SANITIZED
+inline constexpr double kSanitizerSlowdown = 15.0;
+#else
+inline constexpr double kSanitizerSlowdown = 1.0;
+#endif
 
 // The third-party driving logs (shared/data/real beside the source tree): $GEARPULSE_REAL_DATA_DIR if set,
 // else the directory the build was configured with (the CMake variable of the same name).

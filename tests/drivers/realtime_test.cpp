@@ -14,16 +14,7 @@
 #include "drivers/realtime.hpp"
 #include "tests/test_util.hpp"
 
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
-#define GEARPULSE_SANITIZER_SHADOW 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-#define GEARPULSE_SANITIZER_SHADOW 1
-#endif
-
-#ifndef GEARPULSE_SANITIZER_SHADOW
+#ifndef GEARPULSE_SANITIZED
 namespace {
 
 // This process's resident memory, kB (VmRSS).
@@ -63,7 +54,7 @@ int locked_growth_mb() {
 #endif
 
 TEST_CASE("realtime: locked memory is made resident as it is used, not every mapping at once") {
-#ifdef GEARPULSE_SANITIZER_SHADOW
+#ifdef GEARPULSE_SANITIZED
   GEARPULSE_SKIP_TEST("a sanitizer's shadow mappings make mlockall meaningless in this build");
 #else
   const pid_t pid = ::fork();
