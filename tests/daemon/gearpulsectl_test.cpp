@@ -208,3 +208,36 @@ TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of prin
   CHECK(*rc == 1);
   CHECK(read_text(dir / "out.txt") == "gearpulsectl: gearpulsed sent a reply nested deeper than 64 levels\n");
 }
+
+TEST_CASE("control: gearpulsectl status says which threads are not responding") {
+  // A daemon whose tracker and capture threads stopped turning (threads.stalled): the table says so on a
+  // "!" line of its own, as it does the other problems, not only the JSON.
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  const int listener = listen_unix(sock);
+  std::thread server([&] {
+    const int c = ::accept(listener, nullptr, nullptr);
+    if (c < 0) return;
+    char buf[512];
+    (void)!::read(c, buf, sizeof buf);
+    const std::string line =
+        R"({"ok":true,"v":1,"threads":{"stalled":["tracker","capture"],"missing":[]},)"
+        R"("config":{"file":"x.toml","reload_error":"","restart_pending":["audio.rate","audio.device"]}})"
+        "\n";
+    (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
+    ::close(c);
+  });
+  Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
+  const auto rc = p.wait();
+  server.join();
+  ::close(listener);
+  REQUIRE(rc.has_value());
+  CHECK(*rc == 0);
+  const std::string out = read_text(dir / "out.txt");
+  INFO(out);
+  CHECK(out.find("! threads: not responding: tracker, capture\n") != std::string::npos);
+  CHECK(out.find("! threads: not built in") == std::string::npos);
+  CHECK(out.find("! config: changed, applied at the next restart: audio.rate, audio.device\n") !=
+        std::string::npos);
+}

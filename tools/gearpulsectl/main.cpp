@@ -15,6 +15,7 @@
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
@@ -190,17 +191,25 @@ void print_status(const control::StatusReply& s) {
     }
     std::cout << "! audio: " << line << "\n";
   }
+  const auto names = [](const std::vector<std::string>& list) {
+    std::string text;
+    for (const std::string& name : list)
+      text += (text.empty() ? "" : ", ") + name;
+    return text;
+  };
+  // Threads whose heartbeat is stale: the daemon withholds systemd's watchdog until they turn again.
+  if (!s.threads.stalled.empty())
+    std::cout << "! threads: not responding: " << names(s.threads.stalled) << "\n";
+  if (!s.threads.missing.empty())
+    std::cout << "! threads: not built in: " << names(s.threads.missing) << "\n";
   // The state directory's problems (a file set aside, a save that fails) and the configuration's (a
   // reload refused, settings waiting for a restart): shown as the others, not only in the JSON.
   for (const std::string& p : model.problems)
     std::cout << "! model: " << p << "\n";
   if (!s.config.reload_error.empty()) std::cout << "! config: " << s.config.reload_error << "\n";
-  if (!s.config.restart_pending.empty()) {
-    std::string keys;
-    for (const std::string& k : s.config.restart_pending)
-      keys += (keys.empty() ? "" : ", ") + k;
-    std::cout << "! config: changed, applied at the next restart: " << keys << "\n";
-  }
+  if (!s.config.restart_pending.empty())
+    std::cout << "! config: changed, applied at the next restart: " << names(s.config.restart_pending)
+              << "\n";
   std::cout << "gears\n";
   print_gears(s.gears);
 }
