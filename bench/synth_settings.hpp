@@ -74,6 +74,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(idle_braking_prior),
     GEARPULSE_FIELD(first_gear_idle_speed),
     GEARPULSE_FIELD(declutch_brake_spread),
+    GEARPULSE_FIELD(declutch_pull_spread),
     GEARPULSE_FIELD(predict_lower_gears),
     GEARPULSE_FIELD(fitted_lower_gears),
     GEARPULSE_FIELD(fill_ladder_gaps),

@@ -108,6 +108,19 @@ void SpeedSynthesizer::read_revs(const StepInput& in) noexcept {
   // The engine at idle: within the band of revs a braking to a stop or a roll declutched shows
   // (idle_braking).
   at_idle_ = habits_.at_idle(freq, tuning_);
+  // An engine let go falls to idle within a shift's declutch (declutch_time), its revs slowed by its own
+  // friction at about a constant rate: after dt about 1 - dt / declutch_time of its revs above the rolling
+  // idle remain. Revs that fell further than that fell faster than an engine does, and by that much (the
+  // share they overshot) the reading is off the engine's line (a lock of the tracker on another order, as
+  // often at half the engine as anywhere) rather than a declutch (declutch_pull_spread). None at steps as
+  // long as a declutch: an engine falls anywhere within them.
+  fell_too_fast_ = 0.0;
+  if (habits_.idle_known() && std::isfinite(freq) && std::isfinite(prev_freq_) &&
+      prev_freq_ > rolling_idle()) {
+    const double left = std::clamp(1.0 - in.dt / std::max(tuning_.declutch_time, 1e-3), 0.0, 1.0);
+    const double seen = std::max(freq - rolling_idle(), 0.0) / (prev_freq_ - rolling_idle());
+    fell_too_fast_ = std::clamp(left - seen, 0.0, 1.0);
+  }
   lugged_ = habits_.lugged(freq, gears_, tuning_);
   // How fast the revs climb, from kFreeRise (0) to twice it (1): only at the tracker's short steps, where
   // one reading to the next is shorter than a shift, so the climb is the engine's and not a shift's
@@ -129,6 +142,7 @@ SpeedSynthesizer::Track SpeedSynthesizer::entering(int i, int j, bool moving_off
   // Moving off (into the launch mode, or through it into a gear within this step): the clutch slips
   // and the car gains speed at a launch acceleration.
   if (moving_off) x = {x.v, tuning_.launch_accel, x.pvv, 0.0, tuning_.launch_sigma * tuning_.launch_sigma};
+  const double carried = x.a;  // the acceleration the history carried into the step
   // Declutching ends the engine's drive: the car no longer gains speed. Nor does a car declutched
   // all along once GPS is lost, whatever gain GPS showed it (a slipping clutch, revs no gear explains).
   if (j == 0 && (i != 0 || !have_gps)) x.a = std::min(x.a, 0.0);
@@ -136,6 +150,18 @@ SpeedSynthesizer::Track SpeedSynthesizer::entering(int i, int j, bool moving_off
   if (j == 0 && i != 0) {
     const double spread = tuning_.declutch_brake_spread * x.a;
     x.paa = std::max(x.paa, spread * spread);
+  }
+  // A pulling gear's history sent to the clutch by revs that fell faster than an engine let go falls
+  // (fell_too_fast_): by that share the reading was off the engine's line and the car pulls on, so the
+  // clutch's history keeps that share of the pull, and as much again as its spread. Without it, a reading at
+  // half the engine during a launch (first gear's revs at twice the idle put it on the idle band) took the
+  // belief to a clutch that stopped gaining speed; first gear, entered again from that speed when the revs
+  // returned to its line, paid a jump that grew with the pull, and the clutch held the rest of the outage
+  // (`random-503/s1`, urban, from 840 s: 4.2 m/s against a true 5-7, -31.6 %).
+  if (j == 0 && is_gear(i) && carried > 0.0 && tuning_.declutch_pull_spread > 0.0) {
+    const double kept = tuning_.declutch_pull_spread * carried * fell_too_fast_;
+    x.a = std::max(x.a, kept);
+    x.paa = std::max(x.paa, kept * kept);
   }
   // A shift within the step: the engine's pull reaches the wheels through the new gear, as theta_i /
   // theta_j of the force at the same torque (eq. (3): theta is the speed per turn of the engine), so a

@@ -154,6 +154,11 @@ struct SynthTuning {
   // then entered from that spread of speeds, not from the braking carried on unchanged (0: the
   // deceleration stays as certain as GPS measured it).
   double declutch_brake_spread = 1.0;
+  // 1: a pulling gear's history that goes to the clutch on revs that fell faster than an engine let go
+  // falls (toward idle within declutch_time) keeps the share of its pull by which they did, as its mean and
+  // its spread: by that share the reading was off the engine's line (a tracker's lock on another order), not
+  // a declutch, and the car pulls on (0: the pull ends at any fall, as a declutch ends it).
+  double declutch_pull_spread = 1.0;
   // 1: a ladder that lacks first gear (first_gear_idle_speed) is extended below its lowest gear by the
   // gears a progressive gearbox has there, predicted from the ladder's own lowest steps, until the lowest
   // carries the car at the warm idle no faster than first gear does (0: none predicted).

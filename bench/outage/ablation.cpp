@@ -58,6 +58,7 @@ constexpr Rule kRules[] = {
     {"idle braking prior: the fit's idle braking", "idle_braking_prior=0"},
     {"first gear at idle: a ladder too tall at idle lacks first", "first_gear_idle_speed=inf"},
     {"declutch brake spread: braking uncertain once declutched", "declutch_brake_spread=0"},
+    {"declutch pull spread: a pull kept through revs falling too fast", "declutch_pull_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
     {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
     {"upper gears: a young ladder extended above its top", "predict_upper_gears=0"},
