@@ -82,6 +82,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(gap_gear_share),
     GEARPULSE_FIELD(gap_step_growth),
     GEARPULSE_FIELD(launch_gears),
+    GEARPULSE_FIELD(fit_launch_gears),
     GEARPULSE_FIELD(predict_upper_gears),
     GEARPULSE_FIELD(top_gear_idle_speed),
     GEARPULSE_FIELD(top_gear_revs),

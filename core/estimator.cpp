@@ -368,6 +368,7 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
     result.model.reason = problem;
     return result;
   }
+  bool polled = false;  // a polling logger's log (holds_values)
   {
     // The ladder from speed and frequency as of one instant; what the driver does (idle, revs per gear,
     // rolling idle) below from the values as logged, as the synthesis sees them live.
@@ -377,6 +378,7 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
       detail::interpolate_held(*aligned);
     }
     const detail::MixtureData& fit_data = aligned ? *aligned : data;
+    polled = aligned.has_value();
     if (!options.ratios.empty()) {
       result.model = detail::fit_paper(fit_data, options.ratios);
     } else {
@@ -420,6 +422,10 @@ FitResult fit_gear_model(std::span<const Sample> samples, const FitOptions& opti
       if (const auto braking = detail::estimate_idle_braking(data, result.model, *idle, rolling))
         result.model.extra["idle_braking"] = {
             {"accel", braking->accel}, {"seconds", braking->seconds}, {"samples", braking->samples}};
+      // How many gears the launches pass below the ladder's lowest: the synthesis' count to start from.
+      if (const auto launches =
+              polled ? detail::estimate_launch_gears(data, result.model, *idle) : std::nullopt)
+        result.model.extra["launch_gears"] = {{"base", launches->base_theta}, {"counts", launches->counts}};
     }
   }
   return result;

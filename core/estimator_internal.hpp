@@ -1,11 +1,13 @@
 #pragma once
 // Pieces shared by the estimator's translation units (not part of the public API).
+#include <array>
 #include <cstddef>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "core/gear_model.hpp"
+#include "core/launch_gears.hpp"
 #include "core/mixture_likelihood.hpp"
 #include "core/sample.hpp"
 
@@ -22,6 +24,19 @@ struct IdleEstimate {
 
 // The engine's idle from the samples at rest, or nothing when fewer than min_samples of them.
 [[nodiscard]] std::optional<IdleEstimate> estimate_idle(const MixtureData& data, std::size_t min_samples);
+
+// The launches from rest in the log (core/fit_launch_gears.cpp): per count k of upshifts made before the car
+// drives the ladder's lowest gear (`base_theta`; k = kMaxBelow: that many or more), how many launches made k.
+struct LaunchCounts {
+  double base_theta = 0.0;
+  std::array<double, LaunchGears::kMaxBelow + 1> counts{};
+  double launches = 0.0;
+};
+// Nothing where no launch was counted, the ladder has fewer than two gears, or the log reads its revs
+// further apart than a launch holds first gear.
+[[nodiscard]] std::optional<LaunchCounts> estimate_launch_gears(const MixtureData& data,
+                                                                const GearModel& model,
+                                                                const IdleEstimate& idle);
 
 // How a driver uses each gear: the engine frequency over the samples on that gear's line, in log frequency
 // (a gear used from 1200 to 2400 rpm spans the same width at any ratio).

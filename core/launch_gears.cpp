@@ -68,27 +68,50 @@ void LaunchGears::observe_fix(double t, bool standing, double base_theta, int ab
   counts_[static_cast<std::size_t>(std::min(below, kMaxBelow))] += 1.0;
 }
 
+void LaunchGears::seed(double base_theta, const std::array<double, kMaxBelow + 1>& counts) noexcept {
+  fit_base_ = base_theta > 0.0 ? base_theta : 0.0;
+  fit_counts_ = counts;
+}
+
 // Whether `base_theta` is the base the counts belong to: within two gear windows of it.
 bool LaunchGears::same_base(double base_theta) const noexcept {
   return base_theta_ > 0.0 && base_theta > 0.0 &&
          std::abs(std::log(base_theta / base_theta_)) < 2.0 * kGearWindow;
 }
 
-int LaunchGears::gears_below(double base_theta, int idle_count, double off_share) const noexcept {
-  if (idle_count >= kMaxBelow || !same_base(base_theta)) return idle_count;
+namespace {
+
+// The most probable count of gears below the base given `counts` of launches per count, the prior centred
+// on `centre` (launch_gears.hpp).
+int most_probable(const std::array<double, LaunchGears::kMaxBelow + 1>& counts, int centre,
+                  double off_share) noexcept {
   const double off = std::clamp(off_share, 1e-6, 0.5);
-  const double log_on = std::log(1.0 - off), log_off = std::log(off / kMaxBelow);
+  const double log_on = std::log(1.0 - off), log_off = std::log(off / LaunchGears::kMaxBelow);
   double total = 0.0;
-  for (double c : counts_)
+  for (double c : counts)
     total += c;
-  int best = idle_count;
+  int best = centre;
   double best_score = -std::numeric_limits<double>::infinity();
-  for (int k = 0; k <= kMaxBelow; ++k) {
-    const double on = counts_[static_cast<std::size_t>(k)];
-    const double score = std::abs(k - idle_count) * std::log(off) + on * log_on + (total - on) * log_off;
+  for (int k = 0; k <= LaunchGears::kMaxBelow; ++k) {
+    const double on = counts[static_cast<std::size_t>(k)];
+    const double score = std::abs(k - centre) * std::log(off) + on * log_on + (total - on) * log_off;
     if (score > best_score) best = k, best_score = score;
   }
   return best;
+}
+
+}  // namespace
+
+int LaunchGears::gears_below(double base_theta, int idle_count, double off_share) const noexcept {
+  if (idle_count >= kMaxBelow) return idle_count;
+  // The fit's launches may ask for more gears than the idle does, never fewer: a count read at a log's
+  // rows misses a fall (a first gear passed between two readings) more often than it reads one that is
+  // none, so its zeros are weak evidence, and a drive's own launches still decide against it.
+  int centre = idle_count;
+  if (fit_base_ > 0.0 && std::abs(std::log(base_theta / fit_base_)) < 2.0 * kGearWindow)
+    centre = std::max(centre, most_probable(fit_counts_, idle_count, off_share));
+  if (!same_base(base_theta)) return centre;
+  return most_probable(counts_, centre, off_share);
 }
 
 }  // namespace gearpulse

@@ -35,6 +35,10 @@ class LaunchGears {
   // below the base, a move-off or a declutch). A launch held first in a gear `above` positions over the base
   // passed the ones between by as many upshifts, which are not gears below it.
   void observe_fix(double t, bool standing, double base_theta, int above) noexcept;
+  // The launches a fit counted in its log on a base of `base_theta` (extra.launch_gears), per count k of
+  // upshifts: where they show more gears below that base than the idle requires, the prior of the count
+  // is centred there (gears_below).
+  void seed(double base_theta, const std::array<double, kMaxBelow + 1>& counts) noexcept;
   // GPS was lost, the steps paused, the ladder went or the filter restarted: a launch in progress is not
   // counted.
   void abort() noexcept { state_ = State::kIdle; }
@@ -60,6 +64,8 @@ class LaunchGears {
   double moved_ = 0.0;       // time of the first fix moving
   double base_theta_ = 0.0;  // the base the counts belong to (0: none)
   std::array<double, kMaxBelow + 1> counts_{};
+  double fit_base_ = 0.0;  // the base the fit's counts belong to (0: none)
+  std::array<double, kMaxBelow + 1> fit_counts_{};
 };
 
 }  // namespace gearpulse

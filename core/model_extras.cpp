@@ -43,6 +43,23 @@ ModelExtras read_model_extras(const GearModel* model) noexcept {
       if (v.is_number() && v.get<double>() > 0.0 && x.lower_count < x.lower_gears.size())
         x.lower_gears[x.lower_count++] = v.get<double>();
   }
+  if (const auto launches = extra.find("launch_gears"); launches != extra.end() && launches->is_object()) {
+    const double base = extra_number(*launches, "base");
+    const auto counts = launches->find("counts");
+    if (std::isfinite(base) && base > 0.0 && counts != launches->end() && counts->is_array() &&
+        counts->size() == x.launch_counts.size()) {
+      bool valid = true;
+      for (std::size_t k = 0; k < counts->size(); ++k) {
+        const nlohmann::json& c = (*counts)[k];
+        valid = valid && c.is_number() && c.get<double>() >= 0.0;
+        if (valid) x.launch_counts[k] = c.get<double>();
+      }
+      if (valid)
+        x.launch_base = base;
+      else
+        x.launch_counts.fill(0.0);
+    }
+  }
   return x;
 }
 

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "core/gear_model.hpp"
+#include "core/launch_gears.hpp"
 
 namespace gearpulse {
 
@@ -29,6 +30,10 @@ struct ModelExtras {
   // order given, the first kMaxGears of them (a fit writes fewer).
   std::array<double, GearModel::kMaxGears> lower_gears{};
   std::size_t lower_count = 0;
+  // The launches from rest in the fit's log (extra.launch_gears): per count k of upshifts before the
+  // ladder's lowest gear (`launch_base`, 0 = none recorded), how many launches made k.
+  double launch_base = 0.0;
+  std::array<double, LaunchGears::kMaxBelow + 1> launch_counts{};
 };
 
 // The extras of `model` (none without one). Anything missing or malformed is left unknown: a hand-edited

@@ -57,6 +57,7 @@ SpeedSynthesizer::SpeedSynthesizer(std::shared_ptr<const GearModel> model, const
   speed_lag_.set_significance(tuning.speed_lag_significance);
   if (model && model->gears.size() <= static_cast<std::size_t>(kMaxGears)) model_ = std::move(model);
   extras_ = read_model_extras(model_.get());
+  if (tuning_.fit_launch_gears > 0.0) launches_.seed(extras_.launch_base, extras_.launch_counts);
   read_top_gear_revs();
   load_model();
   reset();

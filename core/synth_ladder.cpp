@@ -72,6 +72,7 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
   if (model && model->gears.size() > static_cast<std::size_t>(kMaxGears)) return false;
   model_ = std::move(model);
   extras_ = read_model_extras(model_.get());
+  if (tuning_.fit_launch_gears > 0.0) launches_.seed(extras_.launch_base, extras_.launch_counts);
   read_top_gear_revs();
   std::array<double, kMaxGears> thetas{};
   seen_.forget_learned(thetas_of(model_.get(), thetas));

@@ -185,6 +185,11 @@ struct SynthTuning {
   // under GPS show, by the upshifts they make before the filter holds that gear (launch_gears.hpp); each
   // launch's count is off by one with the share launch_second (0: the idle alone decides).
   double launch_gears = 1.0;
+  // 1: the launches start from those the fit counted in its log (extra.launch_gears), by the same rule on
+  // its rows (two in a row on a gear's line stand for the filter's confident belief): a drive's first
+  // outage may come before its first launch, or in a jam whose crawls in first gear never reach the next
+  // (0: from the launches seen under GPS on this drive alone).
+  double fit_launch_gears = 1.0;
   // Gears predicted above the model's top gear, at most (0: none): a young model has not yet cruised in
   // the tall gears. Each is the next step of a gearbox whose steps shrink toward the top, from the model's
   // own top steps, while the highest carries the car at the warm idle slower than top_gear_idle_speed.

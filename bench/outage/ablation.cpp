@@ -61,6 +61,7 @@ constexpr Rule kRules[] = {
     {"declutch pull spread: a pull kept through revs falling too fast", "declutch_pull_spread=0"},
     {"lower gears: a ladder lacking first extended below", "predict_lower_gears=0"},
     {"fitted lower gears: the fit's gears below a ladder lacking first", "fitted_lower_gears=0"},
+    {"fit launch gears: the fit's launches ask gears below its lowest", "fit_launch_gears=0"},
     {"upper gears: a young ladder extended above its top", "predict_upper_gears=0"},
     {"speed lag: a fix is the speed of a moment before", "speed_lag=0"},
     {"speed lag prior: the fit's speed lag until the drive's shows", "speed_lag_prior=0"},

@@ -150,3 +150,24 @@ TEST_CASE("launch gears: a launch that loses GPS or crawls past the launch time 
   quick.observe_fix(moved + 5.0, false, kBase, 0);
   CHECK(quick.launches(1) == 1.0);
 }
+
+TEST_CASE("launch gears: the fit's launches centre the prior higher, never lower, and a drive's decide") {
+  std::vector<double> from_base;
+  climb(from_base, 80.0, 250.0, 20);
+  // The fit's log: ten launches with an upshift before the base, seven with none (a first gear passed
+  // between two readings leaves no fall).
+  LaunchGears gears;
+  gears.seed(kBase, {7.0, 10.0, 0.0, 0.0, 0.0});
+  CHECK(gears.gears_below(kBase, 0, 0.1) == 1);        // the fit's launches ask one gear below
+  CHECK(gears.gears_below(kBase * 1.2, 0, 0.1) == 0);  // another base: the fit's counts are not of it
+  CHECK(gears.launches(1) == 0.0);                     // the drive's own counts are apart
+  double t = 0.0;
+  launch(gears, t, from_base, 0);
+  CHECK(gears.gears_below(kBase, 0, 0.1) == 0);  // one launch of the drive against the prior's one gear
+
+  // Counts that show the base is first never take back the gears the idle asks.
+  LaunchGears first;
+  first.seed(kBase, {12.0, 0.0, 0.0, 0.0, 0.0});
+  CHECK(first.gears_below(kBase, 1, 0.1) == 1);
+  CHECK(first.gears_below(kBase, 0, 0.1) == 0);
+}
