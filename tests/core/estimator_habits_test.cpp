@@ -140,3 +140,41 @@ TEST_CASE("estimator: a fit records the revs each gear is driven at") {
   CHECK(none.model.gears.empty());
   CHECK_FALSE(none.model.extra.contains("revs"));
 }
+
+TEST_CASE("estimator: a polled log's fit records its launches from rest, a 1 Hz log's none") {
+  // OBD rows, each value polled once a second at its own instant within the first half second.
+  sim::ObservationOptions obd;
+  obd.obd = true;
+  obd.period = 0.5;
+  obd.obd_refresh = 1.0;
+  obd.obd_skew = 0.5;
+  obd.seed = 9;
+  for (const char* name : {"bmw-520i", "van-6"}) {
+    const sim::Vehicle car = sim::vehicle_preset(name);
+    const FitResult r = fit_gear_model(
+        sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kMixed, 2400.0, 1, 2, obd)), {});
+    INFO(name << ": " << serialize_model(r.model));
+    REQUIRE(r.model.extra.contains("launch_gears"));
+    const nlohmann::json& launches = r.model.extra["launch_gears"];
+    CHECK(launches["base"].get<double>() == Approx(r.model.gears[0].theta));
+    REQUIRE(launches["counts"].size() == 5);
+    double total = 0.0, below = 0.0;
+    for (std::size_t k = 0; k < 5; ++k) {
+      total += launches["counts"][k].get<double>();
+      if (k > 0) below += launches["counts"][k].get<double>();
+    }
+    CHECK(total >= 3.0);
+    // A ladder that starts at first gear reads no launch passing a gear below it; one that lacks first
+    // gear reads some.
+    const bool has_first = std::abs(std::log(r.model.gears[0].theta / car.theta[0])) < 0.1;
+    if (has_first)
+      CHECK(below == 0.0);
+    else
+      CHECK(below >= 1.0);
+  }
+  // The daemon's 1 Hz pairs: each drive counts its own launches at 10 Hz, the fit records none.
+  const sim::Vehicle car = sim::vehicle_preset("van-6");
+  const FitResult one_hz = fit_gear_model(
+      sim::to_samples(sim::simulate_observations(car, sim::DrivingStyle::kMixed, 2400.0, 1, 2)), {});
+  CHECK_FALSE(one_hz.model.extra.contains("launch_gears"));
+}

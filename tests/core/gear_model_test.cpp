@@ -203,7 +203,7 @@ TEST_CASE("model: the extras the synthesis reads come out as numbers, the malfor
   m.extra = nlohmann::json::parse(R"({"speed_lag": 0.4, "idle": {"freq": 27.5, "sd": 1.2},
       "rolling_idle": {"freq": "fast"}, "idle_braking": {"accel": -0.7, "seconds": 90},
       "revs": [{"mean_log": 3.9, "sd_log": 0.2, "samples": 300}, {"mean_log": 4.1}],
-      "lower_gears": [0.021, "x", -1, 0.031]})");
+      "lower_gears": [0.021, "x", -1, 0.031], "launch_gears": {"base": 0.043, "counts": [7, 10, 0, 0, 1]}})");
   const gearpulse::ModelExtras x = gearpulse::read_model_extras(&m);
   CHECK(x.speed_lag == Approx(0.4));
   CHECK(x.idle_freq == Approx(27.5));
@@ -217,6 +217,17 @@ TEST_CASE("model: the extras the synthesis reads come out as numbers, the malfor
   CHECK(std::isnan(x.revs[1].sd_log));
   REQUIRE(x.lower_count == 2);
   CHECK(x.lower_gears[1] == Approx(0.031));
+  CHECK(x.launch_base == Approx(0.043));
+  CHECK(x.launch_counts[1] == Approx(10.0));
+  CHECK(x.launch_counts[4] == Approx(1.0));
+  // Launch counts of another length or with a count that is no number are none.
+  GearModel bad = m;
+  bad.extra["launch_gears"] = nlohmann::json::parse(R"({"base": 0.043, "counts": [7, 10]})");
+  CHECK(gearpulse::read_model_extras(&bad).launch_base == 0.0);
+  bad.extra["launch_gears"] = nlohmann::json::parse(R"({"base": 0.043, "counts": [7, "x", 0, 0, 0]})");
+  const gearpulse::ModelExtras refused = gearpulse::read_model_extras(&bad);
+  CHECK(refused.launch_base == 0.0);
+  CHECK(refused.launch_counts[0] == 0.0);
   // Revs for another count of gears belong to another ladder: none is read.
   m.gears.push_back({0.1, 0.2, 0.0});
   CHECK_FALSE(gearpulse::read_model_extras(&m).has_revs);
