@@ -6,6 +6,7 @@
 // time; the daemon asks this history for the same, so what it synthesizes does not depend on when its
 // thread ran. One writer (the gpsd client's thread), any number of readers, no lock and no allocation on
 // either side.
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cstddef>
@@ -19,9 +20,10 @@ namespace gearpulse {
 
 class GpsHistory {
  public:
-  // Reports kept: 64 s of a 1 Hz receiver, 6.4 s of a 10 Hz one; a backlog the tracker thread drains in
-  // one turn (at most 64 capture periods, AudioFrontEnd) is shorter at the periods the daemon takes.
-  static constexpr std::size_t kSize = 64;
+  // Reports kept: a hop can be late by at most what the capture ring holds (`audio.ring_seconds`, at most
+  // 60 s), and a 10 Hz receiver, the fastest gpsd serves a car PC, reports 600 times in that; 1024 slots
+  // (about 64 KiB) cover it with room for receivers that report a fix as several sentences.
+  static constexpr std::size_t kSize = 1024;
 
   // The writer thread only: `report` is the newest (reports come in order of receive time).
   void record(const GpsReport& report) noexcept {
@@ -38,14 +40,15 @@ class GpsHistory {
   }
 
   // The report that was the newest at `t_ns` (CLOCK_MONOTONIC): the last one received no later. When `t_ns`
-  // is older than every report kept (the history went round), the oldest kept: the nearest known state.
-  // None before the first report, or when `t_ns` precedes it.
+  // is older than every report kept (the history went round: a hop later than the capture ring can hold),
+  // the oldest kept, the nearest known state; fresh() then judges it as if received at `t_ns`. None before
+  // the first report, or when `t_ns` precedes it.
   [[nodiscard]] std::optional<GpsReport> at(std::int64_t t_ns) const noexcept;
 
   // The report newest at `t_ns` if it is usable and was received no longer than `timeout_ns` before.
   [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t t_ns, std::int64_t timeout_ns) const noexcept {
     const std::optional<GpsReport> then = at(t_ns);
-    if (!then || !then->usable() || t_ns - then->rx_ns > timeout_ns) return std::nullopt;
+    if (!then || !then->usable() || t_ns - std::min(then->rx_ns, t_ns) > timeout_ns) return std::nullopt;
     return then;
   }
 
@@ -63,7 +66,7 @@ inline std::optional<GpsReport> GpsHistory::at(std::int64_t t_ns) const noexcept
     // leave a newer report in a slot: it is skipped as received after `t_ns`.
     const GpsReport r = ring_[(n - 1 - i) % kSize].read();
     if (r.rx_ns <= t_ns) return r;
-    oldest = r;
+    if (!oldest || r.rx_ns < oldest->rx_ns) oldest = r;
   }
   if (n > kSize) return oldest;
   return std::nullopt;
