@@ -14,12 +14,11 @@
 namespace gearpulse::detail {
 namespace {
 
-// s: a launch holds first gear about this long (SpeedSynthesizer::observe_launch's kFirstGearHeld): a log
-// whose revs are read further apart on average passes first gear unread.
-constexpr double kFirstGearHeld = 1.5;
-// Idle spreads above the idle at or below which the engine idles (SpeedSynthesizer::idle_ceiling's).
-constexpr double kIdleSds = 3.0;
-// s: rows further apart are a gap in the log (GPS lost, logging paused): a launch across it is not counted.
+// A log whose revs are read further apart on average than a launch holds first gear passes it unread.
+constexpr double kFirstGearHeld = LaunchGears::kFirstGearHeld;
+constexpr double kIdleSds = LaunchGears::kIdleSds;
+// s: rows further apart than the slowest polling app reads (a phone OBD app's round of 2-6 s) are a gap in
+// the log (GPS lost, logging paused): a launch across it is not counted.
 constexpr double kMaxRowGap = 6.0;
 
 // The gear of `model` whose theta lies nearest `ratio` in log, if nearer it than a gear `step` (log) below

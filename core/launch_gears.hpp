@@ -25,6 +25,12 @@ namespace gearpulse {
 class LaunchGears {
  public:
   static constexpr int kMaxBelow = 4;  // the most gears counted below the base
+  // s: a launch's first gear is held about this long (the geometric mean of 412 stints in first gear ended
+  // by second, under GPS on the simulated drives; synthesis-experiments.md, "At sparse readings"): revs
+  // read further apart than that pass first gear unread, and their launches are not counted.
+  static constexpr double kFirstGearHeld = 1.5;
+  // Idle spreads above the idle at or below which the engine idles (the revs a launch starts from).
+  static constexpr double kIdleSds = 3.0;
 
   // At every step with GPS present: the engine frequency (NaN if not tracked), the base's step to the gear
   // above it (log theta ratio; 0 at the top of the ladder), and the revs at or below which the engine is

@@ -82,8 +82,7 @@ bool SpeedSynthesizer::set_model(std::shared_ptr<const GearModel> model) noexcep
 
 // Revs at or below this are idling (Hz; 0 while no idle is known).
 double SpeedSynthesizer::idle_ceiling() const noexcept {
-  constexpr double kIdleSds = 3.0;
-  return habits_.idle_known() ? rolling_idle() + kIdleSds * idle_sd() : 0.0;
+  return habits_.idle_known() ? rolling_idle() + LaunchGears::kIdleSds * idle_sd() : 0.0;
 }
 
 // A gear seen under GPS that the model lacks (seen_) joins the ladder or leaves it.
@@ -115,9 +114,7 @@ void SpeedSynthesizer::observe_gear(double gps, double freq, double lag) noexcep
 // when a value changes, a row for a new speed with the revs of its last poll (its rows, not its polls, are
 // the steps), and a step that repeats both values comes from a feed that reads both at every step.
 void SpeedSynthesizer::observe_launch(double gps, double freq, bool gps_new) noexcept {
-  // s: a launch's first gear is held about this long (the geometric mean of 412 stints in first gear ended by
-  // second, under GPS on the simulated drives; synthesis-experiments.md, "At sparse readings").
-  constexpr double kFirstGearHeld = 1.5;
+  constexpr double kFirstGearHeld = LaunchGears::kFirstGearHeld;
   // The feed's reading interval: the mean over about the last ten readings (a logger's polls scatter within
   // its rounds, so one interval is no measure of them).
   constexpr double kReadingsMeant = 10.0;

@@ -115,7 +115,7 @@ void SpeedSynthesizer::read_revs(const StepInput& in) noexcept {
   // often at half the engine as anywhere) rather than a declutch (declutch_pull_spread). None at steps as
   // long as a declutch: an engine falls anywhere within them.
   fell_too_fast_ = 0.0;
-  if (habits_.idle_known() && std::isfinite(freq) && std::isfinite(prev_freq_) &&
+  if (in.dt > 0.0 && habits_.idle_known() && std::isfinite(freq) && std::isfinite(prev_freq_) &&
       prev_freq_ > rolling_idle()) {
     const double left = std::clamp(1.0 - in.dt / std::max(tuning_.declutch_time, 1e-3), 0.0, 1.0);
     const double seen = std::max(freq - rolling_idle(), 0.0) / (prev_freq_ - rolling_idle());
