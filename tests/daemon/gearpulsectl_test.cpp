@@ -12,6 +12,7 @@
 #include <cstring>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -142,6 +143,22 @@ int listen_unix(const std::string& path) {
   REQUIRE(::listen(listener, 4) == 0);
   return listener;
 }
+
+// A thread that answers the next `replies.size()` connections on `listener`, each with its reply line
+// after reading the request, as a daemon would (the client may stop reading first: no SIGPIPE).
+std::thread serve_replies(int listener, std::vector<std::string> replies) {
+  return std::thread([listener, replies = std::move(replies)] {
+    for (const std::string& reply : replies) {
+      const int c = ::accept(listener, nullptr, nullptr);
+      if (c < 0) return;
+      char buf[512];
+      (void)!::read(c, buf, sizeof buf);
+      const std::string line = reply + "\n";
+      (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
+      ::close(c);
+    }
+  });
+}
 }  // namespace
 
 TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of aborting") {
@@ -158,17 +175,7 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
                                             R"({"ok":true,"gears":[1]})",
                                             R"({"ok":true,"speed":1.5,"gps":5})",
                                             std::string(2 << 20, ' ')};
-  std::thread server([&] {
-    for (const std::string& reply : replies) {
-      const int c = ::accept(listener, nullptr, nullptr);
-      if (c < 0) return;
-      char buf[512];
-      (void)!::read(c, buf, sizeof buf);
-      const std::string line = reply + "\n";
-      (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);  // the client may stop reading first
-      ::close(c);
-    }
-  });
+  std::thread server = serve_replies(listener, replies);
   for (const std::string& reply : replies) {
     INFO(reply.substr(0, 80));
     Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
@@ -190,16 +197,8 @@ TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of prin
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
   const int listener = listen_unix(sock);
-  std::thread server([&] {
-    const int c = ::accept(listener, nullptr, nullptr);
-    if (c < 0) return;
-    char buf[512];
-    (void)!::read(c, buf, sizeof buf);
-    const std::string line =
-        R"({"ok":true,"x":)" + std::string(100000, '[') + std::string(100000, ']') + "}\n";
-    (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
-    ::close(c);
-  });
+  std::thread server = serve_replies(
+      listener, {R"({"ok":true,"x":)" + std::string(100000, '[') + std::string(100000, ']') + "}"});
   Process p({ctl, "--socket", sock, "status", "--json"}, dir / "out.txt");
   const auto rc = p.wait();
   server.join();
@@ -216,18 +215,10 @@ TEST_CASE("control: gearpulsectl status says which threads are not responding") 
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
   const int listener = listen_unix(sock);
-  std::thread server([&] {
-    const int c = ::accept(listener, nullptr, nullptr);
-    if (c < 0) return;
-    char buf[512];
-    (void)!::read(c, buf, sizeof buf);
-    const std::string line =
-        R"({"ok":true,"v":1,"threads":{"stalled":["tracker","capture"],"missing":[]},)"
-        R"("config":{"file":"x.toml","reload_error":"","restart_pending":["audio.rate","audio.device"]}})"
-        "\n";
-    (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
-    ::close(c);
-  });
+  std::thread server = serve_replies(
+      listener,
+      {R"({"ok":true,"v":1,"threads":{"stalled":["tracker","capture"],"missing":[]},)"
+       R"("config":{"file":"x.toml","reload_error":"","restart_pending":["audio.rate","audio.device"]}})"});
   Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
   const auto rc = p.wait();
   server.join();
