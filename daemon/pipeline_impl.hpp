@@ -100,8 +100,7 @@ struct Pipeline::Impl {
   bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
   void adopt_model(Tracking& k) noexcept;
   bool track_audio(Tracking& k, double now) noexcept;
-  // `gps_at`: the CLOCK_MONOTONIC s whose GPS the step takes (NaN: the step's own time `t`).
-  void step(Tracking& k, double t, double freq, double snr, bool tracked, double gps_at = kNan) noexcept;
+  void step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept;
   void pair_fixes(Tracking& k, double now) noexcept;
   void tracker_loop() noexcept;
 };

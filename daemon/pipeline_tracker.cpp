@@ -46,20 +46,11 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
 }
 
 // Publishes one step of the synthesis: to the pulse thread and to the snapshot.
-void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked,
-                          double gps_at) noexcept {
-  // GPS as it was at the step's time, not when this thread gets to the step: a backlog of hops drained
-  // late is paired with the fixes of its own time, as `gearpulse replay` pairs them, so the synthesis does
-  // not depend on how the thread was scheduled. GPS counts while the report newest at that time is usable
-  // and younger than the timeout (its receive time and the hop's are both CLOCK_MONOTONIC). A hop stamped
-  // ahead of now (a capture clock that runs ahead) is judged now: GPS of a time to come is not known yet,
-  // and judging the newest fix at that time would age it past the timeout. Lock-free: the gpsd thread
-  // never holds up a hop.
-  // A step on GPS alone (no audio) has no hop to be consistent with: it takes GPS as it is now.
-  const double at = std::isnan(gps_at) ? std::max(t, k.synthesis.last_step_time()) : gps_at;
-  const std::optional<GpsReport> fix =
-      gps ? gps->fresh(std::min(static_cast<std::int64_t>(std::llround(at * 1e9)), monotonic_ns()))
-          : std::nullopt;
+void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept {
+  // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
+  // disagreement between the sound card's clock and the GPS cannot hide a good fix). Lock-free: the
+  // gpsd thread never holds up a hop.
+  const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
   const SynthesisStage::Step s =
       k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed),
                        gps_latency.load(std::memory_order_relaxed));
@@ -180,7 +171,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
     const bool audio_silent = !k.tracker || now - k.last_points_at > audio_stall_s;
     if (!got_points && audio_silent && now - k.synthesis.last_step_time() > no_audio_step_s)
-      step(k, now - config.tracker.window / 2.0, kNan, kNan, false, now);
+      step(k, now - config.tracker.window / 2.0, kNan, kNan, false);
     pair_fixes(k, now);
     if (k.tracker) faults.audio(audio.stats(), std::chrono::steady_clock::now());
     if (k.tracker && audio.has_frames()) continue;  // more than one turn's reading was waiting

@@ -96,8 +96,12 @@ void GpsdClient::stop() {
   status_.state = GpsdState::kStopped;
 }
 
-std::optional<GpsReport> GpsdClient::fresh(std::int64_t t_ns) const noexcept {
-  return history_.fresh(t_ns, std::chrono::nanoseconds(config_.no_fix_timeout).count());
+std::optional<GpsReport> GpsdClient::fresh(std::int64_t now_ns) const noexcept {
+  const std::optional<GpsReport> latest = latest_.read();
+  if (!latest || !latest->usable()) return std::nullopt;
+  const std::int64_t timeout_ns = std::chrono::nanoseconds(config_.no_fix_timeout).count();
+  if (now_ns - latest->rx_ns > timeout_ns) return std::nullopt;
+  return latest;
 }
 
 GpsdStatus GpsdClient::status() const {
@@ -206,7 +210,7 @@ void GpsdClient::run() {
         }
         // Published before the status counts it: a status query in between shows the report with the
         // count before it, which nothing compares.
-        history_.record(*newest);
+        latest_.publish(newest);
         {
           std::lock_guard lock(mutex_);
           ++status_.reports;

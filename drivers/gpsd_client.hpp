@@ -14,7 +14,7 @@
 #include <thread>
 
 #include "core/gps_speed_gate.hpp"
-#include "drivers/gps_history.hpp"
+#include "core/published.hpp"
 #include "drivers/gps_report.hpp"
 
 namespace gearpulse {
@@ -57,13 +57,12 @@ class GpsdClient final {
   void start();  // starts the thread (idempotent); never throws for an absent gpsd: it keeps trying
   void stop();   // joins the thread within ~100 ms
 
-  // The newest report, if any arrived yet. Lock-free (GpsHistory), for the real-time thread's every hop.
-  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return history_.newest(); }
-  // The report that was the newest at `t_ns` (CLOCK_MONOTONIC; now, or the time of a hop stepped late) if
-  // it is usable and was received no longer than the no-fix timeout before `t_ns` (its speed and its
-  // freshness judged on that one report). Lock-free as latest().
-  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t t_ns) const noexcept;
-  [[nodiscard]] bool has_gps(std::int64_t t_ns) const noexcept { return fresh(t_ns).has_value(); }
+  // The newest report, if any arrived yet. Lock-free (Published), for the real-time thread's every hop.
+  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return latest_.read(); }
+  // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
+  // and its freshness judged on that one report). Lock-free as latest().
+  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const noexcept;
+  [[nodiscard]] bool has_gps(std::int64_t now_ns) const noexcept { return fresh(now_ns).has_value(); }
   [[nodiscard]] GpsdStatus status() const;  // under the lock: for status queries, not a real-time path
   // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
   // turn of its loop, at least every 100 ms while connected and every kBeatNs while backing off, so an
@@ -88,7 +87,7 @@ class GpsdClient final {
   bool stop_requested_ = false;
   std::atomic<std::int64_t> beat_ns_{0};
   std::atomic<bool> connecting_{false};
-  GpsHistory history_;  // written by the client thread only
+  Published<std::optional<GpsReport>> latest_;  // written by the client thread only
   GpsdStatus status_;
   GpsSpeedGate gate_;  // client thread only
 };

@@ -1,14 +1,10 @@
 #include <catch2/catch.hpp>
 
-#include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <limits>
 #include <optional>
-#include <vector>
 
 #include "daemon/synthesis_stage.hpp"
-#include "drivers/gps_history.hpp"
 #include "tests/town_drive.hpp"
 
 using gearpulse::GpsReport;
@@ -88,66 +84,4 @@ TEST_CASE("synthesis: the stage's band_low is the readings' floor, also for a mo
   };
   CHECK(idle_after(SynthesisStage(1.2 * idle)) == Approx(idle));
   CHECK(idle_after(SynthesisStage()) > 1.4 * idle);
-}
-
-TEST_CASE("synthesis: hops stepped late in bursts give the speeds they give stepped as they come") {
-  // A loaded machine holds the tracker thread back, and it drains the audio of seconds in one turn. Paired
-  // with the GPS of the moment the thread ran, those hops got a fix newer than they are, or GPS already
-  // lost or back at an outage's edge: the synthesis's input depended on scheduling. Paired with the report
-  // newest at each hop's own time (GpsHistory), a backlog steps as the hops did when they came.
-  constexpr std::int64_t kBase = 1'000'000'000'000;  // ns: CLOCK_MONOTONIC at the drive's start
-  constexpr std::int64_t kTimeout = 1'500'000'000;   // ns: gps.no_fix_timeout
-  constexpr double kLost = 45.0, kBack = 57.0;       // s: an outage in the second town cycle
-  const gearpulse::test::TownDrive drive;
-  const auto ns = [](double s) { return kBase + static_cast<std::int64_t>(std::llround(s * 1e9)); };
-  // `burst` s: how long the thread is held back between turns (0.1: every hop as it comes). `at_hop`: the
-  // hop's time is what GPS is judged at, otherwise the moment the thread runs.
-  const auto run = [&](double burst, bool at_hop) {
-    SynthesisStage stage;
-    REQUIRE(stage.set_model(gearpulse::test::hatch_model(0.5)));
-    gearpulse::GpsHistory history;
-    std::vector<double> speeds;
-    int next_fix = 0, next_hop = 0;
-    const int hops = static_cast<int>(2 * gearpulse::test::TownDrive::kCycle / 0.1);
-    for (double turn = burst; next_hop < hops; turn += burst) {
-      // The gpsd thread ran meanwhile: a report a second, 0.5 s after its moment, "no fix" in the outage.
-      for (; next_fix <= turn; ++next_fix) {
-        GpsReport r = fix(drive.at(std::max(next_fix - 0.5, 0.0)).speed, next_fix - 0.5);
-        r.rx_ns = ns(next_fix);
-        if (next_fix >= kLost && next_fix < kBack) r.mode = 1, r.speed = kNan;
-        history.record(r);
-      }
-      // The thread steps every hop whose window the capture has given (the hop's time lags by 0.1 s).
-      for (; next_hop < hops && next_hop * 0.1 + 0.1 <= turn + 1e-9; ++next_hop) {
-        const double t = next_hop * 0.1;
-        const auto gps = history.fresh(at_hop ? ns(t) : ns(turn), kTimeout);
-        speeds.push_back(stage.step(t, drive.at(t).freq, 30.0, true, gps, -10.0, 0.5).out.speed);
-      }
-    }
-    return speeds;
-  };
-  const auto outage_m = [&](const std::vector<double>& speeds) {
-    double m = 0.0;
-    for (std::size_t i = static_cast<std::size_t>(kLost / 0.1); i < static_cast<std::size_t>(kBack / 0.1);
-         ++i)
-      m += speeds[i] * 0.1;
-    return m;
-  };
-  const auto paced = run(0.1, true);
-  const auto late = run(3.0, true);
-  const auto differing = [](const std::vector<double>& a, const std::vector<double>& b) {
-    REQUIRE(a.size() == b.size());
-    std::size_t n = 0;
-    for (std::size_t i = 0; i < a.size(); ++i)
-      n += a[i] != b[i];
-    return n;
-  };
-  CHECK(differing(paced, late) == 0);
-  // Judged when the thread runs, the same hops diverge: the mechanism the history removes.
-  const auto paced_now = run(0.1, false);
-  const auto late_now = run(3.0, false);
-  INFO("outage m: paced " << outage_m(paced) << ", at the thread's time paced " << outage_m(paced_now)
-                          << ", late " << outage_m(late_now));
-  CHECK(differing(paced_now, late_now) > 0);
-  CHECK(std::abs(outage_m(late_now) - outage_m(paced_now)) > 0.01 * outage_m(paced_now));
 }
