@@ -79,7 +79,8 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
       break;
   }
   if (now.output_state != before.output_state && now.output_state == OutputState::kWriteErrors)
-    spdlog::warn("output: writes to {} are failing; pulses are counted but not delivered", output);
+    spdlog::warn("output: writes to {} are failing ({}); pulses are counted but not delivered", output,
+                 now.output_error);
   if (now.output_dropped > before.output_dropped) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("output-dropped", suppressed))

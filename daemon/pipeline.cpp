@@ -9,6 +9,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <system_error>
 #include <thread>
 
 #include <spdlog/spdlog.h>
@@ -251,9 +252,11 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     const bool reader_behind = dropped_at > 0 && now - dropped_at < kReaderBehind.count();
     if (!s.output_error.empty())
       s.output_state = OutputState::kError;
-    else if (d.output.errors() > 0)
+    else if (const std::uint64_t errors = d.output.errors(); errors > 0) {
       s.output_state = OutputState::kWriteErrors;
-    else if (reader_behind)
+      s.output_error = fmt::format("{} write(s) failed, the last: {}", errors,
+                                   std::error_code(d.output.last_error(), std::generic_category()).message());
+    } else if (reader_behind)
       s.output_state = OutputState::kReaderBehind;
     else if (!d.output.has_reader())
       s.output_state = OutputState::kNoReader;

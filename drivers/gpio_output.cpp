@@ -60,12 +60,10 @@ void GpioOutput::ChipCloser::operator()(gpiod_chip* chip) const noexcept {
   ::gpiod_chip_close(chip);
 }
 
-void GpioOutput::rise() noexcept {
-  if (::gpiod_line_set_value(line_, 1) != 0) errors_.fetch_add(1, std::memory_order_relaxed);
-}
-
-void GpioOutput::fall() noexcept {
-  if (::gpiod_line_set_value(line_, 0) != 0) errors_.fetch_add(1, std::memory_order_relaxed);
+void GpioOutput::set(int value) noexcept {
+  if (::gpiod_line_set_value(line_, value) == 0) return;
+  last_error_.store(errno != 0 ? errno : EIO, std::memory_order_relaxed);
+  errors_.fetch_add(1, std::memory_order_relaxed);
 }
 
 std::string GpioOutput::describe() const {

@@ -24,14 +24,18 @@ class GpioOutput final : public PulseOutput {
   GpioOutput(const GpioOutput&) = delete;
   GpioOutput& operator=(const GpioOutput&) = delete;
 
-  void rise() noexcept override;
-  void fall() noexcept override;
+  void rise() noexcept override { set(1); }
+  void fall() noexcept override { set(0); }
   [[nodiscard]] std::uint64_t errors() const noexcept override {
     return errors_.load(std::memory_order_relaxed);
+  }
+  [[nodiscard]] int last_error() const noexcept override {
+    return last_error_.load(std::memory_order_relaxed);
   }
   [[nodiscard]] std::string describe() const override;
 
  private:
+  void set(int value) noexcept;  // drives the line; a failure is counted with its errno
   std::string chip_name_;
   unsigned offset_;
   struct ChipCloser {
@@ -40,6 +44,7 @@ class GpioOutput final : public PulseOutput {
   std::unique_ptr<gpiod_chip, ChipCloser> chip_;  // closed after the line is released
   gpiod_line* line_ = nullptr;
   std::atomic<std::uint64_t> errors_{0};
+  std::atomic<int> last_error_{0};
 };
 
 // True if at least one GPIO chip device exists (tests skip visibly otherwise).

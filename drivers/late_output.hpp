@@ -28,6 +28,9 @@ class LateOutput final : public PulseOutput {
   [[nodiscard]] std::uint64_t errors() const noexcept override {
     return current_.load(std::memory_order_acquire)->errors();
   }
+  [[nodiscard]] int last_error() const noexcept override {
+    return current_.load(std::memory_order_acquire)->last_error();
+  }
   [[nodiscard]] std::uint64_t dropped() const noexcept override {
     return current_.load(std::memory_order_acquire)->dropped();
   }

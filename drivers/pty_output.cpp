@@ -125,6 +125,7 @@ void PtyOutput::rise() noexcept {
   } else if (n < 0 && errno == EIO) {
     unheard_.fetch_add(1, std::memory_order_relaxed);  // the reader vanished between poll and write
   } else {
+    last_error_.store(n < 0 ? errno : EIO, std::memory_order_relaxed);  // n == 0: nothing taken
     errors_.fetch_add(1, std::memory_order_relaxed);
   }
 }

@@ -34,6 +34,9 @@ class PtyOutput final : public PulseOutput {
   [[nodiscard]] std::uint64_t errors() const noexcept override {
     return errors_.load(std::memory_order_relaxed);
   }
+  [[nodiscard]] int last_error() const noexcept override {
+    return last_error_.load(std::memory_order_relaxed);
+  }
   [[nodiscard]] std::uint64_t dropped() const noexcept override { return overflowed(); }
   // Whether a process has the slave open now (the master reports no hang-up).
   [[nodiscard]] bool has_reader() const noexcept override;
@@ -73,6 +76,7 @@ class PtyOutput final : public PulseOutput {
   std::atomic<std::uint64_t> unheard_{0};
   std::atomic<std::uint64_t> overflowed_{0};
   std::atomic<std::uint64_t> errors_{0};
+  std::atomic<int> last_error_{0};
 };
 
 }  // namespace gearpulse

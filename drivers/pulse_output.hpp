@@ -14,6 +14,8 @@ class PulseOutput {
   virtual void fall() noexcept = 0;
   // Writes to the device that failed (or found nobody listening) since construction.
   [[nodiscard]] virtual std::uint64_t errors() const noexcept = 0;
+  // The errno of the most recent of those failures (0: none yet), for the logs and the status.
+  [[nodiscard]] virtual int last_error() const noexcept { return 0; }
   // Pulses a reader that is there did not take (its queue was full): it has stopped reading, or reads
   // too slowly. A line driven by level (GPIO) has no queue and drops nothing.
   [[nodiscard]] virtual std::uint64_t dropped() const noexcept { return 0; }

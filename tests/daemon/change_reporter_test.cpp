@@ -22,8 +22,10 @@ TEST_CASE("changes: an output whose writes fail is named, a GPIO line as chip:li
   before.output_state = OutputState::kOk;
   PipelineSnapshot now = before;
   now.output_state = OutputState::kWriteErrors;
+  now.output_error = "3 write(s) failed, the last: Input/output error";
   changes.log(before, now);
-  CHECK(log.count("output: writes to gpiochip1:5 are failing") == 1);
+  CHECK(log.count("output: writes to gpiochip1:5 are failing (3 write(s) failed, the last: Input/output "
+                  "error)") == 1);
 
   config.output.kind = OutputKind::kPty;
   config.output.path = "/run/gearpulse/pulse";

@@ -1,7 +1,9 @@
 #include <catch2/catch.hpp>
 
+#include <cerrno>
 #include <chrono>
 #include <memory>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -188,4 +190,27 @@ TEST_CASE("pulse: a late output takes its device once and refuses a second while
   // The first device is still the one driven, and alive: it carries the pulses after the refused attach.
   CHECK(driven->rises() > 0);
   CHECK(driven->rises() == driven->falls());
+}
+
+TEST_CASE("pulse: a late output reports its device's failed writes and their errno") {
+  // A device whose every write fails as a PTY's does when its terminal is gone.
+  class FailingOutput final : public gearpulse::PulseOutput {
+   public:
+    void rise() noexcept override { ++errors_; }
+    void fall() noexcept override {}
+    [[nodiscard]] std::uint64_t errors() const noexcept override { return errors_; }
+    [[nodiscard]] int last_error() const noexcept override { return errors_ > 0 ? EIO : 0; }
+    [[nodiscard]] std::string describe() const override { return "failing"; }
+
+   private:
+    std::uint64_t errors_ = 0;
+  };
+  gearpulse::LateOutput late;
+  CHECK(late.last_error() == 0);  // nothing attached: nothing failed
+  REQUIRE(late.attach(std::make_unique<FailingOutput>()));
+  CHECK(late.last_error() == 0);
+  late.rise();
+  late.rise();
+  CHECK(late.errors() == 2);
+  CHECK(late.last_error() == EIO);
 }
