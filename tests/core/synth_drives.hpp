@@ -66,8 +66,10 @@ inline std::shared_ptr<GearModel> recorded_model(const std::string& name) {
 }
 
 // Steps `synth` through a drive recorded from the simulator at RATE ("10hz", "1hz"; tests/core/data/
-// NAME_RATE.csv: t, GPS speed or blank, frequency, true speed), calling check(t, true speed, output) after
-// every row. `synth` a SpeedSynthesizer, or a LogReplayer stepping one as `gearpulse replay` does a log.
+// NAME_RATE.csv: t, GPS speed or blank, frequency, true speed, and optionally whether the fix is new: 0 for
+// a 1 Hz fix held at the tracker's hops until the next, as the daemon gives it), calling check(t, true
+// speed, output) after every row. `synth` a SpeedSynthesizer, or a LogReplayer stepping one as `gearpulse
+// replay` does a log.
 template <class Synth, class Check>
 void replay_rows(const std::string& name, const std::string& rate, Synth& synth, Check check) {
   std::ifstream rows(GEARPULSE_SOURCE_DIR "/tests/core/data/" + name + "_" + rate + ".csv");
@@ -81,13 +83,14 @@ void replay_rows(const std::string& name, const std::string& rate, Synth& synth,
         cells.emplace_back();
       else
         cells.back().push_back(c);
-    REQUIRE(cells.size() == 4);
+    REQUIRE((cells.size() == 4 || cells.size() == 5));
     const double t = std::stod(cells[0]), freq = std::stod(cells[2]), truth = std::stod(cells[3]);
     const double gps = cells[1].empty() ? kMissing : std::stod(cells[1]);
+    const bool gps_new = cells.size() == 4 || cells[4] != "0";
     if constexpr (std::is_same_v<Synth, LogReplayer>)
       check(t, truth, synth.step(Sample{t, gps, freq}));
     else
-      check(t, truth, synth.step(t, gps, freq));
+      check(t, truth, synth.step(t, gps, freq, gps_new));
   }
 }
 
