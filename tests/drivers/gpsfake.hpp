@@ -12,6 +12,7 @@
 #include <string>
 #include <thread>
 
+#include "drivers/unique_fd.hpp"
 #include "tests/test_util.hpp"
 
 namespace gearpulse::test {
@@ -39,14 +40,12 @@ class GpsFake {
   static bool wait_listening(int port, std::chrono::milliseconds timeout) {
     return wait_for(
         [port] {
-          const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+          const UniqueFd fd(::socket(AF_INET, SOCK_STREAM, 0));
           sockaddr_in a{};
           a.sin_family = AF_INET;
           a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
           a.sin_port = htons(static_cast<std::uint16_t>(port));
-          const bool ok = ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
-          ::close(fd);
-          return ok;
+          return fd && ::connect(fd.get(), reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
         },
         timeout);
   }
