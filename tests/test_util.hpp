@@ -31,6 +31,8 @@
 #include <thread>
 #include <vector>
 
+#include "drivers/unique_fd.hpp"
+
 // Ends the running test case as skipped: it prints GEARPULSE_SKIP and the reason, which ctest reports as
 // "Skipped" (SKIP_REGULAR_EXPRESSION in tests/CMakeLists.txt), and returns from the TEST_CASE. For a test
 // that needs hardware, a privilege, data or a program it cannot have; scripts/test.sh fails when a test
@@ -125,14 +127,13 @@ inline std::string read_text(const std::filesystem::path& p) {
 
 // A TCP port on 127.0.0.1 that was free a moment ago (the kernel picks it).
 inline int free_port() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  const gearpulse::UniqueFd fd(::socket(AF_INET, SOCK_STREAM, 0));
   sockaddr_in a{};
   a.sin_family = AF_INET;
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   socklen_t len = sizeof a;
-  const bool ok = fd >= 0 && ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-                  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) == 0;
-  if (fd >= 0) ::close(fd);
+  const bool ok = fd && ::bind(fd.get(), reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+                  ::getsockname(fd.get(), reinterpret_cast<sockaddr*>(&a), &len) == 0;
   if (!ok) throw std::runtime_error("cannot find a free port");
   return ntohs(a.sin_port);
 }
@@ -238,27 +239,19 @@ class Process {
 class LineClient {
  public:
   explicit LineClient(const std::string& path) {
-    fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    fd_.reset(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
     sockaddr_un addr{};
     addr.sun_family = AF_UNIX;
     std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
-    if (::connect(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
-      ::close(fd_);
-      fd_ = -1;
-    }
+    if (::connect(fd_.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) fd_.reset();
   }
-  ~LineClient() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  LineClient(const LineClient&) = delete;
-  LineClient& operator=(const LineClient&) = delete;
-  [[nodiscard]] bool connected() const { return fd_ >= 0; }
-  [[nodiscard]] int fd() const { return fd_; }
+  [[nodiscard]] bool connected() const { return static_cast<bool>(fd_); }
+  [[nodiscard]] int fd() const { return fd_.get(); }
 
   bool send_all(const std::string& data) {
     std::size_t done = 0;
     while (done < data.size()) {
-      const ssize_t n = ::send(fd_, data.data() + done, data.size() - done, MSG_NOSIGNAL);
+      const ssize_t n = ::send(fd_.get(), data.data() + done, data.size() - done, MSG_NOSIGNAL);
       if (n <= 0) return false;
       done += static_cast<std::size_t>(n);
     }
@@ -272,10 +265,10 @@ class LineClient {
         buffer_.erase(0, nl + 1);
         return line;
       }
-      pollfd pfd{fd_, POLLIN, 0};
+      pollfd pfd{fd_.get(), POLLIN, 0};
       if (::poll(&pfd, 1, timeout_ms) <= 0) return std::nullopt;
       char buf[65536];
-      const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      const ssize_t n = ::recv(fd_.get(), buf, sizeof buf, 0);
       if (n <= 0) return std::nullopt;
       buffer_.append(buf, static_cast<std::size_t>(n));
     }
@@ -284,17 +277,17 @@ class LineClient {
   bool closed_by_peer(int timeout_ms = 10'000) {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
     while (std::chrono::steady_clock::now() < deadline) {
-      pollfd pfd{fd_, POLLIN, 0};
+      pollfd pfd{fd_.get(), POLLIN, 0};
       if (::poll(&pfd, 1, 100) <= 0) continue;
       char buf[65536];
-      const ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      const ssize_t n = ::recv(fd_.get(), buf, sizeof buf, 0);
       if (n == 0 || (n < 0 && errno != EAGAIN && errno != EINTR)) return true;
     }
     return false;
   }
 
  private:
-  int fd_ = -1;
+  gearpulse::UniqueFd fd_;
   std::string buffer_;
 };
 

@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_server.hpp"
+#include "drivers/unique_fd.hpp"
 #include "tests/test_util.hpp"
 
 using gearpulse::daemon::ControlError;
@@ -347,6 +348,7 @@ class OtherUsersFlood {
     std::strncpy(addr.sun_path, socket.c_str(), sizeof addr.sun_path - 1);
     int ready[2];
     REQUIRE(::pipe(ready) == 0);
+    gearpulse::UniqueFd ready_read(ready[0]), ready_write(ready[1]);
     pid_ = ::fork();
     REQUIRE(pid_ >= 0);
     if (pid_ == 0) {  // async-signal-safe calls only from here
@@ -374,10 +376,9 @@ class OtherUsersFlood {
         ::nanosleep(&pause, nullptr);
       }
     }
-    ::close(ready[1]);
+    ready_write.reset();
     char byte = 0;
-    REQUIRE(::read(ready[0], &byte, 1) == 1);
-    ::close(ready[0]);
+    REQUIRE(::read(ready_read.get(), &byte, 1) == 1);
   }
   ~OtherUsersFlood() {
     ::kill(pid_, SIGKILL);
@@ -444,17 +445,18 @@ TEST_CASE("control: out of file descriptors the server waits instead of spinning
   const std::string path = (dir / "ctl.sock").string();
   ControlServer server(path, EchoHandler{});
   server.start();
-  const int s = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  REQUIRE(s >= 0);
+  const gearpulse::UniqueFd socket(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  REQUIRE(socket);
+  const int s = socket.get();
   // Use up this process's descriptors (the server runs in it), under a lowered limit.
   rlimit old{};
   REQUIRE(::getrlimit(RLIMIT_NOFILE, &old) == 0);
   rlimit low = old;
   low.rlim_cur = std::min<rlim_t>(old.rlim_cur, 512);
   REQUIRE(::setrlimit(RLIMIT_NOFILE, &low) == 0);
-  std::vector<int> hogs;
+  std::vector<gearpulse::UniqueFd> hogs;
   for (int fd; (fd = ::dup(s)) >= 0;)
-    hogs.push_back(fd);
+    hogs.emplace_back(fd);
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
@@ -469,8 +471,7 @@ TEST_CASE("control: out of file descriptors the server waits instead of spinning
   const double cpu0 = cpu();
   std::this_thread::sleep_for(std::chrono::seconds(1));
   const double busy = cpu() - cpu0;
-  for (int fd : hogs)
-    ::close(fd);
+  hogs.clear();
   REQUIRE(::setrlimit(RLIMIT_NOFILE, &old) == 0);
   INFO("CPU seconds used over one second without descriptors: " << busy);
   CHECK(busy < 0.3);
@@ -483,7 +484,6 @@ TEST_CASE("control: out of file descriptors the server waits instead of spinning
   char buf[256];
   for (ssize_t n; reply.find('\n') == std::string::npos && (n = ::recv(s, buf, sizeof buf, 0)) > 0;)
     reply.append(buf, static_cast<std::size_t>(n));
-  ::close(s);
   REQUIRE(reply.find('\n') != std::string::npos);
   CHECK(json::parse(reply.substr(0, reply.find('\n')))["echo"] == "after");
 }
@@ -568,12 +568,11 @@ TEST_CASE("control: a stale socket file is replaced and a live one is refused") 
   const std::string path = (dir / "ctl.sock").string();
   {
     // A socket file whose owner died: bound, never unlinked.
-    const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    const gearpulse::UniqueFd fd(::socket(AF_UNIX, SOCK_STREAM, 0));
     sockaddr_un addr{};
     addr.sun_family = AF_UNIX;
     std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
-    REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
-    ::close(fd);
+    REQUIRE(::bind(fd.get(), reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0);
   }
   REQUIRE(std::filesystem::exists(path));
   ControlServer server(path, EchoHandler{});

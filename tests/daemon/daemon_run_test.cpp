@@ -187,13 +187,9 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
   TempDir dir;
   // A capture whose read never returns: the file plugin reads a FIFO whose writer is there but silent.
   const std::filesystem::path fifo = gearpulse::test::make_paced_pcm(dir, "stuck");
-  struct Writer {  // closed however the test ends, so a failed check cannot leave the daemon stuck
-    int fd;
-    ~Writer() {
-      if (fd >= 0) ::close(fd);
-    }
-  } writer{::open(fifo.c_str(), O_RDWR | O_CLOEXEC)};
-  REQUIRE(writer.fd >= 0);
+  // Closed however the test ends, so a failed check cannot leave the daemon stuck.
+  gearpulse::UniqueFd writer(::open(fifo.c_str(), O_RDWR | O_CLOEXEC));
+  REQUIRE(writer);
   write_text(dir / "gearpulse.toml", with(config_for(dir), "gearpulse_test_no_such_pcm", "stuck"));
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   // The capture is open (so its thread is in, or about to be in, its read).
@@ -212,8 +208,7 @@ TEST_CASE("daemon: SIGTERM saves what is learned before it waits for a capture s
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
   CHECK(log_says(dir, "has not returned from the device", std::chrono::seconds(15)));
   CHECK(daemon.running());
-  ::close(writer.fd);  // the read returns (end of file): the daemon can finish
-  writer.fd = -1;
+  writer.reset();  // the read returns (end of file): the daemon can finish
   CHECK(daemon.wait() == 0);
 }
 
@@ -291,7 +286,9 @@ TEST_CASE("daemon: a PTY link whose directory cannot be made says why") {
 TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
   TempDir dir;
   const std::string notify_path = (dir / "notify").string();
-  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  const gearpulse::UniqueFd notify(::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0));
+  REQUIRE(notify);
+  const int sock = notify.get();
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   std::strncpy(addr.sun_path, notify_path.c_str(), sizeof addr.sun_path - 1);
@@ -316,7 +313,6 @@ TEST_CASE("daemon: tells systemd ready and stopping and feeds the watchdog") {
   daemon.signal(SIGTERM);
   CHECK(receive_until("STOPPING=1"));
   CHECK(daemon.wait() == 0);
-  ::close(sock);
 }
 
 TEST_CASE("daemon: a thread that stops turning withholds WATCHDOG=1 until it turns again") {
@@ -328,7 +324,9 @@ TEST_CASE("daemon: a thread that stops turning withholds WATCHDOG=1 until it tur
   }
   TempDir dir;
   const std::string notify_path = (dir / "notify").string();
-  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  const gearpulse::UniqueFd notify(::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0));
+  REQUIRE(notify);
+  const int sock = notify.get();
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   std::strncpy(addr.sun_path, notify_path.c_str(), sizeof addr.sun_path - 1);
@@ -379,7 +377,6 @@ TEST_CASE("daemon: a thread that stops turning withholds WATCHDOG=1 until it tur
   CHECK(unit.find("\nRestart=on-failure\n") != std::string::npos);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
-  ::close(sock);
 }
 
 TEST_CASE("daemon: a reload whose store limits drop stored pairs says how many") {

@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_server.hpp"
+#include "drivers/unique_fd.hpp"
 #include "tests/daemon/daemon_process.hpp"
 #include "tests/test_util.hpp"
 
@@ -133,14 +134,14 @@ TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe
 
 namespace {
 // A listening Unix socket at `path` that is not gearpulsed, for gearpulsectl to talk to.
-int listen_unix(const std::string& path) {
-  const int listener = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  REQUIRE(listener >= 0);
+gearpulse::UniqueFd listen_unix(const std::string& path) {
+  gearpulse::UniqueFd listener(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  REQUIRE(listener);
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
-  REQUIRE(::bind(listener, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
-  REQUIRE(::listen(listener, 4) == 0);
+  REQUIRE(::bind(listener.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
+  REQUIRE(::listen(listener.get(), 4) == 0);
   return listener;
 }
 
@@ -149,13 +150,12 @@ int listen_unix(const std::string& path) {
 std::thread serve_replies(int listener, std::vector<std::string> replies) {
   return std::thread([listener, replies = std::move(replies)] {
     for (const std::string& reply : replies) {
-      const int c = ::accept(listener, nullptr, nullptr);
-      if (c < 0) return;
+      const gearpulse::UniqueFd c(::accept(listener, nullptr, nullptr));
+      if (!c) return;
       char buf[512];
-      (void)!::read(c, buf, sizeof buf);
+      (void)!::read(c.get(), buf, sizeof buf);
       const std::string line = reply + "\n";
-      (void)!::send(c, line.data(), line.size(), MSG_NOSIGNAL);
-      ::close(c);
+      (void)!::send(c.get(), line.data(), line.size(), MSG_NOSIGNAL);
     }
   });
 }
@@ -166,7 +166,7 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
-  const int listener = listen_unix(sock);
+  const gearpulse::UniqueFd listener = listen_unix(sock);
   // The last two: a status whose "gps" is no object (found after the speed line was printed, which then
   // stood above the error), and a reply that never ends (read without bound before).
   const std::vector<std::string> replies = {R"([1,2])",
@@ -175,7 +175,7 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
                                             R"({"ok":true,"gears":[1]})",
                                             R"({"ok":true,"speed":1.5,"gps":5})",
                                             std::string(2 << 20, ' ')};
-  std::thread server = serve_replies(listener, replies);
+  std::thread server = serve_replies(listener.get(), replies);
   for (const std::string& reply : replies) {
     INFO(reply.substr(0, 80));
     Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
@@ -187,7 +187,6 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
     CHECK(out.find("speed ") == std::string::npos);  // nothing of a status printed above the error
   }
   server.join();
-  ::close(listener);
 }
 
 TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of printing it") {
@@ -196,13 +195,12 @@ TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of prin
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
-  const int listener = listen_unix(sock);
+  const gearpulse::UniqueFd listener = listen_unix(sock);
   std::thread server = serve_replies(
-      listener, {R"({"ok":true,"x":)" + std::string(100000, '[') + std::string(100000, ']') + "}"});
+      listener.get(), {R"({"ok":true,"x":)" + std::string(100000, '[') + std::string(100000, ']') + "}"});
   Process p({ctl, "--socket", sock, "status", "--json"}, dir / "out.txt");
   const auto rc = p.wait();
   server.join();
-  ::close(listener);
   REQUIRE(rc.has_value());
   CHECK(*rc == 1);
   CHECK(read_text(dir / "out.txt") == "gearpulsectl: gearpulsed sent a reply nested deeper than 64 levels\n");
@@ -214,15 +212,14 @@ TEST_CASE("control: gearpulsectl status says which threads are not responding") 
   TempDir dir;
   const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
   const std::string sock = (dir / "ctl.sock").string();
-  const int listener = listen_unix(sock);
+  const gearpulse::UniqueFd listener = listen_unix(sock);
   std::thread server = serve_replies(
-      listener,
+      listener.get(),
       {R"({"ok":true,"v":1,"threads":{"stalled":["tracker","capture"],"missing":[]},)"
        R"("config":{"file":"x.toml","reload_error":"","restart_pending":["audio.rate","audio.device"]}})"});
   Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
   const auto rc = p.wait();
   server.join();
-  ::close(listener);
   REQUIRE(rc.has_value());
   CHECK(*rc == 0);
   const std::string out = read_text(dir / "out.txt");

@@ -10,6 +10,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "drivers/unique_fd.hpp"
 #include "tests/daemon/live_chain.hpp"
 #include "tests/daemon/log_lines.hpp"
 
@@ -133,8 +134,9 @@ TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer 
   chain.config.output.pulse_width = 0.0002;
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return std::filesystem::is_symlink(link); }, 10s));
-  const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);  // opened, never read
-  REQUIRE(fd >= 0);
+  gearpulse::UniqueFd reader(::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK));  // never read
+  REQUIRE(reader);
+  const int fd = reader.get();
   REQUIRE(wait_for([&] { return pipeline.snapshot().source == SpeedSource::kGps; }, 20s));
   CHECK(pipeline.snapshot().output_state == OutputState::kOk);
   REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kReaderBehind; }, 15s));
@@ -149,7 +151,6 @@ TEST_CASE("pipeline: a PTY reader that stops reading is reported, and no longer 
       },
       10s);
   CHECK(ok);
-  ::close(fd);
 }
 
 TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the output says no-reader") {
@@ -167,8 +168,9 @@ TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the ou
   CHECK(alone.output_unheard <= alone.pulses);
   CHECK(alone.output_dropped == 0);
   // A reader comes: the state is ok and the count stops (a reader that reads hears every pulse).
-  const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK);
-  REQUIRE(fd >= 0);
+  gearpulse::UniqueFd reader(::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK));
+  REQUIRE(reader);
+  const int fd = reader.get();
   REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kOk; }, 5s));
   const std::uint64_t unheard = pipeline.snapshot().output_unheard;
   const std::uint64_t pulses = pipeline.snapshot().pulses;
@@ -181,7 +183,7 @@ TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the ou
       },
       10s));
   CHECK(pipeline.snapshot().output_unheard == unheard);
-  ::close(fd);
+  reader.reset();  // the reader leaves
   CHECK(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kNoReader; }, 5s));
 }
 

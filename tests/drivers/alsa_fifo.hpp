@@ -22,6 +22,7 @@
 #include <catch2/catch.hpp>
 
 #include "drivers/clock.hpp"
+#include "drivers/unique_fd.hpp"
 #include "tests/test_util.hpp"
 
 namespace gearpulse::test {
@@ -70,9 +71,9 @@ class FifoFeeder {
   FifoFeeder(std::filesystem::path fifo, std::vector<std::int16_t> samples, unsigned period, unsigned rate,
              WriterBreak pause = {})
       : thread_([=, this] {
-          ::signal(SIGPIPE, SIG_IGN);               // the capture closing its end must not kill the test
-          int fd = ::open(fifo.c_str(), O_WRONLY);  // blocks until ALSA opens the infile
-          if (fd < 0) return;
+          ::signal(SIGPIPE, SIG_IGN);  // the capture closing its end must not kill the test
+          gearpulse::UniqueFd fd(::open(fifo.c_str(), O_WRONLY));  // blocks until ALSA opens the infile
+          if (!fd) return;
           // The pipe would buffer the first ~0.7 s unpaced if writing began before the capture reads.
           while (!go_ && !stop_)
             std::this_thread::sleep_for(std::chrono::milliseconds(1));
@@ -81,17 +82,20 @@ class FifoFeeder {
           std::int64_t next = gearpulse::monotonic_ns();
           for (std::size_t off = 0, n = 0; !stop_; off += period, ++n) {
             if (pause.kind != WriterBreak::kNone && n == pause.at_period) {
-              if (pause.kind == WriterBreak::kClose) ::close(fd);
+              if (pause.kind == WriterBreak::kClose) fd.reset();
               const auto resume = std::chrono::steady_clock::now() + pause.length;
               while (!stop_ && std::chrono::steady_clock::now() < resume)
                 std::this_thread::sleep_for(std::chrono::milliseconds(10));
               if (pause.kind == WriterBreak::kClose) {
                 // Without blocking: a reader that has gone meanwhile (the test is over) would hold a
                 // blocking open for ever.
-                while ((fd = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK)) < 0 && errno == ENXIO && !stop_)
+                int reopened;
+                while ((reopened = ::open(fifo.c_str(), O_WRONLY | O_NONBLOCK)) < 0 && errno == ENXIO &&
+                       !stop_)
                   std::this_thread::sleep_for(std::chrono::milliseconds(10));
-                if (fd < 0) return;
-                ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
+                if (reopened < 0) return;
+                fd.reset(reopened);
+                ::fcntl(fd.get(), F_SETFL, ::fcntl(fd.get(), F_GETFL) & ~O_NONBLOCK);
               }
               next = gearpulse::monotonic_ns();  // go on at the rate, no catching up
             }
@@ -99,11 +103,11 @@ class FifoFeeder {
             ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
             const bool data = off + period <= samples.size();
             if (!data) done_ = true;
-            if (::write(fd, data ? samples.data() + off : silence.data(), period * sizeof(std::int16_t)) < 0)
+            if (::write(fd.get(), data ? samples.data() + off : silence.data(),
+                        period * sizeof(std::int16_t)) < 0)
               break;
             next += period_ns;
           }
-          ::close(fd);
         }) {}
   ~FifoFeeder() {
     stop_ = true;

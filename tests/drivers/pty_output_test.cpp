@@ -20,6 +20,7 @@
 
 #include "drivers/pty_output.hpp"
 #include "drivers/pulse_thread.hpp"
+#include "drivers/unique_fd.hpp"
 #include "tests/test_util.hpp"
 
 using gearpulse::PtyOutput;
@@ -32,38 +33,34 @@ class Reader {
  public:
   explicit Reader(const std::filesystem::path& path)
       : fd_(::open(path.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK)) {
-    REQUIRE(fd_ >= 0);
+    REQUIRE(fd_);
   }
-  ~Reader() { close(); }
-  void close() {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = -1;
-  }
+  void close() { fd_.reset(); }
   // Reads what arrives within `wait` (one read at most).
   std::string read_once(std::chrono::milliseconds wait) {
-    pollfd p{fd_, POLLIN, 0};
+    pollfd p{fd_.get(), POLLIN, 0};
     if (::poll(&p, 1, static_cast<int>(wait.count())) <= 0) return {};
     char buf[4096];
-    const ssize_t n = ::read(fd_, buf, sizeof buf);
+    const ssize_t n = ::read(fd_.get(), buf, sizeof buf);
     return n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string();
   }
   // Reads whatever is there, waiting up to `quiet` for more after each chunk; returns the bytes.
   std::string drain(std::chrono::milliseconds quiet = std::chrono::milliseconds(50)) {
     std::string out;
     for (;;) {
-      pollfd p{fd_, POLLIN, 0};
+      pollfd p{fd_.get(), POLLIN, 0};
       if (::poll(&p, 1, static_cast<int>(quiet.count())) <= 0) break;
       char buf[4096];
-      const ssize_t n = ::read(fd_, buf, sizeof buf);
+      const ssize_t n = ::read(fd_.get(), buf, sizeof buf);
       if (n <= 0) break;
       out.append(buf, static_cast<std::size_t>(n));
     }
     return out;
   }
-  [[nodiscard]] int fd() const noexcept { return fd_; }
+  [[nodiscard]] int fd() const noexcept { return fd_.get(); }
 
  private:
-  int fd_;
+  gearpulse::UniqueFd fd_;
 };
 
 }  // namespace

@@ -19,6 +19,7 @@
 
 #include <catch2/catch.hpp>
 
+#include "drivers/unique_fd.hpp"
 #include "tests/test_util.hpp"
 
 namespace fs = std::filesystem;
@@ -286,14 +287,15 @@ TEST_CASE("feed: a FIFO reader gets the file bit-exact in whole periods at real-
                                   .c_str(),
                               "r");
   REQUIRE(feeder != nullptr);
-  const int fd = ::open(fifo.c_str(), O_RDONLY);
-  REQUIRE(fd >= 0);
+  gearpulse::UniqueFd reader(::open(fifo.c_str(), O_RDONLY));
+  REQUIRE(reader);
+  const int fd = reader.get();
   std::string got;
   char buf[8192];
   ssize_t n = 0;
   while ((n = ::read(fd, buf, sizeof buf)) > 0)
     got.append(buf, static_cast<std::size_t>(n));
-  ::close(fd);
+  reader.reset();
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   check_exit_ok(feeder);
   // 16 whole periods: the file, then silence up to the period boundary.
@@ -319,8 +321,9 @@ TEST_CASE("feed: with --wait-start nothing is written before SIGUSR1, and the FI
           .c_str(),
       "r");
   REQUIRE(feeder != nullptr);
-  const int fd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
-  REQUIRE(fd >= 0);
+  gearpulse::UniqueFd reader(::open(fifo.c_str(), O_RDONLY | O_NONBLOCK));
+  REQUIRE(reader);
+  const int fd = reader.get();
   // The feeder says when it has opened and shrunk the FIFO and waits for the signal (EOF if it failed).
   char line[512] = {};
   REQUIRE(std::fgets(line, sizeof line, feeder) != nullptr);
@@ -342,7 +345,7 @@ TEST_CASE("feed: with --wait-start nothing is written before SIGUSR1, and the FI
     if (n <= 0) break;  // the writer closed
     got.append(buf, static_cast<std::size_t>(n));
   }
-  ::close(fd);
+  reader.reset();
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   check_exit_ok(feeder);
   CHECK(got == slurp(in));
