@@ -53,7 +53,8 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
       input(c.sample_rate_hz, 3.0 * c.band_hi_hz),  // up to the highest scored harmonic
       outputs(kOutputQueue,
               std::max<std::size_t>(
-                  8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)) {
+                  8, static_cast<std::size_t>(std::ceil(c.history_s / std::max(c.hop_s, 1e-3))) + 2)),
+      decided(kOutputQueue, 1) {
   fd = input.rate_hz();
   harmonic_limit_hz = input.limit_hz();
   n_win = static_cast<int>(std::lround(cfg.window_s * fd));
@@ -99,8 +100,9 @@ SlidingDftTracker::Impl::Impl(const TrackerConfig& c)
 // After a gear shift at -5 dB the new line's windows give about 1.2 nats a hop, and the posterior reaches
 // 0.8 on a line whose estimates were right for a second or two before (docs/tracker.md, "What limits it").
 void SlidingDftTracker::Impl::deliver(const TrackPoint& p) noexcept {
+  outputs.emit(p);
   if (lag == 0) {
-    outputs.emit(p);
+    decided.emit(p);
     return;
   }
   lagged[(lagged_head + lagged_size) % lagged.size()] = p;
@@ -115,15 +117,16 @@ void SlidingDftTracker::Impl::deliver(const TrackPoint& p) noexcept {
   if (const TrackPoint& last = lagged_at(lagged_size - 1); continued && last.confidence > first.confidence) {
     first.confidence = last.confidence;
     first.tracked = last.tracked;
+    outputs.revise(first);
   }
-  outputs.emit(first);
+  decided.emit(first);
   lagged_head = (lagged_head + 1) % lagged.size();
   --lagged_size;
 }
 
 void SlidingDftTracker::Impl::release_lagged() noexcept {
   for (std::size_t i = 0; i < lagged_size; ++i)
-    outputs.emit(lagged_at(i));
+    decided.emit(lagged_at(i));
   lagged_head = lagged_size = 0;
 }
 
@@ -207,6 +210,7 @@ void SlidingDftTracker::start(double t0) noexcept {
   s.third_n = s.third_mean_db = s.third_var_db = 0.0;  // so is the 3rd harmonic's level
   s.log_noise = kNaN;
   s.outputs.clear();
+  s.decided.clear();
   s.lagged_head = s.lagged_size = 0;
 }
 
@@ -245,8 +249,11 @@ void SlidingDftTracker::finish() noexcept {
 }
 
 bool SlidingDftTracker::pop(TrackPoint& out) noexcept {
-  Impl& s = *impl_;
-  return s.outputs.pop(out);
+  return impl_->outputs.pop(out);
+}
+
+bool SlidingDftTracker::pop_decided(TrackPoint& out) noexcept {
+  return impl_->decided.pop(out);
 }
 
 TrackPoint SlidingDftTracker::at(double t) noexcept {
@@ -267,8 +274,8 @@ TrackPoint SlidingDftTracker::at(double t) noexcept {
   // the best candidate within the slew gate around it, and inherits its confidence.
   TrackPoint prior;
   double prior_dt = 1e9;
-  for (std::size_t k = 0; k < s.recent_count(); ++k) {
-    const TrackPoint& h = s.recent(k);
+  for (std::size_t k = 0; k < s.outputs.held(); ++k) {
+    const TrackPoint& h = s.outputs.recent(k);
     if (std::isfinite(h.freq) && std::abs(h.t - out.t) < prior_dt) {
       prior_dt = std::abs(h.t - out.t);
       prior = h;
@@ -301,8 +308,8 @@ TrackPoint SlidingDftTracker::nearest(double t) const noexcept {
   TrackPoint best;
   best.t = t;
   double best_dt = 0.5 * s.cfg.hop_s + 1e-9;
-  for (std::size_t k = 0; k < s.recent_count(); ++k) {
-    const TrackPoint& h = s.recent(k);
+  for (std::size_t k = 0; k < s.outputs.held(); ++k) {
+    const TrackPoint& h = s.outputs.recent(k);
     if (std::abs(h.t - t) <= best_dt) {
       best_dt = std::abs(h.t - t);
       best = h;

@@ -35,9 +35,10 @@ struct TrackerConfig {
   double max_slew_hz_per_s = 60.0;     // fastest engine-frequency change followed without a re-acquisition
   double shift_slew_hz_per_s = 250.0;  // fastest change at a gear shift, followed while the line is strong
   double history_s = 2.0;              // input kept for at() (windows centred up to this far back)
-  // Fixed-lag decision: each hop's output is queued this much later (rounded to whole hops), its confidence
-  // decided with the windows after it: raised to the latest hop's when the estimates between continue its
-  // line. Its estimate and time stamp are its own hop's. 0: every output as soon as its window is analysed.
+  // Fixed-lag decision: each hop is delivered twice, at once (pop(): the live speed's, with the confidence
+  // its window gives) and this much later (rounded to whole hops; pop_decided()), its confidence decided
+  // with the windows after it: raised to the latest hop's when the estimates between continue its line.
+  // Its estimate and time stamp are its own hop's. 0: every hop decided as soon as its window is analysed.
   // Tuning scenes at 0.5 s: -5 dB coverage 81.9 -> 88.0 %, gross 0.82 -> 1.04 % (docs/tracker.md).
   double decision_lag_s = 0.0;
   // Acquire only a line with a harmonic ladder (f/2, 2f or 3f present). A fan or pump tone has none;
@@ -91,23 +92,29 @@ class SlidingDftTracker {
   // not-tracked outputs, and the continuity state is dropped.
   void skip(std::uint64_t frames) noexcept;
 
-  // Feeds mono frames. Every completed hop appends one TrackPoint to an internal queue (capacity
-  // queue_capacity(); if nobody pops, the oldest are dropped and counted): its own, or with a decision lag
-  // the one that many hops older (rounded to whole hops, at most a quarter of the queue).
+  // Feeds mono frames. Every completed hop appends its TrackPoint to the output queue (capacity
+  // queue_capacity(); if nobody pops, the oldest are dropped and counted) and the one decided with it (its
+  // own, or with a decision lag the one that many hops older, at most a quarter of the queue) to the queue
+  // of decided outputs (as large; if nobody pops it, the oldest are dropped and not counted).
   void push(std::span<const float> frames) noexcept;
   // The stream ends: the outputs held back for the fixed-lag decision (TrackerConfig::decision_lag_s)
-  // are queued as they stand.
+  // are queued as decided as they stand.
   void finish() noexcept;
-  // Next output in time order; false when none is pending. With a decision lag the latest hops' outputs
-  // are held back until the lag has passed (or finish()).
+  // Next output in time order, as soon as its window is analysed (the live speed's); false when none is
+  // pending.
   bool pop(TrackPoint& out) noexcept;
+  // Next decided output in time order (the scores', the printed track's); false when none is pending.
+  // Without a decision lag the same points as pop(); with one the latest hops are held back until the lag
+  // has passed (or finish()). A caller that reads only these drains pop() too, lest its outputs count as
+  // dropped.
+  bool pop_decided(TrackPoint& out) noexcept;
 
   // Estimate from a window centred at time t, computed now from retained input (the daemon asks at GPS
   // fix times). Uses the surrounding hops' track as the prior. Not tracked when t is too old (beyond
   // history_s), too recent (its window is not complete yet) or inside a hole.
   [[nodiscard]] TrackPoint at(double t) noexcept;
-  // The hop output whose centre is closest to t among the last history_size() hops and those held back
-  // for the decision lag (as the hop gave them); not tracked (with t as given) when there is none within
+  // The hop output whose centre is closest to t among the last history_size() hops (with the confidence
+  // decided, once the decision lag has passed); not tracked (with t as given) when there is none within
   // half a hop.
   [[nodiscard]] TrackPoint nearest(double t) const noexcept;
   // Time of the latest window centre that at() can serve now (NaN before the first complete window).

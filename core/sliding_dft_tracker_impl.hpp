@@ -140,23 +140,21 @@ struct SlidingDftTracker::Impl {
   bool floor_is_noise = true;    // rho_track below kLeakRho (this hop)
   std::optional<ToneMap> tones;  // fixed tones of other equipment, counted as background
 
-  TrackOutputs outputs;
-  // The fixed-lag decision (TrackerConfig::decision_lag_s): the latest hops' outputs, held back until
-  // `lag` more hops have been analysed (a ring of lag + 1, oldest first from lagged_head).
+  TrackOutputs outputs;  // each hop at once, and the history at() and nearest() look back on
+  // The fixed-lag decision (TrackerConfig::decision_lag_s): the decided outputs (their queue; its history
+  // is not read), and the latest hops' outputs, held back until `lag` more hops have been analysed (a ring
+  // of lag + 1, oldest first from lagged_head).
+  TrackOutputs decided;
   int lag = 0;
   std::vector<TrackPoint> lagged;
   std::size_t lagged_head = 0, lagged_size = 0;
   [[nodiscard]] const TrackPoint& lagged_at(std::size_t i) const noexcept {
     return lagged[(lagged_head + i) % lagged.size()];
   }
-  // Takes a hop's output; queues the one `lag` hops older, its confidence decided with the hops after it.
+  // Queues a hop's output at once, and as decided the one `lag` hops older, its confidence decided with the
+  // hops after it (the history takes that confidence too).
   void deliver(const TrackPoint& p) noexcept;
-  void release_lagged() noexcept;  // queues every held output as it stands
-  // The outputs at() and nearest() look back on, oldest first: the history, then the held ones.
-  [[nodiscard]] std::size_t recent_count() const noexcept { return outputs.held() + lagged_size; }
-  [[nodiscard]] const TrackPoint& recent(std::size_t k) const noexcept {
-    return k < outputs.held() ? outputs.recent(k) : lagged_at(k - outputs.held());
-  }
+  void release_lagged() noexcept;  // queues every held output as decided as it stands
 
   struct Evidence {
     double freq = kNaN;

@@ -33,6 +33,19 @@ class TrackOutputs {
       ++h_size_;
   }
 
+  // The hop of time p.t in the history, if it is still there, takes p's confidence (decided later).
+  void revise(const TrackPoint& p) noexcept {
+    for (std::size_t k = h_size_; k-- > 0;) {
+      TrackPoint& h = history_[(h_head_ + k) % history_.size()];
+      if (h.t < p.t) return;
+      if (h.t == p.t) {
+        h.confidence = p.confidence;
+        h.tracked = p.tracked;
+        return;
+      }
+    }
+  }
+
   bool pop(TrackPoint& out) noexcept {
     if (q_size_ == 0) return false;
     out = queue_[q_head_];

@@ -350,8 +350,9 @@ gearpulse::TrackerConfig tracker_config_of(const TrackerSection& t, double sampl
   tc.band_lo_hz = t.band_low;
   tc.band_hi_hz = t.band_high;
   // at() serves GPS fixes up to a few seconds old, with the latency on top: the largest the config
-  // accepts, since a reload may raise it while this tracker runs (a few dozen points more).
-  tc.history_s = kMaxGpsLatency + 2.0;
+  // accepts, since a reload may raise it while this tracker runs (a few dozen points more); and with a
+  // decision lag the fixes wait that much longer, for their hops' decided confidence.
+  tc.history_s = kMaxGpsLatency + 2.0 + t.decision_lag;
   return tc;
 }
 

@@ -32,8 +32,8 @@ struct TrackerSection {
   double band_high = TrackerConfig{}.band_hi_hz;  // Hz
   double window = TrackerConfig{}.window_s;       // s
   double hop = TrackerConfig{}.hop_s;             // s
-  // s each hop's confidence is decided later (TrackerConfig::decision_lag_s); 0: at once, as the live speed
-  // wants it (the pulses would carry the engine's frequency this much later)
+  // s each hop's confidence is decided later (TrackerConfig::decision_lag_s) for the training pairs (their
+  // fixes wait as long); the live speed takes every hop at once either way. 0: decided at once
   double decision_lag = 0.0;
   double min_snr_db = -10.0;  // below this a tracked hop is not trusted for training or synthesis
 };

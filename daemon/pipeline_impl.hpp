@@ -87,12 +87,13 @@ struct Pipeline::Impl {
   void open_output_device();
   // The tracker thread's state between two turns of its loop.
   struct Tracking {
-    explicit Tracking(double band_low) : synthesis(band_low) {}
+    // `pair_wait`: how long a GPS fix waits for its window (kPairWait, and the decision lag on top).
+    Tracking(double band_low, double pair_wait) : synthesis(band_low), fixes(pair_wait) {}
     SynthesisStage synthesis;                    // told the tracker's band floor (tracker.band_low)
     ModelPtr model;                              // the one the synthesis uses
     std::unique_ptr<SlidingDftTracker> tracker;  // while audio is open
     std::vector<float> block;                    // one read of the ring
-    FixPairer fixes{kPairWait};
+    FixPairer fixes;
     std::uint64_t model_generation = 0;  // ModelHolder::generation() when `model` was taken
     std::int64_t last_rx = 0;            // receive time of the last GPS report looked at
     double last_points_at = 0.0;         // CLOCK_MONOTONIC s when the tracker last gave points

@@ -128,7 +128,12 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
     }
   }
   if (k.fixes.waiting() == 0) return;
-  for (const PendingFix& f : k.fixes.take_due(now, k.tracker ? k.tracker->latest_time() : kNan)) {
+  // With a decision lag a fix waits until the hops about its instant are decided (and a hop more: the
+  // window centred on it may lie after the latest hop), so that its pair takes the decided confidence.
+  const double hop = config.tracker.hop;
+  const double decided =
+      config.tracker.decision_lag > 0.0 ? (std::round(config.tracker.decision_lag / hop) + 1.0) * hop : 0.0;
+  for (const PendingFix& f : k.fixes.take_due(now, k.tracker ? k.tracker->latest_time() - decided : kNan)) {
     const TrackPoint p = k.tracker->at(f.t);
     const auto pair =
         training_pair(f, p.freq, p.snr_db, p.tracked, min_snr_db.load(std::memory_order_relaxed));
@@ -141,7 +146,7 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
 // waits on `work` until the next thing it does by the clock: a step on GPS alone, an open of the capture,
 // its heartbeat.
 void Pipeline::Impl::tracker_loop() noexcept {
-  Tracking k(config.tracker.band_low);
+  Tracking k(config.tracker.band_low, kPairWait + config.tracker.decision_lag);
   k.model_generation = model.generation();
   k.model = model.get();
   k.synthesis.set_model(k.model);
@@ -150,9 +155,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
   // clock the points arrive on, not by their time stamps: those lag it by the capture's latency (a
   // period and more), and a step stamped "now" would run ahead of every point still to come.
   const double no_audio_step_s = 2.0 * config.tracker.hop + config.tracker.window;
-  // A decision lag holds the points back as many hops more (at the stream's start and after a hole).
-  const double lag_s = std::round(config.tracker.decision_lag / config.tracker.hop) * config.tracker.hop;
-  double audio_stall_s = no_audio_step_s + lag_s;
+  double audio_stall_s = no_audio_step_s;
 
   while (!stop.load(std::memory_order_relaxed)) {
     const std::int64_t now_ns = monotonic_ns();
@@ -163,8 +166,7 @@ void Pipeline::Impl::tracker_loop() noexcept {
     if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(k.tracker)) {
       k.block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
       // Audio arrives a period at a time: only a wait longer than two of them is a stall.
-      audio_stall_s =
-          no_audio_step_s + lag_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
+      audio_stall_s = no_audio_step_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
       k.last_points_at = now;
     }
     const bool got_points = k.tracker && track_audio(k, now);

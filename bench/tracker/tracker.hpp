@@ -209,22 +209,27 @@ struct OrderScore {
   }
 };
 
-// Feeds `x` to a tracker in capture-sized blocks; calls `sink` with every output.
+// Feeds `x` to a tracker in capture-sized blocks; calls `sink` with every decided output (with a decision
+// lag, the hop's confidence decided with the windows after it; the outputs at once are drained unread).
 template <class Sink>
 double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& sink) {
   const std::size_t block = std::min<std::size_t>(4800, tracker.max_push_frames());
   double spent = 0.0;
   TrackPoint p;
+  const auto drain = [&] {
+    while (tracker.pop(p)) {
+    }
+    while (tracker.pop_decided(p))
+      sink(p);
+  };
   for (std::size_t at = 0; at < x.size(); at += block) {
     const double before = cpu_seconds();
     tracker.push(x.subspan(at, std::min(block, x.size() - at)));
     spent += cpu_seconds() - before;
-    while (tracker.pop(p))
-      sink(p);
+    drain();
   }
   tracker.finish();
-  while (tracker.pop(p))
-    sink(p);
+  drain();
   return spent;
 }
 

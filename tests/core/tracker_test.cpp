@@ -465,7 +465,7 @@ TEST_CASE("tracker: no allocation per hop") {
   c.hop_s = 0.05;
   c.decision_lag_s = lag;
   SlidingDftTracker tracker(c);
-  std::size_t outputs = 0, tracked = 0, served = 0;
+  std::size_t outputs = 0, decided = 0, tracked = 0, served = 0;
   TrackPoint p;
   g_allocations = 0;
   g_counting = true;
@@ -475,6 +475,8 @@ TEST_CASE("tracker: no allocation per hop") {
       ++outputs;
       tracked += p.tracked;
     }
+    while (tracker.pop_decided(p))
+      ++decided;
     const TrackPoint q = tracker.at(tracker.latest_time() - 0.2);
     const TrackPoint r = tracker.nearest(q.t);
     served += q.tracked && r.tracked;
@@ -484,9 +486,12 @@ TEST_CASE("tracker: no allocation per hop") {
   tracker.finish();
   while (tracker.pop(p))
     ++outputs;
+  while (tracker.pop_decided(p))
+    ++decided;
   g_counting = false;
   CHECK(g_allocations.load() == 0);
   CHECK(outputs >= 95);
+  CHECK(decided == outputs);
   CHECK(tracked >= 85);
   CHECK(served >= 40);
 }
@@ -932,26 +937,48 @@ TEST_CASE("tracker: a -5 dB scene is tracked through faded windows") {
 // right. Decided half a second later, a hop whose line the next hops continue takes the latest hop's
 // confidence: every estimate and time stay the hop's own, no confidence falls, and on seed 102 the hops
 // within 2 s of a shift or launch are tracked 12 points more often (62 -> 74 %; the tuning set's at -5 dB:
-// 49 -> 62 %), the hops added right as a rule.
+// 49 -> 62 %), the hops added right as a rule. The outputs at once (the live speed's) are those without
+// the lag, delivered as soon.
 TEST_CASE("tracker: a fixed-lag decision tracks the hops after a shift whose line the next hops continue") {
   constexpr std::uint64_t kSeed = 102;
   constexpr double kDurationS = 120.0;
   const sim::FrequencyTrajectory truth = sim::launch_drive_trajectory(kDurationS, kSeed);
   const sim::LighterSceneConfig scene = sim::scene_for_seed(kSeed, -5.0);
   const std::vector<float> x = sim::make_lighter_scene(scene, truth, kDurationS);
+  std::vector<TrackPoint> live;  // the lagged run's outputs at once
   const auto run = [&](double lag) {
     TrackerConfig c = config_at(scene.sample_rate_hz);
     c.decision_lag_s = lag;
     SlidingDftTracker tracker(c);
-    auto points = track(tracker, x);
-    tracker.finish();
+    std::vector<TrackPoint> points;
+    live.clear();
     TrackPoint p;
-    while (tracker.pop(p))
+    for (std::size_t at = 0; at < x.size(); at += 1024) {
+      tracker.push(std::span<const float>(x).subspan(at, std::min<std::size_t>(1024, x.size() - at)));
+      while (tracker.pop(p))
+        live.push_back(p);
+      while (tracker.pop_decided(p))
+        points.push_back(p);
+      // Held back by the lag (rounded to whole hops) only in the decided queue; the history that at() and
+      // nearest() read takes each hop's decided confidence.
+      const auto held = static_cast<std::size_t>(std::lround(lag / c.hop_s));
+      CHECK(live.size() - points.size() == std::min(live.size(), held));
+      if (!points.empty()) CHECK(tracker.nearest(points.back().t).confidence == points.back().confidence);
+    }
+    tracker.finish();
+    while (tracker.pop_decided(p))
       points.push_back(p);
+    CHECK_FALSE(tracker.pop(p));
     return points;
   };
   const std::vector<TrackPoint> now = run(0.0), later = run(0.5);
   REQUIRE(later.size() == now.size());
+  REQUIRE(live.size() == now.size());
+  for (std::size_t i = 0; i < now.size(); ++i) {
+    CHECK(live[i].t == now[i].t);
+    CHECK((live[i].freq == now[i].freq || (std::isnan(live[i].freq) && std::isnan(now[i].freq))));
+    CHECK(live[i].confidence == now[i].confidence);
+  }
   // Within 2 s of a shift (the truth moving faster than 60 Hz/s over 0.2 s) or of the line's entry.
   const auto after_shift = [&](double t) {
     for (double s = 0.0; s <= 2.0; s += 0.05) {

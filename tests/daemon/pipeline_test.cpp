@@ -81,6 +81,31 @@ TEST_CASE("pipeline: raising gps.latency at run time keeps training pairs coming
   }
 }
 
+// With a decision lag each fix waits for its hops' decided confidence, the lag and a hop longer than without:
+// at the most the config accepts (2 s) and no GPS latency, pairs still come, each of the fix's speed and the
+// engine's frequency.
+TEST_CASE("pipeline: with the longest decision lag training pairs keep coming") {
+  LiveChain chain(512, 80, 0.5);  // about 40 s of GPS
+  chain.config.gps.latency = 0.0;
+  chain.config.tracker.decision_lag = 2.0;
+  gearpulse::daemon::Pipeline& pipeline = chain.start();
+  gearpulse::daemon::TrainingStore& store = chain.store;
+  std::size_t added = 0;
+  wait_for(
+      [&] {
+        added += pipeline.drain_pairs();
+        return added >= 5;
+      },
+      25s);
+  CHECK(added >= 5);
+  const auto pairs = store.snapshot();
+  REQUIRE(pairs.size() >= added);
+  for (const auto& pair : pairs) {
+    CHECK(near(pair.speed, kSpeed, 0.01));
+    CHECK(near(pair.freq, kTone, kWander + 0.5));
+  }
+}
+
 TEST_CASE(
     "pipeline: audio that freezes (its source stopped) is not taken for an engine nor made into pairs") {
   // The ripple's writer goes away after 6 s and comes back 14 s later: meanwhile the file plugin hands

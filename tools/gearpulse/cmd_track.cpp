@@ -194,7 +194,9 @@ void print_point(const TrackPoint& p, bool with_confidence) {
 // error with nothing on stdout); `rows` counts the rows printed.
 void print_outputs(SlidingDftTracker& tracker, bool with_confidence, std::size_t& rows) {
   TrackPoint p;
-  while (tracker.pop(p)) {
+  while (tracker.pop(p)) {  // the outputs at once, for a live reader; the track printed is the decided one
+  }
+  while (tracker.pop_decided(p)) {
     if (rows++ == 0) std::printf(with_confidence ? "t,freq,snr_db,confidence\n" : "t,freq,snr_db\n");
     print_point(p, with_confidence);
   }
