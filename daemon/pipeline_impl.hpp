@@ -66,6 +66,7 @@ struct Pipeline::Impl {
   // Published by the tracker thread.
   std::atomic<std::int64_t> tracker_beat{0};
   std::atomic<std::uint64_t> tracker_turns{0};
+  std::atomic<std::uint64_t> late_hops{0};  // hops stepped late, on the GPS of their due time (step())
   std::atomic<double> speed{0.0};
   std::atomic<double> speed_sd{0.0};
   std::atomic<int> gear{0};
@@ -97,11 +98,14 @@ struct Pipeline::Impl {
     std::uint64_t model_generation = 0;  // ModelHolder::generation() when `model` was taken
     std::int64_t last_rx = 0;            // receive time of the last GPS report looked at
     double last_points_at = 0.0;         // CLOCK_MONOTONIC s when the tracker last gave points
+    // s from a hop's time to the latest moment a thread keeping pace steps it (set as the audio opens).
+    double hop_due = 0.0;
   };
   bool open_audio(std::unique_ptr<SlidingDftTracker>& tracker);
   void adopt_model(Tracking& k) noexcept;
   bool track_audio(Tracking& k, double now) noexcept;
-  void step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept;
+  // `hop`: a hop of the audio (GPS judged as GpsHistory::for_hop says), not a step on GPS alone.
+  void step(Tracking& k, double t, double freq, double snr, bool tracked, bool hop) noexcept;
   void pair_fixes(Tracking& k, double now) noexcept;
   void tracker_loop() noexcept;
 };

@@ -46,11 +46,23 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
 }
 
 // Publishes one step of the synthesis: to the pulse thread and to the snapshot.
-void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked) noexcept {
+void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked, bool hop) noexcept {
   // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
-  // disagreement between the sound card's clock and the GPS cannot hide a good fix). Lock-free: the
-  // gpsd thread never holds up a hop.
-  const std::optional<GpsReport> fix = gps ? gps->fresh(monotonic_ns()) : std::nullopt;
+  // disagreement between the sound card's clock and the GPS cannot hide a good fix). A hop of a backlog
+  // drained late (a report newer than the moment a thread keeping pace steps it) takes the report newest
+  // at that moment instead, judged then, as it would have stepped in pace: the synthesis does not depend
+  // on how the thread was scheduled, and a hop on time gets GPS exactly as judged now (GpsHistory). A
+  // step on GPS alone has no hop to be late: it takes GPS as it is now. Lock-free: the gpsd thread never
+  // holds up a hop.
+  const std::int64_t now_ns = monotonic_ns();
+  std::optional<GpsReport> fix;
+  if (gps && hop) {
+    const GpsHistory::ForHop h = gps->for_hop(std::llround((t + k.hop_due) * 1e9), now_ns);
+    fix = h.fix;
+    if (h.late) late_hops.fetch_add(1, std::memory_order_relaxed);
+  } else if (gps) {
+    fix = gps->fresh(now_ns);
+  }
   const SynthesisStage::Step s =
       k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed),
                        gps_latency.load(std::memory_order_relaxed));
@@ -105,7 +117,7 @@ bool Pipeline::Impl::track_audio(Tracking& k, double now) noexcept {
       while (tracker.pop(p)) {
         got_points = true;
         k.last_points_at = now;
-        step(k, p.t, p.freq, p.snr_db, p.tracked);
+        step(k, p.t, p.freq, p.snr_db, p.tracked, true);
       }
     }
     if (b.frames < k.block.size()) break;
@@ -166,14 +178,23 @@ void Pipeline::Impl::tracker_loop() noexcept {
     if (audio.open_due(std::chrono::steady_clock::now()) && open_audio(k.tracker)) {
       k.block.assign(std::max<std::size_t>(config.audio.period_frames, 256), 0.0f);
       // Audio arrives a period at a time: only a wait longer than two of them is a stall.
-      audio_stall_s = no_audio_step_s + 2.0 * audio.period_frames() / static_cast<double>(audio.rate());
+      const double period_s = audio.period_frames() / static_cast<double>(audio.rate());
+      audio_stall_s = no_audio_step_s + 2.0 * period_s;
+      // When a thread keeping pace steps a hop at the latest (GpsHistory::for_hop): its window ends half a
+      // window after its time; its last frame reaches the ring within a period (a sound card delivers a
+      // period at a time, its time stamps counting the frames in its buffer); the thread steps it before
+      // the next hop's window ends, a hop later; and a source may hold up to a hop more that its time stamps
+      // do not count (the test harness' FIFO and file plugin: its hops are stepped 0.19 s after their time,
+      // 0.09 s more than the window's half and a period). A hop stepped after that waited behind others: a
+      // backlog drained late. (The tracker gives each hop at once, whatever its decision lag.)
+      k.hop_due = config.tracker.window / 2.0 + period_s + 2.0 * config.tracker.hop;
       k.last_points_at = now;
     }
     const bool got_points = k.tracker && track_audio(k, now);
     // Without audio (or while it stalls) the synthesis still runs on GPS, one step per hop.
     const bool audio_silent = !k.tracker || now - k.last_points_at > audio_stall_s;
     if (!got_points && audio_silent && now - k.synthesis.last_step_time() > no_audio_step_s)
-      step(k, now - config.tracker.window / 2.0, kNan, kNan, false);
+      step(k, now - config.tracker.window / 2.0, kNan, kNan, false, false);
     pair_fixes(k, now);
     if (k.tracker) faults.audio(audio.stats(), std::chrono::steady_clock::now());
     if (k.tracker && audio.has_frames()) continue;  // more than one turn's reading was waiting

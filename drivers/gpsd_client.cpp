@@ -96,14 +96,6 @@ void GpsdClient::stop() {
   status_.state = GpsdState::kStopped;
 }
 
-std::optional<GpsReport> GpsdClient::fresh(std::int64_t now_ns) const noexcept {
-  const std::optional<GpsReport> latest = latest_.read();
-  if (!latest || !latest->usable()) return std::nullopt;
-  const std::int64_t timeout_ns = std::chrono::nanoseconds(config_.no_fix_timeout).count();
-  if (now_ns - latest->rx_ns > timeout_ns) return std::nullopt;
-  return latest;
-}
-
 GpsdStatus GpsdClient::status() const {
   std::lock_guard lock(mutex_);
   return status_;
@@ -210,7 +202,7 @@ void GpsdClient::run() {
         }
         // Published before the status counts it: a status query in between shows the report with the
         // count before it, which nothing compares.
-        latest_.publish(newest);
+        history_.record(*newest);
         {
           std::lock_guard lock(mutex_);
           ++status_.reports;

@@ -14,7 +14,7 @@
 #include <thread>
 
 #include "core/gps_speed_gate.hpp"
-#include "core/published.hpp"
+#include "drivers/gps_history.hpp"
 #include "drivers/gps_report.hpp"
 
 namespace gearpulse {
@@ -57,12 +57,19 @@ class GpsdClient final {
   void start();  // starts the thread (idempotent); never throws for an absent gpsd: it keeps trying
   void stop();   // joins the thread within ~100 ms
 
-  // The newest report, if any arrived yet. Lock-free (Published), for the real-time thread's every hop.
-  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return latest_.read(); }
+  // The newest report, if any arrived yet. Lock-free (GpsHistory), for the real-time thread's every hop.
+  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return history_.newest(); }
   // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
   // and its freshness judged on that one report). Lock-free as latest().
-  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const noexcept;
+  [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const noexcept {
+    return history_.fresh(now_ns, timeout_ns());
+  }
   [[nodiscard]] bool has_gps(std::int64_t now_ns) const noexcept { return fresh(now_ns).has_value(); }
+  // GPS for a hop stepped at `now_ns` that a thread keeping pace steps by `due_ns` (GpsHistory::for_hop):
+  // fresh(now_ns) while no report is newer than `due_ns`, else the report newest at `due_ns`, judged then.
+  [[nodiscard]] GpsHistory::ForHop for_hop(std::int64_t due_ns, std::int64_t now_ns) const noexcept {
+    return history_.for_hop(due_ns, now_ns, timeout_ns());
+  }
   [[nodiscard]] GpsdStatus status() const;  // under the lock: for status queries, not a real-time path
   // Proof of life for a watchdog: CLOCK_MONOTONIC of the thread's last sign of life. It beats on every
   // turn of its loop, at least every 100 ms while connected and every kBeatNs while backing off, so an
@@ -78,6 +85,9 @@ class GpsdClient final {
   bool wait_backoff(std::chrono::milliseconds delay);  // false if stop was requested; beats meanwhile
   void beat() noexcept;
   void set_error(std::string message, bool connection_lost);
+  [[nodiscard]] std::int64_t timeout_ns() const noexcept {
+    return std::chrono::nanoseconds(config_.no_fix_timeout).count();
+  }
 
   const GpsdConfig config_;
   const Callback on_report_;
@@ -87,7 +97,7 @@ class GpsdClient final {
   bool stop_requested_ = false;
   std::atomic<std::int64_t> beat_ns_{0};
   std::atomic<bool> connecting_{false};
-  Published<std::optional<GpsReport>> latest_;  // written by the client thread only
+  GpsHistory history_;  // written by the client thread only
   GpsdStatus status_;
   GpsSpeedGate gate_;  // client thread only
 };

@@ -3,6 +3,7 @@
 // against an absent or misbehaving gpsd.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
@@ -14,6 +15,7 @@
 #include <sstream>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "drivers/clock.hpp"
 #include "drivers/gpsd_client.hpp"
@@ -131,6 +133,55 @@ TEST_CASE("gpsd: generated NMEA speeds arrive within NMEA precision and an outag
   CHECK(client.has_gps(newest->rx_ns + 1'400'000'000));
   CHECK_FALSE(client.has_gps(newest->rx_ns + 1'600'000'000));
   CHECK(client.status().connects == 1);
+}
+
+TEST_CASE("gpsd: GPS at a past time is the report newest then, after GPS was lost and came back") {
+  // The tracker thread may step a hop after its time (a backlog drained late): it asks for GPS at the
+  // moment the hop was due, which must be what was received by then, not the newest report.
+  TempDir dir;
+  const double nan = std::nan("");
+  const std::vector<double> speeds = {5.0, 5.0, 5.0, 5.0, 5.0, 12.0, 12.0, 12.0, 12.0, nan,
+                                      nan, nan, nan, nan, nan, 20.0, 20.0, 20.0, 20.0, 20.0};
+  const auto log = write_log(dir, speeds);
+  const int port = gearpulse::test::free_port();
+  GpsFake fake(log, port, 0.1, true);
+  REQUIRE(GpsFake::wait_listening(port, 10s));
+  Recorder rec;
+  GpsdClient client(config_for(port), rec.callback());
+  client.start();
+  const double last_fix = utc_of(2026, 1, 15, 12, 0, static_cast<int>(speeds.size()) - 1);
+  REQUIRE(wait_for(
+      [&] {
+        const auto r = client.latest();
+        return r && r->fix_time >= last_fix;
+      },
+      20s));
+  const auto all = rec.snapshot();
+  REQUIRE(all.size() >= 2);
+  const std::size_t kept = std::min(all.size(), gearpulse::GpsHistory::kSize);
+  std::size_t usable = 0, no_fix = 0;
+  for (std::size_t i = all.size() - kept; i < all.size(); ++i) {
+    const GpsReport& r = all[i];
+    // Due and stepped at its receive time (the newest report is then on time, judged at once).
+    const auto then = client.for_hop(r.rx_ns, r.rx_ns).fix;
+    CHECK(then.has_value() == r.usable());
+    if (then) {
+      CHECK(then->rx_ns == r.rx_ns);
+      CHECK(then->speed == r.speed);
+      ++usable;
+    } else {
+      ++no_fix;
+    }
+  }
+  CHECK(usable >= 8);
+  CHECK(no_fix >= 1);
+  // Now, and for a hop on time, the newest report counts, as it always did.
+  const auto newest = client.latest();
+  REQUIRE(newest);
+  CHECK(client.has_gps(newest->rx_ns + 1'400'000'000) == newest->usable());
+  const auto on_time = client.for_hop(newest->rx_ns, newest->rx_ns + 1'400'000'000);
+  CHECK_FALSE(on_time.late);
+  CHECK(on_time.fix.has_value() == newest->usable());
 }
 
 // A receiver's glitch (a multipath spike, a bad epoch) once went straight to the pulse train: 300 m/s for
