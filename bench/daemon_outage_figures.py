@@ -115,7 +115,7 @@ def poll(a, truth, t0, out_start, model):
     shutil.copy(os.path.join(a.work, "state", "model.json"), model)
     lost = False
     with open(os.path.join(a.work, "polls.csv"), "w") as polls:
-        polls.write("t,source,gear,speed,true_speed,true_gear,pulses,track_freq,true_freq\n")
+        polls.write("t,source,gear,speed,true_speed,true_gear,pulses,track_freq,true_freq,late_hops\n")
         while alive(a.until_pid):
             s = status(a.ctl, sock)
             t = time.time() - t0
@@ -124,7 +124,8 @@ def poll(a, truth, t0, out_start, model):
                 i = max(0, bisect.bisect_right(truth[0], t) - 1)
                 polls.write(f"{t:.2f},{source},{s.get('gear', 0)},{s.get('speed') or 0.0:.3f},"
                             f"{truth[1][i]:.3f},{truth[2][i]},{s.get('pulses', 0)},"
-                            f"{s.get('tracker', {}).get('freq') or ''},{truth[3][i]:.2f}\n")
+                            f"{s.get('tracker', {}).get('freq') or ''},{truth[3][i]:.2f},"
+                            f"{s.get('tracker', {}).get('late_hops', '')}\n")
                 if not lost and t > out_start - 5 and source != "gps":
                     lost = True
                     shutil.copy(os.path.join(a.work, "state", "model.json"), model)
@@ -156,9 +157,11 @@ def main():
 
     lost = back = None  # (drive time, pulses)
     edge_gap, last_poll = 0.0, 0.0
+    late_hops = ""  # hops the daemon stepped after a backlog, on the GPS of their due time (the last poll's)
     with open(os.path.join(work, "polls.csv"), newline="") as f:
         for row in csv.DictReader(f):
             t, source, pulses = float(row["t"]), row["source"], int(row["pulses"])
+            late_hops = row.get("late_hops") or late_hops
             if lost is None and t > out_start - 5 and source != "gps":
                 lost, edge_gap = (t, pulses), max(edge_gap, t - last_poll)
             elif lost is not None and back is None and source == "gps":
@@ -200,7 +203,7 @@ def main():
             print(f"figure {a.label}_{key} = {figures[key]:+.2f}")
     if "daemon_m" in figures:
         print(f"  daemon {figures['daemon_m']:.1f} m over {figures['daemon_from_s']:.1f}-{figures['daemon_to_s']:.1f} s "
-              f"(driven {figures['daemon_driven_m']:.1f} m)")
+              f"(driven {figures['daemon_driven_m']:.1f} m), {late_hops or '?'} hops stepped late")
     for key in ("replay", "replay_held"):
         if f"{key}_m" in figures:
             print(f"  {key} {figures[f'{key}_m']:.1f} m over {figures[f'{key}_from_s']:.1f}-"

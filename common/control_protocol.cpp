@@ -88,6 +88,7 @@ GEARPULSE_FIELDS(TrackerStatus) void fields(R& r, F&& f) {
   f("snr_db", r.snr_db);
   f("confident", r.confident);
   f("turns", r.turns);
+  f("late_hops", r.late_hops);
 }
 
 GEARPULSE_FIELDS(LearningStatus) void fields(R& r, F&& f) {

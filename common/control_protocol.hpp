@@ -152,7 +152,8 @@ struct TrackerStatus {
   std::optional<double> freq;  // Hz
   std::optional<double> snr_db;
   bool confident = false;
-  std::uint64_t turns = 0;  // wake-ups of the tracker thread since the daemon started
+  std::uint64_t turns = 0;      // wake-ups of the tracker thread since the daemon started
+  std::uint64_t late_hops = 0;  // hops stepped after a backlog, on the GPS of their due time
 };
 
 struct LearningStatus {

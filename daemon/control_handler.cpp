@@ -93,7 +93,8 @@ control::StatusReply status_reply(const StatusInputs& in) {
   reply.tracker = {.freq = number_if(p.tracker_freq, p.tracker_freq >= 0),
                    .snr_db = number_if(p.tracker_snr_db, p.tracker_freq >= 0),
                    .confident = p.tracker_confident,
-                   .turns = p.tracker_turns};
+                   .turns = p.tracker_turns,
+                   .late_hops = p.tracker_late_hops};
   reply.model = {.state = model_state(m),
                  .gears = m ? m->gears.size() : 0,
                  .fit_samples = m ? m->samples : 0,

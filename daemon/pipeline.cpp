@@ -318,6 +318,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   if (d.tracker_thread.joinable())
     beats.push_back({"tracker", d.tracker_beat.load(std::memory_order_relaxed)});
   s.tracker_turns = d.tracker_turns.load(std::memory_order_relaxed);
+  s.tracker_late_hops = d.late_hops.load(std::memory_order_relaxed);
   s.stalled = stalled_threads(beats, now);
   return s;
 }

@@ -54,6 +54,9 @@ struct PipelineSnapshot {
   // Turns of the tracker thread's loop: one per wake-up (audio pushed, a GPS report, a step on GPS alone,
   // an open of the capture, its heartbeat or stop()); the status's tracker.turns.
   std::uint64_t tracker_turns = 0;
+  // Hops stepped late, after a backlog, on the GPS of the moment a thread keeping pace would have stepped
+  // them; 0 while the thread keeps pace. The status's tracker.late_hops.
+  std::uint64_t tracker_late_hops = 0;
   double tracker_snr_db = 0.0;
   bool tracker_confident = false;
   // Training.

@@ -29,7 +29,7 @@ StatusReply full_status() {
   s.gps = {"no-fix", std::nullopt, 3, 4.5, 2, 1, "127.0.0.1:2947", "gone"};
   s.audio = {"recovering", "hw:1", 48000, 5, 6, "ALSA error -2: No such file or directory",
              "open",       9,      1.7e9, 3};
-  s.tracker = {88.0, 12.0, true, 4321};
+  s.tracker = {88.0, 12.0, true, 4321, 7};
   s.model.state = ModelState::kTrained;
   s.model.gears = 2;
   s.model.fit_samples = 3000;
@@ -95,7 +95,7 @@ TEST_CASE("control: a status reply is written with the fields and types of docs/
         {"open_attempts", 9},
         {"last_attempt", 1.7e9},
         {"reopens", 3}}},
-      {"tracker", {{"freq", 88.0}, {"snr_db", 12.0}, {"confident", true}, {"turns", 4321}}},
+      {"tracker", {{"freq", 88.0}, {"snr_db", 12.0}, {"confident", true}, {"turns", 4321}, {"late_hops", 7}}},
       {"model",
        {{"state", "trained"},
         {"gears", 2},

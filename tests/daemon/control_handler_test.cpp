@@ -52,6 +52,7 @@ TEST_CASE("control: status says what is not available as null and where the outp
   p.tracker_freq = -1.0;  // not tracked: no SNR either
   p.tracker_snr_db = 4.0;
   p.tracker_turns = 1234;
+  p.tracker_late_hops = 56;
   control::StatusReply s = status_reply(inputs(config, path, p));
   CHECK(s.speed_kmh == Approx(36.0));
   CHECK(s.source == "engine");
@@ -64,6 +65,7 @@ TEST_CASE("control: status says what is not available as null and where the outp
   CHECK_FALSE(s.tracker.freq.has_value());
   CHECK_FALSE(s.tracker.snr_db.has_value());
   CHECK(s.tracker.turns == 1234);
+  CHECK(s.tracker.late_hops == 56);
   CHECK(s.audio.failed_step.empty());  // nothing failed: no step, no attempt
   CHECK(s.audio.open_attempts == 0);
   CHECK_FALSE(s.audio.last_attempt.has_value());

@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -249,6 +250,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   // that bracket each edge.
   double pulses_lost = -1.0, pulses_back = -1.0, edge_gap = 0.0, last_poll = 0.0;
   double lost_at = 0.0, back_at = 0.0;
+  std::uint64_t late_hops = 0;  // hops the daemon stepped after a backlog (its status's tracker.late_hops)
   const pid_t feeder = work.pid("feeder");
   REQUIRE(feeder > 0);
   while (::kill(feeder, 0) == 0) {
@@ -262,6 +264,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
       if (pulses_lost >= 0.0 && pulses_back < 0.0 && source == "gps")
         pulses_back = pulses, back_at = t, edge_gap = std::max(edge_gap, t - last_poll);
       last_poll = t;
+      if (s.contains("tracker")) late_hops = s["tracker"].value("late_hops", late_hops);
       // Leave the GPS timeout and a second of slack at both edges of the outage.
       if (t > outage_start + 4.0 && t < outage_start + outage_length - 2.0)
         outage_polls.emplace_back(t, source);
@@ -301,9 +304,9 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   const double live_error = live / live_truth - 1.0, replay_error = replayed.distance / replay_truth - 1.0;
   std::printf(
       "e2e outage: daemon %.1f m over %.1f-%.1f s (driven %.1f m, %+.2f %%), replay %.1f m over %.1f-%.1f s "
-      "(driven %.1f m, %+.2f %%)\n",
+      "(driven %.1f m, %+.2f %%); %llu hops stepped late\n",
       live, lost_at, back_at, live_truth, 100.0 * live_error, replayed.distance, replayed.from, replayed.to,
-      replay_truth, 100.0 * replay_error);
+      replay_truth, 100.0 * replay_error, static_cast<unsigned long long>(late_hops));
   REQUIRE(pulses_lost >= 0.0);
   REQUIRE(pulses_back > pulses_lost);
   REQUIRE(replayed.distance > 100.0);
