@@ -254,8 +254,10 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       s.output_state = OutputState::kError;
     else if (const std::uint64_t errors = d.output.errors(); errors > 0) {
       s.output_state = OutputState::kWriteErrors;
+      const int last = d.output.last_error();
       s.output_error = fmt::format("{} write(s) failed, the last: {}", errors,
-                                   std::error_code(d.output.last_error(), std::generic_category()).message());
+                                   last != 0 ? std::error_code(last, std::generic_category()).message()
+                                             : std::string("unknown error"));
     } else if (reader_behind)
       s.output_state = OutputState::kReaderBehind;
     else if (!d.output.has_reader())

@@ -97,6 +97,7 @@ struct Pipeline::Impl {
     FixPairer fixes;
     std::uint64_t model_generation = 0;  // ModelHolder::generation() when `model` was taken
     std::int64_t last_rx = 0;            // receive time of the last GPS report looked at
+    std::optional<GpsReport> given_fix;  // the newest report a step gave the synthesis
     double last_points_at = 0.0;         // CLOCK_MONOTONIC s when the tracker last gave points
     // s from a hop's time to the latest moment a thread keeping pace steps it (set as the audio opens).
     double hop_due = 0.0;

@@ -60,9 +60,13 @@ void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool t
     const GpsHistory::ForHop h = gps->for_hop(std::llround((t + k.hop_due) * 1e9), now_ns);
     fix = h.fix;
     if (h.late) late_hops.fetch_add(1, std::memory_order_relaxed);
+    // A backlog after steps on GPS alone (the audio stalled) would go back to a report older than one the
+    // synthesis has measured: GPS never runs backwards, the newer one stays (not measured again).
+    if (fix && k.given_fix && fix->rx_ns < k.given_fix->rx_ns) fix = k.given_fix;
   } else if (gps) {
     fix = gps->fresh(now_ns);
   }
+  if (fix) k.given_fix = fix;
   const SynthesisStage::Step s =
       k.synthesis.step(t, freq, snr, tracked, fix, min_snr_db.load(std::memory_order_relaxed),
                        gps_latency.load(std::memory_order_relaxed));
@@ -109,7 +113,8 @@ bool Pipeline::Impl::track_audio(Tracking& k, double now) noexcept {
     }
     // Pushed in pieces of at most half the tracker's output queue of hops, drained after each: a backlog
     // read in one pass (a stall) or a long period at short hops holds more hops than the queue, whose
-    // oldest would be dropped.
+    // oldest would be dropped. (The hops' decided confidence reaches the training pairs through the
+    // tracker's history, nearest(): the daemon never pops the decided queue, which overwrites itself.)
     const std::size_t piece = tracker.max_push_frames();
     for (std::size_t at = 0; at < b.frames; at += piece) {
       tracker.push(std::span<const float>(k.block.data() + at, std::min(piece, b.frames - at)));

@@ -63,7 +63,7 @@ void GpioOutput::ChipCloser::operator()(gpiod_chip* chip) const noexcept {
 void GpioOutput::set(int value) noexcept {
   if (::gpiod_line_set_value(line_, value) == 0) return;
   last_error_.store(errno != 0 ? errno : EIO, std::memory_order_relaxed);
-  errors_.fetch_add(1, std::memory_order_relaxed);
+  errors_.fetch_add(1, std::memory_order_release);  // publishes last_error_ with the count
 }
 
 std::string GpioOutput::describe() const {

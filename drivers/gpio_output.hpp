@@ -27,7 +27,7 @@ class GpioOutput final : public PulseOutput {
   void rise() noexcept override { set(1); }
   void fall() noexcept override { set(0); }
   [[nodiscard]] std::uint64_t errors() const noexcept override {
-    return errors_.load(std::memory_order_relaxed);
+    return errors_.load(std::memory_order_acquire);  // last_error() then holds the errno of a counted failure
   }
   [[nodiscard]] int last_error() const noexcept override {
     return last_error_.load(std::memory_order_relaxed);

@@ -21,7 +21,8 @@ class GpsHistory {
  public:
   // Reports kept: a hop can be late by at most what the capture ring holds (`audio.ring_seconds`, at most
   // 60 s), and a 10 Hz receiver, the fastest gpsd serves a car PC, reports 600 times in that; 1024 slots
-  // (about 100 KiB) cover it with room for receivers that report a fix as several sentences.
+  // (about 100 KiB) cover it, and a few seconds of a backlog for a receiver that reports each fix twice. A
+  // hop later than the history reaches takes its oldest report (at()).
   static constexpr std::size_t kSize = 1024;
 
   // The GPS a hop gets, and whether it was late (judged at `due_ns`, not when the thread ran).
@@ -62,14 +63,15 @@ class GpsHistory {
   }
 
   // GPS for a hop stepped at `now_ns` that a thread keeping pace steps by `due_ns` (the hop's time and the
-  // pipeline's latency). While the newest report is no newer than `due_ns` (none came since) the hop is on
-  // time, and gets GPS now, exactly as fresh(): the code and the moment a hop was always judged at. A hop of
-  // a backlog drained late, whose `due_ns` a newer report has passed, gets the report newest at `due_ns`,
-  // judged then: what it would have had stepped in pace.
+  // pipeline's latency). A hop on time (`now_ns` <= `due_ns`) gets GPS now, exactly as fresh(): the code and
+  // the moment a hop was always judged at. A hop of a backlog drained late gets the report that was newest
+  // at `due_ns`, judged then: what it would have had stepped in pace, whether a newer report came since or
+  // none did (a gpsd thread held back by the same load, or gone).
   [[nodiscard]] ForHop for_hop(std::int64_t due_ns, std::int64_t now_ns,
                                std::int64_t timeout_ns) const noexcept {
+    if (now_ns <= due_ns) return {fresh(now_ns, timeout_ns), false};
     const std::optional<GpsReport> last = newest();
-    if (!last || last->rx_ns <= due_ns) return {judged(last, now_ns, timeout_ns), false};
+    if (!last || last->rx_ns <= due_ns) return {judged(last, due_ns, timeout_ns), true};
     return {judged(at(due_ns), due_ns, timeout_ns), true};
   }
 
@@ -83,8 +85,8 @@ inline std::optional<GpsReport> GpsHistory::at(std::int64_t t_ns) const noexcept
   const std::uint64_t kept = n < kSize ? n : kSize;
   std::optional<GpsReport> oldest;
   for (std::uint64_t i = 0; i < kept; ++i) {
-    // A writer that went round the whole ring during this loop (kSize reports in microseconds) could
-    // leave a newer report in a slot: it is skipped as received after `t_ns`.
+    // Once the ring is full, each report recorded during this loop overwrites the oldest slot with a newer
+    // report: it is skipped as received after `t_ns` (and the oldest kept is then the next slot's).
     const GpsReport r = ring_[(n - 1 - i) % kSize].read();
     if (r.rx_ns <= t_ns) return r;
     if (!oldest || r.rx_ns < oldest->rx_ns) oldest = r;

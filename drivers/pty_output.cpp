@@ -126,7 +126,7 @@ void PtyOutput::rise() noexcept {
     unheard_.fetch_add(1, std::memory_order_relaxed);  // the reader vanished between poll and write
   } else {
     last_error_.store(n < 0 ? errno : EIO, std::memory_order_relaxed);  // n == 0: nothing taken
-    errors_.fetch_add(1, std::memory_order_relaxed);
+    errors_.fetch_add(1, std::memory_order_release);  // publishes last_error_ with the count
   }
 }
 

@@ -32,7 +32,7 @@ class PtyOutput final : public PulseOutput {
   void rise() noexcept override;
   void fall() noexcept override {}
   [[nodiscard]] std::uint64_t errors() const noexcept override {
-    return errors_.load(std::memory_order_relaxed);
+    return errors_.load(std::memory_order_acquire);  // last_error() then holds the errno of a counted failure
   }
   [[nodiscard]] int last_error() const noexcept override {
     return last_error_.load(std::memory_order_relaxed);

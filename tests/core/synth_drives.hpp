@@ -86,7 +86,7 @@ void replay_rows(const std::string& name, const std::string& rate, Synth& synth,
     REQUIRE((cells.size() == 4 || cells.size() == 5));
     const double t = std::stod(cells[0]), freq = std::stod(cells[2]), truth = std::stod(cells[3]);
     const double gps = cells[1].empty() ? kMissing : std::stod(cells[1]);
-    const bool gps_new = cells.size() == 4 || cells[4] != "0";
+    const bool gps_new = cells.size() == 4 || cells[4].rfind('0', 0) != 0;  // "0" (or "0\r"): held
     if constexpr (std::is_same_v<Synth, LogReplayer>)
       check(t, truth, synth.step(Sample{t, gps, freq}));
     else

@@ -162,8 +162,8 @@ TEST_CASE("gpsd: GPS at a past time is the report newest then, after GPS was los
   std::size_t usable = 0, no_fix = 0;
   for (std::size_t i = all.size() - kept; i < all.size(); ++i) {
     const GpsReport& r = all[i];
-    // Due and stepped at its receive time (the newest report is then on time, judged at once).
-    const auto then = client.for_hop(r.rx_ns, r.rx_ns).fix;
+    // Due at its receive time and stepped after it (late): the report of that time, judged then.
+    const auto then = client.for_hop(r.rx_ns, r.rx_ns + 1).fix;
     CHECK(then.has_value() == r.usable());
     if (then) {
       CHECK(then->rx_ns == r.rx_ns);
@@ -179,7 +179,7 @@ TEST_CASE("gpsd: GPS at a past time is the report newest then, after GPS was los
   const auto newest = client.latest();
   REQUIRE(newest);
   CHECK(client.has_gps(newest->rx_ns + 1'400'000'000) == newest->usable());
-  const auto on_time = client.for_hop(newest->rx_ns, newest->rx_ns + 1'400'000'000);
+  const auto on_time = client.for_hop(newest->rx_ns + 1'400'000'000, newest->rx_ns + 1'400'000'000);
   CHECK_FALSE(on_time.late);
   CHECK(on_time.fix.has_value() == newest->usable());
 }

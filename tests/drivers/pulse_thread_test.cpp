@@ -193,7 +193,7 @@ TEST_CASE("pulse: a late output takes its device once and refuses a second while
 }
 
 TEST_CASE("pulse: a late output reports its device's failed writes and their errno") {
-  // A device whose every write fails as a PTY's does when its terminal is gone.
+  // A device whose every write fails with EIO (a GPIO chip whose device went away).
   class FailingOutput final : public gearpulse::PulseOutput {
    public:
     void rise() noexcept override { ++errors_; }
