@@ -49,11 +49,11 @@ bool Pipeline::Impl::open_audio(std::unique_ptr<SlidingDftTracker>& tracker) {
 void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool tracked, bool hop) noexcept {
   // GPS counts while its newest report is usable and younger than the timeout (receive time, so a
   // disagreement between the sound card's clock and the GPS cannot hide a good fix). A hop of a backlog
-  // drained late (a report newer than the moment a thread keeping pace steps it) takes the report newest
-  // at that moment instead, judged then, as it would have stepped in pace: the synthesis does not depend
-  // on how the thread was scheduled, and a hop on time gets GPS exactly as judged now (GpsHistory). A
-  // step on GPS alone has no hop to be late: it takes GPS as it is now. Lock-free: the gpsd thread never
-  // holds up a hop.
+  // drained late (stepped after the moment a thread keeping pace steps it) takes the report newest at that
+  // moment instead, judged then, as it would have stepped in pace: the synthesis does not depend on how the
+  // thread was scheduled, and a hop on time gets GPS exactly as judged now (GpsHistory). A step on GPS
+  // alone has no hop to be late: it takes GPS as it is now. Lock-free: the gpsd thread never holds up a
+  // hop.
   const std::int64_t now_ns = monotonic_ns();
   std::optional<GpsReport> fix;
   if (gps && hop) {

@@ -70,8 +70,6 @@ class GpsHistory {
   [[nodiscard]] ForHop for_hop(std::int64_t due_ns, std::int64_t now_ns,
                                std::int64_t timeout_ns) const noexcept {
     if (now_ns <= due_ns) return {fresh(now_ns, timeout_ns), false};
-    const std::optional<GpsReport> last = newest();
-    if (!last || last->rx_ns <= due_ns) return {judged(last, due_ns, timeout_ns), true};
     return {judged(at(due_ns), due_ns, timeout_ns), true};
   }
 

@@ -66,7 +66,7 @@ class GpsdClient final {
   }
   [[nodiscard]] bool has_gps(std::int64_t now_ns) const noexcept { return fresh(now_ns).has_value(); }
   // GPS for a hop stepped at `now_ns` that a thread keeping pace steps by `due_ns` (GpsHistory::for_hop):
-  // fresh(now_ns) while no report is newer than `due_ns`, else the report newest at `due_ns`, judged then.
+  // fresh(now_ns) while `now_ns` <= `due_ns`, else the report newest at `due_ns`, judged then.
   [[nodiscard]] GpsHistory::ForHop for_hop(std::int64_t due_ns, std::int64_t now_ns) const noexcept {
     return history_.for_hop(due_ns, now_ns, timeout_ns());
   }
