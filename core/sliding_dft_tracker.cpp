@@ -325,6 +325,10 @@ double SlidingDftTracker::latest_time() const noexcept {
   return s.time_of(static_cast<double>(last));
 }
 
+int SlidingDftTracker::decision_lag_hops() const noexcept {
+  return impl_->lag;
+}
+
 const TrackerConfig& SlidingDftTracker::config() const noexcept {
   return impl_->cfg;
 }

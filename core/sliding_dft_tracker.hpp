@@ -119,6 +119,8 @@ class SlidingDftTracker {
   [[nodiscard]] TrackPoint nearest(double t) const noexcept;
   // Time of the latest window centre that at() can serve now (NaN before the first complete window).
   [[nodiscard]] double latest_time() const noexcept;
+  // The decision lag as applied: TrackerConfig::decision_lag_s rounded to whole hops.
+  [[nodiscard]] int decision_lag_hops() const noexcept;
 
   [[nodiscard]] const TrackerConfig& config() const noexcept;
   [[nodiscard]] double decimated_rate_hz() const noexcept;

@@ -147,10 +147,13 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
   if (k.fixes.waiting() == 0) return;
   // With a decision lag a fix waits until the hops about its instant are decided (and a hop more: the
   // window centred on it may lie after the latest hop), so that its pair takes the decided confidence.
-  const double hop = config.tracker.hop;
-  const double decided =
-      config.tracker.decision_lag > 0.0 ? (std::round(config.tracker.decision_lag / hop) + 1.0) * hop : 0.0;
-  for (const PendingFix& f : k.fixes.take_due(now, k.tracker ? k.tracker->latest_time() - decided : kNan)) {
+  // Without a tracker none is served (they wait, and are given up after the pairer's longest wait).
+  double served = kNan;
+  if (k.tracker) {
+    const int lag_hops = k.tracker->decision_lag_hops();
+    served = k.tracker->latest_time() - (lag_hops > 0 ? (lag_hops + 1) * config.tracker.hop : 0.0);
+  }
+  for (const PendingFix& f : k.fixes.take_due(now, served)) {
     const TrackPoint p = k.tracker->at(f.t);
     const auto pair =
         training_pair(f, p.freq, p.snr_db, p.tracked, min_snr_db.load(std::memory_order_relaxed));

@@ -39,7 +39,7 @@ class GpsHistory {
   }
 
   // The newest report received.
-  [[nodiscard]] std::optional<GpsReport> newest() const noexcept {
+  [[nodiscard]] std::optional<GpsReport> latest() const noexcept {
     const std::uint64_t n = count_.load(std::memory_order_acquire);
     if (n == 0) return std::nullopt;
     return ring_[(n - 1) % kSize].read();
@@ -59,7 +59,7 @@ class GpsHistory {
 
   // GPS now: the newest report, judged at `now_ns`.
   [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns, std::int64_t timeout_ns) const noexcept {
-    return judged(newest(), now_ns, timeout_ns);
+    return judged(latest(), now_ns, timeout_ns);
   }
 
   // GPS for a hop stepped at `now_ns` that a thread keeping pace steps by `due_ns` (the hop's time and the

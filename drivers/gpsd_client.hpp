@@ -57,8 +57,8 @@ class GpsdClient final {
   void start();  // starts the thread (idempotent); never throws for an absent gpsd: it keeps trying
   void stop();   // joins the thread within ~100 ms
 
-  // The newest report, if any arrived yet (GpsHistory::newest). Lock-free.
-  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return history_.newest(); }
+  // The newest report, if any arrived yet (GpsHistory::latest). Lock-free.
+  [[nodiscard]] std::optional<GpsReport> latest() const noexcept { return history_.latest(); }
   // The newest report if it is usable and was received no longer ago than the no-fix timeout (its speed
   // and its freshness judged on that one report). Lock-free as latest().
   [[nodiscard]] std::optional<GpsReport> fresh(std::int64_t now_ns) const noexcept {

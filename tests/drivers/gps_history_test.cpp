@@ -29,7 +29,7 @@ GpsReport report(double rx_s, double speed) {
 
 TEST_CASE("gps history: the report newest at a time is the last received no later") {
   GpsHistory h;
-  CHECK_FALSE(h.newest());
+  CHECK_FALSE(h.latest());
   CHECK_FALSE(h.at(100 * kSecond));
   h.record(report(10.0, 5.0));
   h.record(report(11.0, 6.0));
@@ -39,7 +39,7 @@ TEST_CASE("gps history: the report newest at a time is the last received no late
   CHECK(h.at(10 * kSecond + kSecond / 2)->speed == 5.0);
   CHECK(h.at(11 * kSecond)->speed == 6.0);
   CHECK(h.at(12 * kSecond)->mode == 1);
-  CHECK(h.newest()->mode == 1);
+  CHECK(h.latest()->mode == 1);
 }
 
 TEST_CASE("gps history: a hop on time gets the newest report judged now, a late hop the report of its time") {
@@ -85,7 +85,7 @@ TEST_CASE("gps history: a time older than every report kept gets the oldest kept
   const auto n = static_cast<int>(GpsHistory::kSize) + 10;
   for (int i = 0; i < n; ++i)
     h.record(report(i, i));
-  CHECK(h.newest()->speed == n - 1);
+  CHECK(h.latest()->speed == n - 1);
   CHECK(h.at(20 * kSecond)->speed == 20.0);
   // Reports 0-9 went round: the nearest known state is the oldest kept.
   CHECK(h.at(3 * kSecond)->speed == 10.0);
