@@ -50,8 +50,6 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(hold_time),
     GEARPULSE_FIELD(hedge_share),
     GEARPULSE_FIELD(output_quantile),
-    GEARPULSE_FIELD(catch_up_time),
-    GEARPULSE_FIELD(catch_up_mean),
     GEARPULSE_FIELD(climb_cost),
     GEARPULSE_FIELD(declutch_time),
     GEARPULSE_FIELD(clutch_track_share),

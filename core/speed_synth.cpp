@@ -73,10 +73,6 @@ void SpeedSynthesizer::reset() noexcept {
   normalise();
   track_.fill(Track{0.0, 0.0, kInitialSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma});
   age_.fill(0.0);
-  dist_.fill(0.0);
-  outage_ = false;
-  emitted_ = 0.0;
-  emitted_t_ = 0.0;
   started_ = false;
   informed_ = false;
   t_ = 0.0;
@@ -138,39 +134,21 @@ int SpeedSynthesizer::map_mode() const noexcept {
 
 SynthOutput SpeedSynthesizer::in_gap_output(double elapsed) const noexcept {
   const int modes = gears_ + 2;
-  ModeArray speed{}, speed_var{}, dist{};
+  ModeArray speed{}, speed_var{};
   for (int j = 0; j < modes; ++j) {
     Track x = track_[j];
     predict(x, j, elapsed);
     speed[j] = std::max(x.v, 0.0);
     speed_var[j] = x.pvv;
-    dist[j] = dist_[j] + elapsed * 0.5 * (track_[j].v + speed[j]);
   }
-  return outage_output(speed, speed_var, dist);
-}
-
-SynthOutput SpeedSynthesizer::outage_output(const ModeArray& speed, const ModeArray& speed_var,
-                                            const ModeArray& dist) const noexcept {
-  const int modes = gears_ + 2;
   const auto n = static_cast<std::size_t>(modes);
-  SynthOutput out = SynthOutputPolicy::outage({prob_.data(), n}, {speed.data(), n}, {speed_var.data(), n},
-                                              gears_, {model_gear_.data(), n}, mode_, tuning_);
-  if (!outage_) return out;  // an outage that began within a tracker gap: its distance counts from its step
-  double expected = 0.0, mean = 0.0;
-  for (int j = 0; j < modes; ++j) {
-    expected += prob_[j] * dist[j];
-    mean += prob_[j] * speed[j];
-  }
-  if (tuning_.catch_up_mean > 0.0 && tuning_.catch_up_time > 0.0) out.speed = mean;
-  return SynthOutputPolicy::catch_up(out, expected, emitted_, hop_, tuning_);
+  return SynthOutputPolicy::outage({prob_.data(), n}, {speed.data(), n}, {speed_var.data(), n}, gears_,
+                                   {model_gear_.data(), n}, mode_, tuning_);
 }
 
 SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool gps_new,
                                    double gps_age) noexcept {
   if (!std::isfinite(t)) return last_;
-  // The output carried since the last call, at its speed: what the pulses have counted.
-  if (started_ && t > emitted_t_) emitted_ += last_.speed * (t - emitted_t_);
-  emitted_t_ = std::max(emitted_t_, t);
   double dt = started_ ? t - t_ : 0.0;
   if (dt < 0.0) dt = 0.0;
   if (!std::isfinite(freq) || freq < 0.0) freq = std::numeric_limits<double>::quiet_NaN();
@@ -197,7 +175,6 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
     for (Track& x : track_)
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
-    dist_.fill(emitted_);  // the distance over the gap is unknown: taken as the output carried
     habits_.forget_last_fix();
     habits_.end_flat_stretch();  // a flat stretch of revs is not seen whole across the gap
     launches_.abort();           // the launch's shifts in the gap are unseen

@@ -209,10 +209,6 @@ class SpeedSynthesizer {
   // The output at a hop of a tracker gap in an outage, `elapsed` s after the last step: the belief of that
   // step, every mode's track predicted over `elapsed` under its own motion.
   [[nodiscard]] SynthOutput in_gap_output(double elapsed) const noexcept;
-  // The output through an outage from every mode's speed, its variance and the distance it has travelled
-  // since the outage began (outage policy, turned toward the expected distance: SynthOutputPolicy::catch_up).
-  [[nodiscard]] SynthOutput outage_output(const ModeArray& speed, const ModeArray& speed_var,
-                                          const ModeArray& dist) const noexcept;
   [[nodiscard]] double launch_plausibility(double speed) const noexcept;
   [[nodiscard]] double log_launch(double freq, double speed) const noexcept;
   [[nodiscard]] double freq_sigma(double freq) const noexcept;
@@ -271,13 +267,6 @@ class SpeedSynthesizer {
   ModeArray prob_{};  // max-product probabilities of the modes
   ModeArray age_{};   // s in each mode, averaged over the histories that hold it (0 when just entered)
   TrackArray track_{};
-  // Through an outage, per mode the distance (m) travelled since it began, expected given the mode now and
-  // all the evidence so far: summed over the predecessors with the weights that merge the tracks, so the
-  // past is weighed again at every step (merge_histories); copied and reset with the tracks. 0 under GPS.
-  ModeArray dist_{};
-  bool outage_ = false;     // the last step of the filter had no GPS
-  double emitted_ = 0.0;    // m: the distance the output has carried since the outage began, to emitted_t_
-  double emitted_t_ = 0.0;  // s
   ModeArray next_p_{};
   ModeArray row_{};                             // transition probabilities out of one mode over this step
   std::array<ModeArray, kModes> pair_score_{};  // log score of predecessor i -> mode j

@@ -147,7 +147,7 @@ void SpeedSynthesizer::observe_launch(double gps, double freq, bool gps_new) noe
 // ladder is still in the new one, or has left it).
 void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
   const int old_gears = gears_;
-  const ModeArray old_theta = theta_, old_prob = prob_, old_age = age_, old_dist = dist_;
+  const ModeArray old_theta = theta_, old_prob = prob_, old_age = age_;
   const TrackArray old_track = track_;
   load_model();
   if (!new_model) {
@@ -167,12 +167,10 @@ void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
   track_[0] = old_track[0];
   age_.fill(0.0);
   age_[0] = old_age[0];
-  dist_.fill(old_dist[0]);
   for (int j = 1; j <= gears_; ++j)
     track_[j] = old_track[0];
   track_[launch_mode()] = old_track[old_gears + 1];
   age_[launch_mode()] = old_age[old_gears + 1];
-  dist_[launch_mode()] = old_dist[old_gears + 1];
   prob_[launch_mode()] = gears_ > 0 ? old_prob[old_gears + 1] : 0.0;
   next_p_.fill(0.0);  // strongest old gear handed to each new gear so far
   for (int i = 1; i <= old_gears && gears_ > 0; ++i) {
@@ -186,7 +184,6 @@ void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
       next_p_[best] = old_prob[i];
       track_[best] = old_track[i];
       age_[best] = old_age[i];
-      dist_[best] = old_dist[i];
     }
   }
   if (gears_ == 0) {

@@ -93,14 +93,6 @@ SynthOutput SynthOutputPolicy::outage(std::span<const double> prob, std::span<co
   return {v < tuning.stationary_speed && tuning.rest_output > 0.0 ? 0.0 : v, 0, SpeedSource::kCoast, sd};
 }
 
-SynthOutput SynthOutputPolicy::catch_up(SynthOutput out, double expected, double emitted, double hop,
-                                        const SynthTuning& tuning) noexcept {
-  const double tau = std::max(tuning.catch_up_time, hop);
-  if (!(tuning.catch_up_time > 0.0 && std::isfinite(tau) && tau > 0.0)) return out;
-  out.speed = std::max(0.0, out.speed + (expected - emitted) / tau);
-  return out;
-}
-
 SynthOutput SynthOutputPolicy::hold(double t, double gps, const SynthTuning& tuning) const noexcept {
   if (std::isfinite(gps)) return {gps, 0, SpeedSource::kGps};
   if (held_speed_ < 0.0) return {0.0, 0, SpeedSource::kNone};

@@ -56,14 +56,6 @@ class SynthOutputPolicy {
                                           std::span<const int> model_gear, int map_mode,
                                           const SynthTuning& tuning) noexcept;
 
-  // The output `out` of an outage turned toward the distance the car is expected to have travelled since
-  // the outage began (`expected`, m, as the belief has it now, every step of the past weighed by today's
-  // evidence) from the distance the output has carried (`emitted`, m): the difference is spread over
-  // catch_up_time, and no faster than over one step of `hop` s; never below rest. `out` unchanged with
-  // catch_up_time 0 or infinite.
-  [[nodiscard]] static SynthOutput catch_up(SynthOutput out, double expected, double emitted, double hop,
-                                            const SynthTuning& tuning) noexcept;
-
   // A GPS speed seen at t, held through an outage without a ladder.
   void note_gps(double t, double gps) noexcept {
     held_speed_ = gps;

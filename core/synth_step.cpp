@@ -270,11 +270,7 @@ SpeedSynthesizer::Track SpeedSynthesizer::with_brakes(const StepInput& in, const
 // to the mixture's first two moments, and its age.
 void SpeedSynthesizer::merge_histories(double dt) noexcept {
   const int modes = gears_ + 2;
-  ModeArray log_p{}, next_age{}, next_dist{};
-  // Each history's distance over the step: from the speed its mode had before it to the speed it leads to.
-  ModeArray speed_before{};
-  for (int i = 0; i < modes; ++i)
-    speed_before[i] = track_[i].v;
+  ModeArray log_p{}, next_age{};
   for (int j = 0; j < modes; ++j) {
     double top = -std::numeric_limits<double>::infinity();
     for (int i = 0; i < modes; ++i)
@@ -283,7 +279,7 @@ void SpeedSynthesizer::merge_histories(double dt) noexcept {
     if (!std::isfinite(top)) continue;  // no way into mode j this step
     // Sum over the predecessors, the track matched to the mixture's first two moments.
     ModeArray w{};
-    double w_sum = 0.0, v = 0.0, a = 0.0, age = 0.0, dist = 0.0;
+    double w_sum = 0.0, v = 0.0, a = 0.0, age = 0.0;
     for (int i = 0; i < modes; ++i) {
       if (!std::isfinite(pair_score_[i][j])) continue;
       w[i] = std::exp(pair_score_[i][j] - top);
@@ -291,13 +287,10 @@ void SpeedSynthesizer::merge_histories(double dt) noexcept {
       if (i == j) age += w[i] * (age_[i] + dt);  // a history that enters mode j starts its clock at 0
       v += w[i] * pair_track_[i][j].v;
       a += w[i] * pair_track_[i][j].a;
-      // w[i] / w_sum is the chance of mode i before the step given mode j after it and the data so far.
-      dist += w[i] * (dist_[i] + dt * 0.5 * (speed_before[i] + std::max(pair_track_[i][j].v, 0.0)));
     }
     v /= w_sum;
     a /= w_sum;
     next_age[j] = age / w_sum;
-    next_dist[j] = dist / w_sum;
     double pvv = 0.0, pva = 0.0, paa = 0.0;
     for (int i = 0; i < modes; ++i) {
       if (w[i] <= 0.0) continue;
@@ -312,7 +305,6 @@ void SpeedSynthesizer::merge_histories(double dt) noexcept {
     log_p[j] = top + std::log(w_sum);
   }
   age_ = next_age;
-  dist_ = next_dist;
   double top = -std::numeric_limits<double>::infinity();
   for (int j = 0; j < modes; ++j)
     top = std::max(top, log_p[j]);
@@ -343,7 +335,6 @@ void SpeedSynthesizer::prune_histories(bool short_step, bool have_gps) noexcept 
                        (j == 0 && clutch_follows_gear))) {
       track_[j] = track_[mode_];
       age_[j] = 0.0;
-      dist_[j] = dist_[mode_];
     }
 }
 
@@ -381,26 +372,20 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   speed_lag_.note_speed(t_, mean_speed);
   prune_histories(in.short_step, in.have_gps);
   if (in.have_gps) {
-    outage_ = false;
-    dist_.fill(0.0);
     habits_.learn(t_, dt, gps, freq, gps_new, mode_, is_gear(mode_), prob_[mode_], at_idle_, tuning_);
     habits_.learn_shift(is_gear(mode_) ? mode_ : 0, prob_[mode_], freq);
     return {gps, gps >= tuning_.stationary_speed ? model_gear(mode_) : 0, SpeedSource::kGps};
   }
   habits_.end_flat_stretch();  // a flat stretch of revs is one GPS saw whole
-  if (!outage_) {
-    // The outage begins at this step: its distance counts from here, as the output's does.
-    outage_ = true;
-    dist_.fill(0.0);
-    emitted_ = 0.0;
-  }
   // Through an outage the output policy chooses the speed from the belief in the modes and their tracks.
   ModeArray speed{}, speed_var{};
   for (int j = 0; j < modes; ++j) {
     speed[j] = track_[j].v;
     speed_var[j] = track_[j].pvv;
   }
-  return outage_output(speed, speed_var, dist_);
+  const auto n = static_cast<std::size_t>(modes);
+  return SynthOutputPolicy::outage({prob_.data(), n}, {speed.data(), n}, {speed_var.data(), n}, gears_,
+                                   {model_gear_.data(), n}, mode_, tuning_);
 }
 
 }  // namespace gearpulse

@@ -72,11 +72,6 @@ struct SynthTuning {
   // often than the belief says. Kept below 2/3, where a first gear creeping near idle, whose belief second
   // gear shares by a third, would be output as second.
   double output_quantile = 0.6;
-  // s: through an outage the output turns toward the distance the car is expected to have travelled since
-  // the outage began, given all the evidence so far, from the distance it has carried, spread over this time
-  // (SynthOutputPolicy::catch_up; 0 or inf: off). Measured, not kept (synthesis-experiments.md).
-  double catch_up_time = 0.0;
-  double catch_up_mean = 0.0;  // 1: the catch-up's base is the belief's mean speed, not the policy's
   // Rules of the filter that bench_outage's --ablate switches off one at a time (each line: the rule, and
   // the value at which it is absent).
   // Rolling declutched, revs climbing faster than 0.2 a second at the tracker's hops are an engine pulling
