@@ -173,8 +173,8 @@ std::string SlidingDftTracker::validate(const TrackerConfig& c) {
   // The lagged outputs are queued at once at a hole or the stream's end, after at most half a queue of hops
   // pushed (max_push_frames()): they must fit in the rest of the queue, or outputs would be dropped.
   if (std::lround(c.decision_lag_s / c.hop_s) > static_cast<long>(kOutputQueue / 4))
-    return format("decision lag %g s is more than %zu hops of %g s", c.decision_lag_s, kOutputQueue / 4,
-                  c.hop_s);
+    return format("decision lag %g s is more than %g hops of %g s", c.decision_lag_s,
+                  static_cast<double>(kOutputQueue / 4), c.hop_s);
   return {};
 }
 

@@ -232,12 +232,14 @@ void check_relations(const Config& c, const toml::table& root, const std::string
   // band_low, ...), refused here, before any device is opened.
   if (const std::string problem = SlidingDftTracker::validate(tracker_config_of(c.tracker, c.audio.rate));
       !problem.empty()) {
-    // Point at the keys the problem is about: the window (or the band edge it must hold), the hop, else
-    // the band's upper edge against the rate.
+    // Point at the keys the problem is about: the window (or the band edge it must hold), the hop, the
+    // decision lag (in hops), else the band's upper edge against the rate.
     if (problem.starts_with("window"))
       fail({"tracker.window", "tracker.band_low"}, "tracker: " + problem);
     else if (problem.starts_with("hop"))
       fail({"tracker.hop", "tracker.window"}, "tracker: " + problem);
+    else if (problem.starts_with("decision lag"))
+      fail({"tracker.decision_lag", "tracker.hop"}, "tracker: " + problem);
     else
       fail({"tracker.band_high", "tracker.band_low", "audio.rate"}, "tracker: " + problem);
   }
@@ -249,7 +251,8 @@ void check_relations(const Config& c, const toml::table& root, const std::string
              std::to_string(c.audio.period_frames) + " frames at " + hz(c.audio.rate) + " (" +
              format_number(2.0 * c.audio.period_frames / c.audio.rate) + " s)");
   // sun_path holds 108 bytes including the terminator.
-  if (c.control.socket.size() > 107) fail({"control.socket"}, "path longer than 107 bytes");
+  if (c.control.socket.size() > 107)
+    fail({"control.socket"}, "path longer than 107 bytes: " + c.control.socket);
   if (c.output.max_frequency <= c.output.min_frequency)
     fail({"output.max_frequency", "output.min_frequency"},
          "output.max_frequency (" + hz(c.output.max_frequency) + ") must be above output.min_frequency (" +
@@ -374,7 +377,11 @@ Config parse_config(std::string_view text, const std::string& source_name,
   try {
     root = toml::parse(text, std::string_view(source_name));
   } catch (const toml::parse_error& e) {
-    throw ConfigError(where(source_name, e.source()) + ": " + std::string(e.description()));
+    // No key to name: the column says where on the line the syntax broke.
+    std::string at = where(source_name, e.source());
+    if (e.source().begin.line > 0 && e.source().begin.column > 0)
+      at += ":" + std::to_string(e.source().begin.column);
+    throw ConfigError(at + ": " + std::string(e.description()));
   }
   return from_table(root, source_name, base_dir);
 }

@@ -94,6 +94,13 @@ TEST_CASE("config: an unknown section names file line and section") {
   CHECK(error_of("audio = 5\n") == "test.toml:1: audio: expected a [section]");
 }
 
+TEST_CASE("config: a decision lag of more hops than the queue holds names the lag's line") {
+  const std::string e = error_of("[tracker]\nhop = 0.005\ndecision_lag = 2\n");
+  INFO(e);
+  CHECK(e.starts_with("test.toml:3: tracker.decision_lag: tracker: decision lag 2 s is more than"));
+  CHECK(e.ends_with("hops of 0.005 s"));
+}
+
 TEST_CASE("config: an out of range value names file line and key") {
   const std::string e = error_of("[audio]\nrate = 1000\n");
   CHECK(e.starts_with("test.toml:2: audio.rate: value 1000 out of range"));
@@ -131,11 +138,18 @@ TEST_CASE("config: a wrong type names file line and key") {
   CHECK(error_of("[audio]\nrate = 48000.5\n") == "test.toml:2: audio.rate: expected an integer");
 }
 
-TEST_CASE("config: malformed TOML names file and line") {
-  const std::string e = error_of("[audio]\nrate = 48000\n[gps\nport = 1\n");
-  CHECK(e.starts_with("test.toml:3: "));
-  CHECK(error_of("[audio]\ndevice = \"unterminated\n").starts_with("test.toml:2: "));
-  CHECK(error_of("[audio]\nrate = 1\nrate = 2\n").starts_with("test.toml:3: "));
+TEST_CASE("config: malformed TOML names file, line and column") {
+  // FILE:LINE:COLUMN: reason, the column a number from 1.
+  const auto at = [](const std::string& e, const std::string& file_line) {
+    INFO(e);
+    REQUIRE(e.starts_with(file_line + ":"));
+    const std::size_t digits = e.find_first_not_of("0123456789", file_line.size() + 1);
+    CHECK(digits > file_line.size() + 1);
+    CHECK(e.compare(digits, 2, ": ") == 0);
+  };
+  at(error_of("[audio]\nrate = 48000\n[gps\nport = 1\n"), "test.toml:3");
+  at(error_of("[audio]\ndevice = \"unterminated\n"), "test.toml:2");
+  at(error_of("[audio]\nrate = 1\nrate = 2\n"), "test.toml:3");
 }
 
 TEST_CASE("config: relations between keys are checked") {
