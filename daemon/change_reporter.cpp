@@ -18,20 +18,26 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
     gps_connected_ = up;
     if (up) spdlog::info("gps: connected to gpsd at {}", server);
   }
-  if (now.gps_state != before.gps_state) {
-    std::uint64_t suppressed = 0;
-    if (now.gps_state == GpsState::kFix) {
-      // The fault is over: the next one is reported at once.
-      limiter_.reset("gps");
-      limiter_.reset("gps-no-fix");
-      spdlog::info("gps: fix from gpsd at {} ({:.1f} km/h)", server, std::max(0.0, now.gps_speed) * 3.6);
-    } else if (now.gps_state == GpsState::kNoFix && limiter_.allow("gps-no-fix", suppressed)) {
-      // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
-      // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
-      const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
-      spdlog::warn("gps: no usable fix from gpsd at {} {}{}", server, gone,
-                   suppressed ? fmt::format(" ({} more times since the last report)", suppressed) : "");
-    }
+  // No fix is a state a receiver under trees or bridges can enter many times a minute: its start is said
+  // at once, then at most once a minute with how often it came. A fix is said at the first one, after a
+  // spell without one that was said, and after a lost connection; a flap's return is a debug line.
+  std::uint64_t no_fix_starts = 0;
+  const StateFault::Say no_fix =
+      no_fix_.update(now.gps_state == GpsState::kNoFix, std::chrono::steady_clock::now(), no_fix_starts);
+  if (no_fix == StateFault::Say::kStart) {
+    // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
+    // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
+    const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
+    spdlog::warn("gps: no usable fix from gpsd at {} {}{}; check that the antenna sees the sky", server, gone,
+                 no_fix_starts > 1 ? fmt::format(" ({} times since the last report)", no_fix_starts) : "");
+  }
+  if (now.gps_state == GpsState::kFix && before.gps_state != GpsState::kFix) {
+    limiter_.reset("gps");  // the connection works: its next failure is said at once
+    const bool news =
+        !gps_fixed_ || no_fix == StateFault::Say::kEnd || before.gps_state == GpsState::kDisconnected;
+    gps_fixed_ = true;
+    spdlog::log(news ? spdlog::level::info : spdlog::level::debug, "gps: fix from gpsd at {} ({:.1f} km/h)",
+                server, std::max(0.0, now.gps_speed) * 3.6);
   }
   // A receiver's glitch refused: said at once, then at most once a minute with how many more.
   if (now.gps_implausible > before.gps_implausible) {
@@ -78,9 +84,24 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
     case StateFault::Say::kNothing:
       break;
   }
-  if (now.output_state != before.output_state && now.output_state == OutputState::kWriteErrors)
-    spdlog::warn("output: writes to {} are failing ({}); pulses are counted but not delivered", output,
-                 now.output_error);
+  // Writes that fail (a USB adapter unplugged, a PTY's master gone bad): said when they start, at most
+  // once a minute, and when they work again.
+  std::uint64_t failing_starts = 0;
+  switch (write_errors_.update(now.output_state == OutputState::kWriteErrors,
+                               std::chrono::steady_clock::now(), failing_starts)) {
+    case StateFault::Say::kStart:
+      spdlog::warn(
+          "output: writes to {} are failing ({}); pulses are counted but not delivered; check the "
+          "device and its cable{}",
+          output, now.output_error,
+          failing_starts > 1 ? fmt::format(" ({} times since the last report)", failing_starts) : "");
+      break;
+    case StateFault::Say::kEnd:
+      spdlog::info("output: writes to {} work again", output);
+      break;
+    case StateFault::Say::kNothing:
+      break;
+  }
   if (now.output_dropped > before.output_dropped) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("output-dropped", suppressed))

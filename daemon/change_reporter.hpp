@@ -19,7 +19,10 @@ class ChangeReporter {
   const Config& config_;  // the device names the lines give
   LogLimiter limiter_;
   StateFault no_reader_;                 // the pulse output has no reader (a PTY nobody holds open)
+  StateFault no_fix_;                    // gpsd is connected but gives no usable fix
+  StateFault write_errors_;              // writes to the pulse output fail
   bool gps_connected_ = false;           // as the last line said
+  bool gps_fixed_ = false;               // a fix was said once
   std::uint64_t gps_failures_seen_ = 0;  // GPS connection failures looked at
 };
 

@@ -26,6 +26,12 @@ std::vector<control::KnownGear> known_gears(const ModelPtr& model) {
   if (!model) return gears;
   const auto revs = model->extra.find("revs");
   const bool counted = revs != model->extra.end() && revs->is_array() && revs->size() == model->gears.size();
+  // A model file edited by hand may hold anything there: only a number of samples is reported.
+  const auto samples_of = [](const nlohmann::json& gear_revs) -> nlohmann::json {
+    if (!gear_revs.is_object()) return nullptr;
+    const auto n = gear_revs.find("samples");
+    return n != gear_revs.end() && n->is_number() ? *n : nlohmann::json(nullptr);
+  };
   const auto kept = model->extra.find(kKeptGears);
   for (std::size_t i = 0; i < model->gears.size(); ++i) {
     const Gear& g = model->gears[i];
@@ -34,7 +40,7 @@ std::vector<control::KnownGear> known_gears(const ModelPtr& model) {
     gears.push_back({.gear = static_cast<int>(i + 1),
                      .theta = g.theta,
                      .std_error = g.std_error,
-                     .pairs = counted ? (*revs)[i].value("samples", nlohmann::json(nullptr)) : nullptr,
+                     .pairs = counted ? samples_of((*revs)[i]) : nullptr,
                      .kept = was_kept});
   }
   return gears;

@@ -58,8 +58,9 @@ AlsaCaptureConfig capture_config_of(const AudioConfig& a) {
 // Between tries to open an output device that would not open (a GPIO line still held by another
 // process, a USB GPIO adapter that enumerates after the daemon started).
 constexpr auto kOutputRetry = std::chrono::seconds(2);
-// The output is "reader-behind" while pulses were dropped (the reader's queue full) within this time.
-constexpr std::chrono::nanoseconds kReaderBehind = std::chrono::seconds(5);
+// An output fault counted within this time is current: "reader-behind" while pulses were dropped (the
+// reader's queue full), "write-errors" while writes failed.
+constexpr std::chrono::nanoseconds kRecentFault = std::chrono::seconds(5);
 
 }  // namespace
 
@@ -241,18 +242,15 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       std::lock_guard lock(d.output_mutex);
       s.output_error = d.output_error;
     }
-    // A reader that has not taken a pulse for kReaderBehind: the count grew within that time.
+    // A reader that has not taken a pulse, writes that fail: their counts grew within kRecentFault.
     s.output_dropped = d.output.dropped();
     s.output_unheard = d.output.unheard();
-    if (const std::uint64_t seen = d.dropped_seen.load(std::memory_order_relaxed); s.output_dropped != seen) {
-      d.dropped_seen.store(s.output_dropped, std::memory_order_relaxed);
-      d.dropped_at_ns.store(now, std::memory_order_relaxed);
-    }
-    const std::int64_t dropped_at = d.dropped_at_ns.load(std::memory_order_relaxed);
-    const bool reader_behind = dropped_at > 0 && now - dropped_at < kReaderBehind.count();
+    const std::uint64_t errors = d.output.errors();
+    const bool reader_behind = d.dropped.grew_recently(s.output_dropped, now, kRecentFault.count());
+    const bool write_errors = d.write_errors.grew_recently(errors, now, kRecentFault.count());
     if (!s.output_error.empty())
       s.output_state = OutputState::kError;
-    else if (const std::uint64_t errors = d.output.errors(); errors > 0) {
+    else if (write_errors) {
       s.output_state = OutputState::kWriteErrors;
       const int last = d.output.last_error();
       s.output_error = fmt::format("{} write(s) failed, the last: {}", errors,

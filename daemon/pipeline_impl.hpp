@@ -52,9 +52,9 @@ struct Pipeline::Impl {
   std::unique_ptr<GpsdClient> gps;
   mutable std::mutex output_mutex;  // output_error: set by the main thread, read by status queries
   std::string output_error;
-  // Last dropped-pulse count a snapshot saw and when it changed (snapshots come from several threads).
-  mutable std::atomic<std::uint64_t> dropped_seen{0};
-  mutable std::atomic<std::int64_t> dropped_at_ns{0};
+  // The output's dropped-pulse and failed-write counts as snapshots saw them (snapshots come from several
+  // threads).
+  mutable RecentGrowth dropped, write_errors;
   std::chrono::steady_clock::time_point next_output_try;
 
   AudioFrontEnd audio;  // opened, read and closed by the tracker thread; its status() read by any

@@ -1,7 +1,10 @@
 #pragma once
 // The states the pipeline reports for its output, its GPS and its audio, each with the word status
-// gives it (docs/interfaces.md, `gearpulsectl status`) and the reading back of that word.
+// gives it (docs/interfaces.md, `gearpulsectl status`) and the reading back of that word; and how a
+// snapshot tells a fault counted recently (RecentGrowth).
 #include <array>
+#include <atomic>
+#include <cstdint>
 #include <optional>
 #include <string_view>
 #include <utility>
@@ -13,7 +16,7 @@ enum class OutputState {
   kOk,            // a reader takes the pulses (PTY) or the line is driven (GPIO)
   kNoReader,      // no process holds the PTY open
   kReaderBehind,  // pulses were dropped at a full reader queue within the last 5 s
-  kWriteErrors,   // writes to the device fail
+  kWriteErrors,   // writes to the device failed within the last 5 s
   kError,         // the device would not open (retried)
 };
 
@@ -90,5 +93,22 @@ template <>
 constexpr std::optional<AudioState> state_from_string(std::string_view name) noexcept {
   return state_names::value_in<AudioState>(state_names::kAudio, name);
 }
+
+// A count that only grows (pulses dropped, writes failed) and when a snapshot last saw it grow: the fault it
+// counts is current while it grew within some time. Any thread may look.
+class RecentGrowth {
+ public:
+  // `count` as seen at `now_ns`: true when it grew within `within_ns` of it.
+  bool grew_recently(std::uint64_t count, std::int64_t now_ns, std::int64_t within_ns) noexcept {
+    if (seen_.exchange(count, std::memory_order_relaxed) != count)
+      at_ns_.store(now_ns, std::memory_order_relaxed);
+    const std::int64_t at = at_ns_.load(std::memory_order_relaxed);
+    return at > 0 && now_ns - at < within_ns;
+  }
+
+ private:
+  std::atomic<std::uint64_t> seen_{0};
+  std::atomic<std::int64_t> at_ns_{0};
+};
 
 }  // namespace gearpulse::daemon

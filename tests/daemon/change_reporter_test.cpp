@@ -1,4 +1,5 @@
 // The journal's lines on the pulse output name it as the status does: the PTY's path or chip:line.
+// GPS that comes and goes is said at most once a minute.
 #include <catch2/catch.hpp>
 
 #include "daemon/change_reporter.hpp"
@@ -32,4 +33,30 @@ TEST_CASE("changes: an output whose writes fail is named, a GPIO line as chip:li
   ChangeReporter pty_changes(config);
   pty_changes.log(before, now);
   CHECK(log.count("output: writes to /run/gearpulse/pulse are failing") == 1);
+}
+
+TEST_CASE("changes: GPS that flaps between fix and none is said once, not at every flap") {
+  using gearpulse::daemon::GpsState;
+  gearpulse::test::LogLines log;
+  Config config;
+  ChangeReporter changes(config);
+  PipelineSnapshot fix;
+  fix.gps_state = GpsState::kFix;
+  PipelineSnapshot none = fix;
+  none.gps_state = GpsState::kNoFix;
+  none.gps_age = 2.5;
+  PipelineSnapshot down = fix;
+  down.gps_state = GpsState::kDisconnected;
+  changes.log(down, fix);  // the first fix
+  for (int flap = 0; flap < 10; ++flap) {
+    changes.log(fix, none);
+    changes.log(none, fix);
+  }
+  CHECK(log.count("gps: no usable fix from gpsd at 127.0.0.1:2947 for 2.5 s") == 1);
+  // The first fix and the end of the spell that was said; the other returns are debug lines.
+  CHECK(log.count("gps: fix from gpsd at 127.0.0.1:2947") == 2);
+  // After a lost connection the fix is news again.
+  changes.log(fix, down);
+  changes.log(down, fix);
+  CHECK(log.count("gps: fix from gpsd at 127.0.0.1:2947") == 3);
 }

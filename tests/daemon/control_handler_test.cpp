@@ -117,6 +117,13 @@ TEST_CASE("control: status gives a model's gears, or the reason it has none") {
   CHECK(s.model.known_gears[0].pairs == 40);
   CHECK_FALSE(s.model.reason.has_value());
 
+  // A model file edited by hand: what is not a gear's count of samples reads as none, never an error.
+  ladder->extra["revs"] = {1, {{"samples", "many"}}};
+  s = status_reply(in);
+  REQUIRE(s.model.known_gears.size() == 2);
+  CHECK(s.model.known_gears[0].pairs.is_null());
+  CHECK(s.model.known_gears[1].pairs.is_null());
+
   auto none = std::make_shared<GearModel>();
   none->reason = "no gear ladder (automatic or CVT)";
   in.model = none;

@@ -1,5 +1,6 @@
 #include <catch2/catch.hpp>
 
+#include <cstdint>
 #include <string>
 
 #include "daemon/pipeline_state.hpp"
@@ -34,4 +35,14 @@ TEST_CASE("pipeline: each state has the word status gives it, and the word reads
     CHECK(state_from_string<AudioState>(word).has_value());
   CHECK(to_string(GpsState::kNoFix) == "no-fix");
   CHECK(to_string(OutputState::kReaderBehind) == "reader-behind");
+}
+
+TEST_CASE("pipeline: a fault count is current while it grew within the time, then not") {
+  RecentGrowth writes;
+  constexpr std::int64_t kWithin = 5'000'000'000;                // 5 s
+  CHECK_FALSE(writes.grew_recently(0, 1'000'000'000, kWithin));  // nothing failed yet
+  CHECK(writes.grew_recently(3, 2'000'000'000, kWithin));        // three writes failed
+  CHECK(writes.grew_recently(3, 6'900'000'000, kWithin));        // 4.9 s later, none since
+  CHECK_FALSE(writes.grew_recently(3, 7'000'000'000, kWithin));  // 5 s without a new failure: over
+  CHECK(writes.grew_recently(4, 8'000'000'000, kWithin));        // one more: current again
 }
