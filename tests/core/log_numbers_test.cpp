@@ -1,6 +1,7 @@
 // The log readers on numbers written with thousands separators ("1,200" rpm, as a spreadsheet formats
 // them): read where the column says the comma groups digits, a bad row naming its line where it could be a
-// decimal comma. tests/core/sample_io_test.cpp holds the formats themselves.
+// decimal comma. tests/core/sample_io_test.cpp, log_formats_test.cpp and log_times_test.cpp hold the
+// formats themselves.
 #include <catch2/catch.hpp>
 
 #include <string>

@@ -1,7 +1,7 @@
 // The log readers on what other people's exports hold: quoted cells over several lines, speeds in knots,
 // cells that spell "no value", and what loggers and spreadsheets write around the data (byte-order marks,
-// trailing delimiters, a header repeated after a restart, long lines). tests/core/sample_io_test.cpp
-// holds the formats themselves.
+// trailing delimiters, a header repeated after a restart, long lines). tests/core/sample_io_test.cpp,
+// log_formats_test.cpp and log_times_test.cpp hold the formats themselves.
 #include <catch2/catch.hpp>
 
 #include <sstream>
