@@ -21,8 +21,8 @@ struct Row {
 };
 
 // The 7-speed of "synth: launches seen under GPS tell a ladder whose lowest gear could be first that it is
-// not" (synth_ladder_test.cpp): it stands at idle, moves off and pulls through every gear, the revs falling
-// at each shift, cruises in seventh and brakes to rest declutched; twice. Rows every `row` s.
+// not" (synth_young_launch_test.cpp): it stands at idle, moves off and pulls through every gear, the revs
+// falling at each shift, cruises in seventh and brakes to rest declutched; twice. Rows every `row` s.
 constexpr double kCarIdle = 47.0;
 const std::vector<double> kSeven = {0.0145, 0.0200, 0.0270, 0.0358, 0.0463, 0.0590, 0.0737};
 
