@@ -121,7 +121,7 @@ cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo
   "${launcher[@]}" >/dev/null
 "${busy[@]}" cmake --build build-tsan -j"$jobs" --target spsc_ring_test published_test alsa_capture_test \
   alsa_recovery_test gpsd_client_test gpsd_backoff_test gps_history_test pulse_thread_test wake_event_test \
-  log_queue_test control_test persistence_test training_store_test retrainer_test \
+  log_queue_test control_test control_slots_test persistence_test training_store_test retrainer_test \
   pipeline_test pipeline_wake_test fault_reporter_test audio_front_end_test gearpulsed gearpulsectl \
   daemon_run_test daemon_state_test gearpulsectl_test
 stage "TSan build done"
