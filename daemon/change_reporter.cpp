@@ -56,7 +56,8 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
     std::uint64_t suppressed = 0;
     if (limiter_.allow("gps", suppressed))
       spdlog::warn(
-          "gps: {}; reconnecting with backoff{}", now.gps_error,
+          "gps: {}; reconnecting with backoff; check that gpsd runs and that gps.host and gps.port name it{}",
+          now.gps_error,
           suppressed ? fmt::format(" ({} more failed attempts since the last report)", suppressed) : "");
   }
   if (now.source != before.source) {
@@ -117,20 +118,26 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
   if (now.xruns > before.xruns) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("xrun", suppressed))
-      spdlog::warn("audio: {} overrun(s) on {} (total {}); the capture recovered", now.xruns - before.xruns,
-                   config_.audio.device, now.xruns);
+      spdlog::warn(
+          "audio: {} overrun(s) on {} (total {}); the capture recovered; if they repeat, set audio.realtime "
+          "or raise audio.period_frames",
+          now.xruns - before.xruns, config_.audio.device, now.xruns);
   }
   if (now.ring_drops > before.ring_drops) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("ring", suppressed))
-      spdlog::warn("audio: the tracker fell behind, {} frames dropped at the ring (total {})",
-                   now.ring_drops - before.ring_drops, now.ring_drops);
+      spdlog::warn(
+          "audio: the tracker fell behind, {} frames dropped at the ring (total {}); if it repeats, the "
+          "machine is too busy: raise audio.ring_seconds or set audio.realtime",
+          now.ring_drops - before.ring_drops, now.ring_drops);
   }
   if (now.pairs_lost > before.pairs_lost) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("pairs", suppressed))
-      spdlog::warn("training: {} pair(s) lost waiting for the main thread (total {})",
-                   now.pairs_lost - before.pairs_lost, now.pairs_lost);
+      spdlog::warn(
+          "training: {} pair(s) lost waiting for the main thread (total {}); the model learns from the "
+          "others, but a busy machine or a slow state_dir disk is behind it",
+          now.pairs_lost - before.pairs_lost, now.pairs_lost);
   }
 }
 

@@ -72,7 +72,8 @@ void FaultReporter::say(const FaultNote& n) {
   switch (n.kind) {
     case FaultNote::Kind::kAudioLost:
       spdlog::warn(
-          "audio: capture from {} interrupted (ALSA error {}: {}{}{}); the driver keeps reopening it{}",
+          "audio: capture from {} interrupted (ALSA error {}: {}{}{}); the driver keeps reopening it; check "
+          "that the sound card is plugged in and that audio.device names it (arecord -L){}",
           device_, n.error, alsa_error_text(n.error), n.step == AlsaStep::kNone ? "" : ", in ",
           to_string(n.step), meanwhile("lost"));
       break;
@@ -83,7 +84,7 @@ void FaultReporter::say(const FaultNote& n) {
       spdlog::warn(
           "audio: {} gives the same samples period after period (a source that has stopped, or digital "
           "silence); they are not used, and speed follows GPS (without a fix it coasts down from the last "
-          "speed), until they change{}",
+          "speed), until they change; check the wiring from the lighter socket to the card's input{}",
           device_, meanwhile("frozen"));
       break;
     case FaultNote::Kind::kAudioFrozenEnd:
@@ -92,7 +93,8 @@ void FaultReporter::say(const FaultNote& n) {
     case FaultNote::Kind::kAudioStalled:
       spdlog::warn(
           "audio: no samples from {} for {:.1f} s (the device is open but delivers nothing); speed follows "
-          "GPS (without a fix it coasts down from the last speed) until they come again{}",
+          "GPS (without a fix it coasts down from the last speed) until they come again; check the card's "
+          "cable and that no other program holds it{}",
           device_, n.seconds, meanwhile("stalled"));
       break;
     case FaultNote::Kind::kAudioStalledEnd:
