@@ -240,7 +240,10 @@ int run_track(const TrackOptions& o) {
   config.sample_rate_hz = info.samplerate;
   std::string error;
   auto tracker = SlidingDftTracker::create(config, error);
-  if (!tracker) throw UsageError(o.file + ": " + error);
+  // The options are judged at the file's rate (the band against its Nyquist frequency): name both.
+  if (!tracker)
+    throw UsageError("the tracker options do not suit " + o.file + " (" + std::to_string(info.samplerate) +
+                     " Hz): " + error);
 
   constexpr sf_count_t kBlock = 4096;
   const auto channels = static_cast<std::size_t>(info.channels);
