@@ -1,5 +1,6 @@
 #include "core/gear_model.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <stdexcept>
@@ -24,6 +25,17 @@ double finite_number(const nlohmann::json& obj, const char* key, bool required) 
   if (!std::isfinite(value))
     throw std::invalid_argument(std::string("model: field '") + key + "' is not finite");
   return value;
+}
+
+// Where a parse error is, as an editor shows it: "at line L, column C" of `text` for the 1-based byte
+// `byte` nlohmann names (one past the end when the text ended early, as a truncated file does).
+std::string text_position(std::string_view text, std::size_t byte) {
+  const std::size_t at = std::min(std::max<std::size_t>(byte, 1), text.size() + 1) - 1;
+  const std::string_view before = text.substr(0, at);
+  const std::size_t line = 1 + static_cast<std::size_t>(std::count(before.begin(), before.end(), '\n'));
+  const std::size_t newline = before.rfind('\n');  // npos + 1 == 0: the first line starts the text
+  return "at line " + std::to_string(line) + ", column " + std::to_string(at - (newline + 1) + 1) +
+         (at == text.size() ? " (the text ends there)" : "");
 }
 
 }  // namespace
@@ -118,8 +130,16 @@ GearModel parse_model(std::string_view text) {
   constexpr std::size_t kMaxNesting = 32;
   if (json_nesting(text) > kMaxNesting)
     throw std::invalid_argument("model: nested deeper than " + std::to_string(kMaxNesting) + " levels");
-  nlohmann::json json = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (json.is_discarded()) throw std::invalid_argument("model: not valid JSON");
+  nlohmann::json json;
+  try {
+    json = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw std::invalid_argument("model: not valid JSON " + text_position(text, e.byte));
+  } catch (const nlohmann::json::exception& e) {
+    // A number beyond a double ("number overflow parsing '1e9991'"): the library's words, not its tag.
+    const std::string_view what = e.what();
+    throw std::invalid_argument("model: not valid JSON: " + std::string(what.substr(what.find("] ") + 2)));
+  }
   return model_from_json(json);
 }
 

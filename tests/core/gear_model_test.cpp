@@ -82,6 +82,24 @@ TEST_CASE("model: rejects what no fit writes: a wrapped version, too many gears,
   CHECK(gearpulse::parse_model(twelve + "]}").gears.size() == 12);
 }
 
+// A truncated or hand-edited model.json is refused with where it goes wrong, as an editor counts lines
+// and columns, after the message's old start (scripts look for "model: not valid JSON").
+TEST_CASE("model: JSON that does not parse is refused with its line and column") {
+  GearModel m;
+  m.gears = {{0.05, 0.5, 0.0002}, {0.09, 0.5, 0.0003}};
+  const std::string model = gearpulse::serialize_model(m);
+  const std::string truncated = model.substr(0, model.find("\"theta\"", model.find("\"theta\"") + 1));
+  const auto lines = static_cast<std::size_t>(std::count(truncated.begin(), truncated.end(), '\n'));
+  const std::size_t column = truncated.size() - truncated.rfind('\n');
+  CHECK_THROWS_WITH(gearpulse::parse_model(truncated), "model: not valid JSON at line " +
+                                                           std::to_string(lines + 1) + ", column " +
+                                                           std::to_string(column) + " (the text ends there)");
+  CHECK_THROWS_WITH(gearpulse::parse_model("{\"version\": 1,\n \"gears\": [}\n"),
+                    "model: not valid JSON at line 2, column 12");
+  CHECK_THROWS_WITH(gearpulse::parse_model(""),
+                    "model: not valid JSON at line 1, column 1 (the text ends there)");
+}
+
 TEST_CASE("model: a field of the wrong type is refused with std::invalid_argument naming it") {
   // A bad model is refused with std::invalid_argument and a readable message (`gearpulse replay` turns
   // just that into an error naming the file): a string or a boolean where a number belongs must be refused
