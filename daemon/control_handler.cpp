@@ -120,6 +120,7 @@ control::StatusReply status_reply(const StatusInputs& in) {
                  .problems = {}};
   if (m && m->empty() && !m->reason.empty()) reply.model.reason = m->reason;
   reply.model.problems = in.problems;  // the state directory's: files set aside, failed saves
+  if (!r.save_problem.empty()) reply.model.problems.push_back(r.save_problem);  // fits not saved
   reply.config = {
       .file = in.config_path, .reload_error = in.reload_error, .restart_pending = in.restart_pending};
   reply.threads = {.stalled = p.stalled, .missing = p.missing};

@@ -16,6 +16,7 @@
 #include "common/atomic_file.hpp"
 #include "core/estimator.hpp"
 #include "daemon/fitter.hpp"
+#include "daemon/state_directory.hpp"
 #include "drivers/clock.hpp"
 
 namespace gearpulse::daemon {
@@ -105,7 +106,9 @@ Retrainer::Settings Retrainer::settings() const {
 
 Retrainer::Status Retrainer::status() const {
   std::lock_guard lock(mutex_);
-  return status_;
+  Status now = status_;
+  now.save_problem = save_fault_.what();
+  return now;
 }
 
 bool Retrainer::retrain_now() {
@@ -196,19 +199,7 @@ bool Retrainer::retrain_now() {
               "{:.2f} s too {})",
               std::abs(lag), lag > 0.0 ? "before" : "after", std::abs(lag), lag > 0.0 ? "short" : "long");
         spdlog::info("retrain: {}; new model in use", result);
-        try {
-          if (save_model_if_ours(model_, model_path_, *next) == ModelSave::kReplacedByOther) {
-            spdlog::warn(
-                "retrain: {} was replaced while gearpulsed ran; left as it is (it is loaded at the "
-                "next start), so this fit is not saved",
-                model_path_.string());
-            result += "; not saved: model.json was replaced by another program";
-          }
-        } catch (const std::exception& e) {
-          spdlog::error("retrain: cannot save {}: {}; the new model is used but will be lost at restart",
-                        model_path_.string(), e.what());
-          result += "; not saved: " + std::string(e.what());
-        }
+        save_fitted(*next, result);
       }
     }
     store_.mark_trained(fresh);
@@ -232,6 +223,38 @@ bool Retrainer::retrain_now() {
   no_ladder_ = no_ladder;
   if (changed) ++status_.accepted;
   return changed;
+}
+
+void Retrainer::save_fitted(const GearModel& fitted, std::string& result) {
+  std::string unsaved;  // why model.json does not hold the fit
+  bool replaced = false;
+  try {
+    replaced = save_model_if_ours(model_, model_path_, fitted) == ModelSave::kReplacedByOther;
+    if (replaced) unsaved = "model.json was replaced by another program";
+  } catch (const std::exception& e) {
+    unsaved = e.what();
+  }
+  std::lock_guard lock(mutex_);
+  if (unsaved.empty()) {
+    if (save_fault_.succeeded()) spdlog::info("retrain: {} saved again", model_path_.string());
+    return;
+  }
+  result += "; not saved: " + unsaved;
+  // A disk that stays full or read-only fails every retrain the same way: said when that starts or
+  // changes (status lists it meanwhile), not at every retrain.
+  std::string problem = replaced ? "fits not saved: model.json was replaced by another program (it is loaded "
+                                   "at the next start)"
+                                 : "cannot save model.json: " + unsaved;
+  if (!save_fault_.failed(std::move(problem)))
+    spdlog::debug("retrain: {} not saved, as at the last fit: {}", model_path_.string(), unsaved);
+  else if (replaced)
+    spdlog::warn(
+        "retrain: {} was replaced while gearpulsed ran; left as it is (it is loaded at the next start), so "
+        "fits are not saved until then",
+        model_path_.string());
+  else
+    spdlog::error("retrain: cannot save {}: {}; the new model is used but will be lost at restart; {}",
+                  model_path_.string(), unsaved, state_dir_advice(model_path_.parent_path()));
 }
 
 std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generation) {

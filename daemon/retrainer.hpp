@@ -19,6 +19,7 @@
 #include "core/gear_model.hpp"
 #include "core/sample.hpp"
 #include "daemon/learning_schedule.hpp"
+#include "daemon/log_limiter.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/training_store.hpp"
 
@@ -52,6 +53,7 @@ class Retrainer {
     std::uint64_t accepted = 0;  // fits that replaced the model
     double last_run_wall = 0.0;  // UNIX seconds of the last attempt, 0 = never
     std::string last_result;     // one line for status
+    std::string save_problem;    // why fits are not saved to model.json, while they are not ("" else)
     bool busy = false;
     bool young = false;             // the learning schedule decides the fits
     double moving_time = 0.0;       // s of moving the training pairs covered at the schedule's last look
@@ -87,6 +89,9 @@ class Retrainer {
   // Withdraws a one-gear model a fit on `pairs` pairs found without ground (one_gear_withdrawn), unless
   // the model changed since `generation`; returns the result line.
   std::string withdraw_model(std::size_t pairs, std::uint64_t generation);
+  // Saves a fit just installed (under model_.lock_writes()) unless model.json was replaced by another
+  // program; says why not in `result`, and in the log and status while saves keep failing (save_fault_).
+  void save_fitted(const GearModel& fitted, std::string& result);
 
   TrainingStore& store_;
   ModelHolder& model_;
@@ -98,6 +103,7 @@ class Retrainer {
   Settings settings_;
   Status status_;
   bool no_ladder_ = false;  // the last fit found no gear ladder
+  FaultSpell save_fault_;   // fits not saved to model.json (status' save_problem)
   LearningSchedule schedule_;
   bool young_ = true;             // the schedule may decide fits: the thread looks at the store often
   std::size_t settled_size_ = 0;  // store size when the schedule ended; a smaller store starts it again

@@ -18,6 +18,13 @@
 
 namespace gearpulse::daemon {
 
+std::string state_dir_advice(const std::filesystem::path& dir) {
+  return fmt::format(
+      "check that model.state_dir ({}) can be made, has room and may be written by gearpulsed's user; "
+      "under the systemd unit (ProtectSystem=strict) only /var/lib/gearpulse is writable",
+      dir.string());
+}
+
 StateDirectory::StateDirectory(std::filesystem::path dir, ModelHolder& model, TrainingStore& store,
                                std::size_t max_samples)
     : dir_(std::move(dir)),
@@ -63,8 +70,8 @@ bool StateDirectory::load() {
   std::error_code ec;
   std::filesystem::create_directories(dir_, ec);
   if (ec) {
-    spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart",
-                  dir_.string(), ec.message());
+    spdlog::error("state: cannot create {}: {}; the model and training pairs will not survive a restart ({})",
+                  dir_.string(), ec.message(), state_dir_advice(dir_));
     note_problem("cannot create " + dir_.string() + ": " + ec.message());
     return true;  // nothing there to load (a model.json "ignored" under it would only mislead)
   }
@@ -106,8 +113,9 @@ void StateDirectory::probe_writes() {
   }
   if (err != 0) {
     const std::string why = std::strerror(err);
-    spdlog::error("state: cannot write in {}: {}; the model and training pairs will not survive a restart",
-                  dir_.string(), why);
+    spdlog::error(
+        "state: cannot write in {}: {}; the model and training pairs will not survive a restart ({})",
+        dir_.string(), why, state_dir_advice(dir_));
     note_problem("cannot write in " + dir_.string() + ": " + why);
   } else if (struct statvfs fs{}; ::statvfs(dir_.c_str(), &fs) == 0) {
     // A full store is replaced by writing the new one beside it: room for two is needed.
@@ -134,11 +142,23 @@ void StateDirectory::load_model() {
                  loaded.model->gears.size(), loaded.model->samples);
   } else if (!loaded.error.empty()) {
     // Set aside, whether for its content or because it cannot be read (a file another user installed
-    // with mode 0600): the daemon's own saves then go to a fresh file and never over it.
+    // with mode 0600): the daemon's own saves then go to a fresh file, and the file is kept.
     const std::string where = set_aside(model_path_);
-    spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path_.string(),
-                  loaded.error, where);
-    note_problem("model.json ignored: " + loaded.error + " (" + where + ")");
+    if (const std::optional<FileStamp> left = stamp_of(model_path_)) {
+      // Not set aside (every name taken, a rename refused). Left as a file the daemon neither loaded nor
+      // wrote, it would be taken for one installed while the daemon ran, and no fit would ever be saved
+      // over it: it is the daemon's to replace instead.
+      model_.set_file_stamp(left);
+      spdlog::error(
+          "model: ignoring {}: {}; learning from scratch (the file is {}); gearpulsed's saves of its model "
+          "replace it, and if they fail, delete it to let gearpulsed save its model",
+          model_path_.string(), loaded.error, where);
+      note_problem("model.json ignored: " + loaded.error + " (" + where + "; the model's saves replace it)");
+    } else {
+      spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path_.string(),
+                    loaded.error, where);
+      note_problem("model.json ignored: " + loaded.error + " (" + where + ")");
+    }
   } else {
     spdlog::info("model: no {} yet; pulses follow GPS while the model is learning", model_path_.string());
   }
@@ -258,7 +278,8 @@ bool StateDirectory::save_store(const char* why) noexcept {
       // it); a save at shutdown or reset is said every time.
       if (save_fault_.failed(std::string("cannot save training.bin: ") + e.what()) ||
           std::string_view(why) != "periodic")
-        spdlog::error("training: cannot save {} ({}): {}", store_path_.string(), why, e.what());
+        spdlog::error("training: cannot save {} ({}): {}; {}", store_path_.string(), why, e.what(),
+                      state_dir_advice(dir_));
     } catch (...) {
     }
   }
@@ -291,7 +312,11 @@ void StateDirectory::save_model() noexcept {
           "start), so the model in use is not saved",
           model_path_.string());
   } catch (const std::exception& e) {
-    spdlog::error("model: cannot save {} at shutdown: {}", model_path_.string(), e.what());
+    try {
+      spdlog::error("model: cannot save {} at shutdown: {}; {}", model_path_.string(), e.what(),
+                    state_dir_advice(dir_));
+    } catch (...) {
+    }
   }
 }
 

@@ -16,6 +16,10 @@
 
 namespace gearpulse::daemon {
 
+// What to check when the state directory cannot be made or written, for the log line that says so: the
+// setting, and the one directory the systemd unit lets the daemon write.
+[[nodiscard]] std::string state_dir_advice(const std::filesystem::path& dir);
+
 class StateDirectory {
  public:
   // `max_samples` (model.max_samples at start) sizes the room a full training store needs.
