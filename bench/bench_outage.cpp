@@ -38,6 +38,13 @@
 // the error. --debug CAR STYLE FROM TO prints both filters' beliefs per row from FROM to TO s of that drive,
 // and the daemon's synthesis' track (speed, acceleration) at each position of its ladder
 // (CAR a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
+// --calibration prints per line how well the daemon's synthesis' belief knows its odds over the outage
+// samples: the belief in modes slower and faster than the truth (by 5 %, at least 0.5 m/s), the signed error
+// of its mean speed and of the output, and the belief below / above its most probable mode's speed against
+// how often the truth lies there; on simulated drives (true gear known) the belief in the true mode and that
+// mode's own speed error, the belief in slower / faster gears and in no gear while in gear, how often the
+// most probable mode is a slower / a faster gear, and a reliability table (each mode's probability by
+// tenths: its mean, how often that mode is the truth, count; declutched and moving off one mode).
 //
 // --log FILE (repeatable) scores the logs of one car of the user's instead of the set's real cars (any
 // format `gearpulse fit` reads; --row-seconds S for logs without a time column): fitted on the logs in
@@ -47,7 +54,8 @@
 // [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
 //                     [--fit-minutes M] [--wide] [--random-only] [--easy-sim] [--sim-observation PART]
-//                     [--worst PCT] [--debug CAR STYLE FROM TO] [--log FILE]... [--row-seconds S] [DATA_DIR]
+//                     [--worst PCT] [--calibration] [--debug CAR STYLE FROM TO] [--log FILE]...
+//                     [--row-seconds S] [DATA_DIR]
 //
 // The bench's parts are in bench/outage/ (outage.hpp: the shared types and which file does what).
 #include <chrono>
@@ -117,6 +125,8 @@ int main(int argc, char** argv) {
       only.emplace_back(argv[++i]);
     } else if (a == "--worst" && i + 1 < argc) {
       opt.worst = std::atof(argv[++i]);
+    } else if (a == "--calibration") {
+      opt.calibration = true;
     } else if (a == "--wide") {
       opt.wide = true;
     } else if (a == "--random-only") {
@@ -174,6 +184,7 @@ int main(int argc, char** argv) {
     const Outcome o = evaluate(w, tuning, opt);
     print_outcome(w, o, required);
     if (opt.worst > 0.0) print_worst(w, o, opt.worst);
+    if (opt.calibration) print_calibration(w, o);
   }
   std::printf("\n(%.1f s)\n",
               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());

@@ -140,6 +140,65 @@ std::pair<std::string, std::string> outage_cause(const std::vector<Row>& rows, c
   return {"moving (real log)", detail};
 }
 
+// --calibration: the belief of the daemon's synthesis at one outage sample against the truth (Calibration).
+void calibrate(const gearpulse::SpeedSynthesizer& synth, const Row& r, double out_speed,
+               const std::vector<double>& true_theta, Calibration& c) {
+  const int gears = synth.ladder_gears();
+  if (gears <= 0) return;
+  const double tol = std::max(0.5, kCalibrationTolerance * r.truth);
+  // The truth's position on the ladder: 0 declutched (or moving off), a gear, -1 a gear the ladder lacks.
+  int truth = -1;
+  if (r.gear == 0) truth = 0;
+  if (r.gear > 0 && static_cast<std::size_t>(r.gear) <= true_theta.size()) {
+    const double theta = true_theta[static_cast<std::size_t>(r.gear - 1)];
+    for (int m = 1; m <= gears; ++m)
+      if (std::abs(std::log(synth.ladder_theta(m) / theta)) < 0.04) truth = m;
+  }
+  const bool labelled = r.gear >= 0 && truth >= 0;
+  int lead = 0;
+  for (int m = 1; m <= gears + 1; ++m)
+    if (synth.position_probability(m) > synth.position_probability(lead)) lead = m;
+  const double v_lead = std::max(synth.mode_track(lead).speed, 0.0);
+  const double tol_lead = std::max(0.5, kCalibrationTolerance * v_lead);
+  c.truth_below += r.truth < v_lead - tol_lead ? 1.0 : 0.0;
+  c.truth_above += r.truth > v_lead + tol_lead ? 1.0 : 0.0;
+  double mean = 0.0, p_true = 0.0;
+  std::array<double, 2> no_gear{};  // the belief in declutched + moving off, its weighted speed
+  for (int m = 0; m <= gears + 1; ++m) {
+    const double p = synth.position_probability(m), v = std::max(synth.mode_track(m).speed, 0.0);
+    mean += p * v;
+    if (v < r.truth - tol) c.slower += p;
+    if (v > r.truth + tol) c.faster += p;
+    if (v < v_lead - tol_lead) c.below_lead += p;
+    if (v > v_lead + tol_lead) c.above_lead += p;
+    const bool gear = m >= 1 && m <= gears;
+    if (!gear) no_gear[0] += p, no_gear[1] += p * v;
+    if (!labelled || !gear) continue;
+    const auto b = std::min<std::size_t>(static_cast<std::size_t>(p * 10.0), 9);
+    c.p[b] += p, c.count[b] += 1.0, c.hits[b] += m == truth ? 1.0 : 0.0;
+    if (m == truth) p_true = p, c.true_bias += v - r.truth;
+    if (truth > 0 && m < truth) c.slower_gear += p;
+    if (truth > 0 && m > truth) c.faster_gear += p;
+    if (truth == 0) c.gear_held += p;
+  }
+  if (labelled) {
+    const auto b = std::min<std::size_t>(static_cast<std::size_t>(no_gear[0] * 10.0), 9);
+    c.p[b] += no_gear[0], c.count[b] += 1.0, c.hits[b] += truth == 0 ? 1.0 : 0.0;
+    if (truth == 0)
+      p_true = no_gear[0], c.true_bias += no_gear[0] > 0.0 ? no_gear[1] / no_gear[0] - r.truth : 0.0;
+    c.labelled += 1.0, c.true_mode += p_true;
+    (truth > 0 ? c.in_gear : c.declutched) += 1.0;
+    if (truth > 0) {
+      c.no_gear += no_gear[0];
+      const bool gear_lead = lead >= 1 && lead <= gears;
+      c.lead_slower += gear_lead && lead < truth ? 1.0 : 0.0;
+      c.lead_faster += gear_lead && lead > truth ? 1.0 : 0.0;
+      c.lead_no_gear += gear_lead ? 0.0 : 1.0;
+    }
+  }
+  c.samples += 1.0, c.bias += mean - r.truth, c.out_bias += out_speed - r.truth;
+}
+
 // Replays rows with outages; a row repeating an OBD logger's held rpm in an outage brings nothing (as
 // `gearpulse replay` does).
 // `where` names the case for --worst (line, car) and `true_theta` is the simulated car's ladder (empty for a
@@ -245,6 +304,7 @@ void replay(const std::vector<Row>& rows, const std::shared_ptr<const GearModel>
       res.speed[m].push_back(std::abs(value[m] - r.truth) * kMsToKmh);
     }
     dist[kMethods] += r.truth * dt;
+    if (opt.calibration) calibrate(synth, r, o.speed, true_theta, res.calibration);
     if (opt.trace !=
         nullptr)  // t, truth, freq, then the candidate's gear, speed and belief, keep gear, hindsight
       std::fprintf(opt.trace, "%.1f,%.2f,%.2f,%d,%.2f,%.2f,%.2f,%.2f,%d,%.2f\n", r.t - t0, r.truth * kMsToKmh,

@@ -48,6 +48,7 @@ struct Options {
   long first_seed = -1;  // --first-seed N: simulated seeds N.., random vehicles N+500.. (else the set's)
   bool wide = false;     // --wide: the random vehicles drawn by sim::wide_vehicle, not sim::random_vehicle
   bool presets = true;   // the manual presets beside the random vehicles (--random-only: none)
+  bool calibration = false;  // --calibration: how well the daemon's synthesis' belief knows its odds
 };
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the
@@ -68,13 +69,46 @@ struct WorstOutage {
   std::string cause, detail;
 };
 
+// --calibration: the daemon's synthesis' belief against the truth over the outage samples. Every mode's
+// probability is binned by tenths against how often that mode is the true one (simulated drives; gears by
+// the true ladder, declutched and moving off one mode); `slower` / `faster` sum the belief in modes slower /
+// faster than the truth by more than kCalibrationTolerance, `bias` the belief's mean speed minus the truth,
+// `out_bias` the output's; `true_bias` the true mode's own speed minus the truth (simulated drives).
+struct Calibration {
+  std::array<double, 10> p{}, hits{}, count{};
+  double samples = 0.0, slower = 0.0, faster = 0.0, bias = 0.0, out_bias = 0.0;
+  double labelled = 0.0, true_mode = 0.0, true_bias = 0.0;
+  // Belief in slower / faster gears while the truth is in gear, and in gears while it is declutched.
+  double in_gear = 0.0, slower_gear = 0.0, faster_gear = 0.0, no_gear = 0.0, declutched = 0.0,
+         gear_held = 0.0;
+  // The belief below / above the speed of its most probable mode, and how often the truth is there.
+  double below_lead = 0.0, above_lead = 0.0, truth_below = 0.0, truth_above = 0.0;
+  // In gear, how often the most probable mode is a slower / a faster gear, or no gear.
+  double lead_slower = 0.0, lead_faster = 0.0, lead_no_gear = 0.0;
+  void append(const Calibration& o) {
+    for (std::size_t b = 0; b < p.size(); ++b)
+      p[b] += o.p[b], hits[b] += o.hits[b], count[b] += o.count[b];
+    samples += o.samples, slower += o.slower, faster += o.faster, bias += o.bias, out_bias += o.out_bias;
+    labelled += o.labelled, true_mode += o.true_mode, true_bias += o.true_bias;
+    in_gear += o.in_gear, slower_gear += o.slower_gear, faster_gear += o.faster_gear, no_gear += o.no_gear;
+    declutched += o.declutched, gear_held += o.gear_held;
+    below_lead += o.below_lead, above_lead += o.above_lead, truth_below += o.truth_below;
+    truth_above += o.truth_above, lead_slower += o.lead_slower, lead_faster += o.lead_faster;
+    lead_no_gear += o.lead_no_gear;
+  }
+};
+// Share of the truth (at least 0.5 m/s): modes this near the truth's speed are neither slower nor faster.
+inline constexpr double kCalibrationTolerance = 0.05;
+
 // The scores of one or more replays, per method.
 struct Results {
   std::vector<double> dist[kMethods];   // per outage, %
   std::vector<double> speed[kMethods];  // per sample, km/h
   std::vector<std::string> cause;       // per outage (--worst), the failure mode of the daemon's synthesis
   std::vector<WorstOutage> worst;       // with --worst, the outages beyond it
+  Calibration calibration;              // with --calibration
   void append(const Results& o) {
+    calibration.append(o.calibration);
     for (int m = 0; m < kMethods; ++m) {
       dist[m].insert(dist[m].end(), o.dist[m].begin(), o.dist[m].end());
       speed[m].insert(speed[m].end(), o.speed[m].begin(), o.speed[m].end());
@@ -128,6 +162,7 @@ Outcome evaluate(const Workload& w, const gearpulse::SynthTuning& tuning, const 
 // The tables and figures of an outcome, and --worst's outages and failure modes (print.cpp).
 void print_outcome(const Workload& w, const Outcome& o, Requirements& required);
 void print_worst(const Workload& w, const Outcome& o, double worst);
+void print_calibration(const Workload& w, const Outcome& o);
 
 // --ablate (ablation.cpp); --synth is bench/synth_settings.hpp's apply_settings.
 void ablate(const Workload& w, const gearpulse::SynthTuning& base, const std::vector<std::string>& only,

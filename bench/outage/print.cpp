@@ -117,4 +117,38 @@ void print_worst(const Workload& w, const Outcome& o, double worst) {
   }
 }
 
+// --calibration: per line, the reliability of the daemon's synthesis' belief (each mode's probability by
+// tenths against how often that mode is the truth) and where its wrong belief lies, slower or faster.
+void print_calibration(const Workload& w, const Outcome& o) {
+  for (std::size_t l = 0; l < w.lines.size(); ++l) {
+    const Calibration& c = o.all[l].calibration;
+    if (!(c.samples > 0.0)) continue;
+    const double n = c.samples, k = std::max(c.labelled, 1.0);
+    std::printf(
+        "\n%s: %.0f samples; belief slower %.3f faster %.3f than the truth; mean speed %+.2f km/h,"
+        " output %+.2f km/h\n",
+        w.lines[l].label.c_str(), n, c.slower / n, c.faster / n, c.bias / n * kMsToKmh,
+        c.out_bias / n * kMsToKmh);
+    std::printf(
+        "  below the most probable mode's speed: belief %.3f, truth %.3f; above: belief %.3f, truth %.3f\n",
+        c.below_lead / n, c.truth_below / n, c.above_lead / n, c.truth_above / n);
+    if (!(c.labelled > 0.0)) continue;
+    std::printf(
+        "  true mode: belief %.3f, its speed %+.2f km/h; in gear (%.0f): slower gears %.3f, faster"
+        " %.3f, no gear %.3f; declutched (%.0f): gears %.3f",
+        c.true_mode / k, c.true_bias / k * kMsToKmh, c.in_gear, c.slower_gear / std::max(c.in_gear, 1.0),
+        c.faster_gear / std::max(c.in_gear, 1.0), c.no_gear / std::max(c.in_gear, 1.0), c.declutched,
+        c.gear_held / std::max(c.declutched, 1.0));
+    const double g = std::max(c.in_gear, 1.0);
+    std::printf(
+        "\n  in gear, the most probable mode: a slower gear %.3f, a faster gear %.3f, no gear %.3f\n  "
+        "reliability (p: mean p / right / n):",
+        c.lead_slower / g, c.lead_faster / g, c.lead_no_gear / g);
+    for (std::size_t b = 0; b < c.p.size(); ++b)
+      if (c.count[b] > 0.0)
+        std::printf(" %.2f/%.2f/%.0f", c.p[b] / c.count[b], c.hits[b] / c.count[b], c.count[b]);
+    std::printf("\n");
+  }
+}
+
 }  // namespace gearpulse::bench::outage
