@@ -138,7 +138,9 @@ GearModel parse_model(std::string_view text) {
   } catch (const nlohmann::json::exception& e) {
     // A number beyond a double ("number overflow parsing '1e9991'"): the library's words, not its tag.
     const std::string_view what = e.what();
-    throw std::invalid_argument("model: not valid JSON: " + std::string(what.substr(what.find("] ") + 2)));
+    const std::size_t tag = what.find("] ");
+    throw std::invalid_argument("model: not valid JSON: " +
+                                std::string(tag == std::string_view::npos ? what : what.substr(tag + 2)));
   }
   return model_from_json(json);
 }

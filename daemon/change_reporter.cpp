@@ -27,15 +27,23 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
   if (no_fix == StateFault::Say::kStart) {
     // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
     // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
-    const std::string gone = now.gps_age >= 0.0 ? fmt::format("for {:.1f} s", now.gps_age) : "yet";
-    spdlog::warn("gps: no usable fix from gpsd at {} {}{}; check that the antenna sees the sky", server, gone,
-                 no_fix_starts > 1 ? fmt::format(" ({} times since the last report)", no_fix_starts) : "");
+    const std::string times =
+        no_fix_starts > 1 ? fmt::format(" ({} times since the last report)", no_fix_starts) : "";
+    if (now.gps_age >= 0.0)
+      spdlog::warn("gps: no usable fix from gpsd at {} for {:.1f} s{}; check that the antenna sees the sky",
+                   server, now.gps_age, times);
+    else
+      spdlog::warn(
+          "gps: no usable fix from gpsd at {} yet{} (a receiver's first fix can take a minute; if "
+          "none comes, check that the antenna sees the sky)",
+          server, times);
   }
+  if (now.gps_state == GpsState::kDisconnected) gps_lost_ = true;
   if (now.gps_state == GpsState::kFix && before.gps_state != GpsState::kFix) {
     limiter_.reset("gps");  // the connection works: its next failure is said at once
-    const bool news =
-        !gps_fixed_ || no_fix == StateFault::Say::kEnd || before.gps_state == GpsState::kDisconnected;
+    const bool news = !gps_fixed_ || no_fix == StateFault::Say::kEnd || gps_lost_;
     gps_fixed_ = true;
+    gps_lost_ = false;
     spdlog::log(news ? spdlog::level::info : spdlog::level::debug, "gps: fix from gpsd at {} ({:.1f} km/h)",
                 server, std::max(0.0, now.gps_speed) * 3.6);
   }
@@ -98,7 +106,7 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
           failing_starts > 1 ? fmt::format(" ({} times since the last report)", failing_starts) : "");
       break;
     case StateFault::Say::kEnd:
-      spdlog::info("output: writes to {} work again", output);
+      spdlog::info("output: no write to {} has failed for 5 s", output);
       break;
     case StateFault::Say::kNothing:
       break;

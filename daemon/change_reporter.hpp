@@ -23,6 +23,7 @@ class ChangeReporter {
   StateFault write_errors_;              // writes to the pulse output fail
   bool gps_connected_ = false;           // as the last line said
   bool gps_fixed_ = false;               // a fix was said once
+  bool gps_lost_ = false;                // the connection to gpsd was lost since the last fix said
   std::uint64_t gps_failures_seen_ = 0;  // GPS connection failures looked at
 };
 

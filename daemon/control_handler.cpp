@@ -149,6 +149,7 @@ nlohmann::json ControlHandler::operator()(const nlohmann::json& json_request) co
     case control::Command::kResetModel:
       try {
         state_.reset_model(request.keep_samples);
+        retrainer_.model_file_removed();
       } catch (const std::exception& e) {
         throw control::ControlError(e.what());
       }

@@ -238,16 +238,19 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     s.pulse_frequency = std::min(s.pulse_frequency, d.config.output.max_frequency);
   }
   if (d.pulses) {
+    // A reader that has not taken a pulse, writes that fail: their counts grew within kRecentFault. The
+    // counts are read under the lock too, so that snapshots taken at once by two threads see them in order.
+    std::uint64_t errors = 0;
+    bool reader_behind = false, write_errors = false;
     {
       std::lock_guard lock(d.output_mutex);
       s.output_error = d.output_error;
+      s.output_dropped = d.output.dropped();
+      errors = d.output.errors();
+      reader_behind = d.dropped.grew_recently(s.output_dropped, now, kRecentFault.count());
+      write_errors = d.write_errors.grew_recently(errors, now, kRecentFault.count());
     }
-    // A reader that has not taken a pulse, writes that fail: their counts grew within kRecentFault.
-    s.output_dropped = d.output.dropped();
     s.output_unheard = d.output.unheard();
-    const std::uint64_t errors = d.output.errors();
-    const bool reader_behind = d.dropped.grew_recently(s.output_dropped, now, kRecentFault.count());
-    const bool write_errors = d.write_errors.grew_recently(errors, now, kRecentFault.count());
     if (!s.output_error.empty())
       s.output_state = OutputState::kError;
     else if (write_errors) {

@@ -50,10 +50,11 @@ struct Pipeline::Impl {
   LateOutput output;
   std::unique_ptr<PulseThread> pulses;
   std::unique_ptr<GpsdClient> gps;
-  mutable std::mutex output_mutex;  // output_error: set by the main thread, read by status queries
+  mutable std::mutex output_mutex;  // output_error (set by the main thread, read by status queries), dropped,
+                                    // write_errors
   std::string output_error;
   // The output's dropped-pulse and failed-write counts as snapshots saw them (snapshots come from several
-  // threads).
+  // threads: under output_mutex).
   mutable RecentGrowth dropped, write_errors;
   std::chrono::steady_clock::time_point next_output_try;
 

@@ -3,7 +3,6 @@
 // gives it (docs/interfaces.md, `gearpulsectl status`) and the reading back of that word; and how a
 // snapshot tells a fault counted recently (RecentGrowth).
 #include <array>
-#include <atomic>
 #include <cstdint>
 #include <optional>
 #include <string_view>
@@ -94,21 +93,23 @@ constexpr std::optional<AudioState> state_from_string(std::string_view name) noe
   return state_names::value_in<AudioState>(state_names::kAudio, name);
 }
 
-// A count that only grows (pulses dropped, writes failed) and when a snapshot last saw it grow: the fault it
-// counts is current while it grew within some time. Any thread may look.
+// A count of a fault (pulses dropped, writes failed) and when a snapshot last saw it change: the fault is
+// current while it did so within some time. A count that restarts (the device reopened) counts as a change.
+// Not thread-safe: snapshots taken by several threads look under one lock.
 class RecentGrowth {
  public:
-  // `count` as seen at `now_ns`: true when it grew within `within_ns` of it.
+  // `count` as seen at `now_ns`: true when it changed within `within_ns` of it.
   bool grew_recently(std::uint64_t count, std::int64_t now_ns, std::int64_t within_ns) noexcept {
-    if (seen_.exchange(count, std::memory_order_relaxed) != count)
-      at_ns_.store(now_ns, std::memory_order_relaxed);
-    const std::int64_t at = at_ns_.load(std::memory_order_relaxed);
-    return at > 0 && now_ns - at < within_ns;
+    if (count != seen_) {
+      seen_ = count;
+      at_ns_ = now_ns;
+    }
+    return at_ns_ > 0 && now_ns - at_ns_ < within_ns;
   }
 
  private:
-  std::atomic<std::uint64_t> seen_{0};
-  std::atomic<std::int64_t> at_ns_{0};
+  std::uint64_t seen_ = 0;
+  std::int64_t at_ns_ = 0;
 };
 
 }  // namespace gearpulse::daemon

@@ -234,18 +234,25 @@ void Retrainer::save_fitted(const GearModel& fitted, std::string& result) {
   } catch (const std::exception& e) {
     unsaved = e.what();
   }
-  std::lock_guard lock(mutex_);
+  bool news = false;  // the spell of failed saves starts, changes or ends: said at the level it merits
+  {
+    std::lock_guard lock(mutex_);
+    if (unsaved.empty())
+      news = save_fault_.succeeded();
+    else
+      // A disk that stays full or read-only fails every retrain the same way: said when that starts or
+      // changes (status lists it meanwhile), not at every retrain.
+      news =
+          save_fault_.failed(replaced ? "fits not saved: model.json was replaced by another program (it is "
+                                        "loaded at the next start)"
+                                      : "cannot save model.json: " + unsaved);
+  }
   if (unsaved.empty()) {
-    if (save_fault_.succeeded()) spdlog::info("retrain: {} saved again", model_path_.string());
+    if (news) spdlog::info("retrain: {} saved again", model_path_.string());
     return;
   }
   result += "; not saved: " + unsaved;
-  // A disk that stays full or read-only fails every retrain the same way: said when that starts or
-  // changes (status lists it meanwhile), not at every retrain.
-  std::string problem = replaced ? "fits not saved: model.json was replaced by another program (it is loaded "
-                                   "at the next start)"
-                                 : "cannot save model.json: " + unsaved;
-  if (!save_fault_.failed(std::move(problem)))
+  if (!news)
     spdlog::debug("retrain: {} not saved, as at the last fit: {}", model_path_.string(), unsaved);
   else if (replaced)
     spdlog::warn(
@@ -255,6 +262,11 @@ void Retrainer::save_fitted(const GearModel& fitted, std::string& result) {
   else
     spdlog::error("retrain: cannot save {}: {}; the new model is used but will be lost at restart; {}",
                   model_path_.string(), unsaved, state_dir_advice(model_path_.parent_path()));
+}
+
+void Retrainer::model_file_removed() noexcept {
+  std::lock_guard lock(mutex_);
+  (void)save_fault_.succeeded();
 }
 
 std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generation) {
@@ -269,6 +281,7 @@ std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generatio
   try {
     remove_file_durable(model_path_);
     model_.set_file_stamp(std::nullopt);
+    model_file_removed();
   } catch (const std::exception& e) {
     result += fmt::format("; {} stays until the next fit: {}", model_path_.string(), e.what());
   }

@@ -74,6 +74,8 @@ class Retrainer {
   void request() noexcept;
   // Takes effect at once, a wait under way included (it ends at the new interval).
   void set_settings(Settings settings) noexcept;
+  // model.json was removed (a reset): a failure to save over it is over, and the next fit's save says anew.
+  void model_file_removed() noexcept;
   [[nodiscard]] Status status() const;
   [[nodiscard]] Settings settings() const;
   // Runs one retrain now (what the thread does): the store's copy, the model's installation and its save on

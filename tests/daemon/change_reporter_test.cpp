@@ -55,8 +55,28 @@ TEST_CASE("changes: GPS that flaps between fix and none is said once, not at eve
   CHECK(log.count("gps: no usable fix from gpsd at 127.0.0.1:2947 for 2.5 s") == 1);
   // The first fix and the end of the spell that was said; the other returns are debug lines.
   CHECK(log.count("gps: fix from gpsd at 127.0.0.1:2947") == 2);
-  // After a lost connection the fix is news again.
+  // After a lost connection the fix is news again, straight back or through a spell without one.
   changes.log(fix, down);
   changes.log(down, fix);
   CHECK(log.count("gps: fix from gpsd at 127.0.0.1:2947") == 3);
+  changes.log(fix, none);
+  changes.log(none, down);
+  changes.log(down, none);
+  changes.log(none, fix);
+  CHECK(log.count("gps: fix from gpsd at 127.0.0.1:2947") == 4);
+}
+
+TEST_CASE("changes: waiting for a receiver's first fix is not yet a fault of its antenna") {
+  using gearpulse::daemon::GpsState;
+  gearpulse::test::LogLines log;
+  Config config;
+  ChangeReporter changes(config);
+  PipelineSnapshot down;
+  down.gps_state = GpsState::kDisconnected;
+  PipelineSnapshot none = down;
+  none.gps_state = GpsState::kNoFix;
+  none.gps_age = -1.0;  // no report yet
+  changes.log(down, none);
+  CHECK(log.count("gps: no usable fix from gpsd at 127.0.0.1:2947 yet (a receiver's first fix can take a "
+                  "minute") == 1);
 }

@@ -104,6 +104,9 @@ TEST_CASE("daemon: a model.json replaced while the daemon runs is said once, not
   CHECK(log.levels("was replaced while gearpulsed ran") == std::vector{spdlog::level::warn});
   CHECK(model_file_holds(dir / "model.json", installed));
   CHECK(retrainer.status().save_problem.find("replaced by another program") != std::string::npos);
+  // A reset removes model.json: the problem with it is over.
+  retrainer.model_file_removed();
+  CHECK(retrainer.status().save_problem.empty());
 }
 
 // Every name to set a corrupt model.json aside as is taken: the file stayed, the daemon had not loaded

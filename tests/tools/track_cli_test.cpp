@@ -239,13 +239,17 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
     CHECK(r.err.find("1280 frames (0.16 s)") != std::string::npos);
     CHECK(r.err.find("a little more than one window is needed") != std::string::npos);
   }
-  SECTION("options the tracker refuses at the file's rate") {
+  SECTION("options the tracker refuses, alone or at the file's rate") {
     const auto wav = make_wav(dir, "tone.wav", std::vector<float>(16000, 0.1f), 1, 8000);
-    const Result r = run(dir, "--hop 0.005 --decision-lag 2 '" + wav + "'");
+    Result r = run(dir, "--hop 0.005 --decision-lag 2 '" + wav + "'");
+    check_one_line_error(r);
+    CHECK(r.err.find("tracker options refused: decision lag 2 s is more than") != std::string::npos);
+    CHECK(r.err.find("hops of 0.005 s") != std::string::npos);
+    CHECK(r.err.find("tone.wav") == std::string::npos);  // the file is not to blame
+    r = run(dir, "--band 30:3900 '" + wav + "'");
     check_one_line_error(r);
     CHECK(r.err.find("the tracker options do not suit") != std::string::npos);
-    CHECK(r.err.find("(8000 Hz): decision lag 2 s is more than") != std::string::npos);
-    CHECK(r.err.find("hops of 0.005 s") != std::string::npos);
+    CHECK(r.err.find("tone.wav (8000 Hz): ") != std::string::npos);
   }
   SECTION("WAV with zero frames") {
     const auto wav = make_wav(dir, "zero.wav", {}, 1, 8000);

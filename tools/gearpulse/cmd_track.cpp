@@ -240,10 +240,15 @@ int run_track(const TrackOptions& o) {
   config.sample_rate_hz = info.samplerate;
   std::string error;
   auto tracker = SlidingDftTracker::create(config, error);
-  // The options are judged at the file's rate (the band against its Nyquist frequency): name both.
-  if (!tracker)
-    throw UsageError("the tracker options do not suit " + o.file + " (" + std::to_string(info.samplerate) +
-                     " Hz): " + error);
+  // The band and the window are judged at the file's rate (the band against its Nyquist frequency): such a
+  // refusal names the file and its rate; the others are the options' alone.
+  if (!tracker) {
+    const bool at_rate = error.starts_with("band") || error.starts_with("sample rate") ||
+                         (error.starts_with("hop") && error.find(" Hz") != std::string::npos);
+    throw UsageError(at_rate ? "the tracker options do not suit " + o.file + " (" +
+                                   std::to_string(info.samplerate) + " Hz): " + error
+                             : "tracker options refused: " + error);
+  }
 
   constexpr sf_count_t kBlock = 4096;
   const auto channels = static_cast<std::size_t>(info.channels);
