@@ -43,8 +43,9 @@
 // of its mean speed and of the output, and the belief below / above its most probable mode's speed against
 // how often the truth lies there; on simulated drives (true gear known) the belief in the true mode and that
 // mode's own speed error, the belief in slower / faster gears and in no gear while in gear, how often the
-// most probable mode is a slower / a faster gear, and a reliability table (each mode's probability by
-// tenths: its mean, how often that mode is the truth, count; declutched and moving off one mode).
+// most probable mode is a slower / a faster gear, the Brier score of the modes' probabilities and the log
+// score of the true mode's (nats), and a reliability table (each mode's probability by tenths: its mean, how
+// often that mode is the truth, count; declutched and moving off one mode).
 //
 // --log FILE (repeatable) scores the logs of one car of the user's instead of the set's real cars (any
 // format `gearpulse fit` reads; --row-seconds S for logs without a time column): fitted on the logs in

@@ -177,6 +177,7 @@ void calibrate(const gearpulse::SpeedSynthesizer& synth, const Row& r, double ou
     const auto b = std::min<std::size_t>(static_cast<std::size_t>(p * 10.0), 9);
     c.p[b] += p, c.count[b] += 1.0, c.hits[b] += m == truth ? 1.0 : 0.0;
     if (m == truth) p_true = p, c.true_bias += v - r.truth;
+    c.brier += (p - (m == truth ? 1.0 : 0.0)) * (p - (m == truth ? 1.0 : 0.0));
     if (truth > 0 && m < truth) c.slower_gear += p;
     if (truth > 0 && m > truth) c.faster_gear += p;
     if (truth == 0) c.gear_held += p;
@@ -186,6 +187,8 @@ void calibrate(const gearpulse::SpeedSynthesizer& synth, const Row& r, double ou
     c.p[b] += no_gear[0], c.count[b] += 1.0, c.hits[b] += truth == 0 ? 1.0 : 0.0;
     if (truth == 0)
       p_true = no_gear[0], c.true_bias += no_gear[0] > 0.0 ? no_gear[1] / no_gear[0] - r.truth : 0.0;
+    c.brier += (no_gear[0] - (truth == 0 ? 1.0 : 0.0)) * (no_gear[0] - (truth == 0 ? 1.0 : 0.0));
+    c.log_score -= std::log(std::max(p_true, 1e-3));
     c.labelled += 1.0, c.true_mode += p_true;
     (truth > 0 ? c.in_gear : c.declutched) += 1.0;
     if (truth > 0) {

@@ -78,6 +78,9 @@ struct Calibration {
   std::array<double, 10> p{}, hits{}, count{};
   double samples = 0.0, slower = 0.0, faster = 0.0, bias = 0.0, out_bias = 0.0;
   double labelled = 0.0, true_mode = 0.0, true_bias = 0.0;
+  // Brier score of the modes' probabilities against the true mode, and the log score (nats) of the true
+  // mode's probability (at least 1e-3), summed over the labelled samples.
+  double brier = 0.0, log_score = 0.0;
   // Belief in slower / faster gears while the truth is in gear, and in gears while it is declutched.
   double in_gear = 0.0, slower_gear = 0.0, faster_gear = 0.0, no_gear = 0.0, declutched = 0.0,
          gear_held = 0.0;
@@ -90,6 +93,7 @@ struct Calibration {
       p[b] += o.p[b], hits[b] += o.hits[b], count[b] += o.count[b];
     samples += o.samples, slower += o.slower, faster += o.faster, bias += o.bias, out_bias += o.out_bias;
     labelled += o.labelled, true_mode += o.true_mode, true_bias += o.true_bias;
+    brier += o.brier, log_score += o.log_score;
     in_gear += o.in_gear, slower_gear += o.slower_gear, faster_gear += o.faster_gear, no_gear += o.no_gear;
     declutched += o.declutched, gear_held += o.gear_held;
     below_lead += o.below_lead, above_lead += o.above_lead, truth_below += o.truth_below;

@@ -142,8 +142,8 @@ void print_calibration(const Workload& w, const Outcome& o) {
     const double g = std::max(c.in_gear, 1.0);
     std::printf(
         "\n  in gear, the most probable mode: a slower gear %.3f, a faster gear %.3f, no gear %.3f\n  "
-        "reliability (p: mean p / right / n):",
-        c.lead_slower / g, c.lead_faster / g, c.lead_no_gear / g);
+        "Brier %.4f, log score %.4f nats\n  reliability (p: mean p / right / n):",
+        c.lead_slower / g, c.lead_faster / g, c.lead_no_gear / g, c.brier / k, c.log_score / k);
     for (std::size_t b = 0; b < c.p.size(); ++b)
       if (c.count[b] > 0.0)
         std::printf(" %.2f/%.2f/%.0f", c.p[b] / c.count[b], c.hits[b] / c.count[b], c.count[b]);
