@@ -94,7 +94,8 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
       break;
   }
   // Writes that fail (a USB adapter unplugged, a PTY's master gone bad): said when they start, at most
-  // once a minute, and when they work again.
+  // once a minute, and when none has failed for the 5 s the state lasts (pipeline.cpp, kRecentFault; no
+  // write may have been tried meanwhile, so it is not said that they work).
   std::uint64_t failing_starts = 0;
   switch (write_errors_.update(now.output_state == OutputState::kWriteErrors,
                                std::chrono::steady_clock::now(), failing_starts)) {
