@@ -28,6 +28,10 @@ struct Step {
   int gear = 0;
 };
 
+// A gear of a model or a ladder within this log-ratio of a true gear's theta is that gear (neighbouring
+// gears of the simulated ladders lie further apart).
+constexpr double kSameGear = 0.04;
+
 // The model's gear (index + 1) whose theta lies within `tolerance` of `theta` in ratio, 0 if none.
 int gear_near(const GearModel& m, double theta, double tolerance) {
   int best = 0;
@@ -109,9 +113,8 @@ std::pair<std::string, std::string> outage_cause(const std::vector<Row>& rows, c
     int g_true = rows[onset].gear;
     for (std::size_t i = onset; g_true <= 0 && i > w0; --i)
       g_true = rows[i - 1].gear;
-    constexpr double kTolerance = 0.04;
     const int g_model = g_true > 0 && static_cast<std::size_t>(g_true) <= true_theta.size()
-                            ? gear_near(model, true_theta[static_cast<std::size_t>(g_true - 1)], kTolerance)
+                            ? gear_near(model, true_theta[static_cast<std::size_t>(g_true - 1)], kSameGear)
                             : -1;
     if (g_model == 0) return {"fit lacks the engaged gear", detail};
     if (g_out > 0) {
@@ -119,7 +122,7 @@ std::pair<std::string, std::string> outage_cause(const std::vector<Row>& rows, c
       for (const double th : true_theta)
         real_gear =
             real_gear ||
-            std::abs(std::log(model.gears[static_cast<std::size_t>(g_out - 1)].theta / th)) < kTolerance;
+            std::abs(std::log(model.gears[static_cast<std::size_t>(g_out - 1)].theta / th)) < kSameGear;
       if (!real_gear) return {"fit invented the output's gear", detail};
     }
     if (braking && too_fast && g_out == 0) return {"braking declutched: deceleration lost", detail};
@@ -152,7 +155,7 @@ void calibrate(const gearpulse::SpeedSynthesizer& synth, const Row& r, double ou
   if (r.gear > 0 && static_cast<std::size_t>(r.gear) <= true_theta.size()) {
     const double theta = true_theta[static_cast<std::size_t>(r.gear - 1)];
     for (int m = 1; m <= gears; ++m)
-      if (std::abs(std::log(synth.ladder_theta(m) / theta)) < 0.04) truth = m;
+      if (std::abs(std::log(synth.ladder_theta(m) / theta)) < kSameGear) truth = m;
   }
   const bool labelled = r.gear >= 0 && truth >= 0;
   int lead = 0;
