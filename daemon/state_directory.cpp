@@ -144,21 +144,18 @@ void StateDirectory::load_model() {
     // Set aside, whether for its content or because it cannot be read (a file another user installed
     // with mode 0600): the daemon's own saves then go to a fresh file, and the file is kept.
     const std::string where = set_aside(model_path_);
-    if (const std::optional<FileStamp> left = stamp_of(model_path_)) {
-      // Not set aside (every name taken, a rename refused). Left as a file the daemon neither loaded nor
-      // wrote, it would be taken for one installed while the daemon ran, and no fit would ever be saved
-      // over it: it is the daemon's to replace instead.
-      model_.set_file_stamp(left);
-      spdlog::error(
-          "model: ignoring {}: {}; learning from scratch (the file is {}); gearpulsed's saves of its model "
-          "replace it, and if they fail, delete it to let gearpulsed save its model",
-          model_path_.string(), loaded.error, where);
-      note_problem("model.json ignored: " + loaded.error + " (" + where + "; the model's saves replace it)");
-    } else {
-      spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {})", model_path_.string(),
-                    loaded.error, where);
-      note_problem("model.json ignored: " + loaded.error + " (" + where + ")");
-    }
+    // Not set aside (every name taken, a rename refused): left as a file the daemon neither loaded nor
+    // wrote, it would be taken for one installed while the daemon ran, and no fit would ever be saved over
+    // it. It is the daemon's to replace instead.
+    const std::optional<FileStamp> left = stamp_of(model_path_);
+    if (left) model_.set_file_stamp(left);
+    spdlog::error("model: ignoring {}: {}; learning from scratch (the file is {}){}", model_path_.string(),
+                  loaded.error, where,
+                  left ? "; gearpulsed's saves of its model replace it, and if they fail, delete it to let "
+                         "gearpulsed save its model"
+                       : "");
+    note_problem("model.json ignored: " + loaded.error + " (" + where +
+                 (left ? "; the model's saves replace it)" : ")"));
   } else {
     spdlog::info("model: no {} yet; pulses follow GPS while the model is learning", model_path_.string());
   }
