@@ -91,10 +91,13 @@ void Daemon::Impl::reload() {
   try {
     next = load_config(config_path);
   } catch (const ConfigError& e) {
+    // Recorded before it is said: whoever reads the log line and then asks for status sees the refusal.
+    {
+      std::lock_guard lock(reload_mutex);
+      reload_error = e.what();
+    }
     spdlog::error("reload: {}; keeping the running configuration (a restart would refuse this file)",
                   e.what());
-    std::lock_guard lock(reload_mutex);
-    reload_error = e.what();
     return;
   }
   if (!apply_log_level(next.log.level)) spdlog::error("reload: unknown log level {}", next.log.level);
