@@ -41,10 +41,13 @@ struct SynthTuning {
   double launch_gear_time = 3.0;
   // Weight, per second in a gear, of how usual the revs are in that gear for this driver (the model's
   // per-gear revs, recorded by the fit): a wrong gear that explains steady revs as well as the right one
-  // loses to it at this rate. Tempered well below 1, since successive readings are far from independent.
+  // loses to it at this rate. Tuned, not a count of independent readings: the revs' own correlation time
+  // within a gear is a minute or more on every fit, and weighed by it the habit does no more than without
+  // it (synthesis-experiments.md, "The revs priors weighed by the revs' own correlation time"); it drains
+  // a wrong gear against the leak the transitions feed it, at 2-3 times a gear's mean leave rate.
   double revs_habit = 0.3;
   // Exponent on how much nearer a shift brings the revs to the band this driver runs the new gear in
-  // (model extra.revs), as a factor on the rate of that shift; tempered as revs_habit is.
+  // (model extra.revs), as a factor on the rate of that shift; tuned as revs_habit is.
   double shift_comfort = 0.3;
   double min_speed_sigma = 0.15;  // m/s: floor on the model's sigma_v (integer km/h logs, GPS noise)
   double min_freq_rel = 0.01;     // floor on sigma_s as a fraction of the frequency (tracking jitter)
