@@ -71,6 +71,7 @@ TrackModel::TrackModel(const TrackerConfig& config, int first_bin, int last_bin,
   factor_overrun_.assign(states, 0.0);
   overrun_excess_.assign(states, 0.0);
   factor_power_.assign(states, 0.0);
+  factor_upshift_.assign(states, 0.0);
   power_excess_.assign(states, 0.0);
   power_from_ = layers_;
   for (int j = layers_ - 1;
@@ -106,6 +107,7 @@ void TrackModel::reset() noexcept {
   last_freq_ = kNaN;
   anchor_freq_ = kNaN;
   anchor_age_ = 0;
+  up_hi_ = -1;
 }
 
 // Prior of this hop from the previous posterior: a continuing line moves by its layer's rate within the
@@ -143,6 +145,8 @@ void TrackModel::predict() noexcept {
     up_hi = std::min(n - 1, static_cast<int>(std::floor(kUpshiftHigh * anchor_freq_ / df_)) - first_);
     if (near_hi >= near_lo) near_share = std::exp(-(kJumpRate + kStopRate) * dt);
   }
+  up_lo_ = up_lo;
+  up_hi_ = up_hi;
   const double anywhere = (p_jump_ * present + (1.0 - near_share) * p_start_ * post_absent_) / n;
   const double upshift_share = near_share > 0.0 && up_hi >= up_lo ? kUpshiftShare : 0.0;
   const double found = near_share * p_start_ * post_absent_;
@@ -228,12 +232,22 @@ bool TrackModel::update(double hidden) noexcept {
   if (power_from_ < layers_)
     for (std::size_t i = 0; i < n; ++i)
       factor_power_[i] = factor(loglik_[i] + power_excess_[i]);
+  // Where an upshift leads, a loud 2nd harmonic is read as likely as on the overrun, but a usual one keeps
+  // the usual prior's odds: the better of the two ratios. A candidate at twice the new gear (1.1-1.7 times
+  // the estimate) lies above the range, and one at half the old line (0.5) below it.
+  const bool upshift = overrun_layers_ > 0 && up_hi_ >= up_lo_;
+  if (upshift) {
+    std::copy(factor_.begin(), factor_.end(), factor_upshift_.begin());
+    for (auto i = static_cast<std::size_t>(up_lo_); i <= static_cast<std::size_t>(up_hi_); ++i)
+      factor_upshift_[i] = std::max(factor_[i], factor_overrun_[i]);
+  }
   double total = post_absent_ * std::exp(-temper_ * top);
   std::fill(marginal_.begin(), marginal_.end(), 0.0);
   for (int j = 0; j < layers_; ++j) {
     double* p = post_.data() + static_cast<std::size_t>(j) * n;
     const double* f = j < overrun_layers_ ? factor_overrun_.data()
                       : j >= power_from_  ? factor_power_.data()
+                      : upshift           ? factor_upshift_.data()
                                           : factor_.data();
     for (std::size_t i = 0; i < n; ++i) {
       p[i] *= f[i];

@@ -55,6 +55,9 @@ class TrackModel {
   // (1 - hidden) e^E + hidden for the window's E (tempered as the evidence is). One window then takes at
   // most ln(1 / hidden) from a line the track has followed. False (the model reset) when the posterior
   // is degenerate.
+  // Where an upshift from the latest tracked estimate leads (the restart's range below), the layers that
+  // read the usual evidence take the better of it and the overrun's: the new gear's first windows follow
+  // a shift with the throttle closed, at light load, where the 2nd harmonic may stand over the fundamental.
   bool update(double hidden) noexcept;
 
   [[nodiscard]] int mode_bin() const noexcept;
@@ -90,6 +93,11 @@ class TrackModel {
   // update(): each fundamental's likelihood factor, common to every layer that is neither on the overrun
   // nor under power, the overrun's (layers 0 .. overrun_layers_ - 1, the fastest falling) and power's.
   std::vector<double> factor_, factor_overrun_, factor_power_;
+  // The fundamentals where an upshift from the latest tracked estimate leads (up_lo_ .. up_hi_, none when
+  // up_hi_ < up_lo_), set by predict(), and what the layers that read the usual evidence take there: the
+  // better of the usual and the overrun's ratio (a new gear's first windows at light load).
+  int up_lo_ = 0, up_hi_ = -1;
+  std::vector<double> factor_upshift_;
   std::vector<double> overrun_excess_, power_excess_;
   int overrun_layers_ = 0;
   int power_from_ = 1;  // the layers rising at kPowerHzPerS or faster: power_from_ .. layers_ - 1

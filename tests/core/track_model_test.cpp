@@ -156,3 +156,38 @@ TEST_CASE("track model: the overrun's evidence counts for a fast falling line on
     CHECK(near[1] <= near[0] + 0.1);
   }
 }
+
+// Where an upshift from the latest tracked estimate leads (0.55-0.85 of it), a steady line reads the better
+// of the usual and the overrun's evidence (a new gear's first windows at light load, the 2nd harmonic loud);
+// a steady line elsewhere (at twice the new gear) reads the usual evidence alone.
+TEST_CASE("track model: a line where an upshift leads reads the overrun's evidence, one above it does not") {
+  double near[2][2] = {};  // [with the overrun's excess][the line at 100 Hz, at 200 Hz]
+  for (int with = 0; with < 2; ++with) {
+    TrackModel model(TrackerConfig{}, kFirst, kLast, kDf, 4);
+    for (int i = 0; i < 10; ++i) {
+      hop(model, {{150.0, 3.0}}, -0.2);
+      model.observe(150.0, 0.95, true);
+    }
+    for (int i = 0; i < 3; ++i) {
+      hop(model, {}, 0.0);
+      model.observe(150.0, 0.1, false);
+    }
+    for (int i = 0; i < 5; ++i) {
+      std::vector<double>& excess = model.overrun_excess();
+      for (int k = kFirst; k <= kLast; ++k) {
+        const double f = k * kDf;
+        excess[static_cast<std::size_t>(k - kFirst)] =
+            with && (std::abs(f - 100.0) <= 2.0 || std::abs(f - 200.0) <= 2.0) ? 0.7 : 0.0;
+      }
+      hop(model, {{100.0, 0.3}, {200.0, 0.3}}, -0.2);
+      model.observe(100.0, 0.3, false);
+    }
+    near[with][0] = model.mass_near(100.0);
+    near[with][1] = model.mass_near(200.0);
+  }
+  INFO("posterior near 100 Hz: " << near[0][0] << " without the overrun's evidence, " << near[1][0]
+                                 << " with it; near 200 Hz: " << near[0][1] << ", " << near[1][1]);
+  // The faint lines hold little of the posterior in five hops; what counts is the ratio the excess gives.
+  CHECK(near[1][0] >= 2.0 * near[0][0]);
+  CHECK(near[1][1] <= 1.1 * near[0][1]);
+}
