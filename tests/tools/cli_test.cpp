@@ -278,11 +278,12 @@ TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and n
   const auto fitted = nlohmann::json::parse(run(dir, "fit " + log).out);
   const std::size_t gears = fitted["gears"].size();
   REQUIRE(gears >= 4);
-  CHECK(run(dir, "fit " + log).err.empty());
+  CHECK(run(dir, "fit " + log).err.find("warning") == std::string::npos);
   const Result forced = run(dir, "fit --gears " + std::to_string(gears + 1) + " " + log);
   CHECK(forced.status == 0);
   CHECK(forced.err.find("warning: gears") != std::string::npos);
-  CHECK(run(dir, "fit --gears " + std::to_string(gears) + " " + log).err.empty());
+  CHECK(run(dir, "fit --gears " + std::to_string(gears) + " " + log).err.find("warning") ==
+        std::string::npos);
   // Fewer than the car has: the larger ladder the data supports is named.
   const Result fewer = run(dir, "fit --gears " + std::to_string(gears - 1) + " " + log);
   CHECK(fewer.status == 0);
@@ -320,7 +321,7 @@ TEST_CASE("cli: fit --out follows a symbolic link and writes into a FIFO rather 
   // /dev/stdout into a pipe: its link in /proc names no path ("pipe:[N]"); written to, not replaced.
   const Result to_stdout = run(dir, "fit --out /dev/stdout " + log);
   CHECK(to_stdout.status == 0);
-  CHECK(to_stdout.err.empty());
+  CHECK(to_stdout.err.find("cannot write") == std::string::npos);
   CHECK(to_stdout.out == json + json);
   const Result into_dir = run(dir, "fit --out " + dir.path().string() + " " + log);
   CHECK(into_dir.status == 2);
@@ -381,5 +382,53 @@ TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothi
   CHECK(r.status == 0);
   CHECK(r.err.find("--speed applies to Torque Pro exports, named-column and PID-row logs") !=
         std::string::npos);
-  CHECK(run(dir, "fit " + log).err.empty());
+  CHECK(run(dir, "fit " + log).err.find("--speed") == std::string::npos);
+}
+
+TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving, and what to log") {
+  TempDir dir;
+  const std::string log = simulated_log(dir, 21);
+  const Result r = run(dir, "fit " + log);
+  REQUIRE(r.status == 0);
+  const auto model = nlohmann::json::parse(r.out);
+  const std::size_t gears = model["gears"].size();
+  REQUIRE(gears >= 4);
+  CHECK(r.err.find("gearpulse: " + std::to_string(gears) + " gears, fitted on " +
+                   std::to_string(model["samples"].get<long>()) + " samples") != std::string::npos);
+  for (std::size_t g = 1; g <= gears; ++g)
+    CHECK(r.err.find("  gear " + std::to_string(g) + ": theta ") != std::string::npos);
+  CHECK(r.err.find("samples in gear, mostly at ") != std::string::npos);
+  CHECK(r.err.find("if the car has more than " + std::to_string(gears) + " forward gears") !=
+        std::string::npos);
+  // A generic log's freq need not be rpm / 60: no km/h per 1000 rpm. A speed,rpm log's is.
+  CHECK(r.err.find("km/h per 1000 rpm") == std::string::npos);
+  const gearpulse::SampleLog samples = read_log(log);
+  std::string rpm_log = "t,speed,rpm\n";
+  for (const gearpulse::Sample& s : samples.samples) {
+    char row[96];
+    if (s.has_speed() && s.has_freq()) {
+      std::snprintf(row, sizeof row, "%.3f,%.3f,%.2f\n", s.t, s.speed * 3.6, s.freq * 60.0);
+      rpm_log += row;
+    }
+  }
+  write((dir / "rpm.csv").string(), rpm_log);
+  const Result rpm = run(dir, "fit " + (dir / "rpm.csv").string());
+  REQUIRE(rpm.status == 0);
+  const double top = nlohmann::json::parse(rpm.out)["gears"].back()["theta"].get<double>();
+  char per_1000[32];
+  std::snprintf(per_1000, sizeof per_1000, "%.1f km/h per 1000 rpm", top * 60.0);  // (m/s)/Hz -> km/h/krpm
+  CHECK(rpm.err.find(per_1000) != std::string::npos);
+  // The drive without its launches: no first gear, and the few samples of a short log give a rough scale.
+  std::string no_launch = "t,speed,freq\n";
+  for (const gearpulse::Sample& s : samples.samples) {
+    char row[96];
+    if (s.has_speed() && s.has_freq() && (s.speed == 0.0 || s.speed > 9.0) && s.t < 600.0) {
+      std::snprintf(row, sizeof row, "%.3f,%.4f,%.4f\n", s.t, s.speed, s.freq);
+      no_launch += row;
+    }
+  }
+  write((dir / "no_launch.csv").string(), no_launch);
+  const Result thin = run(dir, "fit " + (dir / "no_launch.csv").string());
+  REQUIRE(thin.status == 0);
+  CHECK(thin.err.find("the logs likely lack first gear (log some starts from rest)") != std::string::npos);
 }

@@ -1,4 +1,5 @@
 // `gearpulse fit`: learns the gear scales from sample logs and prints the model as JSON (docs/interfaces.md).
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -21,6 +22,7 @@
 #include "drivers/thread_slice_runner.hpp"
 #include "tools/gearpulse/commands.hpp"
 #include "tools/gearpulse/fit_plot.hpp"
+#include "tools/gearpulse/fit_summary.hpp"
 #include "tools/gearpulse/sample_files.hpp"
 
 namespace gearpulse::cli {
@@ -195,6 +197,11 @@ int run_fit(const FitCommand& cmd) {
         result.model.reason.empty() ? "no discrete gear ladder in the data" : result.model.reason;
     std::fprintf(stderr, "gearpulse: no gear ladder: %s\n", reason.c_str());
   }
+  // How good the model is, in the car's terms, and what to log when it is thin (stderr: stdout is the JSON).
+  const bool rpm_logs = std::none_of(logs.begin(), logs.end(), [](const SampleLog& log) {
+    return log.format == SampleFileFormat::kGeneric;
+  });
+  std::fputs(fit_summary(result.model, samples, rpm_logs).c_str(), stderr);
   // A count forced by --gears or by the ratios of --ratios (paper mode fits as many gears as the priors
   // say, a ladder or not: an automatic's log gives two gears 0.002 % apart).
   if (options.gears != 0) {
