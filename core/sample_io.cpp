@@ -281,10 +281,22 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);  // an export without speed: its own error
   } else {
-    throw SampleFileError(std::string(name) + ":" + std::to_string(header_number) + ": unrecognised header " +
-                          quoted(header_line) +
-                          " (expected t,speed,freq, a Torque Pro, Carloop or speed,rpm log, or columns "
-                          "named rpm and speed with a unit)");
+    // A log of the car that lacks one of the two columns the fit needs is named for it: the user's fix is
+    // to log that reading, not to rename columns.
+    const auto names = [&](std::string_view part) {
+      return std::any_of(header.begin(), header.end(),
+                         [&](const std::string& column) { return holds(folded(column), {part}); });
+    };
+    const char* lacks = "";
+    if (names("speed") && !names("rpm"))
+      lacks = ": no column's name holds 'rpm' (the engine speed): log the engine RPM as well";
+    else if (names("rpm") && !names("speed"))
+      lacks = ": no column's name holds 'speed' (the vehicle's, with its unit): log the speed as well";
+    throw SampleFileError(
+        std::string(name) + ":" + std::to_string(header_number) + ": unrecognised header " +
+        quoted(header_line) + lacks +
+        " (expected t,speed,freq, a Torque Pro, Carloop or speed,rpm log, SECONDS,PID,VALUE "
+        "rows, or columns named rpm and speed with a unit)");
   }
   if (in.bad()) throw SampleFileError(std::string(name) + ": read error");
   SampleLog log = out.finish();

@@ -95,6 +95,15 @@ TEST_CASE("io: empty, headerless and useless files are one-line errors") {
   CHECK(error_of("") == "log.csv: empty file");
   CHECK(error_of("\n\n") == "log.csv: empty file");
   CHECK(error_of("1,2,3\n4,5,6\n").rfind("log.csv:1: unrecognised header", 0) == 0);
+  // A car's log without one of the two readings says which one to log; every format is in the list.
+  const std::string no_rpm = error_of("Time (s),Vehicle Speed (km/h),Throttle\n0,10,5\n");
+  CHECK(no_rpm.rfind("log.csv:1: unrecognised header", 0) == 0);
+  CHECK(no_rpm.find("no column's name holds 'rpm' (the engine speed): log the engine RPM") !=
+        std::string::npos);
+  CHECK(no_rpm.find("SECONDS,PID,VALUE rows") != std::string::npos);
+  const std::string no_speed = error_of("Time (s),Engine RPM,Throttle\n0,800,5\n");
+  CHECK(no_speed.find("no column's name holds 'speed'") != std::string::npos);
+  CHECK(error_of("1,2,3\n4,5,6\n").find("no column's name") == std::string::npos);
   CHECK(error_of("t,speed,freq\n").find("no data rows") != std::string::npos);
   CHECK(error_of("t,speed,freq\n0,x,1\n").find("log.csv:2: not a number") != std::string::npos);
   CHECK(error_of("t,speed,freq\n0,,\n1,,\n").find("no usable samples") != std::string::npos);
