@@ -80,6 +80,15 @@ TEST_CASE("cli: empty file and missing header are one-line errors with exit 2") 
   r = run(dir, "replay --model " + (dir / "missing.json").string() + " " + (dir / "noheader.csv").string());
   CHECK(r.status == 2);
   CHECK(lines(r.err) == 1);
+  // A model never fitted is said where one comes from; so is a log given where the model goes.
+  CHECK(
+      r.err.find("missing.json: cannot open: No such file or directory (fit one first: gearpulse fit --out " +
+                 (dir / "missing.json").string() + " LOG...)") != std::string::npos);
+  r = run(dir, "replay --model " + (dir / "noheader.csv").string() + " " + (dir / "noheader.csv").string());
+  CHECK(r.status == 2);
+  CHECK(lines(r.err) == 1);
+  CHECK(r.err.find("noheader.csv: model: ") != std::string::npos);
+  CHECK(r.err.find("(--model takes the model JSON that gearpulse fit --out writes)") != std::string::npos);
 }
 
 TEST_CASE("cli: NaN negative and garbage rows are reported with file and line and skipped") {

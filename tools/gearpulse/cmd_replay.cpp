@@ -35,14 +35,20 @@ struct ReplayCommand {
 std::shared_ptr<const GearModel> load_model(const std::string& path) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) throw UsageError(path + ": is a directory");
+  // A model never fitted, or a log given where the model goes: the error says where a model comes from.
+  constexpr const char* kFromFit = " (--model takes the model JSON that gearpulse fit --out writes)";
   std::ifstream in(path, std::ios::binary);
-  if (!in) throw UsageError(path + ": cannot open: " + std::strerror(errno));
+  if (!in) {
+    const int error = errno;
+    throw UsageError(path + ": cannot open: " + std::strerror(error) +
+                     (error == ENOENT ? " (fit one first: gearpulse fit --out " + path + " LOG...)" : ""));
+  }
   std::stringstream text;
   text << in.rdbuf();
   try {
     return std::make_shared<const GearModel>(parse_model(text.str()));
   } catch (const std::invalid_argument& e) {
-    throw UsageError(path + ": " + e.what());
+    throw UsageError(path + ": " + e.what() + kFromFit);
   }
 }
 
