@@ -298,3 +298,25 @@ TEST_CASE("cli: a second drive appended without its header is fitted and replaye
   REQUIRE(r.rows.size() == read_log(first).samples.size() + read_log(second).samples.size());
   CHECK(std::equal(one.rows.begin(), one.rows.end(), r.rows.begin()));
 }
+
+TEST_CASE("cli: replay says when the log has no outage to bridge or the model no gears to bridge it with") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string whole = simulated_log(dir, 24), with_outage = simulated_log(dir, 25, 300.0);
+  const Result r = run(dir, "replay --model " + model + " " + whole);
+  CHECK(r.status == 0);
+  CHECK(r.err.find("note: " + whole + " has a speed in every row: no GPS outage to bridge") !=
+        std::string::npos);
+  CHECK(r.out.find(",engine\n") == std::string::npos);
+  const Result outage = run(dir, "replay --model " + model + " " + with_outage);
+  CHECK(outage.status == 0);
+  CHECK(outage.err.find("note:") == std::string::npos);
+  // A model of an automatic (no ladder) bridges nothing: said, with its reason.
+  write((dir / "none.json").string(),
+        R"({"version": 1, "gears": [], "fitted": false, "reason": "one cluster"})");
+  const Result no_gears = run(dir, "replay --model " + (dir / "none.json").string() + " " + with_outage);
+  CHECK(no_gears.status == 0);
+  CHECK(
+      no_gears.err.find("none.json has no gears (one cluster): in an outage the speed is not taken from the "
+                        "engine") != std::string::npos);
+}

@@ -61,6 +61,20 @@ int run_replay(const ReplayCommand& cmd) {
   std::vector<SampleLog> logs = read_sample_files({cmd.file}, read);
   warn_row_seconds(logs, cmd.row_seconds.has_value(), true);
   const SampleLog log = std::move(logs.front());
+  // A first replay is often of a whole drive with its GPS speed in every row: it prints that speed back,
+  // and the user is told how to see the engine's, as a model without gears is said to give none.
+  if (std::all_of(log.samples.begin(), log.samples.end(), [](const Sample& s) { return s.has_speed(); }))
+    std::fprintf(stderr,
+                 "gearpulse: note: %s has a speed in every row: no GPS outage to bridge, so every row is "
+                 "'gps'; empty the speed cells of a stretch to see the speed from the engine there\n",
+                 log.name.c_str());
+  if (model->gears.empty())
+    std::fprintf(
+        stderr,
+        "gearpulse: note: %s has no gears (%s): in an outage the speed is not taken from the "
+        "engine\n",
+        cmd.model.c_str(),
+        model->reason.empty() ? "no gear ladder in the data it was fitted on" : model->reason.c_str());
 
   // One output row per accepted input row: a sample steps the synthesis once, at its first row; an OBD
   // row repeating held values answers with the output of the sample it repeats, and so does a sample
