@@ -265,6 +265,16 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
     CHECK(r.status == 2);
     CHECK(r.err.find("is a directory") != std::string::npos);
   }
+  // Logs: the way out is named (the files in it).
+  CHECK(run(dir, "fit " + dir.path().string())
+            .err.find("is a directory (name the log files in it, as " + (dir / "*.csv").string() + ")") !=
+        std::string::npos);
+  // No command at all: the commands are listed.
+  const Result bare = run(dir, "");
+  CHECK(bare.status == 2);
+  CHECK(bare.err ==
+        "gearpulse: a command is required (commands: fit, replay, track; gearpulse --help says what "
+        "each does)\n");
   // A count forgotten before the file: the file name taken for the count is named, not a missing file.
   const Result swallowed = run(dir, "fit --gears " + log);
   CHECK(swallowed.status == 2);

@@ -32,7 +32,10 @@ int run_app(CLI::App& app, int argc, char** argv, const int& status, const char*
       known += (known.empty() ? "" : ", ") + sub->get_name();
       is_known = is_known || (argc > 1 && sub->get_name() == argv[1]);
     }
-    if (argc > 1 && argv[1][0] != '-' && !is_known) {
+    if (argc == 1) {
+      std::fprintf(stderr, "%s: a command is required (commands: %s; %s --help says what each does)\n", name,
+                   known.c_str(), name);
+    } else if (argc > 1 && argv[1][0] != '-' && !is_known) {
       std::fprintf(stderr, "%s: unknown command '%s' (commands: %s)\n", name, argv[1], known.c_str());
     } else {
       std::fprintf(stderr, "%s: %s\n", name, e.what());

@@ -65,7 +65,9 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
   std::vector<SampleLog> logs;
   for (const std::string& path : paths) {
     std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) throw UsageError(path + ": is a directory");
+    if (std::filesystem::is_directory(path, ec))
+      throw UsageError(path + ": is a directory (name the log files in it, as " +
+                       (std::filesystem::path(path) / "*.csv").string() + ")");
     std::ifstream in(path, std::ios::binary);
     if (!in) throw UsageError(path + ": cannot open: " + std::strerror(errno));
     try {
