@@ -451,3 +451,17 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
   REQUIRE(thin.status == 0);
   CHECK(thin.err.find("the logs likely lack first gear (log some starts from rest)") != std::string::npos);
 }
+
+TEST_CASE("cli: each command's --help names the logs it reads and what --speed applies to") {
+  TempDir dir;
+  for (const char* command : {"fit", "replay"}) {
+    INFO(command);
+    const Result r = run(dir, std::string(command) + " --help");
+    CHECK(r.status == 0);
+    CHECK(r.out.find("Torque Pro, named-column and PID-row logs: speed column") != std::string::npos);
+  }
+  const std::string fit = run(dir, "fit --help").out;
+  for (const char* format : {"t,speed,freq", "Torque Pro", "Carloop", "speed,rpm", "SECONDS,PID,VALUE"})
+    CHECK(fit.find(format) != std::string::npos);
+  CHECK(run(dir, "--help").out.find("track                       Print the") != std::string::npos);
+}

@@ -239,13 +239,15 @@ void add_fit(CLI::App& app, int& status) {
       "Prior ratios c1,... top gear down (paper's Table 2, e.g. 1.25,1.35,1.50,1.7): the paper's method");
   sub->add_option("--out", cmd->out, "Also write the model JSON to this file");
   sub->add_option("--plot", cmd->plot, "Write an SVG of the ratio histogram with the fitted gears");
-  sub->add_option(
-         "--speed", cmd->speed,
-         "Torque Pro logs: speed column to use, auto (GPS if any; with an OBD speed too, the gears are read "
-         "from the wheel speed mapped onto GPS), gps or obd")
+  sub->add_option("--speed", cmd->speed,
+                  "Torque Pro, named-column and PID-row logs: speed column to use, auto (GPS if any; a "
+                  "Torque log with "
+                  "an OBD speed too has its gears read from the wheel speed mapped onto GPS), gps or obd")
       ->capture_default_str();
   add_row_seconds_option(*sub, cmd->row_seconds);
-  sub->add_option("files", cmd->files, "Sample logs: t,speed,freq CSV, Torque Pro, Carloop or speed,rpm")
+  sub->add_option("files", cmd->files,
+                  "Sample logs (CSV): t,speed,freq, Torque Pro, Carloop, speed,rpm, phone OBD apps' "
+                  "(columns named rpm and speed with its unit, or SECONDS,PID,VALUE rows); man gearpulse")
       ->required();
   sub->callback([cmd, &status] { status = run_fit(*cmd); });
 }

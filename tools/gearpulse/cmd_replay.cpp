@@ -114,8 +114,9 @@ void add_replay(CLI::App& app, int& status) {
   CLI::App* sub = app.add_subcommand(
       "replay", "Run the speed synthesis over a sample log as if live; print t,speed,gear,source");
   sub->add_option("--model", cmd->model, "Model JSON (from gearpulse fit --out)")->required();
-  sub->add_option("--speed", cmd->speed,
-                  "Torque Pro logs: speed column to use, auto (GPS if any), gps or obd")
+  sub->add_option(
+         "--speed", cmd->speed,
+         "Torque Pro, named-column and PID-row logs: speed column to use, auto (GPS if any), gps or obd")
       ->capture_default_str();
   add_row_seconds_option(*sub, cmd->row_seconds);
   sub->add_option("--band-low", cmd->band_low,
@@ -123,7 +124,8 @@ void add_replay(CLI::App& app, int& status) {
                   "(0: any; a log of gearpulsed's tracker readings: its band's low end)")
       ->check(CLI::Range(0.0, 10000.0))
       ->capture_default_str();
-  sub->add_option("file", cmd->file, "Sample log; rows with an empty speed are GPS outages")->required();
+  sub->add_option("file", cmd->file, "Sample log, as fit reads; rows with an empty speed are GPS outages")
+      ->required();
   sub->callback([cmd, &status] { status = run_replay(*cmd); });
 }
 

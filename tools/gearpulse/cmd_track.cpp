@@ -296,7 +296,7 @@ int run_track(const TrackOptions& o) {
 void add_track(CLI::App& app, int& status) {
   auto options = std::make_shared<TrackOptions>();
   CLI::App* cmd =
-      app.add_subcommand("track", "print the engine-frequency track of a WAV recording (t,freq,snr_db)");
+      app.add_subcommand("track", "Print the engine-frequency track of a WAV recording (t,freq,snr_db)");
   cmd->add_option("--band", options->band, "search band of the fundamental, LO:HI in Hz")
       ->capture_default_str();
   cmd->add_option("--hop", options->hop_s, "time between outputs (s)")->capture_default_str();
