@@ -190,6 +190,12 @@ TEST_CASE("cli: logs no gearbox made give no ladder, with the reason") {
     const auto json = nlohmann::json::parse(r.out);
     CHECK(json["gears"].empty());
     CHECK(json.value("reason", "").find(c.reason) != std::string::npos);
+    // Said on stderr with what it means for the user's car.
+    CHECK(
+        r.err.find(
+            "gearpulse: no gear ladder: " + json.value("reason", "") +
+            "; an automatic or CVT has none (no speed from the engine in outages), a manual car's logs show "
+            "one with more driving in each gear") != std::string::npos);
     // No mixture was fitted: its figures keep the contract's type (numbers, 0), `fitted` says they are not
     // estimates, and the model loads.
     for (const char* key : {"sigma_speed", "sigma_freq", "log_likelihood", "outlier_weight"})

@@ -195,7 +195,12 @@ int run_fit(const FitCommand& cmd) {
   if (result.model.gears.empty()) {
     const std::string reason =
         result.model.reason.empty() ? "no discrete gear ladder in the data" : result.model.reason;
-    std::fprintf(stderr, "gearpulse: no gear ladder: %s\n", reason.c_str());
+    // An automatic's log ends here by design; a manual's thin log too, and its user can drive more.
+    std::fprintf(
+        stderr,
+        "gearpulse: no gear ladder: %s; an automatic or CVT has none (no speed from the engine in outages), "
+        "a manual car's logs show one with more driving in each gear\n",
+        reason.c_str());
   }
   // How good the model is, in the car's terms, and what to log when it is thin (stderr: stdout is the JSON).
   const bool rpm_logs = std::none_of(logs.begin(), logs.end(), [](const SampleLog& log) {
