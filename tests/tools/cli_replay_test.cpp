@@ -223,7 +223,11 @@ TEST_CASE("cli: --row-seconds gives the rows of a log without a time column thei
   CHECK(lines(at_two.out) == n + 1);
   CHECK(at_two.out == with_times.out);  // t and every synthesized speed, gear and source
   CHECK(at_one.out != with_times.out);
-  CHECK(at_two.err.empty());
+  CHECK(at_two.err.find("no time column") == std::string::npos);
+  CHECK(at_two.err.find("note: " + rows_log +
+                        ": column 'speed' names no unit: read as km/h (name it 'speed "
+                        "(mph)' or 'speed (m/s)' if it is not)") != std::string::npos);
+  CHECK(with_times.err.find("names no unit") == std::string::npos);
   CHECK(at_one.err.find("no time column") != std::string::npos);
   CHECK(at_one.err.find("--row-seconds") != std::string::npos);
   // A log with its own times is said to be untouched by it; fit takes it as replay does.
