@@ -214,7 +214,9 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
   const sim::FrequencyTrajectory truth = [](double) { return 100.0; };
   const auto good = make_wav(dir, "good.wav", engine(8000.0, 2.0, truth, 6), 1, 8000);
   SECTION("missing file") {
-    check_one_line_error(run(dir, std::string("'") + (dir / "absent.wav").string() + "'"));
+    const Result r = run(dir, std::string("'") + (dir / "absent.wav").string() + "'");
+    check_one_line_error(r);
+    CHECK(r.err.find("absent.wav: cannot open: No such file or directory") != std::string::npos);
   }
   SECTION("empty file") {
     std::ofstream((dir / "empty.wav").string()).close();
@@ -222,7 +224,10 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
   }
   SECTION("not audio at all") {
     std::ofstream((dir / "text.wav").string()) << "t,speed,freq\n1,2,3\n";
-    check_one_line_error(run(dir, std::string("'") + (dir / "text.wav").string() + "'"));
+    const Result r = run(dir, std::string("'") + (dir / "text.wav").string() + "'");
+    check_one_line_error(r);
+    CHECK(r.err.find("(track reads a WAV recording; a CSV log of speed and rpm is for fit and replay)") !=
+          std::string::npos);
   }
   SECTION("truncated WAV") {
     const std::string bytes = slurp(good);

@@ -3,12 +3,15 @@
 #include <sndfile.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <memory>
 #include <string>
+#include <system_error>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -215,7 +218,16 @@ int run_track(const TrackOptions& o) {
   SF_INFO info{};
   std::unique_ptr<UnfinishedWav> unfinished;  // outlives `file`, which reads through it
   std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.file.c_str(), SFM_READ, &info));
-  if (!file) throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr));
+  if (!file) {
+    // A file that is not there is said as fit says it; one that is no audio, with where a log goes.
+    if (std::error_code ec; !std::filesystem::exists(o.file, ec))
+      throw UsageError(o.file + ": cannot open: " + std::strerror(ENOENT));
+    const bool unrecognised = sf_error(nullptr) == SF_ERR_UNRECOGNISED_FORMAT;
+    throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr) +
+                     (unrecognised ? " (track reads a WAV recording; a CSV log of speed and rpm is for fit "
+                                     "and replay)"
+                                   : ""));
+  }
   if (info.frames == 0 && (info.format & SF_FORMAT_TYPEMASK) == SF_FORMAT_WAV &&
       (unfinished = UnfinishedWav::open(o.file))) {
     info = SF_INFO{};
