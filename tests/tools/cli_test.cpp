@@ -89,6 +89,17 @@ TEST_CASE("cli: empty file and missing header are one-line errors with exit 2") 
   CHECK(lines(r.err) == 1);
   CHECK(r.err.find("noheader.csv: model: ") != std::string::npos);
   CHECK(r.err.find("(--model takes the model JSON that gearpulse fit --out writes)") != std::string::npos);
+  // And a model where the log goes.
+  write((dir / "model.json").string(), "{\n  \"version\": 1,\n  \"gears\": []\n}\n");
+  for (const std::string& args :
+       {"fit " + (dir / "model.json").string(),
+        "replay --model " + (dir / "model.json").string() + " " + (dir / "model.json").string()}) {
+    INFO(args);
+    r = run(dir, args);
+    CHECK(r.status == 2);
+    CHECK(r.err == "gearpulse: " + (dir / "model.json").string() +
+                       ": a JSON file, not a log (a model from gearpulse fit goes to replay --model)\n");
+  }
 }
 
 TEST_CASE("cli: NaN negative and garbage rows are reported with file and line and skipped") {

@@ -70,6 +70,10 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
                        (std::filesystem::path(path) / "*.csv").string() + ")");
     std::ifstream in(path, std::ios::binary);
     if (!in) throw UsageError(path + ": cannot open: " + std::strerror(errno));
+    // A model where a log belongs (`fit model.json`, the model and the log swapped): JSON opens with '{',
+    // which no log's header does. Peeked, not read: a pipe (`<(zcat log.gz)`) cannot seek back.
+    if (in.peek() == '{')
+      throw UsageError(path + ": a JSON file, not a log (a model from gearpulse fit goes to replay --model)");
     try {
       logs.push_back(read_samples(in, path, options));
     } catch (const SampleFileError& e) {
