@@ -12,7 +12,7 @@ namespace gearpulse::cli {
 
 // A gear's theta whose standard error exceeds this (relative) is named as rough: a third of the window
 // that never holds two gears (kGearWindow), so the gear of a reading is no longer told at three standard
-// errors; the speed synthesized in that gear is off by about as much.
+// errors; the speed synthesized in that gear is off by at least as much.
 inline constexpr double kRoughGear = kGearWindow / 3.0;
 
 // The lines printed (each ending in '\n'); empty for a model without gears. `samples` are those the fit
