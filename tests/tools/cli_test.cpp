@@ -306,6 +306,17 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
 TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and names gears forced apart") {
   TempDir dir;
   const std::string log = simulated_log(dir, 21);
+  // --out or --plot naming a log given would replace the drive: refused, the log untouched.
+  const std::string before = slurp(log);
+  for (const std::string& args : {"fit --out " + log + " " + log, "fit --plot " + log + " " + log}) {
+    INFO(args);
+    const Result r = run(dir, args);
+    CHECK(r.status == 2);
+    CHECK(r.out.empty());
+    CHECK(r.err.find(" is one of the logs given (" + log + "): it would be replaced; name another file") !=
+          std::string::npos);
+  }
+  CHECK(slurp(log) == before);
   const Result bad = run(dir, "fit --out " + (dir / "missing/model.json").string() + " " + log);
   CHECK(bad.status == 2);
   CHECK(bad.out.empty());

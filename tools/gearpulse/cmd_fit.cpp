@@ -12,6 +12,7 @@
 #include <stdexcept>
 #include <string>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -126,7 +127,24 @@ void warn_indistinct_gears(const GearModel& model, const std::string& gears) {
   }
 }
 
+// --out or --plot naming one of the logs (`fit --out drive1.csv drive2.csv`, a slip of the shell's
+// completion) would replace a drive with the model: refused before anything is read. Regular files only: a
+// terminal or a device written into (/dev/stdout) replaces nothing.
+void check_outputs_spare_logs(const FitCommand& cmd) {
+  for (const auto& [option, path] : {std::pair{"--out", cmd.out}, std::pair{"--plot", cmd.plot}}) {
+    std::error_code regular_ec;
+    if (path.empty() || !std::filesystem::is_regular_file(path, regular_ec)) continue;
+    for (const std::string& file : cmd.files) {
+      std::error_code ec;
+      if (std::filesystem::equivalent(path, file, ec) && !ec)
+        throw UsageError(std::string(option) + " " + path + " is one of the logs given (" + file +
+                         "): it would be replaced; name another file");
+    }
+  }
+}
+
 int run_fit(const FitCommand& cmd) {
+  check_outputs_spare_logs(cmd);
   ThreadSliceRunner threads;  // a large log's passes in two threads, one per half
   FitOptions options;
   options.parallel = &threads;
