@@ -100,6 +100,14 @@ TEST_CASE("cli: empty file and missing header are one-line errors with exit 2") 
     CHECK(r.err == "gearpulse: " + (dir / "model.json").string() +
                        ": a JSON file, not a log (a model from gearpulse fit goes to replay --model)\n");
   }
+  // And a recording (a WAV's RIFF header; a log may well begin with an R).
+  write((dir / "rec.wav").string(), std::string("RIFF\x24\0\0\0WAVEfmt ", 16));
+  r = run(dir, "fit " + (dir / "rec.wav").string());
+  CHECK(r.status == 2);
+  CHECK(r.err == "gearpulse: " + (dir / "rec.wav").string() +
+                     ": a WAV recording, not a log (gearpulse track gives its engine frequency)\n");
+  write((dir / "rpm.csv").string(), "RPM,Speed (km/h),Time\n");
+  CHECK(run(dir, "fit " + (dir / "rpm.csv").string()).err.find("WAV") == std::string::npos);
 }
 
 TEST_CASE("cli: NaN negative and garbage rows are reported with file and line and skipped") {

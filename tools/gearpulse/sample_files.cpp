@@ -9,6 +9,7 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include <CLI/CLI.hpp>
 
@@ -74,6 +75,14 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
     // which no log's header does. Peeked, not read: a pipe (`<(zcat log.gz)`) cannot seek back.
     if (in.peek() == '{')
       throw UsageError(path + ": a JSON file, not a log (a model from gearpulse fit goes to replay --model)");
+    // A recording where a log belongs: a WAV opens with "RIFF" (read from a second handle, on a regular
+    // file only, for the same reason).
+    if (std::filesystem::is_regular_file(path, ec)) {
+      char magic[4] = {};
+      if (std::ifstream probe(path, std::ios::binary);
+          probe.read(magic, sizeof magic) && std::string_view(magic, sizeof magic) == "RIFF")
+        throw UsageError(path + ": a WAV recording, not a log (gearpulse track gives its engine frequency)");
+    }
     try {
       logs.push_back(read_samples(in, path, options));
     } catch (const SampleFileError& e) {
