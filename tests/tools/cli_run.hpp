@@ -1,6 +1,7 @@
 #pragma once
-// What the tests of `gearpulse fit` and `gearpulse replay` (cli_test.cpp, cli_replay_test.cpp) share: the
-// built binary run with its output captured, and the simulated logs and fitted model they run it on.
+// What the tests of `gearpulse fit` and `gearpulse replay` (cli_test.cpp, cli_errors_test.cpp,
+// cli_replay_test.cpp) share: the built binary run with its output captured, and the simulated logs and
+// fitted model they run it on.
 #include <cstdint>
 #include <fstream>
 #include <sstream>
