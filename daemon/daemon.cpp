@@ -111,25 +111,27 @@ void Daemon::Impl::reload() {
         next.model.store_hours, next.model.max_samples, held - kept, held, state.store_path().string());
   if (pipeline) pipeline->set_tunables({next.gps.latency, next.tracker.min_snr_db});
   const auto restart = restart_required_changes(config, next);
+  {
+    // What was applied now replaces the running values (under the lock: the control thread reads them
+    // for status); the rest stays as the threads use it. Recorded before it is said, as a refusal is.
+    std::lock_guard lock(reload_mutex);
+    reload_error.clear();
+    restart_pending = restart;
+    config.log = next.log;
+    config.model.retrain_interval = next.model.retrain_interval;
+    config.model.min_new_samples = next.model.min_new_samples;
+    config.model.replace_min_samples = next.model.replace_min_samples;
+    config.model.learn_cluster_pairs = next.model.learn_cluster_pairs;
+    config.model.learn_first_refit = next.model.learn_first_refit;
+    config.model.learn_young_time = next.model.learn_young_time;
+    config.model.store_hours = next.model.store_hours;
+    config.model.max_samples = next.model.max_samples;
+    config.model.save_interval = next.model.save_interval;
+    config.gps.latency = next.gps.latency;
+    config.tracker.min_snr_db = next.tracker.min_snr_db;
+  }
   for (const auto& key : restart)
     spdlog::warn("reload: {} changed; this takes effect only after a restart", key);
-  // What was applied now replaces the running values (under the lock: the control thread reads them for
-  // status); the rest stays as the threads use it.
-  std::lock_guard lock(reload_mutex);
-  reload_error.clear();
-  restart_pending = restart;
-  config.log = next.log;
-  config.model.retrain_interval = next.model.retrain_interval;
-  config.model.min_new_samples = next.model.min_new_samples;
-  config.model.replace_min_samples = next.model.replace_min_samples;
-  config.model.learn_cluster_pairs = next.model.learn_cluster_pairs;
-  config.model.learn_first_refit = next.model.learn_first_refit;
-  config.model.learn_young_time = next.model.learn_young_time;
-  config.model.store_hours = next.model.store_hours;
-  config.model.max_samples = next.model.max_samples;
-  config.model.save_interval = next.model.save_interval;
-  config.gps.latency = next.gps.latency;
-  config.tracker.min_snr_db = next.tracker.min_snr_db;
   spdlog::info(
       "reload: applied log level, retrain settings, training store limits, GPS latency, SNR threshold");
 }
