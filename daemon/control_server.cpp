@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <string_view>
 #include <system_error>
 #include <tuple>
 
@@ -198,10 +199,16 @@ void ControlServer::run() noexcept {
     ev.data.fd = fd;
     ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_MOD, fd, &ev);
   };
-  const auto drop = [&](int fd, const char* why) {
+  // Counted before the client is told (`goodbye`, a reply line) or closed: whoever reads the goodbye or
+  // sees the close and then asks dropped_clients() finds it counted.
+  const auto drop = [&](int fd, const char* why, std::string_view goodbye = {}) {
     if (why) {
       dropped_.fetch_add(1, std::memory_order_relaxed);
       spdlog::debug("control: dropping client fd {}: {}", fd, why);
+    }
+    if (!goodbye.empty()) {
+      [[maybe_unused]] const ssize_t w =
+          ::send(fd, goodbye.data(), goodbye.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
     }
     ::epoll_ctl(epoll_fd_.get(), EPOLL_CTL_DEL, fd, nullptr);
     if (const auto it = clients.find(fd); it != clients.end() && !it->second->owner) --others;
@@ -283,16 +290,15 @@ void ControlServer::run() noexcept {
             const int victim = slot_to_free(clients, owner);
             if (victim < 0) {
               static constexpr char kBusy[] = "{\"ok\":false,\"error\":\"too many clients\",\"v\":1}\n";
+              dropped_.fetch_add(1, std::memory_order_relaxed);  // counted before it is said (drop)
               [[maybe_unused]] const ssize_t w =
                   ::send(cfd.get(), kBusy, sizeof kBusy - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
-              dropped_.fetch_add(1, std::memory_order_relaxed);
               continue;
             }
             static constexpr char kEvicted[] =
                 "{\"ok\":false,\"error\":\"connection closed for a new client: every slot was taken and "
                 "this one had asked least recently\",\"v\":1}\n";
-            [[maybe_unused]] const ssize_t w =
-                ::send(victim, kEvicted, sizeof kEvicted - 1, MSG_NOSIGNAL | MSG_DONTWAIT);
+            drop(victim, "its slot given to a new connection", kEvicted);
             std::uint64_t suppressed = 0;
             if (accept_limiter.allow("evict", suppressed))
               spdlog::warn(
@@ -300,7 +306,6 @@ void ControlServer::run() noexcept {
                   "to admit a new one{}",
                   limits_.max_clients,
                   suppressed ? fmt::format(" ({} more since the last report)", suppressed) : "");
-            drop(victim, "its slot given to a new connection");
           }
           const int key = cfd.get();
           auto c = std::make_unique<Client>();
