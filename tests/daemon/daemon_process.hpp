@@ -111,7 +111,9 @@ nlohmann::json status_once(const TempDir& dir, Process& daemon, Done done) {
   return status;
 }
 
-// Waits up to `timeout` for the daemon's log (dir/log.txt) to say `text`.
+// Waits up to `timeout` for the daemon's log (dir/log.txt) to say `text`. The log is written by a thread
+// of its own: a line said before status answered may reach the file after the answer, so a line of a
+// running daemon is always waited for, never read at once.
 inline bool log_says(const TempDir& dir, std::string_view text, std::chrono::milliseconds timeout) {
   return wait_for([&] { return read_text(dir / "log.txt").find(text) != std::string::npos; }, timeout);
 }

@@ -130,7 +130,7 @@ TEST_CASE("daemon: a state_dir without room for the training store is said at st
   REQUIRE(status.is_object());
   const std::string problems = status["model"]["problems"].dump();
   CHECK(problems.find("MB free in") != std::string::npos);
-  CHECK(read_text(dir / "log.txt").find("a full training store") != std::string::npos);
+  CHECK(log_says(dir, "a full training store", std::chrono::seconds(15)));
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
@@ -292,8 +292,7 @@ TEST_CASE("daemon: a state directory it may not search is said at start, and the
   REQUIRE(status.is_object());
   CHECK(status["model"]["problems"].size() >= 1);
   // The reason model.json stays where it is, not a search for a free name that found none.
-  CHECK(read_text(dir / "log.txt").find("(the file is left where it is: Permission denied)") !=
-        std::string::npos);
+  CHECK(log_says(dir, "(the file is left where it is: Permission denied)", std::chrono::seconds(15)));
   CHECK(read_text(dir / "log.txt").find("copies are set aside already") == std::string::npos);
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
@@ -339,7 +338,7 @@ TEST_CASE("daemon: stored pairs are new to a model it did not fit, and it learns
   INFO(read_text(dir / "log.txt"));
   REQUIRE(status.is_object());
   CHECK(status["gears"].size() == gears);
-  CHECK(read_text(dir / "log.txt").find("stored pairs are new to it") != std::string::npos);
+  CHECK(log_says(dir, "stored pairs are new to it", std::chrono::seconds(15)));
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
@@ -390,8 +389,8 @@ TEST_CASE("daemon: learns a model from a restored training store and saves it") 
   INFO(read_text(dir / "log.txt"));
   REQUIRE(restarted.is_object());
   CHECK(restarted["model"]["retrain_runs"].get<int>() >= 1);
-  CHECK(read_text(dir / "log.txt").find("1200 of the " + std::to_string(before + 1200) + " stored pairs") !=
-        std::string::npos);
+  CHECK(log_says(dir, "1200 of the " + std::to_string(before + 1200) + " stored pairs",
+                 std::chrono::seconds(15)));
   again.signal(SIGTERM);
   CHECK(again.wait() == 0);
 }
@@ -414,7 +413,7 @@ TEST_CASE("daemon: pairs journaled before a power cut are restored at start and 
     INFO(read_text(dir / "log.txt"));
     REQUIRE(status.is_object());
     CHECK(status["training_samples"] == 30);
-    CHECK(read_text(dir / "log.txt").find("10 pairs recovered from") != std::string::npos);
+    CHECK(log_says(dir, "10 pairs recovered from", std::chrono::seconds(15)));
     // Consolidated at once: a second power cut cannot lose them either.
     daemon.signal(SIGKILL);
     CHECK(daemon.wait() == 128 + SIGKILL);
