@@ -8,9 +8,20 @@
 
 using gearpulse::daemon::ChangeReporter;
 using gearpulse::daemon::Config;
+using gearpulse::daemon::GpsState;
 using gearpulse::daemon::OutputKind;
 using gearpulse::daemon::OutputState;
 using gearpulse::daemon::PipelineSnapshot;
+
+namespace {
+// A snapshot whose GPS is in `state`, its last usable fix `age` s old (< 0: none yet).
+PipelineSnapshot gps(GpsState state, double age = -1.0) {
+  PipelineSnapshot s;
+  s.gps_state = state;
+  s.gps_age = age;
+  return s;
+}
+}  // namespace
 
 TEST_CASE("changes: an output whose writes fail is named, a GPIO line as chip:line") {
   gearpulse::test::LogLines log;
@@ -36,17 +47,11 @@ TEST_CASE("changes: an output whose writes fail is named, a GPIO line as chip:li
 }
 
 TEST_CASE("changes: GPS that flaps between fix and none is said once, not at every flap") {
-  using gearpulse::daemon::GpsState;
   gearpulse::test::LogLines log;
   Config config;
   ChangeReporter changes(config);
-  PipelineSnapshot fix;
-  fix.gps_state = GpsState::kFix;
-  PipelineSnapshot none = fix;
-  none.gps_state = GpsState::kNoFix;
-  none.gps_age = 2.5;
-  PipelineSnapshot down = fix;
-  down.gps_state = GpsState::kDisconnected;
+  const PipelineSnapshot fix = gps(GpsState::kFix), none = gps(GpsState::kNoFix, 2.5),
+                         down = gps(GpsState::kDisconnected);
   changes.log(down, fix);  // the first fix
   for (int flap = 0; flap < 10; ++flap) {
     changes.log(fix, none);
@@ -67,16 +72,10 @@ TEST_CASE("changes: GPS that flaps between fix and none is said once, not at eve
 }
 
 TEST_CASE("changes: waiting for a receiver's first fix is not yet a fault of its antenna") {
-  using gearpulse::daemon::GpsState;
   gearpulse::test::LogLines log;
   Config config;
   ChangeReporter changes(config);
-  PipelineSnapshot down;
-  down.gps_state = GpsState::kDisconnected;
-  PipelineSnapshot none = down;
-  none.gps_state = GpsState::kNoFix;
-  none.gps_age = -1.0;  // no report yet
-  changes.log(down, none);
+  changes.log(gps(GpsState::kDisconnected), gps(GpsState::kNoFix));  // no report yet
   CHECK(log.count("gps: no usable fix from gpsd at 127.0.0.1:2947 yet (a receiver's first fix can take a "
                   "minute") == 1);
 }
