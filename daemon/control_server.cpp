@@ -373,6 +373,10 @@ void ControlServer::run() noexcept {
         continue;
       }
       if (too_long) {
+        // Counted here, before the reply that says so: the close comes after the reply is flushed,
+        // at once or at a later EPOLLOUT.
+        dropped_.fetch_add(1, std::memory_order_relaxed);
+        spdlog::debug("control: dropping client fd {}: request too long", fd);
         c.in.clear();
         c.close_after_flush = true;
         queue(c, control::error_reply("request longer than " + std::to_string(limits_.max_request_bytes) +
@@ -381,7 +385,7 @@ void ControlServer::run() noexcept {
       }
       // A peer that shut down its sending side still gets the replies it asked for.
       if (eof) c.close_after_flush = true;
-      if (!flush(c)) drop(fd, too_long ? "request too long" : nullptr);
+      if (!flush(c)) drop(fd, nullptr);
     }
     // Clients that ask nothing hold a slot; give it back (sooner if they never completed a request).
     for (auto it = clients.begin(); it != clients.end();) {
