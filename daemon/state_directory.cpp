@@ -264,14 +264,13 @@ void StateDirectory::journal_store() noexcept {
 bool StateDirectory::save_store(const char* why) noexcept {
   try {
     store_.save(store_path_);
-    // Recorded before it is said: whoever reads the line and then asks for status finds the fault gone.
-    bool again = false;
+    // Recorded before it is said (whoever reads the line and then asks for status finds the fault gone),
+    // and said under the lock, so a save failing meanwhile on another thread is said after it, not before.
     {
       std::lock_guard lock(mutex_);
-      again = save_fault_.succeeded();
+      if (save_fault_.succeeded()) spdlog::info("training: {} saved again ({})", store_path_.string(), why);
     }
     spdlog::debug("training: saved {} pairs to {} ({})", store_.size(), store_path_.string(), why);
-    if (again) spdlog::info("training: {} saved again ({})", store_path_.string(), why);
     return true;
   } catch (const std::exception& e) {
     try {
