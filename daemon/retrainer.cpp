@@ -128,6 +128,10 @@ bool Retrainer::retrain_now() {
   std::string result;
   bool changed = false;
   bool no_ladder = false;
+  // What the journal is told of this fit: said after the status holds its result, so whoever reads the
+  // line and then asks for status finds the fit there.
+  spdlog::level::level_enum said_level = spdlog::level::info;
+  std::string said;
   try {
     samples = store_.snapshot();  // up to max_samples pairs: a copy that may not find the memory
     if (samples.empty()) {
@@ -151,16 +155,20 @@ bool Retrainer::retrain_now() {
       const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (fitted.empty() && withdraw) {
         result = withdraw_model(samples.size(), generation);
+        said_level = spdlog::level::warn;
+        said = "retrain: " + result;
         no_ladder = true;
       } else if (fitted.empty()) {
         result = fmt::format("fit on {} samples found no gear ladder ({}); model kept", samples.size(),
                              fitted.reason.empty() ? "no reason given" : fitted.reason);
         // An automatic gives this answer at every retrain: a warning the first time, then a note.
         no_ladder = true;
-        if (no_ladder_before)
-          spdlog::info("retrain: {} (as at the last attempt)", result);
-        else
-          spdlog::warn("retrain: {}", result);
+        if (no_ladder_before) {
+          said = fmt::format("retrain: {} (as at the last attempt)", result);
+        } else {
+          said_level = spdlog::level::warn;
+          said = "retrain: " + result;
+        }
       } else if (const ModelPtr current = model_.get();
                  current && !current->empty() &&
                  fitted.samples < std::min(current->samples, settings().replace_min_samples)) {
@@ -168,11 +176,11 @@ bool Retrainer::retrain_now() {
             "fit on {} samples found {} gears; current model (fitted on {} samples) kept until a fit uses {}",
             fitted.samples, fitted.gears.size(), current->samples,
             std::min(current->samples, settings().replace_min_samples));
-        spdlog::info("retrain: {}", result);
+        said = "retrain: " + result;
       } else if (auto lock = model_.lock_writes(); model_.generation() != generation) {
         result = fmt::format("fit on {} samples discarded: the model was replaced or reset during the fit",
                              samples.size());
-        spdlog::info("retrain: {}", result);
+        said = "retrain: " + result;
       } else {
         const std::size_t gears = fitted.gears.size();
         // The newest pair it saw: pairs after it are new to the model at the next start too.
@@ -198,7 +206,7 @@ bool Retrainer::retrain_now() {
               " (the GPS speeds describe the engine {:.2f} s {} their stamps: gps.latency may be "
               "{:.2f} s too {})",
               std::abs(lag), lag > 0.0 ? "before" : "after", std::abs(lag), lag > 0.0 ? "short" : "long");
-        spdlog::info("retrain: {}; new model in use", result);
+        said = fmt::format("retrain: {}; new model in use", result);
         save_fitted(*next, result);
       }
     }
@@ -206,22 +214,27 @@ bool Retrainer::retrain_now() {
   } catch (const FitCancelled&) {
     // Not a failure: the pairs stay new, so the next start fits them.
     result = "fit cancelled: gearpulsed is stopping; model kept";
-    spdlog::info("retrain: {}", result);
+    said = "retrain: " + result;
   } catch (const std::exception& e) {
     result = std::string("fit failed: ") + e.what() + "; model kept";
-    spdlog::error("retrain: {}", result);
+    said_level = spdlog::level::err;
+    said = "retrain: " + result;
     store_.mark_trained(fresh);
   } catch (...) {
     // Not a std::exception (a fitter's own type): the retrainer's thread must not end the daemon for it.
     result = "fit failed: an exception of unknown type; model kept";
-    spdlog::error("retrain: {}", result);
+    said_level = spdlog::level::err;
+    said = "retrain: " + result;
     store_.mark_trained(fresh);
   }
-  std::lock_guard lock(mutex_);
-  status_.busy = false;
-  status_.last_result = result;
-  no_ladder_ = no_ladder;
-  if (changed) ++status_.accepted;
+  {
+    std::lock_guard lock(mutex_);
+    status_.busy = false;
+    status_.last_result = result;
+    no_ladder_ = no_ladder;
+    if (changed) ++status_.accepted;
+  }
+  if (!said.empty()) spdlog::log(said_level, "{}", said);
   return changed;
 }
 
@@ -285,7 +298,6 @@ std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generatio
   } catch (const std::exception& e) {
     result += fmt::format("; {} stays until the next fit: {}", model_path_.string(), e.what());
   }
-  spdlog::warn("retrain: {}", result);
   return result;
 }
 
