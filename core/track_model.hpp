@@ -55,9 +55,11 @@ class TrackModel {
   // (1 - hidden) e^E + hidden for the window's E (tempered as the evidence is). One window then takes at
   // most ln(1 / hidden) from a line the track has followed. False (the model reset) when the posterior
   // is degenerate.
-  // Where an upshift from the latest tracked estimate leads (the restart's range below), the layers that
-  // read the usual evidence take the better of it and the overrun's: the new gear's first windows follow
-  // a shift with the throttle closed, at light load, where the 2nd harmonic may stand over the fundamental.
+  // Where an upshift from the latest tracked estimate leads (the restart's range below), on every hop while
+  // there is such an estimate, the layers that read the usual evidence take the better of it and the
+  // overrun's: aimed at the new gear's first windows, which follow a shift with the throttle closed, at
+  // light load, where the 2nd harmonic may stand over the fundamental (a limit of 0.5-2 s after the
+  // shift measured the same, so there is none).
   bool update(double hidden) noexcept;
 
   [[nodiscard]] int mode_bin() const noexcept;
