@@ -200,18 +200,22 @@ void GpsdClient::run() {
           refused = newest->speed;
           newest->speed = std::nan("");
         }
-        // Published before the status counts it: a status query in between shows the report with the
-        // count before it, which nothing compares.
-        history_.record(*newest);
+        // What the batch held (reads that did not parse, reports the newest replaced, a refused speed) is
+        // counted before the report is published, the report itself once it is: whoever sees the report
+        // finds its batch counted, and whoever sees it counted finds it published.
         {
           std::lock_guard lock(mutex_);
-          ++status_.reports;
           status_.superseded += drained;
           status_.bad_reads += bad;
           if (refused == refused) {
             ++status_.implausible;
             status_.last_implausible = refused;
           }
+        }
+        history_.record(*newest);
+        {
+          std::lock_guard lock(mutex_);
+          ++status_.reports;
         }
         backoff = config_.backoff_min;
         if (on_report_) on_report_(*newest);
