@@ -229,6 +229,9 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   s.gear = d.gear.load(std::memory_order_relaxed);
   // Heartbeats of the threads that should be running, for the watchdog.
   std::vector<ThreadBeat> beats;
+  // The output's count of unheard pulses before the pulse thread's count of all: the thread counts a pulse
+  // before the output does (PulseThread::run), so read in this order the part is never more than the whole.
+  const std::uint64_t unheard = d.pulses ? d.output.unheard() : 0;
   if (d.pulses) {
     const PulseThreadStatus ps = d.pulses->status();
     beats.push_back({"pulse", ps.heartbeat_ns, !ps.running});
@@ -250,7 +253,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
       reader_behind = d.dropped.grew_recently(s.output_dropped, now, kRecentFault.count());
       write_errors = d.write_errors.grew_recently(errors, now, kRecentFault.count());
     }
-    s.output_unheard = d.output.unheard();
+    s.output_unheard = unheard;
     if (!s.output_error.empty())
       s.output_state = OutputState::kError;
     else if (write_errors) {

@@ -111,7 +111,7 @@ void PtyOutput::rise() noexcept {
       if (const UniqueFd peer = open_peer(master_.get(), slave_name_)) ::tcflush(peer.get(), TCIFLUSH);
       idle_ = true;
     }
-    unheard_.fetch_add(1, std::memory_order_relaxed);
+    unheard_.fetch_add(1, std::memory_order_release);
     return;
   }
   idle_ = false;
@@ -123,7 +123,7 @@ void PtyOutput::rise() noexcept {
   } else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
     overflowed_.fetch_add(1, std::memory_order_relaxed);
   } else if (n < 0 && errno == EIO) {
-    unheard_.fetch_add(1, std::memory_order_relaxed);  // the reader vanished between poll and write
+    unheard_.fetch_add(1, std::memory_order_release);  // the reader vanished between poll and write
   } else {
     last_error_.store(n < 0 ? errno : EIO, std::memory_order_relaxed);  // n == 0: nothing taken
     errors_.fetch_add(1, std::memory_order_release);  // publishes last_error_ with the count

@@ -45,9 +45,10 @@ class PtyOutput final : public PulseOutput {
   [[nodiscard]] const std::filesystem::path& link() const noexcept { return link_; }
   [[nodiscard]] const std::string& slave_name() const noexcept { return slave_name_; }
   [[nodiscard]] std::uint64_t written() const noexcept { return written_.load(std::memory_order_relaxed); }
-  // Pulses emitted while no reader had the slave open.
+  // Pulses emitted while no reader had the slave open. Acquire: the pulse thread's count of them (counted
+  // before rise()) is then read at least as large.
   [[nodiscard]] std::uint64_t unheard() const noexcept override {
-    return unheard_.load(std::memory_order_relaxed);
+    return unheard_.load(std::memory_order_acquire);
   }
   // Pulses dropped because a reader that is present did not keep up (its input queue was full, or they
   // had waited in it longer than max_age).

@@ -47,7 +47,7 @@ void PulseThread::set_speed(double speed_mps) noexcept {
 
 PulseThreadStatus PulseThread::status() const noexcept {
   PulseThreadStatus s;
-  s.pulses = pulses_.load(std::memory_order_relaxed);
+  s.pulses = pulses_.load(std::memory_order_acquire);
   s.late_edges = late_edges_.load(std::memory_order_relaxed);
   s.max_late_ns = max_late_ns_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
@@ -74,9 +74,12 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
     for (PulseEdge e = sched.emit_due(now); e.kind != EdgeKind::kNone;
          e = sched.emit_due(now = monotonic_ns())) {
       if (e.kind == EdgeKind::kRise) {
+        // Counted before the output takes it: what the output counts of its pulses (unheard, dropped,
+        // written) is never more than the count a reader of both finds here after it. Release: a reader
+        // that finds this count finds the output's counts of the pulses before it.
+        pulses_.fetch_add(1, std::memory_order_release);
         output_.rise();
         high = true;
-        pulses_.fetch_add(1, std::memory_order_relaxed);
         const std::size_t n = logged_.load(std::memory_order_relaxed);
         if (n < rise_log_.size()) {
           rise_log_[n] = {e.t_ns, monotonic_ns()};

@@ -63,7 +63,7 @@ class PulseThread {
   // (one eventfd write) only when the speed it would apply changes: a hop's speed, ten times a second.
   void set_speed(double speed_mps) noexcept;
   [[nodiscard]] double target_speed() const noexcept { return target_.load(std::memory_order_relaxed); }
-  [[nodiscard]] std::uint64_t pulses() const noexcept { return pulses_.load(std::memory_order_relaxed); }
+  [[nodiscard]] std::uint64_t pulses() const noexcept { return pulses_.load(std::memory_order_acquire); }
   [[nodiscard]] std::size_t logged() const noexcept { return logged_.load(std::memory_order_acquire); }
   [[nodiscard]] PulseThreadStatus status() const noexcept;
 
