@@ -197,6 +197,10 @@ TEST_CASE("pipeline: pulses with no PTY reader are counted as unheard and the ou
   REQUIRE(reader);
   const int fd = reader.get();
   REQUIRE(wait_for([&] { return pipeline.snapshot().output_state == OutputState::kOk; }, 5s));
+  // A pulse the pulse thread began before the reader came may still be counted unheard: the next pulse
+  // counted comes after it.
+  const std::uint64_t seen_at = pipeline.snapshot().pulses;
+  REQUIRE(wait_for([&] { return pipeline.snapshot().pulses > seen_at; }, 5s));
   const std::uint64_t unheard = pipeline.snapshot().output_unheard;
   const std::uint64_t pulses = pipeline.snapshot().pulses;
   char buf[4096];
