@@ -73,6 +73,9 @@ void AlsaCapture::stop() {
 
 AlsaCaptureStats AlsaCapture::stats() const noexcept {
   AlsaCaptureStats s;
+  // First: the capture thread records a loss (its failure) and a reopen (its count) before it says it
+  // streams or not (release), so what is read after this is at least as new as the state read here.
+  s.streaming = streaming_.load(std::memory_order_acquire);
   s.frames = frames_.load(std::memory_order_relaxed);
   s.pushed = pushed_.load(std::memory_order_relaxed);
   s.dropped = dropped_.load(std::memory_order_relaxed);
@@ -91,7 +94,6 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.fifo = fifo_.load(std::memory_order_relaxed);
   s.memory_locked = thread_.memory_locked();
   s.running = thread_.running();
-  s.streaming = streaming_.load(std::memory_order_relaxed);
   if (const std::int64_t last = last_frames_ns_.load(std::memory_order_relaxed); s.streaming && last > 0) {
     const double period_s = static_cast<double>(period_frames_) / static_cast<double>(rate_);
     s.silent_s = std::max(0.0, static_cast<double>(monotonic_ns() - last) * 1e-9);
@@ -225,7 +227,7 @@ void AlsaCapture::run() noexcept {
     pcm.reset();
     open_attempts_.store(0, std::memory_order_relaxed);
     last_attempt_.store(0.0, std::memory_order_relaxed);
-    streaming_.store(false, std::memory_order_relaxed);
+    streaming_.store(false, std::memory_order_release);
   };
 
   last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
@@ -272,8 +274,9 @@ void AlsaCapture::run() noexcept {
       pcm = std::move(fresh);
       if (rt.fifo) fifo_.store(set_fifo(true, config_.rt_priority), std::memory_order_relaxed);
       last_frames_ns_.store(monotonic_ns(), std::memory_order_relaxed);
-      streaming_.store(true, std::memory_order_relaxed);
+      // Counted before it says it streams: a look that finds it streaming again finds the reopen counted.
       reopens_.fetch_add(1, std::memory_order_relaxed);
+      streaming_.store(true, std::memory_order_release);
       backoff = std::chrono::duration_cast<std::chrono::nanoseconds>(config_.reopen_min).count();
       if (const int e = ::snd_pcm_start(pcm.get()); e < 0) recover({AlsaStep::kStart, e});
       continue;
