@@ -143,7 +143,10 @@ TEST_CASE("pipeline: audio that stops coming (the device open, no frames) is sta
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return pipeline.snapshot().tracker_freq > 0.0; }, 10s));
   REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kStalled; }, 10s));
-  CHECK(pipeline.snapshot().tracker_freq < 0.0);
+  // Nothing tracked while it stalls. The capture says stalled after 2 s without a frame; the tracker
+  // thread lets the engine go on its own clock, after its shorter wait for points (about 0.4 s), at a
+  // turn a loaded machine can hold up: waited for, within the 4 s the stall is still said.
+  CHECK(wait_for([&] { return pipeline.snapshot().tracker_freq < 0.0; }, 3s));
   REQUIRE(wait_for([&] { return pipeline.snapshot().audio_state == AudioState::kRunning; }, 15s));
   CHECK(wait_for([&] { return pipeline.snapshot().tracker_freq > 0.0; }, 10s));
 }
