@@ -132,6 +132,10 @@ TEST_CASE("track: prints t freq snr_db rows for a mono WAV") {
   CHECK(v[1].t - v[0].t == Approx(0.1));
   CHECK(hit_rate(v, truth, 0.5, 1.0) >= 0.9);
   CHECK(r.err.empty());
+  // "-" is standard input, as libsndfile reads it.
+  const Result piped = run(dir, "- <'" + wav + "'");
+  REQUIRE(piped.status == 0);
+  CHECK(piped.out == r.out);
 }
 
 TEST_CASE("track: stereo WAV takes the chosen channel or the mix") {
@@ -228,6 +232,11 @@ TEST_CASE("track: bad input gives a one-line error and exit status 2") {
     check_one_line_error(r);
     CHECK(r.err.find("(track reads a WAV recording; a CSV log of speed and rpm is for fit and replay)") !=
           std::string::npos);
+    // The same on standard input: not a missing file named "-".
+    const Result in = run(dir, "- <'" + (dir / "text.wav").string() + "'");
+    check_one_line_error(in);
+    CHECK(in.err.find("-: cannot read audio: ") != std::string::npos);
+    CHECK(in.err.find("cannot open") == std::string::npos);
   }
   SECTION("truncated WAV") {
     const std::string bytes = slurp(good);

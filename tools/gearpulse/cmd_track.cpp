@@ -219,8 +219,10 @@ int run_track(const TrackOptions& o) {
   std::unique_ptr<UnfinishedWav> unfinished;  // outlives `file`, which reads through it
   std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.file.c_str(), SFM_READ, &info));
   if (!file) {
-    // A file that is not there is said as fit says it; one that is no audio, with where a log goes.
-    if (std::error_code ec; !std::filesystem::exists(o.file, ec))
+    // A file that is not there is said as fit says it; one that is no audio, with where a log goes. "-" is
+    // standard input to libsndfile, and a path that cannot be looked up (ec set: EACCES, ELOOP, ...) is
+    // no proof of absence: both keep libsndfile's own error.
+    if (std::error_code ec; o.file != "-" && !std::filesystem::exists(o.file, ec) && !ec)
       throw UsageError(o.file + ": cannot open: " + std::strerror(ENOENT));
     const bool unrecognised = sf_error(nullptr) == SF_ERR_UNRECOGNISED_FORMAT;
     throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr) +
