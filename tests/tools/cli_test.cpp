@@ -269,7 +269,7 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
   char per_1000[32];
   std::snprintf(per_1000, sizeof per_1000, "%.1f km/h per 1000 rpm", top * 60.0);  // (m/s)/Hz -> km/h/krpm
   CHECK(rpm.err.find(per_1000) != std::string::npos);
-  // The drive without its launches: no first gear, and the few samples of a short log give a rough scale.
+  // The drive without its launches: no first gear.
   std::string no_launch = "t,speed,freq\n";
   for (const gearpulse::Sample& s : samples.samples) {
     char row[96];
@@ -282,4 +282,32 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
   const Result thin = run(dir, "fit " + (dir / "no_launch.csv").string());
   REQUIRE(thin.status == 0);
   CHECK(thin.err.find("the logs likely lack first gear (log some starts from rest)") != std::string::npos);
+  // The drive with a GPS's speed noise (+-0.3 m/s): first gear, seen briefly and slowly, where that noise is
+  // largest against the speed, is known to worse than kRoughGear (kGearWindow / 3, 0.967 %); every gear
+  // whose +- passes that threshold is marked, and the advice line prints it.
+  std::string noisy = "t,speed,freq\n";
+  for (std::size_t i = 0; i < samples.samples.size(); ++i) {
+    const gearpulse::Sample& s = samples.samples[i];
+    const double jitter = 0.3 * (static_cast<double>(i % 3) - 1.0);
+    char row[96];
+    std::snprintf(row, sizeof row, "%.3f,%.4f,%.4f\n", s.t,
+                  s.speed > 0.0 ? std::max(0.01, s.speed + jitter) : 0.0, s.freq);
+    noisy += row;
+  }
+  write((dir / "noisy.csv").string(), noisy);
+  const Result rough = run(dir, "fit " + (dir / "noisy.csv").string());
+  REQUIRE(rough.status == 0);
+  INFO(rough.err);
+  CHECK(rough.err.find(" (rough)\n") != std::string::npos);
+  CHECK(
+      rough.err.find("  a rough gear's scale is known to worse than 0.97 %: log more driving in that gear") !=
+      std::string::npos);
+  std::istringstream summary(rough.err);
+  for (std::string line; std::getline(summary, line);) {
+    const std::size_t pm = line.find("+- ");
+    if (line.rfind("  gear ", 0) != 0 || pm == std::string::npos) continue;
+    INFO(line);
+    const double error_pct = std::stod(line.substr(pm + 3));
+    CHECK((line.find("(rough)") != std::string::npos) == (error_pct >= 0.97));
+  }
 }

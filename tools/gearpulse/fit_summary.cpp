@@ -77,7 +77,7 @@ std::string fit_summary(const GearModel& model, std::span<const Sample> samples,
   }
   if (rough > 0) {
     std::snprintf(buf, sizeof buf,
-                  "  a rough gear's scale is known to worse than %.0f %%: log more driving in that gear and "
+                  "  a rough gear's scale is known to worse than %.2g %%: log more driving in that gear and "
                   "fit all the logs again\n",
                   100.0 * kRoughGear);
     text += buf;
