@@ -2,13 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <vector>
+
+#include <fmt/format.h>
+
+#include "core/log_reading.hpp"
 
 namespace gearpulse::cli {
 namespace {
-
-constexpr double kKmh = 3.6;  // km/h per m/s
 
 // The speed at the given fraction of the sorted `speeds` (nearest rank).
 double quantile(const std::vector<double>& speeds, double q) {
@@ -19,8 +20,7 @@ double quantile(const std::vector<double>& speeds, double q) {
 }  // namespace
 
 std::string fit_summary(const GearModel& model, std::span<const Sample> samples, bool rpm_logs) {
-  std::string text;
-  if (model.gears.empty()) return text;
+  if (model.gears.empty()) return {};
   double fastest = 0.0;
   // Each moving sample in the gear whose window (kGearWindow either side of its theta on the log scale)
   // holds its speed / frequency: shifts and clutch slip fall between the windows.
@@ -35,58 +35,51 @@ std::string fit_summary(const GearModel& model, std::span<const Sample> samples,
         break;
       }
   }
-  char buf[320];
-  std::snprintf(buf, sizeof buf, "gearpulse: %zu gear%s, fitted on %zu samples (the fastest at %.0f km/h):\n",
-                model.gears.size(), model.gears.size() == 1 ? "" : "s", model.samples, fastest * kKmh);
-  text += buf;
+  using log_reading::kKmhToMs;
+  std::string text =
+      fmt::format("gearpulse: {} gear{}, fitted on {} samples (the fastest at {:.0f} km/h):\n",
+                  model.gears.size(), model.gears.size() == 1 ? "" : "s", model.samples, fastest / kKmhToMs);
   std::size_t rough = 0;
   for (std::size_t g = 0; g < model.gears.size(); ++g) {
     const Gear& gear = model.gears[g];
     std::vector<double>& speeds = in_gear[g];
     std::sort(speeds.begin(), speeds.end());
-    int n = std::snprintf(buf, sizeof buf, "  gear %zu: theta %.4f (m/s)/Hz +- %.2g %%", g + 1, gear.theta,
-                          100.0 * gear.std_error / gear.theta);
-    // theta (m/s)/Hz x 1000 rpm / 60 (Hz) x 3.6 (km/h per m/s) = 60 theta km/h per 1000 rpm.
+    std::string line = fmt::format("  gear {}: theta {:.4f} (m/s)/Hz +- {:.2g} %", g + 1, gear.theta,
+                                   100.0 * gear.std_error / gear.theta);
+    // theta (m/s)/Hz x 1000 rpm / 60 (Hz), in km/h: 60 theta km/h per 1000 rpm.
     if (rpm_logs)
-      n += std::snprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), ", %.1f km/h per 1000 rpm",
-                         gear.theta * 1000.0 / 60.0 * kKmh);
+      line += fmt::format(", {:.1f} km/h per 1000 rpm",
+                          gear.theta * 1000.0 / log_reading::kSecondsPerMinute / kKmhToMs);
     // The fit's own count: the gear's weight (eq. (6)) of the samples it read.
-    n += std::snprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), "; about %.0f samples in gear",
-                       gear.weight * static_cast<double>(model.samples));
+    line += fmt::format("; about {:.0f} samples in gear", gear.weight * static_cast<double>(model.samples));
     if (!speeds.empty())
-      n += std::snprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), ", mostly at %.0f-%.0f km/h",
-                         quantile(speeds, 0.05) * kKmh, quantile(speeds, 0.95) * kKmh);
+      line += fmt::format(", mostly at {:.0f}-{:.0f} km/h", quantile(speeds, 0.05) / kKmhToMs,
+                          quantile(speeds, 0.95) / kKmhToMs);
     if (gear.std_error > kRoughGear * gear.theta) {
       ++rough;
-      std::snprintf(buf + n, sizeof buf - static_cast<std::size_t>(n), " (rough)");
+      line += " (rough)";
     }
-    text += buf;
-    text += '\n';
+    text += line + '\n';
   }
   // A manual car moves off in first gear, which carries it at idle at kFirstGearIdleSpeed at most.
   if (const auto idle = model.extra.find("idle"); idle != model.extra.end() && idle->is_object()) {
     const double idle_freq = idle->value("freq", 0.0);
     const double at_idle = model.gears.front().theta * idle_freq;
-    if (idle_freq > 0.0 && at_idle > kFirstGearIdleSpeed) {
-      std::snprintf(buf, sizeof buf,
-                    "  gear 1 carries the car at %.0f km/h at idle, more than a first gear does: the logs "
-                    "likely lack first gear (log some starts from rest)\n",
-                    at_idle * kKmh);
-      text += buf;
-    }
+    if (idle_freq > 0.0 && at_idle > kFirstGearIdleSpeed)
+      text += fmt::format(
+          "  gear 1 carries the car at {:.0f} km/h at idle, more than a first gear does: the logs likely "
+          "lack first gear (log some starts from rest)\n",
+          at_idle / kKmhToMs);
   }
-  if (rough > 0) {
-    std::snprintf(buf, sizeof buf,
-                  "  a rough gear's scale is known to worse than %.2g %%: log more driving in that gear and "
-                  "fit all the logs again\n",
-                  100.0 * kRoughGear);
-    text += buf;
-  }
-  std::snprintf(buf, sizeof buf,
-                "  if the car has more than %zu forward gears, log a drive that holds the others for a "
-                "while and fit all the logs again\n",
-                model.gears.size());
-  text += buf;
+  if (rough > 0)
+    text += fmt::format(
+        "  a rough gear's scale is known to worse than {:.2g} %: log more driving in that gear and fit all "
+        "the logs again\n",
+        100.0 * kRoughGear);
+  text += fmt::format(
+      "  if the car has more than {} forward gears, log a drive that holds the others for a while and fit "
+      "all the logs again\n",
+      model.gears.size());
   return text;
 }
 
