@@ -281,7 +281,9 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
   write((dir / "no_launch.csv").string(), no_launch);
   const Result thin = run(dir, "fit " + (dir / "no_launch.csv").string());
   REQUIRE(thin.status == 0);
-  CHECK(thin.err.find("the logs likely lack first gear (log some starts from rest)") != std::string::npos);
+  CHECK(
+      thin.err.find("km/h at idle, more than a car's first gear does (a motorcycle's or a tall one may): if "
+                    "there is a lower gear, log some starts from rest\n") != std::string::npos);
   // The drive with a GPS's speed noise (+-0.3 m/s): first gear, seen briefly and slowly, where that noise is
   // largest against the speed, is known to worse than kRoughGear (kGearWindow / 3, 0.967 %); every gear
   // whose +- passes that threshold is marked, and the advice line prints it.

@@ -61,14 +61,16 @@ std::string fit_summary(const GearModel& model, std::span<const Sample> samples,
     }
     text += line + '\n';
   }
-  // A manual car moves off in first gear, which carries it at idle at kFirstGearIdleSpeed at most.
+  // A manual car moves off in first gear, which carries it at idle at kFirstGearIdleSpeed at most; a
+  // motorcycle's (2.9-3.9 m/s, core/auto_ladder_completion.cpp) or a tall one may carry it faster
+  // (docs/cold-start.md): the line says what would tell, not that first gear is missing.
   if (const auto idle = model.extra.find("idle"); idle != model.extra.end() && idle->is_object()) {
     const double idle_freq = idle->value("freq", 0.0);
     const double at_idle = model.gears.front().theta * idle_freq;
     if (idle_freq > 0.0 && at_idle > kFirstGearIdleSpeed)
       text += fmt::format(
-          "  gear 1 carries the car at {:.0f} km/h at idle, more than a first gear does: the logs likely "
-          "lack first gear (log some starts from rest)\n",
+          "  gear 1 carries the car at {:.0f} km/h at idle, more than a car's first gear does (a "
+          "motorcycle's or a tall one may): if there is a lower gear, log some starts from rest\n",
           at_idle / kKmhToMs);
   }
   if (rough > 0)
