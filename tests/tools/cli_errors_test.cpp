@@ -63,6 +63,11 @@ TEST_CASE("cli: empty file and missing header are one-line errors with exit 2") 
                      ": a WAV recording, not a log (gearpulse track gives its engine frequency)\n");
   write((dir / "rpm.csv").string(), "RPM,Speed (km/h),Time\n");
   CHECK(run(dir, "fit " + (dir / "rpm.csv").string()).err.find("WAV") == std::string::npos);
+  // Another RIFF file (an AVI: "RIFF", its size, "AVI ") is no WAV: the reader's own message.
+  write((dir / "clip.avi").string(), std::string("RIFF\x24\0\0\0AVI LIST", 16));
+  r = run(dir, "fit " + (dir / "clip.avi").string());
+  CHECK(r.status == 2);
+  CHECK(r.err.find("WAV") == std::string::npos);
 }
 
 TEST_CASE("cli: NaN negative and garbage rows are reported with file and line and skipped") {

@@ -75,12 +75,14 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
     // which no log's header does. Peeked, not read: a pipe (`<(zcat log.gz)`) cannot seek back.
     if (in.peek() == '{')
       throw UsageError(path + ": a JSON file, not a log (a model from gearpulse fit goes to replay --model)");
-    // A recording where a log belongs: a WAV opens with "RIFF" (read from a second handle, on a regular
-    // file only, for the same reason).
+    // A recording where a log belongs: a WAV opens with "RIFF", a size and "WAVE" (an AVI or a WebP is a RIFF
+    // file too, and left to the reader's message). Read from a second handle, on a regular file only, for the
+    // same reason.
     if (std::filesystem::is_regular_file(path, ec)) {
-      char magic[4] = {};
-      if (std::ifstream probe(path, std::ios::binary);
-          probe.read(magic, sizeof magic) && std::string_view(magic, sizeof magic) == "RIFF")
+      char magic[12] = {};
+      if (std::ifstream probe(path, std::ios::binary); probe.read(magic, sizeof magic) &&
+                                                       std::string_view(magic, 4) == "RIFF" &&
+                                                       std::string_view(magic + 8, 4) == "WAVE")
         throw UsageError(path + ": a WAV recording, not a log (gearpulse track gives its engine frequency)");
     }
     try {
