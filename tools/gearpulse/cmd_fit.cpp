@@ -264,8 +264,8 @@ void add_fit(CLI::App& app, int& status) {
   sub->add_option("--plot", cmd->plot, "Write an SVG of the ratio histogram with the fitted gears");
   sub->add_option("--speed", cmd->speed,
                   "Torque Pro, named-column and PID-row logs: speed column to use, auto (GPS if any; a "
-                  "Torque log with "
-                  "an OBD speed too has its gears read from the wheel speed mapped onto GPS), gps or obd")
+                  "Torque log with an OBD speed too has its gears read from the wheel speed mapped onto "
+                  "GPS), gps or obd")
       ->capture_default_str();
   add_row_seconds_option(*sub, cmd->row_seconds);
   sub->add_option("files", cmd->files,
