@@ -338,7 +338,7 @@ struct ObdLayout {
   std::string speed_column;
 };
 
-// The seconds per unit of a time column, from its folded name (time, timestamp, seconds or t; in
+// The seconds per unit of a time column, from its folded name (time, timestamp, seconds, t or ts; in
 // milliseconds when it ends in ms, (ms) or [ms]), or 0 when the name is not a time's.
 double time_unit(std::string_view folded_name);
 

@@ -66,6 +66,9 @@ struct SampleLog {
   std::string name;
   SampleFileFormat format = SampleFileFormat::kGeneric;
   std::string speed_column;  // header of the column the speed came from (a PID-row log: the PID's name)
+  // A speed,rpm log's: the unit its speed column, which names none, was read in: km/h, or mph or m/s when
+  // every value is whole km/h in that unit (an OBD speed converted by the logger).
+  std::string speed_unit;
   std::vector<Sample> samples;
   std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages
   std::size_t skipped_count = 0;     // every skipped bad row

@@ -151,6 +151,40 @@ TEST_CASE("io: a speed and rpm log with a time column takes its times from it") 
   CHECK(clock.samples[1].t == Approx(0.5));
 }
 
+TEST_CASE("io: a speed and rpm log whose speeds are whole km/h in mph or m/s is read in that unit") {
+  // A logger that converts the OBD speed (whole km/h) writes k * 0.621371 mph (or k / 3.6 m/s); ts is a
+  // time column (milliseconds since 1970, as its values reach 1e11).
+  std::string mph = "ts,rpm,speed\n", ms = "rpm,speed\n", kmh = "rpm,speed\n", few = "rpm,speed\n";
+  for (int k = 1; k <= 12; ++k) {
+    const int rpm = 800 + 150 * k;
+    mph += std::to_string(1558525279922LL + 1400 * k) + "," + std::to_string(rpm) + "," +
+           std::to_string(k * 7 / 1.609344) + "\n";
+    ms += std::to_string(rpm) + "," + std::to_string(k * 7 / 3.6) + "\n";
+    kmh += std::to_string(rpm) + "," + std::to_string(k * 7) + "\n";
+    if (k <= 5) few += std::to_string(rpm) + "," + std::to_string(k * 7 / 1.609344) + "\n";
+  }
+  const SampleLog in_mph = read_log_text(mph);
+  CHECK(in_mph.format == SampleFileFormat::kSpeedRpm);
+  CHECK(in_mph.speed_unit == "mph");
+  CHECK_FALSE(in_mph.time_from_rows);
+  REQUIRE(in_mph.samples.size() == 12);
+  CHECK(in_mph.samples[1].t == Approx(1.4));
+  CHECK(in_mph.samples[1].speed == Approx(14 / 3.6).epsilon(1e-4));
+  const SampleLog in_ms = read_log_text(ms);
+  CHECK(in_ms.speed_unit == "m/s");
+  CHECK(in_ms.samples[1].speed == Approx(14 / 3.6).epsilon(1e-4));
+  // Whole numbers are km/h themselves, and too few values say nothing: km/h, as before.
+  const SampleLog in_kmh = read_log_text(kmh);
+  CHECK(in_kmh.speed_unit == "km/h");
+  CHECK(in_kmh.samples[1].speed == Approx(14 / 3.6));
+  CHECK(read_log_text(few).speed_unit == "km/h");
+  // Speeds in mph as measured (not whole km/h) stay km/h, said in the note.
+  std::string measured = "rpm,speed\n";
+  for (int k = 1; k <= 12; ++k)
+    measured += std::to_string(900 + 150 * k) + "," + std::to_string(4.37 * k + 0.13) + "\n";
+  CHECK(read_log_text(measured).speed_unit == "km/h");
+}
+
 TEST_CASE("io: row_seconds is the row counter's unit in logs without a time column, and only there") {
   gearpulse::ReadOptions options;
   options.row_seconds = 0.5;

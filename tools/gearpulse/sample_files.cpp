@@ -98,13 +98,20 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
           "gearpulse: warning: %s: --speed applies to Torque Pro exports, named-column and PID-row logs; "
           "this %s log has one speed\n",
           path.c_str(), std::string(format_name(log.format)).c_str());
-    // A speed,rpm log's speed column names no unit and is read as km/h (docs/interfaces.md): a log in mph
-    // or m/s would fit a ladder off by 1.6 or 3.6 without a word, so the reading is said with its way out.
-    if (log.format == SampleFileFormat::kSpeedRpm)
+    // A speed,rpm log's speed column names no unit and is read as km/h, or as mph or m/s when its values
+    // are whole km/h in that unit (docs/interfaces.md): a log in another unit would fit a ladder off by 1.6
+    // or 3.6 without a word, so the reading is said with its way out.
+    if (log.format == SampleFileFormat::kSpeedRpm && log.speed_unit == "km/h")
       std::fprintf(stderr,
                    "gearpulse: note: %s: column '%s' names no unit: read as km/h (name it '%s (mph)' or "
                    "'%s (m/s)' if it is not)\n",
                    path.c_str(), log.speed_column.c_str(), log.speed_column.c_str(),
+                   log.speed_column.c_str());
+    else if (log.format == SampleFileFormat::kSpeedRpm)
+      std::fprintf(stderr,
+                   "gearpulse: note: %s: column '%s' names no unit, but every value is a whole km/h in %s "
+                   "(an OBD speed converted): read as %s (name it '%s (km/h)' if it is not)\n",
+                   path.c_str(), log.speed_column.c_str(), log.speed_unit.c_str(), log.speed_unit.c_str(),
                    log.speed_column.c_str());
     for (const std::string& warning : log.warnings)
       std::fprintf(stderr, "gearpulse: warning: %s\n", warning.c_str());
