@@ -370,4 +370,26 @@ double speed_unit(std::string_view name) noexcept {
   return 0.0;
 }
 
+std::optional<Quantity> quantity_cell(std::string_view cell) noexcept {
+  // The names pint gives the units of the readings these readers take (python-OBD's Unit), and plurals.
+  static constexpr std::pair<std::string_view, std::string_view> kUnits[] = {
+      {"revolutions_per_minute", "rpm"},
+      {"kilometer_per_hour", "km/h"},
+      {"kilometers_per_hour", "km/h"},
+      {"mile_per_hour", "mph"},
+      {"miles_per_hour", "mph"},
+      {"meter_per_second", "m/s"},
+      {"meters_per_second", "m/s"},
+      {"knot", "knot"},
+      {"knots", "knot"}};
+  cell = trim(cell);
+  const std::size_t space = cell.rfind(' ');
+  if (space == std::string_view::npos) return std::nullopt;
+  const std::string_view number = trim(cell.substr(0, space)), unit = cell.substr(space + 1);
+  if (number.empty()) return std::nullopt;
+  for (const auto& [pint, ours] : kUnits)
+    if (unit == pint) return Quantity{number, ours};
+  return std::nullopt;
+}
+
 }  // namespace gearpulse::log_reading

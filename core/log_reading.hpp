@@ -288,6 +288,14 @@ bool summary_column(std::string_view name) noexcept;
 // The speed unit a column's name states (m/s per unit), or 0.
 double speed_unit(std::string_view name) noexcept;
 
+// A reading written with its unit after the number, as python-OBD writes a quantity (`790.5
+// revolutions_per_minute`, `12.0 kilometer_per_hour`): the number's text and the unit as these readers name
+// it ("rpm", "km/h", "mph", "m/s", "knot"). None for any other cell.
+struct Quantity {
+  std::string_view number, unit;
+};
+std::optional<Quantity> quantity_cell(std::string_view cell) noexcept;
+
 // A clock of the time of day wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times (Row::clock,
 // Row::period, from parse_clock) are unwrapped in file order into Row::t.
 // A clock cell that jumps away from the row before it while the row after it goes on from that one is
@@ -336,6 +344,7 @@ struct ObdLayout {
   double speed_to_ms = kKmhToMs;
   double time_to_s = 1.0;
   std::string speed_column;
+  bool quantities = false;  // the rpm and speed cells may carry their unit after the number (quantity_cell)
 };
 
 // The seconds per unit of a time column, from its folded name (time, timestamp, seconds, t or ts; in

@@ -257,11 +257,19 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
   DigitGroups groups(reader);
+  // A cell that writes the column's unit after its number is the number; any other stays as written.
+  constexpr double kRpmToMs = -1.0;  // no speed unit's: marks the rpm column
+  const auto number_of = [&](std::string_view cell, double to_ms) {
+    const std::optional<Quantity> q = layout.quantities ? quantity_cell(cell) : std::nullopt;
+    if (!q) return cell;
+    const bool same = to_ms == kRpmToMs ? q->unit == "rpm" : speed_unit(q->unit) == to_ms;
+    return same ? q->number : cell;
+  };
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
     double period = 0.0;  // of a clock cell's time of day
-    const Cell rpm = groups.read(cells[irpm], "rpm");
-    const Cell speed = groups.read(cells[ispeed], "speed");
+    const Cell rpm = groups.read(number_of(cells[irpm], kRpmToMs), "rpm");
+    const Cell speed = groups.read(number_of(cells[ispeed], layout.speed_to_ms), "speed");
     Cell t;
     t.kind = CellKind::kNumber;
     t.value = counter * out.row_seconds();

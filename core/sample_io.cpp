@@ -100,17 +100,43 @@ bool read_units_row(LineReader& reader, std::vector<std::string>& header) {
   return false;
 }
 
+// Whether the first data row writes readings with their units (quantity_cell(): `12.0 kilometer_per_hour`,
+// as python-OBD loggers write them). A speed column whose name states no unit takes its cell's
+// ("SPEED (km/h)"). The row is left to the reader.
+bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
+  while (reader.next()) {
+    if (blank(reader.line)) continue;
+    std::vector<std::string_view> cells;
+    reader.cells(cells, header.size());
+    bool any = false;
+    for (std::size_t i = 0; i < cells.size(); ++i) {
+      const std::optional<Quantity> q = quantity_cell(cells[i]);
+      if (!q) continue;
+      any = true;
+      const std::string name = folded(header[i]);
+      if (holds(name, {"speed"}) && speed_unit(name) == 0.0 && speed_unit(q->unit) > 0.0)
+        header[i] += " (" + std::string(q->unit) + ")";
+    }
+    reader.unread();
+    return any;
+  }
+  return false;
+}
+
 // named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row.
+// `quantities`: the cells may write their units (quantity_cells()).
 std::optional<ObdLayout> named_columns(LineReader& reader, std::vector<std::string>& header,
-                                       TorqueSpeed choice, const std::string& name) {
+                                       TorqueSpeed choice, const std::string& name, bool quantities) {
+  std::optional<ObdLayout> layout;
   try {
-    if (auto layout = named_layout(header, choice, name)) return layout;
+    layout = named_layout(header, choice, name);
   } catch (const SampleFileError&) {
     if (!read_units_row(reader, header)) throw;
     return named_layout(header, choice, name);
   }
-  if (!read_units_row(reader, header)) return std::nullopt;
-  return named_layout(header, choice, name);
+  if (!layout && read_units_row(reader, header)) layout = named_layout(header, choice, name);
+  if (layout) layout->quantities = quantities;
+  return layout;
 }
 
 }  // namespace
@@ -245,12 +271,17 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   reader.set_header(header);
   const auto has = [&](std::string_view column) { return find_column(header, column).has_value(); };
 
-  // The generic header first: its further columns are ignored, whatever their names.
-  if (has("t") && has("speed") && has("freq")) {
+  // The generic header first: its further columns are ignored, whatever their names. The other apps' logs
+  // may write their readings with units (quantity_cells()): a speed's makes it a named-column log.
+  const bool generic = has("t") && has("speed") && has("freq");
+  const bool carloop_header = has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()");
+  const bool torque = !generic && torque_header(header);
+  const bool quantities = !generic && !torque && !carloop_header && quantity_cells(reader, header);
+  if (generic) {
     read_generic(reader, header, out);
-  } else if (torque_header(header)) {
+  } else if (torque) {
     read_torque(reader, header, out, options.torque_speed);
-  } else if (has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()")) {
+  } else if (carloop_header) {
     ObdLayout carloop{SampleFileFormat::kCarloop,
                       *find_column(header, "ENGINE_RPM ()"),
                       *find_column(header, "VEHICLE_SPEED ()"),
@@ -268,6 +299,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
                      kKmhToMs,
                      1.0,
                      "speed"};
+    layout.quantities = quantities;
     for (std::size_t i = 0; i < header.size() && !layout.time; ++i)  // a time column, as named columns'
       if (const double to_s = time_unit(folded(header[i])); to_s > 0.0) {
         layout.time = i;
@@ -276,7 +308,8 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     read_obd(reader, out, layout);
   } else if (has("SECONDS") && has("PID") && has("VALUE")) {
     read_pid_rows(reader, header, out, options.torque_speed);
-  } else if (auto layout = named_columns(reader, header, options.torque_speed, std::string(name))) {
+  } else if (auto layout =
+                 named_columns(reader, header, options.torque_speed, std::string(name), quantities)) {
     read_obd(reader, out, *layout);
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);  // an export without speed: its own error

@@ -185,6 +185,32 @@ TEST_CASE("io: a speed and rpm log whose speeds are whole km/h in mph or m/s is 
   CHECK(read_log_text(measured).speed_unit == "km/h");
 }
 
+TEST_CASE("io: readings written with their units, as python-OBD writes them, read with those units") {
+  // SPEED names no unit; its cells do: a named-column log in km/h, its rpm cells read as numbers.
+  const SampleLog kmh = read_log_text(
+      "timestamp,RPM,SPEED,COOLANT_TEMP\n"
+      "2025-04-11 18:13:28,790.5 revolutions_per_minute,0.0 kilometer_per_hour,93 degree_Celsius\n"
+      "2025-04-11 18:13:30,1511.0 revolutions_per_minute,12.0 kilometer_per_hour,93 degree_Celsius\n");
+  CHECK(kmh.format == SampleFileFormat::kColumns);
+  CHECK(kmh.speed_column == "SPEED (km/h)");
+  REQUIRE(kmh.samples.size() == 2);
+  CHECK(kmh.samples[1].t == Approx(2.0));
+  CHECK(kmh.samples[1].speed == Approx(12 / 3.6));
+  CHECK(kmh.samples[1].freq == Approx(1511.0 / 60));
+  // Converted to mph by the logger; a cell in another unit than its column's is a bad row.
+  const SampleLog mph = read_log_text(
+      "time,Engine RPM,Vehicle Speed\n0,800.0 revolutions_per_minute,10.0 mile_per_hour\n"
+      "1,900.0 revolutions_per_minute,12.0 kilometer_per_hour\n2,1000.0 revolutions_per_minute,11 "
+      "mile_per_hour\n");
+  CHECK(mph.speed_column == "Vehicle Speed (mph)");
+  REQUIRE(mph.samples.size() == 2);
+  CHECK(mph.samples[1].speed == Approx(11 * 0.44704));
+  REQUIRE(mph.skipped_count == 1);
+  CHECK(mph.skipped[0].find(":3: not a number in column speed") != std::string::npos);
+  // A speed,rpm log without units in its cells is as before.
+  CHECK(read_log_text("speed,rpm\n7,898\n1,917\n").format == SampleFileFormat::kSpeedRpm);
+}
+
 TEST_CASE("io: row_seconds is the row counter's unit in logs without a time column, and only there") {
   gearpulse::ReadOptions options;
   options.row_seconds = 0.5;
