@@ -256,6 +256,7 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const bool named = format == SampleFileFormat::kColumns || format == SampleFileFormat::kSpeedRpm;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
+  std::optional<double> epoch_ms;  // the first time cell in milliseconds since 1970
   DigitGroups groups(reader);
   // A cell that writes the column's unit after its number is the number; any other stays as written.
   constexpr double kRpmToMs = -1.0;  // no speed unit's: marks the rpm column
@@ -275,10 +276,16 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     t.value = counter * out.row_seconds();
     if (it) {
       t = groups.read(cells[*it], "time");
-      // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds.
+      // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds. They count
+      // from the log's first in whole milliseconds, then become seconds: 1.5e12 ms made seconds first keep
+      // 2e-7 s, and replay printed 1.599 s as 1.5990002155303955.
       constexpr double kMillisecondsAtLeast = 1e11;
-      if (t.kind == CellKind::kNumber)
-        t.value *= named && t.value >= kMillisecondsAtLeast ? 1e-3 : layout.time_to_s;
+      if (t.kind == CellKind::kNumber && named && t.value >= kMillisecondsAtLeast) {
+        if (!epoch_ms) epoch_ms = t.value;
+        t.value = (t.value - *epoch_ms) / 1000.0;
+      } else if (t.kind == CellKind::kNumber) {
+        t.value *= layout.time_to_s;
+      }
       const auto clock = named && t.kind == CellKind::kBad ? parse_clock(cells[*it]) : std::nullopt;
       if (clock) {
         t = Cell{CellKind::kNumber, clock->first, {}};
