@@ -132,6 +132,12 @@ TEST_CASE("io: a row of units under the header names the units its columns' name
         "log.csv:1: speed column 'Vehicle speed' states no unit: name it with km/h, mph, m/s or knots");
   CHECK(error_of("Time,Mode,Note\ns,-,text\n").rfind("log.csv:1: unrecognised header 'Time,Mode,Note'", 0) ==
         0);
+  // A Freematics logger's `ms:PID=value` lines (after its `#FREEMATICS...` comment line) are named, with the
+  // way to a table.
+  const std::string freematics = error_of("#FREEMATICSEV=1,TS=39890\n40620:0=40620 \n40620:10D=12 \n");
+  CHECK(freematics.rfind("log.csv:2: unrecognised header '40620:0=40620 ': a Freematics log", 0) == 0);
+  CHECK(freematics.find("10C (rpm) and 10D (speed, km/h)") != std::string::npos);
+  CHECK(error_of("12:30,x\n").find("Freematics") == std::string::npos);
 }
 
 TEST_CASE("io: lines of an app's notes before the header are passed over, up to 32") {
