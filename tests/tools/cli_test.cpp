@@ -269,6 +269,23 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
   char per_1000[32];
   std::snprintf(per_1000, sizeof per_1000, "%.1f km/h per 1000 rpm", top * 60.0);  // (m/s)/Hz -> km/h/krpm
   CHECK(rpm.err.find(per_1000) != std::string::npos);
+  CHECK(rpm.err.find("names no unit: read as km/h") != std::string::npos);  // speeds to the metre per hour
+  // The same drive as a logger that converts the OBD speed (whole km/h) to mph writes it: read in mph, said.
+  std::string mph_log = "t,speed,rpm\n";
+  for (const gearpulse::Sample& s : samples.samples) {
+    char row[96];
+    if (s.has_speed() && s.has_freq()) {
+      std::snprintf(row, sizeof row, "%.3f,%.6f,%.2f\n", s.t, std::round(s.speed * 3.6) / 1.609344,
+                    s.freq * 60.0);
+      mph_log += row;
+    }
+  }
+  write((dir / "mph.csv").string(), mph_log);
+  const Result mph = run(dir, "fit " + (dir / "mph.csv").string());
+  REQUIRE(mph.status == 0);
+  CHECK(mph.err.find("every value is a whole km/h in mph (an OBD speed converted): read as mph") !=
+        std::string::npos);
+  CHECK(nlohmann::json::parse(mph.out)["gears"].back()["theta"].get<double>() == Approx(top).epsilon(0.02));
   // The drive without its launches: no first gear.
   std::string no_launch = "t,speed,freq\n";
   for (const gearpulse::Sample& s : samples.samples) {
