@@ -5,7 +5,7 @@
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
-//   bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S] [--lag S]
+//   bench_tracker --scenes tuning|report|check|runup [--band LO:HI] [--window S] [--hop S] [--lag S]
 //                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
 //                 [--hop S] [--lag S] [--offset S] [--dump]
@@ -16,6 +16,8 @@
 // between f and 2 f, automatic gain, clipping, launches) at 10, 0 and -5 dB over one of two fixed seed
 // sets: "tuning" (seeds 101-106, for choosing constants), "report" (seeds 201-206, for figures only) or
 // "check" (seeds 301-306, a second unseen set for a change's side effects, not for choosing constants).
+// "runup" is six run-ups at full throttle (970 -> 4,820 rpm over 10-20 s, seeds 101-106's levels and lines)
+// whose 2nd harmonic rises through the fundamental at 2,400 rpm, at 30, 20 and 10 dB by default.
 // --scene-without switches components of the scenes off (agc, clipping, resonance, spikes, fan, pump,
 // mains, whine, half, swap, third; see sim::scene_without), the noise level unchanged; --scene-snr scores
 // one SNR instead of the three.
@@ -63,16 +65,17 @@ int main(int argc, char** argv) {
   std::string scene_set;
   std::vector<std::string> without;
   std::vector<double> scene_snr = {10.0, 0.0, -5.0};
+  bool snr_given = false;
   WavOptions wav;
   const auto usage = [] {
-    std::fprintf(
-        stderr,
-        "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
-        "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
-        "       bench_tracker --scenes tuning|report|check [--band LO:HI] [--window S] [--hop S] [--lag S]\n"
-        "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]\n"
-        "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
-        "                     [--window S] [--hop S] [--lag S] [--offset S] [--dump]\n");
+    std::fprintf(stderr,
+                 "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
+                 "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
+                 "       bench_tracker --scenes tuning|report|check|runup [--band LO:HI] [--window S]\n"
+                 "                     [--hop S] [--lag S]\n"
+                 "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]\n"
+                 "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
+                 "                     [--window S] [--hop S] [--lag S] [--offset S] [--dump]\n");
     return 2;
   };
   for (int i = 1; i < argc; ++i) {
@@ -81,7 +84,9 @@ int main(int argc, char** argv) {
     double number = 0.0;
     if (a == "--scenes" && more) {
       scene_set = argv[++i];
-      if (scene_set != "tuning" && scene_set != "report" && scene_set != "check") return usage();
+      if (scene_set != "tuning" && scene_set != "report" && scene_set != "check" && scene_set != "runup")
+        return usage();
+      if (scene_set == "runup" && !snr_given) scene_snr = {30.0, 20.0, 10.0};
     } else if (a == "--scene-without" && more) {
       // A comma-separated list of components.
       std::string list = argv[++i];
@@ -97,6 +102,7 @@ int main(int argc, char** argv) {
     } else if (a == "--scene-snr" && more) {
       if (!parse_number(argv[++i], number)) return usage();
       scene_snr = {number};
+      snr_given = true;
     } else if (a == "--wav" && more) {
       wav.wav = argv[++i];
     } else if (a == "--tacho" && more) {

@@ -99,7 +99,13 @@ void LighterScene::generate(std::span<float> out) {
       load_ = std::clamp(0.5 + 0.5 * slope_ / c.load_slew_hz_per_s + load_drift_, 0.0, 1.0);
       const double swing = c.load_swing * (2.0 * load_ - 1.0);
       const double p = kTwoPi * phase_;
-      v += a * ((1.0 + swing) * std::sin(p) + c.harmonic2 * (1.0 - swing) * std::sin(2.0 * p + 0.7) +
+      double second = c.harmonic2 * (1.0 - swing);
+      if (c.harmonic2_peak_hz > 0.0) {
+        const double x = 2.0 * f / c.harmonic2_peak_hz;
+        const double detune = c.harmonic2_peak_q * (x - 1.0 / x);
+        second *= 1.0 + (c.harmonic2_peak - 1.0) / (1.0 + detune * detune);
+      }
+      v += a * ((1.0 + swing) * std::sin(p) + second * std::sin(2.0 * p + 0.7) +
                 c.harmonic3 * std::sin(3.0 * p + 1.9) + c.half_order * std::sin(0.5 * p + 0.3) +
                 c.order_1_5 * std::sin(1.5 * p + 2.3));
       v += a * c.alternator * std::sin(kTwoPi * alt_phase_);
@@ -213,6 +219,14 @@ bool scene_without(LighterSceneConfig& config, std::string_view component,
   if (found == kSceneComponents.end()) return false;
   found->switch_off(config, trajectory, duration_s);
   return true;
+}
+
+FrequencyTrajectory run_up_trajectory(double ramp_s) {
+  constexpr double kIdleS = 3.0, kHoldS = 2.0, kFromHz = 970.0 / 30.0, kToHz = 4820.0 / 30.0;
+  return [ramp_s](double t) {
+    if (!(t >= 0.0) || t > kIdleS + ramp_s + kHoldS) return std::numeric_limits<double>::quiet_NaN();
+    return kFromHz + (kToHz - kFromHz) * std::clamp((t - kIdleS) / ramp_s, 0.0, 1.0);
+  };
 }
 
 FrequencyTrajectory launch_drive_trajectory(double duration_s, std::uint64_t seed) {

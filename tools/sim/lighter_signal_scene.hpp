@@ -41,6 +41,12 @@ struct LighterSceneConfig {
   // harmonic's harmonic2 (1 - swing (2 load - 1)).
   double load_swing = 0.6;
   double load_slew_hz_per_s = 30.0;  // engine acceleration that means full load (f's slope)
+  // A resonance of the supply or the body that the 2nd harmonic passes through (at 2 f = harmonic2_peak_hz
+  // its amplitude is harmonic2_peak times the above, with quality factor harmonic2_peak_q): the 2nd
+  // harmonic rises through the fundamental at mid revs on a run-up. 0 Hz = none (scene_for_seed()'s).
+  double harmonic2_peak_hz = 0.0;
+  double harmonic2_peak = 1.0;
+  double harmonic2_peak_q = 3.0;
   double spike_amplitude = 2.0;
   double spike_decay_s = 2e-4;
   double alternator_ratio = 2.7;  // alternator line at this multiple of the crank rate
@@ -119,6 +125,10 @@ class LighterScene {
 
 [[nodiscard]] std::vector<float> make_lighter_scene(const LighterSceneConfig& config,
                                                     const FrequencyTrajectory& trajectory, double duration_s);
+
+// A run-up of a four-cylinder at full throttle, as its firing frequency: idle at 970 rpm (32.3 Hz) for
+// 3 s, a steady ramp to 4,820 rpm (160.7 Hz) over ramp_s, then 2 s held there.
+[[nodiscard]] FrequencyTrajectory run_up_trajectory(double ramp_s);
 
 // A drive of a four-cylinder for the scene, as its firing frequency: idle at 750-900 rpm (25-30 Hz,
 // below the 50-200 Hz band), launches at up to 1,500 rpm/s (50 Hz/s), shifts, cruising, engine braking
