@@ -47,23 +47,11 @@ struct ShiftSplit {
   }
 };
 
-// The run-up set: the scene of each tuning seed's levels and other lines, driven by a run-up at full
-// throttle (970 -> 4,820 rpm over 10, 12, ... 20 s: a slope that means full load, the fundamental leading)
-// whose 2nd harmonic passes a resonance at 160 Hz (the engine at 2,400 rpm), where it stands 6 dB over the
-// fundamental: a real cabin run-up once held the track at twice the engine there for 0.6 s.
-constexpr double kRunUpIdleS = 3.0, kRunUpHoldS = 2.0, kRunUpFromHz = 970.0 / 30.0,
-                 kRunUpToHz = 4820.0 / 30.0;
-constexpr double kRunUpSecondHz = 160.0, kRunUpSecondOver = 2.0;
-
+// The run-up set: the scenes of the tuning seeds' levels and other lines, driven by a run-up at full throttle
+// (970 -> 4,820 rpm over 10, 12, ... 20 s) whose 2nd harmonic stands 6 dB over the fundamental at 2,400 rpm
+// (sim::run_up_scene_for_seed()): a real cabin run-up was once held at twice the engine there for 0.6 s.
 double run_up_ramp_s(int i) {
   return 10.0 + 2.0 * i;
-}
-
-void make_run_up(sim::LighterSceneConfig& cfg, double ramp_s) {
-  cfg.load_slew_hz_per_s = (kRunUpToHz - kRunUpFromHz) / ramp_s;
-  const double full = 1.0 + cfg.load_swing;  // the fundamental at full load; the 2nd harmonic's below
-  cfg.harmonic2_peak_hz = kRunUpSecondHz;
-  cfg.harmonic2_peak = kRunUpSecondOver * full / (cfg.harmonic2 * (1.0 - cfg.load_swing));
 }
 
 }  // namespace
@@ -76,18 +64,15 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
   constexpr int kSeeds = 6;
   if (run_up)
     std::printf(
-        "scenes (runup set: seeds %llu-%llu's levels, run-ups of a four-cylinder at full throttle, 970 -> "
-        "4,820 "
-        "rpm over 10-20 s, the 2nd harmonic %g times the fundamental at %g Hz), band %g:%g Hz, window %g s, "
-        "hop "
-        "%g s\n",
+        "scenes (runup set: the levels of seeds %llu-%llu, run-ups of a four-cylinder at full throttle, "
+        "970 -> 4,820 rpm over 10-20 s, the 2nd harmonic 6 dB over the fundamental at 80 Hz), band %g:%g Hz, "
+        "window %g s, hop %g s\n",
         static_cast<unsigned long long>(first), static_cast<unsigned long long>(first + kSeeds - 1),
-        kRunUpSecondOver, kRunUpSecondHz / 2.0, base.band_lo_hz, base.band_hi_hz, base.window_s, base.hop_s);
+        base.band_lo_hz, base.band_hi_hz, base.window_s, base.hop_s);
   else
     std::printf(
-        "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), band "
-        "%g:%g "
-        "Hz, window %g s, hop %g s\n",
+        "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), "
+        "band %g:%g Hz, window %g s, hop %g s\n",
         set.c_str(), static_cast<unsigned long long>(first),
         static_cast<unsigned long long>(first + kSeeds - 1), kDurationS, base.band_lo_hz, base.band_hi_hz,
         base.window_s, base.hop_s);
@@ -104,11 +89,11 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
     ShiftSplit split;
     for (int i = 0; i < kSeeds; ++i) {
       const std::uint64_t seed = first + static_cast<std::uint64_t>(i);
-      const double duration = run_up ? kRunUpIdleS + run_up_ramp_s(i) + kRunUpHoldS : kDurationS;
+      const double duration = run_up ? sim::run_up_duration(run_up_ramp_s(i)) : kDurationS;
       const auto trajectory =
           run_up ? sim::run_up_trajectory(run_up_ramp_s(i)) : sim::launch_drive_trajectory(duration, seed);
-      sim::LighterSceneConfig cfg = sim::scene_for_seed(seed, snr);
-      if (run_up) make_run_up(cfg, run_up_ramp_s(i));
+      sim::LighterSceneConfig cfg =
+          run_up ? sim::run_up_scene_for_seed(seed, snr, run_up_ramp_s(i)) : sim::scene_for_seed(seed, snr);
       // The automatic gain last: its fixed stand-in holds the envelope of the components left on.
       for (const bool gain : {false, true})
         for (const std::string& w : without)

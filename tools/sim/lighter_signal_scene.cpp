@@ -15,6 +15,11 @@ constexpr double kSlopeS = 0.3;
 constexpr double kLoadWanderS = 3.0;
 constexpr double kLoadWander = 0.2;
 constexpr double kPumpWobble = 0.01;  // relative, over about 7 s
+// The run-up: 3 s at 970 rpm, the ramp to 4,820 rpm, 2 s there (firing frequencies of a four-cylinder); the
+// 2nd harmonic's resonance at 160 Hz, the 2nd harmonic of the engine at 2,400 rpm.
+constexpr double kRunUpIdleS = 3.0, kRunUpHoldS = 2.0, kRunUpFromHz = 970.0 / 30.0,
+                 kRunUpToHz = 4820.0 / 30.0;
+constexpr double kRunUpSecondHz = 160.0;
 
 bool engine_on(double f) {
   return std::isfinite(f) && f > 0.0;
@@ -222,11 +227,24 @@ bool scene_without(LighterSceneConfig& config, std::string_view component,
 }
 
 FrequencyTrajectory run_up_trajectory(double ramp_s) {
-  constexpr double kIdleS = 3.0, kHoldS = 2.0, kFromHz = 970.0 / 30.0, kToHz = 4820.0 / 30.0;
   return [ramp_s](double t) {
-    if (!(t >= 0.0) || t > kIdleS + ramp_s + kHoldS) return std::numeric_limits<double>::quiet_NaN();
-    return kFromHz + (kToHz - kFromHz) * std::clamp((t - kIdleS) / ramp_s, 0.0, 1.0);
+    if (!(t >= 0.0) || t > run_up_duration(ramp_s)) return std::numeric_limits<double>::quiet_NaN();
+    return kRunUpFromHz + (kRunUpToHz - kRunUpFromHz) * std::clamp((t - kRunUpIdleS) / ramp_s, 0.0, 1.0);
   };
+}
+
+double run_up_duration(double ramp_s) {
+  return kRunUpIdleS + ramp_s + kRunUpHoldS;
+}
+
+LighterSceneConfig run_up_scene_for_seed(std::uint64_t seed, double snr_db, double ramp_s,
+                                         double second_over) {
+  LighterSceneConfig c = scene_for_seed(seed, snr_db);
+  c.load_slew_hz_per_s = (kRunUpToHz - kRunUpFromHz) / ramp_s;
+  c.harmonic2_peak_hz = kRunUpSecondHz;
+  // At the peak and full load: harmonic2 (1 - swing) times the gain over the fundamental's 1 + swing.
+  c.harmonic2_peak = second_over * (1.0 + c.load_swing) / (c.harmonic2 * (1.0 - c.load_swing));
+  return c;
 }
 
 FrequencyTrajectory launch_drive_trajectory(double duration_s, std::uint64_t seed) {

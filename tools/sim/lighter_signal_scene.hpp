@@ -127,8 +127,15 @@ class LighterScene {
                                                     const FrequencyTrajectory& trajectory, double duration_s);
 
 // A run-up of a four-cylinder at full throttle, as its firing frequency: idle at 970 rpm (32.3 Hz) for
-// 3 s, a steady ramp to 4,820 rpm (160.7 Hz) over ramp_s, then 2 s held there.
+// 3 s, a steady ramp to 4,820 rpm (160.7 Hz) over ramp_s, then 2 s held there (run_up_duration()).
 [[nodiscard]] FrequencyTrajectory run_up_trajectory(double ramp_s);
+[[nodiscard]] double run_up_duration(double ramp_s);
+// The scene of that run-up: scene_for_seed()'s levels and lines, the ramp's slope the full-load slope, and
+// the 2nd harmonic through a resonance at 160 Hz (the engine at 2,400 rpm), where at full load it stands
+// second_over times the fundamental's amplitude (a real cabin run-up's 2nd harmonic rose through the
+// fundamental at mid revs).
+[[nodiscard]] LighterSceneConfig run_up_scene_for_seed(std::uint64_t seed, double snr_db, double ramp_s,
+                                                       double second_over = 2.0);
 
 // A drive of a four-cylinder for the scene, as its firing frequency: idle at 750-900 rpm (25-30 Hz,
 // below the 50-200 Hz band), launches at up to 1,500 rpm/s (50 Hz/s), shifts, cruising, engine braking
