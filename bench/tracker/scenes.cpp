@@ -58,17 +58,18 @@ double run_up_ramp_s(int i) {
 
 int scenes(const std::string& set, const TrackerConfig& base, const std::vector<std::string>& without,
            const std::vector<double>& snrs) {
-  const bool run_up = set == "runup";
+  const bool run_up = set.starts_with("runup");
   constexpr double kDurationS = 120.0;
-  const std::uint64_t first = set == "tuning" || run_up ? 101 : set == "check" ? 301 : 201;
+  const std::uint64_t first = set == "tuning" || set == "runup" ? 101 : set == "check" ? 301 : 201;
   constexpr int kSeeds = 6;
   if (run_up)
     std::printf(
-        "scenes (runup set: the levels of seeds %llu-%llu, run-ups of a four-cylinder at full throttle, "
+        "scenes (%s set: the levels of seeds %llu-%llu, run-ups of a four-cylinder at full throttle, "
         "970 -> 4,820 rpm over 10-20 s, the 2nd harmonic 6 dB over the fundamental at 80 Hz), band %g:%g Hz, "
         "window %g s, hop %g s\n",
-        static_cast<unsigned long long>(first), static_cast<unsigned long long>(first + kSeeds - 1),
-        base.band_lo_hz, base.band_hi_hz, base.window_s, base.hop_s);
+        set.c_str(), static_cast<unsigned long long>(first),
+        static_cast<unsigned long long>(first + kSeeds - 1), base.band_lo_hz, base.band_hi_hz, base.window_s,
+        base.hop_s);
   else
     std::printf(
         "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), "
