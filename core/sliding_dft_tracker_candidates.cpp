@@ -39,14 +39,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, st
   const double third_w = third_n / (third_n + third_prior);
   const double third_ratio = std::pow(10.0, 0.1 * third_mean_db);
   const double third_spread = std::sqrt(third_var_db + kThirdSpreadFloorDb * kThirdSpreadFloorDb);
-  // The line the track follows, where it has led its 2nd harmonic by more than a half order may trail its
-  // fundamental: the state at twice it does not read it as its half order (the bin says nothing, as under a
-  // learned tone). With an ignition comb every multiple of the engine is a line, and a state at twice the
-  // engine reads a full ladder with the engine's fundamental as its half order; once the 2nd harmonic rises
-  // through the fundamental (a resonance at mid revs), that ladder outscored the engine's for seconds.
-  const double line = line_leads_second ? track->predicted() : kNaN;
   for (int k = s_lo; k <= k_hi; ++k) {
-    const bool twice_line = std::abs(0.5 * k * df - line) <= lobe * df;  // false when there is no line
     const double z1 = z_at(static_cast<std::size_t>(k));
     // A line puts its maximum where it is: a state on the shoulder of a stronger peak within one
     // resolution bin is penalised by the amplitude mismatch (sqrt z has unit-order noise).
@@ -73,7 +66,7 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, st
         const double pos = kOrder[o] * k;
         if (pos * df > harmonic_limit_hz || pos < noise_lo) continue;
         const auto b = static_cast<std::size_t>(std::lround(pos));
-        if (tones->near(b) || (o == 0 && twice_line)) continue;
+        if (tones->near(b)) continue;
         const double z = z_at(b);
         const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent)
                              : o == 2 ? evidence.second(z, rho, level)

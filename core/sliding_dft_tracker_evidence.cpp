@@ -24,7 +24,7 @@ constexpr double kMatched = 0.5;
 // Order-to-fundamental SNR ratio r: log-uniform over 0.02 .. 2 (-17 to +3 dB) for the harmonics, up to
 // 0.5 for the half order (a "half order" stronger than the fundamental means the candidate is the
 // engine's 2nd harmonic), or the order absent altogether.
-constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = HarmonicEvidence::kHalfOrderMax;
+constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 // The 2nd harmonic of a four-stroke's firing frequency takes the fundamental's energy at light load and on
 // the overrun, where it stands up to 15 dB over it. Its ratio is drawn from a mixture: with probability
 // 1 - kLoudSecond as the other harmonics', with kLoudSecond log-uniform over 2 .. 30 (+3 to +15 dB). A

@@ -34,8 +34,6 @@ class HarmonicEvidence {
   enum class Level { kTrack, kRead };
   // Prior probability that an order other than the fundamental is absent (half_order() takes a learned one).
   static constexpr double kOrderAbsent = 0.03;
-  // The half order's power is at most this share of the fundamental's (-3 dB: the top of its level prior).
-  static constexpr double kHalfOrderMax = 0.5;
   // The tables for the default tone prior, built once (thread-safe) and shared by every tracker.
   static const HarmonicEvidence& shared();
   explicit HarmonicEvidence(double tone_prior);

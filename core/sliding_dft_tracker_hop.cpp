@@ -10,7 +10,6 @@ namespace gearpulse {
 void SlidingDftTracker::Impl::reset_track() noexcept {
   track->reset();
   rho_track = kDefaultRho;
-  line_leads_second = false;
 }
 
 TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
@@ -21,7 +20,6 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     return out;
   }
   track->predict();
-  if (!std::isfinite(track->predicted())) line_leads_second = false;  // the track's line was lost
   tones->mark();
   floor_is_noise = rho_track < kLeakRho;
   candidate_likelihoods(track->evidence(), track->overrun_layers() ? &track->overrun_excess() : nullptr,
@@ -67,15 +65,6 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     out.tracked = reported >= kTrackedConfidence;
   }
   track->observe(ev.freq, right, reported >= kTrackedConfidence);
-  // Whether the line the track follows leads its 2nd harmonic by more than a half order may trail its
-  // engine's fundamental (HarmonicEvidence: at most -3 dB): forgotten when the line does not continue (a
-  // jump beyond the slew), kept while it does.
-  if (!(right >= kTrackedConfidence) ||
-      !(std::abs(ev.freq - predicted) <= cfg.max_slew_hz_per_s * cfg.hop_s + 2.0 * df))
-    line_leads_second = false;
-  if (right >= kTrackedConfidence && ev.available[1] && ev.available[2] &&
-      HarmonicEvidence::kHalfOrderMax * (ev.snr[1] - 1.0) > ev.snr[2] - 1.0)
-    line_leads_second = true;
   // The track's fundamental level, for the matched test of the next hops.
   if (right >= kTrackedConfidence)
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * std::max(ev.snr[1] - 1.0, 1.0);

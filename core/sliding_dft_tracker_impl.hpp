@@ -137,9 +137,6 @@ struct SlidingDftTracker::Impl {
   std::optional<TrackModel> track;
   std::vector<double> at_loglik;  // at()'s candidates, apart from the track's
   double rho_track = kDefaultRho;
-  // The track's line, followed from hop to hop with confidence, has been read at more than twice its 2nd
-  // harmonic's power: it is then no half order of the line at twice it (candidate_likelihoods()).
-  bool line_leads_second = false;
   bool floor_is_noise = true;    // rho_track below kLeakRho (this hop)
   std::optional<ToneMap> tones;  // fixed tones of other equipment, counted as background
 
