@@ -26,6 +26,9 @@ inline constexpr double kKmhToMs = 1.0 / 3.6;
 inline constexpr double kMphToMs = 0.44704;
 inline constexpr double kKnotToMs = 1852.0 / 3600.0;  // a nautical mile (1852 m) an hour
 inline constexpr double kSecondsPerMinute = 60.0;     // freq = rpm / 60
+// The units a user names (ReadOptions::speed_unit), and a stated unit's name (speed_unit() gives its m/s).
+inline constexpr SpeedUnit kSpeedUnits[] = {
+    {kKmhToMs, "km/h"}, {kMphToMs, "mph"}, {1.0, "m/s"}, {kKnotToMs, "knots"}};
 
 std::string_view trim(std::string_view s) noexcept;
 
@@ -345,6 +348,8 @@ struct ObdLayout {
   double time_to_s = 1.0;
   std::string speed_column;
   bool quantities = false;  // the rpm and speed cells may carry their unit after the number (quantity_cell)
+  // speed_to_ms's name (SampleLog::speed_unit); empty in a speed,rpm log read by its values' unit.
+  std::string_view speed_unit = {};
 };
 
 // The seconds per unit of a time column, from its folded name (time, timestamp, seconds, t or ts; in
@@ -352,9 +357,11 @@ struct ObdLayout {
 double time_unit(std::string_view folded_name);
 
 // A named-column log's layout (core/obd_logs.cpp says how columns are found): none when the header has no
-// rpm or no speed column. Throws SampleFileError when the only speed column states no unit.
+// rpm or no speed column. A speed column that states no unit is read in `unitless` (ReadOptions::speed_unit)
+// when no column that states one is there; without it, throws SampleFileError when the only speed column
+// states no unit.
 std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
-                                      const std::string& name);
+                                      std::optional<SpeedUnit> unitless, const std::string& name);
 
 // Carloop, `speed,rpm` and named-column logs, laid out as `layout` says.
 void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout);

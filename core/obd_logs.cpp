@@ -150,10 +150,6 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
 // multiple of, over at least kMinValues distinct speeds, one of them not a whole number as written (whole
 // numbers are km/h themselves); else km/h. A speed in another unit, as measured, comes that near a multiple
 // by chance in under one value in five at the speeds driven, in all of ten about once in 10^7 logs.
-struct SpeedUnit {
-  double to_ms;
-  const char* name;
-};
 SpeedUnit unitless_speed_unit(const std::vector<ObdRow>& rows) {
   constexpr std::size_t kMinValues = 10;
   // Off a whole km/h by the printed digits (two decimals are 0.008 km/h in mph) and by the conversion
@@ -167,15 +163,15 @@ SpeedUnit unitless_speed_unit(const std::vector<ObdRow>& rows) {
   const bool fractions =
       std::any_of(moving.begin(), moving.end(), [](double v) { return std::abs(v - std::round(v)) > 1e-6; });
   if (moving.size() >= kMinValues && fractions)
-    for (const SpeedUnit unit : {SpeedUnit{kMphToMs, "mph"}, SpeedUnit{1.0, "m/s"}}) {
-      const double step = kKmhToMs / unit.to_ms;  // 1 km/h in the unit
+    for (const SpeedUnit& unit : {kSpeedUnits[1], kSpeedUnits[2]}) {  // mph, m/s
+      const double step = kKmhToMs / unit.to_ms;                      // 1 km/h in the unit
       const bool whole = std::all_of(moving.begin(), moving.end(), [&](double v) {
         const double kmh = v / step;
         return std::abs(kmh - std::round(kmh)) <= kDigits + kFactor * kmh;
       });
       if (whole) return unit;
     }
-  return {kKmhToMs, "km/h"};
+  return kSpeedUnits[0];  // km/h
 }
 
 }  // namespace
@@ -194,14 +190,15 @@ double time_unit(std::string_view folded_name) {
 
 // Logs of other OBD apps and data sets, found by their column names (see folded()): the first column
 // whose name holds "rpm"; a speed column, whose name holds "speed" and states its unit, a GPS one (its name
-// holds "gps") or another as `--speed` asks (auto: GPS when there is one); a time column named time,
-// timestamp, seconds, t or ts, in milliseconds when its name ends in ms, (ms) or [ms]. None when the header
-// has no rpm or no speed column; an error naming the column when the only speed has no unit.
+// holds "gps") or another as `--speed` asks (auto: GPS when there is one); else one whose name states no
+// unit, chosen the same way, read in `unitless`; a time column named time, timestamp, seconds, t or ts, in
+// milliseconds when its name ends in ms, (ms) or [ms]. None when the header has no rpm or no speed column;
+// an error naming the column when the only speed has no unit and `unitless` gives none.
 std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
-                                      const std::string& name) {
+                                      std::optional<SpeedUnit> unitless, const std::string& name) {
   ObdLayout layout;
   layout.format = SampleFileFormat::kColumns;
-  std::optional<std::size_t> rpm, gps, other, unitless;
+  std::optional<std::size_t> rpm, gps, other, unitless_gps, unitless_other;
   for (std::size_t i = 0; i < header.size(); ++i) {
     const std::string f = folded(header[i]);
     if (f.find("rpm") != std::string::npos) {
@@ -214,31 +211,43 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
       continue;
     }
     if (f.find("speed") == std::string::npos || summary_column(f)) continue;
-    if (speed_unit(f) == 0.0) {
-      if (!unitless) unitless = i;
-    } else if (f.find("gps") != std::string::npos) {
-      if (!gps) gps = i;
-    } else if (!other) {
-      other = i;
-    }
+    const bool is_gps = f.find("gps") != std::string::npos;
+    std::optional<std::size_t>& column =
+        speed_unit(f) == 0.0 ? (is_gps ? unitless_gps : unitless_other) : (is_gps ? gps : other);
+    if (!column) column = i;
   }
   if (!rpm) return std::nullopt;
-  std::optional<std::size_t> speed = choice == TorqueSpeed::kObd ? other : gps ? gps : other;
-  if (choice == TorqueSpeed::kGps) speed = gps;
+  const auto pick = [choice](std::optional<std::size_t> gps_column, std::optional<std::size_t> other_column) {
+    if (choice == TorqueSpeed::kAuto) return gps_column ? gps_column : other_column;
+    return choice == TorqueSpeed::kGps ? gps_column : other_column;
+  };
+  std::optional<std::size_t> speed = pick(gps, other);
+  const bool stated = speed.has_value();
+  if (!speed && unitless) speed = pick(unitless_gps, unitless_other);
   if (!speed) {
-    if (choice != TorqueSpeed::kAuto && (gps || other))
+    const bool any_unitless = unitless_gps || unitless_other;
+    if (choice != TorqueSpeed::kAuto && (gps || other || (unitless && any_unitless)))
       throw SampleFileError(name + ":1: no " + (choice == TorqueSpeed::kGps ? "GPS" : "OBD") +
                             " speed column (a name holding 'speed' and a unit" +
                             (choice == TorqueSpeed::kGps ? ", and 'GPS')" : ", without 'GPS')"));
-    if (unitless)
-      throw SampleFileError(name + ":1: speed column " + quoted(header[*unitless]) +
-                            " states no unit: name it with km/h, mph, m/s or knots");
+    if (any_unitless)
+      throw SampleFileError(name + ":1: speed column " +
+                            quoted(header[std::min(unitless_gps.value_or(header.size()),
+                                                   unitless_other.value_or(header.size()))]) +
+                            " states no unit: name it with km/h, mph, m/s or knots, or pass --speed-unit");
     return std::nullopt;
   }
   layout.rpm = *rpm;
   layout.speed = *speed;
-  layout.speed_to_ms = speed_unit(folded(header[*speed]));
   layout.speed_column = header[*speed];
+  if (!stated) {
+    layout.speed_to_ms = unitless->to_ms;
+    layout.speed_unit = unitless->name;
+    return layout;
+  }
+  layout.speed_to_ms = speed_unit(folded(header[*speed]));
+  for (const SpeedUnit& unit : kSpeedUnits)
+    if (unit.to_ms == layout.speed_to_ms) layout.speed_unit = unit.name;
   return layout;
 }
 
@@ -323,7 +332,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
            parsed.size(), reader.restarts, [&](std::size_t i) { return parsed[i].line; },
            [&](std::size_t i) -> double& { return parsed[i].t; }, out.log()))
     parsed[i].drive_start = true;
-  if (format != SampleFileFormat::kSpeedRpm) {
+  out.log().speed_unit = layout.speed_unit;
+  if (format != SampleFileFormat::kSpeedRpm || !layout.speed_unit.empty()) {
     add_obd_rows(parsed, out, layout);
     return;
   }

@@ -123,23 +123,32 @@ bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
   return false;
 }
 
-// named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row.
+// named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row; a
+// speed column that states no unit in either is read in `unitless` (ReadOptions::speed_unit), if given.
 // `quantities`: the cells may write their units (quantity_cells()).
 std::optional<ObdLayout> named_columns(LineReader& reader, std::vector<std::string>& header,
-                                       TorqueSpeed choice, const std::string& name, bool quantities) {
+                                       const ReadOptions& options, const std::string& name, bool quantities) {
+  const TorqueSpeed choice = options.torque_speed;
   std::optional<ObdLayout> layout;
   try {
-    layout = named_layout(header, choice, name);
+    layout = named_layout(header, choice, std::nullopt, name);
   } catch (const SampleFileError&) {
-    if (!read_units_row(reader, header)) throw;
-    return named_layout(header, choice, name);
+    if (!read_units_row(reader, header) && !options.speed_unit) throw;
+    layout = named_layout(header, choice, options.speed_unit, name);
   }
-  if (!layout && read_units_row(reader, header)) layout = named_layout(header, choice, name);
+  if (!layout && read_units_row(reader, header))
+    layout = named_layout(header, choice, options.speed_unit, name);
   if (layout) layout->quantities = quantities;
   return layout;
 }
 
 }  // namespace
+
+std::optional<SpeedUnit> speed_unit_named(std::string_view name) noexcept {
+  for (const SpeedUnit& unit : kSpeedUnits)
+    if (unit.name == name) return unit;
+  return std::nullopt;
+}
 
 std::string_view format_name(SampleFileFormat format) noexcept {
   switch (format) {
@@ -300,6 +309,10 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
                      1.0,
                      "speed"};
     layout.quantities = quantities;
+    if (options.speed_unit) {
+      layout.speed_to_ms = options.speed_unit->to_ms;
+      layout.speed_unit = options.speed_unit->name;
+    }
     for (std::size_t i = 0; i < header.size() && !layout.time; ++i)  // a time column, as named columns'
       if (const double to_s = time_unit(folded(header[i])); to_s > 0.0) {
         layout.time = i;
@@ -308,8 +321,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     read_obd(reader, out, layout);
   } else if (has("SECONDS") && has("PID") && has("VALUE")) {
     read_pid_rows(reader, header, out, options.torque_speed);
-  } else if (auto layout =
-                 named_columns(reader, header, options.torque_speed, std::string(name), quantities)) {
+  } else if (auto layout = named_columns(reader, header, options, std::string(name), quantities)) {
     read_obd(reader, out, *layout);
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);  // an export without speed: its own error

@@ -32,6 +32,16 @@ enum class SampleFileFormat { kGeneric, kTorque, kCarloop, kSpeedRpm, kColumns, 
 // wheel-speed reading: smoother but quantised and often a few % high).
 enum class TorqueSpeed { kAuto, kGps, kObd };
 
+// A unit a speed column is read in: m/s per unit and its name (km/h, mph, m/s or knots), as `--speed-unit`
+// takes it and SampleLog::speed_unit says it.
+struct SpeedUnit {
+  double to_ms = 0.0;
+  std::string_view name;
+};
+
+// The unit named exactly km/h, mph, m/s or knots; none for any other text.
+[[nodiscard]] std::optional<SpeedUnit> speed_unit_named(std::string_view name) noexcept;
+
 struct ReadOptions {
   TorqueSpeed torque_speed = TorqueSpeed::kAuto;
   std::size_t max_messages = 1000;  // skip messages kept (all are counted)
@@ -39,6 +49,10 @@ struct ReadOptions {
   // Logs without a time column (`speed,rpm`, a Carloop log without its run time): seconds between rows,
   // the row counter's unit. Must be finite and > 0.
   double row_seconds = 1.0;
+  // The unit of a speed column whose name (and units row, and cells) states none: a named-column log's,
+  // refused without it, and a `speed,rpm` log's, told by its values without it. A column that states its
+  // unit keeps it; the generic log's speed is m/s, Torque's, Carloop's and PID rows' state theirs.
+  std::optional<SpeedUnit> speed_unit;
 };
 
 // One data row the reader accepted: its time and the sample that carries its values. An OBD row that
@@ -66,8 +80,9 @@ struct SampleLog {
   std::string name;
   SampleFileFormat format = SampleFileFormat::kGeneric;
   std::string speed_column;  // header of the column the speed came from (a PID-row log: the PID's name)
-  // A speed,rpm log's: the unit its speed column, which names none, was read in: km/h, or mph or m/s when
-  // every value is whole km/h in that unit (an OBD speed converted by the logger).
+  // A speed,rpm or named-column log's: the unit its speed column was read in (SpeedUnit::name). The one its
+  // name, units row or cells state; else ReadOptions::speed_unit; else a speed,rpm log's is km/h, or mph or
+  // m/s when every value is whole km/h in that unit (an OBD speed converted by the logger).
   std::string speed_unit;
   std::vector<Sample> samples;
   std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages

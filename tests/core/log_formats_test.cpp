@@ -321,7 +321,8 @@ TEST_CASE("io: another app's log is read by its column names: rpm, speed with a 
   }
   SECTION("a speed without a unit is refused, naming the column") {
     CHECK(error_of("Time,Engine RPM,Speed\n1,800,0\n") ==
-          "log.csv:1: speed column 'Speed' states no unit: name it with km/h, mph, m/s or knots");
+          "log.csv:1: speed column 'Speed' states no unit: name it with km/h, mph, m/s or knots, or pass "
+          "--speed-unit");
   }
 }
 

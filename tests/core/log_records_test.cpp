@@ -129,7 +129,8 @@ TEST_CASE("io: a row of units under the header names the units its columns' name
   CHECK(ms.samples[1].t == Approx(0.5));
   // A first data row is no units row: the speed states no unit, as without one.
   CHECK(error_of("Time,Engine RPM,Vehicle speed\n0,800,-\n") ==
-        "log.csv:1: speed column 'Vehicle speed' states no unit: name it with km/h, mph, m/s or knots");
+        "log.csv:1: speed column 'Vehicle speed' states no unit: name it with km/h, mph, m/s or knots, or "
+        "pass --speed-unit");
   CHECK(error_of("Time,Mode,Note\ns,-,text\n").rfind("log.csv:1: unrecognised header 'Time,Mode,Note'", 0) ==
         0);
   // A Freematics logger's `ms:PID=value` lines (after its `#FREEMATICS...` comment line) are named, with the

@@ -2,7 +2,7 @@
 // times are finite and never run backwards and whose values are in range, or throws SampleFileError; the
 // wheel-speed reader holds the same; and what write_samples writes reads back identically. The first byte
 // picks the options (Torque speed column, keep_rows, the message cap, the row spacing of logs without
-// times).
+// times, the unit of a speed column that states none).
 #include <cmath>
 #include <cstdint>
 #include <sstream>
@@ -52,6 +52,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   opt.max_messages = ((options >> 3) & 1) != 0 ? 3 : 1000;
   constexpr double kRowSeconds[] = {1.0, 2.0, 0.1, 3600.0};
   opt.row_seconds = kRowSeconds[(options >> 4) & 3];
+  constexpr const char* kSpeedUnits[] = {"", "mph", "km/h", "knots"};  // "": none given
+  opt.speed_unit = speed_unit_named(kSpeedUnits[(options >> 6) & 3]);
   const std::string text(reinterpret_cast<const char*>(data + 1), size - 1);
   SampleLog log;
   try {
