@@ -158,6 +158,8 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
                                   "fit --row-seconds inf " + log,
                                   "fit --row-seconds 2s " + log,
                                   "replay --model " + log + " --row-seconds 3601 " + log,
+                                  "fit --speed-unit kph " + log,
+                                  "replay --model " + log + " --speed-unit MPH " + log,
                                   "replay --model " + log + " --band-low -1 " + log,
                                   "replay --model " + log + " --band-low 50Hz " + log}) {
     INFO(args);
@@ -171,6 +173,8 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
   CHECK(run(dir, "fit --gears 1 " + log).err.find("from 2 to") != std::string::npos);
   CHECK(run(dir, "fit --row-seconds nan " + log).err.find("--row-seconds: must be a number of seconds") !=
         std::string::npos);
+  CHECK(run(dir, "fit --speed-unit kph " + log).err ==
+        "gearpulse: --speed-unit: must be km/h, mph, m/s or knots, not 'kph'\n");
   // A directory where a file belongs is named as one.
   for (const std::string& args :
        {"fit " + dir.path().string(), "replay --model " + dir.path().string() + " " + log}) {
@@ -222,13 +226,52 @@ TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothi
   CHECK(run(dir, "fit " + log).err.find("--speed") == std::string::npos);
 }
 
-TEST_CASE("cli: each command's --help names the logs it reads and what --speed applies to") {
+TEST_CASE("cli: --speed-unit reads a speed column that names no unit, one that names its own keeps it") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string bare = (dir / "bare.csv").string(), stated = (dir / "stated.csv").string();
+  const std::string rows = "0,800,0\n1,1500,10\n2,2100,20\n";
+  write(bare, "time,ENGINE_RPM,SPEED\n" + rows);
+  write(stated, "time,ENGINE_RPM,SPEED (km/h)\n" + rows);
+  // Refused without it, the way out named; read with it, in fit and replay.
+  const Result refused = run(dir, "fit " + bare);
+  CHECK(refused.status == 2);
+  CHECK(refused.err ==
+        "gearpulse: " + bare +
+            ":1: speed column 'SPEED' states no unit: name it with km/h, mph, m/s or knots, or "
+            "pass --speed-unit\n");
+  const Result mph = run(dir, "replay --model " + model + " --speed-unit mph " + bare);
+  REQUIRE(mph.status == 0);
+  CHECK(mph.out.find("\n2,8.9408,") != std::string::npos);  // 20 mph
+  CHECK(mph.err.find("--speed-unit") == std::string::npos);
+  // A column that states km/h stays km/h, said once with the column and both units.
+  const Result plain = run(dir, "replay --model " + model + " " + stated);
+  const Result against = run(dir, "replay --model " + model + " --speed-unit mph " + stated);
+  REQUIRE(against.status == 0);
+  CHECK(against.out == plain.out);
+  CHECK(against.out.find("\n2,5.5556,") != std::string::npos);  // 20 km/h
+  const std::string warning = "gearpulse: warning: " + stated +
+                              ": --speed-unit mph, but column 'SPEED (km/h)' states km/h: read as km/h\n";
+  CHECK(against.err.find(warning) != std::string::npos);
+  CHECK(against.err.find(warning, against.err.find(warning) + 1) == std::string::npos);
+  // The generic log's speed is m/s by contract: said to be untouched.
+  const std::string generic = simulated_log(dir, 21);
+  const Result on_generic = run(dir, "fit --speed-unit km/h " + generic);
+  CHECK(on_generic.status == 0);
+  CHECK(on_generic.out == run(dir, "fit " + generic).out);
+  CHECK(on_generic.err.find("--speed-unit applies to named-column and speed,rpm logs") != std::string::npos);
+}
+
+TEST_CASE("cli: each command's --help names the logs it reads and what --speed and --speed-unit apply to") {
   TempDir dir;
   for (const char* command : {"fit", "replay"}) {
     INFO(command);
     const Result r = run(dir, std::string(command) + " --help");
     CHECK(r.status == 0);
     CHECK(r.out.find("Torque Pro, named-column and PID-row logs: speed column") != std::string::npos);
+    CHECK(r.out.find("--speed-unit") != std::string::npos);
+    CHECK(r.out.find("whose name states none (named columns, speed,rpm): km/h, mph, m/s or knots") !=
+          std::string::npos);
   }
   const std::string fit = run(dir, "fit --help").out;
   for (const char* format : {"t,speed,freq", "Torque Pro", "Carloop", "speed,rpm", "SECONDS,PID,VALUE"})

@@ -225,8 +225,8 @@ TEST_CASE("cli: --row-seconds gives the rows of a log without a time column thei
   CHECK(at_one.out != with_times.out);
   CHECK(at_two.err.find("no time column") == std::string::npos);
   CHECK(at_two.err.find("note: " + rows_log +
-                        ": column 'speed' names no unit: read as km/h (name it 'speed "
-                        "(mph)' or 'speed (m/s)' if it is not)") != std::string::npos);
+                        ": column 'speed' names no unit: read as km/h (pass --speed-unit mph or m/s, "
+                        "or name it 'speed (mph)', if it is not)") != std::string::npos);
   CHECK(with_times.err.find("names no unit") == std::string::npos);
   CHECK(at_one.err.find("no time column") != std::string::npos);
   CHECK(at_one.err.find("--row-seconds") != std::string::npos);

@@ -330,3 +330,42 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
     CHECK((line.find("(rough)") != std::string::npos) == (error_pct >= 0.97));
   }
 }
+
+TEST_CASE("cli: fit --speed-unit reads a speed column that names no unit as a header naming it would") {
+  TempDir dir;
+  const gearpulse::SampleLog samples = read_log(simulated_log(dir, 21));
+  // The drive in mph, as a data set's SPEED column and as SPEED (mph); and as a speed,rpm log's whole km/h
+  // written in mph, which reads as mph unless told km/h.
+  std::string bare = "time,ENGINE_RPM,SPEED\n", named = "time,ENGINE_RPM,SPEED (mph)\n",
+              converted = "t,speed,rpm\n";
+  for (const gearpulse::Sample& s : samples.samples) {
+    if (!s.has_speed() || !s.has_freq()) continue;
+    char row[96];
+    std::snprintf(row, sizeof row, "%.3f,%.2f,%.3f\n", s.t, s.freq * 60.0, s.speed / 0.44704);
+    bare += row;
+    named += row;
+    std::snprintf(row, sizeof row, "%.3f,%.6f,%.2f\n", s.t, std::round(s.speed * 3.6) / 1.609344,
+                  s.freq * 60.0);
+    converted += row;
+  }
+  write((dir / "bare.csv").string(), bare);
+  write((dir / "named.csv").string(), named);
+  write((dir / "converted.csv").string(), converted);
+  const Result given = run(dir, "fit --speed-unit mph " + (dir / "bare.csv").string());
+  const Result stated = run(dir, "fit " + (dir / "named.csv").string());
+  REQUIRE(given.status == 0);
+  REQUIRE(stated.status == 0);
+  CHECK(nlohmann::json::parse(given.out)["gears"].size() >= 4);
+  CHECK(given.out == stated.out);  // the same ladder, to the last digit
+  CHECK(run(dir, "fit " + (dir / "bare.csv").string()).status == 2);
+  const Result as_mph = run(dir, "fit " + (dir / "converted.csv").string());
+  const Result as_kmh = run(dir, "fit --speed-unit km/h " + (dir / "converted.csv").string());
+  REQUIRE(as_mph.status == 0);
+  REQUIRE(as_kmh.status == 0);
+  CHECK(as_mph.err.find("read as mph") != std::string::npos);
+  CHECK(as_kmh.err.find("names no unit") == std::string::npos);  // told, not guessed: no note
+  const auto top = [](const Result& r) {
+    return nlohmann::json::parse(r.out)["gears"].back()["theta"].get<double>();
+  };
+  CHECK(top(as_kmh) == Approx(top(as_mph) / 1.609344).epsilon(0.01));
+}

@@ -37,7 +37,8 @@ struct FitCommand {
   std::string out;
   std::string plot;
   std::string speed = "auto";
-  std::optional<double> row_seconds;  // --row-seconds, unset when not given (the reader's default)
+  std::optional<double> row_seconds;      // --row-seconds, unset when not given (the reader's default)
+  std::optional<std::string> speed_unit;  // --speed-unit, unset when not given
   std::vector<std::string> files;
 };
 
@@ -158,6 +159,7 @@ int run_fit(const FitCommand& cmd) {
   ReadOptions read;
   read.torque_speed = parse_torque_speed(cmd.speed);
   if (cmd.row_seconds) read.row_seconds = *cmd.row_seconds;
+  if (cmd.speed_unit) read.speed_unit = speed_unit_named(*cmd.speed_unit);
 
   const std::vector<SampleLog> logs = read_sample_files(cmd.files, read);
   warn_row_seconds(logs, cmd.row_seconds.has_value(), false);
@@ -268,6 +270,7 @@ void add_fit(CLI::App& app, int& status) {
                   "GPS), gps or obd")
       ->capture_default_str();
   add_row_seconds_option(*sub, cmd->row_seconds);
+  add_speed_unit_option(*sub, cmd->speed_unit);
   sub->add_option("files", cmd->files,
                   "Sample logs (CSV): t,speed,freq, Torque Pro, Carloop, speed,rpm, phone OBD apps' "
                   "(columns named rpm and speed with its unit, or SECONDS,PID,VALUE rows); man gearpulse")

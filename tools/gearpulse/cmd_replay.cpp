@@ -27,8 +27,9 @@ namespace {
 struct ReplayCommand {
   std::string model;
   std::string speed = "auto";
-  std::optional<double> row_seconds;  // --row-seconds, unset when not given (the reader's default)
-  double band_low = 0.0;              // --band-low: the lowest frequency the log's readings can show (0: any)
+  std::optional<double> row_seconds;      // --row-seconds, unset when not given (the reader's default)
+  std::optional<std::string> speed_unit;  // --speed-unit, unset when not given
+  double band_low = 0.0;  // --band-low: the lowest frequency the log's readings can show (0: any)
   std::string file;
 };
 
@@ -58,6 +59,7 @@ int run_replay(const ReplayCommand& cmd) {
   read.torque_speed = parse_torque_speed(cmd.speed);
   read.keep_rows = true;
   if (cmd.row_seconds) read.row_seconds = *cmd.row_seconds;
+  if (cmd.speed_unit) read.speed_unit = speed_unit_named(*cmd.speed_unit);
   std::vector<SampleLog> logs = read_sample_files({cmd.file}, read);
   warn_row_seconds(logs, cmd.row_seconds.has_value(), true);
   const SampleLog log = std::move(logs.front());
@@ -119,6 +121,7 @@ void add_replay(CLI::App& app, int& status) {
          "Torque Pro, named-column and PID-row logs: speed column to use, auto (GPS if any), gps or obd")
       ->capture_default_str();
   add_row_seconds_option(*sub, cmd->row_seconds);
+  add_speed_unit_option(*sub, cmd->speed_unit);
   sub->add_option("--band-low", cmd->band_low,
                   "Hz: the lowest frequency the log's readings can show, as the daemon's tracker.band_low "
                   "(0: any; a log of gearpulsed's tracker readings: its band's low end)")

@@ -47,6 +47,18 @@ void add_row_seconds_option(CLI::App& sub, std::optional<double>& row_seconds) {
           "SEC"));
 }
 
+void add_speed_unit_option(CLI::App& sub, std::optional<std::string>& speed_unit) {
+  sub.add_option("--speed-unit", speed_unit,
+                 "Unit of a speed column whose name states none (named columns, speed,rpm): km/h, mph, m/s "
+                 "or knots; a column that states its unit keeps it, t,speed,freq's is m/s")
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            return speed_unit_named(text) ? std::string()
+                                          : "must be km/h, mph, m/s or knots, not '" + text + "'";
+          },
+          "UNIT"));
+}
+
 void warn_row_seconds(const std::vector<SampleLog>& logs, bool given, bool note_default) {
   for (const SampleLog& log : logs) {
     if (given && !log.time_from_rows)
@@ -98,19 +110,34 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
           "gearpulse: warning: %s: --speed applies to Torque Pro exports, named-column and PID-row logs; "
           "this %s log has one speed\n",
           path.c_str(), std::string(format_name(log.format)).c_str());
-    // A speed,rpm log's speed column names no unit and is read as km/h, or as mph or m/s when its values
-    // are whole km/h in that unit (docs/interfaces.md): a log in another unit would fit a ladder off by 1.6
-    // or 3.6 without a word, so the reading is said with its way out.
-    if (log.format == SampleFileFormat::kSpeedRpm && log.speed_unit == "km/h")
+    // --speed-unit names the unit of a speed column that states none: a log whose speed has a unit of its
+    // own keeps it, said when the two differ (the column's name or units row is the log's word, the flag
+    // may be meant for another file).
+    const bool named = log.format == SampleFileFormat::kColumns || log.format == SampleFileFormat::kSpeedRpm;
+    if (options.speed_unit && !named)
+      std::fprintf(
+          stderr,
+          "gearpulse: warning: %s: --speed-unit applies to named-column and speed,rpm logs whose "
+          "speed column names no unit; this %s log's speed is in its format's unit or the one it states\n",
+          path.c_str(), std::string(format_name(log.format)).c_str());
+    else if (options.speed_unit && log.speed_unit != options.speed_unit->name)
+      std::fprintf(stderr, "gearpulse: warning: %s: --speed-unit %s, but column '%s' states %s: read as %s\n",
+                   path.c_str(), std::string(options.speed_unit->name).c_str(), log.speed_column.c_str(),
+                   log.speed_unit.c_str(), log.speed_unit.c_str());
+    // Without it, a speed,rpm log's speed column names no unit and is read as km/h, or as mph or m/s when
+    // its values are whole km/h in that unit (docs/interfaces.md): a log in another unit would fit a ladder
+    // off by 1.6 or 3.6 without a word, so the reading is said with its way out.
+    const bool told = log.format == SampleFileFormat::kSpeedRpm && !options.speed_unit;
+    if (told && log.speed_unit == "km/h")
       std::fprintf(stderr,
-                   "gearpulse: note: %s: column '%s' names no unit: read as km/h (name it '%s (mph)' or "
-                   "'%s (m/s)' if it is not)\n",
-                   path.c_str(), log.speed_column.c_str(), log.speed_column.c_str(),
-                   log.speed_column.c_str());
-    else if (log.format == SampleFileFormat::kSpeedRpm)
+                   "gearpulse: note: %s: column '%s' names no unit: read as km/h (pass --speed-unit mph or "
+                   "m/s, or name it '%s (mph)', if it is not)\n",
+                   path.c_str(), log.speed_column.c_str(), log.speed_column.c_str());
+    else if (told)
       std::fprintf(stderr,
                    "gearpulse: note: %s: column '%s' names no unit, but every value is a whole km/h in %s "
-                   "(an OBD speed converted): read as %s (name it '%s (km/h)' if it is not)\n",
+                   "(an OBD speed converted): read as %s (pass --speed-unit km/h, or name it '%s (km/h)', if "
+                   "it is not)\n",
                    path.c_str(), log.speed_column.c_str(), log.speed_unit.c_str(), log.speed_unit.c_str(),
                    log.speed_column.c_str());
     for (const std::string& warning : log.warnings)

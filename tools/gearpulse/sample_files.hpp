@@ -20,6 +20,10 @@ namespace gearpulse::cli {
 // to a subcommand, checked as it is parsed: finite, above 0, at most an hour. Unset when not given.
 void add_row_seconds_option(CLI::App& sub, std::optional<double>& row_seconds);
 
+// Adds --speed-unit (ReadOptions::speed_unit: the unit of a speed column whose name states none) to a
+// subcommand, checked as it is parsed: km/h, mph, m/s or knots. Unset when not given.
+void add_speed_unit_option(CLI::App& sub, std::optional<std::string>& speed_unit);
+
 // Says on stderr when --row-seconds was given for a log with a time column of its own (it does nothing
 // there) and, with `note_default`, when a log without one is read at the default 1 s per row.
 void warn_row_seconds(const std::vector<SampleLog>& logs, bool given, bool note_default);
