@@ -380,8 +380,8 @@ std::optional<Quantity> quantity_cell(std::string_view cell) noexcept {
       {"miles_per_hour", "mph"},
       {"meter_per_second", "m/s"},
       {"meters_per_second", "m/s"},
-      {"knot", "knot"},
-      {"knots", "knot"}};
+      {"knot", "knots"},
+      {"knots", "knots"}};
   cell = trim(cell);
   const std::size_t space = cell.rfind(' ');
   if (space == std::string_view::npos) return std::nullopt;

@@ -27,8 +27,9 @@ inline constexpr double kMphToMs = 0.44704;
 inline constexpr double kKnotToMs = 1852.0 / 3600.0;  // a nautical mile (1852 m) an hour
 inline constexpr double kSecondsPerMinute = 60.0;     // freq = rpm / 60
 // The units a user names (ReadOptions::speed_unit), and a stated unit's name (speed_unit() gives its m/s).
-inline constexpr SpeedUnit kSpeedUnits[] = {
-    {kKmhToMs, "km/h"}, {kMphToMs, "mph"}, {1.0, "m/s"}, {kKnotToMs, "knots"}};
+inline constexpr SpeedUnit kKmh{kKmhToMs, "km/h"}, kMph{kMphToMs, "mph"}, kMetresPerSecond{1.0, "m/s"},
+    kKnots{kKnotToMs, "knots"};
+inline constexpr SpeedUnit kSpeedUnits[] = {kKmh, kMph, kMetresPerSecond, kKnots};
 
 std::string_view trim(std::string_view s) noexcept;
 
@@ -293,7 +294,7 @@ double speed_unit(std::string_view name) noexcept;
 
 // A reading written with its unit after the number, as python-OBD writes a quantity (`790.5
 // revolutions_per_minute`, `12.0 kilometer_per_hour`): the number's text and the unit as these readers name
-// it ("rpm", "km/h", "mph", "m/s", "knot"). None for any other cell.
+// it ("rpm", "km/h", "mph", "m/s", "knots"). None for any other cell.
 struct Quantity {
   std::string_view number, unit;
 };

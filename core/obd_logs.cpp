@@ -148,13 +148,15 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
 // speed (SAE J1979 PID 0x0D) is one byte of whole km/h, so a logger that converts it to mph or m/s writes
 // whole km/h in that unit (8.70106 mph is 14 km/h). The unit whose 1 km/h step every moving speed is a whole
 // multiple of, over at least kMinValues distinct speeds, one of them not a whole number as written (whole
-// numbers are km/h themselves); else km/h. A speed in another unit, as measured, comes that near a multiple
-// by chance in under one value in five at the speeds driven, in all of ten about once in 10^7 logs.
+// numbers are km/h themselves); else km/h. Simulated, logs of 12 speeds in km/h at one, two or six decimals
+// (10-135 km/h) were never taken for mph or m/s in 100,000 each, and mph (four conversion factors) and m/s
+// written at two decimals or more were always told.
 SpeedUnit unitless_speed_unit(const std::vector<ObdRow>& rows) {
   constexpr std::size_t kMinValues = 10;
-  // Off a whole km/h by the printed digits (two decimals are 0.008 km/h in mph) and by the conversion
-  // factors loggers use (1 / 1.609344, 1 / 1.609, 0.6214: up to 0.02 % apart, five times over).
-  constexpr double kDigits = 0.02, kFactor = 1e-3;
+  // Off a whole km/h by the printed digits (two decimals are 0.008 km/h in mph, 0.018 in m/s) and, in mph,
+  // by the conversion factors loggers use (1 / 1.609344, 1 / 1.609, 0.6214, 0.62137: up to 0.02 % apart);
+  // m/s is km/h divided by exactly 3.6.
+  constexpr double kDigits = 0.02, kMphFactor = 3e-4;
   std::vector<double> moving;
   for (const ObdRow& r : rows)
     if (std::isfinite(r.speed) && r.speed > 0.0) moving.push_back(r.speed);
@@ -163,15 +165,16 @@ SpeedUnit unitless_speed_unit(const std::vector<ObdRow>& rows) {
   const bool fractions =
       std::any_of(moving.begin(), moving.end(), [](double v) { return std::abs(v - std::round(v)) > 1e-6; });
   if (moving.size() >= kMinValues && fractions)
-    for (const SpeedUnit& unit : {kSpeedUnits[1], kSpeedUnits[2]}) {  // mph, m/s
-      const double step = kKmhToMs / unit.to_ms;                      // 1 km/h in the unit
+    for (const SpeedUnit& unit : {kMph, kMetresPerSecond}) {
+      const double step = kKmhToMs / unit.to_ms;  // 1 km/h in the unit
+      const double factor = unit.to_ms == kMph.to_ms ? kMphFactor : 0.0;
       const bool whole = std::all_of(moving.begin(), moving.end(), [&](double v) {
         const double kmh = v / step;
-        return std::abs(kmh - std::round(kmh)) <= kDigits + kFactor * kmh;
+        return std::abs(kmh - std::round(kmh)) <= kDigits + factor * kmh;
       });
       if (whole) return unit;
     }
-  return kSpeedUnits[0];  // km/h
+  return kKmh;
 }
 
 }  // namespace
@@ -286,12 +289,17 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     if (it) {
       t = groups.read(cells[*it], "time");
       // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds. They count
-      // from the log's first in whole milliseconds, then become seconds: 1.5e12 ms made seconds first keep
-      // 2e-7 s, and replay printed 1.599 s as 1.5990002155303955.
+      // from the log's first in whole milliseconds, then become seconds, so that times keep the digits
+      // written (1.5e12 ms made seconds first keep only 2e-7 s). Once a log counts so, a smaller time is no
+      // time of it.
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber && named && t.value >= kMillisecondsAtLeast) {
         if (!epoch_ms) epoch_ms = t.value;
         t.value = (t.value - *epoch_ms) / 1000.0;
+      } else if (t.kind == CellKind::kNumber && epoch_ms) {
+        t = Cell{
+            CellKind::kBad, kMissing,
+            "time " + std::string(trim(cells[*it])) + " is not milliseconds since 1970 as the log's first"};
       } else if (t.kind == CellKind::kNumber) {
         t.value *= layout.time_to_s;
       }

@@ -49,7 +49,7 @@ struct ShiftSplit {
 
 // The run-up set: the scenes of the tuning seeds' levels and other lines, driven by a run-up at full throttle
 // (970 -> 4,820 rpm over 10, 12, ... 20 s) whose 2nd harmonic stands 6 dB over the fundamental at 2,400 rpm
-// (sim::run_up_scene_for_seed()): a real cabin run-up was once held at twice the engine there for 0.6 s.
+// (sim::run_up_scene_for_seed()), where a real cabin run-up can be held at twice the engine.
 double run_up_ramp_s(int i) {
   return 10.0 + 2.0 * i;
 }

@@ -173,7 +173,7 @@ TEST_CASE("io: a speed and rpm log whose speeds are whole km/h in mph or m/s is 
   const SampleLog in_ms = read_log_text(ms);
   CHECK(in_ms.speed_unit == "m/s");
   CHECK(in_ms.samples[1].speed == Approx(14 / 3.6).epsilon(1e-4));
-  // Whole numbers are km/h themselves, and too few values say nothing: km/h, as before.
+  // Whole numbers are km/h themselves, and too few values say nothing: km/h.
   const SampleLog in_kmh = read_log_text(kmh);
   CHECK(in_kmh.speed_unit == "km/h");
   CHECK(in_kmh.samples[1].speed == Approx(14 / 3.6));
@@ -183,6 +183,21 @@ TEST_CASE("io: a speed and rpm log whose speeds are whole km/h in mph or m/s is 
   for (int k = 1; k <= 12; ++k)
     measured += std::to_string(900 + 150 * k) + "," + std::to_string(4.37 * k + 0.13) + "\n";
   CHECK(read_log_text(measured).speed_unit == "km/h");
+  // Highway speeds in km/h at one decimal are not a whole km/h in m/s (m/s is km/h / 3.6 exactly).
+  std::string highway = "rpm,speed\n";
+  for (const double v : {95.9, 98.3, 101.7, 104.2, 107.6, 110.1, 113.8, 116.4, 119.9, 122.5, 126.0, 129.2})
+    highway += std::to_string(static_cast<int>(30 * v)) + "," + std::to_string(v) + "\n";
+  CHECK(read_log_text(highway).speed_unit == "km/h");
+}
+
+TEST_CASE("io: a time too small for a log counted in milliseconds since 1970 is a bad row") {
+  const SampleLog log = read_log_text(
+      "ts,rpm,speed (km/h)\n1558525279922,1500,20\n1558525281521,1600,21\n3,1700,22\n"
+      "1558525283120,1800,23\n");
+  REQUIRE(log.samples.size() == 3);
+  CHECK(log.samples[2].t == Approx(3.198));
+  REQUIRE(log.skipped_count == 1);
+  CHECK(log.skipped[0].find(":4: time 3 is not milliseconds since 1970") != std::string::npos);
 }
 
 TEST_CASE("io: readings written with their units, as python-OBD writes them, read with those units") {
@@ -207,7 +222,7 @@ TEST_CASE("io: readings written with their units, as python-OBD writes them, rea
   CHECK(mph.samples[1].speed == Approx(11 * 0.44704));
   REQUIRE(mph.skipped_count == 1);
   CHECK(mph.skipped[0].find(":3: not a number in column speed") != std::string::npos);
-  // A speed,rpm log without units in its cells is as before.
+  // A speed,rpm log without units in its cells reads its bare speed as km/h.
   CHECK(read_log_text("speed,rpm\n7,898\n1,917\n").format == SampleFileFormat::kSpeedRpm);
 }
 

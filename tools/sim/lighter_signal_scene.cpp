@@ -210,7 +210,12 @@ constexpr std::array<SceneComponent, 11> kSceneComponents = {{
        c.order_1_5 = 0.0;
      }},
     // The load's swap of energy between f and 2 f.
-    {"swap", [](Config& c, const Trajectory&, double) { c.load_swing = 0.0; }},
+    {"swap",
+     [](Config& c, const Trajectory&, double) {
+       // A run-up's resonance was set for the swing at full load: the 2nd harmonic keeps its peak level.
+       if (c.harmonic2_peak_hz > 0.0) c.harmonic2_peak *= (1.0 - c.load_swing) / (1.0 + c.load_swing);
+       c.load_swing = 0.0;
+     }},
     // The 3rd harmonic.
     {"third", [](Config& c, const Trajectory&, double) { c.harmonic3 = 0.0; }},
 }};
