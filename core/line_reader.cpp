@@ -96,6 +96,39 @@ bool LineReader::next() {
     held_ = false;
     return true;
   }
+  if (!again_.empty()) {
+    Record& r = again_.front();
+    line = std::move(r.line);
+    written_ = std::move(r.written);
+    number = r.number;
+    marks_made_points_ = r.marks_made_points;
+    again_.pop_front();
+  } else if (!read_record()) {
+    return false;
+  }
+  if (keeping_)
+    kept_.push_back({line, marks_made_points_ ? written_ : std::string(), number, marks_made_points_});
+  return true;
+}
+
+void LineReader::look_ahead() {
+  if (held_) {  // the record held is the first looked at
+    held_ = false;
+    again_.push_front({line, marks_made_points_ ? written_ : std::string(), number, marks_made_points_});
+  }
+  keeping_ = true;
+  kept_.clear();
+}
+
+void LineReader::rewind() {
+  keeping_ = false;
+  held_ = false;
+  for (auto r = kept_.rbegin(); r != kept_.rend(); ++r)
+    again_.push_front(std::move(*r));
+  kept_.clear();
+}
+
+bool LineReader::read_record() {
   if (!physical(line)) return false;
   number = lines_;
   std::size_t marks = 0;  // a file saved twice by a tool that adds one each time has two

@@ -27,6 +27,10 @@ class LineReader {
   bool next();
   // Has next() give the record read last again (a record looked at before its reader takes it).
   void unread() noexcept { held_ = true; }
+  // Records looked at before their reader takes them: from look_ahead() on, the records next() gives are
+  // kept, and rewind() has next() give them again, in order.
+  void look_ahead();
+  void rewind();
   // The record read last, and the number of its first line (from 1).
   std::string line;
   std::size_t number = 0;
@@ -72,6 +76,8 @@ class LineReader {
  private:
   // One line as the file holds it, without its end (LF, CR LF or CR alone); false at the end.
   bool physical(std::string& out);
+  // The next record from the file (next() but for a record held or rewound); false at the end.
+  bool read_record();
   // Whether the record's cells hold the header's names: none (0), the header's own (1) or names in other
   // places (2).
   [[nodiscard]] int header_names(const std::vector<std::string_view>& cells) const;
@@ -90,6 +96,14 @@ class LineReader {
   mutable std::string name_;                // a cell's name being matched against them
   std::string written_;                     // the record before its decimal commas were made points
   bool marks_made_points_ = false;
+  struct Record {  // a record as next() gave it
+    std::string line, written;
+    std::size_t number;
+    bool marks_made_points;
+  };
+  bool keeping_ = false;      // look_ahead()
+  std::vector<Record> kept_;  // the records given since, in order
+  std::deque<Record> again_;  // the records rewind() gives back, in order
 };
 
 }  // namespace gearpulse::log_reading

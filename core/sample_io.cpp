@@ -76,51 +76,67 @@ bool names_a_log(const std::vector<std::string>& header) {
          (find_column(header, "PID") && find_column(header, "VALUE"));
 }
 
+// The next record that is not blank, split into at most `columns` cells; false at the end.
+bool next_record(LineReader& reader, std::size_t columns, std::vector<std::string_view>& cells) {
+  while (reader.next())
+    if (!blank(reader.line)) {
+      reader.cells(cells, columns);
+      return true;
+    }
+  return false;
+}
+
 // A row of units right under the header (`Time,Engine speed,Speed` then `s,rpm,km/h`, as data loggers write
 // it): no cell a number, a speed unit among them. Each unit joins its column's name ("Speed (km/h)"). A
 // record that is no such row is left to the reader.
 bool read_units_row(LineReader& reader, std::vector<std::string>& header) {
-  while (reader.next()) {
-    if (blank(reader.line)) continue;
-    std::vector<std::string_view> cells;
-    reader.cells(cells, header.size());
-    const bool units =
-        std::none_of(cells.begin(), cells.end(),
-                     [](std::string_view c) { return parse_cell(c, "").kind == CellKind::kNumber; }) &&
-        std::any_of(cells.begin(), cells.end(),
-                    [](std::string_view c) { return speed_unit(folded(c)) > 0.0; });
-    if (!units) {
-      reader.unread();
-      return false;
-    }
-    for (std::size_t i = 0; i < cells.size(); ++i)
-      if (!cells[i].empty()) header[i] += " (" + std::string(cells[i]) + ")";
-    return true;
+  std::vector<std::string_view> cells;
+  if (!next_record(reader, header.size(), cells)) return false;
+  const bool units =
+      std::none_of(cells.begin(), cells.end(),
+                   [](std::string_view c) { return parse_cell(c, "").kind == CellKind::kNumber; }) &&
+      std::any_of(cells.begin(), cells.end(), [](std::string_view c) { return speed_unit(folded(c)) > 0.0; });
+  if (!units) {
+    reader.unread();
+    return false;
   }
-  return false;
+  for (std::size_t i = 0; i < cells.size(); ++i)
+    if (!cells[i].empty()) header[i] += " (" + std::string(cells[i]) + ")";
+  return true;
 }
 
-// Whether the first data row writes readings with their units (quantity_cell(): `12.0 kilometer_per_hour`,
-// as python-OBD loggers write them). A speed column whose name states no unit takes its cell's
-// ("SPEED (km/h)"). The row is left to the reader.
+// Whether the data rows write readings with their units (quantity_cell(): `12.0 kilometer_per_hour`, as
+// python-OBD loggers write them). A speed column whose name states no unit takes the one its first reading
+// writes ("SPEED (km/h)"): its first cell that is a quantity or a number (a number states none), passing
+// over missing readings (python-OBD writes None or N/A for a PID the car did not answer) within the first
+// kLookAhead rows. The rows are left to the reader.
 bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
-  while (reader.next()) {
-    if (blank(reader.line)) continue;
-    std::vector<std::string_view> cells;
-    reader.cells(cells, header.size());
-    bool any = false;
-    for (std::size_t i = 0; i < cells.size(); ++i) {
-      const std::optional<Quantity> q = quantity_cell(cells[i]);
-      if (!q) continue;
-      any = true;
-      const std::string name = folded(header[i]);
-      if (holds(name, {"speed"}) && speed_unit(name) == 0.0 && speed_unit(q->unit) > 0.0)
-        header[i] += " (" + std::string(q->unit) + ")";
-    }
-    reader.unread();
-    return any;
+  // A logger polls a PID the car does not answer at every row: a speed missing this long is none the car
+  // gives (at one row a second, over a minute and a half).
+  constexpr std::size_t kLookAhead = 100;  // rows
+  std::vector<std::size_t> unstated;       // speed columns whose name states no unit, their reading unseen
+  for (std::size_t i = 0; i < header.size(); ++i)
+    if (const std::string name = folded(header[i]); holds(name, {"speed"}) && speed_unit(name) == 0.0)
+      unstated.push_back(i);
+  bool any = false;
+  std::vector<std::string_view> cells;
+  reader.look_ahead();
+  for (std::size_t rows = 0;
+       rows < kLookAhead && (!any || !unstated.empty()) && next_record(reader, header.size(), cells);
+       ++rows) {
+    any = any || std::any_of(cells.begin(), cells.end(),
+                             [](std::string_view c) { return quantity_cell(c).has_value(); });
+    std::erase_if(unstated, [&](std::size_t i) {
+      if (i >= cells.size()) return false;
+      if (const std::optional<Quantity> q = quantity_cell(cells[i])) {
+        if (speed_unit(q->unit) > 0.0) header[i] += " (" + std::string(q->unit) + ")";
+        return true;
+      }
+      return parse_cell(cells[i], "").kind == CellKind::kNumber;
+    });
   }
-  return false;
+  reader.rewind();
+  return any;
 }
 
 // named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row; a

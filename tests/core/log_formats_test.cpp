@@ -226,6 +226,35 @@ TEST_CASE("io: readings written with their units, as python-OBD writes them, rea
   CHECK(read_log_text("speed,rpm\n7,898\n1,917\n").format == SampleFileFormat::kSpeedRpm);
 }
 
+TEST_CASE("io: a first row without a speed leaves the speed's unit to the first row that writes one") {
+  // python-OBD loggers write None or N/A for a reading the car did not answer.
+  const SampleLog mph = read_log_text(
+      "timestamp,RPM,SPEED\n0,790.5 revolutions_per_minute,None\n1,1500.0 revolutions_per_minute,12.0 "
+      "mile_per_hour\n2,1600.0 revolutions_per_minute,13.0 mile_per_hour\n");
+  CHECK(mph.format == SampleFileFormat::kColumns);
+  CHECK(mph.speed_unit == "mph");
+  REQUIRE(mph.samples.size() == 2);
+  CHECK(mph.samples[0].speed == Approx(12 * 0.44704));
+  CHECK(mph.skipped_count == 1);  // None is no number
+  const SampleLog kmh = read_log_text(
+      "timestamp,RPM,Vehicle Speed\n0,790.5 revolutions_per_minute,N/A\n1,N/A,N/A\n"
+      "2,1500.0 revolutions_per_minute,12.0 kilometer_per_hour\n");
+  CHECK(kmh.speed_unit == "km/h");
+  REQUIRE(kmh.samples.size() == 3);
+  CHECK(std::isnan(kmh.samples[0].speed));
+  CHECK(kmh.samples[2].speed == Approx(12 / 3.6));
+  CHECK(kmh.skipped_count == 0);
+  // A bare number first: the column states no unit, as in a log without any.
+  CHECK(error_of("timestamp,RPM,Vehicle Speed\n0,800,N/A\n1,900,12\n2,1000,12.0 kilometer_per_hour\n")
+            .find("'Vehicle Speed' states no unit") != std::string::npos);
+  // The look-ahead is bounded: a speed first written after it is no unit of the column.
+  std::string late = "timestamp,RPM,Vehicle Speed\n";
+  for (int i = 0; i < 100; ++i)
+    late += std::to_string(i) + ",800.0 revolutions_per_minute,N/A\n";
+  CHECK(error_of(late + "100,900.0 revolutions_per_minute,12.0 kilometer_per_hour\n")
+            .find("'Vehicle Speed' states no unit") != std::string::npos);
+}
+
 TEST_CASE("io: row_seconds is the row counter's unit in logs without a time column, and only there") {
   gearpulse::ReadOptions options;
   options.row_seconds = 0.5;
