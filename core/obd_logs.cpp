@@ -177,6 +177,38 @@ SpeedUnit unitless_speed_unit(const std::vector<ObdRow>& rows) {
   return kKmh;
 }
 
+// A time cell's number and the digits after its point as written (none: -1, a number with an exponent).
+struct TimeWritten {
+  double value;
+  int decimals;
+};
+
+int decimals_written(std::string_view cell) {
+  cell = trim(cell);
+  if (cell.find_first_of("eE") != std::string_view::npos) return -1;
+  const std::size_t point = cell.rfind('.');  // a decimal comma is a point in the line read
+  if (point == std::string_view::npos) return 0;
+  int digits = 0;
+  for (std::size_t i = point + 1; i < cell.size() && std::isdigit(static_cast<unsigned char>(cell[i])); ++i)
+    ++digits;
+  return digits;
+}
+
+// A time since the log's first, in the digits the two are written to: a clock since 1970 in seconds is
+// 1.5e9, where a double keeps 2.4e-7 s and the difference of two times written to the millisecond would
+// print 1.5989999771118164 for 1.599. Rounded to the finer of the two's decimals, the difference is the
+// nearest double to the one written; times from 0 are their own numbers again.
+double difference_written(double value, TimeWritten first, int decimals) {
+  const double d = value - first.value;
+  if (decimals < 0 || first.decimals < 0) return d;
+  double scale = 1.0;  // a power of ten is exact up to 1e22
+  for (int i = std::max(decimals, first.decimals); i > 0 && scale < 1e22; --i)
+    scale *= 10.0;
+  constexpr double kExactIntegers = 9007199254740992.0;  // 2^53
+  if (!(std::abs(d) * scale < kExactIntegers)) return d;
+  return std::round(d * scale) / scale;
+}
+
 }  // namespace
 
 double time_unit(std::string_view folded_name) {
@@ -268,7 +300,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const bool named = format == SampleFileFormat::kColumns || format == SampleFileFormat::kSpeedRpm;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
-  std::optional<double> epoch_ms;  // the first time cell in milliseconds since 1970
+  std::optional<double> epoch_ms;    // the first time cell in milliseconds since 1970
+  std::optional<TimeWritten> first;  // the first time since 1970 of a row read (not bad), as written
   DigitGroups groups(reader);
   // A cell that writes the column's unit after its number is the number; any other stays as written.
   constexpr double kRpmToMs = -1.0;  // no speed unit's: marks the rpm column
@@ -280,7 +313,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   };
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
-    double period = 0.0;  // of a clock cell's time of day
+    double period = 0.0;   // of a clock cell's time of day
+    bool counted = false;  // a named log's time since 1970: counted from the first (below)
     const Cell rpm = groups.read(number_of(cells[irpm], kRpmToMs), "rpm");
     const Cell speed = groups.read(number_of(cells[ispeed], layout.speed_to_ms), "speed");
     Cell t;
@@ -291,7 +325,10 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
       // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds. They count
       // from the log's first in whole milliseconds, then become seconds, so that times keep the digits
       // written (1.5e12 ms made seconds first keep only 2e-7 s). Once a log counts so, a smaller time is no
-      // time of it.
+      // time of it. No drive's running time reaches 1e8 s (three years), which a clock since 1970 passed in
+      // 1973: seconds since 1970 count from the log's first in the digits written (difference_written()),
+      // smaller times (seconds from the log's start) stay as written.
+      constexpr double kSecondsSince1970AtLeast = 1e8;
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber && named && t.value >= kMillisecondsAtLeast) {
         if (!epoch_ms) epoch_ms = t.value;
@@ -300,6 +337,9 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
         t = Cell{
             CellKind::kBad, kMissing,
             "time " + std::string(trim(cells[*it])) + " is not milliseconds since 1970 as the log's first"};
+      } else if (t.kind == CellKind::kNumber && named &&
+                 t.value * layout.time_to_s >= kSecondsSince1970AtLeast) {
+        counted = true;
       } else if (t.kind == CellKind::kNumber) {
         t.value *= layout.time_to_s;
       }
@@ -317,6 +357,10 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     if (bad->kind == CellKind::kBad) {
       out.skip(reader.number, bad->problem);
       continue;
+    }
+    if (counted) {
+      if (!first) first = {t.value, decimals_written(cells[*it])};
+      t.value = difference_written(t.value, *first, decimals_written(cells[*it])) * layout.time_to_s;
     }
     ObdRow row{reader.number, counter, t.value, rpm.value, speed.value};
     if (period > 0.0) row.clock = t.value, row.period = period;

@@ -190,6 +190,27 @@ TEST_CASE("io: a speed and rpm log whose speeds are whole km/h in mph or m/s is 
   CHECK(read_log_text(highway).speed_unit == "km/h");
 }
 
+TEST_CASE("io: a named log's seconds since 1970 count from its first in the digits written") {
+  // Seconds since 1970 with decimals, as python's time.time() writes them: 1558525281.521 - 1558525279.922
+  // in doubles is 1.5989999771118164; the times keep the milliseconds written. The first row is bad (None).
+  const SampleLog epoch = read_log_text(
+      "timestamp,RPM,SPEED (km/h)\n1558525278.5,700,None\n1558525279.922,800,10\n1558525281.521,900,11\n"
+      "1558525283.12,1000,12\n");
+  REQUIRE(epoch.samples.size() == 3);
+  CHECK(epoch.samples[0].t == 0.0);
+  CHECK(epoch.samples[1].t == 1.599);
+  CHECK(epoch.samples[2].t == 3.198);
+  // In milliseconds with decimals, and times from 0, exactly as written.
+  const SampleLog ms =
+      read_log_text("time (ms),rpm,speed (km/h)\n0,800,10\n1599.5,900,11\n3198.25,1000,12\n");
+  REQUIRE(ms.samples.size() == 3);
+  CHECK(ms.samples[1].t == 1599.5 * 1e-3);
+  CHECK(ms.samples[2].t == 3198.25 * 1e-3);
+  const SampleLog from_zero = read_log_text("time,rpm,speed (km/h)\n0,800,10\n0.1,900,11\n0.3,1000,12\n");
+  CHECK(from_zero.samples[1].t == 0.1);
+  CHECK(from_zero.samples[2].t == 0.3);
+}
+
 TEST_CASE("io: a time too small for a log counted in milliseconds since 1970 is a bad row") {
   const SampleLog log = read_log_text(
       "ts,rpm,speed (km/h)\n1558525279922,1500,20\n1558525281521,1600,21\n3,1700,22\n"

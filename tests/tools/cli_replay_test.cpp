@@ -176,6 +176,18 @@ TEST_CASE("cli: replay prints t with every digit it was given (epoch seconds kee
   CHECK(rows == 50);
 }
 
+TEST_CASE("cli: replay counts a named log's seconds since 1970 from its first in the digits written") {
+  TempDir dir;
+  const std::string model = fitted_model(dir);
+  const std::string path = (dir / "python_obd.csv").string();
+  write(path,
+        "timestamp,RPM,SPEED (km/h)\n1558525279.922,800,10\n1558525281.521,900,11\n1558525283.12,1000,12\n");
+  const Result r = run(dir, "replay --model " + model + " " + path);
+  REQUIRE(r.status == 0);
+  CHECK(r.out.find("\n1.599,") != std::string::npos);
+  CHECK(r.out.find("\n3.198,") != std::string::npos);
+}
+
 TEST_CASE("cli: --row-seconds gives the rows of a log without a time column their time, for the synthesis") {
   TempDir dir;
   const std::string model = fitted_model(dir);
