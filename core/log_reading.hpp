@@ -351,6 +351,7 @@ struct ObdLayout {
   bool quantities = false;  // the rpm and speed cells may carry their unit after the number (quantity_cell)
   // speed_to_ms's name (SampleLog::speed_unit); empty in a speed,rpm log read by its values' unit.
   std::string_view speed_unit = {};
+  std::string_view speed_unit_stated_in = {};  // SampleLog::speed_unit_stated_in
 };
 
 // The seconds per unit of a time column, from its folded name (time, timestamp, seconds, t or ts; in

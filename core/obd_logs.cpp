@@ -385,6 +385,7 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
            [&](std::size_t i) -> double& { return parsed[i].t; }, out.log()))
     parsed[i].drive_start = true;
   out.log().speed_unit = layout.speed_unit;
+  out.log().speed_unit_stated_in = layout.speed_unit_stated_in;
   if (format != SampleFileFormat::kSpeedRpm || !layout.speed_unit.empty()) {
     add_obd_rows(parsed, out, layout);
     return;

@@ -141,20 +141,29 @@ bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
 
 // named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row; a
 // speed column that states no unit in either is read in `unitless` (ReadOptions::speed_unit), if given.
-// `quantities`: the cells may write their units (quantity_cells()).
+// `quantities`: the cells may write their units (quantity_cells(), which added them to `header`'s names);
+// `written`: the header as the log writes it, whose name the speed column keeps.
 std::optional<ObdLayout> named_columns(LineReader& reader, std::vector<std::string>& header,
-                                       const ReadOptions& options, const std::string& name, bool quantities) {
+                                       const std::vector<std::string>& written, const ReadOptions& options,
+                                       const std::string& name, bool quantities) {
   const TorqueSpeed choice = options.torque_speed;
   std::optional<ObdLayout> layout;
+  bool units_row = false;
   try {
     layout = named_layout(header, choice, std::nullopt, name);
   } catch (const SampleFileError&) {
-    if (!read_units_row(reader, header) && !options.speed_unit) throw;
+    units_row = read_units_row(reader, header);
+    if (!units_row && !options.speed_unit) throw;
     layout = named_layout(header, choice, options.speed_unit, name);
   }
-  if (!layout && read_units_row(reader, header))
+  if (!layout && (units_row = read_units_row(reader, header)))
     layout = named_layout(header, choice, options.speed_unit, name);
-  if (layout) layout->quantities = quantities;
+  if (!layout) return layout;
+  layout->quantities = quantities;
+  if (header[layout->speed] != written[layout->speed]) {
+    layout->speed_column = written[layout->speed];
+    layout->speed_unit_stated_in = units_row ? "its units row" : "its cells";
+  }
   return layout;
 }
 
@@ -301,6 +310,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
   const bool generic = has("t") && has("speed") && has("freq");
   const bool carloop_header = has("ENGINE_RPM ()") && has("VEHICLE_SPEED ()");
   const bool torque = !generic && torque_header(header);
+  const std::vector<std::string> written = header;  // the names as written, before units found are added
   const bool quantities = !generic && !torque && !carloop_header && quantity_cells(reader, header);
   if (generic) {
     read_generic(reader, header, out);
@@ -337,7 +347,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
     read_obd(reader, out, layout);
   } else if (has("SECONDS") && has("PID") && has("VALUE")) {
     read_pid_rows(reader, header, out, options.torque_speed);
-  } else if (auto layout = named_columns(reader, header, options, std::string(name), quantities)) {
+  } else if (auto layout = named_columns(reader, header, written, options, std::string(name), quantities)) {
     read_obd(reader, out, *layout);
   } else if (has("Engine RPM(rpm)")) {
     read_torque(reader, header, out, options.torque_speed);  // an export without speed: its own error

@@ -84,6 +84,9 @@ struct SampleLog {
   // name, units row or cells state; else ReadOptions::speed_unit; else a speed,rpm log's is km/h, or mph or
   // m/s when every value is whole km/h in that unit (an OBD speed converted by the logger).
   std::string speed_unit;
+  // Where a named-column log's speed column, its name stating no unit, states speed_unit: "its units row"
+  // (a row of units under the header) or "its cells" (readings written with their units); else empty.
+  std::string speed_unit_stated_in;
   std::vector<Sample> samples;
   std::vector<std::string> skipped;  // "name:line: reason", at most ReadOptions::max_messages
   std::size_t skipped_count = 0;     // every skipped bad row

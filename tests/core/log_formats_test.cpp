@@ -228,7 +228,9 @@ TEST_CASE("io: readings written with their units, as python-OBD writes them, rea
       "2025-04-11 18:13:28,790.5 revolutions_per_minute,0.0 kilometer_per_hour,93 degree_Celsius\n"
       "2025-04-11 18:13:30,1511.0 revolutions_per_minute,12.0 kilometer_per_hour,93 degree_Celsius\n");
   CHECK(kmh.format == SampleFileFormat::kColumns);
-  CHECK(kmh.speed_column == "SPEED (km/h)");
+  CHECK(kmh.speed_column == "SPEED");  // the name written, its unit stated in its cells
+  CHECK(kmh.speed_unit == "km/h");
+  CHECK(kmh.speed_unit_stated_in == "its cells");
   REQUIRE(kmh.samples.size() == 2);
   CHECK(kmh.samples[1].t == Approx(2.0));
   CHECK(kmh.samples[1].speed == Approx(12 / 3.6));
@@ -238,7 +240,8 @@ TEST_CASE("io: readings written with their units, as python-OBD writes them, rea
       "time,Engine RPM,Vehicle Speed\n0,800.0 revolutions_per_minute,10.0 mile_per_hour\n"
       "1,900.0 revolutions_per_minute,12.0 kilometer_per_hour\n2,1000.0 revolutions_per_minute,11 "
       "mile_per_hour\n");
-  CHECK(mph.speed_column == "Vehicle Speed (mph)");
+  CHECK(mph.speed_column == "Vehicle Speed");
+  CHECK(mph.speed_unit == "mph");
   REQUIRE(mph.samples.size() == 2);
   CHECK(mph.samples[1].speed == Approx(11 * 0.44704));
   REQUIRE(mph.skipped_count == 1);

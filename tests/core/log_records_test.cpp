@@ -118,7 +118,9 @@ TEST_CASE("io: a row of units under the header names the units its columns' name
   const SampleLog log =
       read_log_text("Time,Engine speed,Vehicle speed,Throttle\ns,rpm,kn,%\n0,800,0,5\n1,900,20,6\n");
   CHECK(log.format == SampleFileFormat::kColumns);
-  CHECK(log.speed_column == "Vehicle speed (kn)");
+  CHECK(log.speed_column == "Vehicle speed");  // the name written, its unit stated in its units row
+  CHECK(log.speed_unit == "knots");
+  CHECK(log.speed_unit_stated_in == "its units row");
   REQUIRE(log.samples.size() == 2);
   CHECK(log.samples[1].t == 1.0);
   CHECK(log.samples[1].speed == Approx(20 * kKnot));

@@ -254,6 +254,26 @@ TEST_CASE("cli: --speed-unit reads a speed column that names no unit, one that n
                               ": --speed-unit mph, but column 'SPEED (km/h)' states km/h: read as km/h\n";
   CHECK(against.err.find(warning) != std::string::npos);
   CHECK(against.err.find(warning, against.err.find(warning) + 1) == std::string::npos);
+  // A unit stated in the cells or a units row is said as such, with the column's own name.
+  const std::string cells = (dir / "cells.csv").string(), units_row = (dir / "units_row.csv").string();
+  write(cells,
+        "time,ENGINE_RPM,SPEED\n0,800,0 kilometer_per_hour\n1,1500,10 kilometer_per_hour\n2,2100,20 "
+        "kilometer_per_hour\n");
+  write(units_row, "time,ENGINE_RPM,SPEED\ns,rpm,km/h\n" + rows);
+  for (const auto& [path, where] :
+       {std::pair{cells, "in its cells"}, std::pair{units_row, "in its units row"}}) {
+    const Result r = run(dir, "replay --model " + model + " --speed-unit mph " + path);
+    REQUIRE(r.status == 0);
+    CHECK(r.out.find("\n2,5.5556,") != std::string::npos);  // 20 km/h
+    CHECK(r.err.find("gearpulse: warning: " + path + ": --speed-unit mph, but column 'SPEED' states km/h " +
+                     where + ": read as km/h\n") != std::string::npos);
+  }
+  // docs/interfaces.md quotes the warning (its lines wrapped).
+  std::string doc;
+  for (const char c : slurp(std::string(GEARPULSE_SOURCE_DIR) + "/docs/interfaces.md"))
+    if (c != '\n' && (c != ' ' || (!doc.empty() && doc.back() != ' '))) doc += c;
+  CHECK(doc.find("`--speed-unit mph, but column 'SPEED' states km/h in its cells: read as km/h`") !=
+        std::string::npos);
   // The generic log's speed is m/s by contract: said to be untouched.
   const std::string generic = simulated_log(dir, 21);
   const Result on_generic = run(dir, "fit --speed-unit km/h " + generic);

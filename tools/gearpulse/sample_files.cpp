@@ -121,9 +121,11 @@ std::vector<SampleLog> read_sample_files(const std::vector<std::string>& paths, 
           "speed column names no unit; this %s log's speed is in its format's unit or the one it states\n",
           path.c_str(), std::string(format_name(log.format)).c_str());
     else if (options.speed_unit && log.speed_unit != options.speed_unit->name)
-      std::fprintf(stderr, "gearpulse: warning: %s: --speed-unit %s, but column '%s' states %s: read as %s\n",
+      std::fprintf(stderr,
+                   "gearpulse: warning: %s: --speed-unit %s, but column '%s' states %s%s%s: read as %s\n",
                    path.c_str(), std::string(options.speed_unit->name).c_str(), log.speed_column.c_str(),
-                   log.speed_unit.c_str(), log.speed_unit.c_str());
+                   log.speed_unit.c_str(), log.speed_unit_stated_in.empty() ? "" : " in ",
+                   log.speed_unit_stated_in.c_str(), log.speed_unit.c_str());
     // Without it, a speed,rpm log's speed column names no unit and is read as km/h, or as mph or m/s when
     // its values are whole km/h in that unit (docs/interfaces.md): a log in another unit would fit a ladder
     // off by 1.6 or 3.6 without a word, so the reading is said with its way out.
