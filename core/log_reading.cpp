@@ -352,44 +352,4 @@ bool summary_column(std::string_view name) noexcept {
   return holds(name, {"average", "avg", "max", "min", "limit"});
 }
 
-double speed_unit(std::string_view name) noexcept {
-  if (holds(name, {"km/h", "kmh", "kph", "km/hr", "kmph"})) return kKmhToMs;  // before mph: "kmph" holds it
-  if (holds(name, {"mph", "mi/h"})) return kMphToMs;
-  if (holds(name, {"m/s", "mps", "meters/second", "metres/second"})) return 1.0;
-  if (holds(name, {"knot"})) return kKnotToMs;
-  // kn, kt and kts only as the name's last word: the whole unit, after a bracket or right after "speed"
-  // (folded, "speed kt" is "speedkt"), not the end of a longer word.
-  if (name.ends_with(')') || name.ends_with(']')) name.remove_suffix(1);
-  for (std::string_view unit : {"kts", "kn", "kt"}) {
-    if (!name.ends_with(unit)) continue;
-    const std::string_view before = name.substr(0, name.size() - unit.size());
-    if (before.empty() || !std::isalpha(static_cast<unsigned char>(before.back())) ||
-        before.ends_with("speed"))
-      return kKnotToMs;
-  }
-  return 0.0;
-}
-
-std::optional<Quantity> quantity_cell(std::string_view cell) noexcept {
-  // The names pint gives the units of the readings these readers take (python-OBD's Unit), and plurals.
-  static constexpr std::pair<std::string_view, std::string_view> kUnits[] = {
-      {"revolutions_per_minute", "rpm"},
-      {"kilometer_per_hour", "km/h"},
-      {"kilometers_per_hour", "km/h"},
-      {"mile_per_hour", "mph"},
-      {"miles_per_hour", "mph"},
-      {"meter_per_second", "m/s"},
-      {"meters_per_second", "m/s"},
-      {"knot", "knots"},
-      {"knots", "knots"}};
-  cell = trim(cell);
-  const std::size_t space = cell.rfind(' ');
-  if (space == std::string_view::npos) return std::nullopt;
-  const std::string_view number = trim(cell.substr(0, space)), unit = cell.substr(space + 1);
-  if (number.empty()) return std::nullopt;
-  for (const auto& [pint, ours] : kUnits)
-    if (unit == pint) return Quantity{number, ours};
-  return std::nullopt;
-}
-
 }  // namespace gearpulse::log_reading

@@ -1,9 +1,9 @@
 #pragma once
 
 // What every log reader is made of (cells, column names, clocks, time order, the builder that collects a
-// log's samples and bad rows; the line reader is core/line_reader.hpp) and the readers of the OBD and
-// Torque layouts, which core/sample_io.cpp picks by a log's header. Internal to core: the contract is
-// core/sample_io.hpp.
+// log's samples and bad rows; the line reader is core/line_reader.hpp; the speeds' units core/log_units.cpp)
+// and the readers of the OBD and Torque layouts, which core/sample_io.cpp picks by a log's header. Internal
+// to core: the contract is core/sample_io.hpp.
 
 #include <algorithm>
 #include <cmath>
@@ -26,7 +26,7 @@ inline constexpr double kKmhToMs = 1.0 / 3.6;
 inline constexpr double kMphToMs = 0.44704;
 inline constexpr double kKnotToMs = 1852.0 / 3600.0;  // a nautical mile (1852 m) an hour
 inline constexpr double kSecondsPerMinute = 60.0;     // freq = rpm / 60
-// The units a user names (ReadOptions::speed_unit), and a stated unit's name (speed_unit() gives its m/s).
+// The units a user names (ReadOptions::speed_unit), and those a column states (stated_speed_to_ms()).
 inline constexpr SpeedUnit kKmh{kKmhToMs, "km/h"}, kMph{kMphToMs, "mph"}, kMetresPerSecond{1.0, "m/s"},
     kKnots{kKnotToMs, "knots"};
 inline constexpr SpeedUnit kSpeedUnits[] = {kKmh, kMph, kMetresPerSecond, kKnots};
@@ -289,8 +289,10 @@ bool holds(std::string_view text, std::initializer_list<std::string_view> parts)
 // than the car's speed or rpm at the moment.
 bool summary_column(std::string_view name) noexcept;
 
-// The speed unit a column's name states (m/s per unit), or 0.
-double speed_unit(std::string_view name) noexcept;
+// ---- Units (core/log_units.cpp) ----
+
+// The m/s per unit of the speed unit a column's name (folded) states, or 0.
+double stated_speed_to_ms(std::string_view name) noexcept;
 
 // A reading written with its unit after the number, as python-OBD writes a quantity (`790.5
 // revolutions_per_minute`, `12.0 kilometer_per_hour`): the number's text and the unit as these readers name
@@ -299,6 +301,23 @@ struct Quantity {
   std::string_view number, unit;
 };
 std::optional<Quantity> quantity_cell(std::string_view cell) noexcept;
+
+// A cell written as a quantity in `unit` (named as Quantity::unit names it) is its number; any other cell
+// stays as written (a quantity in another unit is then no number).
+std::string_view number_in_unit(std::string_view cell, std::string_view unit) noexcept;
+
+// A `speed,rpm` log's speed names no unit and is read as km/h, unless its values tell another: the OBD
+// speed (SAE J1979 PID 0x0D) is one byte of whole km/h, so a logger that converts it to mph or m/s writes
+// whole km/h in that unit (8.70106 mph is 14 km/h). The unit whose 1 km/h step every moving speed is a whole
+// multiple of, over at least ten distinct speeds, one of them not a whole number as written (whole
+// numbers are km/h themselves); else km/h. Simulated, logs of 12 speeds in km/h at one, two or six decimals
+// (10-135 km/h) were never taken for mph or m/s in 100,000 each, and mph (four conversion factors) and m/s
+// written at two decimals or more were always told.
+SpeedUnit unit_told_by_values(std::span<const double> speeds);
+
+// The seconds per unit of a time column, from its folded name (time, timestamp, seconds, t or ts; in
+// milliseconds when it ends in ms, (ms) or [ms]), or 0 when the name is not a time's.
+double time_unit(std::string_view folded_name);
 
 // A clock of the time of day wraps every hour (mm:ss) or day (hh:mm:ss): the rows' times (Row::clock,
 // Row::period, from parse_clock) are unwrapped in file order into Row::t.
@@ -345,25 +364,21 @@ struct ObdLayout {
   SampleFileFormat format = SampleFileFormat::kSpeedRpm;
   std::size_t rpm = 0, speed = 0;
   std::optional<std::size_t> time;  // none: the row counter times ReadOptions::row_seconds
-  double speed_to_ms = kKmhToMs;
+  // The unit the speed column is read in (SampleLog::speed_unit in a named log); none in a speed,rpm log
+  // read in the unit its values tell (unit_told_by_values()).
+  std::optional<SpeedUnit> speed_in;
   double time_to_s = 1.0;
   std::string speed_column;
   bool quantities = false;  // the rpm and speed cells may carry their unit after the number (quantity_cell)
-  // speed_to_ms's name (SampleLog::speed_unit); empty in a speed,rpm log read by its values' unit.
-  std::string_view speed_unit = {};
   std::string_view speed_unit_stated_in = {};  // SampleLog::speed_unit_stated_in
 };
 
-// The seconds per unit of a time column, from its folded name (time, timestamp, seconds, t or ts; in
-// milliseconds when it ends in ms, (ms) or [ms]), or 0 when the name is not a time's.
-double time_unit(std::string_view folded_name);
-
 // A named-column log's layout (core/obd_logs.cpp says how columns are found): none when the header has no
-// rpm or no speed column. A speed column that states no unit is read in `unitless` (ReadOptions::speed_unit)
-// when no column that states one is there; without it, throws SampleFileError when the only speed column
-// states no unit.
+// rpm or no speed column. A speed column that states no unit is read in `given_unit`
+// (ReadOptions::speed_unit) when no column that states one is there; without it, throws SampleFileError
+// when the only speed column states no unit.
 std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
-                                      std::optional<SpeedUnit> unitless, const std::string& name);
+                                      std::optional<SpeedUnit> given_unit, const std::string& name);
 
 // Carloop, `speed,rpm` and named-column logs, laid out as `layout` says.
 void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout);

@@ -107,7 +107,7 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
     have_last = true;
     lines.push_back(p.line);
     rows.push_back(p.counter);
-    kept.push_back(Sample{p.t, p.speed * layout.speed_to_ms, p.rpm / kSecondsPerMinute});
+    kept.push_back(Sample{p.t, p.speed * layout.speed_in->to_ms, p.rpm / kSecondsPerMinute});
   }
   if (format == SampleFileFormat::kCarloop && timed && refresh_row.size() >= 2) {
     // The counter on a row is the whole second at its last refresh, at most one polling round old: the
@@ -144,39 +144,6 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
   }
 }
 
-// A `speed,rpm` log's speed names no unit and is read as km/h, unless its values tell another: the OBD
-// speed (SAE J1979 PID 0x0D) is one byte of whole km/h, so a logger that converts it to mph or m/s writes
-// whole km/h in that unit (8.70106 mph is 14 km/h). The unit whose 1 km/h step every moving speed is a whole
-// multiple of, over at least kMinValues distinct speeds, one of them not a whole number as written (whole
-// numbers are km/h themselves); else km/h. Simulated, logs of 12 speeds in km/h at one, two or six decimals
-// (10-135 km/h) were never taken for mph or m/s in 100,000 each, and mph (four conversion factors) and m/s
-// written at two decimals or more were always told.
-SpeedUnit unitless_speed_unit(const std::vector<ObdRow>& rows) {
-  constexpr std::size_t kMinValues = 10;
-  // Off a whole km/h by the printed digits (two decimals are 0.008 km/h in mph, 0.018 in m/s) and, in mph,
-  // by the conversion factors loggers use (1 / 1.609344, 1 / 1.609, 0.6214, 0.62137: up to 0.02 % apart);
-  // m/s is km/h divided by exactly 3.6.
-  constexpr double kDigits = 0.02, kMphFactor = 3e-4;
-  std::vector<double> moving;
-  for (const ObdRow& r : rows)
-    if (std::isfinite(r.speed) && r.speed > 0.0) moving.push_back(r.speed);
-  std::sort(moving.begin(), moving.end());
-  moving.erase(std::unique(moving.begin(), moving.end()), moving.end());
-  const bool fractions =
-      std::any_of(moving.begin(), moving.end(), [](double v) { return std::abs(v - std::round(v)) > 1e-6; });
-  if (moving.size() >= kMinValues && fractions)
-    for (const SpeedUnit& unit : {kMph, kMetresPerSecond}) {
-      const double step = kKmhToMs / unit.to_ms;  // 1 km/h in the unit
-      const double factor = unit.to_ms == kMph.to_ms ? kMphFactor : 0.0;
-      const bool whole = std::all_of(moving.begin(), moving.end(), [&](double v) {
-        const double kmh = v / step;
-        return std::abs(kmh - std::round(kmh)) <= kDigits + factor * kmh;
-      });
-      if (whole) return unit;
-    }
-  return kKmh;
-}
-
 // A time cell's number and the digits after its point as written (none: -1, a number with an exponent).
 struct TimeWritten {
   double value;
@@ -211,26 +178,14 @@ double difference_written(double value, TimeWritten first, int decimals) {
 
 }  // namespace
 
-double time_unit(std::string_view folded_name) {
-  std::string base(folded_name.substr(0, folded_name.find_first_of("([")));
-  bool ms = folded_name.substr(base.size()) == "(ms)" || folded_name.substr(base.size()) == "[ms]";
-  if (!ms && base.size() > 2 && base.ends_with("ms")) {
-    base.resize(base.size() - 2);
-    ms = true;
-  }
-  if (base == "time" || base == "timestamp" || base == "seconds" || base == "t" || base == "ts")
-    return ms ? 1e-3 : 1.0;
-  return 0.0;
-}
-
 // Logs of other OBD apps and data sets, found by their column names (see folded()): the first column
 // whose name holds "rpm"; a speed column, whose name holds "speed" and states its unit, a GPS one (its name
 // holds "gps") or another as `--speed` asks (auto: GPS when there is one); else one whose name states no
-// unit, chosen the same way, read in `unitless`; a time column named time, timestamp, seconds, t or ts, in
+// unit, chosen the same way, read in `given_unit`; a time column named time, timestamp, seconds, t or ts, in
 // milliseconds when its name ends in ms, (ms) or [ms]. None when the header has no rpm or no speed column;
-// an error naming the column when the only speed has no unit and `unitless` gives none.
+// an error naming the column when the only speed has no unit and `given_unit` gives none.
 std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, TorqueSpeed choice,
-                                      std::optional<SpeedUnit> unitless, const std::string& name) {
+                                      std::optional<SpeedUnit> given_unit, const std::string& name) {
   ObdLayout layout;
   layout.format = SampleFileFormat::kColumns;
   std::optional<std::size_t> rpm, gps, other, unitless_gps, unitless_other;
@@ -248,7 +203,7 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
     if (f.find("speed") == std::string::npos || summary_column(f)) continue;
     const bool is_gps = f.find("gps") != std::string::npos;
     std::optional<std::size_t>& column =
-        speed_unit(f) == 0.0 ? (is_gps ? unitless_gps : unitless_other) : (is_gps ? gps : other);
+        stated_speed_to_ms(f) == 0.0 ? (is_gps ? unitless_gps : unitless_other) : (is_gps ? gps : other);
     if (!column) column = i;
   }
   if (!rpm) return std::nullopt;
@@ -258,10 +213,10 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
   };
   std::optional<std::size_t> speed = pick(gps, other);
   const bool stated = speed.has_value();
-  if (!speed && unitless) speed = pick(unitless_gps, unitless_other);
+  if (!speed && given_unit) speed = pick(unitless_gps, unitless_other);
   if (!speed) {
     const bool any_unitless = unitless_gps || unitless_other;
-    if (choice != TorqueSpeed::kAuto && (gps || other || (unitless && any_unitless)))
+    if (choice != TorqueSpeed::kAuto && (gps || other || (given_unit && any_unitless)))
       throw SampleFileError(name + ":1: no " + (choice == TorqueSpeed::kGps ? "GPS" : "OBD") +
                             " speed column (a name holding 'speed' and a unit" +
                             (choice == TorqueSpeed::kGps ? ", and 'GPS')" : ", without 'GPS')"));
@@ -276,13 +231,12 @@ std::optional<ObdLayout> named_layout(const std::vector<std::string>& header, To
   layout.speed = *speed;
   layout.speed_column = header[*speed];
   if (!stated) {
-    layout.speed_to_ms = unitless->to_ms;
-    layout.speed_unit = unitless->name;
+    layout.speed_in = given_unit;
     return layout;
   }
-  layout.speed_to_ms = speed_unit(folded(header[*speed]));
+  const double to_ms = stated_speed_to_ms(folded(header[*speed]));
   for (const SpeedUnit& unit : kSpeedUnits)
-    if (unit.to_ms == layout.speed_to_ms) layout.speed_unit = unit.name;
+    if (unit.to_ms == to_ms) layout.speed_in = unit;
   return layout;
 }
 
@@ -304,19 +258,18 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   std::optional<TimeWritten> first;  // the first time since 1970 of a row read (not bad), as written
   DigitGroups groups(reader);
   // A cell that writes the column's unit after its number is the number; any other stays as written.
-  constexpr double kRpmToMs = -1.0;  // no speed unit's: marks the rpm column
-  const auto number_of = [&](std::string_view cell, double to_ms) {
-    const std::optional<Quantity> q = layout.quantities ? quantity_cell(cell) : std::nullopt;
-    if (!q) return cell;
-    const bool same = to_ms == kRpmToMs ? q->unit == "rpm" : speed_unit(q->unit) == to_ms;
-    return same ? q->number : cell;
+  // A cell that writes the column's unit after its number is the number; any other stays as written.
+  const auto number_of = [&](std::string_view cell, std::string_view unit) {
+    return layout.quantities ? number_in_unit(cell, unit) : cell;
   };
+  // A speed,rpm log read in the unit its values tell (found once they are read) takes km/h's quantities.
+  const std::string_view speed_cells_unit = layout.speed_in.value_or(kKmh).name;
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
     double period = 0.0;   // of a clock cell's time of day
     bool counted = false;  // a named log's time since 1970: counted from the first (below)
-    const Cell rpm = groups.read(number_of(cells[irpm], kRpmToMs), "rpm");
-    const Cell speed = groups.read(number_of(cells[ispeed], layout.speed_to_ms), "speed");
+    const Cell rpm = groups.read(number_of(cells[irpm], "rpm"), "rpm");
+    const Cell speed = groups.read(number_of(cells[ispeed], speed_cells_unit), "speed");
     Cell t;
     t.kind = CellKind::kNumber;
     t.value = counter * out.row_seconds();
@@ -384,16 +337,17 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
            parsed.size(), reader.restarts, [&](std::size_t i) { return parsed[i].line; },
            [&](std::size_t i) -> double& { return parsed[i].t; }, out.log()))
     parsed[i].drive_start = true;
-  out.log().speed_unit = layout.speed_unit;
   out.log().speed_unit_stated_in = layout.speed_unit_stated_in;
-  if (format != SampleFileFormat::kSpeedRpm || !layout.speed_unit.empty()) {
+  if (layout.speed_in) {
+    if (named) out.log().speed_unit = layout.speed_in->name;
     add_obd_rows(parsed, out, layout);
     return;
   }
-  const SpeedUnit unit = unitless_speed_unit(parsed);
+  std::vector<double> speeds(parsed.size());
+  std::transform(parsed.begin(), parsed.end(), speeds.begin(), [](const ObdRow& r) { return r.speed; });
   ObdLayout in_unit = layout;
-  in_unit.speed_to_ms = unit.to_ms;
-  out.log().speed_unit = unit.name;
+  in_unit.speed_in = unit_told_by_values(speeds);
+  out.log().speed_unit = in_unit.speed_in->name;
   add_obd_rows(parsed, out, in_unit);
 }
 
@@ -447,8 +401,8 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     if (last_t >= 0.0 && last_t < kDay && seconds < kDay && seconds < last_t - kDay / 2) offset += kDay;
     last_t = seconds;
     seconds += offset;
-    readings.push_back(
-        {reader.number, seconds, value.value, pid, unit.empty() ? -1.0 : speed_unit(unit), value.problem});
+    readings.push_back({reader.number, seconds, value.value, pid,
+                        unit.empty() ? -1.0 : stated_speed_to_ms(unit), value.problem});
   }
   // Digit groups their column does not vouch for: in a value, a bad value (said for the PIDs used); in the
   // time, a bad row.
@@ -470,7 +424,8 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
     });
   const auto speed_pid = [&](std::size_t i, bool gps) {
     return holds(names[i], {"speed"}) && !summary_column(names[i]) &&
-           speed_unit(units[i].empty() ? names[i] : units[i]) > 0.0 && holds(names[i], {"gps"}) == gps;
+           stated_speed_to_ms(units[i].empty() ? names[i] : units[i]) > 0.0 &&
+           holds(names[i], {"gps"}) == gps;
   };
   const std::optional<std::size_t> gps = find_pid([&](std::size_t i) { return speed_pid(i, true); });
   const std::optional<std::size_t> obd = find_pid([&](std::size_t i) { return speed_pid(i, false); });
@@ -488,7 +443,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   ObdLayout layout;
   layout.format = SampleFileFormat::kPidRows;
   layout.time = it;
-  layout.speed_to_ms = 1.0;  // each reading converted by its own unit
+  layout.speed_in = kMetresPerSecond;  // each reading converted by its own unit
   layout.speed_column = written[*speed];
   out.log().format = layout.format;
   out.log().speed_column = layout.speed_column;
@@ -504,7 +459,7 @@ void read_pid_rows(LineReader& reader, const std::vector<std::string>& header, L
   std::vector<const Reading*> revs;
   for (Reading& r : readings) {
     if (r.pid != *rpm && r.pid != *speed) continue;
-    if (r.to_ms < 0.0) r.to_ms = speed_unit(units[r.pid].empty() ? names[r.pid] : units[r.pid]);
+    if (r.to_ms < 0.0) r.to_ms = stated_speed_to_ms(units[r.pid].empty() ? names[r.pid] : units[r.pid]);
     if (!r.problem.empty()) {
       out.skip(r.line, r.problem);
       continue;

@@ -95,7 +95,8 @@ bool read_units_row(LineReader& reader, std::vector<std::string>& header) {
   const bool units =
       std::none_of(cells.begin(), cells.end(),
                    [](std::string_view c) { return parse_cell(c, "").kind == CellKind::kNumber; }) &&
-      std::any_of(cells.begin(), cells.end(), [](std::string_view c) { return speed_unit(folded(c)) > 0.0; });
+      std::any_of(cells.begin(), cells.end(),
+                  [](std::string_view c) { return stated_speed_to_ms(folded(c)) > 0.0; });
   if (!units) {
     reader.unread();
     return false;
@@ -116,7 +117,7 @@ bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
   constexpr std::size_t kLookAhead = 100;  // rows
   std::vector<std::size_t> unstated;       // speed columns whose name states no unit, their reading unseen
   for (std::size_t i = 0; i < header.size(); ++i)
-    if (const std::string name = folded(header[i]); holds(name, {"speed"}) && speed_unit(name) == 0.0)
+    if (const std::string name = folded(header[i]); holds(name, {"speed"}) && stated_speed_to_ms(name) == 0.0)
       unstated.push_back(i);
   bool any = false;
   std::vector<std::string_view> cells;
@@ -129,7 +130,7 @@ bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
     std::erase_if(unstated, [&](std::size_t i) {
       if (i >= cells.size()) return false;
       if (const std::optional<Quantity> q = quantity_cell(cells[i])) {
-        if (speed_unit(q->unit) > 0.0) header[i] += " (" + std::string(q->unit) + ")";
+        if (stated_speed_to_ms(q->unit) > 0.0) header[i] += " (" + std::string(q->unit) + ")";
         return true;
       }
       return parse_cell(cells[i], "").kind == CellKind::kNumber;
@@ -140,7 +141,7 @@ bool quantity_cells(LineReader& reader, std::vector<std::string>& header) {
 }
 
 // named_layout(), or when it finds no speed with a unit, named_layout() of the header with its units row; a
-// speed column that states no unit in either is read in `unitless` (ReadOptions::speed_unit), if given.
+// speed column that states no unit in either is read in ReadOptions::speed_unit, if given.
 // `quantities`: the cells may write their units (quantity_cells(), which added them to `header`'s names);
 // `written`: the header as the log writes it, whose name the speed column keeps.
 std::optional<ObdLayout> named_columns(LineReader& reader, std::vector<std::string>& header,
@@ -321,7 +322,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
                       *find_column(header, "ENGINE_RPM ()"),
                       *find_column(header, "VEHICLE_SPEED ()"),
                       find_column(header, "ENGINE_RUN_TINE ()"),
-                      kKmhToMs,
+                      kKmh,
                       1.0,
                       "VEHICLE_SPEED ()"};  // sic: the logger's own spelling, RUN_TINE
     if (!carloop.time) carloop.time = find_column(header, "ENGINE_RUN_TIME ()");
@@ -331,14 +332,10 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
                      *find_column(header, "rpm"),
                      *find_column(header, "speed"),
                      std::nullopt,
-                     kKmhToMs,
+                     options.speed_unit,  // none: the unit its values tell
                      1.0,
                      "speed"};
     layout.quantities = quantities;
-    if (options.speed_unit) {
-      layout.speed_to_ms = options.speed_unit->to_ms;
-      layout.speed_unit = options.speed_unit->name;
-    }
     for (std::size_t i = 0; i < header.size() && !layout.time; ++i)  // a time column, as named columns'
       if (const double to_s = time_unit(folded(header[i])); to_s > 0.0) {
         layout.time = i;

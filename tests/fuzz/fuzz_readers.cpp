@@ -52,8 +52,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   opt.max_messages = ((options >> 3) & 1) != 0 ? 3 : 1000;
   constexpr double kRowSeconds[] = {1.0, 2.0, 0.1, 3600.0};
   opt.row_seconds = kRowSeconds[(options >> 4) & 3];
-  constexpr const char* kSpeedUnits[] = {"", "mph", "km/h", "knots"};  // "": none given
-  opt.speed_unit = speed_unit_named(kSpeedUnits[(options >> 6) & 3]);
+  constexpr const char* kGivenUnits[] = {"", "mph", "km/h", "knots"};  // "": none given
+  opt.speed_unit = speed_unit_named(kGivenUnits[(options >> 6) & 3]);
   const std::string text(reinterpret_cast<const char*>(data + 1), size - 1);
   SampleLog log;
   try {
