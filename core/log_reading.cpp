@@ -118,8 +118,11 @@ Cell parse_cell(std::string_view text, std::string_view column) {
 
 namespace {
 
-bool digits(std::string_view s) noexcept {
-  return !s.empty() && std::all_of(s.begin(), s.end(), [](char c) { return c >= '0' && c <= '9'; });
+// Whether `s` is decimal digits (or hexadecimal ones) and nothing else.
+bool digits(std::string_view s, bool hex = false) noexcept {
+  return !s.empty() && std::all_of(s.begin(), s.end(), [hex](char c) {
+    return (c >= '0' && c <= '9') || (hex && ((c >= 'a' && c <= 'f') || (c >= 'A' && c <= 'F')));
+  });
 }
 
 // Whether `text` is digit groups (DigitGroups) separated by `sep`, perhaps with a decimal part after `mark`
@@ -156,6 +159,13 @@ bool decimal_comma(std::string_view text) noexcept {
 }
 
 }  // namespace
+
+bool freematics_line(std::string_view line) noexcept {
+  line = trim(line);
+  const std::size_t colon = line.find(':'), equals = line.find('=');
+  return colon != std::string_view::npos && equals != std::string_view::npos && colon < equals &&
+         digits(line.substr(0, colon)) && digits(line.substr(colon + 1, equals - colon - 1), true);
+}
 
 Cell DigitGroups::read(std::string_view cell, std::string_view column) {
   const Cell as_read = parse_cell(cell, column);

@@ -282,6 +282,10 @@ std::string folded(std::string_view name);
 // The same into `out` (its storage reused).
 void fold(std::string_view name, std::string& out);
 
+// Whether a line is one of a Freematics logger's, which writes no table but `ms:PID=value` lines
+// (`40620:10D=12`: the time in ms, the PID in hex).
+bool freematics_line(std::string_view line) noexcept;
+
 // Whether `text` holds any of `parts`.
 bool holds(std::string_view text, std::initializer_list<std::string_view> parts) noexcept;
 

@@ -258,7 +258,6 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   std::optional<TimeWritten> first;  // the first time since 1970 of a row read (not bad), as written
   DigitGroups groups(reader);
   // A cell that writes the column's unit after its number is the number; any other stays as written.
-  // A cell that writes the column's unit after its number is the number; any other stays as written.
   const auto number_of = [&](std::string_view cell, std::string_view unit) {
     return layout.quantities ? number_in_unit(cell, unit) : cell;
   };

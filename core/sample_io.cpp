@@ -360,17 +360,7 @@ SampleLog read_samples(std::istream& in, std::string_view name, const ReadOption
       lacks = ": no column's name holds 'rpm' (the engine speed): log the engine RPM as well";
     else if (names("rpm") && !names("speed"))
       lacks = ": no column's name holds 'speed' (the vehicle's, with its unit): log the speed as well";
-    // A Freematics logger writes no table but `ms:PID=value` lines (`40620:10D=12`), PIDs in hex.
-    const std::string_view first = trim(header_line);
-    const std::size_t colon = first.find(':'), equals = first.find('=');
-    const auto digits = [](std::string_view text, bool hex) {
-      return !text.empty() && std::all_of(text.begin(), text.end(), [hex](char c) {
-        const auto u = static_cast<unsigned char>(c);
-        return hex ? std::isxdigit(u) != 0 : std::isdigit(u) != 0;
-      });
-    };
-    if (colon != std::string_view::npos && equals != std::string_view::npos && colon < equals &&
-        digits(first.substr(0, colon), false) && digits(first.substr(colon + 1, equals - colon - 1), true))
+    if (freematics_line(header_line))
       lacks =
           ": a Freematics log (ms:PID=value lines), which is not read: write its PIDs 10C (rpm) and 10D "
           "(speed, km/h) as columns time (ms),rpm,speed (km/h)";

@@ -29,6 +29,24 @@ namespace fs = std::filesystem;
 using gearpulse::test::TempDir;
 using namespace gearpulse::test::cli;
 
+namespace {
+
+// A drive's rows (speed and rpm both read) as a speed,rpm log whose logger converts the OBD speed (whole
+// km/h) to mph writes them.
+std::string converted_mph_log(const gearpulse::SampleLog& drive) {
+  std::string log = "t,speed,rpm\n";
+  for (const gearpulse::Sample& s : drive.samples) {
+    if (!s.has_speed() || !s.has_freq()) continue;
+    char row[96];
+    std::snprintf(row, sizeof row, "%.3f,%.6f,%.2f\n", s.t, std::round(s.speed * 3.6) / 1.609344,
+                  s.freq * 60.0);
+    log += row;
+  }
+  return log;
+}
+
+}  // namespace
+
 TEST_CASE("cli: fit prints the model JSON of docs/interfaces.md and writes --out and --plot") {
   TempDir dir;
   const std::string log = simulated_log(dir, 21);
@@ -271,16 +289,7 @@ TEST_CASE("cli: fit says on stderr how many gears it found, on how much driving,
   CHECK(rpm.err.find(per_1000) != std::string::npos);
   CHECK(rpm.err.find("names no unit: read as km/h") != std::string::npos);  // speeds to the metre per hour
   // The same drive as a logger that converts the OBD speed (whole km/h) to mph writes it: read in mph, said.
-  std::string mph_log = "t,speed,rpm\n";
-  for (const gearpulse::Sample& s : samples.samples) {
-    char row[96];
-    if (s.has_speed() && s.has_freq()) {
-      std::snprintf(row, sizeof row, "%.3f,%.6f,%.2f\n", s.t, std::round(s.speed * 3.6) / 1.609344,
-                    s.freq * 60.0);
-      mph_log += row;
-    }
-  }
-  write((dir / "mph.csv").string(), mph_log);
+  write((dir / "mph.csv").string(), converted_mph_log(samples));
   const Result mph = run(dir, "fit " + (dir / "mph.csv").string());
   REQUIRE(mph.status == 0);
   CHECK(mph.err.find("every value is a whole km/h in mph (an OBD speed converted): read as mph") !=
@@ -336,21 +345,17 @@ TEST_CASE("cli: fit --speed-unit reads a speed column that names no unit as a he
   const gearpulse::SampleLog samples = read_log(simulated_log(dir, 21));
   // The drive in mph, as a data set's SPEED column and as SPEED (mph); and as a speed,rpm log's whole km/h
   // written in mph, which reads as mph unless told km/h.
-  std::string bare = "time,ENGINE_RPM,SPEED\n", named = "time,ENGINE_RPM,SPEED (mph)\n",
-              converted = "t,speed,rpm\n";
+  std::string bare = "time,ENGINE_RPM,SPEED\n", named = "time,ENGINE_RPM,SPEED (mph)\n";
   for (const gearpulse::Sample& s : samples.samples) {
     if (!s.has_speed() || !s.has_freq()) continue;
     char row[96];
     std::snprintf(row, sizeof row, "%.3f,%.2f,%.3f\n", s.t, s.freq * 60.0, s.speed / 0.44704);
     bare += row;
     named += row;
-    std::snprintf(row, sizeof row, "%.3f,%.6f,%.2f\n", s.t, std::round(s.speed * 3.6) / 1.609344,
-                  s.freq * 60.0);
-    converted += row;
   }
   write((dir / "bare.csv").string(), bare);
   write((dir / "named.csv").string(), named);
-  write((dir / "converted.csv").string(), converted);
+  write((dir / "converted.csv").string(), converted_mph_log(samples));
   const Result given = run(dir, "fit --speed-unit mph " + (dir / "bare.csv").string());
   const Result stated = run(dir, "fit " + (dir / "named.csv").string());
   REQUIRE(given.status == 0);
