@@ -273,7 +273,8 @@ void add_fit(CLI::App& app, int& status) {
   add_speed_unit_option(*sub, cmd->speed_unit);
   sub->add_option("files", cmd->files,
                   "Sample logs (CSV): t,speed,freq, Torque Pro, Carloop, speed,rpm, phone OBD apps' "
-                  "(columns named rpm and speed with its unit or --speed-unit, or SECONDS,PID,VALUE rows); man gearpulse")
+                  "(columns named rpm and speed with its unit or --speed-unit, or SECONDS,PID,VALUE rows); "
+                  "man gearpulse")
       ->required();
   sub->callback([cmd, &status] { status = run_fit(*cmd); });
 }
