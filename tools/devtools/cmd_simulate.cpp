@@ -39,6 +39,7 @@ struct SimulateOptions {
   double idle_start = 8.0;
   double tone_hz = 0.0;
   int gps_lead = 8;
+  int gps_hz = 1;  // fix sets a second in drive.nmea (1, 2, 5 or 10: what car-PC receivers report)
   double skip_downshift = 0.0;  // share of braking downshifts that skip a gear (DriveOptions::skip_downshift)
   double outage_at_skip = 0.0;  // s; > 0: an outage this long from the first braking skip-downshift
   bool skip_drive_on = false;   // that skip: one after which the car drives on in the lower gear
@@ -243,14 +244,16 @@ int run_simulate(const SimulateOptions& o) {
     sim::write_wav_s16(dir / "drive.wav", pcm, o.rate);
   }
 
-  // GPS: Doppler speed with the receiver's noise (paper eq. (2)), no fix inside the outage. The log
-  // starts gps_lead seconds before the drive (at rest) so a replaying gpsd has a fix before t = 0,
-  // and t = 0 is always 12:00:00 UTC: a player can start the audio when that epoch comes out.
+  // GPS: Doppler speed with the receiver's noise (paper eq. (2)), no fix inside the outage, gps_hz epochs
+  // a second, each the truth at its instant. The log starts gps_lead seconds before the drive (at rest)
+  // so a replaying gpsd has a fix before t = 0, and t = 0 is always 12:00:00 UTC: a player can start the
+  // audio when that epoch comes out. (At 1 Hz the same epochs and noise draws as before the option.)
   std::mt19937_64 rng(o.seed + 202);
   std::normal_distribution<double> gps_noise(0.0, 0.05);
   std::vector<sim::NmeaEpoch> epochs;
-  for (int k = -o.gps_lead; k <= static_cast<int>(length); ++k) {
-    const double t = k;
+  const int last_epoch = static_cast<int>(length * o.gps_hz);
+  for (int k = -o.gps_lead * o.gps_hz; k <= last_epoch; ++k) {
+    const double t = static_cast<double>(k) / o.gps_hz;
     const double v = t < 0.0 ? 0.0 : sim::truth_at(drive, t).speed;
     epochs.push_back({t, outage.contains(t) ? kMissing : std::max(0.0, v + gps_noise(rng))});
   }
@@ -280,6 +283,7 @@ int run_simulate(const SimulateOptions& o) {
       "outage_length_s=" + std::to_string(outage.length),
       "shifts_in_outage=" + std::to_string(shifts),
       "gps_lead_s=" + std::to_string(o.gps_lead),
+      "gps_hz=" + std::to_string(o.gps_hz),
       "gps_t0_utc=12:00:00",
   };
   if (skip.clutch_out >= 0.0) {
@@ -338,6 +342,9 @@ void add_simulate(CLI::App& app, int& status) {
   cmd->add_option("--gps-lead", opts->gps_lead, "Seconds of GPS fixes at rest before the drive's t = 0")
       ->capture_default_str()
       ->check(CLI::Range(0, 600));
+  cmd->add_option("--gps-hz", opts->gps_hz, "GPS fix sets a second in drive.nmea (times to 0.01 s)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({1, 2, 5, 10}));
   cmd->add_option("--skip-downshift", opts->skip_downshift,
                   "Share of downshifts under braking that skip a gear (4 -> 2, 5 -> 3), 0..1")
       ->capture_default_str();

@@ -38,10 +38,12 @@ struct Utc {
   int h, m;
   double s;
 };
+// To the hundredth of a second the sentences print: an epoch a tenth of a second before a whole second
+// (59.9 s as 59.899999...) never prints as 60.00 of the minute before.
 Utc utc_of(double seconds_of_day) {
-  const double wrapped = std::fmod(seconds_of_day, 86400.0);
-  const int whole = static_cast<int>(wrapped);
-  return {whole / 3600, (whole / 60) % 60, wrapped - (whole / 60) * 60};
+  const long long centis = std::llround(seconds_of_day * 100.0) % (86400LL * 100);
+  const int whole = static_cast<int>(centis / 100);
+  return {whole / 3600, (whole / 60) % 60, static_cast<double>(centis - (whole / 60) * 6000LL) / 100.0};
 }
 
 }  // namespace

@@ -1,7 +1,9 @@
 #pragma once
 // NMEA 0183 log generator: a vehicle driving along a fixed heading at given speeds, one RMC and one GGA
-// sentence per 1 Hz epoch (exactly two lines, so `gpsfake -c 0.5` replays it at 1 Hz). Epochs whose
-// speed is NaN are GPS outages: void RMC (status V) and GGA fix quality 0, position held.
+// sentence per epoch (exactly two lines, so a player pacing 2 N lines a second replays N Hz epochs in
+// real time: scripts/lib/harness.sh). Times print to the hundredth of a second (hhmmss.ss), as a 5 or
+// 10 Hz receiver's do. Epochs whose speed is NaN are GPS outages: void RMC (status V) and GGA fix
+// quality 0, position held.
 #include <filesystem>
 #include <span>
 #include <string>
@@ -11,7 +13,7 @@
 namespace gearpulse::sim {
 
 struct NmeaEpoch {
-  double t = 0.0;      // s since the start of the log (epochs are 1 s apart in practice)
+  double t = 0.0;      // s since the start of the log (epochs 1 / N s apart for an N Hz receiver)
   double speed = 0.0;  // m/s over ground; NaN = no fix in this epoch
 };
 
