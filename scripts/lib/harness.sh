@@ -17,8 +17,9 @@
 # Settings (environment, read by prepare): GEARPULSE_RATE (48000), GEARPULSE_PERIOD (1024 frames),
 # GEARPULSE_PPK (2485), GEARPULSE_TRAIN_SEED (11), GEARPULSE_TRAIN_DURATION (2400 s), GEARPULSE_VEHICLE
 # (bmw-520i), GEARPULSE_LOG_LEVEL (info), GEARPULSE_COLD (0; 1: no training drive, the daemon starts from
-# an empty state directory), GEARPULSE_REALTIME (false: [audio] realtime, SCHED_FIFO threads
-# and locked memory; true needs root or CAP_SYS_NICE and CAP_IPC_LOCK); read by start: GEARPULSE_GPS_ALIGN
+# an empty state directory), GEARPULSE_GPS_HZ (1: fix sets a second in the drive's NMEA log, 1, 2, 5 or 10;
+# start plays the log at the rate its drive.env names), GEARPULSE_REALTIME (false: [audio] realtime,
+# SCHED_FIFO threads and locked memory; true needs root or CAP_SYS_NICE and CAP_IPC_LOCK); read by start: GEARPULSE_GPS_ALIGN
 # (0.9 s: the audio starts this long after gpsd reported the fix before the drive's t = 0, whose time
 # WORK/drive.t0 holds).
 
@@ -101,7 +102,8 @@ hs_prepare() {
       >"$GEARPULSE_WORK/fit.json" 2>"$GEARPULSE_WORK/fit.log" || hs_die "gearpulse fit failed: $(cat "$GEARPULSE_WORK/fit.log")"
   fi
   "$GEARPULSE_DEVTOOLS" simulate --out "$GEARPULSE_WORK/drive" --rate "$GEARPULSE_RATE" --vehicle "$GEARPULSE_VEHICLE" \
-    --pulses-per-km "$GEARPULSE_PPK" "$@" >"$GEARPULSE_WORK/drive.log" || hs_die "drive simulation failed"
+    --pulses-per-km "$GEARPULSE_PPK" ${GEARPULSE_GPS_HZ:+--gps-hz "$GEARPULSE_GPS_HZ"} "$@" \
+    >"$GEARPULSE_WORK/drive.log" || hs_die "drive simulation failed"
   hs_save_env
 }
 
@@ -171,11 +173,22 @@ hs_start_feeder() {
 # gpsfake plays the log at once (-n); the log starts some seconds before the drive's t = 0, which is
 # the epoch stamped 12:00:00 UTC (see gearpulse simulate --gps-lead). gpsfake finds gpsd's control
 # socket by its own PID in $TMPDIR and takes a stale file of a killed run with the same PID for it (then
-# gpsd gets no device): it keeps that socket in the run's directory.
+# gpsd gets no device): it keeps that socket in the run's directory. A log of N > 1 fix sets a second
+# (drive.env's gps_hz) is played by scripts/lib/gps_player.py, gpsfake's machinery on a clock: `gpsfake -c`
+# sleeps after each line, and its overhead per line (+8.5 % of the drive at 20 lines a second) would put
+# the fixes seconds behind the audio by the drive's end. 1 Hz keeps gpsfake -c 0.5, whose pace every 1 Hz
+# figure was measured with (+0.3 to 1 % behind, as the machine's load has it).
 hs_start_gpsfake() {
+  local hz
   GEARPULSE_PORT=$(hs_free_port)
   hs_save_env
-  hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$GEARPULSE_WORK" gpsfake -q -n -1 -P "$GEARPULSE_PORT" -c 0.5 "$GEARPULSE_WORK/drive/drive.nmea"
+  hz=$(sed -n 's/^gps_hz=//p' "$GEARPULSE_WORK/drive/drive.env")
+  if [ "${hz:-1}" = 1 ]; then
+    hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$GEARPULSE_WORK" gpsfake -q -n -1 -P "$GEARPULSE_PORT" -c 0.5 "$GEARPULSE_WORK/drive/drive.nmea"
+  else
+    hs_spawn gpsfake env PATH="/usr/bin:$PATH" TMPDIR="$GEARPULSE_WORK" /usr/bin/python3 \
+      "$(dirname "${BASH_SOURCE[0]}")/gps_player.py" "$GEARPULSE_WORK/drive/drive.nmea" "$GEARPULSE_PORT" $((2 * hz))
+  fi
 }
 
 # hs_wait_gps_tpv FIRST LAST: blocks until gpsd reports a fix of 11:59:FIRST to 11:59:LAST (the drive's
