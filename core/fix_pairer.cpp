@@ -24,6 +24,15 @@ std::span<const PendingFix> FixPairer::take_due(double now, double served) noexc
   return {due_.data(), due};
 }
 
+bool PairSpacing::take(double fix_time, double t) noexcept {
+  // A clock that advanced pairs by its seconds; one that did not (or none), by receive time.
+  const bool advanced = std::isfinite(fix_time) && fix_time != fix_time_;
+  if (advanced ? std::floor(fix_time) == std::floor(fix_time_) : t - t_ < kMinGap) return false;
+  fix_time_ = fix_time;
+  t_ = t;
+  return true;
+}
+
 std::optional<Sample> training_pair(const PendingFix& fix, double freq, double snr_db, bool tracked,
                                     double min_snr_db) noexcept {
   if (!tracked || !std::isfinite(freq) || !(snr_db >= min_snr_db)) return std::nullopt;

@@ -6,6 +6,7 @@
 // the daemon); the queue is fixed, so nothing allocates.
 #include <array>
 #include <cstddef>
+#include <limits>
 #include <optional>
 #include <span>
 
@@ -40,6 +41,29 @@ class FixPairer {
   std::array<PendingFix, kCapacity> waiting_{};
   std::size_t count_ = 0;
   std::array<PendingFix, kCapacity> due_{};
+};
+
+// At most one training pair a second: the first usable fix of each second of the receiver's clock is
+// paired, the others of that second are not. Pairs a second apart are what the fit, the store's bounds and
+// the learning schedule count (model.min_new_samples, replace_min_samples, learn_cluster_pairs and
+// max_samples are seconds of driving at 1 Hz GPS), and what the fit may take as independent: the fixes of a
+// 5 or 10 Hz receiver come out of its navigation filter, whose speed errors hold for about a second, and
+// their frequencies from tracker windows (0.16 s at 0.1 s hops) of one smoothed track. Ten of them in a
+// second are one second's evidence, not ten; counted as ten, a 10 Hz receiver would fit the young model
+// after 4 s in a gear and replace a fitted model after 6 minutes of driving. A 1 Hz receiver's every fix
+// is paired, as before. A receiver whose clock does not advance (none, or one standing still while the car
+// moves) is paired once every kMinGap of receive time.
+class PairSpacing {
+ public:
+  static constexpr double kMinGap = 0.9;  // s: a 1 Hz receiver's fixes, received with some jitter
+
+  // Whether the usable fix of receiver time `fix_time` (UTC s, NaN = unknown), stamped `t` (s), is paired;
+  // if so it is the last paired.
+  [[nodiscard]] bool take(double fix_time, double t) noexcept;
+
+ private:
+  double fix_time_ = std::numeric_limits<double>::quiet_NaN();  // receiver time of the last pair
+  double t_ = -std::numeric_limits<double>::infinity();         // its stamp
 };
 
 // The training pair of `fix` and the tracker's estimate at its instant: only a tracked, finite frequency

@@ -96,6 +96,7 @@ struct Pipeline::Impl {
     std::unique_ptr<SlidingDftTracker> tracker;  // while audio is open
     std::vector<float> block;                    // one read of the ring
     FixPairer fixes;
+    PairSpacing pair_spacing;            // one pair a second of the receiver's clock
     std::uint64_t model_generation = 0;  // ModelHolder::generation() when `model` was taken
     std::int64_t last_rx = 0;            // receive time of the last GPS report looked at
     std::optional<GpsReport> given_fix;  // the newest report a step gave the synthesis

@@ -131,7 +131,8 @@ bool Pipeline::Impl::track_audio(Tracking& k, double now) noexcept {
   return got_points;
 }
 
-// Training pairs: each new usable GPS fix waits in the FixPairer for the window centred on its time.
+// Training pairs: the first usable GPS fix of each second (PairSpacing) waits in the FixPairer for the
+// window centred on its time.
 void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
   if (gps) {
     if (const auto rep = gps->latest(); rep && rep->rx_ns != k.last_rx) {
@@ -140,7 +141,8 @@ void Pipeline::Impl::pair_fixes(Tracking& k, double now) noexcept {
         last_fix_speed.store(rep->speed, std::memory_order_relaxed);
         last_fix_ns.store(rep->rx_ns, std::memory_order_relaxed);
         const double t_fix = rep->rx_ns * 1e-9 - gps_latency.load(std::memory_order_relaxed);
-        (void)k.fixes.add({t_fix, wall_now() - (now - t_fix), rep->speed});
+        if (k.pair_spacing.take(rep->fix_time, t_fix))
+          (void)k.fixes.add({t_fix, wall_now() - (now - t_fix), rep->speed});
       }
     }
   }

@@ -79,3 +79,33 @@ TEST_CASE("pairer: only a tracked, finite frequency above the SNR threshold make
   CHECK_FALSE(training_pair(fix, 95.0, -12.0, true, -10.0).has_value());
   CHECK(training_pair(fix, 95.0, -10.0, true, -10.0).has_value());
 }
+
+TEST_CASE("pairer: one pair a second of the receiver's clock, every fix of a 1 Hz receiver") {
+  using gearpulse::PairSpacing;
+  SECTION("10 Hz: the first fix of each second") {
+    PairSpacing spacing;
+    std::vector<double> paired;
+    for (int k = 0; k < 30; ++k) {
+      const double fix_time = 1.7e9 + 0.1 * k, t = 100.0 + 0.1 * k;
+      if (spacing.take(fix_time, t)) paired.push_back(t);
+    }
+    REQUIRE(paired.size() == 3);
+    CHECK(paired[0] == Approx(100.0));
+    CHECK(paired[1] == Approx(101.0));
+    CHECK(paired[2] == Approx(102.0));
+  }
+  SECTION("1 Hz, received with jitter: all") {
+    PairSpacing spacing;
+    for (int k = 0; k < 20; ++k)
+      CHECK(spacing.take(1.7e9 + k, 100.0 + k + (k % 2 == 0 ? 0.04 : -0.04)));
+  }
+  SECTION("no receiver time, or one standing still: by receive time") {
+    PairSpacing spacing;
+    CHECK(spacing.take(kNan, 10.0));
+    CHECK_FALSE(spacing.take(kNan, 10.5));
+    CHECK(spacing.take(kNan, 10.95));
+    CHECK(spacing.take(1.7e9, 11.0));
+    CHECK_FALSE(spacing.take(1.7e9, 11.5));
+    CHECK(spacing.take(1.7e9, 12.0));
+  }
+}
