@@ -108,27 +108,31 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
   const bool was_moving = last_gps_ > 5.0 * tuning.stationary_speed;
   // Declutched is known from the revs: with the frequency lost every gear fades and the clutch holds the
   // belief whatever the car does, and a cruise seen so taught a deceleration of zero (after which a car
-  // that lost GPS too was carried on at its last speed for good). Measured from one fix to the next: a
-  // fix repeated at the steps between them shows no change of speed.
+  // that lost GPS too was carried on at its last speed for good). Measured between fixes (a fix repeated at
+  // the steps between them shows no change of speed) at least idle_braking::kMinGap apart: over less, the
+  // change of speed is mostly the receiver's noise, and clipped unevenly above it taught a braking no car
+  // did. A 1 Hz receiver's every fix is measured from the one before; a 5 or 10 Hz receiver's fixes closer
+  // than that to the fix measured from wait (the next measurement spans them): measured fix to fix, its
+  // 0.1 s steps never made an idle braking, and each counted as a whole 1 Hz measurement in the memory.
   if (gps_new) {
-    const double fix_dt = t - last_fix_t_;
-    if (fix_dt > 0.0 && last_gps_ >= 0.0 && was_moving && mode == 0 && belief > 0.8 && std::isfinite(freq) &&
-        freq > 0.0) {
-      constexpr double kCoastMemory = 100.0;  // samples
-      const double a = idle_braking::clip((gps - last_gps_) / fix_dt);
-      coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
-      coast_mean_ += (a - coast_mean_) / coast_count_;
-      // At idle, from fixes at least half a second apart (over less, the change of speed is mostly the
-      // receiver's noise, and clipped unevenly above it taught a braking no car did), each counting for
-      // the share of a second it covers (idle_coast_count_ is in seconds).
-      if (at_idle && fix_dt >= idle_braking::kMinGap) {
-        const double w = idle_braking::weight(fix_dt);
-        idle_coast_count_ = std::min(idle_coast_count_ + w, kCoastMemory);
-        idle_coast_mean_ += w * (a - idle_coast_mean_) / idle_coast_count_;
+    const double fix_dt = t - from_t_;
+    if (from_gps_ < 0.0 || fix_dt >= idle_braking::kMinGap) {
+      if (from_gps_ >= 0.0 && was_moving && mode == 0 && belief > 0.8 && std::isfinite(freq) && freq > 0.0) {
+        constexpr double kCoastMemory = 100.0;  // measurements
+        const double a = idle_braking::clip((gps - from_gps_) / fix_dt);
+        coast_count_ = std::min(coast_count_ + 1.0, kCoastMemory);
+        coast_mean_ += (a - coast_mean_) / coast_count_;
+        // At idle, each counting for the share of a second it covers (idle_coast_count_ is in seconds).
+        if (at_idle) {
+          const double w = idle_braking::weight(fix_dt);
+          idle_coast_count_ = std::min(idle_coast_count_ + w, kCoastMemory);
+          idle_coast_mean_ += w * (a - idle_coast_mean_) / idle_coast_count_;
+        }
       }
+      from_gps_ = gps;
+      from_t_ = t;
     }
     last_gps_ = gps;
-    last_fix_t_ = t;
   }
   if (!std::isfinite(freq) || freq <= 0.0) {
     roll_span_ = -1.0;

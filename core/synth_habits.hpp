@@ -44,7 +44,7 @@ class SynthHabits {
   void learn_shift(int gear, double belief, double freq) noexcept;
 
   // The next fix starts afresh (after a reset or a gap): no speed before it to measure a deceleration by.
-  void forget_last_fix() noexcept { last_gps_ = -1.0; }
+  void forget_last_fix() noexcept { last_gps_ = from_gps_ = -1.0; }
   // A flat stretch of revs counts only if GPS saw it whole (rolling idle).
   void end_flat_stretch() noexcept { roll_span_ = -1.0; }
   // The ladder changed: the gear at old position i is at position to[i] (0 = gone), for old positions
@@ -110,8 +110,9 @@ class SynthHabits {
   // and the current flat stretch (s, -1 = none; its first frequency and GPS speed).
   double roll_mean_ = 0.0, roll_count_ = 0.0, roll_time_ = 0.0;
   double roll_span_ = -1.0, roll_freq_ = 0.0, roll_speed_ = 0.0;
-  double last_gps_ = -1.0;   // newest fix (-1 = none to measure from)
-  double last_fix_t_ = 0.0;  // its step time
+  double last_gps_ = -1.0;  // newest fix (-1 = none)
+  double from_gps_ = -1.0;  // the fix a deceleration is measured from (-1 = none to measure from)
+  double from_t_ = 0.0;     // its step time
   // Engine frequency just before this driver's up- and downshifts, seen while GPS was present.
   double up_mean_ = 0.0, up_var_ = 0.0, up_count_ = 0.0;
   double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
