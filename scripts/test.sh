@@ -139,7 +139,7 @@ stage "package installed, verified and purged"
 # The three-minute drive in real time runs in the release tree only: under the sanitizers its daemon runs
 # the same code the pipeline and daemon tests drive through the same ALSA, gpsd and PTY paths.
 tsan_tests="^(ring|published|alsa|audio|gpsd|gps history|pulse|wake event|log queue|control|daemon|pipeline|faults):"
-start_tests asan-paced build-asan "$paced_jobs_sanitized" -L paced -E "^e2e: pulses match"
+start_tests asan-paced build-asan "$paced_jobs_sanitized" -L paced -E "^e2e: (pulses match|10 Hz GPS)"
 start_tests asan build-asan "$jobs" -LE paced
 finish_tests asan "$may_skip_sanitized"
 finish_tests asan-paced "$may_skip_sanitized"

@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -398,6 +399,82 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
                                          << after.value("training_samples", 0));
   CHECK(after.value("training_samples", 0) >= before.value("training_samples", 0) - kUnjournaled);
   CHECK(after.value("training_samples", 0) <= before.value("training_samples", 0));  // none twice
+}
+
+// A 10 Hz receiver (u-blox M8/M9, a phone through gpsd): the harness plays the log at 10 fixes a second in
+// real time (scripts/lib/gps_player.py). The pulses and the outage go as at 1 Hz, the log says nothing per
+// fix, and the store takes one training pair a second (PairSpacing), not ten.
+TEST_CASE("e2e: 10 Hz GPS: pulses match across an outage, one training pair a second", "[e2e][daemon]") {
+  if (!have_gpsfake())
+    GEARPULSE_SKIP_TEST("gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)");
+  Work work;
+  REQUIRE(!work.dir.empty());
+  const std::string wd = quote(work.dir.string());
+  const double outage_start = 35.0, outage_length = 30.0;
+  const Result prepared =
+      run("GEARPULSE_GPS_HZ=10 GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512 bash " + quote(kHarness) +
+          " prepare " + wd + " " + quote(kBuild) + " --seed 7 --duration 90 --outage 35:30 2>&1");
+  INFO(prepared.out);
+  REQUIRE(prepared.status == 0);
+  const std::string env = slurp(work.dir / "drive" / "drive.env");
+  REQUIRE(env.find("gps_hz=10") != std::string::npos);
+  const Result started = work.harness("start " + wd);
+  INFO(started.out);
+  REQUIRE(started.status == 0);
+
+  std::map<std::string, int> outage_sources;
+  int gps_after_outage = 0;
+  const pid_t feeder = work.pid("feeder");
+  REQUIRE(feeder > 0);
+  while (::kill(feeder, 0) == 0) {
+    const json s = work.status();
+    const double t = seconds_since(work.dir / "drive.t0");
+    if (s.is_object()) {
+      const std::string source = s.value("source", "?");
+      if (t > outage_start + 4.0 && t < outage_start + outage_length - 2.0) ++outage_sources[source];
+      if (t > outage_start + outage_length + 8.0 && source == "gps") ++gps_after_outage;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  const auto drained = [&] {
+    const json s = work.status();
+    if (!s.is_object()) return false;
+    const json output = s.value("output", json::object());
+    const double written =
+        s.value("pulses", 0.0) - output.value("unheard", 0.0) - output.value("dropped", 0.0);
+    return static_cast<double>(fs::file_size(work.dir / "pulses.bin")) >= written;
+  };
+  for (int i = 0; i < 100 && !drained(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+
+  const double distance = truth_distance_m(work.dir / "drive" / "truth.csv");
+  const double expected = distance / 1000.0 * kPulsesPerKm;
+  const auto counted = static_cast<double>(fs::file_size(work.dir / "pulses.bin"));
+  std::printf("e2e 10 Hz drive: %.0f m, %.0f pulses expected, %.0f counted (%+.2f %%)\n", distance, expected,
+              counted, expected > 0.0 ? 100.0 * (counted / expected - 1.0) : 0.0);
+  const std::string log = slurp(work.dir / "gearpulsed.log");
+  INFO("daemon log:\n" << log.substr(0, 4000));
+  REQUIRE(distance > 500.0);
+  CHECK(std::abs(counted - expected) <= 0.03 * expected);
+  INFO("sources polled inside the outage: " << json(outage_sources).dump());
+  CHECK(outage_sources["gps"] == 0);
+  CHECK(outage_sources["engine"] >= 10);
+  CHECK(gps_after_outage > 0);
+  CHECK(log.find("speed source gps -> ") != std::string::npos);
+  CHECK(log.find(" -> gps at ") != std::string::npos);
+  // Nothing said per fix: 10 fixes a second over the drive would be hundreds of lines.
+  CHECK(std::count(log.begin(), log.end(), '\n') < 40);
+
+  // One pair a second of the receiver's clock: at most the seconds the log has a fix in (its lead at rest,
+  // the drive less the outage), where ten a second would be ten times that.
+  const json s = work.status();
+  REQUIRE(s.is_object());
+  const double duration = std::stod(env.substr(env.find("duration_s=") + 11));
+  const double lead = std::stod(env.substr(env.find("gps_lead_s=") + 11));
+  const double fix_seconds = lead + duration - outage_length + 1.0;
+  INFO("training pairs " << s.value("training_samples", 0) << ", seconds with a fix " << fix_seconds);
+  CHECK(s.value("training_samples", 0) >= 20);
+  CHECK(s.value("training_samples", 0) <= fix_seconds);
 }
 
 TEST_CASE("e2e: a malformed config is refused with file and line before any device opens", "[e2e][daemon]") {

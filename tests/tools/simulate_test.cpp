@@ -236,6 +236,35 @@ TEST_CASE("simulate: --outage-at-skip starts the outage at the first braking ski
   CHECK(sim("none", "--seed 1 --duration 60 --skip-downshift 1 --outage-at-skip 60").status == 2);
 }
 
+TEST_CASE("simulate: --gps-hz 10 writes ten fix sets a second, times to the tenth, the same drive",
+          "[simulate]") {
+  TempDir dir;
+  const std::string common = " --seed 5 --duration 60 --outage 20:15 --no-audio --out ";
+  REQUIRE(run(kCli + " simulate" + common + (dir.path() / "one").string()).status == 0);
+  const Result r = run(kCli + " simulate --gps-hz 10" + common + (dir.path() / "ten").string());
+  INFO(r.out);
+  REQUIRE(r.status == 0);
+  CHECK(slurp(dir.path() / "ten" / "truth.csv") == slurp(dir.path() / "one" / "truth.csv"));
+  CHECK(slurp(dir.path() / "ten" / "drive.env").find("gps_hz=10") != std::string::npos);
+  std::vector<std::string> one, ten;
+  for (const auto& [name, rmc] : {std::pair{"one", &one}, std::pair{"ten", &ten}}) {
+    std::ifstream nmea(dir.path() / name / "drive.nmea");
+    for (std::string line; std::getline(nmea, line);)
+      if (line.rfind("$GPRMC", 0) == 0) rmc->push_back(line);
+  }
+  // From 8 s before t = 0 to the drive's end: past the last whole second, its tenths up to the end.
+  REQUIRE(ten.size() > 10 * (one.size() - 1));
+  REQUIRE(ten.size() < 10 * one.size());
+  CHECK(ten[0].rfind("$GPRMC,115952.00,A,", 0) == 0);
+  CHECK(ten[1].rfind("$GPRMC,115952.10,A,", 0) == 0);
+  CHECK(ten[9].rfind("$GPRMC,115952.90,A,", 0) == 0);
+  CHECK(ten[80].rfind("$GPRMC,120000.00,A,", 0) == 0);
+  int void_rmc = 0;
+  for (const std::string& line : ten)
+    void_rmc += line.find(",V,") != std::string::npos;
+  CHECK(void_rmc == 150);
+}
+
 TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
   TempDir dir;
   const std::string out = " --out " + (dir.path() / "x").string();
@@ -259,7 +288,9 @@ TEST_CASE("simulate: bad options are refused with exit 2", "[simulate]") {
                                  " --outage-at-skip 60",
                                  " --skip-downshift 1 --outage-at-skip 60 --outage 10:5",
                                  " --skip-drive-on",
-                                 " --skip-downshift nan"}) {
+                                 " --skip-downshift nan",
+                                 " --gps-hz 3",
+                                 " --gps-hz 0"}) {
     const Result r = run(kCli + " simulate" + out + args);
     INFO(args << ": " << r.out);
     CHECK(r.status == 2);
