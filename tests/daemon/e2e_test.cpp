@@ -219,6 +219,22 @@ Outage replay_outage(const fs::path& work, double after, double gps_timeout) {
   return {};
 }
 
+// The reader drains the PTY: waits until pulses.bin holds every pulse the daemon wrote to it and did not take
+// back (`output.unheard` were emitted while no reader held the PTY, `output.dropped` were never written or
+// flushed as stale), or 10 s.
+void wait_for_pty_drain(const Work& work) {
+  const auto drained = [&] {
+    const json s = work.status();
+    if (!s.is_object()) return false;
+    const json output = s.value("output", json::object());
+    const double written =
+        s.value("pulses", 0.0) - output.value("unheard", 0.0) - output.value("dropped", 0.0);
+    return static_cast<double>(fs::file_size(work.dir / "pulses.bin")) >= written;
+  };
+  for (int i = 0; i < 100 && !drained(); ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+}
+
 double seconds_since(const fs::path& started_file) {
   const double started = std::stod(slurp(started_file));
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count() - started;
@@ -277,19 +293,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   // (scripts/lib/harness.sh), and the feeder keeps it fed to the drive's end: the daemon never says the
   // audio stalled. Its log is read as the feeder ends, before the end could look like a stall.
   const std::string drive_log = slurp(work.dir / "gearpulsed.log");
-  // The reader drains the PTY: wait until the file holds every pulse the daemon wrote to it and did not take
-  // back (`output.unheard` were emitted while no reader held the PTY, `output.dropped` were never written or
-  // flushed as stale), or 10 s.
-  const auto drained = [&] {
-    const json s = work.status();
-    if (!s.is_object()) return false;
-    const json output = s.value("output", json::object());
-    const double written =
-        s.value("pulses", 0.0) - output.value("unheard", 0.0) - output.value("dropped", 0.0);
-    return static_cast<double>(fs::file_size(work.dir / "pulses.bin")) >= written;
-  };
-  for (int i = 0; i < 100 && !drained(); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  wait_for_pty_drain(work);
 
   const double distance = truth_distance_m(work.dir / "drive" / "truth.csv");
   const double expected = distance / 1000.0 * kPulsesPerKm;
@@ -436,16 +440,7 @@ TEST_CASE("e2e: 10 Hz GPS: pulses match across an outage, one training pair a se
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
-  const auto drained = [&] {
-    const json s = work.status();
-    if (!s.is_object()) return false;
-    const json output = s.value("output", json::object());
-    const double written =
-        s.value("pulses", 0.0) - output.value("unheard", 0.0) - output.value("dropped", 0.0);
-    return static_cast<double>(fs::file_size(work.dir / "pulses.bin")) >= written;
-  };
-  for (int i = 0; i < 100 && !drained(); ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  wait_for_pty_drain(work);
 
   const double distance = truth_distance_m(work.dir / "drive" / "truth.csv");
   const double expected = distance / 1000.0 * kPulsesPerKm;
