@@ -81,6 +81,7 @@ void SpeedSynthesizer::reset() noexcept {
   output_.forget_gps();
   prev_freq_ = std::numeric_limits<double>::quiet_NaN();
   freq_seen_t_ = -std::numeric_limits<double>::infinity();
+  fix_measured_t_ = -std::numeric_limits<double>::infinity();
   lost_for_ = 0.0;
   hop_ = 0.0;
   in_gap_ = false;

@@ -280,12 +280,13 @@ class SpeedSynthesizer {
   ModelExtras extras_;  // what the fit recorded beside the model's ladder, read once per model
   // This step's log-score of the frequency in each gear by the revs this driver runs it at.
   ModeArray revs_habit_{};
-  bool at_idle_ = false;        // this step's frequency is at idle
-  double fell_too_fast_ = 0.0;  // share by which this step's revs fell faster than an engine let go
-  double lugged_ = 0.0;         // share of a gear's chance at this step's frequency that is lugging it
-  double prev_freq_ = 0.0;      // frequency of the previous step (NaN if lost): the revs a shift left
-  double freq_seen_t_ = 0.0;    // time of the latest frequency reading (-inf before the first)
-  double lost_for_ = 0.0;       // s since then at this step, 0 with a reading
+  bool at_idle_ = false;         // this step's frequency is at idle
+  double fell_too_fast_ = 0.0;   // share by which this step's revs fell faster than an engine let go
+  double lugged_ = 0.0;          // share of a gear's chance at this step's frequency that is lugging it
+  double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
+  double freq_seen_t_ = 0.0;     // time of the latest frequency reading (-inf before the first)
+  double lost_for_ = 0.0;        // s since then at this step, 0 with a reading
+  double fix_measured_t_ = 0.0;  // time of the latest fix measured (-inf before the first)
   // s: the spacing of the readings the filter is fed at (the tracker's hop, a log's row): the step's own
   // length, or after a tracker gap taken as one step (gap_one_step), the hop before the gap.
   double hop_ = 0.0;

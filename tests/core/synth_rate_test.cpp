@@ -25,9 +25,10 @@ namespace {
 // |error| km/h of every outage sample of a simulated drive observed every `period` s (outages of 60 s
 // from 120 s in, then every 180 s: the benches' protocol, bench/outage_protocol.hpp). With a fix
 // interval, GPS gives a fix only every so many seconds, and every step until the next one is given it
-// again, as the daemon gives the newest fresh fix at every tracker hop (flagged new at the first).
+// again, as the daemon gives the newest fresh fix at every tracker hop (flagged new at the first). A fix
+// `late` s late gives the true speed of that long before.
 std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double period, std::uint64_t seed,
-                                  double fix_interval = 0.0) {
+                                  double fix_interval = 0.0, double late = 0.0) {
   gearpulse::sim::ObservationOptions obs;
   obs.period = period;
   obs.seed = seed;
@@ -38,13 +39,14 @@ std::vector<double> outage_errors(const gearpulse::sim::Drive& drive, double per
   for (const auto& r : gearpulse::sim::observe(drive, obs)) {
     const double t = r.truth.t;
     const bool out = gearpulse::bench::in_outage(t);
-    double gps = out ? kMissing : r.speed;
+    const double measured = late > 0.0 ? gearpulse::sim::truth_at(drive, t - late).speed : r.speed;
+    double gps = out ? kMissing : measured;
     bool fresh = true;
     if (fix_interval > 0.0) {
       const long index = std::lround(std::floor(t / fix_interval + 1e-6));
       fresh = !out && index != fix_index;
       if (fresh) {
-        fix = r.speed;
+        fix = measured;
         fix_index = index;
       }
       if (!out) gps = fix;
@@ -115,6 +117,28 @@ TEST_CASE("synth: at 10 Hz hops given a 1 Hz fix at each, outages are followed a
   CHECK(quantile(held, 0.5) < 1.0);
   CHECK(beyond(held, 5.0) < 1.2 * beyond(every, 5.0) + 0.005);
   CHECK(quantile(held, 0.95) < 1.2 * quantile(every, 0.95) + 0.3);
+}
+
+TEST_CASE("synth: a late receiver's ten fixes a second weigh as its one fix a second") {
+  // A receiver 0.6 s late, at 1 and at 10 fixes a second, both stepped at the tracker's hops. Its fixes'
+  // departures from the model (the lag's error times the acceleration) last about a second: counted as ten
+  // independent measurements a second they drove the modes' belief ten times as hard, and outages at 10 Hz
+  // erred more than at 1 Hz.
+  std::vector<double> one, ten;
+  for_each_test_drive([&](const gearpulse::sim::Drive& drive, std::uint64_t seed) {
+    const auto a = outage_errors(drive, 0.1, seed + 4, 1.0, 0.6),
+               b = outage_errors(drive, 0.1, seed + 4, 0.1, 0.6);
+    one.insert(one.end(), a.begin(), a.end());
+    ten.insert(ten.end(), b.begin(), b.end());
+  });
+  const auto beyond = share_beyond;
+  INFO("1 Hz fixes: median " << quantile(one, 0.5) << " km/h, p95 " << quantile(one, 0.95) << ", "
+                             << 100.0 * beyond(one, 5.0)
+                             << " % beyond 5 km/h; 10 Hz fixes: " << quantile(ten, 0.5) << ", "
+                             << quantile(ten, 0.95) << ", " << 100.0 * beyond(ten, 5.0) << " %");
+  CHECK(quantile(ten, 0.5) < 1.0);
+  CHECK(beyond(ten, 5.0) < 1.2 * beyond(one, 5.0) + 0.005);
+  CHECK(quantile(ten, 0.95) < 1.2 * quantile(one, 0.95) + 0.3);
 }
 
 // A log written at the tracker's hop holds each 1 Hz fix on the rows until the next, as the daemon holds it:

@@ -29,6 +29,21 @@ namespace {
 struct LaunchHop {
   double t, speed, freq;
 };
+
+// A receiver of one fix a second, as most are: the daemon gives the newest fix at every tracker hop, new at
+// the first hop after it (NaN speed: no GPS).
+struct OneFixASecond {
+  double fix = kMissing;
+  long second = -1;
+  SynthOutput step(SpeedSynthesizer& synth, double t, double speed, double freq) {
+    if (!std::isfinite(speed)) return synth.step(t, kMissing, freq);
+    const long now = std::lround(std::floor(t + 1e-6));
+    const bool fresh = now != second;
+    if (fresh) fix = speed, second = now;
+    return synth.step(t, fix, freq, fresh);
+  }
+};
+
 constexpr double kLaunchDt = 0.1, kLaunchLost = 15.0, kLaunchAt = 20.0, kLaunchShift = 0.4;
 
 // GPS shows the car standing at `idle` and is lost at kLaunchLost; at kLaunchAt the car moves off at
@@ -242,9 +257,10 @@ TEST_CASE("synth: launches seen under GPS tell a ladder whose lowest gear could 
   const auto model = model_of({seven[1], seven[4], seven[5], seven[6]});
   const auto distance_error = [&](const gearpulse::SynthTuning& tuning, int& ladder) {
     SpeedSynthesizer synth(model, tuning);
+    OneFixASecond gps;
     double synthesized = 0.0, driven = 0.0;
     for (const Hop& h : hops) {
-      const SynthOutput o = synth.step(h.t, h.t < lost ? h.speed : kMissing, h.freq);
+      const SynthOutput o = gps.step(synth, h.t, h.t < lost ? h.speed : kMissing, h.freq);
       if (h.t >= relaunch && h.t < braked) synthesized += o.speed * kDt, driven += h.speed * kDt;
     }
     ladder = synth.ladder_gears();
@@ -323,25 +339,26 @@ TEST_CASE("synth: a launch from rest partly unseen counts no gears below the lad
   constexpr double kCarIdle = 47.0, kDt = 0.1, kAccel = 1.2, kShift = 0.4;
   const auto model = model_of({seven[1], seven[4], seven[5], seven[6]});
   SpeedSynthesizer synth(model);
+  OneFixASecond gps;
   REQUIRE(synth.ladder_gears() == 6);
   double t = 0.0, v = 0.0;
   const auto stand = [&](double seconds) {
     for (const double end = t + seconds; t < end; t += kDt)
-      synth.step(t, 0.0, kCarIdle);
+      gps.step(synth, t, 0.0, kCarIdle);
   };
   const auto through = [&](std::size_t first, std::size_t last) {  // gears first..last-1, shifting up
     for (std::size_t gear = first; gear < last; ++gear) {
       for (; v / seven[gear] < 5.0 * kCarIdle; t += kDt, v += kAccel * kDt)
-        synth.step(t, v, std::max(1.6 * kCarIdle, v / seven[gear]));
+        gps.step(synth, t, v, std::max(1.6 * kCarIdle, v / seven[gear]));
       for (double s = 0.0; s < kShift; s += kDt, t += kDt)
-        synth.step(t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear]));
+        gps.step(synth, t, v, v / seven[gear] + (s / kShift) * (v / seven[gear + 1] - v / seven[gear]));
     }
   };
   const auto cruise_and_stop = [&](std::size_t gear) {
     for (const double end = t + 10.0; t < end; t += kDt)
-      synth.step(t, v, v / seven[gear]);
+      gps.step(synth, t, v, v / seven[gear]);
     for (; v > 0.0; t += kDt, v = std::max(0.0, v - 2.0 * kDt))
-      synth.step(t, v, kCarIdle);
+      gps.step(synth, t, v, kCarIdle);
   };
   stand(20.0);
   through(0, 3);
