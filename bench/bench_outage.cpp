@@ -31,13 +31,15 @@
 // --rule SETTING (repeatable) keeps only the rules switched off by that setting. --fits prints each
 // simulated vehicle's fitted thetas beside the true ones on stderr, and per cadence how many fits found
 // another gear count than the car's; --fit-minutes fits the simulated vehicles' models on a mixed drive of
-// M minutes instead of 40. --wide draws the random vehicles from sim::wide_vehicle (3-9 gears, diesels,
-// motorcycles, irregular ladders) instead of sim::random_vehicle, for robustness; --random-only leaves the
-// presets out (the random vehicles' figures alone). --worst PCT lists every outage of the daemon's
-// synthesis erring beyond PCT % with its failure mode (outage_cause) and, per line, each mode's share of
-// the error. --debug CAR STYLE FROM TO prints both filters' beliefs per row from FROM to TO s of that drive,
-// and the daemon's synthesis' track (speed, acceleration) at each position of its ladder
-// (CAR a simulated car's name, or NAME/sSEED for one seed; STYLE 0 mixed, 1 urban, 2 jam, 3 highway).
+// M minutes instead of 40; --gps-hz N gives the daemon's cadence a receiver of N fixes a second (1, 2, 5 or
+// 10; each fix as late as the drive's GPS, the model still fitted on one pair a second). --wide draws the
+// random vehicles from sim::wide_vehicle (3-9 gears, diesels, motorcycles, irregular ladders) instead of
+// sim::random_vehicle, for robustness; --random-only leaves the presets out (the random vehicles' figures
+// alone). --worst PCT lists every outage of the daemon's synthesis erring beyond PCT % with its failure mode
+// (outage_cause) and, per line, each mode's share of the error. --debug CAR STYLE FROM TO prints both
+// filters' beliefs per row from FROM to TO s of that drive, and the daemon's synthesis' track (speed,
+// acceleration) at each position of its ladder (CAR a simulated car's name, or NAME/sSEED for one seed; STYLE
+// 0 mixed, 1 urban, 2 jam, 3 highway).
 // --calibration prints per line how well the daemon's synthesis' belief knows its odds over the outage
 // samples: the belief in modes slower and faster than the truth (by 5 %, at least 0.5 m/s), the signed error
 // of its mean speed and of the output, and the belief below / above its most probable mode's speed against
@@ -54,9 +56,9 @@
 // Usage: bench_outage [--set tuning|report] [--seeds N] [--random N] [--first-seed S] [--cadence K]
 // [--real-only] [--sim-only]
 //                     [--synth KEY=VALUE]... [--ablate [--rule SETTING]...] [--trace FILE] [--fits]
-//                     [--fit-minutes M] [--wide] [--random-only] [--easy-sim] [--sim-observation PART]
-//                     [--worst PCT] [--calibration] [--debug CAR STYLE FROM TO] [--log FILE]...
-//                     [--row-seconds S] [DATA_DIR]
+//                     [--fit-minutes M] [--gps-hz N] [--wide] [--random-only] [--easy-sim]
+//                     [--sim-observation PART] [--worst PCT] [--calibration] [--debug CAR STYLE FROM TO]
+//                     [--log FILE]... [--row-seconds S] [DATA_DIR]
 //
 // The bench's parts are in bench/outage/ (outage.hpp: the shared types and which file does what).
 #include <chrono>
@@ -142,6 +144,12 @@ int main(int argc, char** argv) {
                          parts == "all" || parts == "lines"};
       if (parts != "none" && opt.observation.none()) {
         std::fprintf(stderr, "--sim-observation wants lag, gaps, lines, all or none: %s\n", argv[i]);
+        return 2;
+      }
+    } else if (a == "--gps-hz" && i + 1 < argc) {
+      opt.gps_hz = std::atoi(argv[++i]);
+      if (opt.gps_hz != 1 && opt.gps_hz != 2 && opt.gps_hz != 5 && opt.gps_hz != 10) {
+        std::fprintf(stderr, "--gps-hz wants 1, 2, 5 or 10 fixes a second: %s\n", argv[i]);
         return 2;
       }
     } else if (a == "--fit-minutes" && i + 1 < argc) {

@@ -24,6 +24,7 @@ run() { # run NAME COMMAND...: the command's output in OUT/NAME.txt
 
 run outage-report build/bench/bench_outage --set report --seeds 2 --random 7
 run outage-tuning build/bench/bench_outage --set tuning --seeds 2 --random 7
+run outage-report-gps10 build/bench/bench_outage --set report --sim-only --seeds 2 --random 7 --cadence 0 --gps-hz 10
 run first-drive build/bench/bench_first_drive --report
 run real-logs build/bench/bench_real_logs
 for seed in 1 2 3; do

@@ -49,6 +49,7 @@ struct Options {
   bool wide = false;     // --wide: the random vehicles drawn by sim::wide_vehicle, not sim::random_vehicle
   bool presets = true;   // the manual presets beside the random vehicles (--random-only: none)
   bool calibration = false;  // --calibration: how well the daemon's synthesis' belief knows its odds
+  int gps_hz = 1;            // --gps-hz N: the daemon cadence's fixes a second (1, 2, 5 or 10)
 };
 
 // One replay row: time, the speed given to the synthesis (NaN in an outage or between fixes), whether the

@@ -225,10 +225,16 @@ void simulated(bool report_set, int seeds, int randoms, const Options& opt, Work
     cars.push_back(opt.wide ? sim::wide_vehicle(base + 500 + static_cast<std::uint64_t>(k))
                             : sim::random_vehicle(base + 500 + static_cast<std::uint64_t>(k)));
   bool first = true;
-  for (const Cadence& c : kCadences) {
+  for (long index = 0; index < std::ssize(kCadences); ++index) {
     int fits = 0, fits_off = 0, fits_empty = 0;  // fits, those with another gear count, those with none
-    if (opt.cadence >= 0 && &c - kCadences != opt.cadence) continue;
-    w.lines.push_back({first ? title : "", c.name, std::string("sim_") + c.key, true});
+    if (opt.cadence >= 0 && index != opt.cadence) continue;
+    Cadence c = kCadences[index];
+    std::string name = c.name;
+    if (index == 0 && opt.gps_hz > 1) {  // a receiver of N fixes a second at the daemon's cadence
+      c.fix_period = 1.0 / opt.gps_hz;
+      name = "daemon 10 Hz/" + std::to_string(opt.gps_hz) + " Hz";
+    }
+    w.lines.push_back({first ? title : "", name, std::string("sim_") + c.key, true});
     first = false;
     for (const sim::Vehicle& car : cars)
       for (int s = 1; s <= seeds; ++s) {
