@@ -7,7 +7,7 @@
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
 //   bench_tracker --scenes tuning|report|check|runup|runup-report [--band LO:HI] [--window S] [--hop S]
 //                 [--lag S]
-//                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]
+//                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB] [--clips S]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
 //                 [--hop S] [--lag S] [--offset S] [--dump]
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
@@ -22,7 +22,9 @@
 // choosing); "runup-report" the same run-ups with seeds 201-206's levels and lines (for figures only).
 // --scene-without switches components of the scenes off (agc, clipping, resonance, spikes, fan, pump,
 // mains, whine, half, swap, third; see sim::scene_without), the noise level unchanged; --scene-snr scores
-// one SNR instead of the three.
+// one SNR instead of the three. --clips S also cuts each scene into consecutive clips of S seconds and
+// tracks each with a fresh tracker from its start (a short recording started mid-drive), scored beside the
+// same hops of the whole-scene run, by the clip's content (launch, cruise, idle).
 // --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
 // is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
@@ -68,6 +70,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> without;
   std::vector<double> scene_snr = {10.0, 0.0, -5.0};
   bool snr_given = false;
+  double clip_s = 0.0;
   WavOptions wav;
   const auto usage = [] {
     std::fprintf(
@@ -76,7 +79,7 @@ int main(int argc, char** argv) {
         "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
         "       bench_tracker --scenes tuning|report|check|runup|runup-report [--band LO:HI] [--window S]\n"
         "                     [--hop S] [--lag S]\n"
-        "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB]\n"
+        "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB] [--clips S]\n"
         "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
         "                     [--window S] [--hop S] [--lag S] [--offset S] [--dump]\n");
     return 2;
@@ -107,6 +110,8 @@ int main(int argc, char** argv) {
       if (!parse_number(argv[++i], number)) return usage();
       scene_snr = {number};
       snr_given = true;
+    } else if (a == "--clips" && more) {
+      if (!parse_number(argv[++i], clip_s) || clip_s <= 0.0) return usage();
     } else if (a == "--wav" && more) {
       wav.wav = argv[++i];
     } else if (a == "--tacho" && more) {
@@ -152,8 +157,9 @@ int main(int argc, char** argv) {
       if (wav.wav.empty() || wav.tacho.empty()) return usage();
       return score_wav(wav);
     }
-    if (!scene_set.empty()) return scenes(scene_set, wav.config, without, scene_snr);
-    if (wav.config.decision_lag_s != 0.0) return usage();  // the generated drives run the tracker as it is
+    if (!scene_set.empty()) return scenes(scene_set, wav.config, without, scene_snr, clip_s);
+    if (wav.config.decision_lag_s != 0.0 || clip_s > 0.0)
+      return usage();  // the generated drives run the tracker as it is
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_tracker: %s\n", e.what());
     return 2;

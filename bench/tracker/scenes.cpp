@@ -54,10 +54,130 @@ double run_up_ramp_s(int i) {
   return 10.0 + 2.0 * i;
 }
 
+// ---- Short clips started cold (--clips) ----
+
+// A clip's content, from its truth: a launch or pull (the line rising faster than 20 Hz/s over 0.5 s, as a
+// launch's first gears at 10-50 Hz/s), the engine in the band otherwise (cruise, coast, a shift alone), or
+// idle only (no hop in the band).
+enum ClipKind { kLaunch, kCruise, kIdleOnly, kClipKinds };
+constexpr const char* kClipKindNames[kClipKinds] = {"launch/pull", "cruise/coast", "idle only"};
+
+ClipKind clip_kind(const sim::FrequencyTrajectory& truth, double from, double to) {
+  constexpr double kStepS = 0.1, kSpanS = 0.5, kRiseHzPerS = 20.0;
+  bool any = false;
+  for (double t = from; t < to; t += kStepS) {
+    const double a = truth(t);
+    if (!(a >= kScoredLoHz && a <= kScoredHiHz)) continue;
+    any = true;
+    if (a - truth(t - kSpanS) > kRiseHzPerS * kSpanS) return kLaunch;
+  }
+  return any ? kCruise : kIdleOnly;
+}
+
+// The clips' hops scored as the scene's (in the band and at idle) beside the same hops of the whole-scene
+// run, by content; and the time from a clip's start to its first right tracked hop, for clips that start
+// with the engine in the band.
+struct ClipScores {
+  OrderScore clip[kClipKinds], whole[kClipKinds], clip_idle, whole_idle;
+  double first_sum[2] = {};
+  std::size_t first_n[2] = {}, never[2] = {};
+  explicit ClipScores(double hop_s) {
+    for (int k = 0; k < kClipKinds; ++k) {
+      clip[k].band_lo = whole[k].band_lo = kScoredLoHz;
+      clip[k].band_hi = whole[k].band_hi = kScoredHiHz;
+      clip[k].hop_s = whole[k].hop_s = hop_s;
+    }
+    for (OrderScore* s : {&clip_idle, &whole_idle}) {
+      s->band_lo = kIdleLoHz;
+      s->band_hi = kScoredLoHz;
+      s->hop_s = hop_s;
+    }
+  }
+  void first_right(int which, double from, double at) {
+    if (std::isfinite(at)) {
+      first_sum[which] += at - from;
+      ++first_n[which];
+    } else {
+      ++never[which];
+    }
+  }
+  static void line(const char* label, OrderScore s) {
+    s.close_run();
+    double other = 0.0;
+    for (const std::size_t n : s.at_order)
+      other += Score::pct(n, s.tracked);
+    std::printf(
+        "%s coverage %5.1f %% of %5zu, gross %5.2f %% (%5.2f %% at another order), %zu locks > %.1f s\n",
+        label, Score::pct(s.tracked, s.in_band), s.in_band, Score::pct(s.gross, s.tracked),
+        s.tracked ? other : NAN, s.long_locks, kLockLimitS);
+  }
+  void print(double clip_s) const {
+    for (int k = 0; k < kClipKinds; ++k) {
+      if (clip[k].in_band == 0) continue;
+      std::printf("      %-12s", kClipKindNames[k]);
+      line(" clips", clip[k]);
+      std::printf("      %-12s", "");
+      line(" whole", whole[k]);
+    }
+    std::printf(
+        "      idle (%g-%g Hz) right/wrong: clips %5.1f / %4.1f %%, whole %5.1f / %4.1f %% of %zu hops\n",
+        kIdleLoHz, kScoredLoHz, Score::pct(clip_idle.right_n, clip_idle.in_band),
+        Score::pct(clip_idle.gross, clip_idle.in_band), Score::pct(whole_idle.right_n, whole_idle.in_band),
+        Score::pct(whole_idle.gross, whole_idle.in_band), whole_idle.in_band);
+    std::printf(
+        "      first right tracked hop after a %g s clip's start in the band: clips %.2f s (%zu never), "
+        "whole %.2f s (%zu never) of %zu clips\n",
+        clip_s, first_n[0] ? first_sum[0] / static_cast<double>(first_n[0]) : NAN, never[0],
+        first_n[1] ? first_sum[1] / static_cast<double>(first_n[1]) : NAN, never[1], first_n[0] + never[0]);
+  }
+};
+
+// Cuts the scene `x` into consecutive clips of clip_s, runs a fresh tracker on each from its start and
+// scores its hops beside the same hops of the whole-scene run `whole` (keyed by hop index).
+void score_clips(const std::vector<float>& x, const sim::FrequencyTrajectory& truth, const TrackerConfig& tc,
+                 double clip_s, const std::vector<TrackPoint>& whole, ClipScores& out) {
+  const auto clip_frames = static_cast<std::size_t>(std::llround(clip_s * tc.sample_rate_hz));
+  const auto hop_index = [&](double t) { return std::llround(t / tc.hop_s); };
+  std::vector<const TrackPoint*> by_hop;
+  for (const TrackPoint& p : whole) {
+    const auto i = static_cast<std::size_t>(std::max(0LL, hop_index(p.t)));
+    if (by_hop.size() <= i) by_hop.resize(i + 1, nullptr);
+    by_hop[i] = &p;
+  }
+  SlidingDftTracker tracker(tc);
+  for (std::size_t from = 0; from + clip_frames <= x.size(); from += clip_frames) {
+    const double t0 = static_cast<double>(from) / tc.sample_rate_hz;
+    const ClipKind kind = clip_kind(truth, t0, t0 + clip_s);
+    const bool starts_in_band = truth(t0) >= kScoredLoHz && truth(t0) <= kScoredHiHz;
+    double first[2] = {NAN, NAN};
+    tracker.start(t0);
+    run_tracker(tracker, std::span<const float>(x).subspan(from, clip_frames), [&](const TrackPoint& p) {
+      const auto i = static_cast<std::size_t>(std::max(0LL, hop_index(p.t)));
+      if (i >= by_hop.size() || by_hop[i] == nullptr) return;
+      const TrackPoint& w = *by_hop[i];
+      const double f = truth(p.t);
+      out.clip[kind].add(p, f);
+      out.whole[kind].add(w, f);
+      out.clip_idle.add(p, f);
+      out.whole_idle.add(w, f);
+      const bool in = f >= kScoredLoHz && f <= kScoredHiHz;
+      if (in && p.tracked && right(p.freq, f) && !std::isfinite(first[0])) first[0] = p.t;
+      if (in && w.tracked && right(w.freq, f) && !std::isfinite(first[1])) first[1] = w.t;
+    });
+    out.clip[kind].close_run();  // a lock on another order ends with its clip
+    out.whole[kind].close_run();
+    out.clip_idle.close_run();
+    out.whole_idle.close_run();
+    if (starts_in_band)
+      for (int which : {0, 1})
+        out.first_right(which, t0, first[which]);
+  }
+}
+
 }  // namespace
 
 int scenes(const std::string& set, const TrackerConfig& base, const std::vector<std::string>& without,
-           const std::vector<double>& snrs) {
+           const std::vector<double>& snrs, double clip_s) {
   const bool run_up = set.starts_with("runup");
   constexpr double kDurationS = 120.0;
   const std::uint64_t first = set == "tuning" || set == "runup" ? 101 : set == "check" ? 301 : 201;
@@ -88,6 +208,7 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
   for (const double snr : snrs) {
     OrderScore pooled, pooled_idle;
     ShiftSplit split;
+    ClipScores clips(base.hop_s);
     for (int i = 0; i < kSeeds; ++i) {
       const std::uint64_t seed = first + static_cast<std::uint64_t>(i);
       const double duration = run_up ? sim::run_up_duration(run_up_ramp_s(i)) : kDurationS;
@@ -110,6 +231,7 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
       idle.band_lo = kIdleLoHz;
       idle.band_hi = kScoredLoHz;
       const bool dump = std::getenv("GEARPULSE_BENCH_DUMP") != nullptr;
+      std::vector<TrackPoint> hops;
       spent += run_tracker(tracker, x, [&](const TrackPoint& p) {
         if (dump)
           std::printf("%llu %.2f %.2f %.2f %.1f %d %.3f\n", static_cast<unsigned long long>(seed), p.t,
@@ -117,7 +239,9 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
         s.add(p, trajectory(p.t));
         idle.add(p, trajectory(p.t));
         split.add(p, trajectory(p.t), after_shift_or_entry(trajectory, p.t));
+        if (clip_s > 0.0) hops.push_back(p);
       });
+      if (clip_s > 0.0) score_clips(x, trajectory, tc, clip_s, hops, clips);
       audio += duration;
       char label[64];
       std::snprintf(label, sizeof label, "  seed %3llu %5.1f dB", static_cast<unsigned long long>(seed), snr);
@@ -133,6 +257,10 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
                 kScoredLoHz, Score::pct(pooled_idle.right_n, pooled_idle.in_band), pooled_idle.in_band,
                 Score::pct(pooled_idle.gross, pooled_idle.in_band));
     split.print();
+    if (clip_s > 0.0) {
+      std::printf("    clips of %g s started cold, beside the same hops of the whole scenes:\n", clip_s);
+      clips.print(clip_s);
+    }
   }
   std::printf("CPU: %.2f s for %.0f s of 48 kHz audio (%.3f %% of one core)\n", spent, audio,
               100.0 * spent / audio);

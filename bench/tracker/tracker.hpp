@@ -259,9 +259,9 @@ void generalisation(std::uint64_t seed);
 void cpu();
 
 // The scenes of one seed set ("tuning", "report" or "check") with the components `without` switched off,
-// at each of `snrs`.
+// at each of `snrs`; with clip_s > 0, also cut into clips of clip_s, each tracked from a cold start.
 int scenes(const std::string& set, const TrackerConfig& base, const std::vector<std::string>& without,
-           const std::vector<double>& snrs);
+           const std::vector<double>& snrs, double clip_s = 0.0);
 
 struct WavOptions {
   std::string wav, tacho;
