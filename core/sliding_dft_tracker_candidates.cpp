@@ -13,7 +13,7 @@ namespace gearpulse {
 // is long enough for the comb's upper lines to reach the evidence's bound. The two roots predict the
 // same lines at f's orders and differ at f / 4 and 3 f / 4: background under root f, the lower engine's
 // fundamental and 3rd order under root f / 4. The log likelihood ratio S of those two bins (each an order
-// of the lower engine, at -13 to +13 dB of f's line) gives, with the two roots equally likely beforehand,
+// of the lower engine, at -15 to +30 dB of f's line) gives, with the two roots equally likely beforehand,
 // the posterior of root f; the state at f loses the log odds by which it is the less likely root,
 // ln((1 + e^S) / 2) when S > 0, and nothing otherwise. Only the 4th order is judged so: f / 2 and 3 f / 2
 // are a four-stroke's own half orders (the half order's level prior and the track's continuity tell f
@@ -68,17 +68,21 @@ void SlidingDftTracker::Impl::candidate_likelihoods(std::vector<double>& out, st
         const auto b = static_cast<std::size_t>(std::lround(pos));
         if (tones->near(b)) continue;
         const double z = z_at(b);
-        const double fixed = o == 0   ? evidence.half_order(z, rho, half_absent)
-                             : o == 2 ? evidence.second(z, rho, level)
-                                      : evidence.order(z, rho, level);
-        if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho, level) - fixed;
-        if (o == 2 && power) power_second = evidence.second_power(z, rho, level) - fixed;
+        // The orders' level priors are ratios of the lines' powers: a level read from this bin is carried
+        // to the order's bin through the two floors (a crowded band's floor stands over the noise, the
+        // floor above it does not). The track's level, read over earlier windows, stays a per-bin SNR.
+        const double rho_o = on_tone ? rho : rho * floor_ratio(static_cast<std::size_t>(k), b);
+        const double fixed = o == 0   ? evidence.half_order(z, rho_o, half_absent)
+                             : o == 2 ? evidence.second(z, rho_o, level)
+                                      : evidence.order(z, rho_o, level);
+        if (o == 2 && overrun) overrun_second = evidence.second_overrun(z, rho_o, level) - fixed;
+        if (o == 2 && power) power_second = evidence.second_power(z, rho_o, level) - fixed;
         if (o != 3 || third_w <= 0.0) {
           l += fixed;
           continue;
         }
         // The mixture of the two priors, whose ratios to background add with the priors' weights.
-        const double learned = evidence.profiled(z, rho * third_ratio, third_spread);
+        const double learned = evidence.profiled(z, rho_o * third_ratio, third_spread);
         const double m = std::max(fixed, learned);
         l += m + std::log((1.0 - third_w) * std::exp(fixed - m) + third_w * std::exp(learned - m));
       }

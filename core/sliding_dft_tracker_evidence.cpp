@@ -21,10 +21,11 @@ constexpr double kBroadLo = 1.0, kBroadHi = 1e4;
 constexpr int kBroadSteps = 80;
 // Weight of the matched (track-level) SNR against the broad prior for the fundamental.
 constexpr double kMatched = 0.5;
-// Order-to-fundamental SNR ratio r: log-uniform over 0.02 .. 2 (-17 to +3 dB) for the harmonics, up to
-// 0.5 for the half order (a "half order" stronger than the fundamental means the candidate is the
-// engine's 2nd harmonic), or the order absent altogether.
-constexpr double kRatioLo = 0.05, kRatioHi = 2.0, kHalfRatioHi = 0.5;
+// Order-to-fundamental power ratio r (the callers carry the fundamental's per-bin SNR to the order's bin
+// through the two floors): log-uniform over 0.03 .. 2 (-15 to +3 dB) for the harmonics (the 2nd falls to
+// about -15 dB at full load), up to 0.5 for the half order (a "half order" stronger than the fundamental
+// means the candidate is the engine's 2nd harmonic), or the order absent altogether.
+constexpr double kRatioLo = 0.03, kRatioHi = 2.0, kHalfRatioHi = 0.5;
 // The 2nd harmonic of a four-stroke's firing frequency takes the fundamental's energy at light load and on
 // the overrun, where it stands up to 15 dB over it. Its ratio is drawn from a mixture: with probability
 // 1 - kLoudSecond as the other harmonics', with kLoudSecond log-uniform over 2 .. 30 (+3 to +15 dB). A
@@ -41,8 +42,9 @@ constexpr double kLoudSecondOverrun = 0.5;
 constexpr double kLoudSecondPower = 0.02;
 constexpr int kRatioSteps = 20;
 // A line below a candidate f that is an order of a lower engine of which f is a harmonic (a comb): its ratio
-// to f's line spans the harmonics' prior either way, log-uniform over 0.05 .. 20 (-13 to +13 dB).
-constexpr double kLowerRatioHi = 20.0;
+// to f's line (per-bin SNRs, each against its own floor), log-uniform over 0.03 .. 1000 (-15 to +30 dB): a
+// clean idle's fundamental and 3rd stand up to 30 dB over its 4th harmonic, as an ignition comb's do.
+constexpr double kLowerRatioHi = 1000.0;
 // Probabilities of the half order's absence tabulated for half_order(): the prior's, then as learned.
 constexpr double kHalfAbsent[] = {HarmonicEvidence::kOrderAbsent, 0.1, 0.3, 0.6, 0.9};
 constexpr int kHalfTables = static_cast<int>(std::size(kHalfAbsent));

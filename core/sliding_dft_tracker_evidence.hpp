@@ -40,8 +40,9 @@ class HarmonicEvidence {
   // Log likelihood ratio (engine fundamental over noise-or-tone) of a bin with normalised power z, when
   // the track's recent fundamental SNR is rho_track (per bin, linear).
   [[nodiscard]] double fundamental(double z, double rho_track) const noexcept;
-  // Log likelihood ratio of a harmonic's bin (2f, 3f), given the per-bin SNR of the candidate's
-  // fundamental.
+  // Log likelihood ratio of a harmonic's bin (2f, 3f), given the per-bin SNR that the candidate's
+  // fundamental would have in that bin (its own times the ratio of the two bins' floors: the level prior
+  // is a ratio of the lines' powers).
   [[nodiscard]] double order(double z, double rho_fundamental, Level level) const noexcept;
   // The same for the 2nd harmonic's bin, which may stand up to 15 dB over the fundamental (light load,
   // overrun).
@@ -54,7 +55,7 @@ class HarmonicEvidence {
   [[nodiscard]] double second_power(double z, double rho_fundamental, Level level) const noexcept;
   // The same for a bin below a candidate's line that is an order of a lower engine of which the candidate
   // is a harmonic (f / 4 and 3 f / 4 when it is the 4th), given the per-bin SNR of the candidate's line:
-  // the ratio spans 0.05 .. 20 (-13 to +13 dB).
+  // the ratio spans 0.03 .. 1000 (-15 to +30 dB).
   [[nodiscard]] double lower_root(double z, double rho_line) const noexcept;
   // The same for the half order's bin, when the probability that this engine's signal has none is
   // `absent` (learned per recording; the prior's is kOrderAbsent), within [kOrderAbsent, 0.9].

@@ -91,8 +91,10 @@ void SlidingDftTracker::Impl::learn_third(const Evidence& ev, double right) noex
   const double rho1 = ev.snr[1] - 1.0;
   const auto b = static_cast<std::size_t>(std::lround(3.0 * ev.freq / df));
   if (b >= tones->bins() || tones->near(b)) return;
-  // A 3rd harmonic below the noise is read at the floor the fundamental's level lets show.
-  const double x = 10.0 * std::log10(std::max(ev.snr[3] - 1.0, 1.0) / rho1);
+  // A 3rd harmonic below the noise is read at the floor the fundamental's level lets show. The ratio is
+  // of the lines' powers (each SNR times its bin's floor), as the orders' level priors.
+  const auto k1 = static_cast<std::size_t>(std::clamp<long>(std::lround(ev.freq / df), 0, nfft / 2));
+  const double x = 10.0 * std::log10(std::max(ev.snr[3] - 1.0, 1.0) / (rho1 * floor_ratio(k1, b)));
   third_n += 1.0;
   const double d = x - third_mean_db;
   third_mean_db += d / third_n;

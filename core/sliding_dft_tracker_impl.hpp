@@ -63,7 +63,7 @@ constexpr double kToneCandidate = 0.05;  // probability from which the estimate'
 // (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
 constexpr double kToneCandidateMismatch = 2.0;
 // Whether this signal carries a half order is learned from confident hops whose fundamental stands this
-// far over the noise (per bin), so that a half order at the prior's lowest ratio (0.05) would show;
+// far over the noise (per bin), so that a half order at the prior's lowest ratio (0.03) would show;
 // over this time (s). Until then HarmonicEvidence::kOrderAbsent holds.
 constexpr double kHalfObserveRho = 100.0;
 constexpr double kHalfMemoryS = 1.0;
@@ -180,6 +180,12 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
     const double b = tones->background(k);
     return power()[k] / (noise()[k] * (b < 1.0 && !floor_is_noise ? 1.0 : b));
+  }
+  // The floor of fine bin a over that of fine bin b: carries a line's per-bin SNR at a to the SNR at b of a
+  // line of the same power.
+  [[nodiscard]] double floor_ratio(std::size_t a, std::size_t b) const noexcept {
+    const double na = noise()[a], nb = noise()[b];
+    return na > 0.0 && nb > 0.0 ? na / nb : 1.0;
   }
   void learn_tones(double freq, double right) noexcept;
   // `overrun`, when given, gets what a line on the overrun adds to it (HarmonicEvidence::second_overrun()),
