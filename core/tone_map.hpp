@@ -43,9 +43,9 @@ class ToneMap {
   [[nodiscard]] bool loud(double z) const noexcept;
   // Learns from this window's spectrum (power and noise floor per fine bin). The bins within two
   // resolution bins (a Hann main lobe's half-width) of the estimate's orders (`orders` x freq_hz; none when
-  // freq_hz is NaN) and of its other integer multiples (an engine's comb) are left out while the estimate is
-  // probably the engine (`on_track`); the orders of a `candidate` not yet confident are left out until
-  // they have persisted.
+  // freq_hz is NaN) and of its other integer multiples (an engine's comb; a bin there louder than the
+  // fundamental is another line, and is learned) are left out while the estimate is probably the engine
+  // (`on_track`); the orders of a `candidate` not yet confident are left out until they have persisted.
   void learn(const double* power, const double* noise, double freq_hz, std::span<const double> orders,
              bool on_track, bool candidate) noexcept;
 
