@@ -168,6 +168,8 @@ class SpeedSynthesizer {
   [[nodiscard]] int model_gear(int mode) const noexcept { return is_gear(mode) ? model_gear_[mode] : 0; }
   [[nodiscard]] int launch_mode() const noexcept { return gears_ + 1; }
   [[nodiscard]] bool is_gear(int mode) const noexcept { return mode >= 1 && mode <= gears_; }
+  // The time a fix given at this step with `gps_age` is stamped with (step's gps_age).
+  [[nodiscard]] double fix_stamp(double gps_age) const noexcept { return t_ - gps_age; }
   // What one step of the filter gives every history it scores (filter_step, step_input).
   struct StepInput {
     double dt = 0.0;
@@ -286,7 +288,7 @@ class SpeedSynthesizer {
   double prev_freq_ = 0.0;       // frequency of the previous step (NaN if lost): the revs a shift left
   double freq_seen_t_ = 0.0;     // time of the latest frequency reading (-inf before the first)
   double lost_for_ = 0.0;        // s since then at this step, 0 with a reading
-  double fix_measured_t_ = 0.0;  // time of the latest fix measured (-inf before the first)
+  double fix_measured_t_ = 0.0;  // stamp of the latest fix measured (-inf before the first)
   // s: the spacing of the readings the filter is fed at (the tracker's hop, a log's row): the step's own
   // length, or after a tracker gap taken as one step (gap_one_step), the hop before the gap.
   double hop_ = 0.0;

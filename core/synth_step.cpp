@@ -83,9 +83,12 @@ SpeedSynthesizer::StepInput SpeedSynthesizer::step_input(double dt, double gps, 
   in.short_step = hop_ < kShortStep * tuning_.accel_time;  // the tracker's hops, not GPS or OBD rows
   // A fix's departure from the model (the lag's error times the acceleration, the receiver's own filter)
   // persists over the second the revs' departures do (evidence_time): fixes closer together than that are
-  // one measurement shared among them, each with its variance widened by the share it holds.
-  const double since_fix = t_ - fix_measured_t_;
-  in.gps_var = sigma_v_ * sigma_v_ / std::clamp(since_fix / tuning_.evidence_time, 1e-3, 1.0);
+  // one measurement shared among them, each with its variance widened by the share it holds. Counted between
+  // the fixes' stamps, not the steps that take them (a 1 Hz fix taken at the next tracker hop is a second's).
+  // A fix stamped with the one before it adds next to nothing (kLeastFixShare).
+  constexpr double kLeastFixShare = 1e-3;
+  const double since_fix = fix_stamp(gps_age) - fix_measured_t_;
+  in.gps_var = sigma_v_ * sigma_v_ / std::clamp(since_fix / tuning_.evidence_time, kLeastFixShare, 1.0);
   in.lacks_first = lacks_first_gear();
   in.lag = fix_lag(gps_age);
   double in_step = std::min(in.lag, dt);
@@ -347,7 +350,7 @@ void SpeedSynthesizer::prune_histories(bool short_step, bool have_gps) noexcept 
 SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bool gps_new,
                                           double gps_age) noexcept {
   const StepInput in = step_input(dt, gps, freq, gps_new, gps_age);
-  if (in.measure_gps) fix_measured_t_ = t_;
+  if (in.measure_gps) fix_measured_t_ = fix_stamp(gps_age);
   const int modes = gears_ + 2;
   // A shift is decided by the revs before it, not by the revs it leads to.
   const double shift_freq = std::isfinite(prev_freq_) ? prev_freq_ : freq;
