@@ -55,14 +55,19 @@ bool ToneMap::loud(double z) const noexcept {
 void ToneMap::learn(const double* power, const double* noise, double freq_hz, std::span<const double> orders,
                     bool on_track, bool candidate) noexcept {
   local_maxima(power, noise, 2 * lobe_);
-  // The fundamental's power: its peak within one resolution bin of the estimate.
-  double fundamental = INFINITY;
+  // The engine's loudest line: the peak, within one resolution bin, of the estimate or of one of its orders.
+  double loudest = INFINITY;
   if (on_track && std::isfinite(freq_hz) && freq_hz > 0.0) {
     const auto n = static_cast<int>(tone_.size());
-    const auto c = static_cast<int>(std::lround(freq_hz / df_));
-    fundamental = 0.0;
-    for (int j = std::max(0, c - lobe_); j <= std::min(n - 1, c + lobe_); ++j)
-      fundamental = std::max(fundamental, power[static_cast<std::size_t>(j)]);
+    loudest = 0.0;
+    const auto peak = [&](double hz) {
+      const auto c = static_cast<int>(std::lround(hz / df_));
+      for (int j = std::max(0, c - lobe_); j <= std::min(n - 1, c + lobe_); ++j)
+        loudest = std::max(loudest, power[static_cast<std::size_t>(j)]);
+    };
+    peak(freq_hz);
+    for (const double o : orders)
+      peak(o * freq_hz);
   }
   for (int k = first_; k <= last_; ++k) {
     bool near = false;
@@ -74,13 +79,14 @@ void ToneMap::learn(const double* power, const double* noise, double freq_hz, st
     // either side) is its own: its shoulders, one to two bins out, stand within 20 dB of its peak (so the
     // skirt test below keeps them), and learned as tones they would blank a loud engine's orders
     // wherever they cross them.
-    // A comb's multiple stands under its fundamental (each multiple of a train of short pulses carries
+    // A comb's multiple stands under the engine's lines (each multiple of a train of short pulses carries
     // about 2 A tau f of the fundamental's amplitude, -25 dB at 69 Hz on the generated scenes): a line louder
-    // than the fundamental at a multiple beyond the orders is another line there (a fan at four times the
-    // idle), and is learned.
+    // than the estimate and every one of its orders, at a multiple beyond the orders, is another line there
+    // (a fan at four times the idle), and is learned. Not one louder than the estimate alone: with the track
+    // at half the engine, the engine's own 2nd and 3rd harmonics stand at four and six times it.
     if (on_track && std::isfinite(freq_hz) && freq_hz > 0.0 && !near) {
       const double m = std::round(k * df_ / freq_hz);
-      near = m >= 1.0 && std::abs(k * df_ - m * freq_hz) <= 2.0 * lobe_ * df_ && !(power[k] > fundamental);
+      near = m >= 1.0 && std::abs(k * df_ - m * freq_hz) <= 2.0 * lobe_ * df_ && !(power[k] > loudest);
     }
     if (on_track && near) continue;
     const auto i = static_cast<std::size_t>(k);

@@ -378,3 +378,24 @@ TEST_CASE("tone map: a line louder than the tracked fundamental at one of its mu
       CHECK(tones.mean(kFourth) == Approx(1.0));
   }
 }
+
+// With the track at half the engine (a lock on the engine's half order), the engine's own 2nd and 3rd
+// harmonics stand at four and six times the estimate, louder than the estimate's weak line but under the
+// engine's line at twice it, one of the estimate's orders. Learned as tones they would blank the engine's
+// orders wherever it later crosses them: a comb's multiple is judged against the estimate's loudest order.
+TEST_CASE("tone map: a track at half the engine does not learn the engine's harmonics as tones") {
+  constexpr std::size_t kBins = 256, kHalf = 30, kEngine = 60, kSecond = 120, kThird = 180;
+  const double orders[] = {0.5, 1.0, 2.0, 3.0};
+  gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);
+  std::mt19937_64 rng(7);
+  std::exponential_distribution<double> noise(1.0);
+  std::vector<double> power(kBins), floor(kBins, 1.0);
+  for (int hop = 0; hop < 600; ++hop) {  // 60 s of a track at the engine's half order
+    for (std::size_t k = 0; k < kBins; ++k)
+      power[k] = noise(rng) + (k == kHalf ? 5.0 : 0.0) + (k == kEngine ? 100.0 : 0.0) +
+                 (k == kSecond ? 60.0 : 0.0) + (k == kThird ? 30.0 : 0.0);
+    tones.learn(power.data(), floor.data(), kHalf * 0.4, orders, true, false);
+  }
+  CHECK(tones.mean(kSecond) == Approx(1.0));
+  CHECK(tones.mean(kThird) == Approx(1.0));
+}
