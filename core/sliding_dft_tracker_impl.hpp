@@ -63,17 +63,17 @@ constexpr double kToneCandidate = 0.05;  // probability from which the estimate'
 // (sqrt of normalised power; the shoulder of a line one resolution bin away is 6 dB down).
 constexpr double kToneCandidateMismatch = 2.0;
 // Whether this signal carries a half order is learned from confident hops whose fundamental stands this
-// far over the noise (per bin), so that a half order at the prior's lowest ratio (0.03) would show;
-// over this time (s). Until then HarmonicEvidence::kOrderAbsent holds.
+// far over the noise (per bin), so that a half order at the prior's lowest ratio (0.03) would show over a
+// floor alike; over this time (s). Until then HarmonicEvidence::kOrderAbsent holds.
 constexpr double kHalfObserveRho = 100.0;
 constexpr double kHalfMemoryS = 1.0;
 constexpr double kHalfObserveRight = 0.95;
 // The 3rd harmonic's level against the fundamental is a property of the engine and its wiring (the shape of
 // its firing pulse) and changes slowly: it is learned (dB, a mean and a spread over kThirdMemoryS) from the
 // hops on which the half order's presence is learned (a confident estimate, a fundamental 20 dB over the
-// noise per bin, so that a 3rd harmonic at -20 dB shows; a weaker one is read at that floor). The 3rd
-// harmonic's level prior is then a mixture: the learned level (normal in dB, its spread widened by
-// kThirdSpreadFloorDb) with weight n / (n + kThirdPriorS / hop) for n hops learned (exponentially
+// noise per bin, so that a 3rd harmonic at -20 dB shows over a floor alike; a weaker one is read at that
+// floor). The 3rd harmonic's level prior is then a mixture: the learned level (normal in dB, its spread
+// widened by kThirdSpreadFloorDb) with weight n / (n + kThirdPriorS / hop) for n hops learned (exponentially
 // forgotten), the fixed prior with the rest, so that the fixed prior is worth kThirdPriorS of such hops.
 // The 2nd harmonic's level swings with load and the half order's presence is learned on its own (see
 // docs/algorithms/tracker-method.md). Chosen on the generated scenes' tuning set.
