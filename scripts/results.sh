@@ -37,6 +37,10 @@ run fit-sim-random build/bench/bench_fit_sim 0 0 40
 run fit-sim-conditions build/bench/bench_fit_sim 0 0 0 3
 run fit-speed build/bench/bench_fit_speed
 run tracker build/bench/bench_tracker
+run tracker-scenes-report build/bench/bench_tracker --scenes report
+run tracker-runup-report build/bench/bench_tracker --scenes runup-report
+run tracker-runup-report-real-band build/bench/bench_tracker --scenes runup-report --band 30:200 --window 0.2
+run tracker-clips-report build/bench/bench_tracker --scenes report --clips 5
 run pulse build/bench/bench_pulse
 run daemon bash scripts/measure_daemon.sh
 echo "== outputs in $out/"
