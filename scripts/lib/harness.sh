@@ -20,8 +20,8 @@
 # an empty state directory), GEARPULSE_GPS_HZ (1: fix sets a second in the drive's NMEA log, 1, 2, 5 or 10;
 # start plays the log at the rate its drive.env names), GEARPULSE_REALTIME (false: [audio] realtime,
 # SCHED_FIFO threads and locked memory; true needs root or CAP_SYS_NICE and CAP_IPC_LOCK); read by start:
-# GEARPULSE_GPS_ALIGN (0.9 s: the audio starts this long after gpsd reported the fix before the drive's t = 0, whose time
-# WORK/drive.t0 holds).
+# GEARPULSE_GPS_ALIGN (0.9 s: the audio starts this long after gpsd reported the fix before the drive's
+# t = 0, whose time WORK/drive.t0 holds).
 
 hs_die() {
   echo "harness: $*" >&2

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <random>
 #include <span>
 #include <utility>
@@ -353,25 +354,41 @@ TEST_CASE("tone map: a bin that reads below the noise floor on average is scaled
   }
 }
 
+namespace {
+
+// A tone map after 60 s of hops (0.4 Hz fine bins) whose estimate, tracked, lies at fine bin `estimate`, over
+// unit noise with `lines` (fine bin, power in noise units) standing still.
+gearpulse::ToneMap tones_learned(std::size_t estimate,
+                                 std::initializer_list<std::pair<std::size_t, double>> lines) {
+  constexpr std::size_t kBins = 256;
+  constexpr double kDf = 0.4;
+  const double orders[] = {0.5, 1.0, 2.0, 3.0};
+  gearpulse::ToneMap tones(kBins, 8, 240, 8, kDf, 0.1);
+  std::mt19937_64 rng(7);
+  std::exponential_distribution<double> noise(1.0);
+  std::vector<double> power(kBins), floor(kBins, 1.0);
+  for (int hop = 0; hop < 600; ++hop) {
+    for (std::size_t k = 0; k < kBins; ++k)
+      power[k] = noise(rng);
+    for (const auto& [k, p] : lines)
+      power[k] += p;
+    tones.learn(power.data(), floor.data(), static_cast<double>(estimate) * kDf, orders, true, false);
+  }
+  return tones;
+}
+
+}  // namespace
+
 // While the track holds the engine, the tone map leaves out every multiple of its fundamental (an ignition
 // comb's lines, which at an idle stand still for seconds). A comb's multiple stands under its fundamental;
 // a line louder than the fundamental at four times it is another line there (a fan at four times the idle),
 // and is learned as a tone. Left out with the comb, it stayed unlearned while the idle was tracked, and at
 // the next shift the track fell on it (the default rows' van-6 mix, a fan at 109 Hz over an idle at 27 Hz).
 TEST_CASE("tone map: a line louder than the tracked fundamental at one of its multiples is learned") {
-  constexpr std::size_t kBins = 256, kFundamental = 30, kFourth = 120;
-  const double orders[] = {0.5, 1.0, 2.0, 3.0};
+  constexpr std::size_t kFundamental = 30, kFourth = 120;  // a tracked idle at 12 Hz
   for (const double fourth : {100.0, 5.0}) {  // a fan over the fundamental (50), a comb's line under it
     INFO("line at four times the fundamental " << fourth << " times the noise");
-    gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);
-    std::mt19937_64 rng(7);
-    std::exponential_distribution<double> noise(1.0);
-    std::vector<double> power(kBins), floor(kBins, 1.0);
-    for (int hop = 0; hop < 600; ++hop) {  // 60 s of a tracked idle at 12 Hz
-      for (std::size_t k = 0; k < kBins; ++k)
-        power[k] = noise(rng) + (k == kFundamental ? 50.0 : 0.0) + (k == kFourth ? fourth : 0.0);
-      tones.learn(power.data(), floor.data(), kFundamental * 0.4, orders, true, false);
-    }
+    const gearpulse::ToneMap tones = tones_learned(kFundamental, {{kFundamental, 50.0}, {kFourth, fourth}});
     if (fourth > 50.0)
       CHECK(tones.mean(kFourth) >= gearpulse::ToneMap::kFitLevel);
     else
@@ -384,18 +401,9 @@ TEST_CASE("tone map: a line louder than the tracked fundamental at one of its mu
 // engine's line at twice it, one of the estimate's orders. Learned as tones they would blank the engine's
 // orders wherever it later crosses them: a comb's multiple is judged against the estimate's loudest order.
 TEST_CASE("tone map: a track at half the engine does not learn the engine's harmonics as tones") {
-  constexpr std::size_t kBins = 256, kHalf = 30, kEngine = 60, kSecond = 120, kThird = 180;
-  const double orders[] = {0.5, 1.0, 2.0, 3.0};
-  gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);
-  std::mt19937_64 rng(7);
-  std::exponential_distribution<double> noise(1.0);
-  std::vector<double> power(kBins), floor(kBins, 1.0);
-  for (int hop = 0; hop < 600; ++hop) {  // 60 s of a track at the engine's half order
-    for (std::size_t k = 0; k < kBins; ++k)
-      power[k] = noise(rng) + (k == kHalf ? 5.0 : 0.0) + (k == kEngine ? 100.0 : 0.0) +
-                 (k == kSecond ? 60.0 : 0.0) + (k == kThird ? 30.0 : 0.0);
-    tones.learn(power.data(), floor.data(), kHalf * 0.4, orders, true, false);
-  }
+  constexpr std::size_t kHalf = 30, kEngine = 60, kSecond = 120, kThird = 180;
+  const gearpulse::ToneMap tones =
+      tones_learned(kHalf, {{kHalf, 5.0}, {kEngine, 100.0}, {kSecond, 60.0}, {kThird, 30.0}});
   CHECK(tones.mean(kSecond) == Approx(1.0));
   CHECK(tones.mean(kThird) == Approx(1.0));
 }

@@ -73,6 +73,18 @@ struct Work {
   Result harness(const std::string& args) const {
     return run("bash " + quote(kHarness) + " " + args + " 2>&1");
   }
+  // Prepares a drive (`simulate_args` for gearpulse-devtools simulate, `env` the harness's variables) and
+  // starts gpsfake, the feeder and the daemon on it.
+  void start_drive(const std::string& env, const std::string& simulate_args) const {
+    const std::string wd = quote(dir.string());
+    const Result prepared = run(env + " bash " + quote(kHarness) + " prepare " + wd + " " + quote(kBuild) +
+                                " " + simulate_args + " 2>&1");
+    INFO(prepared.out);
+    REQUIRE(prepared.status == 0);
+    const Result started = harness("start " + wd);
+    INFO(started.out);
+    REQUIRE(started.status == 0);
+  }
   json status() const {
     const Result r = run(quote(kBuild + "/tools/gearpulsectl") + " --socket " +
                          quote((dir / "control.sock").string()) + " status --json 2>/dev/null");
@@ -219,6 +231,21 @@ Outage replay_outage(const fs::path& work, double after, double gps_timeout) {
   return {};
 }
 
+// The pulses a drive should give (its true distance at kPulsesPerKm) and those the PTY's reader counted,
+// printed under `label`.
+struct PulseCount {
+  double distance = 0.0, expected = 0.0, counted = 0.0;
+};
+PulseCount count_pulses(const Work& work, const char* label) {
+  PulseCount c;
+  c.distance = truth_distance_m(work.dir / "drive" / "truth.csv");
+  c.expected = c.distance / 1000.0 * kPulsesPerKm;
+  c.counted = static_cast<double>(fs::file_size(work.dir / "pulses.bin"));
+  std::printf("%s: %.0f m, %.0f pulses expected, %.0f counted (%+.2f %%)\n", label, c.distance, c.expected,
+              c.counted, c.expected > 0.0 ? 100.0 * (c.counted / c.expected - 1.0) : 0.0);
+  return c;
+}
+
 // The reader drains the PTY: waits until pulses.bin holds every pulse the daemon wrote to it and did not take
 // back (`output.unheard` were emitted while no reader held the PTY, `output.dropped` were never written or
 // flushed as stale), or 10 s.
@@ -251,14 +278,7 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   const std::string wd = quote(work.dir.string());
   // 16 kHz keeps the daemon's CPU low under the sanitizers; the drive starts and ends at rest.
   const double outage_start = 45.0, outage_length = 60.0;
-  const Result prepared =
-      run("GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512 bash " + quote(kHarness) + " prepare " + wd + " " +
-          quote(kBuild) + " --seed 7 --duration 140 --outage 45:60 2>&1");
-  INFO(prepared.out);
-  REQUIRE(prepared.status == 0);
-  const Result started = work.harness("start " + wd);
-  INFO(started.out);
-  REQUIRE(started.status == 0);
+  work.start_drive("GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512", "--seed 7 --duration 140 --outage 45:60");
 
   // Poll the status while the drive plays (the feeder exits at the end of the audio).
   std::vector<std::pair<double, std::string>> outage_polls;  // (drive time, source)
@@ -295,12 +315,8 @@ TEST_CASE("e2e: pulses match the drive distance across a GPS outage and the mode
   const std::string drive_log = slurp(work.dir / "gearpulsed.log");
   wait_for_pty_drain(work);
 
-  const double distance = truth_distance_m(work.dir / "drive" / "truth.csv");
-  const double expected = distance / 1000.0 * kPulsesPerKm;
-  const auto counted = static_cast<double>(fs::file_size(work.dir / "pulses.bin"));
+  const auto [distance, expected, counted] = count_pulses(work, "e2e drive");
   INFO("distance " << distance << " m, pulses expected " << expected << ", counted " << counted);
-  std::printf("e2e drive: %.0f m, %.0f pulses expected, %.0f counted (%+.2f %%)\n", distance, expected,
-              counted, expected > 0.0 ? 100.0 * (counted / expected - 1.0) : 0.0);
   INFO("daemon log:\n" << slurp(work.dir / "gearpulsed.log").substr(0, 4000));
   REQUIRE(distance > 500.0);
   CHECK(std::abs(counted - expected) <= 0.03 * expected);
@@ -413,18 +429,11 @@ TEST_CASE("e2e: 10 Hz GPS: pulses match across an outage, one training pair a se
     GEARPULSE_SKIP_TEST("gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)");
   Work work;
   REQUIRE(!work.dir.empty());
-  const std::string wd = quote(work.dir.string());
   const double outage_start = 35.0, outage_length = 30.0;
-  const Result prepared =
-      run("GEARPULSE_GPS_HZ=10 GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512 bash " + quote(kHarness) +
-          " prepare " + wd + " " + quote(kBuild) + " --seed 7 --duration 90 --outage 35:30 2>&1");
-  INFO(prepared.out);
-  REQUIRE(prepared.status == 0);
+  work.start_drive("GEARPULSE_GPS_HZ=10 GEARPULSE_RATE=16000 GEARPULSE_PERIOD=512",
+                   "--seed 7 --duration 90 --outage 35:30");
   const std::string env = slurp(work.dir / "drive" / "drive.env");
   REQUIRE(env.find("gps_hz=10") != std::string::npos);
-  const Result started = work.harness("start " + wd);
-  INFO(started.out);
-  REQUIRE(started.status == 0);
 
   std::map<std::string, int> outage_sources;
   int gps_after_outage = 0;
@@ -442,11 +451,7 @@ TEST_CASE("e2e: 10 Hz GPS: pulses match across an outage, one training pair a se
   }
   wait_for_pty_drain(work);
 
-  const double distance = truth_distance_m(work.dir / "drive" / "truth.csv");
-  const double expected = distance / 1000.0 * kPulsesPerKm;
-  const auto counted = static_cast<double>(fs::file_size(work.dir / "pulses.bin"));
-  std::printf("e2e 10 Hz drive: %.0f m, %.0f pulses expected, %.0f counted (%+.2f %%)\n", distance, expected,
-              counted, expected > 0.0 ? 100.0 * (counted / expected - 1.0) : 0.0);
+  const auto [distance, expected, counted] = count_pulses(work, "e2e 10 Hz drive");
   const std::string log = slurp(work.dir / "gearpulsed.log");
   INFO("daemon log:\n" << log.substr(0, 4000));
   REQUIRE(distance > 500.0);
