@@ -74,7 +74,7 @@ bool same_letters(std::string_view a, std::string_view b) noexcept {
 
 bool spells_missing(std::string_view text) noexcept {
   return text.empty() || text == "-" || text.front() == '#' || same_letters(text, "NA") ||
-         same_letters(text, "N/A") || same_letters(text, "null");
+         same_letters(text, "N/A") || same_letters(text, "null") || same_letters(text, "None");
 }
 
 }  // namespace

@@ -192,9 +192,9 @@ TEST_CASE("io: a speed and rpm log whose speeds are whole km/h in mph or m/s is 
 
 TEST_CASE("io: a named log's seconds since 1970 count from its first in the digits written") {
   // Seconds since 1970 with decimals, as python's time.time() writes them: 1558525281.521 - 1558525279.922
-  // in doubles is 1.5989999771118164; the times keep the milliseconds written. The first row is bad (None).
+  // in doubles is 1.5989999771118164; the times keep the milliseconds written. The first row is bad (NaN).
   const SampleLog epoch = read_log_text(
-      "timestamp,RPM,SPEED (km/h)\n1558525278.5,700,None\n1558525279.922,800,10\n1558525281.521,900,11\n"
+      "timestamp,RPM,SPEED (km/h)\n1558525278.5,700,NaN\n1558525279.922,800,10\n1558525281.521,900,11\n"
       "1558525283.12,1000,12\n");
   REQUIRE(epoch.samples.size() == 3);
   CHECK(epoch.samples[0].t == 0.0);
@@ -257,9 +257,11 @@ TEST_CASE("io: a first row without a speed leaves the speed's unit to the first 
       "mile_per_hour\n2,1600.0 revolutions_per_minute,13.0 mile_per_hour\n");
   CHECK(mph.format == SampleFileFormat::kColumns);
   CHECK(mph.speed_unit == "mph");
-  REQUIRE(mph.samples.size() == 2);
-  CHECK(mph.samples[0].speed == Approx(12 * 0.44704));
-  CHECK(mph.skipped_count == 1);  // None is no number
+  REQUIRE(mph.samples.size() == 3);  // None is a missing reading: the row is kept without its speed
+  CHECK(std::isnan(mph.samples[0].speed));
+  CHECK(mph.samples[0].has_freq());
+  CHECK(mph.samples[1].speed == Approx(12 * 0.44704));
+  CHECK(mph.skipped_count == 0);
   const SampleLog kmh = read_log_text(
       "timestamp,RPM,Vehicle Speed\n0,790.5 revolutions_per_minute,N/A\n1,N/A,N/A\n"
       "2,1500.0 revolutions_per_minute,12.0 kilometer_per_hour\n");
