@@ -135,7 +135,8 @@ struct ClipScores {
 // Cuts the scene `x` into consecutive clips of clip_s, runs a fresh tracker on each from its start and
 // scores its hops beside the same hops of the whole-scene run `whole` (keyed by hop index).
 void score_clips(const std::vector<float>& x, const sim::FrequencyTrajectory& truth, const TrackerConfig& tc,
-                 double clip_s, const std::vector<TrackPoint>& whole, ClipScores& out) {
+                 double clip_s, const std::vector<TrackPoint>& whole, ClipScores& out,
+                 const std::string& label) {
   const auto clip_frames = static_cast<std::size_t>(std::llround(clip_s * tc.sample_rate_hz));
   const auto hop_index = [&](double t) { return std::llround(t / tc.hop_s); };
   std::vector<const TrackPoint*> by_hop;
@@ -145,17 +146,25 @@ void score_clips(const std::vector<float>& x, const sim::FrequencyTrajectory& tr
     by_hop[i] = &p;
   }
   SlidingDftTracker tracker(tc);
+  const bool dump = std::getenv("GEARPULSE_BENCH_DUMP") != nullptr;
   for (std::size_t from = 0; from + clip_frames <= x.size(); from += clip_frames) {
     const double t0 = static_cast<double>(from) / tc.sample_rate_hz;
     const ClipKind kind = clip_kind(truth, t0, t0 + clip_s);
     const bool starts_in_band = truth(t0) >= kScoredLoHz && truth(t0) <= kScoredHiHz;
     double first[2] = {NAN, NAN};
     tracker.start(t0);
+    char tag[96];
+    std::snprintf(tag, sizeof tag, "%s clip %.0f s %s", label.c_str(), t0, kClipKindNames[kind]);
+    out.clip[kind].tag = tag;
+    out.whole[kind].tag = std::string(tag) + " (whole run)";
     run_tracker(tracker, std::span<const float>(x).subspan(from, clip_frames), [&](const TrackPoint& p) {
       const auto i = static_cast<std::size_t>(std::max(0LL, hop_index(p.t)));
       if (i >= by_hop.size() || by_hop[i] == nullptr) return;
       const TrackPoint& w = *by_hop[i];
       const double f = truth(p.t);
+      if (dump)
+        std::printf("clip %s %.2f %.2f %.2f %.1f %d %.3f\n", label.c_str(), p.t, f, p.freq, p.snr_db,
+                    p.tracked, p.confidence);
       out.clip[kind].add(p, f);
       out.whole[kind].add(w, f);
       out.clip_idle.add(p, f);
@@ -230,6 +239,9 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
       s.hop_s = idle.hop_s = tc.hop_s;
       idle.band_lo = kIdleLoHz;
       idle.band_hi = kScoredLoHz;
+      char label[64];
+      std::snprintf(label, sizeof label, "  seed %3llu %5.1f dB", static_cast<unsigned long long>(seed), snr);
+      s.tag = label;
       const bool dump = std::getenv("GEARPULSE_BENCH_DUMP") != nullptr;
       std::vector<TrackPoint> hops;
       spent += run_tracker(tracker, x, [&](const TrackPoint& p) {
@@ -241,10 +253,8 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
         split.add(p, trajectory(p.t), after_shift_or_entry(trajectory, p.t));
         if (clip_s > 0.0) hops.push_back(p);
       });
-      if (clip_s > 0.0) score_clips(x, trajectory, tc, clip_s, hops, clips);
+      if (clip_s > 0.0) score_clips(x, trajectory, tc, clip_s, hops, clips, label);
       audio += duration;
-      char label[64];
-      std::snprintf(label, sizeof label, "  seed %3llu %5.1f dB", static_cast<unsigned long long>(seed), snr);
       OrderScore shown = s;
       shown.print(label);
       pooled.merge(s);

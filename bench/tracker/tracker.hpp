@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <iterator>
 #include <span>
@@ -136,12 +137,18 @@ struct OrderScore {
   // The run of consecutive tracked hops at one other order.
   int run_order = -1;
   double run_from = 0.0, run_to = 0.0;
+  // With GEARPULSE_BENCH_LOCKS set, every lock over kLockLimitS is printed with this label (a lock still
+  // open when a score is printed and merged may be printed twice).
+  std::string tag;
 
   void close_run() {
     if (run_order < 0) return;
     const double length = run_to - run_from + hop_s;
     longest_lock_s = std::max(longest_lock_s, length);
     long_locks += length > kLockLimitS + 1e-9;
+    if (length > kLockLimitS + 1e-9 && std::getenv("GEARPULSE_BENCH_LOCKS") != nullptr)
+      std::printf("lock %s %s %.1f-%.1f s, %.1f s\n", tag.c_str(), kOtherOrderNames[run_order], run_from,
+                  run_to, length);
     run_order = -1;
   }
   void add(const TrackPoint& p, double truth) {
