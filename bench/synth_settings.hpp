@@ -87,6 +87,8 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(top_gear_idle_speed),
     GEARPULSE_FIELD(top_gear_revs),
     GEARPULSE_FIELD(upper_gear_samples),
+    GEARPULSE_FIELD(cold_idle_ratio),
+    GEARPULSE_FIELD(warm_fit_samples),
     GEARPULSE_FIELD(speed_lag),
     GEARPULSE_FIELD(speed_lag_prior),
     GEARPULSE_FIELD(speed_lag_significance),

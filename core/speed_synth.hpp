@@ -248,6 +248,7 @@ class SpeedSynthesizer {
   int upper_ = 0;
   bool top_gear_below_band_ = false;  // the fit saw the model's top gear run no higher than the one below
   double top_gear_samples_ = 0.0;     // pairs the fit saw in the model's top gear (extra.revs)
+  bool young_idle_ = false;           // the fit's idle may be a cold engine's (SynthTuning::cold_idle_ratio)
   SeenGears seen_;
   LaunchGears launches_;       // how many gears the launches seen under GPS pass below the lowest measured
   double launch_revs_ = 0.0;   // Hz: the revs last read, for the launches

@@ -39,9 +39,14 @@ double SpeedSynthesizer::log_declutched(double freq, double speed) const noexcep
   const double free_share = speed > kMovingOffSpeed ? 1.0 - tuning_.idle_weight : kStandingFree;
   // A warming engine's idle only falls: revs between the idle learned last (perhaps while the engine was
   // still cold) and the warm idle the fit saw are the idle now.
-  const double floor = std::isfinite(habits_.warm_idle()) && tuning_.warm_floor > 0.0
-                           ? std::min(habits_.warm_idle(), habits_.idle_mean())
-                           : habits_.idle_mean();
+  // A young fit's idle may be a cold engine's, as the idle learned then: the warm one lies up to
+  // cold_idle_ratio below it.
+  const double warm = std::isfinite(habits_.warm_idle()) && tuning_.warm_floor > 0.0
+                          ? std::min(habits_.warm_idle(), habits_.idle_mean())
+                          : habits_.idle_mean();
+  const double floor = young_idle_ && tuning_.cold_idle_ratio > 1.0
+                           ? std::min(warm, habits_.idle_mean() / tuning_.cold_idle_ratio)
+                           : warm;
   // Rolling, many engines are held above their standing idle (the rolling idle, learned under GPS).
   const double top = speed > kMovingOffSpeed ? rolling_idle() : habits_.idle_mean();
   const double z = freq > top ? (freq - top) / idle_sd() : freq < floor ? (floor - freq) / idle_sd() : 0.0;

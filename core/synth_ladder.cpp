@@ -37,6 +37,8 @@ void SpeedSynthesizer::load_model() noexcept {
   insert_gap_gears();
   speed_lag_.set_prior(model && tuning_.speed_lag_prior > 0.0 ? extras_.speed_lag : 0.0);
   habits_.load_engine(extras_, tuning_);  // the warm idle, for the gears below the ladder
+  // A model that does not say how many pairs it was fitted on (0) is taken as a mature one.
+  young_idle_ = model && model->samples > 0 && static_cast<double>(model->samples) < tuning_.warm_fit_samples;
   insert_upper_gears();
   insert_fitted_lower_gears();
   insert_predicted_gears();

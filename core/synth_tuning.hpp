@@ -211,6 +211,14 @@ struct SynthTuning {
   // open road; 300 pairs are five minutes at the daemon's 1 Hz fixes (ten at 2 s rows). Beyond that the top
   // gear seen is the gearbox's (infinity: however long it was driven).
   double upper_gear_samples = 300.0;
+  // A young fit's idle is a cold engine's: its standing pairs come from the first minutes of a first drive,
+  // when the engine idles high, as does the idle learned then under GPS, and a car that does not stop
+  // again under GPS keeps it. While the model's fit used fewer than warm_fit_samples pairs (20 minutes at
+  // the daemon's 1 Hz fixes, several times an engine's warm-up), revs down to the idle learned over
+  // cold_idle_ratio (a cold engine's fast idle, up to half above its warm idle) are idle too: a warming
+  // engine's idle only falls (1: only revs down to the idle learned, or the fit's).
+  double cold_idle_ratio = 1.5;
+  double warm_fit_samples = 1200.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as
   // SpeedLag learns from this drive's fixes (0: the speed of the step itself).
   double speed_lag = 1.0;

@@ -229,6 +229,52 @@ TEST_CASE("synth: a stop in an outage is seen while the idle still falls from a 
   }
 }
 
+TEST_CASE("synth: a young model's stop in an outage is seen at a warm idle far below the cold one") {
+  // A first drive: the car stands at a light with the engine cold (GPS shows the high idle), drives off
+  // and does not stop again under GPS, so the idle learned stays the cold one. The model is young: its fit
+  // saw the engine stand only then, and recorded that cold idle. GPS is lost in 5th; the car brakes,
+  // declutches and stands at the next light with the engine warm, its idle 1.4 times lower: a car at
+  // rest, not a gear rolling at idle revs.
+  constexpr double kColdIdle = 1.4 * kIdle;
+  auto model = std::make_shared<GearModel>(*model_of(kHatch));
+  model->samples = 300;  // five minutes of pairs at 1 Hz
+  model->extra["idle"] = {{"freq", kColdIdle}, {"sd", 0.3}, {"samples", 30}};
+  std::vector<Row> rows;
+  for (int k = 0; k < 30; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, kColdIdle, 0});
+  const auto drive = script(0.0,
+                            {{1, 1.5, 3},
+                             {2, 1.0, 5},
+                             {3, 0.5, 8},
+                             {4, 0.3, 10},
+                             {5, 0.0, 20},
+                             {5, -1.5, 4},
+                             {0, -2.0, 6},
+                             {0, 0.0, 30}},
+                            kHatch);
+  for (Row r : drive) {
+    r.t += 30.0;
+    if (r.gear == 0) r.freq = kIdle;
+    rows.push_back(r);
+  }
+  const auto standing_speed = [&](const gearpulse::SynthTuning& tuning) {
+    SpeedSynthesizer synth(model, tuning);
+    const auto out = replay(synth, rows, 70.0);
+    REQUIRE(synth.idle_freq() > kColdIdle - 1.0);  // all GPS showed was the cold idle
+    double most = 0.0;
+    for (std::size_t i = rows.size() - 25; i < rows.size(); ++i)
+      most = std::max(most, out[i].speed);
+    return most;
+  };
+  gearpulse::SynthTuning warm_only;
+  warm_only.cold_idle_ratio = 1.0;
+  const double with_rule = standing_speed({}), without = standing_speed(warm_only);
+  INFO("the fastest output over the last 25 s at rest: " << with_rule << " m/s, " << without
+                                                         << " m/s with only the idle learned as idle");
+  CHECK(with_rule == 0.0);
+  CHECK(without > 1.0);  // the test's premise: without the rule, the warm idle looks like a gear
+}
+
 TEST_CASE("synth: after a long coast in an outage, steady revs go to the gear this driver runs them in") {
   // GPS is lost as the car leaves 5th and coasts out of gear for 25 s, long enough that its speed is only
   // roughly known; then it runs in 4th at steady revs. A gear entered at the wrong speed explains steady
