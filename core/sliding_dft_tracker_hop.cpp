@@ -71,30 +71,71 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
   else
     rho_track = kRhoMemory * rho_track + (1.0 - kRhoMemory) * kDefaultRho;
   learn_tones(ev.freq, right);
-  // This signal's half order, from hops that can tell: a confident estimate with a loud fundamental.
-  if (right >= kHalfObserveRight && ev.available[0] && ev.snr[1] >= kHalfObserveRho) {
-    const auto b = static_cast<std::size_t>(std::lround(0.5 * ev.freq / df));
-    if (b < tones->bins() && !tones->near(b))
-      half_present = half_keep * half_present + (1.0 - half_keep) * (ev.snr[0] >= kToneFitLevel ? 1.0 : 0.0);
-  }
-  learn_third(ev, right);
+  // This signal's orders (the half order's presence, the 3rd harmonic's level), from hops that can tell: a
+  // confident estimate with a loud fundamental or, before the track is confident, a harmonic pair.
+  third_n *= third_keep;
+  if (right >= kTrackedConfidence)
+    learn_orders(ev, right);
+  else
+    learn_orders_from_pair();
   return out;
 }
 
-// The 3rd harmonic's level ratio, from hops that can tell: a confident estimate with a loud fundamental.
-void SlidingDftTracker::Impl::learn_third(const Evidence& ev, double right) noexcept {
-  third_n *= third_keep;
+// The half order's presence and the 3rd harmonic's level, from a confident estimate with a loud fundamental.
+void SlidingDftTracker::Impl::learn_orders(const Evidence& ev, double right) noexcept {
   // Written so that a NaN fails each test (a non-finite level would poison every later hop's prior).
-  if (!(right >= kHalfObserveRight) || !ev.available[3] || !(ev.snr[1] >= kHalfObserveRho) ||
-      !std::isfinite(ev.snr[1]) || !std::isfinite(ev.snr[3]))
-    return;
-  const double rho1 = ev.snr[1] - 1.0;
-  const auto b = static_cast<std::size_t>(std::lround(3.0 * ev.freq / df));
-  if (b >= tones->bins() || tones->near(b)) return;
+  if (!(right >= kHalfObserveRight) || !(ev.snr[1] >= kHalfObserveRho) || !std::isfinite(ev.snr[1])) return;
+  const double f1 = ev.freq / df;
+  if (ev.available[0]) add_half(f1, ev.snr[0]);
+  if (!ev.available[3] || !std::isfinite(ev.snr[3])) return;
+  const auto k1 = static_cast<std::size_t>(std::clamp<long>(std::lround(f1), 0, nfft / 2));
+  add_third_level(ev.snr[1] - 1.0, ev.snr[3], k1, static_cast<std::size_t>(std::lround(3.0 * f1)));
+}
+
+// A loud line with a line at exactly twice its frequency is a harmonic source's, whatever the track holds
+// yet: the band's strongest such pair (within a fine bin, each kHalfObserveRho over the noise per bin,
+// learned tones left out) teaches the half order's presence and the 3rd harmonic's level as a confident hop
+// does. So a signal without those orders, whose absence would otherwise cost every state at the engine the
+// fixed prior's kOrderAbsent twice at high SNR (more than its two lines' ratios, bounded by the tone prior,
+// bring) and keep the track from ever being confident, learns that absence before it is tracked.
+void SlidingDftTracker::Impl::learn_orders_from_pair() noexcept {
+  int k = -1;
+  double top = kHalfObserveRho, f1 = 0.0;
+  for (int j = std::max(k_lo, 1); j <= k_hi; ++j) {
+    const auto b = static_cast<std::size_t>(j);
+    const double z = z_at(b);
+    if (z < top || tones->near(b) || z < z_at(b - 1) || z < z_at(b + 1)) continue;
+    const double f = peak_near(j, lobe / 2);
+    if (3.0 * f * df > harmonic_limit_hz) continue;
+    const double f2 = peak_near(static_cast<int>(std::lround(2.0 * f)), lobe / 2);
+    const auto b2 = static_cast<std::size_t>(std::lround(f2));
+    if (std::abs(f2 - 2.0 * f) > 1.0 || b2 >= tones->bins() || tones->near(b2) || z_at(b2) < kHalfObserveRho)
+      continue;
+    top = z;
+    k = j;
+    f1 = f;
+  }
+  if (k < 0) return;
+  add_half(f1, z_at(static_cast<std::size_t>(std::lround(0.5 * f1))));
+  const auto b3 = static_cast<std::size_t>(std::lround(3.0 * f1));
+  add_third_level(top - 1.0, z_at(b3), static_cast<std::size_t>(k), b3);
+}
+
+// Adds one hop's half order: present when its bin (the fundamental's at fine bin f1, halved) stands out.
+void SlidingDftTracker::Impl::add_half(double f1, double z_half) noexcept {
+  const auto b = static_cast<std::size_t>(std::lround(0.5 * f1));
+  if (b < tones->bins() && !tones->near(b))
+    half_present = half_keep * half_present + (1.0 - half_keep) * (z_half >= kToneFitLevel ? 1.0 : 0.0);
+}
+
+// Adds one hop's 3rd harmonic level: the fundamental's per-bin SNR rho1 at fine bin k1, the normalised
+// power z3 at the 3rd harmonic's bin b.
+void SlidingDftTracker::Impl::add_third_level(double rho1, double z3, std::size_t k1,
+                                              std::size_t b) noexcept {
+  if (b >= tones->bins() || tones->near(b) || !std::isfinite(z3)) return;
   // A 3rd harmonic below the noise is read at the floor the fundamental's level lets show. The ratio is
   // of the lines' powers (each SNR times its bin's floor), as the orders' level priors.
-  const auto k1 = static_cast<std::size_t>(std::clamp<long>(std::lround(ev.freq / df), 0, nfft / 2));
-  const double x = 10.0 * std::log10(std::max(ev.snr[3] - 1.0, 1.0) / (rho1 * floor_ratio(k1, b)));
+  const double x = 10.0 * std::log10(std::max(z3 - 1.0, 1.0) / (rho1 * floor_ratio(k1, b)));
   third_n += 1.0;
   const double d = x - third_mean_db;
   third_mean_db += d / third_n;

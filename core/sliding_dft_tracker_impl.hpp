@@ -64,7 +64,8 @@ constexpr double kToneCandidate = 0.05;  // probability from which the estimate'
 constexpr double kToneCandidateMismatch = 2.0;
 // Whether this signal carries a half order is learned from confident hops whose fundamental stands this
 // far over the noise (per bin), so that a half order at the prior's lowest ratio (0.03) would show over a
-// floor alike; over this time (s). Until then HarmonicEvidence::kOrderAbsent holds.
+// floor alike, or, while the track is not confident, from a harmonic pair whose two lines do
+// (learn_orders_from_pair()); over this time (s). Until then HarmonicEvidence::kOrderAbsent holds.
 constexpr double kHalfObserveRho = 100.0;
 constexpr double kHalfMemoryS = 1.0;
 constexpr double kHalfObserveRight = 0.95;
@@ -195,7 +196,10 @@ struct SlidingDftTracker::Impl {
   // Log odds lost by the state at fine bin k, whose line has per-bin SNR rho_line, to the root f / 4 of a
   // comb of which it would be the 4th harmonic.
   [[nodiscard]] double comb_root_penalty(int k, double rho_line) const noexcept;
-  void learn_third(const Evidence& ev, double right) noexcept;
+  void learn_orders(const Evidence& ev, double right) noexcept;
+  void learn_orders_from_pair() noexcept;
+  void add_half(double f1, double z_half) noexcept;
+  void add_third_level(double rho1, double z3, std::size_t k1, std::size_t b) noexcept;
   void reset_track() noexcept;
   [[nodiscard]] double peak_near(int k, int reach) const noexcept;
   [[nodiscard]] double harmonic_peak_near(int k, int reach) const noexcept;
