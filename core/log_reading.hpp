@@ -53,8 +53,9 @@ struct Cell {
   std::string problem;  // set when kind == kBad
 };
 
-// A cell that is empty or spells "no value" is missing: "-" (Torque), "NA", "N/A" or "null" (any case), a
-// spreadsheet's error ("#N/A", "#DIV/0!"). NaN is not: a number no computation should give, a bad cell.
+// A cell that is empty or spells "no value" is missing: "-" (Torque), "NA", "N/A", "null" or "None"
+// (python-OBD; any case), a spreadsheet's error ("#N/A", "#DIV/0!"). NaN is not: a number no computation
+// should give, a bad cell.
 Cell parse_cell(std::string_view text, std::string_view column);
 
 // Header names compare without case and without spaces: Torque writes "Engine RPM(rpm)" in one version and

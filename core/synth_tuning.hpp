@@ -216,7 +216,8 @@ struct SynthTuning {
   // again under GPS keeps it. While the model's fit used fewer than warm_fit_samples pairs (20 minutes at
   // the daemon's 1 Hz fixes, several times an engine's warm-up), revs down to the idle learned over
   // cold_idle_ratio (a cold engine's fast idle, up to half above its warm idle) are idle too: a warming
-  // engine's idle only falls (1: only revs down to the idle learned, or the fit's).
+  // engine's idle only falls (1: only revs down to the idle learned, or the fit's). The bound counts pairs,
+  // as the fit records them: a log fitted offline at 5 s rows stays young for 100 minutes of rows.
   double cold_idle_ratio = 1.5;
   double warm_fit_samples = 1200.0;
   // 1: a GPS fix is the speed of a moment before the step it comes with, as late against the revs as

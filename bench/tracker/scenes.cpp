@@ -157,6 +157,8 @@ void score_clips(const std::vector<float>& x, const sim::FrequencyTrajectory& tr
     std::snprintf(tag, sizeof tag, "%s clip %.0f s %s", label.c_str(), t0, kClipKindNames[kind]);
     out.clip[kind].tag = tag;
     out.whole[kind].tag = std::string(tag) + " (whole run)";
+    out.clip_idle.tag = std::string(tag) + " idle";
+    out.whole_idle.tag = std::string(tag) + " idle (whole run)";
     run_tracker(tracker, std::span<const float>(x).subspan(from, clip_frames), [&](const TrackPoint& p) {
       const auto i = static_cast<std::size_t>(std::max(0LL, hop_index(p.t)));
       if (i >= by_hop.size() || by_hop[i] == nullptr) return;
@@ -242,6 +244,7 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
       char label[64];
       std::snprintf(label, sizeof label, "  seed %3llu %5.1f dB", static_cast<unsigned long long>(seed), snr);
       s.tag = label;
+      idle.tag = std::string(label) + " idle";
       const bool dump = std::getenv("GEARPULSE_BENCH_DUMP") != nullptr;
       std::vector<TrackPoint> hops;
       spent += run_tracker(tracker, x, [&](const TrackPoint& p) {
@@ -255,8 +258,8 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
       });
       if (clip_s > 0.0) score_clips(x, trajectory, tc, clip_s, hops, clips, label);
       audio += duration;
-      OrderScore shown = s;
-      shown.print(label);
+      s.close_run();  // the scene's lock ends with it: printed once, here
+      s.print(label);
       pooled.merge(s);
       pooled_idle.merge(idle);
     }

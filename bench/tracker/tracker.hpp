@@ -137,8 +137,8 @@ struct OrderScore {
   // The run of consecutive tracked hops at one other order.
   int run_order = -1;
   double run_from = 0.0, run_to = 0.0;
-  // With GEARPULSE_BENCH_LOCKS set, every lock over kLockLimitS is printed with this label (a lock still
-  // open when a score is printed and merged may be printed twice).
+  // With GEARPULSE_BENCH_LOCKS set, every lock over kLockLimitS is printed with this label when its run
+  // closes (close_run(), which print() and merge() call).
   std::string tag;
 
   void close_run() {

@@ -273,6 +273,12 @@ TEST_CASE("synth: a young model's stop in an outage is seen at a warm idle far b
                                                          << " m/s with only the idle learned as idle");
   CHECK(with_rule == 0.0);
   CHECK(without > 1.0);  // the test's premise: without the rule, the warm idle looks like a gear
+  // A mature model (its fit used warm_fit_samples pairs or more) knows its warm idle: the rule is off.
+  model->samples = static_cast<std::size_t>(gearpulse::SynthTuning{}.warm_fit_samples);
+  CHECK(standing_speed({}) == Approx(without));
+  // So is a model that does not say how many pairs it was fitted on.
+  model->samples = 0;
+  CHECK(standing_speed({}) == Approx(without));
 }
 
 TEST_CASE("synth: after a long coast in an outage, steady revs go to the gear this driver runs them in") {
