@@ -41,6 +41,8 @@ run tracker-scenes-report build/bench/bench_tracker --scenes report
 run tracker-runup-report build/bench/bench_tracker --scenes runup-report
 run tracker-runup-report-real-band build/bench/bench_tracker --scenes runup-report --band 30:200 --window 0.2
 run tracker-clips-report build/bench/bench_tracker --scenes report --clips 5
+run tracker-scenes-report-20db build/bench/bench_tracker --scenes report --scene-snr 20
+run tracker-scenes-report-30db build/bench/bench_tracker --scenes report --scene-snr 30
 run pulse build/bench/bench_pulse
 run daemon bash scripts/measure_daemon.sh
 echo "== outputs in $out/"
