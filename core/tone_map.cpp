@@ -17,6 +17,15 @@ constexpr double kPersist = 0.1;
 // line of its own: a Hann window's first sidelobe is 31 dB down, its main lobe 15 dB down 1.5 bins out.
 constexpr double kSkirt = 100.0;
 constexpr double kQuickWindows = 5.0;  // a line is loud that would be a tone within this many windows
+// A bin stands as a line's peak while its reading is within 3 dB of the strongest within two resolution
+// bins: within 0.72 resolution bins of the line's centre (a Hann window's 3 dB bandwidth is 1.44 bins;
+// Harris 1978, Table 1).
+constexpr double kPeak = 2.0;
+// How far the estimate must move (resolution bins) while a bin stands as a line's peak for that line to be
+// a fixed tone: a line at order m of the engine moves m times as far as the estimate and stays within a
+// peak's 1.44 bins until the estimate has moved 1.44 / m bins, 2.88 for the half order (the lowest the
+// tracker fits).
+constexpr double kMoved = 1.44 / 0.5;
 
 }  // namespace
 
@@ -29,6 +38,9 @@ ToneMap::ToneMap(std::size_t bins, int first, int last, int lobe, double df_hz, 
       tone_(bins, 1.0),
       time_(bins, 0.0),
       near_(bins, 0),
+      lo_(bins, INFINITY),
+      hi_(bins, -INFINITY),
+      moved_(bins, 0),
       z_here_(bins, 0.0),
       z_around_(bins, 0.0),
       z_pre_(bins, 0.0),
@@ -37,13 +49,16 @@ ToneMap::ToneMap(std::size_t bins, int first, int last, int lobe, double df_hz, 
 void ToneMap::reset() noexcept {
   std::fill(tone_.begin(), tone_.end(), 1.0);
   std::fill(time_.begin(), time_.end(), 0.0);
+  std::fill(lo_.begin(), lo_.end(), INFINITY);
+  std::fill(hi_.begin(), hi_.end(), -INFINITY);
+  std::fill(moved_.begin(), moved_.end(), 0);
 }
 
 void ToneMap::mark() noexcept {
   std::fill(near_.begin(), near_.end(), 0);
   const auto n = static_cast<int>(near_.size());
   for (int k = first_; k <= last_; ++k)
-    if (tone_[static_cast<std::size_t>(k)] >= kFitLevel)
+    if (tone_[static_cast<std::size_t>(k)] >= kFitLevel && moved_[static_cast<std::size_t>(k)] != 0)
       for (int j = std::max(0, k - lobe_); j <= std::min(n - 1, k + lobe_); ++j)
         near_[static_cast<std::size_t>(j)] = 1;
 }
@@ -105,6 +120,21 @@ void ToneMap::learn(const double* power, const double* noise, double freq_hz, st
     // Below 1 the mean says the floor stands over this bin's noise (see background()).
     const double next = keep_ * tone_[i] + (1.0 - keep_) * std::min(z, 1e3);
     tone_[i] = loud(z) && time_[i] < kPersist ? std::min(next, std::max(tone_[i], 0.5 * kFitLevel)) : next;
+    // A line that stays put while the engine moves is a tone; one that stands in the bin only while the
+    // estimate holds still may be the engine's (a half order, the alternator's whine, orders during an
+    // unconfident spell), and 40 dB over the noise it raised the bin's mean past kFitLevel within a few
+    // windows, marking a third of the band as tones that then blanked the engine's own orders.
+    if (z >= kFitLevel && kPeak * z_here_[i] >= z_around_[i]) {
+      if (std::isfinite(freq_hz)) {
+        lo_[i] = std::min(lo_[i], freq_hz);
+        hi_[i] = std::max(hi_[i], freq_hz);
+        if (hi_[i] - lo_[i] > kMoved * lobe_ * df_) moved_[i] = 1;
+      }
+    } else {
+      lo_[i] = INFINITY;
+      hi_[i] = -INFINITY;
+    }
+    if (tone_[i] < kFitLevel) moved_[i] = 0;  // forgotten: must stay put through a move again
   }
 }
 

@@ -36,7 +36,8 @@ class ToneMap {
   [[nodiscard]] double background(std::size_t k) const noexcept {
     return tone_[k] < 1.0 ? std::max(tone_[k], kLowestNoise) : std::max(1.0, tone_[k] - 1.0);
   }
-  // Within one resolution bin of a learned tone, as marked by mark() for this hop.
+  // Within one resolution bin of a learned tone (a mean from kFitLevel, its line having stayed put while
+  // the estimate moved; see learn()), as marked by mark() for this hop.
   [[nodiscard]] bool near(std::size_t k) const noexcept { return near_[k] != 0; }
   void mark() noexcept;
   // A reading this loud (normalised power) would make a tone within a few windows.
@@ -54,10 +55,12 @@ class ToneMap {
 
   int first_, last_, lobe_;
   double df_;
-  double keep_;               // per hop
-  std::vector<double> tone_;  // mean normalised power
-  std::vector<double> time_;  // share of the memory spent above kFitLevel
-  std::vector<char> near_;    // within one resolution bin of a learned tone (this hop)
+  double keep_;                  // per hop
+  std::vector<double> tone_;     // mean normalised power
+  std::vector<double> time_;     // share of the memory spent above kFitLevel
+  std::vector<char> near_;       // within one resolution bin of a learned tone (this hop)
+  std::vector<double> lo_, hi_;  // the estimate's range (Hz) while the bin has stood as a line's peak
+  std::vector<char> moved_;      // the estimate moved far while the bin stood as a line's peak (see learn())
   // This hop: the normalised power, and its maximum within two resolution bins (with the block maxima
   // that give it in one pass).
   std::vector<double> z_here_, z_around_, z_pre_, z_suf_;

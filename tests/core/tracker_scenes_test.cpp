@@ -407,3 +407,34 @@ TEST_CASE("tone map: a track at half the engine does not learn the engine's harm
   CHECK(tones.mean(kSecond) == Approx(1.0));
   CHECK(tones.mean(kThird) == Approx(1.0));
 }
+
+// A fixed tone of other equipment stays put while the engine moves; an engine's line off the track's orders
+// (a half order, the alternator's whine, an order of an engine the track does not hold) stands in a bin only
+// while the engine holds its speed, and at 30-40 dB over the noise it raised the bin's mean past the fit
+// level within 2-3 s: the bins marked as tones grew to a third of the band and blanked the engine's own
+// orders after the next shift. A bin is marked only once the estimate has moved by more than a resolution
+// bin while the bin stood as a line's peak above the fit level.
+TEST_CASE("tone map: a line is marked a tone once it has stayed put while the estimate moved") {
+  constexpr std::size_t kBins = 256, kLine = 100;
+  gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);  // a resolution bin of 3.2 Hz
+  std::mt19937_64 rng(9);
+  std::exponential_distribution<double> noise(1.0);
+  std::vector<double> power(kBins), floor(kBins, 1.0);
+  const double order[] = {1.0};
+  const auto run = [&](int hops, double line, double from_hz, double to_hz) {
+    for (int hop = 0; hop < hops; ++hop) {
+      for (std::size_t k = 0; k < kBins; ++k)
+        power[k] = noise(rng);
+      power[kLine] += line;
+      const double freq = from_hz + (to_hz - from_hz) * hop / hops;
+      tones.learn(power.data(), floor.data(), freq, order, false, false);
+    }
+    tones.mark();
+  };
+  run(300, 0.0, 20.0, 20.0);      // 30 s of noise
+  run(100, 10000.0, 20.0, 20.0);  // a line 40 dB over the noise for 10 s, the estimate held
+  CHECK(tones.mean(kLine) >= gearpulse::ToneMap::kFitLevel);
+  CHECK_FALSE(tones.near(kLine));
+  run(30, 10000.0, 20.0, 35.0);  // the line stays while the estimate moves 15 Hz: a tone
+  CHECK(tones.near(kLine));
+}
