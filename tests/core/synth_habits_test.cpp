@@ -26,19 +26,38 @@ using gearpulse::test::script;
 
 namespace {
 
-// 20 s standing at idle, then the scripted drive (script()) with the engine held at `rolling_idle` whenever
-// the car is out of gear, as many engines are held above their standing idle while the car rolls.
-std::vector<Row> stand_then_drive_rolling_at(double rolling_idle, const std::vector<Phase>& phases) {
-  constexpr int kStanding = 20;  // s
+// `standing_s` standing at `standing_idle`, then the scripted drive (script()) with the engine at
+// `declutched` whenever the car is out of gear: held above the standing idle while the car rolls, as many
+// engines are, or a warm idle after a cold one.
+std::vector<Row> stand_then_drive(int standing_s, double standing_idle, double declutched,
+                                  const std::vector<Phase>& phases) {
   std::vector<Row> rows;
-  for (int k = 0; k < kStanding; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kIdle, 0});
+  for (int k = 0; k < standing_s; ++k)
+    rows.push_back({static_cast<double>(k), 0.0, standing_idle, 0});
   for (Row r : script(0.0, phases, kHatch)) {
-    r.t += kStanding;
-    if (r.gear == 0) r.freq = rolling_idle;
+    r.t += standing_s;
+    if (r.gear == 0) r.freq = declutched;
     rows.push_back(r);
   }
   return rows;
+}
+
+std::vector<Row> stand_then_drive_rolling_at(double rolling_idle, const std::vector<Phase>& phases) {
+  return stand_then_drive(20, kIdle, rolling_idle, phases);
+}
+
+// A first drive that stops: 30 s standing at `cold_idle`, a launch up to 5th (GPS is to be lost there, from
+// 70 s), braking in gear, a declutch and 30 s standing with the engine at `idle_then`.
+std::vector<Row> stop_after_cold_start(double cold_idle, double idle_then) {
+  return stand_then_drive(30, cold_idle, idle_then,
+                          {{1, 1.5, 3},
+                           {2, 1.0, 5},
+                           {3, 0.5, 8},
+                           {4, 0.3, 10},
+                           {5, 0.0, 20},
+                           {5, -1.5, 4},
+                           {0, -2.0, 6},
+                           {0, 0.0, 30}});
 }
 
 }  // namespace
@@ -201,24 +220,7 @@ TEST_CASE("synth: a stop in an outage is seen while the idle still falls from a 
   constexpr double kColdIdle = 17.0, kWarmerIdle = 14.5;
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
   model->extra["idle"] = {{"freq", kIdle}, {"sd", 0.3}, {"samples", 500}};
-  std::vector<Row> rows;
-  for (int k = 0; k < 30; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kColdIdle, 0});
-  const auto drive = script(0.0,
-                            {{1, 1.5, 3},
-                             {2, 1.0, 5},
-                             {3, 0.5, 8},
-                             {4, 0.3, 10},
-                             {5, 0.0, 20},
-                             {5, -1.5, 4},
-                             {0, -2.0, 6},
-                             {0, 0.0, 30}},
-                            kHatch);
-  for (Row r : drive) {
-    r.t += 30.0;
-    if (r.gear == 0) r.freq = kWarmerIdle;
-    rows.push_back(r);
-  }
+  const std::vector<Row> rows = stop_after_cold_start(kColdIdle, kWarmerIdle);
   SpeedSynthesizer synth(model);
   const auto out = replay(synth, rows, 70.0);
   REQUIRE(synth.idle_freq() > kColdIdle - 1.0);  // all GPS showed was the cold idle
@@ -239,24 +241,7 @@ TEST_CASE("synth: a young model's stop in an outage is seen at a warm idle far b
   auto model = std::make_shared<GearModel>(*model_of(kHatch));
   model->samples = 300;  // five minutes of pairs at 1 Hz
   model->extra["idle"] = {{"freq", kColdIdle}, {"sd", 0.3}, {"samples", 30}};
-  std::vector<Row> rows;
-  for (int k = 0; k < 30; ++k)
-    rows.push_back({static_cast<double>(k), 0.0, kColdIdle, 0});
-  const auto drive = script(0.0,
-                            {{1, 1.5, 3},
-                             {2, 1.0, 5},
-                             {3, 0.5, 8},
-                             {4, 0.3, 10},
-                             {5, 0.0, 20},
-                             {5, -1.5, 4},
-                             {0, -2.0, 6},
-                             {0, 0.0, 30}},
-                            kHatch);
-  for (Row r : drive) {
-    r.t += 30.0;
-    if (r.gear == 0) r.freq = kIdle;
-    rows.push_back(r);
-  }
+  const std::vector<Row> rows = stop_after_cold_start(kColdIdle, kIdle);
   const auto standing_speed = [&](const gearpulse::SynthTuning& tuning) {
     SpeedSynthesizer synth(model, tuning);
     const auto out = replay(synth, rows, 70.0);

@@ -412,8 +412,9 @@ TEST_CASE("tone map: a track at half the engine does not learn the engine's harm
 // (a half order, the alternator's whine, an order of an engine the track does not hold) stands in a bin only
 // while the engine holds its speed, and at 30-40 dB over the noise it raised the bin's mean past the fit
 // level within 2-3 s: the bins marked as tones grew to a third of the band and blanked the engine's own
-// orders after the next shift. A bin is marked only once the estimate has moved by more than a resolution
-// bin while the bin stood as a line's peak above the fit level.
+// orders after the next shift. A bin is marked only once the estimate has moved by about three resolution
+// bins (2.88: the half order's line leaves a peak's 3 dB width by then) while the bin stood as a line's
+// peak above the fit level.
 TEST_CASE("tone map: a line is marked a tone once it has stayed put while the estimate moved") {
   constexpr std::size_t kBins = 256, kLine = 100;
   gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);  // a resolution bin of 3.2 Hz
