@@ -254,7 +254,7 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const bool named = format == SampleFileFormat::kColumns || format == SampleFileFormat::kSpeedRpm;
   std::vector<std::string_view> cells;
   std::vector<ObdRow> parsed;
-  std::optional<double> epoch_ms;    // the first time cell in milliseconds since 1970
+  bool milliseconds = false;         // the log's clock counts milliseconds since 1970
   std::optional<TimeWritten> first;  // the first time since 1970 of a row read (not bad), as written
   DigitGroups groups(reader);
   // A cell that writes the column's unit after its number is the number; any other stays as written.
@@ -265,8 +265,8 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
   const std::string_view speed_cells_unit = layout.speed_in.value_or(kKmh).name;
   while (reader.next_row(cells, need, out)) {
     const auto counter = static_cast<double>(reader.rows - 1);
-    double period = 0.0;   // of a clock cell's time of day
-    bool counted = false;  // a named log's time since 1970: counted from the first (below)
+    double period = 0.0;      // of a clock cell's time of day
+    double per_second = 0.0;  // a named log's clock since 1970 in units a second: counted from the first
     const Cell rpm = groups.read(number_of(cells[irpm], "rpm"), "rpm");
     const Cell speed = groups.read(number_of(cells[ispeed], speed_cells_unit), "speed");
     Cell t;
@@ -274,24 +274,23 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
     t.value = counter * out.row_seconds();
     if (it) {
       t = groups.read(cells[*it], "time");
-      // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds. They count
-      // from the log's first in whole milliseconds, then become seconds, so that times keep the digits
-      // written (1.5e12 ms made seconds first keep only 2e-7 s). Once a log counts so, a smaller time is no
-      // time of it. No drive's running time reaches 1e8 s (three years), which a clock since 1970 passed in
-      // 1973: seconds since 1970 count from the log's first in the digits written (difference_written()),
-      // smaller times (seconds from the log's start) stay as written.
+      // No log's clock in seconds reaches 1e11 (the year 5138 since 1970): beyond, milliseconds. No
+      // drive's running time reaches 1e8 s (three years), which a clock since 1970 passed in 1973: beyond,
+      // seconds since 1970. Either counts from the log's first in the digits written (difference_written():
+      // 1.5e12 ms made seconds first keep only 2e-7 s); smaller times (from the log's start) stay as
+      // written. Once a log counts milliseconds, a smaller time is no time of it.
       constexpr double kSecondsSince1970AtLeast = 1e8;
       constexpr double kMillisecondsAtLeast = 1e11;
       if (t.kind == CellKind::kNumber && named && t.value >= kMillisecondsAtLeast) {
-        if (!epoch_ms) epoch_ms = t.value;
-        t.value = (t.value - *epoch_ms) / 1000.0;
-      } else if (t.kind == CellKind::kNumber && epoch_ms) {
+        milliseconds = true;
+        per_second = 1000.0;
+      } else if (t.kind == CellKind::kNumber && milliseconds) {
         t = Cell{
             CellKind::kBad, kMissing,
             "time " + std::string(trim(cells[*it])) + " is not milliseconds since 1970 as the log's first"};
       } else if (t.kind == CellKind::kNumber && named &&
                  t.value * layout.time_to_s >= kSecondsSince1970AtLeast) {
-        counted = true;
+        per_second = 1.0 / layout.time_to_s;
       } else if (t.kind == CellKind::kNumber) {
         t.value *= layout.time_to_s;
       }
@@ -310,9 +309,9 @@ void read_obd(LineReader& reader, LogBuilder& out, const ObdLayout& layout) {
       out.skip(reader.number, bad->problem);
       continue;
     }
-    if (counted) {
+    if (per_second > 0.0) {
       if (!first) first = {t.value, decimals_written(cells[*it])};
-      t.value = difference_written(t.value, *first, decimals_written(cells[*it])) * layout.time_to_s;
+      t.value = difference_written(t.value, *first, decimals_written(cells[*it])) / per_second;
     }
     ObdRow row{reader.number, counter, t.value, rpm.value, speed.value};
     if (period > 0.0) row.clock = t.value, row.period = period;
