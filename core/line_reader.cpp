@@ -92,10 +92,6 @@ bool LineReader::physical(std::string& out) {
 }
 
 bool LineReader::next() {
-  if (held_) {
-    held_ = false;
-    return true;
-  }
   if (!again_.empty()) {
     Record& r = again_.front();
     line = std::move(r.line);
@@ -111,20 +107,20 @@ bool LineReader::next() {
   return true;
 }
 
-void LineReader::look_ahead() {
-  if (held_) {  // the record held is the first looked at
-    held_ = false;
-    again_.push_front({line, marks_made_points_ ? written_ : std::string(), number, marks_made_points_});
-  }
+void LineReader::look_ahead() noexcept {
   keeping_ = true;
   kept_.clear();
 }
 
 void LineReader::rewind() {
   keeping_ = false;
-  held_ = false;
   for (auto r = kept_.rbegin(); r != kept_.rend(); ++r)
     again_.push_front(std::move(*r));
+  kept_.clear();
+}
+
+void LineReader::take() noexcept {
+  keeping_ = false;
   kept_.clear();
 }
 

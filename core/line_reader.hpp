@@ -25,12 +25,11 @@ class LineReader {
   // breaks (they are kept as '\n'). `number` is its first line's. A byte-order mark at a record's start (a
   // file's, or one joined on end to end) is dropped. False at the end.
   bool next();
-  // Has next() give the record read last again (a record looked at before its reader takes it).
-  void unread() noexcept { held_ = true; }
   // Records looked at before their reader takes them: from look_ahead() on, the records next() gives are
-  // kept, and rewind() has next() give them again, in order.
-  void look_ahead();
+  // kept; rewind() has next() give them again, in order, and take() leaves them read.
+  void look_ahead() noexcept;
   void rewind();
+  void take() noexcept;
   // The record read last, and the number of its first line (from 1).
   std::string line;
   std::size_t number = 0;
@@ -85,7 +84,6 @@ class LineReader {
   std::istream& in_;
   char delimiter_ = ',';
   bool delimiter_known_ = false;   // until the header is read, any of ",;\t" may end a quoted cell
-  bool held_ = false;              // unread()
   std::size_t lines_ = 0;          // physical lines handed out
   std::deque<std::string> ahead_;  // lines read ahead for a quoted cell that did not close, in order
   std::string cr_lines_;           // a run of CR-ended lines read as one, and where its next line starts

@@ -91,16 +91,21 @@ bool next_record(LineReader& reader, std::size_t columns, std::vector<std::strin
 // record that is no such row is left to the reader.
 bool read_units_row(LineReader& reader, std::vector<std::string>& header) {
   std::vector<std::string_view> cells;
-  if (!next_record(reader, header.size(), cells)) return false;
+  reader.look_ahead();
+  if (!next_record(reader, header.size(), cells)) {
+    reader.rewind();
+    return false;
+  }
   const bool units =
       std::none_of(cells.begin(), cells.end(),
                    [](std::string_view c) { return parse_cell(c, "").kind == CellKind::kNumber; }) &&
       std::any_of(cells.begin(), cells.end(),
                   [](std::string_view c) { return stated_speed_to_ms(folded(c)) > 0.0; });
   if (!units) {
-    reader.unread();
+    reader.rewind();
     return false;
   }
+  reader.take();
   for (std::size_t i = 0; i < cells.size(); ++i)
     if (!cells[i].empty()) header[i] += " (" + std::string(cells[i]) + ")";
   return true;
