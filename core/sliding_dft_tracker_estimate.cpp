@@ -150,7 +150,8 @@ SlidingDftTracker::Impl::Evidence SlidingDftTracker::Impl::refine(double f0, dou
     double strongest = kToneFitLevel;
     const auto c = static_cast<int>(std::lround(f0 / df));
     for (int k = std::max(noise_lo, c - 2 * lobe); k <= std::min(noise_hi, c + 2 * lobe); ++k)
-      if (tones->mean(static_cast<std::size_t>(k)) > strongest) {
+      if (tones->learned(static_cast<std::size_t>(k)) &&
+          tones->mean(static_cast<std::size_t>(k)) > strongest) {
         strongest = tones->mean(static_cast<std::size_t>(k));
         nuisance_hz = k * df;
       }

@@ -20,7 +20,7 @@ TrackPoint SlidingDftTracker::Impl::process_hop(std::uint64_t centre) noexcept {
     return out;
   }
   track->predict();
-  tones->mark();
+  tones->mark(track->predicted());
   floor_is_noise = rho_track < kLeakRho;
   candidate_likelihoods(track->evidence(), track->overrun_layers() ? &track->overrun_excess() : nullptr,
                         track->power_layers() ? &track->power_excess() : nullptr);

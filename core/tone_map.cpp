@@ -38,6 +38,7 @@ ToneMap::ToneMap(std::size_t bins, int first, int last, int lobe, double df_hz, 
       tone_(bins, 1.0),
       time_(bins, 0.0),
       near_(bins, 0),
+      engine_(bins, 0),
       lo_(bins, INFINITY),
       hi_(bins, -INFINITY),
       moved_(bins, 0),
@@ -54,9 +55,16 @@ void ToneMap::reset() noexcept {
   std::fill(moved_.begin(), moved_.end(), 0);
 }
 
-void ToneMap::mark() noexcept {
+void ToneMap::mark(double engine_hz) noexcept {
   std::fill(near_.begin(), near_.end(), 0);
   const auto n = static_cast<int>(near_.size());
+  std::fill(engine_.begin(), engine_.end(), 0);
+  if (std::isfinite(engine_hz) && engine_hz > 0.0)
+    for (int k = 0; k < n; ++k) {
+      const double m = std::round(2.0 * k * df_ / engine_hz);
+      engine_[static_cast<std::size_t>(k)] =
+          m >= 1.0 && std::abs(k * df_ - 0.5 * m * engine_hz) <= lobe_ * df_;
+    }
   for (int k = first_; k <= last_; ++k)
     if (tone_[static_cast<std::size_t>(k)] >= kFitLevel && moved_[static_cast<std::size_t>(k)] != 0)
       for (int j = std::max(0, k - lobe_); j <= std::min(n - 1, k + lobe_); ++j)

@@ -6,6 +6,7 @@
 // them, so a cruising engine does not become a tone. Sized at construction; nothing allocates, locks or
 // throws afterwards.
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <span>
 #include <vector>
@@ -30,16 +31,25 @@ class ToneMap {
   // The bin's mean normalised power.
   [[nodiscard]] double mean(std::size_t k) const noexcept { return tone_[k]; }
   // What a reading of the bin is divided by: the tone's level where it stands above the noise on average
-  // (a moving engine raises a bin's mean a little, not a lot); the mean itself (from kLowestNoise) where it
-  // is below 1: lines only add power, so a bin that reads under the floor on average lies under a floor
-  // set too high, and its readings divided by that mean read as noise again; else 1.
+  // (a moving engine raises a bin's mean a little, not a lot), but up to kFitLevel only where the engine's
+  // lines may stand (see mark()) unless the bin is a learned tone: a loud engine's own line held in a bin
+  // raises its mean far past kFitLevel, and divided by that mean the engine's readings there read as noise;
+  // the mean itself (from kLowestNoise) where it is below 1: lines only add power, so a bin that reads under
+  // the floor on average lies under a floor set too high, and its readings divided by that mean read as
+  // noise again; else 1.
   [[nodiscard]] double background(std::size_t k) const noexcept {
-    return tone_[k] < 1.0 ? std::max(tone_[k], kLowestNoise) : std::max(1.0, tone_[k] - 1.0);
+    if (tone_[k] < 1.0) return std::max(tone_[k], kLowestNoise);
+    return std::max(1.0, (learned(k) || !engine_[k] ? tone_[k] : std::min(tone_[k], kFitLevel)) - 1.0);
   }
   // Within one resolution bin of a learned tone (a mean from kFitLevel, its line having stayed put while
   // the estimate moved; see learn()), as marked by mark() for this hop.
   [[nodiscard]] bool near(std::size_t k) const noexcept { return near_[k] != 0; }
-  void mark() noexcept;
+  // Marks this hop's tones and, given the engine's expected frequency (the track's prediction), the bins
+  // where its lines may stand: within a resolution bin of a multiple of half of it (its half orders, orders
+  // and comb).
+  void mark(double engine_hz = NAN) noexcept;
+  // A learned tone: a mean from kFitLevel whose line has stayed put while the estimate moved (see learn()).
+  [[nodiscard]] bool learned(std::size_t k) const noexcept { return tone_[k] >= kFitLevel && moved_[k] != 0; }
   // A reading this loud (normalised power) would make a tone within a few windows.
   [[nodiscard]] bool loud(double z) const noexcept;
   // Learns from this window's spectrum (power and noise floor per fine bin). The bins within two
@@ -59,6 +69,7 @@ class ToneMap {
   std::vector<double> tone_;     // mean normalised power
   std::vector<double> time_;     // share of the memory spent above kFitLevel
   std::vector<char> near_;       // within one resolution bin of a learned tone (this hop)
+  std::vector<char> engine_;     // within one resolution bin of a multiple of half the engine (this hop)
   std::vector<double> lo_, hi_;  // the estimate's range (Hz) while the bin has stood as a line's peak
   std::vector<char> moved_;      // the estimate moved far while the bin stood as a line's peak (see learn())
   // This hop: the normalised power, and its maximum within two resolution bins (with the block maxima

@@ -439,3 +439,40 @@ TEST_CASE("tone map: a line is marked a tone once it has stayed put while the es
   run(30, 10000.0, 20.0, 35.0);  // the line stays while the estimate moves 15 Hz: a tone
   CHECK(tones.near(kLine));
 }
+
+// A bin's mean counts as background (what its readings are divided by) past the fit level, where the engine's
+// lines may stand (within a resolution bin of a multiple of half the track's prediction), only if the bin is
+// a learned tone: a loud engine's own line held in a bin (a cruise, a steady 2nd harmonic) raised the mean
+// far past the fit level, and its later readings, divided by that mean, read as noise, so that the engine's
+// own orders scored as absent while a state at twice or three times the engine read the comb's upper lines.
+// Away from the engine's lines (a fan the engine never moves far enough from to mark) the mean counts as
+// before.
+TEST_CASE("tone map: a line held under a still estimate is not divided out as a tone") {
+  constexpr std::size_t kBins = 256, kLine = 100;        // the line at 40 Hz
+  gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);  // a resolution bin of 3.2 Hz
+  std::mt19937_64 rng(9);
+  std::exponential_distribution<double> noise(1.0);
+  std::vector<double> power(kBins), floor(kBins, 1.0);
+  const double order[] = {1.0};
+  const auto run = [&](int hops, double line, double from_hz, double to_hz) {
+    for (int hop = 0; hop < hops; ++hop) {
+      for (std::size_t k = 0; k < kBins; ++k)
+        power[k] = noise(rng);
+      power[kLine] += line;
+      const double freq = from_hz + (to_hz - from_hz) * hop / hops;
+      tones.learn(power.data(), floor.data(), freq, order, false, false);
+    }
+  };
+  run(300, 0.0, 20.0, 20.0);      // 30 s of noise
+  run(100, 10000.0, 20.0, 20.0);  // a line 40 dB over the noise for 10 s, the estimate held
+  REQUIRE(tones.mean(kLine) > 10.0 * gearpulse::ToneMap::kFitLevel);
+  CHECK_FALSE(tones.learned(kLine));
+  tones.mark(20.0);  // the line at twice the prediction: the engine's 2nd harmonic
+  CHECK(tones.background(kLine) == Approx(gearpulse::ToneMap::kFitLevel - 1.0));
+  tones.mark(23.0);  // no multiple of half the prediction within a resolution bin
+  CHECK(tones.background(kLine) == Approx(tones.mean(kLine) - 1.0));
+  run(30, 10000.0, 20.0, 35.0);  // the line stays while the estimate moves 15 Hz: a tone
+  tones.mark(20.0);
+  CHECK(tones.learned(kLine));
+  CHECK(tones.background(kLine) == Approx(tones.mean(kLine) - 1.0));
+}
