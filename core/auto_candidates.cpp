@@ -60,12 +60,15 @@ std::vector<Peak> density_modes(const std::vector<double>& r, double bandwidth) 
 }  // namespace
 
 LadderJudge::LadderJudge(const MixtureData& work, std::size_t total_samples,
-                         std::vector<double> steady_log_ratios, std::vector<double> moving_log_ratios)
+                         std::vector<double> steady_log_ratios, std::vector<double> moving_log_ratios,
+                         std::vector<double> octave_log_ratios)
     : work_(work),
       total_(total_samples),
       log_ratios_(std::move(steady_log_ratios)),
-      moving_(std::move(moving_log_ratios)) {
+      moving_(std::move(moving_log_ratios)),
+      octave_(std::move(octave_log_ratios)) {
   std::sort(log_ratios_.begin(), log_ratios_.end());
+  std::sort(octave_.begin(), octave_.end());
   std::sort(moving_.begin(), moving_.end());
   // The idle frequency, from standstill samples, if the log has enough of them.
   constexpr std::size_t kMinIdleSamples = 20;
@@ -113,6 +116,21 @@ LadderCheck LadderJudge::check(const MixtureParams& p) const {
     if (step > 2.6) return {smaller, "gear clusters further apart than any gearbox step"};
     if (!valley_between(std::log(p.theta[i]), std::log(p.theta[i + 1])))
       return {smaller, "no valley between gear clusters (a continuum, as from a CVT or clutch slip)"};
+  }
+  // The frequency tracker locks for a moment now and then on the line at twice or half the engine's
+  // (tracker-method.md): a gear read so gives a reading at half or twice its theta beside time neighbours
+  // read right. A cluster most of whose readings are such is a gear's other line, not a gear (a gear is
+  // held, and its readings agree with their neighbours'). Each cluster is read within half the log step
+  // to its nearest neighbour. The lowest gear is not judged so: it is passed through in a second or two
+  // on every launch, its readings beside the 1 -> 2 shift, whose step is near two in many gearboxes.
+  for (int i = 1; i < m; ++i) {
+    const double down = std::log(p.theta[i] / p.theta[i - 1]);
+    const double w = 0.5 * (i + 1 < m ? std::min(down, std::log(p.theta[i + 1] / p.theta[i])) : down);
+    const double c = std::log(p.theta[i]);
+    if (2 * count_in(octave_, c - w, c + w) > count_in(moving_, c - w, c + w))
+      return {i,
+              "a cluster of readings at twice or half a time neighbour's engine frequency (the tracker "
+              "on another line of a gear)"};
   }
   // A gear drives the engine above idle over a range of engine speeds: through it, engine speed rises
   // with road speed up to the next shift. A cluster of crawl speeds whose samples stay within half an
@@ -186,8 +204,10 @@ LadderJudge::FreqSpread LadderJudge::freq_spread(const MixtureParams& p, int gea
 // log(v/s) of the moving samples that agree with a time neighbour: a sample in gear shares its ratio with
 // the sample before or after it, while shifts, clutch slip and an OBD logger's skewed polls give isolated
 // ratios. The tolerance widens at low speed where a few tenths of m/s of speed error (GPS noise, integer
-// km/h) move the ratio. Without usable time stamps every moving sample counts.
-std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
+// km/h) move the ratio. Without usable time stamps every moving sample counts. With octave, the moving
+// samples whose ratio moved by ln 2 either way agrees with a time neighbour's: readings at twice or half a
+// neighbour's frequency (none without time stamps).
+std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed, bool octave) {
   std::vector<double> out;
   timed = false;
   const std::size_t n = all.size();
@@ -200,6 +220,7 @@ std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
     }
   }
   if (gaps.empty() || gaps.size() < n / 2) {
+    if (octave) return out;
     for (std::size_t k = 0; k < n; ++k)
       if (moving(k)) out.push_back(std::log(all.v[k] / all.s[k]));
     return out;
@@ -209,7 +230,10 @@ std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
   const double max_gap = 3.0 * gaps[gaps.size() / 2];
   auto agree = [&](std::size_t k, std::size_t j, double r) {
     if (!moving(j) || std::abs(all.t[j] - all.t[k]) > max_gap) return false;
-    return steady_ratios_agree(r, std::log(all.v[j] / all.s[j]), all.v[k]);
+    const double rj = std::log(all.v[j] / all.s[j]);
+    if (!octave) return steady_ratios_agree(r, rj, all.v[k]);
+    return steady_ratios_agree(r + std::log(2.0), rj, all.v[k]) ||
+           steady_ratios_agree(r - std::log(2.0), rj, all.v[k]);
   };
   for (std::size_t k = 0; k < n; ++k) {
     if (!moving(k)) continue;

@@ -31,7 +31,7 @@ struct LadderCheck {
 class LadderJudge {
  public:
   LadderJudge(const MixtureData& work, std::size_t total_samples, std::vector<double> steady_log_ratios,
-              std::vector<double> moving_log_ratios);
+              std::vector<double> moving_log_ratios, std::vector<double> octave_log_ratios);
 
   // Hz: the idle frequency of the standstill samples; 0 when the log has too few of them.
   double idle_freq() const { return idle_freq_; }
@@ -58,11 +58,12 @@ class LadderJudge {
   std::size_t total_;
   std::vector<double> log_ratios_;
   std::vector<double> moving_;
+  std::vector<double> octave_;
   double idle_freq_ = 0.0;
 };
 
 // Candidate gear scales and the samples that show them (auto_candidates.cpp).
-std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed);
+std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed, bool octave = false);
 std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std::size_t limit);
 
 // EM and BIC (auto_estimator.cpp).

@@ -307,6 +307,27 @@ TEST_CASE("estimator: a CVT's top ratio with a bump of its continuum beside it i
   }
 }
 
+TEST_CASE("estimator: top gear read on twice its engine frequency now and then is no gear") {
+  // A frequency tracker that locks for a moment on the line at twice the engine's frequency reads top gear
+  // at half its theta; wide-4's top gear (0.4500) then falls 7.5 % above second gear (0.2093), a step a
+  // gearbox can have. Every 100th sample of top gear read so (every fourth of them with the sample after
+  // it) made a fifth gear at 0.2254: most of those readings sit at twice their neighbours' frequency.
+  const sim::Vehicle car = sim::vehicle_preset("wide-4");
+  auto observed = sim::simulate_observations(car, sim::DrivingStyle::kMixed, 2400.0, 1, 1);
+  int top = 0;
+  for (std::size_t k = 0; k + 1 < observed.size(); ++k) {
+    const sim::TruthSample& truth = observed[k].truth;
+    if (truth.gear != car.gears() || truth.clutch != sim::Clutch::kEngaged || ++top % 100 != 0) continue;
+    observed[k].freq *= 2.0;
+    if (top % 400 == 0) observed[k + 1].freq *= 2.0;
+  }
+  const FitResult fit = fit_gear_model(sim::to_samples(observed), {});
+  INFO(serialize_model(fit.model));
+  REQUIRE(fit.model.gears.size() == car.theta.size());
+  for (std::size_t i = 0; i < car.theta.size(); ++i)
+    CHECK(fit.model.gears[i].theta == Approx(car.theta[i]).epsilon(0.005));
+}
+
 TEST_CASE("estimator: a drive in two gears gives both, the lighter with a tenth of the driving") {
   // A manual seen in only two gears (a stretch of fourth and fifth): the pair is a ladder when both are
   // driven, even one of them only a tenth of the time.
