@@ -119,15 +119,17 @@ LadderCheck LadderJudge::check(const MixtureParams& p) const {
   }
   // The frequency tracker locks for a moment now and then on the line at twice or half the engine's
   // (tracker-method.md): a gear read so gives a reading at half or twice its theta beside time neighbours
-  // read right. A cluster most of whose readings are such is a gear's other line, not a gear (a gear is
-  // held, and its readings agree with their neighbours'). Each cluster is read within half the log step
-  // to its nearest neighbour. The lowest gear is not judged so: it is passed through in a second or two
-  // on every launch, its readings beside the 1 -> 2 shift, whose step is near two in many gearboxes.
+  // read right. A gear is held, and its readings agree with their neighbours'; a cluster with more
+  // readings at twice or half a neighbour's frequency than readings that agree with a neighbour is a
+  // gear's other line (with the shifts' transients that fall beside it), not a gear. Each cluster is read
+  // within half the log step to its nearest neighbour. The lowest gear is not judged so: it is passed
+  // through in a second or two on every launch, its readings beside the 1 -> 2 shift, whose step is near
+  // two in many gearboxes.
   for (int i = 1; i < m; ++i) {
     const double down = std::log(p.theta[i] / p.theta[i - 1]);
     const double w = 0.5 * (i + 1 < m ? std::min(down, std::log(p.theta[i + 1] / p.theta[i])) : down);
     const double c = std::log(p.theta[i]);
-    if (2 * count_in(octave_, c - w, c + w) > count_in(moving_, c - w, c + w))
+    if (count_in(octave_, c - w, c + w) > count_in(log_ratios_, c - w, c + w))
       return {i,
               "a cluster of readings at twice or half a time neighbour's engine frequency (the tracker "
               "on another line of a gear)"};
