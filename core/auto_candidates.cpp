@@ -3,6 +3,7 @@
 // ladder beyond the likelihood (support, steps, valleys, clutch slip).
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <optional>
 #include <span>
 
@@ -203,13 +204,11 @@ LadderJudge::FreqSpread LadderJudge::freq_spread(const MixtureParams& p, int gea
   return {freqs[n / 10], freqs[n / 2], freqs[n - n / 10], speeds[n / 2]};
 }
 
-// log(v/s) of the moving samples that agree with a time neighbour: a sample in gear shares its ratio with
-// the sample before or after it, while shifts, clutch slip and an OBD logger's skewed polls give isolated
-// ratios. The tolerance widens at low speed where a few tenths of m/s of speed error (GPS noise, integer
-// km/h) move the ratio. Without usable time stamps every moving sample counts. With octave, the moving
-// samples whose ratio moved by ln 2 either way agrees with a time neighbour's: readings at twice or half a
-// neighbour's frequency (none without time stamps).
-std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed, bool octave) {
+namespace {
+
+// log(v/s) of the moving samples whose ratio, moved by `shift` either way, agrees with a time neighbour's;
+// `timed` false, and none, without usable time stamps.
+std::vector<double> agreeing_log_ratios(const MixtureData& all, double shift, bool& timed) {
   std::vector<double> out;
   timed = false;
   const std::size_t n = all.size();
@@ -221,21 +220,14 @@ std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed, bool 
       if (dt > 0.0) gaps.push_back(dt);
     }
   }
-  if (gaps.empty() || gaps.size() < n / 2) {
-    if (octave) return out;
-    for (std::size_t k = 0; k < n; ++k)
-      if (moving(k)) out.push_back(std::log(all.v[k] / all.s[k]));
-    return out;
-  }
+  if (gaps.empty() || gaps.size() < n / 2) return out;
   timed = true;
   std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
   const double max_gap = 3.0 * gaps[gaps.size() / 2];
   auto agree = [&](std::size_t k, std::size_t j, double r) {
     if (!moving(j) || std::abs(all.t[j] - all.t[k]) > max_gap) return false;
     const double rj = std::log(all.v[j] / all.s[j]);
-    if (!octave) return steady_ratios_agree(r, rj, all.v[k]);
-    return steady_ratios_agree(r + std::log(2.0), rj, all.v[k]) ||
-           steady_ratios_agree(r - std::log(2.0), rj, all.v[k]);
+    return steady_ratios_agree(r + shift, rj, all.v[k]) || steady_ratios_agree(r - shift, rj, all.v[k]);
   };
   for (std::size_t k = 0; k < n; ++k) {
     if (!moving(k)) continue;
@@ -243,6 +235,27 @@ std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed, bool 
     if ((k > 0 && agree(k, k - 1, r)) || (k + 1 < n && agree(k, k + 1, r))) out.push_back(r);
   }
   return out;
+}
+
+}  // namespace
+
+// log(v/s) of the moving samples that agree with a time neighbour: a sample in gear shares its ratio with
+// the sample before or after it, while shifts, clutch slip and an OBD logger's skewed polls give isolated
+// ratios. The tolerance widens at low speed where a few tenths of m/s of speed error (GPS noise, integer
+// km/h) move the ratio. Without usable time stamps every moving sample counts.
+std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed) {
+  std::vector<double> out = agreeing_log_ratios(all, 0.0, timed);
+  if (timed) return out;
+  for (std::size_t k = 0; k < all.size(); ++k)
+    if (all.v[k] > kMovingSpeed) out.push_back(std::log(all.v[k] / all.s[k]));
+  return out;
+}
+
+// log(v/s) of the moving samples read at twice or half a time neighbour's frequency (their ratio moved by
+// ln 2 agrees with the neighbour's); none without time stamps.
+std::vector<double> octave_log_ratios(const MixtureData& all) {
+  bool timed = false;
+  return agreeing_log_ratios(all, std::numbers::ln2, timed);
 }
 
 // Candidate gear scales: modes of log(v/s) at three smoothing widths, merged, highest first.

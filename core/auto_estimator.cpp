@@ -150,8 +150,7 @@ GearModel fit_auto(const MixtureData& input, int gears, bool single_gear) {
   }
   if (steady.size() < kMinMovingSamples) steady = log_ratios;
   const MixtureData work = subsample(all, kWorkingSamples);
-  bool timed_too = false;
-  const LadderJudge judge(work, all.size(), steady, log_ratios, steady_log_ratios(all, timed_too, true));
+  const LadderJudge judge(work, all.size(), steady, log_ratios, octave_log_ratios(all));
   std::vector<double> init =
       candidate_scales(steady, static_cast<std::size_t>(std::max(kMaxCandidates, gears)));
   // A forced count larger than the modes found: fill the widest gaps geometrically.

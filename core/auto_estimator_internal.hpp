@@ -63,7 +63,8 @@ class LadderJudge {
 };
 
 // Candidate gear scales and the samples that show them (auto_candidates.cpp).
-std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed, bool octave = false);
+std::vector<double> steady_log_ratios(const MixtureData& all, bool& timed);
+std::vector<double> octave_log_ratios(const MixtureData& all);
 std::vector<double> candidate_scales(const std::vector<double>& log_ratios, std::size_t limit);
 
 // EM and BIC (auto_estimator.cpp).

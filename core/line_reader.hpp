@@ -75,7 +75,7 @@ class LineReader {
  private:
   // One line as the file holds it, without its end (LF, CR LF or CR alone); false at the end.
   bool physical(std::string& out);
-  // The next record from the file (next() but for a record held or rewound); false at the end.
+  // The next record from the file (next() but for a record rewound); false at the end.
   bool read_record();
   // Whether the record's cells hold the header's names: none (0), the header's own (1) or names in other
   // places (2).

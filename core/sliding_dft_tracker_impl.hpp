@@ -175,9 +175,8 @@ struct SlidingDftTracker::Impl {
   [[nodiscard]] double time_of(double frame) const noexcept { return t0 + frame / fs; }
   bool analyse(std::uint64_t centre) noexcept;
   [[nodiscard]] double noise_at(double fine_bin) const noexcept;
-  // Normalised power of a fine bin, a learned fixed tone counted as background (only where it stands
-  // clearly above the noise on average: a moving engine raises a bin's mean a little, not a lot), and a
-  // floor read over the bin's noise scaled back to it while the floor is the noise's (floor_is_noise).
+  // Normalised power of a fine bin over its background (ToneMap::background()), and a floor read over the
+  // bin's noise scaled back to it while the floor is the noise's (floor_is_noise).
   [[nodiscard]] double z_at(std::size_t k) const noexcept {
     const double b = tones->background(k);
     return power()[k] / (noise()[k] * (b < 1.0 && !floor_is_noise ? 1.0 : b));

@@ -59,14 +59,15 @@ void ToneMap::mark(double engine_hz) noexcept {
   std::fill(near_.begin(), near_.end(), 0);
   const auto n = static_cast<int>(near_.size());
   std::fill(engine_.begin(), engine_.end(), 0);
-  if (std::isfinite(engine_hz) && engine_hz > 0.0)
+  if (std::isfinite(engine_hz) && engine_hz > 0.0) {
+    const double halves_per_bin = 2.0 * df_ / engine_hz;
     for (int k = 0; k < n; ++k) {
-      const double m = std::round(2.0 * k * df_ / engine_hz);
-      engine_[static_cast<std::size_t>(k)] =
-          m >= 1.0 && std::abs(k * df_ - 0.5 * m * engine_hz) <= lobe_ * df_;
+      const double m = std::max(1.0, std::round(k * halves_per_bin));
+      engine_[static_cast<std::size_t>(k)] = std::abs(k * df_ - 0.5 * m * engine_hz) <= lobe_ * df_;
     }
+  }
   for (int k = first_; k <= last_; ++k)
-    if (tone_[static_cast<std::size_t>(k)] >= kFitLevel && moved_[static_cast<std::size_t>(k)] != 0)
+    if (learned(static_cast<std::size_t>(k)))
       for (int j = std::max(0, k - lobe_); j <= std::min(n - 1, k + lobe_); ++j)
         near_[static_cast<std::size_t>(j)] = 1;
 }

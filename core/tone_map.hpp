@@ -46,8 +46,9 @@ class ToneMap {
   [[nodiscard]] bool near(std::size_t k) const noexcept { return near_[k] != 0; }
   // Marks this hop's tones and, given the engine's expected frequency (the track's prediction), the bins
   // where its lines may stand: within a resolution bin of a multiple of half of it (its half orders, orders
-  // and comb).
-  void mark(double engine_hz = NAN) noexcept;
+  // and comb); none without a prediction (NaN). At an idle of a few resolution bins that is most of the
+  // band.
+  void mark(double engine_hz) noexcept;
   // A learned tone: a mean from kFitLevel whose line has stayed put while the estimate moved (see learn()).
   [[nodiscard]] bool learned(std::size_t k) const noexcept { return tone_[k] >= kFitLevel && moved_[k] != 0; }
   // A reading this loud (normalised power) would make a tone within a few windows.

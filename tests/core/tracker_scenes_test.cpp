@@ -430,7 +430,7 @@ TEST_CASE("tone map: a line is marked a tone once it has stayed put while the es
       const double freq = from_hz + (to_hz - from_hz) * hop / hops;
       tones.learn(power.data(), floor.data(), freq, order, false, false);
     }
-    tones.mark();
+    tones.mark(NAN);  // no prediction: no bin is near the engine's lines
   };
   run(300, 0.0, 20.0, 20.0);      // 30 s of noise
   run(100, 10000.0, 20.0, 20.0);  // a line 40 dB over the noise for 10 s, the estimate held
