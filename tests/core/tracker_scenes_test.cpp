@@ -377,6 +377,27 @@ gearpulse::ToneMap tones_learned(std::size_t estimate,
   return tones;
 }
 
+// One line over exponential noise fed to a tone map (a resolution bin of 3.2 Hz) off the track, the
+// estimate ramped from `from_hz` to `to_hz` over the hops.
+struct LineFeed {
+  static constexpr std::size_t kBins = 256, kLine = 100;  // the line at 40 Hz
+  gearpulse::ToneMap tones{kBins, 8, 240, 8, 0.4, 0.1};
+  std::mt19937_64 rng{9};
+  std::exponential_distribution<double> noise{1.0};
+  std::vector<double> power = std::vector<double>(kBins), floor = std::vector<double>(kBins, 1.0);
+
+  void run(int hops, double line, double from_hz, double to_hz) {
+    const double order[] = {1.0};
+    for (int hop = 0; hop < hops; ++hop) {
+      for (std::size_t k = 0; k < kBins; ++k)
+        power[k] = noise(rng);
+      power[kLine] += line;
+      const double freq = from_hz + (to_hz - from_hz) * hop / hops;
+      tones.learn(power.data(), floor.data(), freq, order, false, false);
+    }
+  }
+};
+
 }  // namespace
 
 // While the track holds the engine, the tone map leaves out every multiple of its fundamental (an ignition
@@ -416,28 +437,17 @@ TEST_CASE("tone map: a track at half the engine does not learn the engine's harm
 // bins (2.88: the half order's line leaves a peak's 3 dB width by then) while the bin stood as a line's
 // peak above the fit level.
 TEST_CASE("tone map: a line is marked a tone once it has stayed put while the estimate moved") {
-  constexpr std::size_t kBins = 256, kLine = 100;
-  gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);  // a resolution bin of 3.2 Hz
-  std::mt19937_64 rng(9);
-  std::exponential_distribution<double> noise(1.0);
-  std::vector<double> power(kBins), floor(kBins, 1.0);
-  const double order[] = {1.0};
+  LineFeed feed;
   const auto run = [&](int hops, double line, double from_hz, double to_hz) {
-    for (int hop = 0; hop < hops; ++hop) {
-      for (std::size_t k = 0; k < kBins; ++k)
-        power[k] = noise(rng);
-      power[kLine] += line;
-      const double freq = from_hz + (to_hz - from_hz) * hop / hops;
-      tones.learn(power.data(), floor.data(), freq, order, false, false);
-    }
-    tones.mark(NAN);  // no prediction: no bin is near the engine's lines
+    feed.run(hops, line, from_hz, to_hz);
+    feed.tones.mark(NAN);  // no prediction: no bin is near the engine's lines
   };
   run(300, 0.0, 20.0, 20.0);      // 30 s of noise
   run(100, 10000.0, 20.0, 20.0);  // a line 40 dB over the noise for 10 s, the estimate held
-  CHECK(tones.mean(kLine) >= gearpulse::ToneMap::kFitLevel);
-  CHECK_FALSE(tones.near(kLine));
+  CHECK(feed.tones.mean(LineFeed::kLine) >= gearpulse::ToneMap::kFitLevel);
+  CHECK_FALSE(feed.tones.near(LineFeed::kLine));
   run(30, 10000.0, 20.0, 35.0);  // the line stays while the estimate moves 15 Hz: a tone
-  CHECK(tones.near(kLine));
+  CHECK(feed.tones.near(LineFeed::kLine));
 }
 
 // A bin's mean counts as background (what its readings are divided by) past the fit level, where the engine's
@@ -448,31 +458,19 @@ TEST_CASE("tone map: a line is marked a tone once it has stayed put while the es
 // Away from the engine's lines (a fan the engine never moves far enough from to mark) the mean counts as
 // before.
 TEST_CASE("tone map: a line held under a still estimate is not divided out as a tone") {
-  constexpr std::size_t kBins = 256, kLine = 100;        // the line at 40 Hz
-  gearpulse::ToneMap tones(kBins, 8, 240, 8, 0.4, 0.1);  // a resolution bin of 3.2 Hz
-  std::mt19937_64 rng(9);
-  std::exponential_distribution<double> noise(1.0);
-  std::vector<double> power(kBins), floor(kBins, 1.0);
-  const double order[] = {1.0};
-  const auto run = [&](int hops, double line, double from_hz, double to_hz) {
-    for (int hop = 0; hop < hops; ++hop) {
-      for (std::size_t k = 0; k < kBins; ++k)
-        power[k] = noise(rng);
-      power[kLine] += line;
-      const double freq = from_hz + (to_hz - from_hz) * hop / hops;
-      tones.learn(power.data(), floor.data(), freq, order, false, false);
-    }
-  };
-  run(300, 0.0, 20.0, 20.0);      // 30 s of noise
-  run(100, 10000.0, 20.0, 20.0);  // a line 40 dB over the noise for 10 s, the estimate held
+  LineFeed feed;
+  const gearpulse::ToneMap& tones = feed.tones;
+  constexpr std::size_t kLine = LineFeed::kLine;  // at 40 Hz
+  feed.run(300, 0.0, 20.0, 20.0);                 // 30 s of noise
+  feed.run(100, 10000.0, 20.0, 20.0);             // a line 40 dB over the noise for 10 s, the estimate held
   REQUIRE(tones.mean(kLine) > 10.0 * gearpulse::ToneMap::kFitLevel);
   CHECK_FALSE(tones.learned(kLine));
-  tones.mark(20.0);  // the line at twice the prediction: the engine's 2nd harmonic
+  feed.tones.mark(20.0);  // the line at twice the prediction: the engine's 2nd harmonic
   CHECK(tones.background(kLine) == Approx(gearpulse::ToneMap::kFitLevel - 1.0));
-  tones.mark(23.0);  // no multiple of half the prediction within a resolution bin
+  feed.tones.mark(23.0);  // no multiple of half the prediction within a resolution bin
   CHECK(tones.background(kLine) == Approx(tones.mean(kLine) - 1.0));
-  run(30, 10000.0, 20.0, 35.0);  // the line stays while the estimate moves 15 Hz: a tone
-  tones.mark(20.0);
+  feed.run(30, 10000.0, 20.0, 35.0);  // the line stays while the estimate moves 15 Hz: a tone
+  feed.tones.mark(20.0);
   CHECK(tones.learned(kLine));
   CHECK(tones.background(kLine) == Approx(tones.mean(kLine) - 1.0));
 }
