@@ -52,6 +52,7 @@ constexpr Field kFields[] = {
     GEARPULSE_FIELD(output_quantile),
     GEARPULSE_FIELD(climb_cost),
     GEARPULSE_FIELD(declutch_time),
+    GEARPULSE_FIELD(pulled_engage),
     GEARPULSE_FIELD(clutch_track_share),
     GEARPULSE_FIELD(leave_cap),
     GEARPULSE_FIELD(bite_gap),

@@ -73,6 +73,8 @@ void SpeedSynthesizer::reset() noexcept {
   normalise();
   track_.fill(Track{0.0, 0.0, kInitialSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma});
   age_.fill(0.0);
+  pulled_.fill(0.0);
+  habits_.forget_pulled_shift();
   started_ = false;
   informed_ = false;
   t_ = 0.0;

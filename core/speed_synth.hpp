@@ -16,21 +16,22 @@
 // no gear explains) or runs free;
 // moving off, the clutch slips and the car gains speed at a launch acceleration until first gear bites.
 // Mode changes come from rates per second (up at the revs this driver shifts up, down at the revs he
-// shifts down; out of first gear the sooner the longer it has lasted, since first gear is for moving off). A
-// gear is scored by its innovation in its own units: within a dead zone of ordinary jitter it costs per
-// second of time, beyond it the jump costs once, however often step() is called (at steps much shorter than
-// an acceleration lasts, such a jump upward also reopens the acceleration, so that a ramp the history did not
-// expect is paid once too), and a gear just entered is scored as one held; being declutched or
-// moving off is scored per second, and so is how usual the revs are in a gear for this driver (the fit's revs
-// per gear, model extra.revs): steady revs that several gears explain go, over time, to the gear this driver
-// runs them in, and a shift is the likelier the nearer it brings the revs to the new gear's band. The idle
-// may have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle. At such short
-// steps in an outage, too, the clutch keeps no speed history of its own while a gear outweighs it, and a
-// clutch biting after a move-off may find the car faster than the move-off guessed. Apart from these, the
-// result does not depend on the step rate. The output follows the mode at a quantile of the belief by speed a
-// little above its median (the most probable one while it holds 0.6 of it), leaning halfway toward the
-// contenders' speed. A GPS fix is taken as the speed of a moment before its step, as late against the revs
-// as the drive's fixes show (speed_lag.hpp). No look-ahead: every output depends only on past input.
+// shifts down; out of first gear the sooner the longer it has lasted, since first gear is for moving off; out
+// of a declutch that followed a pulling gear, into the gear above at the share of such declutches this driver
+// ended there under GPS). A gear is scored by its innovation in its own units: within a dead zone of ordinary
+// jitter it costs per second of time, beyond it the jump costs once, however often step() is called (at
+// steps much shorter than an acceleration lasts, such a jump upward also reopens the acceleration, so that a
+// ramp the history did not expect is paid once too), and a gear just entered is scored as one held; being
+// declutched or moving off is scored per second, and so is how usual the revs are in a gear for this driver
+// (the fit's revs per gear, model extra.revs): steady revs that several gears explain go, over time, to the
+// gear this driver runs them in, and a shift is the likelier the nearer it brings the revs to the new gear's
+// band. The idle may have fallen since GPS last showed it (a warming engine) as far as the fit's warm idle.
+// At such short steps in an outage, too, the clutch keeps no speed history of its own while a gear outweighs
+// it, and a clutch biting after a move-off may find the car faster than the move-off guessed. Apart from
+// these, the result does not depend on the step rate. The output follows the mode at a quantile of the belief
+// by speed a little above its median (the most probable one while it holds 0.6 of it), leaning halfway toward
+// the contenders' speed. A GPS fix is taken as the speed of a moment before its step, as late against the
+// revs as the drive's fixes show (speed_lag.hpp). No look-ahead: every output depends only on past input.
 //
 // The filter runs on the model's gears and on the gears it has measured under GPS that the model lacks: a
 // steady ratio of GPS speed to revs off every gear of the model (seen_gears.hpp), carried, with its standard
@@ -205,6 +206,9 @@ class SpeedSynthesizer {
   [[nodiscard]] Track with_brakes(const StepInput& in, const Track& x, int j, Track held,
                                   double& score) const noexcept;
   void merge_histories(double dt) noexcept;
+  void note_pulled(double dt) noexcept;
+  // A gear's track pulls: its acceleration more than one of its spreads above 0 (pulled_engage).
+  [[nodiscard]] static bool pulling(const Track& x) noexcept { return x.a > 0.0 && x.a * x.a > x.paa; }
   void prune_histories(bool short_step, bool have_gps) noexcept;
   [[nodiscard]] double log_declutched(double freq, double speed) const noexcept;
   [[nodiscard]] double log_declutching(int gear, double freq, const Track& x) const noexcept;
@@ -264,6 +268,9 @@ class SpeedSynthesizer {
   ModeArray weight_{};      // share of each mode in use (0 = declutched; moving off has none)
   ModeArray leave_rate_{};  // 1/s, per gear
   ModeArray creep_{};       // 1: a gear seen under GPS only at lugged revs (SeenGears::Gear::creep)
+  // Per gear, the share of the clutch's belief that came from it while it pulled, fading over the time spent
+  // declutched (SynthTuning::pulled_engage).
+  ModeArray pulled_{};
   double sigma_v_ = 0.0;
   double sigma_s_ = 0.0;
 

@@ -198,6 +198,36 @@ void SynthHabits::learn_shift(int gear, double belief, double freq) noexcept {
   sure_gear_freq_ = freq;
 }
 
+void SynthHabits::learn_pulled_shift(int mode, double belief, bool in_gear, bool pulling, bool rolling,
+                                     double dt, double max_declutch) noexcept {
+  constexpr double kSure = 0.8;
+  if (pulled_gear_ == 0) pulled_declutch_ = 0.0;
+  if (!rolling) {
+    forget_pulled_shift();  // a stop, not a shift
+    return;
+  }
+  if (!in_gear) {
+    // Declutched (the clutch or a move-off) after the pulling gear: the shift is on, as long as a shift's.
+    if (pulled_gear_ > 0 && mode == 0 && pulled_declutch_ >= 0.0) {
+      pulled_declutch_ += std::max(dt, 1e-9);
+      if (pulled_declutch_ > max_declutch) pulled_declutch_ = -1.0;
+    }
+    return;
+  }
+  if (belief < kSure) return;
+  if (pulled_gear_ > 0 && (mode != pulled_gear_ || pulled_declutch_ != 0.0)) {
+    if (pulled_declutch_ >= 0.0) {
+      const int outcome = mode == pulled_gear_ + 1 ? 0 : mode == pulled_gear_ ? 1 : 2;
+      const double keep = 1.0 - 1.0 / kPulledShiftMemory;
+      for (double& c : pulled_count_)
+        c *= keep;
+      pulled_count_[static_cast<std::size_t>(outcome)] += 1.0;
+    }
+  }
+  pulled_gear_ = pulling ? mode : 0;
+  pulled_declutch_ = 0.0;
+}
+
 // The same gears keep what was learned of them (their shift revs) under their new numbers.
 void SynthHabits::renumber_gears(const GearNumbers& to, int old_gears) noexcept {
   for (GearArray* a : {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_,
@@ -208,6 +238,7 @@ void SynthHabits::renumber_gears(const GearNumbers& to, int old_gears) noexcept 
       if (to[i] > 0) (*a)[to[i]] = old[i];
   }
   sure_gear_ = sure_gear_ > 0 && sure_gear_ <= old_gears ? to[sure_gear_] : 0;
+  pulled_gear_ = pulled_gear_ > 0 && pulled_gear_ <= old_gears ? to[pulled_gear_] : 0;
 }
 
 // Shift revs learned per gear belong to the old ladder.
@@ -215,6 +246,7 @@ void SynthHabits::forget_gear_shifts() noexcept {
   for (GearArray* a :
        {&gear_up_mean_, &gear_up_var_, &gear_up_count_, &gear_down_mean_, &gear_down_var_, &gear_down_count_})
     a->fill(0.0);
+  forget_pulled_shift();
 }
 
 double SynthHabits::idle_freq() const noexcept {

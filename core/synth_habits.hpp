@@ -42,6 +42,20 @@ class SynthHabits {
   // Under GPS, after each step: notes the frequency at which a confidently held gear (`gear` held with
   // `belief`; 0 = no gear) was left for its neighbour.
   void learn_shift(int gear, double belief, double freq) noexcept;
+  // Under GPS, after each step of dt: the filter's most probable mode `mode` (0 = declutched) holding
+  // `belief`, whether it is a gear (`in_gear`) that pulls (`pulling`), and whether the car rolls. Of the
+  // gears left while they pulled, counts where the next gear held with confidence was: the one above, the
+  // same (after a declutch of at most `max_declutch` s) or another.
+  void learn_pulled_shift(int mode, double belief, bool in_gear, bool pulling, bool rolling, double dt,
+                          double max_declutch) noexcept;
+  // Share of the declutches after a pulling gear that engage the gear above: the Laplace (add-one)
+  // estimate over the three outcomes of learn_pulled_shift, over about the last kPulledShiftMemory.
+  [[nodiscard]] double upshift_share() const noexcept {
+    return (pulled_count_[0] + 1.0) / (pulled_count_[0] + pulled_count_[1] + pulled_count_[2] + 3.0);
+  }
+  static constexpr double kPulledShiftMemory = 50.0;  // shifts
+  // No shift is pending across a reset or a gap.
+  void forget_pulled_shift() noexcept { pulled_gear_ = 0, pulled_declutch_ = 0.0; }
 
   // The next fix starts afresh (after a reset or a gap): no speed before it to measure a deceleration by.
   void forget_last_fix() noexcept { last_gps_ = from_gps_ = -1.0; }
@@ -118,7 +132,13 @@ class SynthHabits {
   double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
   GearArray gear_up_mean_{}, gear_up_var_{}, gear_up_count_{};  // the same, per gear left
   GearArray gear_down_mean_{}, gear_down_var_{}, gear_down_count_{};
-  int sure_gear_ = 0;            // last gear held with confidence under GPS
+  int sure_gear_ = 0;  // last gear held with confidence under GPS
+  // Where the gears left while pulling went (up one, the same, another), counts over a bounded memory; the
+  // gear held with confidence last if it pulled then (0: none), and the s declutched since it was left
+  // (0: not left; -1: left, but the declutch was too long to be a shift).
+  std::array<double, 3> pulled_count_{};
+  int pulled_gear_ = 0;
+  double pulled_declutch_ = 0.0;
   double sure_gear_freq_ = 0.0;  // its last frequency
 };
 

@@ -169,6 +169,7 @@ void SpeedSynthesizer::change_ladder(bool new_model) noexcept {
   track_[0] = old_track[0];
   age_.fill(0.0);
   age_[0] = old_age[0];
+  pulled_.fill(0.0);  // per position of the old ladder
   for (int j = 1; j <= gears_; ++j)
     track_[j] = old_track[0];
   track_[launch_mode()] = old_track[old_gears + 1];

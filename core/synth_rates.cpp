@@ -24,7 +24,8 @@ double leave_by(double dt, double total_rate, double rate) noexcept {
 
 // Mode changes over dt out of mode `from`, as rates per second: a gear is left for the clutch or for a
 // neighbouring gear (a quick shift between two samples; up more likely at high revs, down at low revs);
-// the clutch is left for any gear in proportion to its use, or, standing, for moving off; moving off ends
+// the clutch is left for any gear in proportion to its use (for the gear above one it came from while that
+// pulled, at the upshift share learned), or, standing, for moving off; moving off ends
 // when the clutch bites in first (or second) gear.
 void SpeedSynthesizer::transitions_from(int from, double dt, double freq, double speed, ModeArray& row,
                                         double& caught_share) const noexcept {
@@ -115,8 +116,18 @@ void SpeedSynthesizer::clutch_transitions(double dt, double speed, ModeArray& ro
   const double total = engage + launch_rate;
   row[0] = std::exp(-total * dt);
   row[launch] += leave_by(dt, total, launch_rate);
-  for (int j = 1; j <= gears_; ++j)
-    row[j] += leave_by(dt, total, engage * weight_[j] / (1.0 - weight_[0]));
+  // A declutch after a pulling gear is most often an upshift: the share of the clutch's belief that came
+  // from a gear while it pulled (pulled_, note_pulled) engages the gear above at the share of such
+  // declutches this driver ended in the gear above under GPS; the rest of the engagement goes by use.
+  const double up_share = tuning_.pulled_engage > 0.0 ? habits_.upshift_share() : 0.0;
+  double above = 0.0;
+  for (int g = 1; g < gears_; ++g)
+    above += pulled_[g] * up_share;
+  const double by_use = std::max(1.0 - above, 0.0);
+  for (int j = 1; j <= gears_; ++j) {
+    const double share = by_use * weight_[j] / (1.0 - weight_[0]) + (j > 1 ? pulled_[j - 1] * up_share : 0.0);
+    row[j] += leave_by(dt, total, engage * share);
+  }
   // Moving off and biting within the same step (a step may be longer than a launch): of the launches
   // begun at a uniform time inside dt, the share whose clutch has bitten by its end.
   const double bite = tuning_.bite_rate * dt;

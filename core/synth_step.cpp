@@ -16,6 +16,9 @@ namespace {
 
 constexpr double kNegligible = 1e-2;   // belief, relative to the leading mode, worth a history of its own
 constexpr double kStandingVar = 0.01;  // (m/s)^2: a car at rest is at rest
+// Declutches up to this many declutch_time long count toward the upshift share after a pulling gear
+// (learn_pulled_shift): by then the clutch's memory of the pull (note_pulled) has faded to e^-4.
+constexpr double kPulledDeclutches = 4.0;
 // Declutched, the engine runs free: its revs fall toward idle, or rise in a blip the driver gives (matching
 // the revs for a downshift). Revs that climb by more than kFreeRise a second are an engine pulling the car.
 constexpr double kFreeRise = 0.2;  // 1/s, relative; above the tracker's hop-to-hop jitter
@@ -273,10 +276,41 @@ SpeedSynthesizer::Track SpeedSynthesizer::with_brakes(const StepInput& in, const
   return held;
 }
 
+// The clutch's memory of where its belief came from (pulled_), from this step's histories into it: of each
+// gear that pulled at the step's start (its track before the step; the clutch's own history drops the pull),
+// the share of the clutch's belief it brought; the share the clutch held already, faded over the step as
+// exp(-dt / declutch_time): a declutch longer than a shift is no longer one.
+void SpeedSynthesizer::note_pulled(double dt) noexcept {
+  const int modes = gears_ + 2;
+  double top = -std::numeric_limits<double>::infinity();
+  for (int i = 0; i < modes; ++i)
+    top = std::max(top, pair_score_[i][0]);
+  ModeArray next{};
+  if (tuning_.pulled_engage > 0.0 && std::isfinite(top)) {
+    const double fade = tuning_.declutch_time > 0.0 ? std::exp(-dt / tuning_.declutch_time) : 0.0;
+    double w_sum = 0.0;
+    for (int i = 0; i < modes; ++i) {
+      if (!std::isfinite(pair_score_[i][0])) continue;
+      const double w = std::exp(pair_score_[i][0] - top);
+      w_sum += w;
+      if (i == 0) {
+        for (int g = 1; g < gears_; ++g)
+          next[g] += w * fade * pulled_[g];
+      } else if (is_gear(i) && i < gears_ && pulling(track_[i])) {
+        next[i] += w;
+      }
+    }
+    for (int g = 1; g < gears_; ++g)
+      next[g] /= w_sum;
+  }
+  pulled_ = next;
+}
+
 // Every mode sums over its predecessors' histories (pair_score_, pair_track_): its belief, its track matched
 // to the mixture's first two moments, and its age.
 void SpeedSynthesizer::merge_histories(double dt) noexcept {
   const int modes = gears_ + 2;
+  note_pulled(dt);  // before the tracks the histories started from are replaced
   ModeArray log_p{}, next_age{};
   for (int j = 0; j < modes; ++j) {
     double top = -std::numeric_limits<double>::infinity();
@@ -382,6 +416,9 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
   if (in.have_gps) {
     habits_.learn(t_, dt, gps, freq, gps_new, mode_, is_gear(mode_), prob_[mode_], at_idle_, tuning_);
     habits_.learn_shift(is_gear(mode_) ? mode_ : 0, prob_[mode_], freq);
+    habits_.learn_pulled_shift(mode_, prob_[mode_], is_gear(mode_), pulling(track_[mode_]),
+                               gps >= tuning_.stationary_speed, dt,
+                               kPulledDeclutches * tuning_.declutch_time);
     return {gps, gps >= tuning_.stationary_speed ? model_gear(mode_) : 0, SpeedSource::kGps};
   }
   habits_.end_flat_stretch();  // a flat stretch of revs is one GPS saw whole

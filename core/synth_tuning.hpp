@@ -83,6 +83,12 @@ struct SynthTuning {
   // s: the clutch is out this long in a shift; between readings further apart than the tracker's hops, a
   // reading falls inside an upshift's declutch with this share of the step (0: never).
   double declutch_time = 0.5;
+  // 1: a declutch that follows a pulling gear (its acceleration more than one of its spreads above 0) is
+  // most often an upshift: the share of the clutch's belief that came from gear g while it pulled, fading
+  // over declutch_time spent declutched, engages gear g + 1 at the upshift share this driver's shifts after
+  // a pulling gear show under GPS (SynthHabits::upshift_share); the rest of the clutch's engagement goes to
+  // every gear in proportion to its use (0: all of it does).
+  double pulled_engage = 1.0;
   // At the tracker's hops through an outage the clutch keeps no speed history of its own while it holds
   // less than this share of the leading gear's belief (0: it always keeps its own).
   double clutch_track_share = 0.5;

@@ -36,6 +36,7 @@ constexpr Rule kRules[] = {
     {"second-gear launches", "launch_second=0"},
     {"climb: climbing revs cost the clutch", "climb_cost=0"},
     {"declutch caught within a long step", "declutch_time=0"},
+    {"pulled engage: a declutch after a pull engages the gear above", "pulled_engage=0"},
     {"clutch follows the gear at hops", "clutch_track_share=0"},
     {"leave cap: gear hazard capped", "leave_cap=inf"},
     {"bite gap: biting clutch's spread", "bite_gap=0"},
