@@ -4,30 +4,61 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <iterator>
 #include <vector>
 
 namespace gearpulse {
 
-// A ladder at f is also what an engine at f / 4 shows when its ignition spikes give it every harmonic (a
-// comb): f is then its 4th order, and an idle's 4th harmonic scores as well as the idle when the window
-// is long enough for the comb's upper lines to reach the evidence's bound. The two roots predict the
-// same lines at f's orders and differ at f / 4 and 3 f / 4: background under root f, the lower engine's
-// fundamental and 3rd order under root f / 4. The log likelihood ratio S of those two bins (each an order
-// of the lower engine, at -15 to +30 dB of f's line) gives, with the two roots equally likely beforehand,
-// the posterior of root f; the state at f loses the log odds by which it is the less likely root,
-// ln((1 + e^S) / 2) when S > 0, and nothing otherwise. Only the 4th order is judged so: f / 2 and 3 f / 2
-// are a four-stroke's own half orders (the half order's level prior and the track's continuity tell f
-// from f / 2), and f / 3 and 2 f / 3 lie a third of f apart, both inside a cabin's body resonance
-// (20-40 Hz) for an engine at 60-120 Hz (see docs/algorithms/tracker-experiments.md).
+// A ladder at f is also what an engine at f / r shows when its ignition spikes give it every harmonic (a
+// comb): f is then its r-th order, and the comb's lines at f's orders score as well as a line of its own
+// when the window is long enough for the comb's upper lines to reach the evidence's bound (at high SNR the
+// 2nd and 3rd multiples do). Three roots are judged, r = 4, 2 and 3, each by two bins where the lower engine
+// has lines that are neither f's orders nor a four-stroke's low half orders (f / 2 and 3 f / 2, whose level
+// prior tells f from f / 2), nor both inside a cabin's body resonance (20-40 Hz) for an engine at 60-120 Hz
+// (as f / 3 and 2 f / 3 are): f / 4 and 3 f / 4 (the lower engine's 1st and 3rd orders), 5 f / 2 and 7 f / 2
+// (its 5th and 7th), 4 f / 3 and 5 f / 3 (its 4th and 5th). Under root f those bins hold background, under
+// root f / r the lower engine's orders, each at -15 to +30 dB of f's line; S_r is their log likelihood
+// ratio. With root f and the n roots judged equally likely beforehand, the posterior of root f is
+// 1 / (1 + sum e^S_r); the state at f loses the log odds by which that falls short of its prior,
+// ln((1 + sum e^S_r) / (1 + n)) when positive (ln((1 + e^S) / 2) with one root, the 4th's test alone). The
+// posterior rather than the largest root's penalty: a root whose bins show background (S_r < 0) takes its
+// share of the prior and says f is not its multiple, which the largest would ignore, and the tests'
+// overlap (an engine at f / 4 has lines at 5 f / 2 and 7 f / 2 too, its 10th and 14th orders) counts one
+// comb at most twice, ln 2 of the penalty. A bin below the noise floor's range, or under a learned tone,
+// voids its root's test (says nothing); one above the harmonic limit is left out, and a root left without a
+// bin says nothing (see docs/algorithms/tracker-experiments.md).
 double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const noexcept {
-  double s = 0.0;
-  for (const int m : {1, 3}) {
-    const double pos = 0.25 * m * k;
-    const auto b = static_cast<std::size_t>(std::lround(pos));
-    if (pos < noise_lo || tones->near(b)) return 0.0;  // unseen, or under a learned tone: says nothing
-    s += evidence.lower_root(z_at(b), rho_line);
+  struct Root {
+    double bins[2];  // the lower engine's orders tested, as multiples of f
+  };
+  static constexpr Root kRoots[] = {{{0.25, 0.75}}, {{2.5, 3.5}}, {{4.0 / 3.0, 5.0 / 3.0}}};
+  double log_odds[std::size(kRoots)] = {};  // each judged root's over root f
+  std::size_t judged = 0;
+  for (const Root& root : kRoots) {
+    double s = 0.0;
+    int counted = 0;
+    bool void_test = false;
+    for (const double m : root.bins) {
+      const double pos = m * k;
+      if (pos * df > harmonic_limit_hz) continue;
+      const auto b = static_cast<std::size_t>(std::lround(pos));
+      if (pos < noise_lo || tones->near(b)) {  // unseen, or under a learned tone: says nothing
+        void_test = true;
+        break;
+      }
+      s += evidence.lower_root(z_at(b), rho_line);
+      ++counted;
+    }
+    if (!void_test && counted > 0) log_odds[judged++] = s;
   }
-  return s > 0.0 ? std::log(0.5 * (1.0 + std::exp(s))) : 0.0;
+  if (judged == 0) return 0.0;
+  // ln(1 + sum e^S_r), kept finite for a loud comb.
+  const double top = std::max(0.0, *std::max_element(log_odds, log_odds + judged));
+  double sum = std::exp(-top);
+  for (std::size_t r = 0; r < judged; ++r)
+    sum += std::exp(log_odds[r] - top);
+  return std::max(0.0, top + std::log(sum) - std::log(1.0 + static_cast<double>(judged)));
 }
 
 // Log likelihood ratio of every state (engine line at that fine bin over noise-or-tone), from the
