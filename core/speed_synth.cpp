@@ -179,8 +179,10 @@ SynthOutput SpeedSynthesizer::step(double t, double gps_speed, double freq, bool
       x = {x.v, 0.0, kMaxSpeedVar, 0.0, tuning_.accel_sigma * tuning_.accel_sigma};
     age_.fill(0.0);
     habits_.forget_last_fix();
-    habits_.end_flat_stretch();  // a flat stretch of revs is not seen whole across the gap
-    launches_.abort();           // the launch's shifts in the gap are unseen
+    habits_.end_flat_stretch();     // a flat stretch of revs is not seen whole across the gap
+    habits_.forget_pulled_shift();  // nor a shift after a pulling gear
+    pulled_.fill(0.0);              // a pull before the gap says nothing after it
+    launches_.abort();              // the launch's shifts in the gap are unseen
     dt = 0.0;
   }
   if (!in_gap_) hop_ = dt;

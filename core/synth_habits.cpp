@@ -15,6 +15,9 @@ constexpr double kMinRevsSd = 0.1;  // in ln(freq): no gear is confined to a ban
 // Samples a prior on a gear's revs is worth (load_gear_revs, lugged_band): a young model's few samples of
 // a gear move its band only part of the way from the prior.
 constexpr double kRevsPriorSamples = 20.0;
+// Belief in the filter's most probable mode under GPS for a habit to be learned from it: GPS tells the
+// gears apart (speed over revs) except in the moments of a shift, when the belief is split between them.
+constexpr double kSureMode = 0.8;
 // The edge of the lugging band (lugged()): its logistic falls from 0.95 to 0.05 over 2 ln(19) / 3 = 2 of the
 // band's spreads, and the band's top lies at least far enough above the idle that the logistic reaches 0.95
 // there, where the idle lugs any gear wholly.
@@ -143,17 +146,16 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
   };
   constexpr double kIdleMemory = 60.0;    // s
   constexpr double kDriveMemory = 600.0;  // s
-  constexpr double kSureGear = 0.8;
   // Declutched on the move the engine idles too; a reading there at or below the idle learned so far
   // follows a warming engine down when the car no longer stops (a cold start's high idle otherwise stays,
   // and a car coasting at warm idle looks in gear).
-  const bool idling_moving = tuning.idle_on_move > 0.0 && was_moving && mode == 0 && belief > kSureGear &&
+  const bool idling_moving = tuning.idle_on_move > 0.0 && was_moving && mode == 0 && belief > kSureMode &&
                              idle_count_ > 0.0 && freq < idle_mean_ + idle_sd();
   // Rolling declutched above the standing idle (gear_model.hpp's rolling_idle rule, as the fit applies it
   // to a log): revs that no gear explains, flat while GPS shows the car slowing, are the rolling idle. Not a
   // shift's revs (they move), nor a slipping clutch's (the car gains speed, or creeps).
   using namespace rolling_idle;
-  const bool roll_candidate = gps > kMinSpeed && was_moving && mode == 0 && belief > kSureGear &&
+  const bool roll_candidate = gps > kMinSpeed && was_moving && mode == 0 && belief > kSureMode &&
                               idle_count_ > 0.0 && freq >= idle_mean_ + idle_sd() &&
                               freq < kCeiling * idle_mean_;
   if (!roll_candidate) {
@@ -176,15 +178,14 @@ void SynthHabits::learn(double t, double dt, double gps, double freq, bool gps_n
     constexpr double kIdleFallMemory = 15.0;  // s
     if (idle_readable_)
       add(idle_mean_, idle_var_, idle_count_, freq < idle_mean_ ? kIdleFallMemory : kIdleMemory);
-  } else if (in_gear && belief > kSureGear && gps > 10.0 * tuning.stationary_speed) {
+  } else if (in_gear && belief > kSureMode && gps > 10.0 * tuning.stationary_speed) {
     add(drive_mean_, drive_var_, drive_count_, kDriveMemory);
   }
 }
 
 void SynthHabits::learn_shift(int gear, double belief, double freq) noexcept {
-  constexpr double kSure = 0.8;
   constexpr double kShiftMemory = 50.0;  // shifts
-  if (gear == 0 || belief < kSure || !std::isfinite(freq)) return;
+  if (gear == 0 || belief < kSureMode || !std::isfinite(freq)) return;
   if (sure_gear_ > 0 && gear == sure_gear_ + 1) {
     accumulate(sure_gear_freq_, up_mean_, up_var_, up_count_, kShiftMemory);
     accumulate(sure_gear_freq_, gear_up_mean_[sure_gear_], gear_up_var_[sure_gear_],
@@ -200,8 +201,10 @@ void SynthHabits::learn_shift(int gear, double belief, double freq) noexcept {
 
 void SynthHabits::learn_pulled_shift(int mode, double belief, bool in_gear, bool pulling, bool rolling,
                                      double dt, double max_declutch) noexcept {
-  constexpr double kSure = 0.8;
-  if (pulled_gear_ == 0) pulled_declutch_ = 0.0;
+  if (pulled_gear_ == 0) {
+    pulled_declutch_ = 0.0;
+    pulled_left_ = false;
+  }
   if (!rolling) {
     forget_pulled_shift();  // a stop, not a shift
     return;
@@ -209,23 +212,23 @@ void SynthHabits::learn_pulled_shift(int mode, double belief, bool in_gear, bool
   if (!in_gear) {
     // Declutched (the clutch or a move-off) after the pulling gear: the shift is on, as long as a shift's.
     if (pulled_gear_ > 0 && mode == 0 && pulled_declutch_ >= 0.0) {
-      pulled_declutch_ += std::max(dt, 1e-9);
+      pulled_left_ = true;
+      pulled_declutch_ += dt;
       if (pulled_declutch_ > max_declutch) pulled_declutch_ = -1.0;
     }
     return;
   }
-  if (belief < kSure) return;
-  if (pulled_gear_ > 0 && (mode != pulled_gear_ || pulled_declutch_ != 0.0)) {
-    if (pulled_declutch_ >= 0.0) {
-      const int outcome = mode == pulled_gear_ + 1 ? 0 : mode == pulled_gear_ ? 1 : 2;
-      const double keep = 1.0 - 1.0 / kPulledShiftMemory;
-      for (double& c : pulled_count_)
-        c *= keep;
-      pulled_count_[static_cast<std::size_t>(outcome)] += 1.0;
-    }
+  if (belief < kSureMode) return;
+  if (pulled_gear_ > 0 && (mode != pulled_gear_ || pulled_left_) && pulled_declutch_ >= 0.0) {
+    const PulledOutcome outcome = mode == pulled_gear_ + 1 ? kUpOne : mode == pulled_gear_ ? kSame : kOther;
+    const double keep = 1.0 - 1.0 / kPulledShiftMemory;
+    for (double& c : pulled_count_)
+      c *= keep;
+    pulled_count_[outcome] += 1.0;
   }
   pulled_gear_ = pulling ? mode : 0;
   pulled_declutch_ = 0.0;
+  pulled_left_ = false;
 }
 
 // The same gears keep what was learned of them (their shift revs) under their new numbers.

@@ -51,11 +51,16 @@ class SynthHabits {
   // Share of the declutches after a pulling gear that engage the gear above: the Laplace (add-one)
   // estimate over the three outcomes of learn_pulled_shift, over about the last kPulledShiftMemory.
   [[nodiscard]] double upshift_share() const noexcept {
-    return (pulled_count_[0] + 1.0) / (pulled_count_[0] + pulled_count_[1] + pulled_count_[2] + 3.0);
+    return (pulled_count_[kUpOne] + 1.0) /
+           (pulled_count_[kUpOne] + pulled_count_[kSame] + pulled_count_[kOther] + 3.0);
   }
   static constexpr double kPulledShiftMemory = 50.0;  // shifts
   // No shift is pending across a reset or a gap.
-  void forget_pulled_shift() noexcept { pulled_gear_ = 0, pulled_declutch_ = 0.0; }
+  void forget_pulled_shift() noexcept {
+    pulled_gear_ = 0;
+    pulled_declutch_ = 0.0;
+    pulled_left_ = false;
+  }
 
   // The next fix starts afresh (after a reset or a gap): no speed before it to measure a deceleration by.
   void forget_last_fix() noexcept { last_gps_ = from_gps_ = -1.0; }
@@ -132,14 +137,16 @@ class SynthHabits {
   double down_mean_ = 0.0, down_var_ = 0.0, down_count_ = 0.0;
   GearArray gear_up_mean_{}, gear_up_var_{}, gear_up_count_{};  // the same, per gear left
   GearArray gear_down_mean_{}, gear_down_var_{}, gear_down_count_{};
-  int sure_gear_ = 0;  // last gear held with confidence under GPS
-  // Where the gears left while pulling went (up one, the same, another), counts over a bounded memory; the
-  // gear held with confidence last if it pulled then (0: none), and the s declutched since it was left
-  // (0: not left; -1: left, but the declutch was too long to be a shift).
+  int sure_gear_ = 0;            // last gear held with confidence under GPS
+  double sure_gear_freq_ = 0.0;  // its last frequency
+  // Where the gears left while pulling went, counts over a bounded memory; the gear held with confidence
+  // last if it pulled then (0: none), whether it has been left for the clutch, and the s declutched since
+  // (-1: the declutch was too long to be a shift).
+  enum PulledOutcome : std::size_t { kUpOne, kSame, kOther };
   std::array<double, 3> pulled_count_{};
   int pulled_gear_ = 0;
+  bool pulled_left_ = false;
   double pulled_declutch_ = 0.0;
-  double sure_gear_freq_ = 0.0;  // its last frequency
 };
 
 }  // namespace gearpulse

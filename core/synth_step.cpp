@@ -421,7 +421,8 @@ SynthOutput SpeedSynthesizer::filter_step(double dt, double gps, double freq, bo
                                kPulledDeclutches * tuning_.declutch_time);
     return {gps, gps >= tuning_.stationary_speed ? model_gear(mode_) : 0, SpeedSource::kGps};
   }
-  habits_.end_flat_stretch();  // a flat stretch of revs is one GPS saw whole
+  habits_.end_flat_stretch();     // a flat stretch of revs is one GPS saw whole
+  habits_.forget_pulled_shift();  // and so is a shift after a pulling gear
   // Through an outage the output policy chooses the speed from the belief in the modes and their tracks.
   ModeArray speed{}, speed_var{};
   for (int j = 0; j < modes; ++j) {

@@ -67,6 +67,8 @@ TEST_CASE("synth: a declutch after a pulling gear lets in the gear above") {
   CHECK(with.hops_to_third >= 0);
   CHECK(with.hops_to_third <= 2);
   CHECK(with.third_belief > 0.2);
+  CHECK(with.third_belief > without.third_belief);
+  CHECK(with.hops_to_third < without.hops_to_third);
 }
 
 TEST_CASE("synth habits: the upshift share after a pulling gear is learned from the shifts under GPS") {
@@ -87,6 +89,11 @@ TEST_CASE("synth habits: the upshift share after a pulling gear is learned from 
   const double share = habits.upshift_share();
   shift(3, 2, false, 4);
   shift(3, 3, true, 40);
+  CHECK(habits.upshift_share() == Approx(share));
+  // Nor does a shift not seen whole: GPS lost after the pulling gear and back in another gear.
+  habits.learn_pulled_shift(2, 0.95, true, true, true, kDt, kMaxDeclutch);
+  habits.forget_pulled_shift();
+  habits.learn_pulled_shift(4, 0.95, true, false, true, kDt, kMaxDeclutch);
   CHECK(habits.upshift_share() == Approx(share));
   // A pulling gear taken again after a short declutch counts as the same gear; the memory is bounded, so
   // a driver who does so from now on is followed.
