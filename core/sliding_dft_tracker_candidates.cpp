@@ -3,6 +3,7 @@
 #include "core/sliding_dft_tracker_impl.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <iterator>
@@ -29,17 +30,15 @@ namespace gearpulse {
 // voids its root's test (says nothing); one above the harmonic limit is left out, and a root left without a
 // bin says nothing (see docs/algorithms/tracker-experiments.md).
 double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const noexcept {
-  struct Root {
-    double bins[2];  // the lower engine's orders tested, as multiples of f
-  };
-  static constexpr Root kRoots[] = {{{0.25, 0.75}}, {{2.5, 3.5}}, {{4.0 / 3.0, 5.0 / 3.0}}};
-  double log_odds[std::size(kRoots)] = {};  // each judged root's over root f
+  using Root = std::array<double, 2>;  // the lower engine's orders tested, as multiples of f
+  static constexpr std::array<Root, 3> kRoots{{{0.25, 0.75}, {2.5, 3.5}, {4.0 / 3.0, 5.0 / 3.0}}};
+  std::array<double, kRoots.size()> log_odds{};  // each judged root's over root f
   std::size_t judged = 0;
   for (const Root& root : kRoots) {
     double s = 0.0;
     int counted = 0;
     bool void_test = false;
-    for (const double m : root.bins) {
+    for (const double m : root) {
       const double pos = m * k;
       if (pos * df > harmonic_limit_hz) continue;
       const auto b = static_cast<std::size_t>(std::lround(pos));
@@ -54,7 +53,8 @@ double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const 
   }
   if (judged == 0) return 0.0;
   // ln(1 + sum e^S_r), kept finite for a loud comb.
-  const double top = std::max(0.0, *std::max_element(log_odds, log_odds + judged));
+  const auto judged_end = log_odds.begin() + static_cast<std::ptrdiff_t>(judged);
+  const double top = std::max(0.0, *std::max_element(log_odds.begin(), judged_end));
   double sum = std::exp(-top);
   for (std::size_t r = 0; r < judged; ++r)
     sum += std::exp(log_odds[r] - top);

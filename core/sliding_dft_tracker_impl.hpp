@@ -192,8 +192,9 @@ struct SlidingDftTracker::Impl {
   // `power` what a line under power adds (HarmonicEvidence::second_power()).
   void candidate_likelihoods(std::vector<double>& out, std::vector<double>* overrun = nullptr,
                              std::vector<double>* power = nullptr) const noexcept;
-  // Log odds lost by the state at fine bin k, whose line has per-bin SNR rho_line, to the likeliest of the
-  // roots f / 4, f / 2 and f / 3 of a comb of which it would be the 4th, 2nd or 3rd harmonic.
+  // Log odds by which root f, for the state at fine bin k whose line has per-bin SNR rho_line, falls short
+  // of its prior among the judged roots f / 4, f / 2 and f / 3 of a comb of which it would be the 4th, 2nd
+  // or 3rd harmonic.
   [[nodiscard]] double comb_root_penalty(int k, double rho_line) const noexcept;
   void learn_orders(const Evidence& ev, double right) noexcept;
   void learn_orders_from_pair() noexcept;
