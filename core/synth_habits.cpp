@@ -201,10 +201,6 @@ void SynthHabits::learn_shift(int gear, double belief, double freq) noexcept {
 
 void SynthHabits::learn_pulled_shift(int mode, double belief, bool in_gear, bool pulling, bool rolling,
                                      double dt, double max_declutch) noexcept {
-  if (pulled_gear_ == 0) {
-    pulled_declutch_ = 0.0;
-    pulled_left_ = false;
-  }
   if (!rolling) {
     forget_pulled_shift();  // a stop, not a shift
     return;
@@ -241,7 +237,10 @@ void SynthHabits::renumber_gears(const GearNumbers& to, int old_gears) noexcept 
       if (to[i] > 0) (*a)[to[i]] = old[i];
   }
   sure_gear_ = sure_gear_ > 0 && sure_gear_ <= old_gears ? to[sure_gear_] : 0;
-  pulled_gear_ = pulled_gear_ > 0 && pulled_gear_ <= old_gears ? to[pulled_gear_] : 0;
+  if (pulled_gear_ > 0 && pulled_gear_ <= old_gears && to[pulled_gear_] > 0)
+    pulled_gear_ = to[pulled_gear_];
+  else
+    forget_pulled_shift();  // the gear left is not in the new ladder
 }
 
 // Shift revs learned per gear belong to the old ladder.
