@@ -14,13 +14,17 @@ namespace gearpulse {
 // A ladder at f is also what an engine at f / r shows when its ignition spikes give it every harmonic (a
 // comb): f is then its r-th order, and the comb's lines at f's orders score as well as a line of its own
 // when the window is long enough for the comb's upper lines to reach the evidence's bound (at high SNR the
-// 2nd and 3rd multiples do). Three roots are judged, r = 4, 2 and 3, each by two bins where the lower engine
+// 2nd and 3rd multiples do). Three roots are judged, r = 4, 2 and 3, each by bins where the lower engine
 // has lines that are neither f's orders nor a four-stroke's low half orders (f / 2 and 3 f / 2, whose level
 // prior tells f from f / 2), nor both inside a cabin's body resonance (20-40 Hz) for an engine at 60-120 Hz
 // (as f / 3 and 2 f / 3 are): f / 4 and 3 f / 4 (the lower engine's 1st and 3rd orders), 5 f / 2 and 7 f / 2
-// (its 5th and 7th), 4 f / 3 and 5 f / 3 (its 4th and 5th). Under root f those bins hold background, under
-// root f / r the lower engine's orders, each at -15 to +30 dB of f's line; S_r is their log likelihood
-// ratio. With root f and the n roots judged equally likely beforehand, the posterior of root f is
+// (its 5th and 7th), 4 f / 3 and 5 f / 3 (its 4th and 5th). The 3rd root is judged at 8 f / 3 too (its 8th),
+// between f's 2nd and 3rd orders: those two read the comb's 6th and 9th, above the band where the floor is
+// the noise's and the comb stands over it, while 4 f / 3 and 5 f / 3 may lie in the band, whose crowd of
+// lines holds the floor over the comb; 8 f / 3 is also a line when f is 1.5 times a four-stroke engine at
+// 2 f / 3 (that engine's 4th harmonic), which 7 f / 3 (its 3.5 order) is not. Under root f those bins hold
+// background, under root f / r the lower engine's orders, each at -15 to +30 dB of f's line; S_r is their log
+// likelihood ratio. With root f and the n roots judged equally likely beforehand, the posterior of root f is
 // 1 / (1 + sum e^S_r); the state at f loses the log odds by which that falls short of its prior,
 // ln((1 + sum e^S_r) / (1 + n)) when positive (ln((1 + e^S) / 2) with one root, the 4th's test alone). The
 // posterior rather than the largest root's penalty: a root whose bins show background (S_r < 0) takes its
@@ -30,8 +34,9 @@ namespace gearpulse {
 // voids its root's test (says nothing); one above the harmonic limit is left out, and a root left without a
 // bin says nothing (see docs/algorithms/tracker-experiments.md).
 double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const noexcept {
-  using Root = std::array<double, 2>;  // the lower engine's orders tested, as multiples of f
-  static constexpr std::array<Root, 3> kRoots{{{0.25, 0.75}, {2.5, 3.5}, {4.0 / 3.0, 5.0 / 3.0}}};
+  using Root = std::array<double, 3>;  // the lower engine's orders tested, as multiples of f (0: none)
+  static constexpr std::array<Root, 3> kRoots{
+      {{0.25, 0.75, 0.0}, {2.5, 3.5, 0.0}, {4.0 / 3.0, 5.0 / 3.0, 8.0 / 3.0}}};
   std::array<double, kRoots.size()> log_odds{};  // each judged root's over root f
   std::size_t judged = 0;
   for (const Root& root : kRoots) {
@@ -39,6 +44,7 @@ double SlidingDftTracker::Impl::comb_root_penalty(int k, double rho_line) const 
     int counted = 0;
     bool void_test = false;
     for (const double m : root) {
+      if (m == 0.0) break;
       const double pos = m * k;
       if (pos * df > harmonic_limit_hz) continue;
       const auto b = static_cast<std::size_t>(std::lround(pos));
