@@ -356,10 +356,23 @@ TEST_CASE("pty: the pulse thread writes one byte per pulse and stops low") {
   const auto pulses_fast = thread.pulses();
   REQUIRE(read_until([&] { return thread.pulses() >= pulses_fast + 5; }));
   thread.set_speed(std::nan(""));  // standstill
-  // The turn after the set_speed loads the standstill (edges overdue under the old speed first); once
-  // the turn after that has begun, no rise can come.
+  // The turn after the set_speed loads the standstill. Distance owed under the old speed is still paid:
+  // a thread woken more than a period late owes a rise that waits for the fall and the low time before
+  // it, so it may come turns later. An owed rise comes within two turns of the edge before it (its
+  // fall's turn, then its own); four turns without a rise and nothing is owed. Counted in turns, not in
+  // time: a sanitized build on a loaded machine may sleep through any fixed wait.
   const auto turns_set = thread.status().turns;
   REQUIRE(read_until([&] { return thread.status().turns >= turns_set + 2; }));
+  auto quiet_from_turn = thread.status().turns;
+  auto quiet_pulses = thread.pulses();
+  REQUIRE(read_until([&] {
+    const auto s = thread.status();
+    if (s.pulses != quiet_pulses) {
+      quiet_pulses = s.pulses;
+      quiet_from_turn = s.turns;
+    }
+    return s.turns >= quiet_from_turn + 4;
+  }));
   const auto pulses_stopped = thread.pulses();
   // An absence has no condition to wait for: a loaded machine only makes this window see less.
   read_for(std::chrono::milliseconds(100));
