@@ -336,8 +336,9 @@ TEST_CASE(
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   REQUIRE(wait_for([&] { return !pipeline.snapshot().gps_error.empty(); }, 10s));  // gpsd absent
   const std::vector<double> speeds(40, 12.5);
+  const auto fix = [&] { return pipeline.snapshot().gps_state == GpsState::kFix; };
   auto fake = chain.gpsd(speeds, 0.1);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
+  if (!wait_for(fix, 20s)) FAIL("no fix: " << fake->describe());
   auto s = pipeline.snapshot();
   CHECK(s.gps_error.empty());
   CHECK(s.gps_reconnects == 0);
@@ -346,7 +347,7 @@ TEST_CASE(
   REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kDisconnected; }, 10s));
   CHECK_FALSE(pipeline.snapshot().gps_error.empty());
   fake = chain.gpsd(speeds, 0.1);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
+  if (!wait_for(fix, 20s)) FAIL("no fix after the restart: " << fake->describe());
   s = pipeline.snapshot();
   CHECK(s.gps_error.empty());
   CHECK(s.gps_reconnects == 1);
@@ -359,7 +360,8 @@ TEST_CASE("pipeline: a receiver that goes quiet is no fix after gps.timeout and 
   chain.config.gps.timeout = 1.0;
   gearpulse::daemon::Pipeline& pipeline = chain.start();
   auto fake = chain.gpsd(std::vector<double>(40, 9.0), 0.1);
-  REQUIRE(wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s));
+  if (!wait_for([&] { return pipeline.snapshot().gps_state == GpsState::kFix; }, 20s))
+    FAIL("no fix: " << fake->describe());
   fake->pause();
   // gps.timeout (1 s) after the last report; gpsd stays up and quiet until resumed, so a bound of 10 s
   // still tells the timeout from "a fix for as long as gpsd is up", with room for a loaded machine.

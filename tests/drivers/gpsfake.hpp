@@ -29,7 +29,7 @@ class GpsFake {
   GpsFake(const std::filesystem::path& log, int port, double cycle_s, bool once)
       : port_(port),
         process_(
-            args(log, port, cycle_s, once), "/dev/null",
+            args(log, port, cycle_s, once), tmp_.path() / "gpsfake.log",
             // gpsfake is a Python program for Debian's /usr/bin/python3; another may come first.
             {.env = {"PATH=/usr/bin:/usr/sbin:/bin", "TMPDIR=" + tmp_.path().string()}, .own_group = true}) {}
   ~GpsFake() { kill(); }
@@ -48,6 +48,13 @@ class GpsFake {
           return fd && ::connect(fd.get(), reinterpret_cast<sockaddr*>(&a), sizeof a) == 0;
         },
         timeout);
+  }
+
+  // For a test that waited in vain: whether gpsd listens on the port, and what gpsfake and gpsd wrote.
+  [[nodiscard]] std::string describe() const {
+    return "gpsd on port " + std::to_string(port_) +
+           (wait_listening(port_, std::chrono::milliseconds(0)) ? " listens" : " does not listen") +
+           "; gpsfake wrote: '" + read_text(tmp_.path() / "gpsfake.log") + "'";
   }
 
   // SIGSTOP/SIGCONT to gpsfake alone: gpsd stays up and connected but gets nothing from its device, as
