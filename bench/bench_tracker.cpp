@@ -5,8 +5,8 @@
 // CPU time for 10 minutes of 48 kHz audio. Prints figures; asserts nothing.
 //
 //   bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu]
-//   bench_tracker --scenes tuning|report|check|runup|runup-report [--band LO:HI] [--window S] [--hop S]
-//                 [--lag S]
+//   bench_tracker --scenes tuning|report|check|runup|runup-report|no-third|no-third-report [--band LO:HI]
+//                 [--window S] [--hop S] [--lag S]
 //                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB] [--clips S]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
 //                 [--hop S] [--lag S] [--offset S] [--dump]
@@ -20,6 +20,9 @@
 // "runup" is six run-ups at full throttle (970 -> 4,820 rpm over 10-20 s, seeds 101-106's levels and lines)
 // whose 2nd harmonic rises through the fundamental at 2,400 rpm, at 30, 20 and 10 dB by default (for
 // choosing); "runup-report" the same run-ups with seeds 201-206's levels and lines (for figures only).
+// "no-third" is seeds 101-106's launch drives with an engine of orders 1, 2 and 4 (the 3rd harmonic off,
+// the half orders in the odd seeds only; sim::no_third_scene_for_seed()), at 30, 20 and 10 dB by default
+// (for choosing); "no-third-report" the same with seeds 201-206 (for figures only).
 // --scene-without switches components of the scenes off (agc, clipping, resonance, spikes, fan, pump,
 // mains, whine, half, swap, third; see sim::scene_without), the noise level unchanged; --scene-snr scores
 // one SNR instead of the three. --clips S also cuts each scene into consecutive clips of S seconds and
@@ -77,8 +80,8 @@ int main(int argc, char** argv) {
         stderr,
         "usage: bench_tracker [--seed N] [--vehicle drive|NAME] [--no-cpu] [--quick]\n"
         "                     [--require NAME<=VALUE|NAME>=VALUE]...\n"
-        "       bench_tracker --scenes tuning|report|check|runup|runup-report [--band LO:HI] [--window S]\n"
-        "                     [--hop S] [--lag S]\n"
+        "       bench_tracker --scenes tuning|report|check|runup|runup-report|no-third|no-third-report\n"
+        "                     [--band LO:HI] [--window S] [--hop S] [--lag S]\n"
         "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB] [--clips S]\n"
         "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
         "                     [--window S] [--hop S] [--lag S] [--offset S] [--dump]\n");
@@ -91,9 +94,10 @@ int main(int argc, char** argv) {
     if (a == "--scenes" && more) {
       scene_set = argv[++i];
       if (scene_set != "tuning" && scene_set != "report" && scene_set != "check" && scene_set != "runup" &&
-          scene_set != "runup-report")
+          scene_set != "runup-report" && scene_set != "no-third" && scene_set != "no-third-report")
         return usage();
-      if (scene_set.starts_with("runup") && !snr_given) scene_snr = {30.0, 20.0, 10.0};
+      if ((scene_set.starts_with("runup") || scene_set.starts_with("no-third")) && !snr_given)
+        scene_snr = {30.0, 20.0, 10.0};
     } else if (a == "--scene-without" && more) {
       // A comma-separated list of components.
       std::string list = argv[++i];

@@ -40,6 +40,7 @@ run tracker build/bench/bench_tracker
 run tracker-scenes-report build/bench/bench_tracker --scenes report
 run tracker-runup-report build/bench/bench_tracker --scenes runup-report
 run tracker-runup-report-real-band build/bench/bench_tracker --scenes runup-report --band 30:200 --window 0.2
+run tracker-no-third-report build/bench/bench_tracker --scenes no-third-report
 run tracker-clips-report build/bench/bench_tracker --scenes report --clips 5
 run tracker-scenes-report-20db build/bench/bench_tracker --scenes report --scene-snr 20
 run tracker-scenes-report-30db build/bench/bench_tracker --scenes report --scene-snr 30

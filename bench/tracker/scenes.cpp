@@ -189,9 +189,10 @@ void score_clips(const std::vector<float>& x, const sim::FrequencyTrajectory& tr
 
 int scenes(const std::string& set, const TrackerConfig& base, const std::vector<std::string>& without,
            const std::vector<double>& snrs, double clip_s) {
-  const bool run_up = set.starts_with("runup");
+  const bool run_up = set.starts_with("runup"), no_third = set.starts_with("no-third");
   constexpr double kDurationS = 120.0;
-  const std::uint64_t first = set == "tuning" || set == "runup" ? 101 : set == "check" ? 301 : 201;
+  const bool tuning_seeds = set == "tuning" || set == "runup" || set == "no-third";
+  const std::uint64_t first = tuning_seeds ? 101 : set == "check" ? 301 : 201;
   constexpr int kSeeds = 6;
   if (run_up)
     std::printf(
@@ -203,11 +204,12 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
         base.hop_s);
   else
     std::printf(
-        "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder), "
+        "scenes (%s set: seeds %llu-%llu, %.0f s each at 48 kHz, launch drives of a four-cylinder%s), "
         "band %g:%g Hz, window %g s, hop %g s\n",
         set.c_str(), static_cast<unsigned long long>(first),
-        static_cast<unsigned long long>(first + kSeeds - 1), kDurationS, base.band_lo_hz, base.band_hi_hz,
-        base.window_s, base.hop_s);
+        static_cast<unsigned long long>(first + kSeeds - 1), kDurationS,
+        no_third ? "; orders 1, 2 and 4, no 3rd harmonic; the half orders in the odd seeds only" : "",
+        base.band_lo_hz, base.band_hi_hz, base.window_s, base.hop_s);
   if (base.decision_lag_s > 0.0) std::printf("decision lag %g s\n", base.decision_lag_s);
   if (!without.empty()) {
     std::printf("without:");
@@ -225,8 +227,9 @@ int scenes(const std::string& set, const TrackerConfig& base, const std::vector<
       const double duration = run_up ? sim::run_up_duration(run_up_ramp_s(i)) : kDurationS;
       const auto trajectory =
           run_up ? sim::run_up_trajectory(run_up_ramp_s(i)) : sim::launch_drive_trajectory(duration, seed);
-      sim::LighterSceneConfig cfg =
-          run_up ? sim::run_up_scene_for_seed(seed, snr, run_up_ramp_s(i)) : sim::scene_for_seed(seed, snr);
+      sim::LighterSceneConfig cfg = run_up     ? sim::run_up_scene_for_seed(seed, snr, run_up_ramp_s(i))
+                                    : no_third ? sim::no_third_scene_for_seed(seed, snr, seed % 2 == 1)
+                                               : sim::scene_for_seed(seed, snr);
       // The automatic gain last: its fixed stand-in holds the envelope of the components left on.
       for (const bool gain : {false, true})
         for (const std::string& w : without)

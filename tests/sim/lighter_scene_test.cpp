@@ -114,3 +114,32 @@ TEST_CASE("lighter scene: every component scene_without names changes the record
   sim::LighterSceneConfig c = base;
   CHECK_FALSE(sim::scene_without(c, "exhaust", truth, kDuration));
 }
+
+TEST_CASE("lighter scene without a 3rd harmonic: the 4th shows, the 3rd not, the half orders on request") {
+  constexpr double kFs = 48000.0, kF = 60.0;
+  for (const bool with_half : {true, false}) {
+    INFO("half orders " << with_half);
+    sim::LighterSceneConfig c = sim::no_third_scene_for_seed(9, INFINITY, with_half);
+    const sim::LighterSceneConfig drawn = sim::scene_for_seed(9, INFINITY);
+    // The seed's other draws are scene_for_seed()'s.
+    CHECK(c.harmonic2 == drawn.harmonic2);
+    CHECK(c.fan_hz == drawn.fan_hz);
+    CHECK(c.harmonic4 >= 0.2);
+    CHECK(c.harmonic4 <= 0.6);
+    // The engine's orders alone, at a steady line and mean load.
+    c.spike_amplitude = c.alternator = c.body = c.fan = c.pump = c.mains = 0.0;
+    c.load_swing = 0.0;
+    c.agc_s = 0.0;
+    c.clip = 1e9;
+    const auto x = sim::make_lighter_scene(
+        c, [](double) { return kF; }, 2.0);
+    const auto amplitude = [&](double order) { return order_amplitude(x, kFs, kF, 0.0, order, 0.5, 2.0); };
+    CHECK(amplitude(4.0) == Approx(c.harmonic4 * c.amplitude).epsilon(0.02));
+    CHECK(amplitude(3.0) < 0.01 * c.amplitude);
+    CHECK(amplitude(2.0) == Approx(c.harmonic2 * c.amplitude).epsilon(0.02));
+    if (with_half)
+      CHECK(amplitude(0.5) == Approx(drawn.half_order * c.amplitude).epsilon(0.02));
+    else
+      CHECK(amplitude(0.5) < 0.01 * c.amplitude);
+  }
+}

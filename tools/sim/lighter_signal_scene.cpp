@@ -112,7 +112,7 @@ void LighterScene::generate(std::span<float> out) {
       }
       v += a * ((1.0 + swing) * std::sin(p) + second * std::sin(2.0 * p + 0.7) +
                 c.harmonic3 * std::sin(3.0 * p + 1.9) + c.half_order * std::sin(0.5 * p + 0.3) +
-                c.order_1_5 * std::sin(1.5 * p + 2.3));
+                c.order_1_5 * std::sin(1.5 * p + 2.3) + c.harmonic4 * std::sin(4.0 * p + 2.9));
       v += a * c.alternator * std::sin(kTwoPi * alt_phase_);
       phase_ = wrap(phase_ + f / fs);
       alt_phase_ = wrap(alt_phase_ + c.alternator_ratio * 2.0 * f / c.cylinders / fs);
@@ -249,6 +249,15 @@ LighterSceneConfig run_up_scene_for_seed(std::uint64_t seed, double snr_db, doub
   c.harmonic2_peak_hz = kRunUpSecondHz;
   // At the peak and full load: harmonic2 (1 - swing) times the gain over the fundamental's 1 + swing.
   c.harmonic2_peak = second_over * (1.0 + c.load_swing) / (c.harmonic2 * (1.0 - c.load_swing));
+  return c;
+}
+
+LighterSceneConfig no_third_scene_for_seed(std::uint64_t seed, double snr_db, bool with_half) {
+  LighterSceneConfig c = scene_for_seed(seed, snr_db);
+  std::mt19937_64 rng(seed * 104729 + 3);  // its own stream: scene_for_seed()'s draws are kept
+  c.harmonic3 = 0.0;
+  c.harmonic4 = std::uniform_real_distribution<double>(0.2, 0.6)(rng);
+  if (!with_half) c.half_order = c.order_1_5 = 0.0;
   return c;
 }
 

@@ -37,6 +37,7 @@ struct LighterSceneConfig {
   double order_1_5 = 0.2;   // 1.5 f
   double harmonic2 = 1.0;   // 2 f at mean load
   double harmonic3 = 0.2;
+  double harmonic4 = 0.0;  // 4 f (none in scene_for_seed()'s scenes; no_third_scene_for_seed()'s)
   // Load moves energy between f and 2 f: the fundamental's amplitude is (1 + swing (2 load - 1)), the 2nd
   // harmonic's harmonic2 (1 - swing (2 load - 1)).
   double load_swing = 0.6;
@@ -136,6 +137,12 @@ class LighterScene {
 // fundamental at mid revs).
 [[nodiscard]] LighterSceneConfig run_up_scene_for_seed(std::uint64_t seed, double snr_db, double ramp_s,
                                                        double second_over = 2.0);
+
+// A scene of an engine whose 3rd harmonic lies under the noise while its 2nd and 4th show (orders 1, 2 and
+// 4 of the firing frequency; a real engine's orders need not follow a smooth ladder): scene_for_seed()'s
+// levels and lines with the 3rd harmonic off, a 4th at 0.2-0.6 of the fundamental drawn from the seed, and
+// the half orders (0.5 f, 1.5 f) kept or, with_half false, off.
+[[nodiscard]] LighterSceneConfig no_third_scene_for_seed(std::uint64_t seed, double snr_db, bool with_half);
 
 // A drive of a four-cylinder for the scene, as its firing frequency: idle at 750-900 rpm (25-30 Hz,
 // below the 50-200 Hz band), launches at up to 1,500 rpm/s (50 Hz/s), shifts, cruising, engine braking
