@@ -4,7 +4,8 @@
 //
 // The engine's line f(t) (the tracked fundamental: the firing frequency, twice the crank rate on a
 // four-cylinder) comes with
-//   - half and one-and-a-half orders (0.5 f, 1.5 f) and a 3rd harmonic;
+//   - half and one-and-a-half orders (0.5 f, 1.5 f) and a 3rd harmonic (or, in no_third_scene_for_seed()'s
+//     scenes, a 4th in its place);
 //   - energy that moves between f and 2 f with the load: under load (accelerating) the fundamental
 //     leads, on the overrun (engine braking) and at light load the 2nd harmonic stands up to 12 dB over it;
 //   - ignition spikes at the firing rate;
