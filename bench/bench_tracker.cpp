@@ -9,7 +9,7 @@
 //                 [--window S] [--hop S] [--lag S]
 //                 [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB] [--clips S]
 //   bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI] [--window S]
-//                 [--hop S] [--lag S] [--offset S] [--dump]
+//                 [--hop S] [--lag S] [--offset S] [--tacho-gap S] [--dump] [--require NAME<=VALUE]...
 // --seed changes every drive and every noise (default 11); --vehicle takes the main drives from the
 // vehicle simulator's preset NAME (bmw-520i, hatch-5, close-6, wide-4, van-6, sport-7, compact-4)
 // instead of the built-in drive ("drive").
@@ -31,6 +31,10 @@
 // --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock; a header line
 // is skipped): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing frequency, by default).
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
+// --tacho-gap S: the longest interval between tacho rows that the truth is interpolated across (default 1.5
+// times the log's median interval, at least 1 s: an OBD log polled every second or slower is scored whole,
+// a row missing from its polling leaves a gap). The recording's figures (in_band_hops, coverage_pct,
+// gross_pct, rmse_hz, longest_lock_s) can be held to --require thresholds; no in-band truth at all exits 1.
 // --lag S: the tracker's fixed-lag decision (TrackerConfig::decision_lag_s) for the scenes or the recording.
 // The bench's parts beside main(): bench/tracker/tracker.hpp says which file does what.
 #include <algorithm>
@@ -84,7 +88,8 @@ int main(int argc, char** argv) {
         "                     [--band LO:HI] [--window S] [--hop S] [--lag S]\n"
         "                     [--scene-without COMPONENT[,COMPONENT]...] [--scene-snr DB] [--clips S]\n"
         "       bench_tracker --wav FILE --tacho FILE.csv [--order K] [--channel N] [--band LO:HI]\n"
-        "                     [--window S] [--hop S] [--lag S] [--offset S] [--dump]\n");
+        "                     [--window S] [--hop S] [--lag S] [--offset S] [--tacho-gap S] [--dump]\n"
+        "                     [--require NAME<=VALUE|NAME>=VALUE]...\n");
     return 2;
   };
   for (int i = 1; i < argc; ++i) {
@@ -122,6 +127,8 @@ int main(int argc, char** argv) {
       wav.tacho = argv[++i];
     } else if (a == "--offset" && more) {
       if (!parse_number(argv[++i], wav.offset_s)) return usage();
+    } else if (a == "--tacho-gap" && more) {
+      if (!parse_number(argv[++i], wav.tacho_gap_s) || wav.tacho_gap_s <= 0.0) return usage();
     } else if (a == "--order" && more) {
       if (!parse_number(argv[++i], wav.order) || wav.order <= 0) return usage();
     } else if (a == "--channel" && more) {
@@ -159,7 +166,7 @@ int main(int argc, char** argv) {
   try {
     if (!wav.wav.empty() || !wav.tacho.empty()) {
       if (wav.wav.empty() || wav.tacho.empty()) return usage();
-      return score_wav(wav);
+      return score_wav(wav, required);
     }
     if (!scene_set.empty()) return scenes(scene_set, wav.config, without, scene_snr, clip_s);
     if (wav.config.decision_lag_s != 0.0 || clip_s > 0.0)

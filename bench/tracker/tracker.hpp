@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/requirements.hpp"
 #include "core/sliding_dft_tracker.hpp"
 
 namespace gearpulse::bench::tracker_bench {
@@ -274,12 +275,16 @@ struct WavOptions {
   std::string wav, tacho;
   double order = 2.0;
   double offset_s = 0.0;  // tacho time of the recording's first frame
+  // Longest interval between two tacho rows that the truth is interpolated across (s); 0: from the log, 1.5
+  // times its median interval (a row missing from its own polling), at least 1 s.
+  double tacho_gap_s = 0.0;
   int channel = -1;
   TrackerConfig config;
   bool dump = false;
 };
 
-// Scores a real recording against its tacho log.
-int score_wav(WavOptions o);
+// Scores a real recording against its tacho log; the figures go through `required` (--require). 1 when no
+// hop of the recording has a truth in the band (the reason on stderr), else required's exit status.
+int score_wav(WavOptions o, Requirements& required);
 
 }  // namespace gearpulse::bench::tracker_bench

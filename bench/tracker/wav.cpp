@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -35,30 +37,56 @@ std::vector<std::array<double, 2>> read_tacho(const std::string& path) {
   return rows;
 }
 
-// Truth at t: rpm linearly interpolated between tacho samples at most 1 s apart, / 60 x order; NaN
-// outside the log, across a gap, or with the engine stopped.
-double tacho_truth(const std::vector<std::array<double, 2>>& tacho, double t, double order) {
-  constexpr double kMaxGapS = 1.0;
+// The truth at a hop: the rpm linearly interpolated between the tacho rows around it, / 60 x order, and the
+// range between those two rows' values (where the revs were, if they moved one way between the rows).
+struct Truth {
+  double at = NAN, lo = NAN, hi = NAN;
+};
+
+// Truth at t from tacho rows at most max_gap_s apart; NaN outside the log, across a gap, or with the engine
+// stopped.
+Truth tacho_truth(const std::vector<std::array<double, 2>>& tacho, double t, double order, double max_gap_s) {
   const auto it = std::lower_bound(tacho.begin(), tacho.end(), t,
                                    [](const std::array<double, 2>& r, double v) { return r[0] < v; });
-  if (it == tacho.begin() || it == tacho.end())
-    return it != tacho.end() && (*it)[0] == t ? (*it)[1] / 60.0 * order : NAN;
+  if (it == tacho.begin() || it == tacho.end()) {
+    if (it == tacho.end() || (*it)[0] != t || !((*it)[1] > 0.0)) return {};
+    const double f = (*it)[1] / 60.0 * order;
+    return {f, f, f};
+  }
   const auto& b = *it;
   const auto& a = *(it - 1);
-  if (b[0] - a[0] > kMaxGapS) return NAN;
+  if (b[0] - a[0] > max_gap_s || !(a[1] > 0.0) || !(b[1] > 0.0)) return {};
   const double rpm = a[1] + (t - a[0]) / (b[0] - a[0]) * (b[1] - a[1]);
-  return rpm > 0.0 ? rpm / 60.0 * order : NAN;
+  return {rpm / 60.0 * order, std::min(a[1], b[1]) / 60.0 * order, std::max(a[1], b[1]) / 60.0 * order};
+}
+
+// The longest interval between tacho rows (times ascending) interpolated across when none is given: 1.5
+// times the log's median interval (a row missing from its own polling), at least 1 s.
+double tacho_gap_s(std::span<const double> times) {
+  std::vector<double> steps;
+  for (std::size_t i = 1; i < times.size(); ++i)
+    steps.push_back(times[i] - times[i - 1]);
+  if (steps.empty()) return 1.0;
+  const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
+  std::nth_element(steps.begin(), mid, steps.end());
+  return std::max(1.0, 1.5 * *mid);
 }
 
 }  // namespace
 
-int score_wav(WavOptions o) {
+int score_wav(WavOptions o, Requirements& required) {
   const auto tacho = read_tacho(o.tacho);
+  std::vector<double> times;
+  for (const auto& row : tacho)
+    times.push_back(row[0]);
+  const double gap = o.tacho_gap_s > 0.0 ? o.tacho_gap_s : tacho_gap_s(times);
   SF_INFO info{};
   std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.wav.c_str(), SFM_READ, &info));
   if (!file) throw std::runtime_error(o.wav + ": cannot read audio: " + sf_strerror(nullptr));
   if (info.frames <= 0 || info.channels <= 0) throw std::runtime_error(o.wav + ": no audio frames");
-  if (o.channel >= info.channels) throw std::runtime_error(o.wav + ": no such channel");
+  if (o.channel >= info.channels)
+    throw std::runtime_error(o.wav + ": --channel " + std::to_string(o.channel) + " but the file has " +
+                             std::to_string(info.channels) + " channel(s), counted from 0");
   std::vector<float> interleaved(static_cast<std::size_t>(info.frames) *
                                  static_cast<std::size_t>(info.channels));
   const sf_count_t got = sf_readf_float(file.get(), interleaved.data(), info.frames);
@@ -69,24 +97,52 @@ int score_wav(WavOptions o) {
   std::string error;
   auto tracker = SlidingDftTracker::create(o.config, error);
   if (!tracker) throw std::runtime_error(o.wav + ": " + error);
-  OrderScore s;
-  s.band_lo = o.config.band_lo_hz;
-  s.band_hi = o.config.band_hi_hz;
-  s.hop_s = o.config.hop_s;
+  // Scored against the interpolated truth, and against the range between the tacho rows around each hop
+  // (the value in that range nearest the estimate): a log polled every second or slower puts a shift's
+  // fall, or a ramp's bend, between two rows, where the interpolation is not where the revs were.
+  OrderScore s, ranged;
+  for (OrderScore* score : {&s, &ranged}) {
+    score->band_lo = o.config.band_lo_hz;
+    score->band_hi = o.config.band_hi_hz;
+    score->hop_s = o.config.hop_s;
+  }
   const double spent = run_tracker(*tracker, mono, [&](const TrackPoint& p) {
-    const double truth = tacho_truth(tacho, p.t + o.offset_s, o.order);
+    const Truth truth = tacho_truth(tacho, p.t + o.offset_s, o.order, gap);
     if (o.dump)
-      std::printf("%.3f %.3f %.3f %.1f %d %.3f\n", p.t, truth, p.freq, p.snr_db, p.tracked, p.confidence);
-    s.add(p, truth);
+      std::printf("%.3f %.3f %.3f %.1f %d %.3f\n", p.t, truth.at, p.freq, p.snr_db, p.tracked, p.confidence);
+    s.add(p, truth.at);
+    // The same hops as in-band (the interpolated truth's), the range's value kept in the band.
+    const bool in_band = truth.at >= o.config.band_lo_hz && truth.at <= o.config.band_hi_hz;
+    ranged.add(p, in_band && std::isfinite(p.freq) ? std::clamp(std::clamp(p.freq, truth.lo, truth.hi),
+                                                                o.config.band_lo_hz, o.config.band_hi_hz)
+                                                   : truth.at);
   });
   const double seconds = static_cast<double>(mono.size()) / info.samplerate;
   std::printf("%s (%.1f s at %d Hz, channel %s) against %s x %g / 60, band %g:%g Hz, window %g s, hop %g s\n",
               o.wav.c_str(), seconds, info.samplerate,
               o.channel < 0 ? "mix" : std::to_string(o.channel).c_str(), o.tacho.c_str(), o.order,
               o.config.band_lo_hz, o.config.band_hi_hz, o.config.window_s, o.config.hop_s);
+  std::printf("tacho: %zu rows over %.1f-%.1f s, interpolated across intervals up to %.2f s (%s)\n",
+              tacho.size(), tacho.front()[0], tacho.back()[0], gap,
+              o.tacho_gap_s > 0.0 ? "--tacho-gap" : "1.5 x the median interval, at least 1 s");
+  if (s.in_band == 0) {
+    std::fprintf(stderr,
+                 "bench_tracker: no hop of %s has a truth in the band %g:%g Hz: check that the tacho's t is "
+                 "on the recording's clock (--offset), the order (--order %g: rpm / 60 x %g), the band "
+                 "(--band) and the intervals the truth is interpolated across (--tacho-gap)\n",
+                 o.wav.c_str(), o.config.band_lo_hz, o.config.band_hi_hz, o.order, o.order);
+    return 1;
+  }
   s.print("recording");
+  ranged.print("recording, truth as the range between tacho rows");
   std::printf("CPU: %.2f s (%.3f %% of one core)\n", spent, 100.0 * spent / std::max(seconds, 1e-9));
-  return 0;
+  required.report("in_band_hops", static_cast<double>(s.in_band));
+  required.report("coverage_pct", Score::pct(s.tracked, s.in_band));
+  required.report("gross_pct", Score::pct(s.gross, s.tracked));
+  required.report("rmse_hz", s.right_n ? std::sqrt(s.sq / static_cast<double>(s.right_n)) : NAN);
+  required.report("longest_lock_s", s.longest_lock_s);
+  required.report("gross_range_pct", Score::pct(ranged.gross, ranged.tracked));
+  return required.exit_status();
 }
 
 }  // namespace gearpulse::bench::tracker_bench
