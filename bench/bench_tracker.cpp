@@ -33,8 +33,10 @@
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).
 // --tacho-gap S: the longest interval between tacho rows that the truth is interpolated across (default 1.5
 // times the log's median interval, at least 1 s: an OBD log polled every second or slower is scored whole,
-// a row missing from its polling leaves a gap). The recording's figures (in_band_hops, coverage_pct,
-// gross_pct, rmse_hz, longest_lock_s) can be held to --require thresholds; no in-band truth at all exits 1.
+// a row missing from its polling leaves a gap). The recording is scored against that truth and again
+// against the range between the two rows around each hop (a shift between two rows leaves the interpolated
+// truth off the revs); its figures (in_band_hops, coverage_pct, gross_pct, rmse_hz, longest_lock_s,
+// gross_range_pct) can be held to --require thresholds; no in-band truth at all exits 1.
 // --lag S: the tracker's fixed-lag decision (TrackerConfig::decision_lag_s) for the scenes or the recording.
 // The bench's parts beside main(): bench/tracker/tracker.hpp says which file does what.
 #include <algorithm>
