@@ -240,7 +240,11 @@ TEST_CASE("gpsd: keeps trying while gpsd is absent and connects once it starts")
   CHECK_FALSE(client.latest());
 
   GpsFake fake(log, port, 0.05, false);
-  REQUIRE(wait_for([&] { return client.has_gps(gearpulse::monotonic_ns()); }, 20s));
+  // On a failure: whether gpsd listens, what gpsfake wrote, and where the client stands.
+  if (!wait_for([&] { return client.has_gps(gearpulse::monotonic_ns()); }, 20s))
+    FAIL("no fix: " << fake.describe() << "; client " << gearpulse::to_string(client.status().state) << ", "
+                    << client.status().connects << " connects, last error '" << client.status().last_error
+                    << "'");
   CHECK(client.status().state == GpsdState::kConnected);
   CHECK(client.latest()->speed == Approx(12.5).margin(0.001));
 }
