@@ -219,25 +219,40 @@ struct OrderScore {
 
 // Feeds `x` to a tracker in capture-sized blocks; calls `sink` with every decided output (with a decision
 // lag, the hop's confidence decided with the windows after it; the outputs at once are drained unread).
+// Returns the CPU time spent in the tracker. push_frames() alone leaves the stream open for more frames
+// (finish_stream() ends it); run_tracker() does both.
 template <class Sink>
-double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& sink) {
+double push_frames(SlidingDftTracker& tracker, std::span<const float> x, Sink&& sink) {
   const std::size_t block = std::min<std::size_t>(4800, tracker.max_push_frames());
   double spent = 0.0;
   TrackPoint p;
-  const auto drain = [&] {
-    while (tracker.pop(p)) {
-    }
-    while (tracker.pop_decided(p))
-      sink(p);
-  };
   for (std::size_t at = 0; at < x.size(); at += block) {
     const double before = cpu_seconds();
     tracker.push(x.subspan(at, std::min(block, x.size() - at)));
     spent += cpu_seconds() - before;
-    drain();
+    while (tracker.pop(p)) {
+    }
+    while (tracker.pop_decided(p))
+      sink(p);
   }
+  return spent;
+}
+
+// Ends the stream: the outputs held back for the decision lag go to `sink`.
+template <class Sink>
+void finish_stream(SlidingDftTracker& tracker, Sink&& sink) {
   tracker.finish();
-  drain();
+  TrackPoint p;
+  while (tracker.pop(p)) {
+  }
+  while (tracker.pop_decided(p))
+    sink(p);
+}
+
+template <class Sink>
+double run_tracker(SlidingDftTracker& tracker, std::span<const float> x, Sink&& sink) {
+  const double spent = push_frames(tracker, x, sink);
+  finish_stream(tracker, sink);
   return spent;
 }
 

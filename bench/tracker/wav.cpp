@@ -87,11 +87,6 @@ int score_wav(WavOptions o, Requirements& required) {
   if (o.channel >= info.channels)
     throw std::runtime_error(o.wav + ": --channel " + std::to_string(o.channel) + " but the file has " +
                              std::to_string(info.channels) + " channel(s), counted from 0");
-  std::vector<float> interleaved(static_cast<std::size_t>(info.frames) *
-                                 static_cast<std::size_t>(info.channels));
-  const sf_count_t got = sf_readf_float(file.get(), interleaved.data(), info.frames);
-  std::vector<float> mono(static_cast<std::size_t>(std::max<sf_count_t>(got, 0)));
-  (void)gearpulse::extract_channel(interleaved, info.channels, o.channel, mono);
   o.config.sample_rate_hz = info.samplerate;
   o.config.history_s = 0.0;
   std::string error;
@@ -106,7 +101,7 @@ int score_wav(WavOptions o, Requirements& required) {
     score->band_hi = o.config.band_hi_hz;
     score->hop_s = o.config.hop_s;
   }
-  const double spent = run_tracker(*tracker, mono, [&](const TrackPoint& p) {
+  const auto score_hop = [&](const TrackPoint& p) {
     const Truth truth = tacho_truth(tacho, p.t + o.offset_s, o.order, gap);
     if (o.dump)
       std::printf("%.3f %.3f %.3f %.1f %d %.3f\n", p.t, truth.at, p.freq, p.snr_db, p.tracked, p.confidence);
@@ -116,8 +111,26 @@ int score_wav(WavOptions o, Requirements& required) {
     ranged.add(p, in_band && std::isfinite(p.freq) ? std::clamp(std::clamp(p.freq, truth.lo, truth.hi),
                                                                 o.config.band_lo_hz, o.config.band_hi_hz)
                                                    : truth.at);
-  });
-  const double seconds = static_cast<double>(mono.size()) / info.samplerate;
+  };
+  // The recording read in blocks (a long one need not fit in memory).
+  constexpr sf_count_t kBlock = 1 << 16;
+  const auto channels = static_cast<std::size_t>(info.channels);
+  std::vector<float> interleaved(static_cast<std::size_t>(kBlock) * channels);
+  std::vector<float> mono(static_cast<std::size_t>(kBlock));
+  sf_count_t frames = 0;
+  double spent = 0.0;
+  for (sf_count_t got = 0; (got = sf_readf_float(file.get(), interleaved.data(), kBlock)) > 0;) {
+    frames += got;
+    const std::size_t n = gearpulse::extract_channel(
+        std::span<const float>(interleaved.data(), static_cast<std::size_t>(got) * channels), info.channels,
+        o.channel, mono);
+    spent += push_frames(*tracker, std::span<const float>(mono.data(), n), score_hop);
+  }
+  finish_stream(*tracker, score_hop);
+  if (sf_error(file.get()) != SF_ERR_NO_ERROR)
+    throw std::runtime_error(o.wav + ": read error after " + std::to_string(frames) +
+                             " frames: " + sf_strerror(file.get()));
+  const double seconds = static_cast<double>(frames) / info.samplerate;
   std::printf("%s (%.1f s at %d Hz, channel %s) against %s x %g / 60, band %g:%g Hz, window %g s, hop %g s\n",
               o.wav.c_str(), seconds, info.samplerate,
               o.channel < 0 ? "mix" : std::to_string(o.channel).c_str(), o.tacho.c_str(), o.order,
