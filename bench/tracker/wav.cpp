@@ -21,20 +21,41 @@ struct SndfileCloser {
   void operator()(SNDFILE* f) const noexcept { sf_close(f); }
 };
 
-// Tacho samples (t, rpm) in time order; a line that does not parse as two numbers is skipped.
-std::vector<std::array<double, 2>> read_tacho(const std::string& path) {
+// Tacho samples (t, rpm) in time order; a line that does not parse as two numbers is skipped. Rows that
+// share a time (a log written with whole seconds and polled faster) are one sample, their mean; a time
+// before the row above is an error naming the line.
+struct Tacho {
+  std::vector<std::array<double, 2>> rows;
+  std::size_t merged = 0;  // rows that shared a time with the row above
+};
+
+Tacho read_tacho(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open");
-  std::vector<std::array<double, 2>> rows;
+  Tacho tacho;
+  auto& rows = tacho.rows;
+  std::size_t same = 1;  // rows averaged into the last sample
   std::string line;
-  while (std::getline(in, line)) {
+  for (std::size_t number = 1; std::getline(in, line); ++number) {
     double t = 0.0, rpm = 0.0;
-    if (std::sscanf(line.c_str(), "%lf,%lf", &t, &rpm) != 2 || !std::isfinite(t)) continue;
-    if (!rows.empty() && t <= rows.back()[0]) throw std::runtime_error(path + ": times must increase");
+    if (std::sscanf(line.c_str(), "%lf,%lf", &t, &rpm) != 2 || !std::isfinite(t) || !std::isfinite(rpm))
+      continue;
+    if (!rows.empty() && t == rows.back()[0]) {
+      rows.back()[1] += (rpm - rows.back()[1]) / static_cast<double>(++same);
+      ++tacho.merged;
+      continue;
+    }
+    if (!rows.empty() && t < rows.back()[0]) {
+      char what[160];
+      std::snprintf(what, sizeof what, ":%zu: time %g is before the row above's %g: times must increase",
+                    number, t, rows.back()[0]);
+      throw std::runtime_error(path + what);
+    }
     rows.push_back({t, rpm});
+    same = 1;
   }
   if (rows.size() < 2) throw std::runtime_error(path + ": fewer than two t,rpm rows");
-  return rows;
+  return tacho;
 }
 
 // The truth at a hop: the rpm linearly interpolated between the tacho rows around it, / 60 x order, and the
@@ -75,7 +96,8 @@ double tacho_gap_s(std::span<const double> times) {
 }  // namespace
 
 int score_wav(WavOptions o, Requirements& required) {
-  const auto tacho = read_tacho(o.tacho);
+  const Tacho log = read_tacho(o.tacho);
+  const auto& tacho = log.rows;
   std::vector<double> times;
   for (const auto& row : tacho)
     times.push_back(row[0]);
@@ -135,9 +157,12 @@ int score_wav(WavOptions o, Requirements& required) {
               o.wav.c_str(), seconds, info.samplerate,
               o.channel < 0 ? "mix" : std::to_string(o.channel).c_str(), o.tacho.c_str(), o.order,
               o.config.band_lo_hz, o.config.band_hi_hz, o.config.window_s, o.config.hop_s);
-  std::printf("tacho: %zu rows over %.1f-%.1f s, interpolated across intervals up to %.2f s (%s)\n",
+  std::printf("tacho: %zu rows over %.1f-%.1f s, interpolated across intervals up to %.2f s (%s)",
               tacho.size(), tacho.front()[0], tacho.back()[0], gap,
               o.tacho_gap_s > 0.0 ? "--tacho-gap" : "1.5 x the median interval, at least 1 s");
+  if (log.merged > 0)
+    std::printf("; %zu row(s) sharing a time with the row above averaged into it", log.merged);
+  std::printf("\n");
   if (s.in_band == 0) {
     std::fprintf(stderr,
                  "bench_tracker: no hop of %s has a truth in the band %g:%g Hz: check that the tacho's t is "

@@ -107,7 +107,7 @@ TEST_CASE("bench_tracker: scores a recording against revs logged every 0.1 s and
   CHECK(r.err.empty());
 }
 
-TEST_CASE("bench_tracker: a recording with no truth in the band, or a threshold missed, exits 1") {
+TEST_CASE("bench_tracker: no truth in the band, a missed threshold, odd tacho rows and a bad channel") {
   if (!std::filesystem::exists(kBench)) GEARPULSE_SKIP_TEST("bench_tracker not built (GEARPULSE_BENCH off)");
   TempDir dir;
   const auto [wav, tacho] = recording(dir);
@@ -119,6 +119,16 @@ TEST_CASE("bench_tracker: a recording with no truth in the band, or a threshold 
   const Result missed = run(dir, "--wav '" + wav + "' --tacho '" + tacho + "' --require 'coverage_pct>=101'");
   CHECK(missed.status == 1);
   CHECK(missed.out.find("FAILED") != std::string::npos);
+  // Rows that share a time are one sample; a time going back names its line.
+  const std::string shared = (dir / "shared.csv").string(), back = (dir / "back.csv").string();
+  std::ofstream(shared) << "t,rpm\n0,1000\n1,2000\n1,2200\n2,2400\n";
+  std::ofstream(back) << "t,rpm\n0,1000\n2,2000\n1,1500\n";
+  const Result merged = run(dir, "--wav '" + wav + "' --tacho '" + shared + "'");
+  CHECK(merged.out.find("3 rows over 0.0-2.0 s") != std::string::npos);
+  CHECK(merged.out.find("1 row(s) sharing a time with the row above averaged into it") != std::string::npos);
+  const Result backwards = run(dir, "--wav '" + wav + "' --tacho '" + back + "'");
+  CHECK(backwards.status == 2);
+  CHECK(backwards.err.find("back.csv:4: time 1 is before the row above's 2") != std::string::npos);
   const Result channel = run(dir, "--wav '" + wav + "' --tacho '" + tacho + "' --channel 1");
   CHECK(channel.status == 2);
   CHECK(channel.err.find("--channel 1 but the file has 1 channel(s), counted from 0") != std::string::npos);
