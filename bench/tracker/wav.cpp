@@ -83,10 +83,10 @@ Truth tacho_truth(const std::vector<std::array<double, 2>>& tacho, double t, dou
 
 // The longest interval between tacho rows (times ascending) interpolated across when none is given: 1.5
 // times the log's median interval (a row missing from its own polling), at least 1 s.
-double tacho_gap_s(std::span<const double> times) {
+double tacho_gap_s(const std::vector<std::array<double, 2>>& rows) {
   std::vector<double> steps;
-  for (std::size_t i = 1; i < times.size(); ++i)
-    steps.push_back(times[i] - times[i - 1]);
+  for (std::size_t i = 1; i < rows.size(); ++i)
+    steps.push_back(rows[i][0] - rows[i - 1][0]);
   if (steps.empty()) return 1.0;
   const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
   std::nth_element(steps.begin(), mid, steps.end());
@@ -98,10 +98,7 @@ double tacho_gap_s(std::span<const double> times) {
 int score_wav(WavOptions o, Requirements& required) {
   const Tacho log = read_tacho(o.tacho);
   const auto& tacho = log.rows;
-  std::vector<double> times;
-  for (const auto& row : tacho)
-    times.push_back(row[0]);
-  const double gap = o.tacho_gap_s > 0.0 ? o.tacho_gap_s : tacho_gap_s(times);
+  const double gap = o.tacho_gap_s > 0.0 ? o.tacho_gap_s : tacho_gap_s(tacho);
   SF_INFO info{};
   std::unique_ptr<SNDFILE, SndfileCloser> file(sf_open(o.wav.c_str(), SFM_READ, &info));
   if (!file) throw std::runtime_error(o.wav + ": cannot read audio: " + sf_strerror(nullptr));
