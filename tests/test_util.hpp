@@ -14,6 +14,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
@@ -125,17 +126,28 @@ inline std::string read_text(const std::filesystem::path& p) {
   return s.str();
 }
 
-// A TCP port on 127.0.0.1 that was free a moment ago (the kernel picks it).
+// A TCP port on 127.0.0.1 that was free a moment ago, for a server the test starts later. It is drawn
+// below the kernel's ephemeral range (/proc/sys/net/ipv4/ip_local_port_range, 32768-60999 by default):
+// a port the kernel hands out for bind(0) it also hands out as the source port of any connect on the
+// machine, so one of the parallel tests' many connections could hold it by the time the server binds it
+// (a gpsd started ten seconds later). Drawn at random, tests running side by side rarely draw the same;
+// each draw is checked free by binding it.
 inline int free_port() {
-  const gearpulse::UniqueFd fd(::socket(AF_INET, SOCK_STREAM, 0));
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof a;
-  const bool ok = fd && ::bind(fd.get(), reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-                  ::getsockname(fd.get(), reinterpret_cast<sockaddr*>(&a), &len) == 0;
-  if (!ok) throw std::runtime_error("cannot find a free port");
-  return ntohs(a.sin_port);
+  int low = 32768;
+  if (std::ifstream range("/proc/sys/net/ipv4/ip_local_port_range"); !(range >> low)) low = 32768;
+  const int first = 10000, last = std::max(first + 1000, low) - 1;
+  std::mt19937 rng(std::random_device{}() ^ static_cast<unsigned>(::getpid()));
+  std::uniform_int_distribution<int> pick(first, last);
+  for (int attempt = 0; attempt < 200; ++attempt) {
+    const gearpulse::UniqueFd fd(::socket(AF_INET, SOCK_STREAM, 0));
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    const int port = pick(rng);
+    a.sin_port = htons(static_cast<std::uint16_t>(port));
+    if (fd && ::bind(fd.get(), reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) return port;
+  }
+  throw std::runtime_error("cannot find a free port below the ephemeral range");
 }
 
 // Polls `done` every 20 ms until it holds or `timeout` passes; returns its last value. The timeout only

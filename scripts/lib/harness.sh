@@ -81,9 +81,25 @@ hs_check_tools() {
     hs_die "gpsfake is not installed (apt-get install gpsd gpsd-clients python3-gps)"
 }
 
-# A TCP port nobody listens on now (the kernel picks it).
+# A TCP port nobody has bound now, drawn below the kernel's ephemeral range (as tests/test_util.hpp's
+# free_port: a port bind(0) hands out is also any connect's source port, and gpsd binds this one later).
 hs_free_port() {
-  /usr/bin/python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'
+  /usr/bin/python3 -c '
+import random, socket
+low = int(open("/proc/sys/net/ipv4/ip_local_port_range").read().split()[0])
+for _ in range(200):
+    port = random.randint(10000, max(11000, low) - 1)
+    s = socket.socket()
+    try:
+        s.bind(("127.0.0.1", port))
+    except OSError:
+        continue
+    finally:
+        s.close()
+    print(port)
+    break
+else:
+    raise SystemExit("no free port below the ephemeral range")'
 }
 
 # hs_prepare [simulate options...]: a training drive fitted offline into the state directory (the daemon
