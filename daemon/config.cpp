@@ -224,10 +224,12 @@ void check_relations(const Config& c, const toml::table& root, const std::string
     fail({"tracker.band_high", "tracker.band_low"}, "tracker.band_high (" + hz(c.tracker.band_high) +
                                                         ") must be above tracker.band_low (" +
                                                         hz(c.tracker.band_low) + ")");
-  if (c.tracker.band_high >= c.audio.rate / 2.0)
+  // The tracker's own bound (SlidingDftTracker::validate): the band's top at most rate / 2.5, short of
+  // Nyquist by the decimating filter's transition band.
+  if (c.tracker.band_high > c.audio.rate / 2.5)
     fail({"tracker.band_high", "audio.rate"}, "tracker.band_high (" + hz(c.tracker.band_high) +
-                                                  ") must be below half of audio.rate (" +
-                                                  hz(c.audio.rate / 2.0) + ")");
+                                                  ") must be at most audio.rate / 2.5 (" +
+                                                  hz(c.audio.rate / 2.5) + ")");
   // Whatever else the tracker would refuse at the configured rate (the window must hold 4 periods of
   // band_low, ...), refused here, before any device is opened.
   if (const std::string problem = SlidingDftTracker::validate(tracker_config_of(c.tracker, c.audio.rate));
@@ -402,29 +404,38 @@ Config load_config(const std::string& path) {
 
 std::vector<std::string> restart_required_changes(const Config& a, const Config& b) {
   std::vector<std::string> changed;
-  const auto check = [&](bool differs, const char* name) {
-    if (differs) changed.emplace_back(name);
+  const auto check = [&](bool differs, const char* key) {
+    if (differs) changed.emplace_back(key);
   };
-  check(a.audio.device != b.audio.device || a.audio.rate != b.audio.rate ||
-            a.audio.channels != b.audio.channels || a.audio.channel != b.audio.channel ||
-            a.audio.format != b.audio.format || a.audio.period_frames != b.audio.period_frames ||
-            a.audio.realtime != b.audio.realtime || a.audio.rt_priority != b.audio.rt_priority ||
-            a.audio.ring_seconds != b.audio.ring_seconds,
-        "[audio]");
-  check(a.tracker.band_low != b.tracker.band_low || a.tracker.band_high != b.tracker.band_high ||
-            a.tracker.window != b.tracker.window || a.tracker.hop != b.tracker.hop ||
-            a.tracker.decision_lag != b.tracker.decision_lag,
-        "[tracker] band/window/hop/decision_lag");
-  check(a.gps.host != b.gps.host || a.gps.port != b.gps.port || a.gps.timeout != b.gps.timeout,
-        "gps.host/port/timeout");
-  check(a.output.kind != b.output.kind || a.output.path != b.output.path || a.output.chip != b.output.chip ||
-            a.output.line != b.output.line || a.output.pulses_per_km != b.output.pulses_per_km ||
-            a.output.pulse_width != b.output.pulse_width || a.output.duty != b.output.duty ||
-            a.output.min_frequency != b.output.min_frequency ||
-            a.output.max_frequency != b.output.max_frequency,
-        "[output]");
+  check(a.audio.device != b.audio.device, "audio.device");
+  check(a.audio.rate != b.audio.rate, "audio.rate");
+  check(a.audio.channels != b.audio.channels, "audio.channels");
+  check(a.audio.channel != b.audio.channel, "audio.channel");
+  check(a.audio.format != b.audio.format, "audio.format");
+  check(a.audio.period_frames != b.audio.period_frames, "audio.period_frames");
+  check(a.audio.realtime != b.audio.realtime, "audio.realtime");
+  check(a.audio.rt_priority != b.audio.rt_priority, "audio.rt_priority");
+  check(a.audio.ring_seconds != b.audio.ring_seconds, "audio.ring_seconds");
+  check(a.tracker.band_low != b.tracker.band_low, "tracker.band_low");
+  check(a.tracker.band_high != b.tracker.band_high, "tracker.band_high");
+  check(a.tracker.window != b.tracker.window, "tracker.window");
+  check(a.tracker.hop != b.tracker.hop, "tracker.hop");
+  check(a.tracker.decision_lag != b.tracker.decision_lag, "tracker.decision_lag");
+  check(a.gps.host != b.gps.host, "gps.host");
+  check(a.gps.port != b.gps.port, "gps.port");
+  check(a.gps.timeout != b.gps.timeout, "gps.timeout");
+  check(a.output.kind != b.output.kind, "output.kind");
+  check(a.output.path != b.output.path, "output.path");
+  check(a.output.chip != b.output.chip, "output.chip");
+  check(a.output.line != b.output.line, "output.line");
+  check(a.output.pulses_per_km != b.output.pulses_per_km, "output.pulses_per_km");
+  check(a.output.pulse_width != b.output.pulse_width, "output.pulse_width");
+  check(a.output.duty != b.output.duty, "output.duty");
+  check(a.output.min_frequency != b.output.min_frequency, "output.min_frequency");
+  check(a.output.max_frequency != b.output.max_frequency, "output.max_frequency");
   check(a.model.state_dir != b.model.state_dir, "model.state_dir");
-  check(a.control.socket != b.control.socket || a.control.max_clients != b.control.max_clients, "[control]");
+  check(a.control.socket != b.control.socket, "control.socket");
+  check(a.control.max_clients != b.control.max_clients, "control.max_clients");
   return changed;
 }
 

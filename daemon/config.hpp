@@ -126,7 +126,8 @@ inline constexpr std::size_t kMaxConfigBytes = std::size_t{1} << 20;
 [[nodiscard]] const char* to_string(OutputKind kind) noexcept;
 
 // Keys whose change takes effect on SIGHUP; everything else needs a restart.
-// Returns the dotted names of keys that differ between `a` and `b` and need a restart.
+// Returns the dotted names of the keys that differ between `a` and `b` and need a restart, in the
+// documentation's order.
 [[nodiscard]] std::vector<std::string> restart_required_changes(const Config& a, const Config& b);
 
 }  // namespace gearpulse::daemon

@@ -156,7 +156,12 @@ TEST_CASE("config: relations between keys are checked") {
   CHECK(error_of("[tracker]\nband_low = 300\nband_high = 200\n") ==
         "test.toml:3: tracker.band_high: tracker.band_high (200 Hz) must be above tracker.band_low (300 Hz)");
   CHECK(error_of("[audio]\nrate = 8000\n[tracker]\nband_high = 4500\n")
-            .starts_with("test.toml:4: tracker.band_high: tracker.band_high (4500 Hz) must be below half"));
+            .starts_with("test.toml:4: tracker.band_high: tracker.band_high (4500 Hz) must be at most"));
+  // Below Nyquist but beyond the tracker's rate / 2.5.
+  CHECK(error_of("[audio]\nrate = 8000\n[tracker]\nband_high = 3500\n") ==
+        "test.toml:4: tracker.band_high: tracker.band_high (3500 Hz) must be at most audio.rate / 2.5 (3200 "
+        "Hz)");
+  CHECK(error_of("[audio]\nrate = 8000\n[tracker]\nband_high = 3200\nwindow = 0.16\n").empty());
   CHECK(error_of("[output]\npulse_width = 0.01\nmax_frequency = 500\n")
             .starts_with("test.toml:2: output.pulse_width:"));
   CHECK(error_of("[output]\nmin_frequency = 5\nmax_frequency = 2\n")
@@ -305,7 +310,14 @@ TEST_CASE("config: changes that need a restart are named") {
       "[audio]\ndevice = \"hw:2\"\n[log]\nlevel = \"debug\"\n[model]\nmin_new_samples = 5\n", "b");
   const auto changed = gearpulse::daemon::restart_required_changes(a, b);
   REQUIRE(changed.size() == 1);
-  CHECK(changed[0] == "[audio]");
+  CHECK(changed[0] == "audio.device");
+  // Each key by its dotted name, as the configuration's documentation lists them.
+  const auto several = gearpulse::daemon::restart_required_changes(
+      a, parse_config("[audio]\nrate = 8000\n[tracker]\nband_high = 3000\nhop = 0.05\n[output]\nduty = 0.4\n"
+                      "[control]\nmax_clients = 2\n",
+                      "b"));
+  CHECK(several == std::vector<std::string>{"audio.rate", "tracker.band_high", "tracker.hop", "output.duty",
+                                            "control.max_clients"});
 }
 
 TEST_CASE("config: a reload changing the GPS timeout or the state directory needs a restart") {
@@ -314,7 +326,7 @@ TEST_CASE("config: a reload changing the GPS timeout or the state directory need
   const Config a = parse_config("", "a");
   const auto gps = gearpulse::daemon::restart_required_changes(a, parse_config("[gps]\ntimeout = 3\n", "b"));
   REQUIRE(gps.size() == 1);
-  CHECK(gps[0] == "gps.host/port/timeout");
+  CHECK(gps[0] == "gps.timeout");
   const auto state =
       gearpulse::daemon::restart_required_changes(a, parse_config("[model]\nstate_dir = \"/tmp/s\"\n", "b"));
   REQUIRE(state.size() == 1);

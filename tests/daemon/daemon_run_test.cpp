@@ -432,12 +432,12 @@ TEST_CASE("daemon: SIGHUP applies what it can and names what needs a restart") {
   changed.replace(changed.find("[model]\n"), 8, "[model]\nmin_new_samples = 7\n");
   write_text(dir / "gearpulse.toml", changed);
   daemon.signal(SIGHUP);
-  CHECK(wait_log("reload: [audio] changed; this takes effect only after a restart"));
+  CHECK(wait_log("reload: audio.device changed; this takes effect only after a restart"));
   CHECK(wait_log("reload: applied"));
   const json applied = wait_for_status(dir, daemon);
   CHECK(applied["ok"] == true);
   CHECK(applied["config"]["reload_error"] == "");
-  CHECK(applied["config"]["restart_pending"] == json::array({"[audio]"}));
+  CHECK(applied["config"]["restart_pending"] == json::array({"audio.device"}));
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
 }
