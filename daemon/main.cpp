@@ -22,10 +22,11 @@ constexpr const char* kDefaultConfig = "/etc/gearpulse/gearpulse.toml";
 
 void usage(std::FILE* to) {
   std::fprintf(to,
-               "usage: gearpulsed [--config FILE] [--check-config]\n"
-               "  --config FILE    TOML configuration (default %s)\n"
-               "  --check-config   validate the configuration and exit (0 = valid, 2 = invalid)\n"
-               "  --version        print the version and exit\n",
+               "usage: gearpulsed [--config FILE] [--check-config] | --version | --help\n"
+               "  -c, --config FILE  TOML configuration (also --config=FILE; default %s)\n"
+               "  --check-config     validate the configuration and exit (0 = valid, 2 = invalid)\n"
+               "  --version          print the version and exit\n"
+               "  -h, --help         print this help and exit\n",
                kDefaultConfig);
 }
 
