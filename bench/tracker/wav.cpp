@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <memory>
 #include <span>
@@ -21,13 +22,40 @@ struct SndfileCloser {
   void operator()(SNDFILE* f) const noexcept { sf_close(f); }
 };
 
-// Tacho samples (t, rpm) in time order; a line that does not parse as two numbers is skipped. Rows that
-// share a time (a log written with whole seconds and polled faster) are one sample, their mean; a time
-// before the row above is an error naming the line.
+// Tacho samples (t, rpm) in time order. A row's first two fields are t and rpm, separated by a comma, a tab
+// or spaces, or by a semicolon, in which case a comma is the decimal mark ("1,5;800", as spreadsheets in
+// many locales write it); a line that does not read so (a header, a gap marked "-") is skipped and counted.
+// Rows that share a time (a log written with whole seconds and polled faster) are one sample, their mean; a
+// time before the row above is an error naming the line.
 struct Tacho {
   std::vector<std::array<double, 2>> rows;
-  std::size_t merged = 0;  // rows that shared a time with the row above
+  std::size_t merged = 0;     // rows that shared a time with the row above
+  std::size_t skipped = 0;    // lines that are not two numbers (blank lines aside)
+  std::string first_skipped;  // "line N: text" of the first of them
 };
+
+// t and rpm from one line, or false.
+bool parse_tacho_row(std::string line, double& t, double& rpm) {
+  if (line.find(';') != std::string::npos) {
+    std::replace(line.begin(), line.end(), ',', '.');
+    std::replace(line.begin(), line.end(), ';', ',');
+  }
+  std::replace(line.begin(), line.end(), '\t', ',');
+  const char* p = line.c_str();
+  char* end = nullptr;
+  t = std::strtod(p, &end);
+  if (end == p) return false;
+  p = end;
+  const char* sep = p;
+  while (*p == ' ' || *p == ',')
+    ++p;
+  if (p == sep || std::count(sep, p, ',') > 1) return false;  // no separator, or an empty field between
+  rpm = std::strtod(p, &end);
+  if (end == p) return false;
+  while (*end == ' ' || *end == '\r')
+    ++end;
+  return (*end == '\0' || *end == ',') && std::isfinite(t) && std::isfinite(rpm);
+}
 
 Tacho read_tacho(const std::string& path) {
   std::ifstream in(path);
@@ -38,8 +66,14 @@ Tacho read_tacho(const std::string& path) {
   std::string line;
   for (std::size_t number = 1; std::getline(in, line); ++number) {
     double t = 0.0, rpm = 0.0;
-    if (std::sscanf(line.c_str(), "%lf,%lf", &t, &rpm) != 2 || !std::isfinite(t) || !std::isfinite(rpm))
+    if (!parse_tacho_row(line, t, rpm)) {
+      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+      if (tacho.skipped++ == 0)
+        tacho.first_skipped = "line " + std::to_string(number) + ": '" +
+                              line.substr(0, std::min(line.find_last_not_of('\r') + 1, std::size_t{60})) +
+                              "'";
       continue;
+    }
     if (!rows.empty() && t == rows.back()[0]) {
       rows.back()[1] += (rpm - rows.back()[1]) / static_cast<double>(++same);
       ++tacho.merged;
@@ -54,7 +88,12 @@ Tacho read_tacho(const std::string& path) {
     rows.push_back({t, rpm});
     same = 1;
   }
-  if (rows.size() < 2) throw std::runtime_error(path + ": fewer than two t,rpm rows");
+  if (rows.size() < 2)
+    throw std::runtime_error(path + ": fewer than two t,rpm rows" +
+                             (tacho.skipped > 0
+                                  ? " (" + std::to_string(tacho.skipped) +
+                                        " line(s) not two numbers; first, " + tacho.first_skipped + ")"
+                                  : std::string()));
   return tacho;
 }
 
@@ -159,6 +198,8 @@ int score_wav(WavOptions o, Requirements& required) {
               o.tacho_gap_s > 0.0 ? "--tacho-gap" : "1.5 x the median interval, at least 1 s");
   if (log.merged > 0)
     std::printf("; %zu row(s) sharing a time with the row above averaged into it", log.merged);
+  if (log.skipped > 0)
+    std::printf("; %zu line(s) not two numbers skipped (first, %s)", log.skipped, log.first_skipped.c_str());
   std::printf("\n");
   if (s.in_band == 0) {
     std::fprintf(stderr,
