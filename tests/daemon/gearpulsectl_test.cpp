@@ -7,6 +7,8 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -134,14 +136,14 @@ TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe
 
 namespace {
 // A listening Unix socket at `path` that is not gearpulsed, for gearpulsectl to talk to.
-gearpulse::UniqueFd listen_unix(const std::string& path) {
+gearpulse::UniqueFd listen_unix(const std::string& path, int backlog = 4) {
   gearpulse::UniqueFd listener(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
   REQUIRE(listener);
   sockaddr_un addr{};
   addr.sun_family = AF_UNIX;
   std::strncpy(addr.sun_path, path.c_str(), sizeof addr.sun_path - 1);
   REQUIRE(::bind(listener.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) == 0);
-  REQUIRE(::listen(listener.get(), 4) == 0);
+  REQUIRE(::listen(listener.get(), backlog) == 0);
   return listener;
 }
 
@@ -187,6 +189,47 @@ TEST_CASE("control: gearpulsectl reports a reply of the wrong shape instead of a
     CHECK(out.find("speed ") == std::string::npos);  // nothing of a status printed above the error
   }
   server.join();
+}
+
+TEST_CASE("control: gearpulsectl gives up after 10 s on a stuck daemon, whatever it is stuck in") {
+  // A control thread that no longer accepts leaves connections in the socket's backlog, and connect()
+  // blocks once it is full; one that accepted may trickle bytes without ending its reply. Either way the
+  // whole exchange has 10 s (both hung without a bound before).
+  TempDir dir;
+  const std::string ctl = GEARPULSE_BINARY_DIR "/tools/gearpulsectl";
+  const std::string sock = (dir / "ctl.sock").string();
+  SECTION("the backlog full") {
+    const gearpulse::UniqueFd listener = listen_unix(sock, 0);
+    LineClient first(sock);  // the backlog's one place, never accepted
+    REQUIRE(first.connected());
+    const auto start = std::chrono::steady_clock::now();
+    Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
+    const auto rc = p.wait(30'000);
+    REQUIRE(rc.has_value());
+    CHECK(*rc == 1);
+    CHECK(read_text(dir / "out.txt").find("did not take the connection within 10 s") != std::string::npos);
+    CHECK(std::chrono::steady_clock::now() - start < 15s);
+  }
+  SECTION("a reply that trickles") {
+    const gearpulse::UniqueFd listener = listen_unix(sock);
+    std::atomic<bool> done = false;
+    std::thread server([&] {
+      const gearpulse::UniqueFd c(::accept(listener.get(), nullptr, nullptr));
+      for (int i = 0; c && !done && i < 100; ++i) {  // a byte every 0.5 s, never a newline
+        (void)!::send(c.get(), " ", 1, MSG_NOSIGNAL);
+        std::this_thread::sleep_for(500ms);
+      }
+    });
+    const auto start = std::chrono::steady_clock::now();
+    Process p({ctl, "--socket", sock, "status"}, dir / "out.txt");
+    const auto rc = p.wait(30'000);
+    done = true;
+    server.join();
+    REQUIRE(rc.has_value());
+    CHECK(*rc == 1);
+    CHECK(read_text(dir / "out.txt") == "gearpulsectl: no reply from gearpulsed within 10 s\n");
+    CHECK(std::chrono::steady_clock::now() - start < 15s);
+  }
 }
 
 TEST_CASE("control: gearpulsectl refuses a reply nested too deep instead of printing it") {

@@ -2,6 +2,7 @@
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/time.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -28,7 +29,9 @@
 namespace {
 
 constexpr std::size_t kMaxReply = 1 << 20;  // bytes: a status or gears reply is a few kB
-constexpr int kReplyTimeoutMs = 10'000;
+// The whole exchange, from connecting to the reply's end: a daemon whose control thread is stuck leaves
+// connections in its backlog (connect then blocks once it is full) or may trickle bytes.
+constexpr std::chrono::seconds kReplyTimeout{10};
 
 struct Failure {
   std::string message;
@@ -44,8 +47,17 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
   const gearpulse::UniqueFd socket(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
   if (!socket) throw Failure{std::string("socket: ") + std::strerror(errno), 1};
   const int fd = socket.get();
+  const auto deadline = std::chrono::steady_clock::now() + kReplyTimeout;
+  // A Unix socket's blocking connect and send wait at most the send timeout (EAGAIN after it).
+  const timeval limit{.tv_sec = kReplyTimeout.count(), .tv_usec = 0};
+  if (::setsockopt(fd, SOL_SOCKET, SO_SNDTIMEO, &limit, sizeof limit) != 0)
+    throw Failure{std::string("setsockopt: ") + std::strerror(errno), 1};
   if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
     const int err = errno;
+    if (err == EAGAIN || err == EWOULDBLOCK)
+      throw Failure{"gearpulsed at " + path + " did not take the connection within 10 s (its control " +
+                        "thread may be stuck)",
+                    1};
     struct stat st {};
     if (err == ECONNREFUSED && ::stat(path.c_str(), &st) == 0 && !S_ISSOCK(st.st_mode))
       throw Failure{path + " is not a socket (is --socket or control.socket right?)", 3};
@@ -63,6 +75,7 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
     const ssize_t n = ::send(fd, line.data() + done, line.size() - done, MSG_NOSIGNAL);
     if (n < 0) {
       if (errno == EINTR) continue;
+      if (errno == EAGAIN || errno == EWOULDBLOCK) throw Failure{"no reply from gearpulsed within 10 s", 1};
       if (errno != EPIPE && errno != ECONNRESET)
         throw Failure{std::string("cannot send request: ") + std::strerror(errno), 1};
       send_error = errno;
@@ -74,7 +87,9 @@ nlohmann::json ask_daemon(const std::string& path, const nlohmann::json& request
   char buf[4096];
   while (reply.find('\n') == std::string::npos) {
     pollfd pfd{fd, POLLIN, 0};
-    const int ready = ::poll(&pfd, 1, kReplyTimeoutMs);
+    const auto left =
+        std::chrono::ceil<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()).count();
+    const int ready = left > 0 ? ::poll(&pfd, 1, static_cast<int>(left)) : 0;
     if (ready == 0) throw Failure{"no reply from gearpulsed within 10 s", 1};
     if (ready < 0) {
       if (errno == EINTR) continue;
