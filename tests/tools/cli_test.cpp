@@ -161,6 +161,14 @@ TEST_CASE("cli: fit writes nothing to stdout when --out cannot be written, and n
           std::string::npos);
   }
   CHECK(slurp(log) == before);
+  // --out and --plot naming one file (here spelt two ways): the plot would replace the model.
+  const std::string same = (dir / "same.out").string();
+  const Result both =
+      run(dir, "fit --out " + same + " --plot " + (dir / "." / "same.out").string() + " " + log);
+  CHECK(both.status == 2);
+  CHECK(both.err.find("name the same file: the plot would replace the model; name two files") !=
+        std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(same));
   const Result bad = run(dir, "fit --out " + (dir / "missing/model.json").string() + " " + log);
   CHECK(bad.status == 2);
   CHECK(bad.out.empty());
@@ -373,4 +381,21 @@ TEST_CASE("cli: fit --speed-unit reads a speed column that names no unit as a he
     return nlohmann::json::parse(r.out)["gears"].back()["theta"].get<double>();
   };
   CHECK(top(as_kmh) == Approx(top(as_mph) / 1.609344).epsilon(0.01));
+}
+
+TEST_CASE("cli: a Torque export fitted from a FIFO is read once, its ladder from the GPS speed") {
+  // The wheel speed is read in a second pass over the file, which a FIFO cannot give: opening it again
+  // waited for a writer that had gone.
+  const std::filesystem::path torque = GEARPULSE_REAL_DATA_DIR "/torque-louisville/rpms_chart_from_obd.csv";
+  if (!std::filesystem::exists(torque)) GEARPULSE_SKIP_TEST("no real logs at " GEARPULSE_REAL_DATA_DIR);
+  TempDir dir;
+  const std::string fifo = (dir / "log.fifo").string();
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  const std::string err = (dir / "stderr.txt").string();
+  const gearpulse::test::ShellResult r = gearpulse::test::run_shell(
+      "(cat '" + torque.string() + "' > " + fifo + " &); timeout 20 " + kCli + " fit " + fifo + " 2>" + err);
+  CHECK(r.status == 0);
+  CHECK(slurp(err).find("is not a regular file: a Torque export's wheel speed is read in a second pass") !=
+        std::string::npos);
+  CHECK(nlohmann::json::parse(r.out)["gears"].size() >= 4);
 }

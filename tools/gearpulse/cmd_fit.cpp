@@ -142,6 +142,18 @@ void check_outputs_spare_logs(const FitCommand& cmd) {
                          "): it would be replaced; name another file");
     }
   }
+  // --out and --plot naming one file: the plot would replace the model. A file that exists is compared as
+  // the file it is (a link, another spelling), one that does not yet by its absolute, normal path.
+  if (cmd.out.empty() || cmd.plot.empty()) return;
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const bool same =
+      fs::exists(cmd.out, ec) && fs::exists(cmd.plot, ec)
+          ? fs::is_regular_file(cmd.out, ec) && fs::equivalent(cmd.out, cmd.plot, ec) && !ec
+          : fs::absolute(cmd.out, ec).lexically_normal() == fs::absolute(cmd.plot, ec).lexically_normal();
+  if (same)
+    throw UsageError("--out " + cmd.out + " and --plot " + cmd.plot +
+                     " name the same file: the plot would replace the model; name two files");
 }
 
 int run_fit(const FitCommand& cmd) {

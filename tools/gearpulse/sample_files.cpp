@@ -13,6 +13,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "core/log_reading.hpp"
 #include "tools/gearpulse/commands.hpp"
 
 namespace gearpulse::cli {
@@ -166,6 +167,18 @@ std::vector<SampleLog> read_wheel_speeds(const std::vector<std::string>& paths,
   std::vector<SampleLog> wheel;
   if (paths.size() != logs.size()) return {};
   for (std::size_t i = 0; i < logs.size(); ++i) {
+    if (logs[i].format != SampleFileFormat::kTorque || !log_reading::torque_gps_column(logs[i].speed_column))
+      return {};
+    // The file is read a second time: a FIFO or a pipe cannot be (opening a FIFO again waits for a writer
+    // that has gone), so its ladder is read from the GPS speed.
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(paths[i], ec)) {
+      std::fprintf(stderr,
+                   "gearpulse: note: %s is not a regular file: a Torque export's wheel speed is read in a "
+                   "second pass, which a pipe cannot give; the ladder is read from its GPS speed\n",
+                   paths[i].c_str());
+      return {};
+    }
     std::ifstream in(paths[i], std::ios::binary);
     std::optional<SampleLog> w = in ? read_wheel_speed(in, logs[i]) : std::nullopt;
     if (!w) return {};  // GPS alone
