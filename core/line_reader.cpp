@@ -69,6 +69,31 @@ Quotes scan_quotes(std::string_view text, bool& open, IsDelimiter is_delimiter, 
 
 }  // namespace
 
+// std::getline with a bound: a file without line breaks (binary data, /dev/zero) would be read whole into
+// one line. Read in chunks; a chunk filled without a line break sets failbit, cleared to read on.
+bool LineReader::bounded_line(std::string& out) {
+  out.clear();
+  char chunk[4096];
+  for (;;) {
+    in_.getline(chunk, sizeof chunk);
+    const auto got = static_cast<std::size_t>(in_.gcount());
+    if (in_.eof()) {  // the file's last line, without a line break (or none left)
+      out.append(chunk, got);
+      return got > 0 || !out.empty();
+    }
+    if (!in_.fail()) {  // a line break, extracted and counted, not stored
+      out.append(chunk, got - 1);
+      return true;
+    }
+    if (in_.bad()) return false;
+    in_.clear();  // the chunk filled: the line goes on
+    out.append(chunk, got);
+    if (out.size() > kMaxLineBytes)
+      throw SampleFileError(file_ + ":" + std::to_string(lines_ + 1) + ": a line longer than " +
+                            std::to_string(kMaxLineBytes >> 20) + " MiB: not a log of text rows");
+  }
+}
+
 bool LineReader::physical(std::string& out) {
   if (!ahead_.empty()) {
     out = std::move(ahead_.front());
@@ -78,7 +103,7 @@ bool LineReader::physical(std::string& out) {
     out.assign(cr_lines_, cr_at_, end - cr_at_);
     cr_at_ = end + 1;
   } else {
-    if (!std::getline(in_, out)) return false;
+    if (!bounded_line(out)) return false;
     if (!out.empty() && out.back() == '\r') out.pop_back();
     // Lines ended by a CR alone (a spreadsheet's "CSV (Macintosh)") arrive as one: handed out one by one.
     if (const std::size_t cr = out.find('\r'); cr != std::string::npos) {

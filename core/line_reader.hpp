@@ -19,7 +19,11 @@ class LogBuilder;
 // spreadsheet saved where the comma is the decimal mark): then a comma in a data line is a decimal mark.
 class LineReader {
  public:
-  explicit LineReader(std::istream& in) : in_(in) {}
+  // `name` (the file's, for errors): a line longer than kMaxLineBytes is refused naming it and the line
+  // (a row of a few thousand cells is kilobytes; a file without line breaks, binary data, would be read
+  // whole into one line).
+  LineReader(std::istream& in, std::string_view name) : in_(in), file_(name) {}
+  static constexpr std::size_t kMaxLineBytes = std::size_t{16} << 20;
 
   // The next record: one line, or several when a cell opened by a double quote at its start holds line
   // breaks (they are kept as '\n'). `number` is its first line's. A byte-order mark at a record's start (a
@@ -75,6 +79,7 @@ class LineReader {
  private:
   // One line as the file holds it, without its end (LF, CR LF or CR alone); false at the end.
   bool physical(std::string& out);
+  bool bounded_line(std::string& out);
   // The next record from the file (next() but for a record rewound); false at the end.
   bool read_record();
   // Whether the record's cells hold the header's names: none (0), the header's own (1) or names in other
@@ -82,6 +87,7 @@ class LineReader {
   [[nodiscard]] int header_names(const std::vector<std::string_view>& cells) const;
 
   std::istream& in_;
+  std::string file_;  // the file's name, for errors
   char delimiter_ = ',';
   bool delimiter_known_ = false;   // until the header is read, any of ",;\t" may end a quoted cell
   std::size_t lines_ = 0;          // physical lines handed out

@@ -61,7 +61,7 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   join_restarts(
       rows.size(), reader.restarts, [&](std::size_t i) { return lines[i]; },
       [&](std::size_t i) -> double& { return rows[i].t; }, out.log());
-  TimeOrder order(rows, [](const Sample& r) { return r.t; });
+  TimeOrder order(rows, [](const Sample& r) { return r.t; }, out.log().name);
   for (std::size_t i = 0; i < rows.size(); ++i)
     if (order.keep(i, lines[i], out)) out.add(lines[i], rows[i]);
 }
@@ -240,7 +240,7 @@ void warn_units(SampleLog& log) {
 SampleLog read_samples(std::istream& in, std::string_view name, const ReadOptions& options) {
   if (!(std::isfinite(options.row_seconds) && options.row_seconds > 0.0))
     throw std::invalid_argument("ReadOptions::row_seconds must be finite and above 0");
-  LineReader reader(in);
+  LineReader reader(in, name);
   LogBuilder out(name, options);
   // Before the header: blank lines, comment lines ('#') and a spreadsheet's "sep=;" line, which sets the
   // delimiter. False at the end.

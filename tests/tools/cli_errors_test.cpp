@@ -27,6 +27,13 @@ TEST_CASE("cli: empty file and missing header are one-line errors with exit 2") 
   CHECK(r.err.find((dir / "noheader.csv").string() + ":1: unrecognised header") != std::string::npos);
   CHECK(lines(r.err) == 1);
 
+  // A file without line breaks (binary data, a device) is not read whole into one line.
+  write((dir / "long.csv").string(), "t,speed,freq\n" + std::string(std::size_t{17} << 20, '7'));
+  r = run(dir, "fit " + (dir / "long.csv").string());
+  CHECK(r.status == 2);
+  CHECK(r.err == "gearpulse: " + (dir / "long.csv").string() +
+                     ":2: a line longer than 16 MiB: not a log of text rows\n");
+
   r = run(dir, "fit " + (dir / "missing.csv").string());
   CHECK(r.status == 2);
   CHECK(r.err.find("missing.csv: cannot open") != std::string::npos);
