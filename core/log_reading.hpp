@@ -204,16 +204,22 @@ class LogBuilder {
 };
 
 // A reader's rows, in file order, walked against their time_order_drops(): keep() reports a dropped row
-// as skipped and returns false.
+// as skipped and returns false. A log most of whose rows go back in time (written newest first) is refused
+// naming `file`: read on, it kept one row and was fitted as a log with nothing to learn from.
 class TimeOrder {
  public:
   template <class Rows, class Time>
-  TimeOrder(const Rows& rows, Time time) {
+  TimeOrder(const Rows& rows, Time time, std::string_view file) {
     std::vector<double> t;
     t.reserve(rows.size());
     for (const auto& r : rows)
       t.push_back(time(r));
     drops_ = time_order_drops(t);
+    if (t.size() >= 3 && 2 * drops_.size() > t.size())
+      throw SampleFileError(std::string(file) + ": " + std::to_string(drops_.size()) + " of " +
+                            std::to_string(t.size()) +
+                            " rows go back in time (the first: " + drops_.front().reason +
+                            "): written newest first? Sort the log by time, oldest first");
     next_ = drops_.begin();
   }
   bool keep(std::size_t row, std::size_t line, LogBuilder& out) {

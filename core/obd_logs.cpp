@@ -81,7 +81,8 @@ void add_obd_rows(std::vector<ObdRow>& parsed, LogBuilder& out, const ObdLayout&
   // Each reading of a PID-row log is a poll of its own, not a value held by a logger's row.
   const bool held = format != SampleFileFormat::kPidRows;
   std::optional<double> t0;
-  TimeOrder order(parsed, [](const ObdRow& p) { return p.t; });
+  TimeOrder order(
+      parsed, [](const ObdRow& p) { return p.t; }, out.log().name);
   for (std::size_t i = 0; i < parsed.size(); ++i) {
     if (!order.keep(i, parsed[i].line, out)) continue;
     if (from_first && !t0) t0 = parsed[i].t;

@@ -61,7 +61,8 @@ void read_generic(LineReader& reader, const std::vector<std::string>& header, Lo
   join_restarts(
       rows.size(), reader.restarts, [&](std::size_t i) { return lines[i]; },
       [&](std::size_t i) -> double& { return rows[i].t; }, out.log());
-  TimeOrder order(rows, [](const Sample& r) { return r.t; }, out.log().name);
+  TimeOrder order(
+      rows, [](const Sample& r) { return r.t; }, out.log().name);
   for (std::size_t i = 0; i < rows.size(); ++i)
     if (order.keep(i, lines[i], out)) out.add(lines[i], rows[i]);
 }

@@ -93,7 +93,8 @@ void read_torque(LineReader& reader, const std::vector<std::string>& header, Log
                           ":1: no speed values (no OBD speed column and no GPS speed value)");
   out.log().speed_column = use_gps ? gps_col->header : obd_col->header;
   // Times count from the first row kept (a first row dropped for a corrupt time would shift them all).
-  TimeOrder order(rows, [](const Row& r) { return r.t; });
+  TimeOrder order(
+      rows, [](const Row& r) { return r.t; }, out.log().name);
   std::optional<double> t0;
   for (std::size_t i = 0; i < rows.size(); ++i) {
     const Row& r = rows[i];

@@ -93,6 +93,13 @@ TEST_CASE("io: bad rows are skipped and reported with file and line") {
 
 TEST_CASE("io: empty, headerless and useless files are one-line errors") {
   CHECK(error_of("") == "log.csv: empty file");
+  // A log written newest first: every row but one went back in time and was dropped, and the one left
+  // was fitted as a log with nothing to learn from.
+  CHECK(error_of("t,speed,freq\n3,10,50\n2,9,45\n1,8,40\n0,7,35\n") ==
+        "log.csv: 3 of 4 rows go back in time (the first: time goes backwards (2 after 3)): written newest "
+        "first? Sort the log by time, oldest first");
+  CHECK(error_of("Time (s),Engine RPM (rpm),Vehicle Speed (km/h)\n3,1500,10\n2,1400,9\n1,1300,8\n")
+            .rfind("log.csv: 2 of 3 rows go back in time", 0) == 0);
   CHECK(error_of("\n\n") == "log.csv: empty file");
   CHECK(error_of("1,2,3\n4,5,6\n").rfind("log.csv:1: unrecognised header", 0) == 0);
   // A car's log without one of the two readings says which one to log; every format is in the list.
