@@ -19,6 +19,7 @@
 #include "core/gear_model.hpp"
 #include "core/speed_synth.hpp"
 #include "tools/gearpulse/commands.hpp"
+#include "tools/gearpulse/number_option.hpp"
 #include "tools/gearpulse/sample_files.hpp"
 
 namespace gearpulse::cli {
@@ -125,7 +126,7 @@ void add_replay(CLI::App& app, int& status) {
   sub->add_option("--band-low", cmd->band_low,
                   "Hz: the lowest frequency the log's readings can show, as the daemon's tracker.band_low "
                   "(0: any; a log of gearpulsed's tracker readings: its band's low end)")
-      ->check(CLI::Range(0.0, 10000.0))
+      ->check(number_in(0.0, 10000.0))
       ->capture_default_str();
   sub->add_option("file", cmd->file, "Sample log, as fit reads; rows with an empty speed are GPS outages")
       ->required();

@@ -18,6 +18,7 @@
 
 #include "core/sliding_dft_tracker.hpp"
 #include "tools/gearpulse/commands.hpp"
+#include "tools/gearpulse/number_option.hpp"
 
 namespace gearpulse::cli {
 namespace {
@@ -316,14 +317,14 @@ void add_track(CLI::App& app, int& status) {
   cmd->add_option("--hop", options->hop_s, "time between outputs (s)")->capture_default_str();
   cmd->add_option("--window", options->window_s, "analysis window (s)")->capture_default_str();
   cmd->add_option("--channel", options->channel, "channel to use (0-based); default: mix all channels")
-      ->check(CLI::Range(0, 1023));
+      ->check(number_in(0, 1023, true));
   cmd->add_option("--max-slew", options->max_slew, "fastest followed frequency change (Hz/s)")
       ->capture_default_str();
   cmd->add_option("--decision-lag", options->decision_lag_s,
                   "decide each hop's confidence with the windows of the next S seconds (0-2; the daemon's "
                   "tracker.decision_lag)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 2.0));
+      ->check(number_in(0.0, 2.0));
   cmd->add_flag("--any-line", options->any_line, "also acquire lines without harmonics (pure-sine ripple)");
   cmd->add_flag("--confidence", options->confidence,
                 "add a confidence column (probability the estimate is the engine) and print every estimate");
