@@ -168,7 +168,11 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
                                   "fit --speed-unit kph " + log,
                                   "replay --model " + log + " --speed-unit MPH " + log,
                                   "replay --model " + log + " --band-low -1 " + log,
-                                  "replay --model " + log + " --band-low 50Hz " + log}) {
+                                  "replay --model " + log + " --band-low 50Hz " + log,
+                                  "replay --model " + log + " --band-low nan " + log,
+                                  "track --channel abc " + log,
+                                  "track --channel 1.5 " + log,
+                                  "track --decision-lag nan " + log}) {
     INFO(args);
     const Result r = run(dir, args);
     CHECK(r.status == 2);
@@ -182,6 +186,10 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
         std::string::npos);
   CHECK(run(dir, "fit --speed-unit kph " + log).err ==
         "gearpulse: --speed-unit: must be km/h, mph, m/s or knots, not 'kph'\n");
+  CHECK(run(dir, "replay --model " + log + " --band-low nan " + log).err ==
+        "gearpulse: --band-low: must be a number from 0 to 10000, not 'nan'\n");
+  CHECK(run(dir, "track --channel abc " + log).err ==
+        "gearpulse: --channel: must be a whole number from 0 to 1023, not 'abc'\n");
   // A directory where a file belongs is named as one.
   for (const std::string& args :
        {"fit " + dir.path().string(), "replay --model " + dir.path().string() + " " + log}) {
