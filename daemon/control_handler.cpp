@@ -1,6 +1,8 @@
 #include "daemon/control_handler.hpp"
 
 #include <algorithm>
+#include <cstdint>
+#include <string>
 
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
@@ -135,6 +137,15 @@ control::GearsReply gears_reply(const ModelPtr& model, std::size_t training_samp
           .training_samples = training_samples};
 }
 
+namespace {
+
+// What a rate-limited line adds for the requests it stands for.
+std::string since(std::uint64_t more) {
+  return more > 0 ? fmt::format(" ({} more such request(s) since the last line)", more) : std::string();
+}
+
+}  // namespace
+
 nlohmann::json ControlHandler::operator()(const nlohmann::json& json_request) const {
   const control::Request request = control::parse_request(json_request);
   switch (request.command) {
@@ -144,7 +155,8 @@ nlohmann::json ControlHandler::operator()(const nlohmann::json& json_request) co
       return control::to_json(gears_reply(model_.get(), store_.size()));
     case control::Command::kRetrain:
       retrainer_.request();
-      spdlog::info("control: retrain requested ({} training pairs)", store_.size());
+      if (std::uint64_t more = 0; request_lines_->allow("retrain", more))
+        spdlog::info("control: retrain requested ({} training pairs){}", store_.size(), since(more));
       return control::to_json(control::RetrainReply{.queued = true, .training_samples = store_.size()});
     case control::Command::kResetModel:
       try {
@@ -153,8 +165,10 @@ nlohmann::json ControlHandler::operator()(const nlohmann::json& json_request) co
       } catch (const std::exception& e) {
         throw control::ControlError(e.what());
       }
-      spdlog::warn("control: model reset{}; pulses follow GPS while the model is learning again",
-                   request.keep_samples ? " (training pairs kept)" : " and training pairs cleared");
+      if (std::uint64_t more = 0; request_lines_->allow("reset-model", more))
+        spdlog::warn("control: model reset{}; pulses follow GPS while the model is learning again{}",
+                     request.keep_samples ? " (training pairs kept)" : " and training pairs cleared",
+                     since(more));
       return control::to_json(control::ResetReply{.reset = true, .training_samples = store_.size()});
   }
   throw control::ControlError("unknown command");

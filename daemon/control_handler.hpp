@@ -1,8 +1,10 @@
 #pragma once
 // The daemon's side of the control protocol (common/control_protocol.hpp): what each command does and
 // the reply it gets. The socket itself is the ControlServer's.
+#include <chrono>
 #include <cstddef>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -10,6 +12,7 @@
 
 #include "common/control_protocol.hpp"
 #include "daemon/config.hpp"
+#include "daemon/log_limiter.hpp"
 #include "daemon/model_store.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/retrainer.hpp"
@@ -54,6 +57,9 @@ class ControlHandler {
   Retrainer& retrainer_;
   StateDirectory& state_;
   StatusSource status_;
+  // The info and warning lines of requests (a client in a loop must not push the daemon's real warnings
+  // out of the log queue): one per command every 10 s, with how many came since.
+  std::shared_ptr<LogLimiter> request_lines_ = std::make_shared<LogLimiter>(std::chrono::seconds(10));
 };
 
 }  // namespace gearpulse::daemon

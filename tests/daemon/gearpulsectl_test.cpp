@@ -89,9 +89,20 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
   Process retrain({ctl, "--socket", sock, "retrain", "--json"}, dir / "retrain.txt");
   CHECK(retrain.wait() == 0);
   CHECK(json::parse(read_text(dir / "retrain.txt"))["queued"] == true);
+  // Requests in a loop: each answered, one log line for them every 10 s.
+  for (int i = 0; i < 5; ++i) {
+    Process again({ctl, "--socket", sock, "retrain"}, dir / "again.txt");
+    CHECK(again.wait() == 0);
+  }
 
   daemon.signal(SIGTERM);
   CHECK(daemon.wait() == 0);
+  const std::string log = read_text(dir / "log.txt");
+  std::size_t lines = 0;
+  for (std::size_t at = log.find("control: retrain requested"); at != std::string::npos;
+       at = log.find("control: retrain requested", at + 1))
+    ++lines;
+  CHECK(lines == 1);
 }
 
 TEST_CASE("control: gearpulsectl reports a daemon's refusal, not the broken pipe it leaves") {
