@@ -88,7 +88,10 @@ Cell parse_cell(std::string_view text, std::string_view column) {
   const auto [ptr, ec] = std::from_chars(number.data(), number.data() + number.size(), value);
   if (ec != std::errc() || ptr != number.data() + number.size() || (plus && number.starts_with('-'))) {
     cell.kind = CellKind::kBad;
-    cell.problem = "not a number in column " + std::string(column) + ": " + quoted(text);
+    cell.problem = (ec == std::errc::result_out_of_range && ptr == number.data() + number.size()
+                        ? "a number beyond what a double holds in column "
+                        : "not a number in column ") +
+                   std::string(column) + ": " + quoted(text);
     return cell;
   }
   if (!std::isfinite(value)) {

@@ -255,6 +255,13 @@ TEST_CASE("io: what exports write around the data") {
     REQUIRE(log.skipped.size() == 1);
     CHECK(log.skipped[0].rfind("log.csv:3: not a number in column speed: '+-2'", 0) == 0);
   }
+  SECTION("a number beyond a double's range is said as one, not as no number") {
+    const SampleLog log = read_log_text("t,speed,freq\n0,1e400,20\n1,2,1e-400\n2,3,22\n");
+    REQUIRE(log.samples.size() == 1);
+    REQUIRE(log.skipped.size() == 2);
+    CHECK(log.skipped[0] == "log.csv:2: a number beyond what a double holds in column speed: '1e400'");
+    CHECK(log.skipped[1] == "log.csv:3: a number beyond what a double holds in column freq: '1e-400'");
+  }
   SECTION("a header with its columns elsewhere is an error at its line: its rows would be misread") {
     CHECK(error_of("Time,Engine RPM,Speed (km/h)\n0,800,10\nTime,Speed (km/h),Engine RPM\n1,20,900\n") ==
           "log.csv:3: a header with other columns (a logger restarted?): the rows after it would be "

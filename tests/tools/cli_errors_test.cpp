@@ -192,7 +192,8 @@ TEST_CASE("cli: unknown options and bad values exit 2 with one line") {
         "gearpulse: --channel: must be a whole number from 0 to 1023, not 'abc'\n");
   // A directory where a file belongs is named as one.
   for (const std::string& args :
-       {"fit " + dir.path().string(), "replay --model " + dir.path().string() + " " + log}) {
+       {"fit " + dir.path().string(), "replay --model " + dir.path().string() + " " + log,
+        "track " + dir.path().string()}) {
     INFO(args);
     const Result r = run(dir, args);
     CHECK(r.status == 2);

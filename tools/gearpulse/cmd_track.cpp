@@ -225,6 +225,8 @@ int run_track(const TrackOptions& o) {
     // no proof of absence: both keep libsndfile's own error.
     if (std::error_code ec; o.file != "-" && !std::filesystem::exists(o.file, ec) && !ec)
       throw UsageError(o.file + ": cannot open: " + std::strerror(ENOENT));
+    if (std::error_code ec; std::filesystem::is_directory(o.file, ec))
+      throw UsageError(o.file + ": is a directory (name a WAV recording in it)");
     const bool unrecognised = sf_error(nullptr) == SF_ERR_UNRECOGNISED_FORMAT;
     throw UsageError(o.file + ": cannot read audio: " + sf_strerror(nullptr) +
                      (unrecognised ? " (track reads a WAV recording; a CSV log of speed and rpm is for fit "
