@@ -223,10 +223,11 @@ PipelineSnapshot Pipeline::snapshot() const {
 PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   const Impl& d = *impl_;
   PipelineSnapshot s;
-  s.speed = d.speed.load(std::memory_order_relaxed);
-  s.speed_sd = d.speed_sd.load(std::memory_order_relaxed);
-  s.source = d.source.load(std::memory_order_relaxed);
-  s.gear = d.gear.load(std::memory_order_relaxed);
+  const SynthOutput out = d.step_output.read();  // one step's, whole
+  s.speed = out.speed;
+  s.speed_sd = out.speed_sd;
+  s.source = out.source;
+  s.gear = out.gear;
   // Heartbeats of the threads that should be running, for the watchdog.
   std::vector<ThreadBeat> beats;
   // The output's count of unheard pulses before the pulse thread's count of all: the thread counts a pulse

@@ -13,8 +13,10 @@
 #include <vector>
 
 #include "core/fix_pairer.hpp"
+#include "core/published.hpp"
 #include "core/sliding_dft_tracker.hpp"
 #include "core/spsc_ring.hpp"
+#include "core/synth_output.hpp"
 #include "daemon/fault_reporter.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/synthesis_stage.hpp"
@@ -68,10 +70,7 @@ struct Pipeline::Impl {
   std::atomic<std::int64_t> tracker_beat{0};
   std::atomic<std::uint64_t> tracker_turns{0};
   std::atomic<std::uint64_t> late_hops{0};  // hops stepped late, on the GPS of their due time (step())
-  std::atomic<double> speed{0.0};
-  std::atomic<double> speed_sd{0.0};
-  std::atomic<int> gear{0};
-  std::atomic<SpeedSource> source{SpeedSource::kNone};
+  Published<SynthOutput> step_output;       // speed, its spread, gear and source of one step, read together
   std::atomic<double> track_freq{kNan};
   std::atomic<double> track_snr{kNan};
   std::atomic<bool> track_confident{false};

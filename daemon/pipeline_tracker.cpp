@@ -74,10 +74,7 @@ void Pipeline::Impl::step(Tracking& k, double t, double freq, double snr, bool t
   track_snr.store(snr, std::memory_order_relaxed);
   track_confident.store(s.confident, std::memory_order_relaxed);
   if (pulses) pulses->set_speed(s.out.speed);
-  speed.store(s.out.speed, std::memory_order_relaxed);
-  speed_sd.store(s.out.speed_sd, std::memory_order_relaxed);
-  gear.store(s.out.gear, std::memory_order_relaxed);
-  source.store(s.out.source, std::memory_order_relaxed);
+  step_output.publish(s.out);
 }
 
 // A retrained model takes over between two steps. The holder's lock (which the idle-priority retrainer
