@@ -28,8 +28,8 @@
 // one SNR instead of the three. --clips S also cuts each scene into consecutive clips of S seconds and
 // tracks each with a fresh tracker from its start (a short recording started mid-drive), scored beside the
 // same hops of the whole-scene run, by the clip's content (launch, cruise, idle).
-// --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock, or tab-, space-
-// or semicolon-separated, the last with decimal commas; lines not two numbers are skipped and counted, rows
+// --wav scores a real recording against a tacho log (CSV t,rpm on the recording's clock, or space-, tab- or
+// semicolon-separated, the last two with decimal commas; lines not two numbers are skipped and counted, rows
 // sharing a time are averaged): the truth is rpm / 60 x K (K = 2, a four-cylinder's firing
 // frequency, by default).
 // --offset S: the tacho log's time of the recording's first frame (its t is shifted by S).

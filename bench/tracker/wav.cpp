@@ -22,9 +22,10 @@ struct SndfileCloser {
   void operator()(SNDFILE* f) const noexcept { sf_close(f); }
 };
 
-// Tacho samples (t, rpm) in time order. A row's first two fields are t and rpm, separated by a comma, a tab
-// or spaces, or by a semicolon, in which case a comma is the decimal mark ("1,5;800", as spreadsheets in
-// many locales write it); a line that does not read so (a header, a gap marked "-") is skipped and counted.
+// Tacho samples (t, rpm) in time order. A row's first two fields are t and rpm, separated by a comma or
+// spaces, or by a semicolon or a tab, in which case a comma is the decimal mark ("1,5;800", as spreadsheets
+// in many locales write it); a line that does not read so (a header, a gap marked "-") is skipped and
+// counted.
 // Rows that share a time (a log written with whole seconds and polled faster) are one sample, their mean; a
 // time before the row above is an error naming the line.
 struct Tacho {
@@ -36,11 +37,11 @@ struct Tacho {
 
 // t and rpm from one line, or false.
 bool parse_tacho_row(std::string line, double& t, double& rpm) {
-  if (line.find(';') != std::string::npos) {
+  if (line.find_first_of(";\t") != std::string::npos) {
     std::replace(line.begin(), line.end(), ',', '.');
     std::replace(line.begin(), line.end(), ';', ',');
+    std::replace(line.begin(), line.end(), '\t', ',');
   }
-  std::replace(line.begin(), line.end(), '\t', ',');
   const char* p = line.c_str();
   char* end = nullptr;
   t = std::strtod(p, &end);

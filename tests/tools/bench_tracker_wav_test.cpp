@@ -121,19 +121,24 @@ TEST_CASE("bench_tracker: no truth in the band, a missed threshold, odd tacho ro
   const Result backwards = run(dir, "--wav '" + wav + "' --tacho '" + back + "'");
   CHECK(backwards.status == 2);
   CHECK(backwards.err.find("back.csv:4: time 1 is before the row above's 2") != std::string::npos);
-  // A spreadsheet's export (semicolons, decimal commas) and a tab-separated log read as the comma one; a
-  // gap marked "-" is skipped and counted; a file of no rows names its first line.
+  // A spreadsheet's export (semicolons, decimal commas) and a tab-separated log read as the comma one (a
+  // comma in them a decimal mark, not a third field); a gap marked "-" is skipped and counted; a file of no
+  // rows names its first line.
   const std::string euro = (dir / "euro.csv").string(), tabs = (dir / "tabs.csv").string(),
                     words = (dir / "words.csv").string();
   std::ofstream(euro) << "t;rpm\n0;1000\n1,5;2000,5\n2;-\n3;2400\n";
-  std::ofstream(tabs) << "t\trpm\n0\t1000\n1.5\t2000.5\n2\t-\n3\t2400\n";
+  std::ofstream(tabs) << "t\trpm\n0\t1000\n1,5\t2000.5\n2\t-\n3\t2400\n";  // decimal commas or points
   std::ofstream(words) << "time,revs\nzero,idle\n";
+  std::vector<double> in_band;
   for (const std::string& f : {euro, tabs}) {
     const Result r = run(dir, "--wav '" + wav + "' --tacho '" + f + "'");
     INFO(f << ": " << r.out << r.err);
     CHECK(r.out.find("3 rows over 0.0-3.0 s") != std::string::npos);
     CHECK(r.out.find("2 line(s) not two numbers skipped (first, line 1: 't") != std::string::npos);
+    in_band.push_back(figure(r.out, "in_band_hops"));
   }
+  CHECK(in_band[0] > 0.0);
+  CHECK(in_band[0] == in_band[1]);  // the same revs read from both
   const Result unread = run(dir, "--wav '" + wav + "' --tacho '" + words + "'");
   CHECK(unread.status == 2);
   CHECK(unread.err.find("words.csv: fewer than two t,rpm rows (2 line(s) not two numbers; first, line 1: "
