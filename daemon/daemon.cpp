@@ -22,6 +22,7 @@
 #include "daemon/model_store.hpp"
 #include "daemon/pipeline.hpp"
 #include "daemon/state_directory.hpp"
+#include "daemon/state_saver.hpp"
 #include "daemon/systemd_notify.hpp"
 #include "daemon/training_store.hpp"
 #include "daemon/watchdog.hpp"
@@ -36,6 +37,11 @@ using Clock = std::chrono::steady_clock;
 // without a shutdown controller loses power with the ignition) costs at most this much learning, for a
 // few hundred bytes and one sync per interval.
 constexpr std::chrono::seconds kJournalInterval{10};
+
+// A write of the state directory that has run this long is said in the log and in status: as long as a
+// pipeline thread may go without a heartbeat before it counts as hung (watchdog.hpp). The write goes on
+// on its own thread; the pulses and the watchdog do not wait for it.
+constexpr std::chrono::nanoseconds kSlowWrite{kStallNs};
 
 Retrainer::Settings retrain_settings(const ModelConfig& m) {
   return {std::chrono::duration<double>(m.retrain_interval),
@@ -59,6 +65,10 @@ struct Daemon::Impl {
         config_path(std::move(path)),
         store(config.model.store_hours * 3600.0, config.model.max_samples),
         state(config.model.state_dir, model, store, config.model.max_samples),
+        saver({.unsaved = [this] { return store.unsaved(); },
+               .save = [this] { return state.save_store("periodic"); },
+               .journal = [this] { state.journal_store(); }},
+              StateSaver::Seconds(config.model.save_interval), kJournalInterval),
         retrainer(store, model, state.model_path(), std::move(fitter), retrain_settings(config.model)),
         changes(config) {}
 
@@ -70,16 +80,17 @@ struct Daemon::Impl {
   ModelHolder model;
   TrainingStore store;
   StateDirectory state;
+  StateSaver saver;  // stopped before the state directory goes
   Retrainer retrainer;
   std::optional<Pipeline> pipeline;
   Clock::time_point started = Clock::now();
-  std::uint64_t pairs_at_last_save = 0;
   ChangeReporter changes;
 
   mutable std::mutex reload_mutex;
   std::string reload_error;                  // the last SIGHUP's file was refused ("" = it was taken)
   std::vector<std::string> restart_pending;  // changed by the last reload, waiting for a restart
   void reload();
+  [[nodiscard]] std::vector<std::string> problems() const;
   control::StatusReply status();
   std::string status_line();
   std::optional<ControlServer> control;  // last: destroyed first (above)
@@ -127,6 +138,7 @@ void Daemon::Impl::reload() {
     config.model.store_hours = next.model.store_hours;
     config.model.max_samples = next.model.max_samples;
     config.model.save_interval = next.model.save_interval;
+    saver.set_save_interval(StateSaver::Seconds(next.model.save_interval));
     config.gps.latency = next.gps.latency;
     config.tracker.min_snr_db = next.tracker.min_snr_db;
   }
@@ -134,6 +146,16 @@ void Daemon::Impl::reload() {
     spdlog::warn("reload: {} changed; this takes effect only after a restart", key);
   spdlog::info(
       "reload: applied log level, retrain settings, training store limits, GPS latency, SNR threshold");
+}
+
+std::vector<std::string> Daemon::Impl::problems() const {
+  std::vector<std::string> all = state.problems();
+  if (const auto writing = saver.busy_for(); writing >= kSlowWrite)
+    all.push_back(
+        fmt::format("a write of training.bin or its journal has run for {:.0f} s (is the state "
+                    "directory's disk failing?)",
+                    writing.count()));
+  return all;
 }
 
 control::StatusReply Daemon::Impl::status() {
@@ -154,7 +176,7 @@ control::StatusReply Daemon::Impl::status() {
                   .retrainer = retrainer.status(),
                   .training_samples = store.size(),
                   .new_samples = store.new_samples(),
-                  .problems = state.problems(),
+                  .problems = problems(),
                   .reload_error = std::move(reload_said),
                   .restart_pending = std::move(pending),
                   .clients = control ? control->clients() : 0,
@@ -217,14 +239,14 @@ int Daemon::run() {
                               std::chrono::duration_cast<std::chrono::milliseconds>(watchdog / 3),
                               std::chrono::milliseconds(1000))
                         : std::chrono::milliseconds(1000);
-  auto last_save = Clock::now();
-  auto last_journal = Clock::now();
   auto last_status = Clock::now();
   std::string last_line;
   WatchdogGate gate([watchdog] {
     if (watchdog.count() > 0) systemd::watchdog();
   });
   PipelineSnapshot previous = d.pipeline->snapshot();
+  bool slow_write = false;  // said while it lasts
+  d.saver.start();
   bool running = true;
   while (running) {
     pollfd pfd{sfd.get(), POLLIN, 0};
@@ -257,19 +279,14 @@ int Daemon::run() {
       if (line != last_line) systemd::status(line);
       last_line = std::move(line);
     }
-    if (now - last_save >= std::chrono::duration<double>(d.config.model.save_interval)) {
-      last_save = last_journal = now;
-      if (snap.pairs_added != d.pairs_at_last_save) {
-        // A save that fails (a full disk) leaves the journal to keep the pairs, however short the save
-        // interval: with saves due before every journal append, none was written once.
-        if (d.state.save_store("periodic"))
-          d.pairs_at_last_save = snap.pairs_added;
-        else
-          d.state.journal_store();
-      }
-    } else if (now - last_journal >= kJournalInterval) {
-      last_journal = now;
-      d.state.journal_store();
+    if (const bool slow = d.saver.busy_for() >= kSlowWrite; slow != slow_write) {
+      slow_write = slow;
+      if (slow)
+        spdlog::warn(
+            "training: a write to {} has run for over {} s; pulses and learning go on while it lasts",
+            d.state.path().string(), std::chrono::duration_cast<std::chrono::seconds>(kSlowWrite).count());
+      else
+        spdlog::info("training: the slow write to {} is over", d.state.path().string());
     }
   }
 
@@ -280,6 +297,7 @@ int Daemon::run() {
   // outlast systemd's stop timeout, and its SIGKILL must not cost the pairs since the last periodic save.
   d.pipeline->halt();  // output left low, no more training pairs asked for
   d.pipeline->drain_pairs();
+  d.saver.stop();  // after the write in progress, if any
   d.state.save_or_journal();
   d.state.save_model();
   d.pipeline->stop();
