@@ -68,13 +68,30 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
           now.gps_error,
           suppressed ? fmt::format(" ({} more failed attempts since the last report)", suppressed) : "");
   }
-  if (now.source != before.source) {
-    // Into and out of GPS is news; engine <-> coast inside an outage is every declutch (two per shift).
-    const auto outage = [](SpeedSource s) { return s == SpeedSource::kEngine || s == SpeedSource::kCoast; };
-    const bool routine = outage(before.source) && outage(now.source);
-    spdlog::log(routine ? spdlog::level::debug : spdlog::level::info,
-                "synthesis: speed source {} -> {} at {:.1f} km/h (gear {})", source_name(before.source),
-                source_name(now.source), now.speed * 3.6, now.gear);
+  // Away from GPS (speed from the engine or coasting through an outage, or none at all) is a state a
+  // receiver under trees can enter many times a minute: once the speed has come from GPS, its start and
+  // end are said as StateFault says them (two lines a minute at most) and its other flaps are debug lines.
+  // Before that, each change is said. Engine <-> coast inside an outage (every declutch) is a debug line.
+  const auto outage = [](SpeedSource s) { return s == SpeedSource::kEngine || s == SpeedSource::kCoast; };
+  const bool routine = outage(before.source) && outage(now.source);
+  const bool before_gps = !gps_source_seen_;
+  gps_source_seen_ = gps_source_seen_ || now.source == SpeedSource::kGps;
+  std::uint64_t departures = 0;
+  const StateFault::Say away = gps_source_seen_
+                                   ? away_from_gps_.update(now.source != SpeedSource::kGps,
+                                                           std::chrono::steady_clock::now(), departures)
+                                   : StateFault::Say::kNothing;
+  if (now.source != before.source || away == StateFault::Say::kStart) {
+    const std::string change =
+        now.source != before.source
+            ? fmt::format("{} -> {}", source_name(before.source), source_name(now.source))
+            : std::string(source_name(now.source));
+    const bool news = away != StateFault::Say::kNothing || (before_gps && !routine);
+    spdlog::log(news ? spdlog::level::info : spdlog::level::debug,
+                "synthesis: speed source {} at {:.1f} km/h (gear {}){}", change, now.speed * 3.6, now.gear,
+                away == StateFault::Say::kStart && departures > 1
+                    ? fmt::format(" (GPS left {} times since the last line said so)", departures)
+                    : "");
   }
   // A navigator that should be reading the pulses is not: said when the last reader goes (or none is
   // there at start) and when one comes, at most once a minute for a reader that opens and closes often.

@@ -79,3 +79,33 @@ TEST_CASE("changes: waiting for a receiver's first fix is not yet a fault of its
   CHECK(log.count("gps: no usable fix from gpsd at 127.0.0.1:2947 yet (a receiver's first fix can take a "
                   "minute") == 1);
 }
+
+TEST_CASE("changes: a speed source that flaps between GPS and the engine is said once, not at every flap") {
+  gearpulse::test::LogLines log;
+  Config config;
+  ChangeReporter changes(config);
+  using gearpulse::SpeedSource;
+  const auto source = [](SpeedSource s) {
+    PipelineSnapshot snap = gps(s == SpeedSource::kGps ? GpsState::kFix : GpsState::kNoFix, 3.0);
+    snap.source = s;
+    snap.speed = 20.0;
+    snap.gear = 3;
+    return snap;
+  };
+  const PipelineSnapshot none = source(SpeedSource::kNone), by_gps = source(SpeedSource::kGps),
+                         engine = source(SpeedSource::kEngine), coast = source(SpeedSource::kCoast);
+  changes.log(none, none);  // the daemon starts without a speed
+  changes.log(none, by_gps);
+  CHECK(log.count("synthesis: speed source none -> gps at 72.0 km/h (gear 3)") == 1);
+  for (int flap = 0; flap < 10; ++flap) {
+    changes.log(by_gps, engine);
+    changes.log(engine, coast);  // a declutch inside the outage
+    changes.log(coast, engine);
+    changes.log(engine, by_gps);
+  }
+  CHECK(log.count("synthesis: speed source gps -> engine") == 1);
+  CHECK(log.count("synthesis: speed source engine -> gps") == 1);
+  CHECK(log.count("synthesis: speed source engine -> coast") == 0);
+  CHECK(log.count("synthesis: speed source coast -> engine") == 0);
+  CHECK(log.count("synthesis: speed source") == 3);
+}
