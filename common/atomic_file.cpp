@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <array>
 #include <cerrno>
 #include <cstdint>
 #include <fstream>
@@ -113,10 +114,18 @@ void remove_file_durable(const std::filesystem::path& path) {
 }
 
 std::optional<std::string> read_file(const std::filesystem::path& path, std::size_t max_bytes) {
+  std::string out;
+  if (!read_file_chunks(path, max_bytes, [&out](std::string_view piece) { out.append(piece); }))
+    return std::nullopt;
+  return out;
+}
+
+bool read_file_chunks(const std::filesystem::path& path, std::size_t max_bytes,
+                      const std::function<void(std::string_view)>& consume) {
   // O_NONBLOCK: opening a FIFO for reading otherwise waits for a writer, before fstat can refuse it.
   UniqueFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK));
   if (fd.get() < 0) {
-    if (errno == ENOENT) return std::nullopt;
+    if (errno == ENOENT) return false;
     throw_errno("cannot open", path);
   }
   struct stat st {};
@@ -127,20 +136,20 @@ std::optional<std::string> read_file(const std::filesystem::path& path, std::siz
     return FileRefused(path, "longer than " + std::to_string(max_bytes) + " bytes, the limit for this file");
   };
   if (static_cast<std::uintmax_t>(st.st_size) > max_bytes) throw too_long();
-  std::string out;
-  out.reserve(static_cast<std::size_t>(st.st_size));
-  char buf[65536];
+  std::array<char, 65536> buf;
+  std::size_t read = 0;
   for (;;) {
-    const ssize_t n = ::read(fd.get(), buf, sizeof buf);
+    const ssize_t n = ::read(fd.get(), buf.data(), buf.size());
     if (n < 0) {
       if (errno == EINTR) continue;
       throw_errno("cannot read", path);
     }
     if (n == 0) break;
-    if (out.size() + static_cast<std::size_t>(n) > max_bytes) throw too_long();  // it grew since fstat
-    out.append(buf, static_cast<std::size_t>(n));
+    read += static_cast<std::size_t>(n);
+    if (read > max_bytes) throw too_long();  // it grew since fstat
+    consume(std::string_view(buf.data(), static_cast<std::size_t>(n)));
   }
-  return out;
+  return true;
 }
 
 std::size_t remove_stale_temp_files(const std::filesystem::path& path) noexcept {

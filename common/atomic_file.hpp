@@ -2,6 +2,7 @@
 // Files that must survive a power cut: a car PC loses power without warning, so a reader sees either
 // the old content or the new one, never a torn mix.
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -51,6 +52,10 @@ class FileRefused : public std::runtime_error {
 // a file longer than `max_bytes` (so no file makes the reader allocate more than that), std::system_error
 // on other open and read errors.
 [[nodiscard]] std::optional<std::string> read_file(const std::filesystem::path& path, std::size_t max_bytes);
+// The same checks, the file handed to `consume` in pieces of up to 64 KiB as it is read, so that a reader
+// that keeps only part of it holds no more than that part. False if the file does not exist.
+bool read_file_chunks(const std::filesystem::path& path, std::size_t max_bytes,
+                      const std::function<void(std::string_view)>& consume);
 
 // Removes temp files that a crash between create and rename left behind next to `path`.
 // Returns how many were removed.

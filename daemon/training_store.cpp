@@ -1,76 +1,19 @@
 #include "daemon/training_store.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <cstring>
 #include <exception>
 
 #include "common/atomic_file.hpp"
+#include "daemon/training_format.hpp"
 
 namespace gearpulse::daemon {
-namespace {
 
-constexpr char kMagic[8] = {'G', 'P', 'T', 'R', 'A', 'I', 'N', '\n'};
-constexpr std::uint32_t kVersion = 1;
-constexpr std::uint32_t kRecordSize = 3 * sizeof(double);
-constexpr std::size_t kHeaderSize = sizeof kMagic + 2 * sizeof(std::uint32_t) + sizeof(std::uint64_t);
-constexpr char kJournalMagic[8] = {'G', 'P', 'J', 'O', 'U', 'R', 'N', '\n'};
-constexpr std::size_t kJournalHeaderSize = sizeof kJournalMagic + 2 * sizeof(std::uint32_t);
-constexpr std::size_t kJournalRecordSize = kRecordSize + sizeof(std::uint32_t);
-
-template <typename T>
-void put(std::string& out, T value) {
-  char bytes[sizeof(T)];
-  std::memcpy(bytes, &value, sizeof(T));
-  out.append(bytes, sizeof(T));
-}
-
-template <typename T>
-T get(std::string_view in, std::size_t offset) {
-  T value;
-  std::memcpy(&value, in.data() + offset, sizeof(T));
-  return value;
-}
-
-// The checksum a saved store ends with (what a journal names as the file it extends); 0 for none.
-std::uint32_t trailing_crc(std::string_view blob) {
-  return blob.size() >= sizeof(std::uint32_t) ? get<std::uint32_t>(blob, blob.size() - sizeof(std::uint32_t))
-                                              : 0;
-}
-
-void put_record(std::string& out, const Sample& s) {
-  put(out, s.t);
-  put(out, s.speed);
-  put(out, s.freq);
-}
-
-Sample get_record(std::string_view in, std::size_t offset) {
-  return {get<double>(in, offset), get<double>(in, offset + 8), get<double>(in, offset + 16)};
-}
-
-bool plausible(const Sample& s) {
-  return std::isfinite(s.t) && std::isfinite(s.speed) && std::isfinite(s.freq) && s.speed >= 0.0 &&
-         s.freq > 0.0;
-}
-
-}  // namespace
+// The file layout (training_format.hpp); named, not imported: this file shares a unity batch with others.
+namespace tf = training_format;
 
 std::uint32_t crc32(std::string_view data) noexcept {
-  static const auto table = [] {
-    std::array<std::uint32_t, 256> t{};
-    for (std::uint32_t i = 0; i < 256; ++i) {
-      std::uint32_t c = i;
-      for (int k = 0; k < 8; ++k)
-        c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      t[i] = c;
-    }
-    return t;
-  }();
-  std::uint32_t crc = 0xFFFFFFFFu;
-  for (unsigned char byte : data)
-    crc = table[(crc ^ byte) & 0xFFu] ^ (crc >> 8);
-  return crc ^ 0xFFFFFFFFu;
+  return tf::crc32_update(0xFFFFFFFFu, data) ^ 0xFFFFFFFFu;
 }
 
 TrainingStore::TrainingStore(double max_age_s, std::size_t max_samples)
@@ -92,7 +35,7 @@ void TrainingStore::pop_front_locked() noexcept {
 }
 
 bool TrainingStore::add(const Sample& sample) {
-  if (!plausible(sample)) return false;
+  if (!tf::plausible(sample)) return false;
   std::lock_guard lock(mutex_);
   push_back_locked(sample);
   ++new_samples_;
@@ -200,58 +143,42 @@ std::string TrainingStore::serialize() const {
 
 std::string TrainingStore::serialize_locked() const {
   std::string out;
-  out.reserve(kHeaderSize + samples_.size() * kRecordSize + sizeof(std::uint32_t));
-  out.append(kMagic, sizeof kMagic);
-  put(out, kVersion);
-  put(out, kRecordSize);
-  put(out, static_cast<std::uint64_t>(samples_.size()));
+  out.reserve(tf::kHeaderSize + samples_.size() * tf::kRecordSize + sizeof(std::uint32_t));
+  out.append(tf::kMagic, sizeof tf::kMagic);
+  tf::put(out, tf::kVersion);
+  tf::put(out, tf::kRecordSize);
+  tf::put(out, static_cast<std::uint64_t>(samples_.size()));
   for (const Sample& s : samples_)
-    put_record(out, s);
-  put(out, crc32(out));
+    tf::put_record(out, s);
+  tf::put(out, crc32(out));
   return out;
 }
 
 std::string TrainingStore::deserialize(std::string_view blob) {
+  std::size_t keep = 0;
   {
     std::lock_guard lock(mutex_);
     empty_locked();
+    keep = max_samples_;
   }
-  if (blob.size() < kHeaderSize + sizeof(std::uint32_t))
-    return "file too short (" + std::to_string(blob.size()) + " bytes)";
-  if (std::memcmp(blob.data(), kMagic, sizeof kMagic) != 0) return "not a training store (bad magic)";
-  const auto version = get<std::uint32_t>(blob, sizeof kMagic);
-  if (version != kVersion) return "unsupported version " + std::to_string(version);
-  const auto record = get<std::uint32_t>(blob, sizeof kMagic + 4);
-  if (record != kRecordSize) return "unexpected record size " + std::to_string(record);
-  const auto count = get<std::uint64_t>(blob, sizeof kMagic + 8);
-  const std::size_t body = blob.size() - kHeaderSize - sizeof(std::uint32_t);
-  if (count > body / kRecordSize || count * kRecordSize != body)
-    return "truncated or padded: header says " + std::to_string(count) + " records, file holds " +
-           std::to_string(body) + " bytes";
-  const std::size_t crc_at = blob.size() - sizeof(std::uint32_t);
-  if (get<std::uint32_t>(blob, crc_at) != crc32(blob.substr(0, crc_at))) return "checksum mismatch";
-  std::deque<Sample> loaded;
-  std::size_t skipped = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    const std::size_t at = kHeaderSize + i * kRecordSize;
-    const Sample s = get_record(blob, at);
-    // The checksum holds, so the record is where the header says and the others are sound: one bad
-    // pair (written by another program, or corrupted before the checksum was taken) costs only itself.
-    if (!plausible(s)) {
-      ++skipped;
-      continue;
-    }
-    loaded.push_back(s);
+  tf::StoreReader reader(keep);
+  reader.feed(blob);
+  std::string problem = reader.finish();
+  if (problem.empty()) {
+    std::lock_guard lock(mutex_);
+    install_locked(std::move(reader.pairs), reader.skipped);
   }
-  std::lock_guard lock(mutex_);
+  return problem;
+}
+
+void TrainingStore::install_locked(std::deque<Sample> pairs, std::size_t skipped) {
   skipped_ = skipped;
-  samples_ = std::move(loaded);
+  samples_ = std::move(pairs);
   span_s_ = 0.0;
   for (std::size_t i = 1; i < samples_.size(); ++i)
     span_s_ += step(samples_[i - 1], samples_[i]);
   new_samples_ = 0;
   enforce_bounds_locked();
-  return {};
 }
 
 void TrainingStore::save(const std::filesystem::path& path) {
@@ -296,7 +223,7 @@ void TrainingStore::save(const std::filesystem::path& path) {
   }
   {
     std::lock_guard lock(mutex_);
-    saved_crc_ = trailing_crc(blob);
+    saved_crc_ = tf::trailing_crc(blob);
     journal_current_ = false;
     unjournaled_ = since_save_;
   }
@@ -310,24 +237,31 @@ void TrainingStore::save(const std::filesystem::path& path) {
 }
 
 std::string TrainingStore::load(const std::filesystem::path& path) {
+  std::size_t keep = 0;
   {
     std::lock_guard lock(mutex_);
     saved_crc_ = 0;
     journal_current_ = false;
+    keep = max_samples_;
   }
-  const auto blob = read_file(path, static_cast<std::size_t>(file_bytes(kMaxStoreSamples)));
-  std::string problem = blob ? deserialize(*blob) : std::string();
+  tf::StoreReader reader(keep);
+  const bool exists = read_file_chunks(path, static_cast<std::size_t>(file_bytes(kMaxStoreSamples)),
+                                       [&reader](std::string_view piece) { reader.feed(piece); });
+  const std::string problem = exists ? reader.finish() : std::string();
   std::lock_guard lock(mutex_);
-  if (!blob) empty_locked();
+  empty_locked();
   // A journal extends a file that loaded; one written after a corrupt file (set aside by the caller)
   // extends none, as does one of a first run that never saved.
-  if (blob && problem.empty()) saved_crc_ = trailing_crc(*blob);
+  if (exists && problem.empty()) {
+    install_locked(std::move(reader.pairs), reader.skipped);
+    saved_crc_ = reader.stored_crc();
+  }
   return problem;
 }
 
 double TrainingStore::file_bytes(std::size_t pairs) noexcept {
-  return static_cast<double>(kHeaderSize + sizeof(std::uint32_t)) +
-         static_cast<double>(pairs) * static_cast<double>(kRecordSize);
+  return static_cast<double>(tf::kHeaderSize + sizeof(std::uint32_t)) +
+         static_cast<double>(pairs) * static_cast<double>(tf::kRecordSize);
 }
 
 std::filesystem::path TrainingStore::journal_path(const std::filesystem::path& path) {
@@ -351,14 +285,14 @@ std::size_t TrainingStore::append_journal_io(const std::filesystem::path& path) 
     count = rewrite ? since_save_ : unjournaled_;
     if (!rewrite && count == 0) return 0;
     if (rewrite) {
-      out.append(kJournalMagic, sizeof kJournalMagic);
-      put(out, kVersion);
-      put(out, saved_crc_);
+      out.append(tf::kJournalMagic, sizeof tf::kJournalMagic);
+      tf::put(out, tf::kVersion);
+      tf::put(out, saved_crc_);
     }
     for (auto it = samples_.end() - static_cast<std::ptrdiff_t>(count); it != samples_.end(); ++it) {
       const std::size_t at = out.size();
-      put_record(out, *it);
-      put(out, crc32(std::string_view(out).substr(at)));
+      tf::put_record(out, *it);
+      tf::put(out, crc32(std::string_view(out).substr(at)));
     }
     unjournaled_ = 0;
     journal_current_ = true;
@@ -380,57 +314,36 @@ std::size_t TrainingStore::append_journal_io(const std::filesystem::path& path) 
 
 TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem::path& path) {
   JournalReplay replay;
+  std::size_t keep = 0;
+  {
+    std::lock_guard lock(mutex_);
+    keep = max_samples_;
+  }
   // A journal holds at most the pairs since the last save, never more than the store does.
-  const auto blob = read_file(journal_path(path), kJournalHeaderSize + kMaxStoreSamples * kJournalRecordSize);
-  if (!blob) return replay;
-  if (blob->empty()) {
-    replay.problem = "empty (nothing to recover)";
+  tf::JournalReader reader(keep);
+  if (!read_file_chunks(journal_path(path),
+                        tf::kJournalHeaderSize + kMaxStoreSamples * tf::kJournalRecordSize,
+                        [&reader](std::string_view piece) { reader.feed(piece); }))
     return replay;
-  }
-  if (blob->size() < kJournalHeaderSize ||
-      std::memcmp(blob->data(), kJournalMagic, sizeof kJournalMagic) != 0) {
-    replay.problem = "not a training journal (bad magic)";
-    return replay;
-  }
-  if (const auto version = get<std::uint32_t>(*blob, sizeof kJournalMagic); version != kVersion) {
-    replay.problem = "unsupported journal version " + std::to_string(version);
-    return replay;
-  }
+  if (replay.problem = reader.header_problem(); !replay.problem.empty()) return replay;
   std::lock_guard lock(mutex_);
   // A journal names the saved file it follows: one that follows another file holds pairs that file
   // already has. But with no pairs loaded (that file lost or set aside as corrupt) its pairs are in no
   // other place, and are kept.
-  if (get<std::uint32_t>(*blob, sizeof kJournalMagic + 4) != saved_crc_ && !samples_.empty()) {
+  if (reader.extends() != saved_crc_ && !samples_.empty()) {
     replay.stale = true;
     return replay;
   }
-  std::size_t at = kJournalHeaderSize;
-  std::size_t first_skipped = 0;  // 1-based number of the first record skipped
-  for (; at + kJournalRecordSize <= blob->size(); at += kJournalRecordSize) {
-    const std::string_view record = std::string_view(*blob).substr(at, kRecordSize);
-    if (get<std::uint32_t>(*blob, at + kRecordSize) != crc32(record)) break;
-    const Sample s = get_record(*blob, at);
-    // A whole record (its checksum holds) that is no pair: the records after it are sound, and kept.
-    if (!plausible(s)) {
-      if (replay.skipped++ == 0) first_skipped = (at - kJournalHeaderSize) / kJournalRecordSize + 1;
-      continue;
-    }
+  for (const Sample& s : reader.pairs)
     push_back_locked(s);
-    ++replay.recovered;
-  }
-  const std::size_t records = (at - kJournalHeaderSize) / kJournalRecordSize;
+  replay.recovered = reader.recovered;
+  replay.skipped = reader.skipped;
   if (replay.skipped > 0)
     replay.problem = std::to_string(replay.skipped) + " record(s) from record " +
-                     std::to_string(first_skipped) +
+                     std::to_string(reader.first_skipped) +
                      " on hold their checksum but no plausible pair (skipped)";
-  const auto also = [&](const std::string& text) {
-    replay.problem += (replay.problem.empty() ? "" : "; ") + text;
-  };
-  if (at + kJournalRecordSize <= blob->size())
-    also("record " + std::to_string(records + 1) + " fails its checksum; it and the " +
-         std::to_string(blob->size() - at) + " bytes from it on are dropped");
-  else if (at < blob->size())
-    also(std::to_string(blob->size() - at) + " bytes at the end are not a whole record (dropped)");
+  if (const std::string tail = reader.tail_problem(); !tail.empty())
+    replay.problem += (replay.problem.empty() ? "" : "; ") + tail;
   // The recovered pairs are in no saved file: they count as added since the save, and the journal is
   // rewritten with them (past any torn end) at the next append.
   new_samples_ += replay.recovered;

@@ -88,6 +88,8 @@ class TrainingStore {
 
  private:
   void enforce_bounds_locked();
+  // Replaces the pairs with `pairs` read from a file (none of them new), `skipped` records left out.
+  void install_locked(std::deque<Sample> pairs, std::size_t skipped);
   void clamp_counts_locked() noexcept;
   void empty_locked() noexcept;
   std::size_t append_journal_io(const std::filesystem::path& path);

@@ -2,11 +2,16 @@
 // the journal that keeps the pairs gathered since the last save through a power cut.
 #include <catch2/catch.hpp>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <memory>
 #include <string>
@@ -22,6 +27,7 @@ using namespace gearpulse::daemon;
 using gearpulse::test::add_pairs;
 using gearpulse::test::count_entries;
 using gearpulse::test::FileSizeLimit;
+using gearpulse::test::pair_time;
 using gearpulse::test::read_text;
 using gearpulse::test::TempDir;
 using gearpulse::test::write_text;
@@ -404,4 +410,94 @@ TEST_CASE("daemon: a record that is no pair though the file's checksum holds is 
   CHECK(pairs[50].freq == 40.0 + 51);
   CHECK(back.deserialize(store.serialize()).empty());
   CHECK(back.skipped() == 0);
+}
+
+TEST_CASE("daemon: a store and journal beyond model.max_samples are read in pieces, the newest kept") {
+  // 10,000 pairs make a file of 240 KB and 3,000 a journal of 84 KB: both read in 64 KiB pieces that
+  // split records.
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  TrainingStore store(1e9, 20000);
+  add_pairs(store, 0, 10000);
+  store.save(path);
+  add_pairs(store, 10000, 13000);
+  REQUIRE(store.append_journal(path) == 3000);
+
+  SECTION("a store of a larger bound reads both whole") {
+    TrainingStore back(1e9, 20000);
+    REQUIRE(back.load(path).empty());
+    const auto replay = back.replay_journal(path);
+    CHECK(replay.recovered == 3000);
+    CHECK(replay.problem.empty());
+    const auto a = store.snapshot();
+    const auto b = back.snapshot();
+    REQUIRE(a.size() == b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      CHECK(a[i].t == b[i].t);
+      CHECK(a[i].freq == b[i].freq);
+    }
+  }
+  SECTION("a store bounded to 1,000 pairs keeps the newest 1,000 of each") {
+    TrainingStore back(1e9, 1000);
+    REQUIRE(back.load(path).empty());
+    REQUIRE(back.size() == 1000);
+    CHECK(back.snapshot().front().t == pair_time(9000));
+    CHECK(back.snapshot().back().t == pair_time(9999));
+    const auto replay = back.replay_journal(path);
+    CHECK(replay.recovered == 3000);
+    REQUIRE(back.size() == 1000);
+    CHECK(back.snapshot().front().t == pair_time(12000));
+    CHECK(back.snapshot().back().t == pair_time(12999));
+    CHECK(back.new_samples() == 1000);
+  }
+}
+
+namespace {
+
+// VmRSS or VmHWM of this process, in KiB (-1 when /proc does not say).
+long status_kib(const std::string& field) {
+  std::ifstream in("/proc/self/status");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind(field + ":", 0) == 0) return std::stol(line.substr(field.size() + 1));
+  return -1;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "daemon: loading a store saved under a larger model.max_samples takes no more memory than its "
+    "bound") {
+  // A million pairs (24 MB) saved by a child process, so this one never held them; loaded into a store of
+  // 1,000 pairs, the peak resident memory grows by far less than the file (read whole, it grew by the
+  // file and the pairs, 48 MB).
+  TempDir dir;
+  const auto path = dir / "training.bin";
+  const pid_t child = ::fork();
+  REQUIRE(child >= 0);
+  if (child == 0) {
+    TrainingStore big(1e9, 1'000'000);
+    for (int i = 0; i < 1'000'000; ++i)
+      big.add({pair_time(i), 10.0, 50.0});
+    big.save(path);
+    std::_Exit(0);
+  }
+  int status = 0;
+  REQUIRE(::waitpid(child, &status, 0) == child);
+  REQUIRE(WIFEXITED(status));
+  REQUIRE(WEXITSTATUS(status) == 0);
+  {
+    // Resets the peak to what is resident now (Linux 4.0 on).
+    std::ofstream reset("/proc/self/clear_refs");
+    reset << "5" << std::flush;
+    if (!reset) GEARPULSE_SKIP_TEST("cannot reset the peak resident memory (/proc/self/clear_refs)");
+  }
+  const long before = status_kib("VmRSS");
+  REQUIRE(before > 0);
+  TrainingStore back(1e9, 1000);
+  REQUIRE(back.load(path).empty());
+  CHECK(back.size() == 1000);
+  CHECK(back.snapshot().back().t == pair_time(999'999));
+  const long grown = status_kib("VmHWM") - before;
+  INFO("peak resident memory grew by " << grown << " KiB");
+  CHECK(grown < 8 * 1024);
 }
