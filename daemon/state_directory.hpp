@@ -71,7 +71,7 @@ class StateDirectory {
   std::size_t max_samples_;
   std::optional<DirectoryLock> lock_;
 
-  mutable std::mutex mutex_;  // the problems below: written by the main and control threads
+  mutable std::mutex mutex_;  // the problems below: written by the main, state saver and control threads
   std::vector<std::string> problems_;
   FaultSpell save_fault_;     // the training store's saves failing (the last one's error)
   FaultSpell journal_fault_;  // journal appends failing (said once per spell)

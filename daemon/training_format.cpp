@@ -23,6 +23,22 @@ std::uint32_t crc32_update(std::uint32_t crc, std::string_view data) noexcept {
   return crc;
 }
 
+void NewestPairs::add(const Sample& s) {
+  if (ring_.size() < keep_) {
+    ring_.push_back(s);
+    return;
+  }
+  if (keep_ == 0) return;
+  ring_[oldest_] = s;
+  oldest_ = (oldest_ + 1) % keep_;
+}
+
+std::deque<Sample> NewestPairs::in_order() const {
+  std::deque<Sample> out(ring_.begin() + static_cast<std::ptrdiff_t>(oldest_), ring_.end());
+  out.insert(out.end(), ring_.begin(), ring_.begin() + static_cast<std::ptrdiff_t>(oldest_));
+  return out;
+}
+
 void StoreReader::feed(std::string_view bytes) {
   total_ += bytes.size();
   while (!bytes.empty()) {
@@ -95,8 +111,7 @@ void StoreReader::take(const Sample& s) {
     ++skipped;
     return;
   }
-  pairs.push_back(s);
-  if (pairs.size() > keep_) pairs.pop_front();
+  pairs.add(s);
 }
 
 void JournalReader::feed(std::string_view bytes) {
@@ -122,8 +137,7 @@ void JournalReader::feed(std::string_view bytes) {
         continue;
       }
       ++recovered;
-      pairs.push_back(s);
-      if (pairs.size() > keep_) pairs.pop_front();
+      pairs.add(s);
     }
   }
 }

@@ -9,6 +9,7 @@
 #include <deque>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/sample.hpp"
 
@@ -60,12 +61,27 @@ inline bool plausible(const Sample& s) {
 // CRC-32 (IEEE 802.3) of `data` continued from `crc`: crc32() starts from all ones and inverts the end.
 [[nodiscard]] std::uint32_t crc32_update(std::uint32_t crc, std::string_view data) noexcept;
 
+// The newest `keep` pairs of those added, in a ring that grows to `keep` and then overwrites its oldest:
+// no allocation per pair once full (a deque's push and pop allocated and freed a block every 21 pairs).
+class NewestPairs {
+ public:
+  explicit NewestPairs(std::size_t keep) : keep_(keep) {}
+  void add(const Sample& s);
+  // The pairs kept, oldest first.
+  [[nodiscard]] std::deque<Sample> in_order() const;
+
+ private:
+  std::size_t keep_;
+  std::vector<Sample> ring_;
+  std::size_t oldest_ = 0;  // ring_'s oldest pair once it holds `keep`
+};
+
 // A saved store read piece by piece as load() reads the file: only the newest `keep` plausible pairs are
 // kept, so a file written under a larger model.max_samples costs no more memory than the store it is
 // loaded into (pruned as a store of all its pairs would be: the newest `keep`, then by age).
 class StoreReader {
  public:
-  explicit StoreReader(std::size_t keep) : keep_(keep) {}
+  explicit StoreReader(std::size_t keep) : pairs(keep) {}
 
   void feed(std::string_view bytes);
 
@@ -73,8 +89,8 @@ class StoreReader {
   [[nodiscard]] std::string finish() const;
   [[nodiscard]] std::uint32_t stored_crc() const { return trailing_crc(pending_); }
 
-  std::deque<Sample> pairs;  // the newest `keep` plausible pairs, in the file's order
-  std::size_t skipped = 0;   // records that are no plausible pair
+  NewestPairs pairs;        // the newest `keep` plausible pairs
+  std::size_t skipped = 0;  // records that are no plausible pair
 
  private:
   // Moves bytes from the front of `bytes` to pending_ until it holds `size`.
@@ -82,7 +98,6 @@ class StoreReader {
   [[nodiscard]] std::string check_header();
   void take(const Sample& s);
 
-  std::size_t keep_;
   std::uint64_t total_ = 0;  // bytes fed
   std::string pending_;      // the header, a record split between pieces, or the trailing checksum
   bool header_read_ = false;
@@ -96,7 +111,7 @@ class StoreReader {
 // Records are read up to the first that fails its own checksum (a torn append at a power cut).
 class JournalReader {
  public:
-  explicit JournalReader(std::size_t keep) : keep_(keep) {}
+  explicit JournalReader(std::size_t keep) : pairs(keep) {}
 
   void feed(std::string_view bytes);
 
@@ -107,13 +122,12 @@ class JournalReader {
   // What was left unread past the last whole record, "" for nothing.
   [[nodiscard]] std::string tail_problem() const;
 
-  std::deque<Sample> pairs;  // the newest `keep` plausible pairs recovered, in the journal's order
+  NewestPairs pairs;  // the newest `keep` plausible pairs recovered
   std::size_t recovered = 0;
   std::size_t skipped = 0;
   std::size_t first_skipped = 0;  // 1-based number of the first record skipped
 
  private:
-  std::size_t keep_;
   std::uint64_t total_ = 0;
   std::string header_;
   std::string pending_;  // a record split between pieces

@@ -166,7 +166,7 @@ std::string TrainingStore::deserialize(std::string_view blob) {
   std::string problem = reader.finish();
   if (problem.empty()) {
     std::lock_guard lock(mutex_);
-    install_locked(std::move(reader.pairs), reader.skipped);
+    install_locked(reader.pairs.in_order(), reader.skipped);
   }
   return problem;
 }
@@ -253,7 +253,7 @@ std::string TrainingStore::load(const std::filesystem::path& path) {
   // A journal extends a file that loaded; one written after a corrupt file (set aside by the caller)
   // extends none, as does one of a first run that never saved.
   if (exists && problem.empty()) {
-    install_locked(std::move(reader.pairs), reader.skipped);
+    install_locked(reader.pairs.in_order(), reader.skipped);
     saved_crc_ = reader.stored_crc();
   }
   return problem;
@@ -334,7 +334,7 @@ TrainingStore::JournalReplay TrainingStore::replay_journal(const std::filesystem
     replay.stale = true;
     return replay;
   }
-  for (const Sample& s : reader.pairs)
+  for (const Sample& s : reader.pairs.in_order())
     push_back_locked(s);
   replay.recovered = reader.recovered;
   replay.skipped = reader.skipped;

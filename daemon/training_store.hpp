@@ -96,8 +96,8 @@ class TrainingStore {
   [[nodiscard]] std::string serialize_locked() const;
 
   mutable std::mutex mutex_;
-  // Serialises the file writes (save, journal) of the main loop and of a reset from the control thread,
-  // held across the I/O; mutex_ is taken only to copy, so add() never waits on a disk.
+  // Serialises the file writes (save, journal) of the state saver's thread, of the stop and of a reset from
+  // the control thread, held across the I/O; mutex_ is taken only to copy, so add() never waits on a disk.
   std::mutex io_mutex_;
   std::deque<Sample> samples_;
   // Driving time samples_ covers: the steps between consecutive pairs, each counted up to kMaxStepS, so

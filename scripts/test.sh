@@ -123,7 +123,7 @@ cmake -S . -B build-tsan -DGEARPULSE_WERROR=ON -DCMAKE_BUILD_TYPE=RelWithDebInfo
   alsa_recovery_test gpsd_client_test gpsd_backoff_test gps_history_test pulse_thread_test wake_event_test \
   log_queue_test control_test control_slots_test persistence_test training_store_test retrainer_test \
   pipeline_test pipeline_wake_test fault_reporter_test audio_front_end_test gearpulsed gearpulsectl \
-  daemon_run_test daemon_state_test gearpulsectl_test
+  daemon_run_test daemon_state_test gearpulsectl_test state_saver_test
 stage "TSan build done"
 finish_tests release-paced "$may_skip"
 stage "release tree's paced tests passed"
@@ -138,7 +138,7 @@ stage "package installed, verified and purged"
 
 # The three-minute drive in real time runs in the release tree only: under the sanitizers its daemon runs
 # the same code the pipeline and daemon tests drive through the same ALSA, gpsd and PTY paths.
-tsan_tests="^(ring|published|alsa|audio|gpsd|gps history|pulse|wake event|log queue|control|daemon|pipeline|faults):"
+tsan_tests="^(ring|published|alsa|audio|gpsd|gps history|pulse|wake event|log queue|control|daemon|pipeline|faults|state saver):"
 start_tests asan-paced build-asan "$paced_jobs_sanitized" -L paced -E "^e2e: (pulses match|10 Hz GPS)"
 start_tests asan build-asan "$jobs" -LE paced
 finish_tests asan "$may_skip_sanitized"

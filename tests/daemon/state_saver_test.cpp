@@ -64,9 +64,13 @@ TEST_CASE("state saver: saves what is unsaved, journals between saves and after 
     saver.stop();
     const auto writes = log.copy();
     CHECK(count(writes, "journal") >= 2);
-    // A successful save is not followed by a journal append at once: the save holds the pairs.
-    for (std::size_t i = 0; i + 1 < writes.size(); ++i)
-      if (writes[i] == "save") CHECK(writes[i + 1] != "save");
+  }
+  SECTION("a save that works is not followed by a journal append: the file holds the pairs") {
+    StateSaver fast(log.hooks(), 0.02s, 3600s);
+    fast.start();
+    REQUIRE(wait_for([&] { return count(log.copy(), "save") >= 3; }, 10s));
+    fast.stop();
+    CHECK(count(log.copy(), "journal") == 0);
   }
   SECTION("a store its file holds already is not saved again; the journal appends go on") {
     log.unsaved = false;
@@ -122,7 +126,7 @@ TEST_CASE("state saver: a stalled write holds up neither status nor a reload, an
   saver.set_save_interval(0.5s);
   const auto answered = std::chrono::steady_clock::now() - asked;
   CHECK(busy >= 250ms);
-  CHECK(answered < 100ms);  // neither waited for the write
+  CHECK(answered < 2s);  // neither waited for the write (which would be for good)
   release.set_value();
   CHECK(wait_for([&] { return saver.busy_for() < 250ms; }, 10s));
   saver.stop();

@@ -413,21 +413,21 @@ TEST_CASE("daemon: a record that is no pair though the file's checksum holds is 
 }
 
 TEST_CASE("daemon: a store and journal beyond model.max_samples are read in pieces, the newest kept") {
-  // 10,000 pairs make a file of 240 KB and 3,000 a journal of 84 KB: both read in 64 KiB pieces that
-  // split records.
+  // 10,000 pairs make a file of 240 KB and 5,000 a journal of 140 KB: both read in 64 KiB pieces, the
+  // file's second and the journal's third of which start inside a record.
   TempDir dir;
   const auto path = dir / "training.bin";
   TrainingStore store(1e9, 20000);
   add_pairs(store, 0, 10000);
   store.save(path);
-  add_pairs(store, 10000, 13000);
-  REQUIRE(store.append_journal(path) == 3000);
+  add_pairs(store, 10000, 15000);
+  REQUIRE(store.append_journal(path) == 5000);
 
   SECTION("a store of a larger bound reads both whole") {
     TrainingStore back(1e9, 20000);
     REQUIRE(back.load(path).empty());
     const auto replay = back.replay_journal(path);
-    CHECK(replay.recovered == 3000);
+    CHECK(replay.recovered == 5000);
     CHECK(replay.problem.empty());
     const auto a = store.snapshot();
     const auto b = back.snapshot();
@@ -444,10 +444,10 @@ TEST_CASE("daemon: a store and journal beyond model.max_samples are read in piec
     CHECK(back.snapshot().front().t == pair_time(9000));
     CHECK(back.snapshot().back().t == pair_time(9999));
     const auto replay = back.replay_journal(path);
-    CHECK(replay.recovered == 3000);
+    CHECK(replay.recovered == 5000);
     REQUIRE(back.size() == 1000);
-    CHECK(back.snapshot().front().t == pair_time(12000));
-    CHECK(back.snapshot().back().t == pair_time(12999));
+    CHECK(back.snapshot().front().t == pair_time(14000));
+    CHECK(back.snapshot().back().t == pair_time(14999));
     CHECK(back.new_samples() == 1000);
   }
 }
@@ -469,7 +469,7 @@ TEST_CASE(
     "bound") {
   // A million pairs (24 MB) saved by a child process, so this one never held them; loaded into a store of
   // 1,000 pairs, the peak resident memory grows by far less than the file (read whole, it grew by the
-  // file and the pairs, 48 MB).
+  // file and the pairs, 46 MB).
   TempDir dir;
   const auto path = dir / "training.bin";
   const pid_t child = ::fork();
