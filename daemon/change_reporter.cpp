@@ -9,7 +9,8 @@
 
 namespace gearpulse::daemon {
 
-void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot& now) {
+void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot& now,
+                         std::chrono::steady_clock::time_point at) {
   const std::string server = fmt::format("{}:{}", config_.gps.host, config_.gps.port);
   const std::string output = output_target(config_.output);
   // From the connection itself, not from a change between two snapshots: the first connection is often
@@ -22,8 +23,7 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
   // at once, then at most once a minute with how often it came. A fix is said at the first one, after a
   // spell without one that was said, and after a lost connection; a flap's return is a debug line.
   std::uint64_t no_fix_starts = 0;
-  const StateFault::Say no_fix =
-      no_fix_.update(now.gps_state == GpsState::kNoFix, std::chrono::steady_clock::now(), no_fix_starts);
+  const StateFault::Say no_fix = no_fix_.update(now.gps_state == GpsState::kNoFix, at, no_fix_starts);
   if (no_fix == StateFault::Say::kStart) {
     // How long GPS has really been gone: after a reconnect that can be far more than the timeout.
     // (The source it switches to is said when it switches: after the timeout, not necessarily yet.)
@@ -78,8 +78,7 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
   gps_source_seen_ = gps_source_seen_ || now.source == SpeedSource::kGps;
   std::uint64_t departures = 0;
   const StateFault::Say away = gps_source_seen_
-                                   ? away_from_gps_.update(now.source != SpeedSource::kGps,
-                                                           std::chrono::steady_clock::now(), departures)
+                                   ? away_from_gps_.update(now.source != SpeedSource::kGps, at, departures)
                                    : StateFault::Say::kNothing;
   if (now.source != before.source || away == StateFault::Say::kStart) {
     const std::string change =
@@ -96,8 +95,7 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
   // A navigator that should be reading the pulses is not: said when the last reader goes (or none is
   // there at start) and when one comes, at most once a minute for a reader that opens and closes often.
   std::uint64_t starts = 0;
-  switch (no_reader_.update(now.output_state == OutputState::kNoReader, std::chrono::steady_clock::now(),
-                            starts)) {
+  switch (no_reader_.update(now.output_state == OutputState::kNoReader, at, starts)) {
     case StateFault::Say::kStart:
       spdlog::warn(
           "output: no process has {} open; pulses are discarded and counted as unheard ({} so far){}", output,
@@ -114,8 +112,7 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
   // once a minute, and when none has failed for the 5 s the state lasts (pipeline.cpp, kRecentFault; no
   // write may have been tried meanwhile, so it is not said that they work).
   std::uint64_t failing_starts = 0;
-  switch (write_errors_.update(now.output_state == OutputState::kWriteErrors,
-                               std::chrono::steady_clock::now(), failing_starts)) {
+  switch (write_errors_.update(now.output_state == OutputState::kWriteErrors, at, failing_starts)) {
     case StateFault::Say::kStart:
       spdlog::warn(
           "output: writes to {} are failing ({}); pulses are counted but not delivered; check the "

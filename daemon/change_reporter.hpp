@@ -3,6 +3,7 @@
 // or back, the speed's source leaving GPS or coming back to it, an output without a reader), and
 // repeated faults at most once a minute, so a log read at 2 a.m. tells what happened and when. Used by
 // the main thread only.
+#include <chrono>
 #include <cstdint>
 
 #include "daemon/config.hpp"
@@ -14,7 +15,9 @@ namespace gearpulse::daemon {
 class ChangeReporter {
  public:
   explicit ChangeReporter(const Config& config) : config_(config) {}
-  void log(const PipelineSnapshot& before, const PipelineSnapshot& now);
+  // `at`: when `now` was taken (the states said at most once a minute are timed by it).
+  void log(const PipelineSnapshot& before, const PipelineSnapshot& now,
+           std::chrono::steady_clock::time_point at = std::chrono::steady_clock::now());
 
  private:
   const Config& config_;  // the device names the lines give

@@ -2,6 +2,8 @@
 // GPS that comes and goes is said at most once a minute.
 #include <catch2/catch.hpp>
 
+#include <chrono>
+
 #include "daemon/change_reporter.hpp"
 #include "daemon/config.hpp"
 #include "tests/daemon/log_lines.hpp"
@@ -108,4 +110,42 @@ TEST_CASE("changes: a speed source that flaps between GPS and the engine is said
   CHECK(log.count("synthesis: speed source engine -> coast") == 0);
   CHECK(log.count("synthesis: speed source coast -> engine") == 0);
   CHECK(log.count("synthesis: speed source") == 3);
+}
+
+TEST_CASE("changes: GPS that keeps leaving the speed is said again after a minute, with how often it left") {
+  gearpulse::test::LogLines log;
+  Config config;
+  ChangeReporter changes(config);
+  using gearpulse::SpeedSource;
+  const auto source = [](SpeedSource s) {
+    PipelineSnapshot snap = gps(s == SpeedSource::kGps ? GpsState::kFix : GpsState::kNoFix, 3.0);
+    snap.source = s;
+    return snap;
+  };
+  const PipelineSnapshot by_gps = source(SpeedSource::kGps), engine = source(SpeedSource::kEngine);
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto at = [t0](int s) { return t0 + std::chrono::seconds(s); };
+  changes.log(by_gps, by_gps, at(0));
+  changes.log(by_gps, engine, at(1));
+  changes.log(engine, by_gps, at(2));
+  for (int flap = 0; flap < 5; ++flap) {  // held back: within the minute
+    changes.log(by_gps, engine, at(3 + 2 * flap));
+    changes.log(engine, by_gps, at(4 + 2 * flap));
+  }
+  CHECK(log.count("synthesis: speed source gps -> engine") == 1);
+  changes.log(by_gps, engine, at(70));
+  CHECK(
+      log.count("synthesis: speed source gps -> engine at 0.0 km/h (gear 0) (GPS left 6 times since the last "
+                "line said so)") == 1);
+  changes.log(engine, by_gps, at(71));
+  CHECK(log.count("synthesis: speed source engine -> gps") == 2);
+  // Away again twice within the minute, and still away when it is over: said then, with no change.
+  changes.log(by_gps, engine, at(72));
+  changes.log(engine, by_gps, at(73));
+  changes.log(by_gps, engine, at(74));
+  changes.log(engine, engine, at(100));
+  CHECK(log.count("synthesis: speed source engine at") == 0);
+  changes.log(engine, engine, at(140));
+  CHECK(log.count("synthesis: speed source engine at 0.0 km/h (gear 0) (GPS left 2 times since the last line "
+                  "said so)") == 1);
 }
