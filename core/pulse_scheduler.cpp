@@ -9,6 +9,10 @@ namespace gearpulse {
 namespace {
 
 constexpr double kNsPerS = 1e9;
+// The pulses owed are bounded by this long at max_freq_hz: far more than a thread woken late owes (the
+// pulse thread counts an edge 1 ms behind as late), and little enough that a backlog paid out after a stop
+// moves the navigator's car for at most half a second.
+constexpr double kMaxOwedS = 0.5;
 
 [[noreturn]] void bad(const std::string& field, const std::string& why) {
   throw std::invalid_argument("pulse config: " + field + " " + why);
@@ -31,6 +35,7 @@ PulseScheduler::PulseScheduler(const PulseConfig& config, std::int64_t t0_ns)
     : config_(config), min_spacing_ns_(0), t_(t0_ns) {
   validate(config_);
   min_spacing_ns_ = kNsPerS / config_.max_freq_hz;
+  max_owed_ = 1.0 + kMaxOwedS * config_.max_freq_hz;
   // The shortest low time the train ever has (at max frequency); a rise that is late never comes sooner
   // than this after the previous fall, so a counter on the line sees every pulse.
   min_low_ns_ = config_.pulse_width_s > 0 ? min_spacing_ns_ - config_.pulse_width_s * kNsPerS
@@ -41,6 +46,10 @@ void PulseScheduler::advance_to(std::int64_t t_ns) noexcept {
   if (t_ns <= t_) return;
   owed_ += freq_ * static_cast<double>(t_ns - t_) / kNsPerS;
   t_ = t_ns;
+  if (owed_ > max_owed_) {
+    discarded_ += owed_ - max_owed_;
+    owed_ = max_owed_;
+  }
 }
 
 void PulseScheduler::set_speed(std::int64_t t_ns, double speed_mps) noexcept {

@@ -8,7 +8,10 @@
 // A pulse high when the speed rises falls as one at the new frequency would (never in the past), so a slow
 // pulse does not hold the train back. Below min_freq_hz the train stops: the phase is frozen (a crawl below
 // that speed adds no distance) and no edge is scheduled except the fall of a pulse already high. Above
-// max_freq_hz the frequency is clamped. Pure and real-time safe: time is an argument (CLOCK_MONOTONIC ns in
+// max_freq_hz the frequency is clamped. The pulses owed are bounded: beyond half a second's pulses at
+// max_freq_hz they are dropped and counted (discarded()), so a line that cannot keep up (an output slower
+// than its edges, a thread held up for long) does not pay them out after the car has stopped; a caller
+// woken late owes far fewer. Pure and real-time safe: time is an argument (CLOCK_MONOTONIC ns in
 // the daemon), nothing allocates or throws after construction.
 #include <cstdint>
 #include <limits>
@@ -58,8 +61,11 @@ class PulseScheduler {
   [[nodiscard]] double frequency_hz() const noexcept { return freq_; }     // after clamping / stopping
   [[nodiscard]] double speed_mps() const noexcept { return speed_; }       // as last set
   [[nodiscard]] std::uint64_t pulses() const noexcept { return pulses_; }  // rising edges committed
+  // Whole pulses dropped from the pulses owed beyond the bound (half a second at max_freq_hz).
+  [[nodiscard]] std::uint64_t discarded() const noexcept { return static_cast<std::uint64_t>(discarded_); }
   [[nodiscard]] bool high() const noexcept { return high_; }
-  // Distance in pulses integrated up to t_ns (>= the scheduler's time): pulses() + owed phase.
+  // Distance in pulses integrated up to t_ns (>= the scheduler's time): pulses() + owed phase (less what
+  // was discarded()).
   [[nodiscard]] double phase_pulses(std::int64_t t_ns) const noexcept;
   [[nodiscard]] const PulseConfig& config() const noexcept { return config_; }
 
@@ -73,6 +79,8 @@ class PulseScheduler {
   double min_low_ns_ = 0.0;  // low time at max_freq_hz
   std::int64_t t_;           // time up to which owed_ is integrated
   double owed_ = 0.0;        // phase not yet emitted, in pulses (a rise is due at 1)
+  double max_owed_ = 1.0;    // the bound on owed_
+  double discarded_ = 0.0;   // phase dropped beyond it, in pulses
   double freq_ = 0.0;        // Hz
   double speed_ = 0.0;       // m/s
   std::uint64_t pulses_ = 0;

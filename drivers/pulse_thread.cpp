@@ -50,6 +50,7 @@ PulseThreadStatus PulseThread::status() const noexcept {
   s.pulses = pulses_.load(std::memory_order_acquire);
   s.late_edges = late_edges_.load(std::memory_order_relaxed);
   s.max_late_ns = max_late_ns_.load(std::memory_order_relaxed);
+  s.discarded = discarded_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
   s.memory_locked = thread_.memory_locked();
   s.running = thread_.running();
@@ -69,10 +70,13 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
   bool high = false;
   std::int64_t max_late = 0;
   // Each edge is committed at the instant it is written (read again after every write), so one woken late
-  // writes the overdue edge and sleeps until the next: a pulse keeps its width on the line.
+  // writes the overdue edge and sleeps until the next: a pulse keeps its width on the line. A pass writes
+  // only the edges due when it began: with an output slower than the edges (a USB adapter's round trip
+  // over the gap between them) it would otherwise never end, and the thread would beat, read the speed
+  // and see a stop no more.
   auto emit_due = [&](std::int64_t now) noexcept {
-    for (PulseEdge e = sched.emit_due(now); e.kind != EdgeKind::kNone;
-         e = sched.emit_due(now = monotonic_ns())) {
+    for (const std::int64_t due_by = now; sched.next_edge().t_ns <= due_by; now = monotonic_ns()) {
+      const PulseEdge e = sched.emit_due(now);
       if (e.kind == EdgeKind::kRise) {
         // Counted before the output takes it: what the output counts of its pulses (unheard, dropped,
         // written) is never more than the count a reader of both finds here after it. Release: a reader
@@ -96,6 +100,7 @@ void PulseThread::run(std::int64_t t0_ns) noexcept {
         max_late_ns_.store(late, std::memory_order_relaxed);
       }
     }
+    discarded_.store(sched.discarded(), std::memory_order_relaxed);
   };
 
   while (!thread_.stopping()) {

@@ -37,6 +37,7 @@ struct PulseThreadStatus {
   std::uint64_t pulses = 0;      // rising edges emitted
   std::uint64_t late_edges = 0;  // edges emitted more than 1 ms after their scheduled time
   std::int64_t max_late_ns = 0;  // worst lateness seen
+  std::uint64_t discarded = 0;   // pulses owed beyond the scheduler's bound, dropped (PulseScheduler)
   bool realtime_ok = false;      // SCHED_FIFO granted
   bool memory_locked = false;    // mlockall succeeded
   bool running = false;
@@ -78,6 +79,7 @@ class PulseThread {
   std::atomic<std::uint64_t> pulses_{0};
   std::atomic<std::uint64_t> late_edges_{0};
   std::atomic<std::int64_t> max_late_ns_{0};
+  std::atomic<std::uint64_t> discarded_{0};
   std::atomic<std::size_t> logged_{0};
   std::atomic<std::uint64_t> turns_{0};
   WakeEvent wake_;       // set_speed() and stop() signal it, the thread waits on it

@@ -1,5 +1,9 @@
 #include <catch2/catch.hpp>
 
+#include <time.h>
+
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <memory>
@@ -213,4 +217,49 @@ TEST_CASE("pulse: a late output reports its device's failed writes and their err
   late.rise();
   CHECK(late.errors() == 2);
   CHECK(late.last_error() == EIO);
+}
+
+namespace {
+
+// An output each of whose writes takes `write_ns` while `slow` (a USB adapter's round trip).
+struct SlowOutput final : gearpulse::PulseOutput {
+  std::atomic<bool> slow{true};
+  std::int64_t write_ns = 1'000'000;
+  void wait() const noexcept {
+    if (!slow.load()) return;
+    const timespec ts{0, static_cast<long>(write_ns)};
+    ::nanosleep(&ts, nullptr);
+  }
+  void rise() noexcept override { wait(); }
+  void fall() noexcept override { wait(); }
+  [[nodiscard]] std::uint64_t errors() const noexcept override { return 0; }
+  [[nodiscard]] std::string describe() const override { return "slow"; }
+};
+
+}  // namespace
+
+TEST_CASE("pulse: an output slower than its edges keeps the thread beating, and a stop ends it") {
+  // 700 Hz (edges 0.7 ms apart) on writes of 1 ms each: a pass that wrote every edge due by the end of its
+  // last write never ended, so the heartbeat aged past the watchdog's limit and stop() never returned.
+  SlowOutput out;
+  gearpulse::PulseThreadConfig cfg;
+  cfg.pulse.pulses_per_km = 1000.0;
+  cfg.pulse.max_freq_hz = 1000.0;
+  cfg.pulse.pulse_width_s = 0.0005;
+  gearpulse::PulseThread thread(out, cfg);
+  thread.start();
+  thread.set_speed(700.0);
+  std::int64_t worst_age = 0;
+  for (int i = 0; i < 30; ++i) {
+    std::this_thread::sleep_for(100ms);
+    worst_age = std::max(worst_age, gearpulse::monotonic_ns() - thread.status().heartbeat_ns);
+  }
+  CHECK(worst_age < 1'000'000'000);
+  const gearpulse::PulseThreadStatus st = thread.status();
+  CHECK(st.discarded > 0);  // the pulses it could not write, dropped beyond half a second's
+  out.slow = false;         // lets the old loop end too, so the test fails rather than hangs
+  thread.set_speed(0.0);
+  const auto asked = std::chrono::steady_clock::now();
+  thread.stop();
+  CHECK(std::chrono::steady_clock::now() - asked < 2s);
 }
