@@ -138,6 +138,15 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
     limiter_.reset("output-dropped");
     spdlog::info("output: the reader of {} keeps up again", output);
   }
+  if (now.pulses_discarded > before.pulses_discarded) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("pulses-discarded", suppressed))
+      spdlog::warn(
+          "output: pulses come due faster than {} takes them: {} owed beyond half a second at "
+          "output.max_frequency dropped (total {}); the device is too slow for the rate, or the pulse "
+          "thread is held up (set audio.realtime)",
+          output, now.pulses_discarded - before.pulses_discarded, now.pulses_discarded);
+  }
   if (now.xruns > before.xruns) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("xrun", suppressed))

@@ -237,6 +237,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     const PulseThreadStatus ps = d.pulses->status();
     beats.push_back({"pulse", ps.heartbeat_ns, !ps.running});
     s.pulses = ps.pulses;
+    s.pulses_discarded = ps.discarded;
     s.pulse_frequency = d.pulses->target_speed() * d.config.output.pulses_per_km / 1000.0;
     if (s.pulse_frequency < d.config.output.min_frequency) s.pulse_frequency = 0.0;
     s.pulse_frequency = std::min(s.pulse_frequency, d.config.output.max_frequency);

@@ -23,7 +23,8 @@ struct PipelineSnapshot {
   SpeedSource source = SpeedSource::kNone;
   int gear = 0;
   std::uint64_t pulses = 0;
-  double pulse_frequency = 0.0;  // Hz
+  std::uint64_t pulses_discarded = 0;  // owed beyond the scheduler's bound, dropped (PulseScheduler)
+  double pulse_frequency = 0.0;        // Hz
   OutputState output_state = OutputState::kOff;
   std::string output_error;
   std::uint64_t output_dropped = 0;  // pulses a present reader did not take (PulseOutput::dropped)

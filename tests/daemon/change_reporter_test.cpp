@@ -149,3 +149,21 @@ TEST_CASE("changes: GPS that keeps leaving the speed is said again after a minut
   CHECK(log.count("synthesis: speed source engine at 0.0 km/h (gear 0) (GPS left 2 times since the last line "
                   "said so)") == 1);
 }
+
+TEST_CASE("changes: pulses dropped because the line cannot keep up are said, at most once a minute") {
+  gearpulse::test::LogLines log;
+  Config config;
+  config.output.kind = OutputKind::kPty;
+  config.output.path = "/run/gearpulse/pulse";
+  ChangeReporter changes(config);
+  PipelineSnapshot before, now;
+  now.pulses_discarded = 12;
+  changes.log(before, now);
+  CHECK(
+      log.count("output: pulses come due faster than /run/gearpulse/pulse takes them: 12 owed beyond half a "
+                "second at output.max_frequency dropped (total 12)") == 1);
+  PipelineSnapshot later = now;
+  later.pulses_discarded = 20;
+  changes.log(now, later);
+  CHECK(log.count("output: pulses come due faster than") == 1);
+}
