@@ -39,7 +39,7 @@ void StateSaver::set_save_interval(Seconds interval) noexcept {
 
 StateSaver::Seconds StateSaver::busy_for() const noexcept {
   std::lock_guard lock(mutex_);
-  return busy_ ? Seconds(Clock::now() - busy_since_) : Seconds(0.0);
+  return writing_since_ ? Seconds(Clock::now() - *writing_since_) : Seconds(0.0);
 }
 
 void StateSaver::run() noexcept {
@@ -56,8 +56,7 @@ void StateSaver::run() noexcept {
       continue;  // stopping, or the save interval changed: the loop's test or a new deadline
     const auto now = Clock::now();
     const bool save = now >= save_due;
-    busy_ = true;
-    busy_since_ = now;
+    writing_since_ = now;
     lock.unlock();
     // The writes say their own faults (StateDirectory) and do not throw.
     if (save) {
@@ -66,7 +65,7 @@ void StateSaver::run() noexcept {
       writes_.journal();
     }
     lock.lock();
-    busy_ = false;
+    writing_since_.reset();
     last_journal = now;
     if (save) last_save = now;
   }

@@ -9,6 +9,7 @@
 #include <condition_variable>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 namespace gearpulse::daemon {
@@ -45,8 +46,7 @@ class StateSaver {
   std::condition_variable wake_;
   Seconds save_interval_;
   bool stop_ = false;
-  bool busy_ = false;
-  Clock::time_point busy_since_{};
+  std::optional<Clock::time_point> writing_since_;  // the write in progress began then
   std::thread thread_;
 };
 

@@ -6,6 +6,17 @@
 #include "daemon/training_store.hpp"
 
 namespace gearpulse::daemon::training_format {
+namespace {
+
+// Moves bytes from the front of `bytes` to `into` until it holds `size`; returns the bytes moved.
+std::string_view fill_to(std::string& into, std::string_view& bytes, std::size_t size) {
+  const std::string_view piece = bytes.substr(0, std::min(size - into.size(), bytes.size()));
+  into.append(piece);
+  bytes.remove_prefix(piece.size());
+  return piece;
+}
+
+}  // namespace
 
 std::uint32_t crc32_update(std::uint32_t crc, std::string_view data) noexcept {
   static const auto table = [] {
@@ -88,10 +99,8 @@ std::string StoreReader::finish() const {
 }
 
 void StoreReader::fill(std::string_view& bytes, std::size_t size, bool checksummed) {
-  const std::string_view piece = bytes.substr(0, std::min(size - pending_.size(), bytes.size()));
+  const std::string_view piece = fill_to(pending_, bytes, size);
   if (checksummed) crc_ = crc32_update(crc_, piece);
-  pending_.append(piece);
-  bytes.remove_prefix(piece.size());
 }
 
 std::string StoreReader::check_header() {
@@ -117,28 +126,27 @@ void StoreReader::take(const Sample& s) {
 void JournalReader::feed(std::string_view bytes) {
   total_ += bytes.size();
   while (!bytes.empty() && !broken_) {
-    const std::size_t size = header_.size() < kJournalHeaderSize ? kJournalHeaderSize : kJournalRecordSize;
-    std::string& into = header_.size() < kJournalHeaderSize ? header_ : pending_;
-    const std::string_view piece = bytes.substr(0, std::min(size - into.size(), bytes.size()));
-    into.append(piece);
-    bytes.remove_prefix(piece.size());
-    if (&into == &pending_ && pending_.size() == kJournalRecordSize) {
-      const std::string_view record = std::string_view(pending_).substr(0, kRecordSize);
-      if (get<std::uint32_t>(pending_, kRecordSize) != crc32(record)) {
-        broken_ = true;
-        return;
-      }
-      ++records_;
-      const Sample s = get_record(pending_, 0);
-      pending_.clear();
-      // A whole record (its checksum holds) that is no pair: the records after it are sound, and kept.
-      if (!plausible(s)) {
-        if (skipped++ == 0) first_skipped = records_;
-        continue;
-      }
-      ++recovered;
-      pairs.add(s);
+    if (header_.size() < kJournalHeaderSize) {
+      fill_to(header_, bytes, kJournalHeaderSize);
+      continue;
     }
+    fill_to(pending_, bytes, kJournalRecordSize);
+    if (pending_.size() < kJournalRecordSize) return;  // the record's rest comes with the next piece
+    const std::string_view record = std::string_view(pending_).substr(0, kRecordSize);
+    if (get<std::uint32_t>(pending_, kRecordSize) != crc32(record)) {
+      broken_ = true;
+      return;
+    }
+    ++records_;
+    const Sample s = get_record(pending_, 0);
+    pending_.clear();
+    // A whole record (its checksum holds) that is no pair: the records after it are sound, and kept.
+    if (!plausible(s)) {
+      if (skipped++ == 0) first_skipped = records_;
+      continue;
+    }
+    ++recovered;
+    pairs.add(s);
   }
 }
 

@@ -8,6 +8,7 @@
 #include "daemon/config.hpp"
 #include "tests/daemon/log_lines.hpp"
 
+using gearpulse::SpeedSource;
 using gearpulse::daemon::ChangeReporter;
 using gearpulse::daemon::Config;
 using gearpulse::daemon::GpsState;
@@ -21,6 +22,15 @@ PipelineSnapshot gps(GpsState state, double age = -1.0) {
   PipelineSnapshot s;
   s.gps_state = state;
   s.gps_age = age;
+  return s;
+}
+
+// A snapshot whose speed (m/s, in `gear`) comes from `source`: GPS with a fix, the others without one.
+PipelineSnapshot speed_from(SpeedSource source, double speed = 0.0, int gear = 0) {
+  PipelineSnapshot s = gps(source == SpeedSource::kGps ? GpsState::kFix : GpsState::kNoFix, 3.0);
+  s.source = source;
+  s.speed = speed;
+  s.gear = gear;
   return s;
 }
 }  // namespace
@@ -86,14 +96,7 @@ TEST_CASE("changes: a speed source that flaps between GPS and the engine is said
   gearpulse::test::LogLines log;
   Config config;
   ChangeReporter changes(config);
-  using gearpulse::SpeedSource;
-  const auto source = [](SpeedSource s) {
-    PipelineSnapshot snap = gps(s == SpeedSource::kGps ? GpsState::kFix : GpsState::kNoFix, 3.0);
-    snap.source = s;
-    snap.speed = 20.0;
-    snap.gear = 3;
-    return snap;
-  };
+  const auto source = [](SpeedSource s) { return speed_from(s, 20.0, 3); };
   const PipelineSnapshot none = source(SpeedSource::kNone), by_gps = source(SpeedSource::kGps),
                          engine = source(SpeedSource::kEngine), coast = source(SpeedSource::kCoast);
   changes.log(none, none);  // the daemon starts without a speed
@@ -116,12 +119,7 @@ TEST_CASE("changes: GPS that keeps leaving the speed is said again after a minut
   gearpulse::test::LogLines log;
   Config config;
   ChangeReporter changes(config);
-  using gearpulse::SpeedSource;
-  const auto source = [](SpeedSource s) {
-    PipelineSnapshot snap = gps(s == SpeedSource::kGps ? GpsState::kFix : GpsState::kNoFix, 3.0);
-    snap.source = s;
-    return snap;
-  };
+  const auto source = [](SpeedSource s) { return speed_from(s); };
   const PipelineSnapshot by_gps = source(SpeedSource::kGps), engine = source(SpeedSource::kEngine);
   const auto t0 = std::chrono::steady_clock::now();
   const auto at = [t0](int s) { return t0 + std::chrono::seconds(s); };
