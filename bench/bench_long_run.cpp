@@ -13,8 +13,8 @@
 // Everything the daemon's configuration counts in seconds is divided by `speedup`: retrain_interval
 // (600 s), save_interval (300 s), store_hours; the young model's schedule is off (learn_young_time = 0:
 // it counts moving time from the pairs' wall-clock stamps, which run `speedup` times slow), so the model
-// is refitted by the interval rule alone (600 new pairs). The store holds `store-hours` of driving (a
-// quarter of the run's by default), so it is full from early on.
+// is refitted by the interval rule alone (600 new pairs, or fewer: below). The store holds `store-hours` of
+// driving (a quarter of the run's by default), so it is full from early on.
 //
 // Sampled every wall second: resident memory (VmRSS), open file descriptors and threads of this process;
 // every simulated hour: the daemon's status over its control socket. Figures:
@@ -418,15 +418,18 @@ int main(int argc, char** argv) {
   ::setenv("ALSA_CONFIG_PATH", ("/usr/share/alsa/alsa.conf:" + (dir / "asound.conf").string()).c_str(), 1);
   const int port = gearpulse::test::free_port();
   const std::string socket = (dir / "control.sock").string();
+  // At k times real time the pairs come k a second: the store's hours hold k times the pairs the
+  // configuration counts (one a second), and the retrain threshold is kept within that count.
+  const auto min_new_samples = std::min<long>(600, std::lround(std::floor(o.store_hours / k * 3600.0)));
   const std::string config_text = fmt::format(
       "[audio]\ndevice = \"longrun\"\nrate = {}\nformat = \"S16_LE\"\nperiod_frames = {}\n"
       "[gps]\nhost = \"127.0.0.1\"\nport = {}\n"
       "[output]\nkind = \"none\"\npulses_per_km = {}\nmax_frequency = {}\n"
       "[model]\nstate_dir = \"{}\"\nretrain_interval = {}\nsave_interval = {}\nstore_hours = {}\n"
-      "learn_young_time = 0\n"
+      "min_new_samples = {}\nlearn_young_time = 0\n"
       "[control]\nsocket = \"{}\"\n[log]\nlevel = \"warn\"\n",
       kRate, kPeriod, port, kPulsesPerKm, kMaxFrequency, (dir / "state").string(), 600.0 / k, 300.0 / k,
-      o.store_hours / k, socket);
+      o.store_hours / k, min_new_samples, socket);
   gearpulse::test::write_text(dir / "gearpulse.toml", config_text);
   gearpulse::daemon::Config config;
   try {

@@ -1,5 +1,6 @@
 #include "daemon/config.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -272,6 +273,18 @@ void check_relations(const Config& c, const toml::table& root, const std::string
     fail({"output.min_frequency", "output.max_frequency", "output.pulse_width", "output.duty"},
          std::string("[output]: ") + e.what());
   }
+  // A retrain waits for model.min_new_samples new pairs, and the store counts no more new pairs than it
+  // holds: a store smaller than that (by its cap, or by the hours it keeps at one pair a second) would
+  // never retrain again once the young model's schedule ended, with nothing said.
+  const double held =
+      std::min(static_cast<double>(c.model.max_samples), std::floor(c.model.store_hours * 3600.0));
+  if (static_cast<double>(c.model.min_new_samples) > held)
+    fail({"model.min_new_samples", "model.max_samples", "model.store_hours"},
+         "model.min_new_samples (" + std::to_string(c.model.min_new_samples) +
+             " pairs) must be at most what the store holds: model.max_samples (" +
+             std::to_string(c.model.max_samples) + ") and model.store_hours (" +
+             format_number(c.model.store_hours) + " h, " +
+             format_number(std::floor(c.model.store_hours * 3600.0)) + " pairs at one a second)");
 }
 
 // A relative path in the file is taken from the file's own directory, as the file's author sees it: under

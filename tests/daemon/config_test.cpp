@@ -183,6 +183,13 @@ TEST_CASE("config: relations between keys are checked") {
         "16000 Hz (0.512 s)");
   CHECK(error_of("[audio]\nrate = 16000\nperiod_frames = 4096\nring_seconds = 0.6\n").empty());
   CHECK(error_of("[output]\nmax_frequency = 100000\n").starts_with("test.toml:2: output.max_frequency:"));
+  // A store that cannot hold the new pairs a retrain waits for never retrained after the young schedule.
+  CHECK(error_of("[model]\nmax_samples = 500\n") ==
+        "test.toml:2: model.max_samples: model.min_new_samples (600 pairs) must be at most what the store "
+        "holds: model.max_samples (500) and model.store_hours (50 h, 180000 pairs at one a second)");
+  CHECK(error_of("[model]\nstore_hours = 0.1\n").starts_with("test.toml:2: model.store_hours:"));
+  CHECK(error_of("[model]\nmin_new_samples = 2000000\n").starts_with("test.toml:2: model.min_new_samples:"));
+  CHECK(error_of("[model]\nmax_samples = 600\nstore_hours = 0.17\n").empty());
 }
 
 TEST_CASE("config: every accepted output section is one the pulse scheduler takes") {

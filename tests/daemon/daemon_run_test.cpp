@@ -395,7 +395,8 @@ TEST_CASE("daemon: a reload whose store limits drop stored pairs says how many")
   write_text(dir / "gearpulse.toml", base);
   Process daemon({kDaemon, "--config", (dir / "gearpulse.toml").string()}, dir / "log.txt");
   REQUIRE(wait_for_status(dir, daemon)["training_samples"] == 300);
-  write_text(dir / "gearpulse.toml", with(base, "[model]\n", "[model]\nmax_samples = 100\n"));
+  write_text(dir / "gearpulse.toml",
+             with(base, "[model]\n", "[model]\nmax_samples = 100\nmin_new_samples = 100\n"));
   daemon.signal(SIGHUP);
   const bool said = log_says(dir, "drop 200 of its 300 pairs", std::chrono::seconds(15));
   INFO(read_text(dir / "log.txt"));
