@@ -114,6 +114,35 @@ inline ShellResult run_shell(const std::string& command) {
   return r;
 }
 
+// Runs `argv` (argv[0] an absolute path) with stdout a pipe nobody reads any more and stderr to `err`,
+// SIGPIPE at its default (as a shell that is not ignoring it leaves it, whatever this process does with
+// it): the exit status, or 128 + the signal that ended it, as a shell reports it.
+inline int run_into_closed_pipe(const std::vector<std::string>& argv, const std::filesystem::path& err) {
+  std::vector<char*> args;
+  for (const std::string& a : argv)
+    args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  int fds[2];
+  if (::pipe(fds) != 0) return -1;
+  ::close(fds[0]);
+  const gearpulse::UniqueFd out(fds[1]);
+  const gearpulse::UniqueFd err_fd(::open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600));
+  if (!err_fd) return -1;
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::signal(SIGPIPE, SIG_DFL);
+    ::dup2(out.get(), STDOUT_FILENO);
+    ::dup2(err_fd.get(), STDERR_FILENO);
+    ::execv(args[0], args.data());
+    ::_exit(127);
+  }
+  if (pid < 0) return -1;
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
 inline void write_text(const std::filesystem::path& p, const std::string& text) {
   std::ofstream out(p, std::ios::binary);
   out << text;

@@ -67,6 +67,9 @@ TEST_CASE("control: gearpulsectl prints status tables and JSON and fails clearly
 
   Process full({ctl, "--socket", sock, "status"}, "/dev/full");  // a reply that cannot be written
   CHECK(full.wait() == 2);
+  // Nor can one into a pipe whose reader has gone: exit 2 as documented, not a death by SIGPIPE (141).
+  CHECK(gearpulse::test::run_into_closed_pipe({ctl, "--socket", sock, "status"}, dir / "pipe.txt") == 2);
+  CHECK(read_text(dir / "pipe.txt").find("cannot write the reply to stdout") != std::string::npos);
 
   Process raw({ctl, "--socket", sock, "status", "--json"}, dir / "raw.txt");
   CHECK(raw.wait() == 0);

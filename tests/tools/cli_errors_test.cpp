@@ -232,6 +232,17 @@ TEST_CASE("cli: output that cannot be written is an error, not a truncated succe
   }
 }
 
+// `gearpulse fit ... | head` whose reader has gone: exit 2 and the message, as for a full disk, not a death
+// by SIGPIPE that a script sees as 141.
+TEST_CASE("cli: output into a pipe nobody reads is an error, not a death by SIGPIPE") {
+  TempDir dir;
+  const std::string log = simulated_log(dir, 24, 300.0);
+  const int status = gearpulse::test::run_into_closed_pipe({kCli, "fit", log}, dir / "err.txt");
+  CHECK(status == 2);
+  CHECK(gearpulse::test::read_text(dir / "err.txt").find("cannot write the output to stdout") !=
+        std::string::npos);
+}
+
 TEST_CASE("cli: --speed on a log that is not a Torque export is said to do nothing") {
   TempDir dir;
   const std::string log = simulated_log(dir, 21);

@@ -1,6 +1,7 @@
 #include "tools/gearpulse/run_app.hpp"
 
 #include <cerrno>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -13,6 +14,9 @@
 namespace gearpulse::cli {
 
 int run_app(CLI::App& app, int argc, char** argv, const int& status, const char* name) {
+  // Output into a pipe whose reader has gone is a write that fails (said below, exit 2), not a death by
+  // SIGPIPE that a script reads as 141.
+  std::signal(SIGPIPE, SIG_IGN);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstring>
 #include <iostream>
 #include <optional>
@@ -232,6 +233,9 @@ void print_status(const control::StatusReply& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // A reply into a pipe whose reader has gone is a write that fails (exit 2, as the manual says), not a
+  // death by SIGPIPE (141).
+  std::signal(SIGPIPE, SIG_IGN);
   CLI::App app{"gearpulsectl: query and control a running gearpulsed"};
   std::string socket = "/run/gearpulse/control.sock";
   bool json = false;
