@@ -138,11 +138,6 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
 
 ControlServer::~ControlServer() {
   stop();
-  epoll_fd_.reset();
-  if (listen_fd_) {
-    listen_fd_.reset();
-    ::unlink(path_.c_str());
-  }
 }
 
 void ControlServer::start() {
@@ -152,10 +147,17 @@ void ControlServer::start() {
 }
 
 void ControlServer::stop() noexcept {
-  if (!thread_.joinable()) return;
-  running_.store(false);
-  wake_.signal();  // after the flag: the server thread sees it when epoll_wait returns, or does not wait
-  thread_.join();
+  if (thread_.joinable()) {
+    running_.store(false);
+    wake_.signal();  // after the flag: the server thread sees it when epoll_wait returns, or does not wait
+    thread_.join();
+  }
+  // The socket goes with the serving: a daemon on its way out (its last save may take seconds) must not
+  // leave a client waiting 10 s for a reply that never comes; it is told at once that nothing listens.
+  if (listen_fd_) {
+    listen_fd_.reset();
+    ::unlink(path_.c_str());
+  }
 }
 
 std::string ControlServer::handle_line(std::string_view line) const {

@@ -51,6 +51,8 @@ class ControlServer {
   ControlServer& operator=(const ControlServer&) = delete;
 
   void start();  // serves on a thread of its own; once serving, a second start() does nothing
+  // Ends the serving and removes the socket (a client then fails to connect at once); a stopped server
+  // does not start again.
   void stop() noexcept;
 
   [[nodiscard]] std::size_t clients() const noexcept { return clients_.load(std::memory_order_relaxed); }

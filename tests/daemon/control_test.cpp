@@ -57,6 +57,19 @@ TEST_CASE("control: a second start() while serving leaves the server as it was")
   server.stop();
 }
 
+// A daemon on its way out saves for seconds after it stops serving: a client must be refused at once
+// then, not left waiting for a reply on a socket nobody serves.
+TEST_CASE("control: once stopped, the socket is gone and a client is refused at once") {
+  TempDir dir;
+  const std::string path = (dir / "ctl.sock").string();
+  ControlServer server(path, EchoHandler{});
+  server.start();
+  server.stop();
+  CHECK_FALSE(std::filesystem::exists(path));
+  LineClient c(path);
+  CHECK_FALSE(c.connected());
+}
+
 TEST_CASE("control: bad requests get error replies and the connection stays usable") {
   TempDir dir;
   ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
