@@ -329,6 +329,19 @@ void ControlServer::run() noexcept {
         continue;
       }
       bool eof = false, error = false, overflow = false, too_long = false;
+      // One request line answered in order (blank ones are not requests); false when the reply does not
+      // fit the client's output buffer.
+      const auto answer = [&](std::string_view line) {
+        if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+        if (line.find_first_not_of(" \t") == std::string_view::npos) return true;
+        requests_.fetch_add(1, std::memory_order_relaxed);
+        Reply reply = respond(line);
+        if (reply.ok) {
+          c.requested = true;
+          c.last_request = now;
+        }
+        return queue(c, std::move(reply.line));
+      };
       char buf[4096];
       while (!eof && !error && !overflow && !too_long) {
         const ssize_t r = ::recv(fd, buf, sizeof buf, MSG_DONTWAIT);
@@ -351,20 +364,19 @@ void ControlServer::run() noexcept {
             too_long = true;
             break;
           }
-          if (line.find_first_not_of(" \t") == std::string_view::npos) continue;
-          requests_.fetch_add(1, std::memory_order_relaxed);
-          Reply reply = respond(line);
-          if (reply.ok) {
-            c.requested = true;
-            c.last_request = now;
-          }
-          if (!queue(c, std::move(reply.line))) {
+          if (!answer(line)) {
             overflow = true;
             break;
           }
         }
         c.in.erase(0, start);
         if (c.in.size() > limits_.max_request_bytes) too_long = true;
+      }
+      // A last request ended by the peer's shutdown rather than a newline (printf '{"cmd":"status"}' into
+      // a socket) is a line too: answered, not dropped with nothing said.
+      if (eof && !error && !overflow && !too_long) {
+        overflow = !answer(c.in);
+        c.in.clear();
       }
       if (error) {
         drop(fd, "socket error");

@@ -220,6 +220,23 @@ TEST_CASE("control: a client that half-closes still gets its reply") {
   CHECK(c.closed_by_peer());
 }
 
+TEST_CASE("control: a last request ended by a half-close instead of a newline is answered") {
+  TempDir dir;
+  ControlServer server((dir / "ctl.sock").string(), EchoHandler{});
+  server.start();
+  LineClient c((dir / "ctl.sock").string());
+  REQUIRE(c.send_all("{\"cmd\":\"a\"}\n{\"cmd\":\"b\"}"));
+  ::shutdown(c.fd(), SHUT_WR);
+  const auto first = c.read_line();
+  REQUIRE(first.has_value());
+  CHECK(json::parse(*first)["echo"] == "a");
+  const auto last = c.read_line();
+  REQUIRE(last.has_value());
+  CHECK(json::parse(*last)["echo"] == "b");
+  CHECK(c.closed_by_peer());
+  CHECK(server.requests() == 2);
+}
+
 TEST_CASE("control: a stale socket file is replaced and a live one is refused") {
   TempDir dir;
   const std::string path = (dir / "ctl.sock").string();
