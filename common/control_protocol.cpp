@@ -124,6 +124,7 @@ GEARPULSE_FIELDS(ConfigStatus) void fields(R& r, F&& f) {
 GEARPULSE_FIELDS(ThreadStatus) void fields(R& r, F&& f) {
   f("stalled", r.stalled);
   f("missing", r.missing);
+  f("realtime_refused", r.realtime_refused);
 }
 
 GEARPULSE_FIELDS(StatusReply) void fields(R& r, F&& f) {

@@ -189,6 +189,7 @@ struct ConfigStatus {
 struct ThreadStatus {
   std::vector<std::string> stalled;
   std::vector<std::string> missing;
+  std::vector<std::string> realtime_refused;
 };
 
 struct StatusReply {

@@ -147,6 +147,20 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
           "thread is held up (set audio.realtime)",
           output, now.pulses_discarded - before.pulses_discarded, now.pulses_discarded);
   }
+  // Said once for each thread: audio.realtime that is not granted leaves the thread at the normal
+  // priority, which the overrun and pulse lines above would otherwise go on advising to set.
+  for (const std::string& thread : now.realtime_refused) {
+    if (std::find(before.realtime_refused.begin(), before.realtime_refused.end(), thread) !=
+        before.realtime_refused.end())
+      continue;
+    const int priority =
+        thread == "pulse" ? std::min(99, config_.audio.rt_priority + 10) : config_.audio.rt_priority;
+    spdlog::warn(
+        "realtime: the {} thread was refused SCHED_FIFO at priority {} or the memory lock that "
+        "audio.realtime asks for, and runs at the normal priority; grant RLIMIT_RTPRIO and RLIMIT_MEMLOCK "
+        "(the unit's LimitRTPRIO=95 honours audio.rt_priority up to 85) or CAP_SYS_NICE and CAP_IPC_LOCK",
+        thread, priority);
+  }
   if (now.xruns > before.xruns) {
     std::uint64_t suppressed = 0;
     if (limiter_.allow("xrun", suppressed))

@@ -125,7 +125,7 @@ control::StatusReply status_reply(const StatusInputs& in) {
   if (!r.save_problem.empty()) reply.model.problems.push_back(r.save_problem);  // fits not saved
   reply.config = {
       .file = in.config_path, .reload_error = in.reload_error, .restart_pending = in.restart_pending};
-  reply.threads = {.stalled = p.stalled, .missing = p.missing};
+  reply.threads = {.stalled = p.stalled, .missing = p.missing, .realtime_refused = p.realtime_refused};
   reply.clients = in.clients;
   return reply;
 }

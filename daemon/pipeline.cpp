@@ -328,6 +328,8 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   s.tracker_turns = d.tracker_turns.load(std::memory_order_relaxed);
   s.tracker_late_hops = d.late_hops.load(std::memory_order_relaxed);
   s.stalled = stalled_threads(beats, now);
+  if (a.stats.realtime_refused) s.realtime_refused.emplace_back("capture");
+  if (d.pulses && d.pulses->status().realtime_refused) s.realtime_refused.emplace_back("pulse");
   return s;
 }
 

@@ -66,6 +66,8 @@ struct PipelineSnapshot {
   // Threads whose heartbeat is stale (empty = all alive).
   std::vector<std::string> stalled;
   std::vector<std::string> missing;  // components not built into this daemon
+  // Threads refused the real-time set-up audio.realtime asks for (SCHED_FIFO, the memory lock).
+  std::vector<std::string> realtime_refused;
 };
 
 // Settings that may change on SIGHUP without restarting the threads.

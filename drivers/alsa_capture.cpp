@@ -93,6 +93,7 @@ AlsaCaptureStats AlsaCapture::stats() const noexcept {
   s.realtime_ok = thread_.realtime_ok();
   s.fifo = fifo_.load(std::memory_order_relaxed);
   s.memory_locked = thread_.memory_locked();
+  s.realtime_refused = thread_.realtime_refused();
   s.running = thread_.running();
   if (const std::int64_t last = last_frames_ns_.load(std::memory_order_relaxed); s.streaming && last > 0) {
     const double period_s = static_cast<double>(period_frames_) / static_cast<double>(rate_);

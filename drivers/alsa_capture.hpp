@@ -133,7 +133,8 @@ struct AlsaCaptureStats {
   // hold the tracker off its core at every attempt.
   bool fifo = false;
   bool memory_locked = false;
-  bool running = false;    // the capture thread runs
+  bool realtime_refused = false;  // SCHED_FIFO or the memory lock asked for at start was refused
+  bool running = false;           // the capture thread runs
   bool streaming = false;  // ... and the device is open and capturing (false while it is lost and reopened)
   // The last half second of periods each repeated the one before, bit for bit: a source that has
   // stopped (the file plugin hands back its buffer unchanged once its input ends) or digital silence

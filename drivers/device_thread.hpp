@@ -42,6 +42,7 @@ class DeviceThread {
     const RealtimeResult rt = make_realtime(request);
     realtime_ok_.store(rt.fifo);
     memory_locked_.store(rt.memory_locked);
+    realtime_refused_.store((request.fifo && !rt.fifo) || (request.lock_memory && !rt.memory_locked));
     return rt;
   }
   // On the thread: its loop runs (true once set up, false as it ends).
@@ -50,6 +51,10 @@ class DeviceThread {
   [[nodiscard]] bool running() const noexcept { return running_.load(std::memory_order_relaxed); }
   [[nodiscard]] bool realtime_ok() const noexcept { return realtime_ok_.load(std::memory_order_relaxed); }
   [[nodiscard]] bool memory_locked() const noexcept { return memory_locked_.load(std::memory_order_relaxed); }
+  // What enter_realtime() was asked for was refused, in part or whole (SCHED_FIFO, the memory lock).
+  [[nodiscard]] bool realtime_refused() const noexcept {
+    return realtime_refused_.load(std::memory_order_relaxed);
+  }
 
  private:
   std::thread thread_;
@@ -57,6 +62,7 @@ class DeviceThread {
   std::atomic<bool> running_{false};
   std::atomic<bool> realtime_ok_{false};
   std::atomic<bool> memory_locked_{false};
+  std::atomic<bool> realtime_refused_{false};
 };
 
 }  // namespace gearpulse

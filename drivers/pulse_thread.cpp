@@ -53,6 +53,7 @@ PulseThreadStatus PulseThread::status() const noexcept {
   s.discarded = discarded_.load(std::memory_order_relaxed);
   s.realtime_ok = thread_.realtime_ok();
   s.memory_locked = thread_.memory_locked();
+  s.realtime_refused = thread_.realtime_refused();
   s.running = thread_.running();
   s.heartbeat_ns = heartbeat_ns_.load(std::memory_order_relaxed);
   s.turns = turns_.load(std::memory_order_relaxed);

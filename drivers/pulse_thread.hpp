@@ -34,12 +34,13 @@ struct RiseRecord {
 };
 
 struct PulseThreadStatus {
-  std::uint64_t pulses = 0;      // rising edges emitted
-  std::uint64_t late_edges = 0;  // edges emitted more than 1 ms after their scheduled time
-  std::int64_t max_late_ns = 0;  // worst lateness seen
-  std::uint64_t discarded = 0;   // pulses owed beyond the scheduler's bound, dropped (PulseScheduler)
-  bool realtime_ok = false;      // SCHED_FIFO granted
-  bool memory_locked = false;    // mlockall succeeded
+  std::uint64_t pulses = 0;       // rising edges emitted
+  std::uint64_t late_edges = 0;   // edges emitted more than 1 ms after their scheduled time
+  std::int64_t max_late_ns = 0;   // worst lateness seen
+  std::uint64_t discarded = 0;    // pulses owed beyond the scheduler's bound, dropped (PulseScheduler)
+  bool realtime_ok = false;       // SCHED_FIFO granted
+  bool memory_locked = false;     // mlockall succeeded
+  bool realtime_refused = false;  // SCHED_FIFO or the memory lock asked for was refused
   bool running = false;
   std::int64_t heartbeat_ns = 0;  // CLOCK_MONOTONIC of the last turn of its loop (one a heartbeat at least)
   // Turns of its loop: one per wake-up (for edges due, a new speed, a heartbeat or stop()). At a constant

@@ -43,7 +43,7 @@ StatusReply full_status() {
   s.model.learning = {true, 600.0, std::nullopt, 41, 40};
   s.model.problems = {"training.bin kept as training.bin.corrupt"};
   s.config = {"/etc/gearpulse/gearpulse.toml", "", {"audio.rate"}};
-  s.threads = {{"capture"}, {}};
+  s.threads = {{"capture"}, {}, {"pulse"}};
   s.clients = 2;
   return s;
 }
@@ -120,7 +120,7 @@ TEST_CASE("control: a status reply is written with the fields and types of docs/
        {{"file", "/etc/gearpulse/gearpulse.toml"},
         {"reload_error", ""},
         {"restart_pending", {"audio.rate"}}}},
-      {"threads", {{"stalled", {"capture"}}, {"missing", json::array()}}},
+      {"threads", {{"stalled", {"capture"}}, {"missing", json::array()}, {"realtime_refused", {"pulse"}}}},
       {"clients", 2},
   };
   CHECK(to_json(full_status()).dump() == expected.dump());

@@ -165,3 +165,24 @@ TEST_CASE("changes: pulses dropped because the line cannot keep up are said, at 
   changes.log(now, later);
   CHECK(log.count("output: pulses come due faster than") == 1);
 }
+
+// audio.realtime that is not granted left its threads at the normal priority with nothing said, while the
+// overrun lines advised to set it.
+TEST_CASE("changes: a thread refused the real-time set-up is said once, with its priority") {
+  gearpulse::test::LogLines log;
+  Config config;
+  config.audio.realtime = true;
+  config.audio.rt_priority = 88;
+  ChangeReporter changes(config);
+  const PipelineSnapshot before;
+  PipelineSnapshot now;
+  now.realtime_refused = {"pulse"};
+  changes.log(before, now);
+  changes.log(now, now);
+  CHECK(log.count("realtime: the pulse thread was refused SCHED_FIFO at priority 98") == 1);
+  PipelineSnapshot both = now;
+  both.realtime_refused.emplace_back("capture");
+  changes.log(now, both);
+  CHECK(log.count("realtime: the capture thread was refused SCHED_FIFO at priority 88") == 1);
+  CHECK(log.count("realtime: the pulse thread") == 1);
+}

@@ -69,6 +69,24 @@ TEST_CASE("pulse: the thread refuses a bad configuration before starting") {
   CHECK_FALSE(thread.status().running);
 }
 
+// SCHED_FIFO that is asked for and not granted is shown, so that the daemon can say so. A priority out of
+// SCHED_FIFO's range (1..99) is refused even to root; nothing asked, nothing refused.
+TEST_CASE("pulse: a real-time set-up asked for and refused is shown in the status") {
+  for (const bool asked : {true, false}) {
+    INFO("realtime asked: " << asked);
+    gearpulse::NullPulseOutput out;
+    gearpulse::PulseThreadConfig cfg = pulse_a_metre();
+    cfg.realtime = asked;
+    cfg.rt_priority = 100;
+    gearpulse::PulseThread thread(out, cfg);
+    thread.start();
+    REQUIRE(within_5s([&] { return thread.status().running; }));
+    CHECK(thread.status().realtime_refused == asked);
+    CHECK_FALSE(thread.status().realtime_ok);
+    thread.stop();
+  }
+}
+
 // At standstill no edge is due, yet the thread turns its loop once a heartbeat period to show the
 // watchdog it is alive.
 TEST_CASE("pulse: at standstill the thread beats once a heartbeat period") {

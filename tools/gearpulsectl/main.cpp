@@ -218,6 +218,9 @@ void print_status(const control::StatusReply& s) {
     std::cout << "! threads: not responding: " << names(s.threads.stalled) << "\n";
   if (!s.threads.missing.empty())
     std::cout << "! threads: not built in: " << names(s.threads.missing) << "\n";
+  if (!s.threads.realtime_refused.empty())
+    std::cout << "! threads: refused the real-time set-up audio.realtime asks for: "
+              << names(s.threads.realtime_refused) << "\n";
   // The state directory's problems (a file set aside, a save that fails) and the configuration's (a
   // reload refused, settings waiting for a restart): shown as the others, not only in the JSON.
   for (const std::string& p : model.problems)
