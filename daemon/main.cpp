@@ -1,6 +1,8 @@
 // gearpulsed: learns gear scales from engine ripple and GPS, emits a synthetic speed-pulse train.
 #include <malloc.h>
+#include <sys/resource.h>
 
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -28,6 +30,28 @@ void usage(std::FILE* to) {
                "  --version          print the version and exit\n"
                "  -h, --help         print this help and exit\n",
                kDefaultConfig);
+}
+
+// Descriptors: the soft limit raised to the hard one, as systemd advises a service that needs more than
+// the 1024 it starts every service with. At the soft limit the control server can no longer accept, so
+// not even the slot kept for the daemon's own user can be given (control.max_clients goes up to 1024,
+// beside the daemon's own descriptors: the audio, gpsd, the output, the state files, the journal).
+void raise_descriptor_limit(std::int64_t max_clients) {
+  constexpr rlim_t kOwn = 64;  // the daemon's own descriptors, with room to spare
+  rlimit lim{};
+  if (::getrlimit(RLIMIT_NOFILE, &lim) != 0) return;
+  if (lim.rlim_cur < lim.rlim_max) {
+    const rlim_t was = lim.rlim_cur;
+    lim.rlim_cur = lim.rlim_max;
+    if (::setrlimit(RLIMIT_NOFILE, &lim) != 0) lim.rlim_cur = was;
+  }
+  const auto needed = static_cast<rlim_t>(max_clients) + kOwn;
+  if (lim.rlim_cur != RLIM_INFINITY && lim.rlim_cur < needed)
+    spdlog::warn(
+        "control: control.max_clients ({}) connections need about {} file descriptors and RLIMIT_NOFILE "
+        "allows {}: once they are used up no new connection is served, the daemon's own user's neither; "
+        "lower control.max_clients or raise the limit (LimitNOFILE= in the unit)",
+        max_clients, needed, static_cast<std::uint64_t>(lim.rlim_cur));
 }
 
 }  // namespace
@@ -86,6 +110,7 @@ int main(int argc, char** argv) {
   spdlog::default_logger()->set_pattern("%^%l%$: %v");
   gearpulse::daemon::apply_log_level(config.log.level);
   spdlog::info("gearpulsed starting with {}", config_path);
+  raise_descriptor_limit(config.control.max_clients);
 
   try {
     gearpulse::daemon::Daemon daemon(std::move(config), config_path,

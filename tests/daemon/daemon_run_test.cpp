@@ -18,6 +18,7 @@
 #include <cstring>
 #include <ctime>
 #include <limits>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -108,6 +109,33 @@ TEST_CASE("daemon: runs with output none and no gpsd or ALSA and answers status"
   CHECK(read_text(dir / "log.txt").find("reconnecting with backoff") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(dir / "ctl.sock"));
   CHECK(std::filesystem::exists(dir / "state/training.bin"));
+}
+
+// systemd starts a service at 1024 descriptors whatever the hard limit; at the soft limit the control
+// server can accept no one, the daemon's own user neither.
+TEST_CASE("daemon: the descriptor limit is raised to the hard one, and one too low is said") {
+  TempDir dir;
+  write_text(dir / "gearpulse.toml", with(config_for(dir), "[control]\n", "[control]\nmax_clients = 1024\n"));
+  for (const char* limit : {"--nofile=256:4096", "--nofile=256:512"}) {
+    INFO(limit);
+    Process daemon({"/usr/bin/prlimit", limit, kDaemon, "--config", (dir / "gearpulse.toml").string()},
+                   dir / "log.txt");
+    REQUIRE(wait_for_status(dir, daemon).is_object());
+    const std::string limits = read_text("/proc/" + std::to_string(daemon.pid()) + "/limits");
+    const std::size_t at = limits.find("Max open files");
+    REQUIRE(at != std::string::npos);
+    std::istringstream row(limits.substr(at + std::string_view("Max open files").size()));
+    long soft = 0, hard = 0;
+    row >> soft >> hard;
+    const bool high = std::string_view(limit) == "--nofile=256:4096";
+    CHECK(soft == hard);
+    CHECK(hard == (high ? 4096 : 512));
+    daemon.signal(SIGTERM);
+    CHECK(daemon.wait() == 0);
+    const bool said =
+        read_text(dir / "log.txt").find("control.max_clients (1024) connections need") != std::string::npos;
+    CHECK(said == !high);
+  }
 }
 
 TEST_CASE("daemon: reset-model says so when the training pairs cannot be cleared from disk") {
