@@ -26,6 +26,7 @@
 #include "daemon/systemd_notify.hpp"
 #include "daemon/training_store.hpp"
 #include "daemon/watchdog.hpp"
+#include "drivers/audio_front_end.hpp"
 #include "drivers/unique_fd.hpp"
 
 namespace gearpulse::daemon {
@@ -56,6 +57,7 @@ bool apply_log_level(const std::string& level) {
   const auto parsed = spdlog::level::from_str(level);
   if (parsed == spdlog::level::off && level != "off") return false;
   spdlog::set_level(parsed);
+  show_alsa_library_errors(parsed == spdlog::level::trace);
   return true;
 }
 

@@ -148,7 +148,7 @@ Pipeline::~Pipeline() {
 
 void Pipeline::start() {
   Impl& d = *impl_;
-  if (d.config.log.level != "trace") quiet_alsa_library_errors();
+  show_alsa_library_errors(spdlog::should_log(spdlog::level::trace));
   d.open_output();
   GpsdConfig gc;
   gc.host = d.config.gps.host;

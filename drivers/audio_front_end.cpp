@@ -3,7 +3,10 @@
 #include <alsa/asoundlib.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
 #include <stdexcept>
 
 #include "drivers/clock.hpp"
@@ -11,12 +14,27 @@
 namespace gearpulse {
 namespace {
 
-void ignore_alsa_error(const char*, int, const char*, int, const char*, ...) {}
+std::atomic<bool> alsa_errors_shown{false};
+
+// libasound's diagnostics, written as its own handler writes them while they are shown, else dropped.
+void alsa_error(const char* file, int line, const char* function, int err, const char* fmt, ...) {
+  if (!alsa_errors_shown.load(std::memory_order_relaxed)) return;
+  std::va_list args;
+  va_start(args, fmt);
+  std::fprintf(stderr, "ALSA lib %s:%i:(%s) ", file, line, function);
+  std::vfprintf(stderr, fmt, args);
+  va_end(args);
+  if (err != 0) std::fprintf(stderr, ": %s", ::snd_strerror(err));
+  std::fputc('\n', stderr);
+}
 
 }  // namespace
 
-void quiet_alsa_library_errors() noexcept {
-  snd_lib_error_set_handler(&ignore_alsa_error);
+void show_alsa_library_errors(bool show) noexcept {
+  alsa_errors_shown.store(show, std::memory_order_relaxed);
+  // Installed once, before any thread opens a device; later calls (a reload) only flip the flag.
+  static const bool installed = (snd_lib_error_set_handler(&alsa_error), true);
+  (void)installed;
 }
 
 std::string alsa_error_text(int code) {

@@ -106,8 +106,9 @@ class AudioFrontEnd {
 };
 
 // libasound prints its own multi-line diagnostics to stderr on every failed open; the daemon logs one
-// rate-limited line naming the device instead. Process-wide.
-void quiet_alsa_library_errors() noexcept;
+// rate-limited line naming the device instead, and lets libasound's through only when `show` (at log
+// level trace). Process-wide; called again on a change of level.
+void show_alsa_library_errors(bool show) noexcept;
 // "Input/output error" for -EIO: ALSA's text for an error code.
 [[nodiscard]] std::string alsa_error_text(int code);
 

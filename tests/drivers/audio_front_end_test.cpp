@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include <alsa/asoundlib.h>
+
 #include "drivers/audio_front_end.hpp"
 #include "tests/drivers/alsa_fifo.hpp"
 #include "tests/test_util.hpp"
@@ -108,4 +110,30 @@ TEST_CASE("audio: a stream the tracker cannot use is a failed open, and the next
   audio.close();
   CHECK_FALSE(audio.is_open());
   CHECK_FALSE(audio.status().open);
+}
+
+// libasound's own diagnostics reach stderr at log level trace only; the daemon says each failed open in
+// one line of its own. A reload that changes the level changes which (they stayed off once turned off).
+TEST_CASE("audio: libasound's diagnostics are shown at trace only, and follow a change of level") {
+  TempDir dir;
+  const auto path = dir / "stderr.txt";
+  const auto stderr_of_a_failed_open = [&](bool show) {
+    gearpulse::show_alsa_library_errors(show);
+    std::fflush(stderr);
+    const gearpulse::UniqueFd saved(::dup(STDERR_FILENO));
+    {
+      const gearpulse::UniqueFd to(::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600));
+      ::dup2(to.get(), STDERR_FILENO);
+    }
+    snd_pcm_t* pcm = nullptr;
+    if (::snd_pcm_open(&pcm, "gearpulse_test_no_such_pcm", SND_PCM_STREAM_CAPTURE, 0) == 0)
+      ::snd_pcm_close(pcm);
+    std::fflush(stderr);
+    ::dup2(saved.get(), STDERR_FILENO);
+    return gearpulse::test::read_text(path);
+  };
+  CHECK(stderr_of_a_failed_open(true).find("ALSA lib") != std::string::npos);
+  CHECK(stderr_of_a_failed_open(false).empty());
+  CHECK(stderr_of_a_failed_open(true).find("Unknown PCM gearpulse_test_no_such_pcm") != std::string::npos);
+  gearpulse::show_alsa_library_errors(false);
 }
