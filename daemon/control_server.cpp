@@ -121,9 +121,11 @@ ControlServer::ControlServer(std::string socket_path, Handler handler, ControlLi
   listen_fd_.reset(::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0));
   if (!listen_fd_) throw_errno("cannot create the control socket " + path_);
   const sockaddr_un addr = make_address(path_);
+  // A bind that fails leaves the path as it was: another daemon may have bound it since the stale
+  // check, and its socket is not this one's to remove.
+  if (::bind(listen_fd_.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0)
+    throw_errno("cannot bind control socket " + path_);
   try {
-    if (::bind(listen_fd_.get(), reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0)
-      throw_errno("cannot bind control socket " + path_);
     // Owner and group (the gearpulse group) may talk to the daemon; nobody else. Set before listen so
     // no connection is ever accepted under a wider mode.
     if (::chmod(path_.c_str(), 0660) != 0) throw_errno("cannot chmod control socket " + path_);
