@@ -66,6 +66,7 @@ GEARPULSE_FIELDS(GpsStatus) void fields(R& r, F&& f) {
   f("age", r.age);
   f("reconnects", r.reconnects);
   f("implausible", r.implausible);
+  f("unmeasured", r.unmeasured);
   f("server", r.server);
   f("error", r.error);
 }

@@ -129,6 +129,7 @@ struct GpsStatus {
   std::optional<double> age;  // s
   std::uint64_t reconnects = 0;
   std::uint64_t implausible = 0;
+  std::uint64_t unmeasured = 0;
   std::string server;
   std::string error;
 };

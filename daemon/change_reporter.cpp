@@ -57,6 +57,17 @@ void ChangeReporter::log(const PipelineSnapshot& before, const PipelineSnapshot&
           now.gps_last_implausible * 3.6, server, now.gps_implausible,
           suppressed ? fmt::format(" ({} since the last report)", suppressed) : "");
   }
+  // A receiver that dead-reckons (a tunnel) reports a fix and a speed it did not measure: taken as no GPS,
+  // which a user watching gpsd's own clients would not guess without this line.
+  if (now.gps_unmeasured > before.gps_unmeasured) {
+    std::uint64_t suppressed = 0;
+    if (limiter_.allow("gps-unmeasured", suppressed))
+      spdlog::info(
+          "gps: gpsd at {} gives a fix by dead reckoning (or time only, or simulated): its speed was not "
+          "measured and is taken as no GPS; {} such reports so far{}",
+          server, now.gps_unmeasured,
+          suppressed ? fmt::format(" ({} since the last report)", suppressed) : "");
+  }
   // One count per failed attempt (the backoff spaces them), not per turn of this loop.
   if (now.gps_state == GpsState::kDisconnected && !now.gps_error.empty() &&
       now.gps_failures != gps_failures_seen_) {

@@ -86,6 +86,7 @@ control::StatusReply status_reply(const StatusInputs& in) {
                .age = number_if(p.gps_age, p.gps_age >= 0),
                .reconnects = p.gps_reconnects,
                .implausible = p.gps_implausible,
+               .unmeasured = p.gps_unmeasured,
                .server = fmt::format("{}:{}", config.gps.host, config.gps.port),
                .error = p.gps_error};
   reply.audio = {.state = std::string(to_string(p.audio_state)),

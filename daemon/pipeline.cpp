@@ -297,6 +297,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     s.gps_failures = g.failures;
     s.gps_implausible = g.implausible;
     s.gps_last_implausible = g.last_implausible;
+    s.gps_unmeasured = g.unmeasured;
     // Its errors are about the connection: once connected again they are history.
     if (s.gps_state != GpsState::kDisconnected) s.gps_error.clear();
   }

@@ -38,6 +38,7 @@ struct PipelineSnapshot {
   std::uint64_t gps_failures = 0;     // failed connection attempts and lost connections
   std::uint64_t gps_implausible = 0;  // reports whose speed the GpsSpeedGate refused
   double gps_last_implausible = 0.0;  // m/s, the last refused speed
+  std::uint64_t gps_unmeasured = 0;   // reports of a dead-reckoned, time-only or simulated fix
   std::string gps_error;
   // Audio and tracker.
   AudioState audio_state = AudioState::kStopped;

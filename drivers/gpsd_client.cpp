@@ -14,6 +14,14 @@ namespace {
 
 constexpr int kPollUs = 100'000;  // how long one wait for data may delay stop()
 
+// Whether a fix of gpsd's status (gps_fix_t.status) carries a speed measured over ground. Dead reckoning
+// alone (a receiver extrapolating its last velocity through a tunnel; NMEA's 'E' mode indicator, GGA
+// quality 6), a time-only or a simulated fix does not: it must neither drive the pulses, which have the
+// engine for that, nor teach the estimator. GNSS with dead reckoning (STATUS_GNSSDR) is measured.
+bool measured_speed(int status) noexcept {
+  return status != STATUS_DR && status != STATUS_TIME && status != STATUS_SIM;
+}
+
 // libgps closes and frees what gps_open set up; this keeps that pairing exception-safe.
 class GpsConnection {
  public:
@@ -164,6 +172,7 @@ void GpsdClient::run() {
       }
       // Drain everything that is already buffered; only the newest position/velocity report counts.
       std::optional<GpsReport> newest;
+      bool newest_unmeasured = false;  // its speed was refused as not measured (measured_speed)
       std::uint64_t drained = 0;
       std::uint64_t bad = 0;
       bool lost = false;
@@ -188,6 +197,8 @@ void GpsdClient::run() {
         r.speed = std::isfinite(fix.speed) && fix.speed >= 0.0 ? fix.speed : std::nan("");
         r.eps = std::isfinite(fix.eps) && fix.eps >= 0.0 ? fix.eps : std::nan("");
         r.fix_time = fix_seconds(fix.time);
+        newest_unmeasured = r.usable() && !measured_speed(fix.status);
+        if (newest_unmeasured) r.speed = std::nan("");
         if (newest) ++drained;
         newest = r;
       } while (::gps_waiting(&conn.data(), 0));
@@ -211,6 +222,7 @@ void GpsdClient::run() {
             ++status_.implausible;
             status_.last_implausible = refused;
           }
+          if (newest_unmeasured) ++status_.unmeasured;
         }
         history_.record(*newest);
         {

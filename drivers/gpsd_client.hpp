@@ -40,6 +40,8 @@ struct GpsdStatus {
   // so they count as no fix; the last such speed (m/s).
   std::uint64_t implausible = 0;
   double last_implausible = 0.0;
+  // Reports whose fix gpsd gives as dead-reckoned, time-only or simulated: published without a speed.
+  std::uint64_t unmeasured = 0;
   std::string last_error;  // empty if none yet
 };
 

@@ -26,7 +26,7 @@ StatusReply full_status() {
   s.training_samples = 4000;
   s.uptime = 61.5;
   s.output = {"pty", "no-reader", "", 7, 8, 2485.0, std::string("/run/gearpulse/pulse")};
-  s.gps = {"no-fix", std::nullopt, 3, 4.5, 2, 1, "127.0.0.1:2947", "gone"};
+  s.gps = {"no-fix", std::nullopt, 3, 4.5, 2, 1, 9, "127.0.0.1:2947", "gone"};
   s.audio = {"recovering", "hw:1", 48000, 5, 6, "ALSA error -2: No such file or directory",
              "open",       9,      1.7e9, 3};
   s.tracker = {88.0, 12.0, true, 4321, 7};
@@ -82,6 +82,7 @@ TEST_CASE("control: a status reply is written with the fields and types of docs/
         {"age", 4.5},
         {"reconnects", 2},
         {"implausible", 1},
+        {"unmeasured", 9},
         {"server", "127.0.0.1:2947"},
         {"error", "gone"}}},
       {"audio",

@@ -9,8 +9,10 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "drivers/clock.hpp"
 #include "drivers/gpsd_client.hpp"
@@ -157,4 +159,63 @@ TEST_CASE("gpsd: after a working connection a lost one is retried at the shortes
   // At the shortest delay it is back 50 ms after the loss; at the grown one, 3.2 s or more. Between the
   // two, 2 s leaves a sanitized build on a loaded machine forty times the 50 ms.
   CHECK(waited < 2s);
+}
+
+// A receiver dead-reckoning through a tunnel (NMEA's 'E' mode indicator; gpsd's status 5) reports a 3D fix
+// and a speed it extrapolated, not measured: taken as no speed, and counted. GNSS with dead reckoning
+// (status 6) and a fix without a status are measured.
+TEST_CASE("gpsd: a dead-reckoned fix carries no speed, a measured one after it does") {
+  const auto [listener, port] = gearpulse::test::loopback_listener();
+  std::atomic<bool> done{false};
+  std::thread server([&] {
+    while (!done) {
+      const UniqueFd c(::accept(listener.get(), nullptr, nullptr));
+      if (!c) break;
+      const auto tpv = [&](int second, const char* status, double speed) {
+        const std::string line = "{\"class\":\"TPV\",\"device\":\"x\"" + std::string(status) +
+                                 ",\"mode\":3,\"time\":\"2026-01-15T12:00:0" + std::to_string(second) +
+                                 ".000Z\",\"speed\":" + std::to_string(speed) + "}\n";
+        (void)!::write(c.get(), line.data(), line.size());
+        std::this_thread::sleep_for(50ms);  // a report each, not one batch
+      };
+      for (int i = 0; i < 4; ++i)
+        tpv(i, ",\"status\":5", 10.0);
+      tpv(4, ",\"status\":6", 11.0);
+      tpv(5, "", 12.0);
+      while (!done)
+        std::this_thread::sleep_for(10ms);
+    }
+  });
+  std::mutex mutex;
+  std::vector<gearpulse::GpsReport> reports;
+  GpsdClient client(config_for(port), [&](const gearpulse::GpsReport& r) {
+    std::lock_guard lock(mutex);
+    reports.push_back(r);
+  });
+  client.start();
+  const bool got = wait_for(
+      [&] {
+        const auto r = client.latest();
+        return r && r->usable() && std::fabs(r->speed - 12.0) < 1e-9;
+      },
+      20s);
+  const auto st = client.status();
+  client.stop();
+  done = true;
+  ::shutdown(listener.get(), SHUT_RDWR);
+  server.join();
+  REQUIRE(got);
+  std::lock_guard lock(mutex);
+  std::size_t dead_reckoned = 0;
+  for (const gearpulse::GpsReport& r : reports) {
+    INFO("fix time " << r.fix_time << ", speed " << r.speed);
+    CHECK(r.mode == 3);
+    if (r.usable()) {
+      CHECK((std::fabs(r.speed - 11.0) < 1e-9 || std::fabs(r.speed - 12.0) < 1e-9));
+    } else {
+      ++dead_reckoned;
+    }
+  }
+  CHECK(dead_reckoned >= 1);  // reports that come in one read are one report, the newest
+  CHECK(st.unmeasured == dead_reckoned);
 }
