@@ -162,7 +162,7 @@ nlohmann::json ControlHandler::operator()(const nlohmann::json& json_request) co
     case control::Command::kResetModel:
       try {
         state_.reset_model(request.keep_samples);
-        retrainer_.model_file_removed();
+        retrainer_.model_reset(!request.keep_samples);
       } catch (const std::exception& e) {
         throw control::ControlError(e.what());
       }

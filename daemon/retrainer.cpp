@@ -282,6 +282,17 @@ void Retrainer::model_file_removed() noexcept {
   (void)save_fault_.succeeded();
 }
 
+void Retrainer::model_reset(bool pairs_cleared) noexcept {
+  std::lock_guard lock(mutex_);
+  (void)save_fault_.succeeded();
+  // The fits tried were on pairs, or against a model, that are gone: a schedule that remembered them
+  // would wait for a refit time or a cluster larger than theirs, the interval rule for its next end.
+  schedule_.restart();
+  young_ = true;
+  if (!pairs_cleared) requested_ = true;
+  wake_.notify_all();
+}
+
 std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generation) {
   const auto lock = model_.lock_writes();
   if (model_.generation() != generation)

@@ -76,6 +76,10 @@ class Retrainer {
   void set_settings(Settings settings) noexcept;
   // model.json was removed (a reset): a failure to save over it is over, and the next fit's save says anew.
   void model_file_removed() noexcept;
+  // The model was reset (reset-model, after StateDirectory::reset_model): model.json is gone, and the
+  // learning schedule starts again at once: with the pairs cleared as for a new car, with them kept by a
+  // fit on them as soon as possible.
+  void model_reset(bool pairs_cleared) noexcept;
   [[nodiscard]] Status status() const;
   [[nodiscard]] Settings settings() const;
   // Runs one retrain now (what the thread does): the store's copy, the model's installation and its save on

@@ -391,3 +391,48 @@ TEST_CASE("learning: the retrainer's first fit comes as soon as the pairs show o
   REQUIRE(LearningSchedule().next_refit(s.moving_time).has_value());
   CHECK(s.next_refit == Approx(*LearningSchedule().next_refit(s.moving_time)));
 }
+
+// docs/cold-start.md: a reset-model that clears the training pairs starts the schedule again. A retrainer
+// that remembered the fit before the reset waited for a refit time, or a cluster larger than the old one,
+// past what the new pairs showed: minutes of driving with no model.
+TEST_CASE("learning: after a reset the schedule starts again, with the pairs cleared or kept") {
+  for (const bool cleared : {true, false}) {
+    INFO("pairs cleared: " << cleared);
+    TempDir dir;
+    TrainingStore store(1e9, 100000);
+    for (const Sample& s : drive_in_gears({hatch_thetas()[1]}, 200.0, 7, 1.7e9))
+      store.add(s);
+    ModelHolder model;
+    std::atomic<int> fits{0};
+    const auto fitter = make_estimator_fitter();
+    Retrainer retrainer(
+        store, model, dir / "model.json",
+        [&](std::span<const Sample> pairs, std::stop_token stop) {
+          ++fits;
+          return fitter(pairs, std::move(stop));
+        },
+        Retrainer::Settings{});  // min_new_samples 600: only the schedule fits here
+    retrainer.start();
+    const auto wait_trained = [&] {
+      // The bound is for a failing test only (a fit at SCHED_IDLE on a loaded, sanitized run).
+      for (int i = 0; i < 6000 && !model.trained(); ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      return model.trained();
+    };
+    REQUIRE(wait_trained());
+    const int before = fits.load();
+    {  // what StateDirectory::reset_model does in memory
+      const auto lock = model.lock_writes();
+      model.set(nullptr);
+    }
+    if (cleared) {
+      store.clear();
+      for (const Sample& s : drive_in_gears({hatch_thetas()[1]}, 200.0, 8, 1.8e9))
+        store.add(s);
+    }
+    retrainer.model_reset(cleared);
+    CHECK(wait_trained());
+    CHECK(fits.load() > before);
+    retrainer.stop();
+  }
+}
