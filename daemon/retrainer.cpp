@@ -6,6 +6,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <exception>
 #include <optional>
 #include <thread>
@@ -170,12 +171,10 @@ bool Retrainer::retrain_now() {
           said = "retrain: " + result;
         }
       } else if (const ModelPtr current = model_.get();
-                 current && !current->empty() &&
-                 fitted.samples < std::min(current->samples, settings().replace_min_samples)) {
+                 current && !current->empty() && fitted.samples < replace_threshold(*current)) {
         result = fmt::format(
             "fit on {} samples found {} gears; current model (fitted on {} samples) kept until a fit uses {}",
-            fitted.samples, fitted.gears.size(), current->samples,
-            std::min(current->samples, settings().replace_min_samples));
+            fitted.samples, fitted.gears.size(), current->samples, replace_threshold(*current));
         said = "retrain: " + result;
       } else if (auto lock = model_.lock_writes(); model_.generation() != generation) {
         result = fmt::format("fit on {} samples discarded: the model was replaced or reset during the fit",
@@ -280,6 +279,13 @@ void Retrainer::save_fitted(const GearModel& fitted, std::string& result) {
 void Retrainer::model_file_removed() noexcept {
   std::lock_guard lock(mutex_);
   (void)save_fault_.succeeded();
+}
+
+std::size_t Retrainer::replace_threshold(const GearModel& current) const {
+  // A fit on every pair the store can hold is the most the car can give: a model fitted on more (by
+  // `gearpulse fit` on days of logs, or before the store's limits were lowered) would otherwise never be
+  // replaced.
+  return std::min({current.samples, settings().replace_min_samples, store_.capacity()});
 }
 
 void Retrainer::model_reset(bool pairs_cleared) noexcept {

@@ -42,8 +42,8 @@ class Retrainer {
   struct Settings {
     std::chrono::duration<double> interval{600.0};
     std::size_t min_new_samples = 600;
-    // A fit on fewer samples than this (and than the current model's) does not replace a trained model:
-    // ten minutes in town must not overwrite a ladder learned over days.
+    // A fit on fewer samples than this (and than the current model's, and than the store holds at most)
+    // does not replace a trained model: ten minutes in town must not overwrite a ladder learned over days.
     std::size_t replace_min_samples = 3600;
     LearningSettings learning{};
   };
@@ -95,6 +95,8 @@ class Retrainer {
   // Withdraws a one-gear model a fit on `pairs` pairs found without ground (one_gear_withdrawn), unless
   // the model changed since `generation`; returns the result line.
   std::string withdraw_model(std::size_t pairs, std::uint64_t generation);
+  // The fewest samples a fit needs to replace `current` (Settings::replace_min_samples).
+  [[nodiscard]] std::size_t replace_threshold(const GearModel& current) const;
   // Saves a fit just installed (under model_.lock_writes()) unless model.json was replaced by another
   // program; says why not in `result`, and in the log and status while saves keep failing (save_fault_).
   void save_fitted(const GearModel& fitted, std::string& result);

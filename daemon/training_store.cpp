@@ -52,6 +52,11 @@ void TrainingStore::set_limits(double max_age_s, std::size_t max_samples) {
   enforce_bounds_locked();
 }
 
+std::size_t TrainingStore::capacity() const {
+  std::lock_guard lock(mutex_);
+  return std::min(max_samples_, static_cast<std::size_t>(std::max(1.0, std::floor(max_age_s_))));
+}
+
 void TrainingStore::clear() {
   std::lock_guard lock(mutex_);
   empty_locked();

@@ -36,6 +36,8 @@ class TrainingStore {
 
   [[nodiscard]] std::vector<Sample> snapshot() const;
   [[nodiscard]] std::size_t size() const;
+  // The most pairs the store keeps: max_samples, or max_age_s of driving at a pair a second.
+  [[nodiscard]] std::size_t capacity() const;
   // Something the file at the last save() does not hold: pairs added, or a clear().
   [[nodiscard]] bool unsaved() const;
   // Pairs that neither the file of the last save() nor the journal holds: what a power cut now would lose.

@@ -447,3 +447,35 @@ TEST_CASE("daemon: a fit on few samples does not replace a model learned on many
   CHECK(retrainer.retrain_now());
   CHECK(model.get()->samples == 10);
 }
+
+// A model fitted on more pairs than the store can hold (by `gearpulse fit` on days of logs, or before the
+// store's limits were lowered) was never replaced: no fit could reach its count.
+TEST_CASE("daemon: a fit on every pair the store can hold replaces a model fitted on more") {
+  TempDir dir;
+  TrainingStore store(1e9, 1000);
+  for (int i = 0; i < 1000; ++i)
+    store.add({1.0 + i, 10.0, 100.0});
+  ModelHolder model;
+  GearModel big = three_gears();
+  big.samples = 2401;
+  model.set(std::make_shared<const GearModel>(big));
+  std::size_t fitted_samples = 999;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>, std::stop_token) {
+                        GearModel m = three_gears();
+                        m.samples = fitted_samples;
+                        return m;
+                      },
+                      {std::chrono::duration<double>(600.0), 1, 3600});
+  CHECK_FALSE(retrainer.retrain_now());
+  CHECK(model.get()->samples == 2401);
+  fitted_samples = 1000;
+  CHECK(retrainer.retrain_now());
+  CHECK(model.get()->samples == 1000);
+  // Held by its hours (store_hours), at a pair a second, the same.
+  store.set_limits(600.0, 100000);
+  model.set(std::make_shared<const GearModel>(big));
+  fitted_samples = 600;
+  CHECK(retrainer.retrain_now());
+  CHECK(model.get()->samples == 600);
+}
