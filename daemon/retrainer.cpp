@@ -308,6 +308,11 @@ std::string Retrainer::withdraw_model(std::size_t pairs, std::uint64_t generatio
       "fit on {} samples found no gear ladder, and the steady pairs beside the model's one gear are a "
       "continuum (as from a CVT below its cruise ratio): that gear is withdrawn, pulses follow GPS",
       pairs);
+  // A model.json another program installed while the daemon ran is not the one withdrawn: it stays, to
+  // be loaded at the next start, as a fit's save leaves it (save_model_if_ours).
+  if (const std::optional<FileStamp> now = stamp_of(model_path_); now && now != model_.file_stamp())
+    return result +
+           fmt::format("; {} was replaced while gearpulsed ran and is left as it is", model_path_.string());
   try {
     remove_file_durable(model_path_);
     model_.set_file_stamp(std::nullopt);

@@ -275,14 +275,22 @@ TEST_CASE("learning: the retrainer withdraws a one-gear model a refit finds with
   GearModel top;
   top.gears = {{cvt.cvt_theta_max, 0.8, 0.001}};
   top.samples = 40;
-  model.set(std::make_shared<const GearModel>(top));
-  write_text(dir / "model.json", serialize_model(top));
-  Retrainer retrainer(store, model, dir / "model.json", make_estimator_fitter(), {});
-  CHECK_FALSE(retrainer.retrain_now());
-  INFO(retrainer.status().last_result);
-  CHECK_FALSE(model.trained());
-  CHECK_FALSE(std::filesystem::exists(dir / "model.json"));
-  CHECK(retrainer.status().last_result.find("withdrawn") != std::string::npos);
+  for (const bool installed : {false, true}) {
+    INFO("model.json installed while the daemon ran: " << installed);
+    model.set(std::make_shared<const GearModel>(top));
+    write_text(dir / "model.json", serialize_model(top));
+    model.set_file_stamp(stamp_of(dir / "model.json"));  // as loaded at start
+    if (installed) {  // `gearpulse fit ... --out model.json` meanwhile: another file, not the daemon's
+      std::filesystem::remove(dir / "model.json");
+      write_text(dir / "model.json", serialize_model(top) + "\n");
+    }
+    Retrainer retrainer(store, model, dir / "model.json", make_estimator_fitter(), {});
+    CHECK_FALSE(retrainer.retrain_now());
+    INFO(retrainer.status().last_result);
+    CHECK_FALSE(model.trained());
+    CHECK(std::filesystem::exists(dir / "model.json") == installed);
+    CHECK(retrainer.status().last_result.find("withdrawn") != std::string::npos);
+  }
 }
 
 TEST_CASE("learning: a refit keeps a learned gear its pairs do not contradict") {
