@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <string_view>
 
 #include "drivers/clock.hpp"
 
@@ -159,6 +160,7 @@ void GpsdClient::run() {
       status_.state = GpsdState::kConnected;
       ++status_.connects;
     }
+    device_.clear();  // a gpsd started again may name its devices anew
     char message[4096];
     while (!stopping()) {
       beat();
@@ -175,6 +177,7 @@ void GpsdClient::run() {
       bool newest_unmeasured = false;  // its speed was refused as not measured (measured_speed)
       std::uint64_t drained = 0;
       std::uint64_t bad = 0;
+      std::uint64_t other = 0;
       bool lost = false;
       do {
         beat();  // a flood of reports keeps the thread here: it is busy, not hung
@@ -197,8 +200,25 @@ void GpsdClient::run() {
         r.speed = std::isfinite(fix.speed) && fix.speed >= 0.0 ? fix.speed : std::nan("");
         r.eps = std::isfinite(fix.eps) && fix.eps >= 0.0 ? fix.eps : std::nan("");
         r.fix_time = fix_seconds(fix.time);
-        newest_unmeasured = r.usable() && !measured_speed(fix.status);
-        if (newest_unmeasured) r.speed = std::nan("");
+        const bool unmeasured = r.usable() && !measured_speed(fix.status);
+        if (unmeasured) r.speed = std::nan("");
+        // gpsd serves every device it has (a modem's NMEA port beside the receiver, one with no fix): the
+        // device of the last usable fix is followed, and another's reports count only once that one has
+        // given no usable fix for the no-fix timeout. Mixed, a device without a fix made GPS flap between
+        // fix and none, and two with fixes made a training pair at every crossing of their times.
+        const std::string_view device = conn.data().dev.path;
+        if (!device_.empty() && device != device_ && r.rx_ns - device_fix_ns_ <= timeout_ns()) {
+          ++other;
+          continue;
+        }
+        if (r.usable()) {
+          if (device != device_) {
+            device_ = device;
+            gate_.reset();  // the last speed it judges by was another receiver's
+          }
+          device_fix_ns_ = r.rx_ns;
+        }
+        newest_unmeasured = unmeasured;
         if (newest) ++drained;
         newest = r;
       } while (::gps_waiting(&conn.data(), 0));
@@ -218,6 +238,7 @@ void GpsdClient::run() {
           std::lock_guard lock(mutex_);
           status_.superseded += drained;
           status_.bad_reads += bad;
+          status_.other_device += other;
           if (refused == refused) {
             ++status_.implausible;
             status_.last_implausible = refused;
@@ -231,9 +252,10 @@ void GpsdClient::run() {
         }
         backoff = config_.backoff_min;
         if (on_report_) on_report_(*newest);
-      } else if (bad) {
+      } else if (bad || other) {
         std::lock_guard lock(mutex_);
         status_.bad_reads += bad;
+        status_.other_device += other;
       }
       if (lost) {
         const int err = errno;

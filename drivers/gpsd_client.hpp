@@ -42,6 +42,8 @@ struct GpsdStatus {
   double last_implausible = 0.0;
   // Reports whose fix gpsd gives as dead-reckoned, time-only or simulated: published without a speed.
   std::uint64_t unmeasured = 0;
+  // Reports of another device than the one followed, while that one gives fixes: skipped.
+  std::uint64_t other_device = 0;
   std::string last_error;  // empty if none yet
 };
 
@@ -102,6 +104,9 @@ class GpsdClient final {
   GpsHistory history_;  // written by the client thread only
   GpsdStatus status_;
   GpsSpeedGate gate_;  // client thread only
+  // The device followed (client thread only): the one of the last usable fix, and when it came.
+  std::string device_;
+  std::int64_t device_fix_ns_ = 0;
 };
 
 }  // namespace gearpulse

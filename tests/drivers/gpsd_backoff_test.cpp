@@ -219,3 +219,60 @@ TEST_CASE("gpsd: a dead-reckoned fix carries no speed, a measured one after it d
   CHECK(dead_reckoned >= 1);  // reports that come in one read are one report, the newest
   CHECK(st.unmeasured == dead_reckoned);
 }
+
+// gpsd serves every device it has: a modem's NMEA port without a fix beside the receiver made every other
+// report "no fix", and GPS flapped. The device of the last usable fix is followed; another counts once
+// that one has given no usable fix for the no-fix timeout.
+TEST_CASE("gpsd: a second device without a fix does not hide the first one's fixes") {
+  const auto [listener, port] = gearpulse::test::loopback_listener();
+  std::atomic<bool> done{false};
+  std::atomic<bool> first_gone{false};
+  std::thread server([&] {
+    const UniqueFd c(::accept(listener.get(), nullptr, nullptr));
+    if (!c) return;
+    const auto send = [&](const std::string& line) {
+      (void)!::write(c.get(), line.data(), line.size());
+      std::this_thread::sleep_for(50ms);  // a report each, not one batch
+    };
+    for (int i = 0; !done && !first_gone; ++i) {
+      send("{\"class\":\"TPV\",\"device\":\"/dev/gps\",\"mode\":3,\"time\":\"2026-01-15T12:00:" +
+           std::to_string(10 + i % 40) + ".000Z\",\"speed\":10.0}\n");
+      send("{\"class\":\"TPV\",\"device\":\"/dev/modem\",\"mode\":1}\n");
+    }
+    // The receiver goes quiet; the modem's port gets a fix of its own.
+    for (int i = 0; !done; ++i)
+      send("{\"class\":\"TPV\",\"device\":\"/dev/modem\",\"mode\":3,\"time\":\"2026-01-15T12:01:" +
+           std::to_string(10 + i % 40) + ".000Z\",\"speed\":20.0}\n");
+  });
+  std::mutex mutex;
+  std::vector<gearpulse::GpsReport> reports;
+  GpsdClient client(config_for(port), [&](const gearpulse::GpsReport& r) {
+    std::lock_guard lock(mutex);
+    reports.push_back(r);
+  });
+  client.start();
+  const auto count = [&] {
+    std::lock_guard lock(mutex);
+    return reports.size();
+  };
+  REQUIRE(wait_for([&] { return count() >= 20 && client.status().other_device >= 10; }, 20s));
+  {
+    std::lock_guard lock(mutex);
+    for (const gearpulse::GpsReport& r : reports) {
+      CHECK(r.usable());
+      CHECK(r.speed == 10.0);
+    }
+  }
+  first_gone = true;
+  const bool switched = wait_for(
+      [&] {
+        const auto r = client.latest();
+        return r && r->usable() && r->speed == 20.0;
+      },
+      20s);
+  client.stop();
+  done = true;
+  ::shutdown(listener.get(), SHUT_RDWR);
+  server.join();
+  CHECK(switched);
+}
