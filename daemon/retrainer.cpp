@@ -114,6 +114,7 @@ Retrainer::Status Retrainer::status() const {
 
 bool Retrainer::retrain_now() {
   const std::uint64_t generation = model_.generation();
+  const std::uint64_t clears = store_.clears();  // read first: a clear after it keeps the pairs new
   const std::size_t fresh = store_.new_samples();
   std::vector<Sample> samples;
   bool no_ladder_before = false;
@@ -209,7 +210,7 @@ bool Retrainer::retrain_now() {
         save_fitted(*next, result);
       }
     }
-    store_.mark_trained(fresh);
+    store_.mark_trained(fresh, clears);
   } catch (const FitCancelled&) {
     // Not a failure: the pairs stay new, so the next start fits them.
     result = "fit cancelled: gearpulsed is stopping; model kept";
@@ -218,13 +219,13 @@ bool Retrainer::retrain_now() {
     result = std::string("fit failed: ") + e.what() + "; model kept";
     said_level = spdlog::level::err;
     said = "retrain: " + result;
-    store_.mark_trained(fresh);
+    store_.mark_trained(fresh, clears);
   } catch (...) {
     // Not a std::exception (a fitter's own type): the retrainer's thread must not end the daemon for it.
     result = "fit failed: an exception of unknown type; model kept";
     said_level = spdlog::level::err;
     said = "retrain: " + result;
-    store_.mark_trained(fresh);
+    store_.mark_trained(fresh, clears);
   }
   {
     std::lock_guard lock(mutex_);

@@ -61,6 +61,7 @@ void TrainingStore::clear() {
   std::lock_guard lock(mutex_);
   empty_locked();
   cleared_ = true;
+  ++clears_;
 }
 
 void TrainingStore::empty_locked() noexcept {
@@ -98,6 +99,16 @@ std::size_t TrainingStore::new_samples() const {
 void TrainingStore::mark_trained(std::size_t consumed) {
   std::lock_guard lock(mutex_);
   new_samples_ -= std::min(consumed, new_samples_);
+}
+
+std::uint64_t TrainingStore::clears() const {
+  std::lock_guard lock(mutex_);
+  return clears_;
+}
+
+void TrainingStore::mark_trained(std::size_t consumed, std::uint64_t clears_seen) {
+  std::lock_guard lock(mutex_);
+  if (clears_ == clears_seen) new_samples_ -= std::min(consumed, new_samples_);
 }
 
 bool TrainingStore::set_new_after_pair(const Sample& last) {

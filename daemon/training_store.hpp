@@ -45,6 +45,10 @@ class TrainingStore {
   // Pairs added since the last mark_trained() (or since start).
   [[nodiscard]] std::size_t new_samples() const;
   void mark_trained(std::size_t consumed);
+  // Clears so far: with it, mark_trained() of a count read before a clear (a fit's, with a reset during
+  // the fit) leaves the pairs added since the clear new, as they are.
+  [[nodiscard]] std::uint64_t clears() const;
+  void mark_trained(std::size_t consumed, std::uint64_t clears_seen);
   // Counts as new the pairs later than `t` (wall-clock s): those a fit ending at `t` has not seen, kept
   // from earlier runs of the daemon.
   void set_new_after(double t);
@@ -112,6 +116,7 @@ class TrainingStore {
   double max_age_s_;
   std::size_t max_samples_;
   std::size_t new_samples_ = 0;
+  std::uint64_t clears_ = 0;
   std::size_t skipped_ = 0;  // records of the last load that were no plausible pair
   // Journal bookkeeping: pairs at the back of samples_ added since the last save (all in the journal
   // when it is current), and how many of those are not yet in it.

@@ -292,6 +292,26 @@ TEST_CASE("daemon: a fit begun before a model reset is discarded, not installed 
   CHECK(model.trained());
 }
 
+// A reset that clears the pairs while a fit runs, with pairs added after it: they are newer than any
+// fit, and stay new. The fit's count of new pairs, read before the clear, was taken off them.
+TEST_CASE("daemon: pairs added after a clear during a fit stay new") {
+  TempDir dir;
+  TrainingStore store(1e9, 10000);
+  for (int i = 0; i < 700; ++i)
+    store.add({1.0 + i, 10.0, 100.0});
+  ModelHolder model;
+  Retrainer retrainer(store, model, dir / "model.json",
+                      [&](std::span<const Sample>, std::stop_token) {
+                        store.clear();  // reset-model --confirm while the fit runs, then driving on
+                        for (int i = 0; i < 300; ++i)
+                          store.add({2000.0 + i, 10.0, 100.0});
+                        return three_gears();
+                      },
+                      {});
+  (void)retrainer.retrain_now();
+  CHECK(store.new_samples() == 300);
+}
+
 TEST_CASE("daemon: retrainer thread fits when asked and stops promptly") {
   TempDir dir;
   TrainingStore store(1e9, 10000);
