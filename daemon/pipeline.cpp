@@ -238,6 +238,7 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
     beats.push_back({"pulse", ps.heartbeat_ns, !ps.running});
     s.pulses = ps.pulses;
     s.pulses_discarded = ps.discarded;
+    if (ps.realtime_refused) s.realtime_refused.emplace_back("pulse");
     s.pulse_frequency = d.pulses->target_speed() * d.config.output.pulses_per_km / 1000.0;
     if (s.pulse_frequency < d.config.output.min_frequency) s.pulse_frequency = 0.0;
     s.pulse_frequency = std::min(s.pulse_frequency, d.config.output.max_frequency);
@@ -330,7 +331,6 @@ PipelineSnapshot Pipeline::snapshot(std::int64_t now) const {
   s.tracker_late_hops = d.late_hops.load(std::memory_order_relaxed);
   s.stalled = stalled_threads(beats, now);
   if (a.stats.realtime_refused) s.realtime_refused.emplace_back("capture");
-  if (d.pulses && d.pulses->status().realtime_refused) s.realtime_refused.emplace_back("pulse");
   return s;
 }
 

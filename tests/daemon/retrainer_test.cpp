@@ -45,6 +45,15 @@ Retrainer::Fitter counting_fitter(std::atomic<int>& fits) {
   };
 }
 
+// A fitter that finds three gears and says it used `samples` pairs (read at each fit).
+Retrainer::Fitter fitter_on(const std::size_t& samples) {
+  return [&samples](std::span<const Sample>, std::stop_token) {
+    GearModel m = three_gears();
+    m.samples = samples;
+    return m;
+  };
+}
+
 // Waits up to 20 s for a first fit: the fits here take no time, but the retrainer runs them at the lowest
 // priority (SCHED_IDLE), which a loaded machine serves last. The bound is for a failing test only.
 void wait_for_a_fit(const std::atomic<int>& fits) {
@@ -449,12 +458,7 @@ TEST_CASE("daemon: a fit on few samples does not replace a model learned on many
   const auto good = std::make_shared<const GearModel>(big);
   model.set(good);
   std::size_t fitted_samples = 100;
-  Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>, std::stop_token) {
-                        GearModel m = three_gears();
-                        m.samples = fitted_samples;
-                        return m;
-                      },
+  Retrainer retrainer(store, model, dir / "model.json", fitter_on(fitted_samples),
                       {std::chrono::duration<double>(600.0), 1, 3600});
   CHECK_FALSE(retrainer.retrain_now());
   CHECK(model.get() == good);
@@ -480,12 +484,7 @@ TEST_CASE("daemon: a fit on every pair the store can hold replaces a model fitte
   big.samples = 2401;
   model.set(std::make_shared<const GearModel>(big));
   std::size_t fitted_samples = 999;
-  Retrainer retrainer(store, model, dir / "model.json",
-                      [&](std::span<const Sample>, std::stop_token) {
-                        GearModel m = three_gears();
-                        m.samples = fitted_samples;
-                        return m;
-                      },
+  Retrainer retrainer(store, model, dir / "model.json", fitter_on(fitted_samples),
                       {std::chrono::duration<double>(600.0), 1, 3600});
   CHECK_FALSE(retrainer.retrain_now());
   CHECK(model.get()->samples == 2401);

@@ -9,10 +9,8 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <mutex>
 #include <string>
 #include <thread>
-#include <vector>
 
 #include "drivers/clock.hpp"
 #include "drivers/gpsd_client.hpp"
@@ -26,27 +24,23 @@ using gearpulse::GpsdConfig;
 using gearpulse::GpsdState;
 using gearpulse::UniqueFd;
 using gearpulse::test::config_for;
+using gearpulse::test::FakeGpsd;
+using gearpulse::test::Recorder;
 using gearpulse::test::wait_for;
 
 TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") {
   // A fake gpsd: answers every connection with junk, a malformed TPV, binary noise, then one good TPV.
-  const auto [listener, port] = gearpulse::test::loopback_listener();
-  std::atomic<bool> done{false};
-  std::thread server([&] {
-    while (!done) {
-      const UniqueFd c(::accept(listener.get(), nullptr, nullptr));
-      if (!c) break;
-      std::string junk = "this is not json\n{\"class\":\"TPV\",\"mode\":\"three\",\"speed\":[1,2]}\n";
-      junk += std::string("\x01\xff\xfe{{{{\"\n", 9);
-      junk += "{\"class\":\"TPV\",\"speed\":1e999999,\"mode\":3}\n";
-      junk +=
-          "{\"class\":\"TPV\",\"device\":\"x\",\"mode\":3,\"time\":\"2026-01-15T12:00:00.000Z\",\"speed\":4."
-          "125}\n";
-      (void)!::write(c.get(), junk.data(), junk.size());
-      std::this_thread::sleep_for(100ms);
-    }
+  const FakeGpsd gpsd([](int fd, const std::atomic<bool>&) {
+    std::string junk = "this is not json\n{\"class\":\"TPV\",\"mode\":\"three\",\"speed\":[1,2]}\n";
+    junk += std::string("\x01\xff\xfe{{{{\"\n", 9);
+    junk += "{\"class\":\"TPV\",\"speed\":1e999999,\"mode\":3}\n";
+    junk +=
+        "{\"class\":\"TPV\",\"device\":\"x\",\"mode\":3,\"time\":\"2026-01-15T12:00:00.000Z\",\"speed\":4."
+        "125}\n";
+    (void)!::write(fd, junk.data(), junk.size());
+    std::this_thread::sleep_for(100ms);
   });
-  GpsdClient client(config_for(port));
+  GpsdClient client(config_for(gpsd.port()));
   client.start();
   const bool got = wait_for(
       [&] {
@@ -55,10 +49,6 @@ TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") 
       },
       20s);
   const auto st = client.status();
-  client.stop();
-  done = true;
-  ::shutdown(listener.get(), SHUT_RDWR);  // wakes the server's accept
-  server.join();
   CHECK(got);
   CHECK(st.connects >= 1);
   INFO("bad reads " << st.bad_reads << ", failures " << st.failures << ", last error " << st.last_error);
@@ -67,21 +57,16 @@ TEST_CASE("gpsd: garbage from the socket is skipped and never ends the client") 
 
 TEST_CASE("gpsd: a gpsd that greets and hangs up is retried with a growing delay, not hammered") {
   // A broken gpsd (or something else on its port): every connection gets gpsd's banner and is closed.
-  const auto [listener, port] = gearpulse::test::loopback_listener();
   std::atomic<int> accepted{0};
-  std::thread server([&] {
-    while (true) {
-      const UniqueFd c(::accept(listener.get(), nullptr, nullptr));  // closed at the end of each turn
-      if (!c) break;
-      ++accepted;
-      const std::string banner =
-          "{\"class\":\"VERSION\",\"release\":\"3.22\",\"rev\":\"3.22\",\"proto_major\":3,\"proto_minor\":14}"
-          "\n";
-      (void)!::write(c.get(), banner.data(), banner.size());
-      std::this_thread::sleep_for(20ms);
-    }
+  const FakeGpsd gpsd([&](int fd, const std::atomic<bool>&) {  // closed as each call returns
+    ++accepted;
+    const std::string banner =
+        "{\"class\":\"VERSION\",\"release\":\"3.22\",\"rev\":\"3.22\",\"proto_major\":3,\"proto_minor\":14}"
+        "\n";
+    (void)!::write(fd, banner.data(), banner.size());
+    std::this_thread::sleep_for(20ms);
   });
-  GpsdConfig cfg = config_for(port);  // backoff 50 ms doubling to 400 ms
+  GpsdConfig cfg = config_for(gpsd.port());  // backoff 50 ms doubling to 400 ms
   GpsdClient client(cfg);
   client.start();
   std::this_thread::sleep_for(3s);
@@ -89,8 +74,6 @@ TEST_CASE("gpsd: a gpsd that greets and hangs up is retried with a growing delay
   // That it retries at all is waited for: a loaded machine may be slow to make the first few attempts.
   const bool retried = wait_for([&] { return accepted.load() >= 3; }, 20s);
   client.stop();
-  ::shutdown(listener.get(), SHUT_RDWR);  // wakes the server's accept
-  server.join();
   // With the delay reset by the banner the client would reconnect every 50 ms plus the 20 ms the server
   // holds the line (about 40 times in 3 s); growing to 400 ms it connects about 10 times. A slow machine
   // only makes fewer attempts: the upper bound holds whatever the load.
@@ -161,53 +144,43 @@ TEST_CASE("gpsd: after a working connection a lost one is retried at the shortes
   CHECK(waited < 2s);
 }
 
+namespace {
+// Writes `line` to a fake gpsd's client, then waits: a report each, not one batch.
+void send_line(int fd, const std::string& line) {
+  (void)!::write(fd, line.data(), line.size());
+  std::this_thread::sleep_for(50ms);
+}
+}  // namespace
+
 // A receiver dead-reckoning through a tunnel (NMEA's 'E' mode indicator; gpsd's status 5) reports a 3D fix
 // and a speed it extrapolated, not measured: taken as no speed, and counted. GNSS with dead reckoning
 // (status 6) and a fix without a status are measured.
 TEST_CASE("gpsd: a dead-reckoned fix carries no speed, a measured one after it does") {
-  const auto [listener, port] = gearpulse::test::loopback_listener();
-  std::atomic<bool> done{false};
-  std::thread server([&] {
-    while (!done) {
-      const UniqueFd c(::accept(listener.get(), nullptr, nullptr));
-      if (!c) break;
-      const auto tpv = [&](int second, const char* status, double speed) {
-        const std::string line = "{\"class\":\"TPV\",\"device\":\"x\"" + std::string(status) +
-                                 ",\"mode\":3,\"time\":\"2026-01-15T12:00:0" + std::to_string(second) +
-                                 ".000Z\",\"speed\":" + std::to_string(speed) + "}\n";
-        (void)!::write(c.get(), line.data(), line.size());
-        std::this_thread::sleep_for(50ms);  // a report each, not one batch
-      };
-      for (int i = 0; i < 4; ++i)
-        tpv(i, ",\"status\":5", 10.0);
-      tpv(4, ",\"status\":6", 11.0);
-      tpv(5, "", 12.0);
-      while (!done)
-        std::this_thread::sleep_for(10ms);
-    }
+  const FakeGpsd gpsd([](int fd, const std::atomic<bool>& done) {
+    const auto tpv = [&](int second, const std::string& status, double speed) {
+      send_line(fd, "{\"class\":\"TPV\",\"device\":\"x\"" + status +
+                        ",\"mode\":3,\"time\":\"2026-01-15T12:00:0" + std::to_string(second) +
+                        ".000Z\",\"speed\":" + std::to_string(speed) + "}\n");
+    };
+    for (int i = 0; i < 4; ++i)
+      tpv(i, ",\"status\":5", 10.0);
+    tpv(4, ",\"status\":6", 11.0);
+    tpv(5, "", 12.0);
+    while (!done)
+      std::this_thread::sleep_for(10ms);
   });
-  std::mutex mutex;
-  std::vector<gearpulse::GpsReport> reports;
-  GpsdClient client(config_for(port), [&](const gearpulse::GpsReport& r) {
-    std::lock_guard lock(mutex);
-    reports.push_back(r);
-  });
+  Recorder rec;
+  GpsdClient client(config_for(gpsd.port()), rec.callback());
   client.start();
-  const bool got = wait_for(
+  REQUIRE(wait_for(
       [&] {
         const auto r = client.latest();
         return r && r->usable() && std::fabs(r->speed - 12.0) < 1e-9;
       },
-      20s);
-  const auto st = client.status();
+      20s));
   client.stop();
-  done = true;
-  ::shutdown(listener.get(), SHUT_RDWR);
-  server.join();
-  REQUIRE(got);
-  std::lock_guard lock(mutex);
   std::size_t dead_reckoned = 0;
-  for (const gearpulse::GpsReport& r : reports) {
+  for (const gearpulse::GpsReport& r : rec.snapshot()) {
     INFO("fix time " << r.fix_time << ", speed " << r.speed);
     CHECK(r.mode == 3);
     if (r.usable()) {
@@ -217,62 +190,38 @@ TEST_CASE("gpsd: a dead-reckoned fix carries no speed, a measured one after it d
     }
   }
   CHECK(dead_reckoned >= 1);  // reports that come in one read are one report, the newest
-  CHECK(st.unmeasured == dead_reckoned);
+  CHECK(client.status().unmeasured == dead_reckoned);
 }
 
 // gpsd serves every device it has: a modem's NMEA port without a fix beside the receiver made every other
 // report "no fix", and GPS flapped. The device of the last usable fix is followed; another counts once
 // that one has given no usable fix for the no-fix timeout.
 TEST_CASE("gpsd: a second device without a fix does not hide the first one's fixes") {
-  const auto [listener, port] = gearpulse::test::loopback_listener();
-  std::atomic<bool> done{false};
   std::atomic<bool> first_gone{false};
-  std::thread server([&] {
-    const UniqueFd c(::accept(listener.get(), nullptr, nullptr));
-    if (!c) return;
-    const auto send = [&](const std::string& line) {
-      (void)!::write(c.get(), line.data(), line.size());
-      std::this_thread::sleep_for(50ms);  // a report each, not one batch
-    };
+  const FakeGpsd gpsd([&](int fd, const std::atomic<bool>& done) {
     for (int i = 0; !done && !first_gone; ++i) {
-      send("{\"class\":\"TPV\",\"device\":\"/dev/gps\",\"mode\":3,\"time\":\"2026-01-15T12:00:" +
-           std::to_string(10 + i % 40) + ".000Z\",\"speed\":10.0}\n");
-      send("{\"class\":\"TPV\",\"device\":\"/dev/modem\",\"mode\":1}\n");
+      send_line(fd, "{\"class\":\"TPV\",\"device\":\"/dev/gps\",\"mode\":3,\"time\":\"2026-01-15T12:00:" +
+                        std::to_string(10 + i % 40) + ".000Z\",\"speed\":10.0}\n");
+      send_line(fd, "{\"class\":\"TPV\",\"device\":\"/dev/modem\",\"mode\":1}\n");
     }
     // The receiver goes quiet; the modem's port gets a fix of its own.
     for (int i = 0; !done; ++i)
-      send("{\"class\":\"TPV\",\"device\":\"/dev/modem\",\"mode\":3,\"time\":\"2026-01-15T12:01:" +
-           std::to_string(10 + i % 40) + ".000Z\",\"speed\":20.0}\n");
+      send_line(fd, "{\"class\":\"TPV\",\"device\":\"/dev/modem\",\"mode\":3,\"time\":\"2026-01-15T12:01:" +
+                        std::to_string(10 + i % 40) + ".000Z\",\"speed\":20.0}\n");
   });
-  std::mutex mutex;
-  std::vector<gearpulse::GpsReport> reports;
-  GpsdClient client(config_for(port), [&](const gearpulse::GpsReport& r) {
-    std::lock_guard lock(mutex);
-    reports.push_back(r);
-  });
+  Recorder rec;
+  GpsdClient client(config_for(gpsd.port()), rec.callback());
   client.start();
-  const auto count = [&] {
-    std::lock_guard lock(mutex);
-    return reports.size();
-  };
-  REQUIRE(wait_for([&] { return count() >= 20 && client.status().other_device >= 10; }, 20s));
-  {
-    std::lock_guard lock(mutex);
-    for (const gearpulse::GpsReport& r : reports) {
-      CHECK(r.usable());
-      CHECK(r.speed == 10.0);
-    }
+  REQUIRE(wait_for([&] { return rec.size() >= 20 && client.status().other_device >= 10; }, 20s));
+  for (const gearpulse::GpsReport& r : rec.snapshot()) {
+    CHECK(r.usable());
+    CHECK(r.speed == 10.0);
   }
   first_gone = true;
-  const bool switched = wait_for(
+  CHECK(wait_for(
       [&] {
         const auto r = client.latest();
         return r && r->usable() && r->speed == 20.0;
       },
-      20s);
-  client.stop();
-  done = true;
-  ::shutdown(listener.get(), SHUT_RDWR);
-  server.join();
-  CHECK(switched);
+      20s));
 }

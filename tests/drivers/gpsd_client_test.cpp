@@ -31,45 +31,13 @@ using gearpulse::GpsdState;
 using gearpulse::GpsReport;
 using gearpulse::test::config_for;
 using gearpulse::test::GpsFake;
+using gearpulse::test::Recorder;
 using gearpulse::test::TempDir;
 using gearpulse::test::wait_for;
 
 namespace {
 
 constexpr double kKnot = 1852.0 / 3600.0;
-
-// Every report the client publishes, for checks after the run.
-struct Recorder {
-  std::mutex mutex;
-  std::vector<GpsReport> reports;
-  GpsdClient::Callback callback() {
-    return [this](const GpsReport& r) {
-      std::lock_guard lock(mutex);
-      reports.push_back(r);
-    };
-  }
-  std::vector<GpsReport> snapshot() {
-    std::lock_guard lock(mutex);
-    return reports;
-  }
-  std::size_t usable() {
-    std::lock_guard lock(mutex);
-    return static_cast<std::size_t>(
-        std::count_if(reports.begin(), reports.end(), [](const GpsReport& r) { return r.usable(); }));
-  }
-  std::size_t size() {
-    std::lock_guard lock(mutex);
-    return reports.size();
-  }
-  // True once a report of fix time `first` or earlier came before one of `last` or later: a whole pass of
-  // a repeated log arrived, whenever the client joined it.
-  bool saw_pass(double first, double last) {
-    std::lock_guard lock(mutex);
-    const auto start =
-        std::find_if(reports.begin(), reports.end(), [&](const GpsReport& r) { return r.fix_time <= first; });
-    return std::any_of(start, reports.end(), [&](const GpsReport& r) { return r.fix_time >= last; });
-  }
-};
 
 // Each of these tests repeats its log: gpsfake feeds from the moment gpsd listens, and under a loaded
 // sanitizer run the client has joined a log fed once only after its last epoch. Once a whole pass has

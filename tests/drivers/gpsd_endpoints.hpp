@@ -6,8 +6,14 @@
 
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <functional>
+#include <mutex>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "drivers/gpsd_client.hpp"
 #include "drivers/unique_fd.hpp"
@@ -48,5 +54,69 @@ inline LoopbackSocket loopback_listener() {
   REQUIRE(::listen(s.fd.get(), 4) == 0);
   return s;
 }
+
+// A gpsd the test plays on a loopback port: `serve` runs for each connection accepted, on a thread of its
+// own, with the connection and a flag set when the fake goes (stop at it). Declared before the client, so
+// that the client stops first.
+class FakeGpsd {
+ public:
+  using Serve = std::function<void(int fd, const std::atomic<bool>& done)>;
+  explicit FakeGpsd(Serve serve) : socket_(loopback_listener()), serve_(std::move(serve)) {
+    thread_ = std::thread([this] {
+      while (!done_) {
+        const UniqueFd c(::accept(socket_.fd.get(), nullptr, nullptr));
+        if (!c) break;
+        serve_(c.get(), done_);
+      }
+    });
+  }
+  ~FakeGpsd() {
+    done_ = true;
+    ::shutdown(socket_.fd.get(), SHUT_RDWR);  // wakes the accept
+    thread_.join();
+  }
+  FakeGpsd(const FakeGpsd&) = delete;
+  FakeGpsd& operator=(const FakeGpsd&) = delete;
+  [[nodiscard]] int port() const noexcept { return socket_.port; }
+
+ private:
+  LoopbackSocket socket_;
+  Serve serve_;
+  std::atomic<bool> done_{false};
+  std::thread thread_;
+};
+
+// Every report the client publishes, for checks after the run.
+struct Recorder {
+  std::mutex mutex;
+  std::vector<GpsReport> reports;
+  GpsdClient::Callback callback() {
+    return [this](const GpsReport& r) {
+      std::lock_guard lock(mutex);
+      reports.push_back(r);
+    };
+  }
+  std::vector<GpsReport> snapshot() {
+    std::lock_guard lock(mutex);
+    return reports;
+  }
+  std::size_t usable() {
+    std::lock_guard lock(mutex);
+    return static_cast<std::size_t>(
+        std::count_if(reports.begin(), reports.end(), [](const GpsReport& r) { return r.usable(); }));
+  }
+  std::size_t size() {
+    std::lock_guard lock(mutex);
+    return reports.size();
+  }
+  // True once a report of fix time `first` or earlier came before one of `last` or later: a whole pass of
+  // a repeated log arrived, whenever the client joined it.
+  bool saw_pass(double first, double last) {
+    std::lock_guard lock(mutex);
+    const auto start =
+        std::find_if(reports.begin(), reports.end(), [&](const GpsReport& r) { return r.fix_time <= first; });
+    return std::any_of(start, reports.end(), [&](const GpsReport& r) { return r.fix_time >= last; });
+  }
+};
 
 }  // namespace gearpulse::test
